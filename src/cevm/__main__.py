@@ -1,0 +1,3 @@
+from cevm.cli import main
+
+main()
