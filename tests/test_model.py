@@ -133,6 +133,18 @@ def test_table_and_direct_paths_agree():
     np.testing.assert_allclose(grid[:, 1], fast, rtol=1e-10, atol=1e-6)
 
 
+def test_scalar_calls_repeated_switch_to_the_table_and_stay_exact():
+    rng = np.random.default_rng(11)
+    t, v, h = random_cycle(rng, 800)
+    vec = drive_cycle_vector(t, v, h)
+    want = reference_wheel_energy_j(t, v, h, 18000.0, 5.0, 0.007, "ev", 0.8)
+    got = [float(wheel_energy_j(vec, 18000.0, 5.0, 0.007, 0.64)) for _ in range(6)]
+    assert 0.007 in vec._tables  # built after a few direct sums
+    np.testing.assert_allclose(got, want, rtol=1e-10)
+    arr = wheel_energy_j(vec, np.array([18000.0, 18000.0]), 5.0, 0.007, 0.64)
+    np.testing.assert_allclose(arr, want, rtol=1e-10)
+
+
 def test_shared_public_cycles_against_reference(shared_cycles):
     import pandas as pd
 
@@ -243,6 +255,7 @@ def test_property_braking_modes_are_ordered(cyc, params):
     nc, ev, paper = (energy(vec, m, cda, cr, mode, eta) for mode in ("no-credit", "ev", "paper"))
     tol = 1e-12 * magnitude(t, v, h, m, cda, cr)
     assert nc >= ev - tol and ev >= paper - tol
+    assert ev >= eta * eta * paper - tol  # never below the full-regeneration bound x eta^2
     etas = np.array([0.3, 0.5, 0.7, 0.9])
     batt = battery_energy_from_wheel_j(wheel_energy_j(vec, m, cda, cr, etas**2), etas)
     if nc > tol:  # a cycle that needs traction at all

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import io
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 
@@ -201,6 +202,7 @@ class CycleVector:
     n_samples: int
     physics: Physics = PAPER_PHYSICS
     _tables: dict = field(default_factory=dict, repr=False, compare=False)
+    _direct_uses: dict = field(default_factory=dict, repr=False, compare=False)
 
     @property
     def delta(self) -> np.ndarray:
@@ -212,7 +214,7 @@ class CycleVector:
         """Number of non-simplified moving steps kept."""
         return int(self.ns_x.size)
 
-    @property
+    @cached_property
     def ns_sums(self) -> tuple[float, float, float]:
         """Sums of x, a, r over all non-simplified steps (standstill x included)."""
         return (
@@ -239,6 +241,7 @@ class CycleVector:
             )
             if len(self._tables) >= _TABLE_CACHE_LIMIT:
                 self._tables.clear()
+                self._direct_uses.clear()
             self._tables[cr] = table
         return table
 

@@ -36,8 +36,11 @@ IceBraking = Literal["paper", "no-credit"]
 ICE_BRAKING_MODES: tuple[str, ...] = ("paper", "no-credit")
 
 # Direct evaluation touches n_steps values per prediction; the sorted table costs about
-# n_steps * log2(n_steps) once per (cycle, Cr), then log2(n_steps) per prediction.
+# n_steps * log2(n_steps) once per (cycle, Cr), then log2(n_steps) per prediction. A Cr
+# met in small groups is summed directly until it has been asked for this many times
+# (an optimisation loop predicting one vehicle at a time), then it gets its table.
 _DIRECT_CHUNK_ELEMENTS = 1 << 20
+_TABLE_AFTER_DIRECT_USES = 3
 
 
 def _check_cr(vector: CycleVector, cr: np.ndarray) -> None:
@@ -78,13 +81,31 @@ def nonsimplified_positive_j(
         sel = inverse == j if unique_cr.size > 1 else slice(None)
         mg = m[sel]
         cg = cda[sel]
-        if mg.size >= direct_below or float(crv) in vector._tables:
+        if _use_table(vector, float(crv), mg.size, direct_below):
             t = vector.threshold_table(float(crv))
             idx = np.searchsorted(t.threshold, cg / mg, side="left")
             out[sel] = mg * (t.x_cum[idx] + crv * t.r_cum[idx]) + cg * t.a_cum[idx]
         else:
             out[sel] = _positive_direct(vector, mg, cg, float(crv))
     return out.reshape(shape)
+
+
+def _use_table(vector: CycleVector, cr: float, n_predictions: int, direct_below: float) -> bool:
+    if n_predictions >= direct_below or cr in vector._tables:
+        return True
+    uses = vector._direct_uses.get(cr, 0) + 1
+    vector._direct_uses[cr] = uses
+    return uses > _TABLE_AFTER_DIRECT_USES
+
+
+def _positive_scalar(vector: CycleVector, m: float, cda: float, cr: float) -> float:
+    if vector.n_nonsimplified == 0:
+        return 0.0
+    if not _use_table(vector, cr, 1, 2.0 * np.log2(vector.n_nonsimplified + 1.0) + 4.0):
+        return float(_positive_direct(vector, np.array([m]), np.array([cda]), cr)[0])
+    t = vector.threshold_table(cr)
+    i = int(t.threshold.searchsorted(cda / m, side="left"))
+    return m * (float(t.x_cum[i]) + cr * float(t.r_cum[i])) + cda * float(t.a_cum[i])
 
 
 def _positive_direct(vector: CycleVector, m: np.ndarray, cda: np.ndarray, cr: float) -> np.ndarray:
@@ -116,6 +137,8 @@ def wheel_energy_j(
     negative_weight : w applied to negative non-simplified steps: 1 for the paper's ICE
         (eq. 24), 0 for an ICE with no braking credit, eta^2 for an EV (eq. 29)
     """
+    if all(isinstance(x, (float, int)) for x in (mass_kg, cda_m2, cr, negative_weight)):
+        return _wheel_energy_scalar(vector, float(mass_kg), float(cda_m2), float(cr), float(negative_weight))
     m = np.asarray(mass_kg, dtype=np.float64)
     cda = np.asarray(cda_m2, dtype=np.float64)
     crs = np.asarray(cr, dtype=np.float64)
@@ -132,6 +155,23 @@ def wheel_energy_j(
         return np.asarray(e1 + net + 0.0 * w)
     pos = nonsimplified_positive_j(vector, m, cda, crs)
     return np.asarray(e1 + pos + w * (net - pos))
+
+
+def _wheel_energy_scalar(vector: CycleVector, m: float, cda: float, cr: float, w: float) -> np.ndarray:
+    """:func:`wheel_energy_j` for plain Python numbers: same result, less overhead."""
+    if not m > 0:
+        raise ValueError("mass_kg must be > 0")
+    if not cda >= 0:
+        raise ValueError("cda_m2 must be >= 0")
+    if not cr >= vector.cr0:
+        _check_cr(vector, np.asarray(cr))
+    e1 = m * vector.s_me + cda * vector.s_a + cr * m * vector.s_r
+    sx, sa, sr = vector.ns_sums
+    net = m * (sx + cr * sr) + cda * sa
+    if w == 1.0:
+        return np.float64(e1 + net)
+    pos = _positive_scalar(vector, m, cda, cr)
+    return np.float64(e1 + pos + w * (net - pos))
 
 
 def ice_fuel_l(
