@@ -1,0 +1,294 @@
+"""Tests of cevm.consumption: rates, counters, SoC, uncertainty and source choice.
+
+Expected values are hand computations written out in each test.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from cevm.consumption import (
+    ConsumptionParams,
+    counter_increase,
+    estimate_source,
+    integrate_rate,
+    measure_trip,
+    soc_energy,
+)
+
+
+@dataclass(frozen=True)
+class Src:
+    """Stand-in for cevm.loggers.EnergySource (same attributes)."""
+
+    column: str
+    kind: str
+    quantity: str
+    resolution: float
+    priority: int
+    capacity_j: float | None = None
+
+
+@dataclass(frozen=True)
+class WrappingSrc(Src):
+    modulus: float | None = None
+
+
+T = np.arange(0.0, 1001.0)  # 0..1000 s at 1 Hz
+
+
+# ----------------------------------------------------------------------------- rates
+
+
+def test_constant_rate_over_known_time_is_exact():
+    rate = np.full(T.size, 0.002)  # l/s
+    raw = integrate_rate(T, rate, 0.0, 1000.0)
+    assert raw.value == pytest.approx(2.0, rel=1e-12)
+    assert raw.gap_share == 0.0
+    assert raw.uncertainty == 0.0  # no resolution, no gaps
+    # a span that does not start or end on a sample: still rate x time
+    raw = integrate_rate(T, rate, 10.5, 990.25)
+    assert raw.value == pytest.approx(0.002 * 979.75, rel=1e-12)
+
+
+def test_rate_gap_is_bridged_and_reported():
+    keep = (T <= 100) | (T >= 400)  # a 300 s gap
+    t, rate = T[keep], np.full(keep.sum(), 0.002)
+    raw = integrate_rate(t, rate, 0.0, 1000.0, max_gap_s=15.0)
+    assert raw.value == pytest.approx(2.0, rel=1e-12)  # constant: linear bridge exact
+    assert raw.gap_share == pytest.approx(300.0 / 1000.0)
+    # via estimate_source: 30 % gaps > 10 % allowed -> not valid
+    est = estimate_source(t, {"fuel_rate_lps": rate}, Src("fuel_rate_lps", "rate", "fuel_l", 0.0, 1),
+                          0.0, 1000.0)
+    assert not est.valid and "gap share" in est.reason
+
+
+def test_rate_gap_uncertainty_uses_spread_of_rate():
+    # rate alternates 1 and 3 (std 1) except a 100 s gap: sigma = 1 * 100
+    t = np.concatenate((np.arange(0.0, 201.0), np.arange(300.0, 501.0)))
+    rate = np.where(np.arange(t.size) % 2 == 0, 1.0, 3.0)
+    raw = integrate_rate(t, rate, 0.0, 500.0, max_gap_s=15.0)
+    assert raw.gap_share == pytest.approx(100.0 / 500.0)
+    vals = np.interp(np.concatenate(([0.0], t[(t > 0) & (t < 500)], [500.0])), t, rate)
+    assert raw.uncertainty == pytest.approx(np.std(vals) * 100.0, rel=1e-12)
+
+
+def test_rate_quantisation_noise_formula():
+    # resolution q [l/s]; trapezoid weights on a 1 s grid: 0.5 at the ends, 1 inside
+    q = 0.01
+    t = np.arange(0.0, 101.0)
+    raw = integrate_rate(t, np.full(t.size, 0.05), 0.0, 100.0, resolution=q)
+    sum_w2 = 2 * 0.5**2 + 99 * 1.0**2
+    assert raw.uncertainty == pytest.approx(q / math.sqrt(12) * math.sqrt(sum_w2), rel=1e-12)
+
+
+def test_battery_power_v_times_i_hand_computed():
+    # current every 1 s: +50 A up to t=100, -20 A (regeneration) from t=101
+    # voltage only every 2 s, constant 400 V (interpolated at the current's times)
+    t = np.arange(0.0, 201.0)
+    current = np.where(t <= 100, 50.0, -20.0)
+    voltage = np.where(t % 2 == 0, 400.0, np.nan)
+    # integral of current: 50*100 + (50-20)/2*1 - 20*99 = 5000 + 15 - 1980 = 3035 A s
+    expected_j = 400.0 * 3035.0
+    cols = {"battery_voltage_v": voltage, "battery_current_a": current}
+    for column in ("battery_power_w", "battery_voltage_v*battery_current_a"):
+        est = estimate_source(t, cols, Src(column, "rate", "energy_j", 0.0, 1), 0.0, 200.0)
+        assert est.valid, est.reason
+        assert est.value == pytest.approx(expected_j, rel=1e-12)
+        assert est.resolution == 0.0
+
+
+def test_negative_fuel_rate_rejected():
+    rate = np.full(T.size, 0.002)
+    rate[500] = -5.0  # junk
+    est = estimate_source(T, {"fuel_rate_lps": rate}, Src("fuel_rate_lps", "rate", "fuel_l", 0.0, 1),
+                          0.0, 1000.0)
+    assert est.counts["rate_values_rejected"] == 1
+    assert est.value == pytest.approx(2.0, rel=1e-12)
+
+
+@settings(max_examples=30, deadline=None)
+@given(
+    a=st.floats(0, 300), b=st.floats(300, 700), c=st.floats(700, 1000),
+    seed=st.integers(0, 2**32 - 1),
+)
+def test_rate_integral_is_additive(a, b, c, seed):
+    rate = np.random.default_rng(seed).uniform(0, 0.01, T.size)
+    whole = integrate_rate(T, rate, a, c).value
+    parts = integrate_rate(T, rate, a, b).value + integrate_rate(T, rate, b, c).value
+    assert whole == pytest.approx(parts, rel=1e-9, abs=1e-12)
+
+
+# -------------------------------------------------------------------------- counters
+
+
+def test_counter_quantisation_uncertainty_is_q_over_sqrt6():
+    t = np.arange(0.0, 1001.0, 10.0)
+    c = 1000.0 + np.floor(t * 0.003 / 0.5) * 0.5  # 0.5 l counter, 3 l over the trip
+    src = Src("total_fuel_l", "counter", "fuel_l", 0.5, 1)
+    m, q = measure_trip(t, {"total_fuel_l": c}, [src], 0.0, 1000.0)
+    assert m.value == pytest.approx(3.0)
+    assert m.resolution == 0.5
+    assert m.uncertainty == pytest.approx(0.5 / math.sqrt(6), rel=1e-12)  # 0.204 l: 7 %
+    assert q["source"] == "total_fuel_l"
+
+
+def test_counter_wrap_at_known_modulus_is_exact():
+    k = np.arange(41)
+    t = 10.0 * k
+    c = (990.0 + 0.5 * k) % 1000.0  # 990 ... 999.5, 0, 0.5 ... 10
+    src = WrappingSrc("total_fuel_l", "counter", "fuel_l", 0.5, 1, modulus=1000.0)
+    est = estimate_source(t, {"total_fuel_l": c}, src, 0.0, 400.0)
+    assert est.valid
+    assert est.value == pytest.approx(20.0)  # 41 readings, 40 steps of 0.5 l
+    assert est.counts["counter_wraps"] == 1
+    assert est.counts["counter_resets"] == 0
+
+
+def test_counter_reset_continues_from_new_base():
+    t = 10.0 * np.arange(18)
+    c = np.concatenate((100.0 + 0.5 * np.arange(11), 0.5 * np.arange(7)))
+    # 100 .. 105 (+5 l), reset to 0, 0 .. 3 (+3 l): 8 l; the reset step itself counts 0
+    src = Src("total_fuel_l", "counter", "fuel_l", 0.5, 1)
+    est = estimate_source(t, {"total_fuel_l": c}, src, 0.0, 170.0)
+    assert est.value == pytest.approx(8.0)
+    assert est.counts["counter_resets"] == 1
+    # the lost step adds the mean rate x its duration to the uncertainty
+    mean_rate = 8.0 / 170.0
+    expected = math.sqrt(0.5**2 / 6 + (mean_rate * 10.0) ** 2)
+    assert est.uncertainty == pytest.approx(expected, rel=1e-12)
+
+
+def test_counter_wrap_without_modulus_counts_as_reset():
+    k = np.arange(41)
+    c = (990.0 + 0.5 * k) % 1000.0
+    raw = counter_increase(10.0 * k, c, 0.0, 400.0, resolution=0.5, max_rate=0.1)
+    assert raw.counts["counter_resets"] == 1
+    assert raw.value == pytest.approx(19.5)  # the wrap step's 0.5 l is lost
+
+
+def test_counter_glitch_is_a_jump():
+    t = 10.0 * np.arange(21)
+    c = 500.0 + 0.5 * np.arange(21)
+    c[10] = 1.0e6  # a glitch: up and down again
+    raw = counter_increase(t, c, 0.0, 200.0, resolution=0.5, max_rate=0.1)
+    assert raw.counts["counter_jumps"] == 2
+    assert raw.value == pytest.approx(10.0 - 1.0)  # the two steps around the glitch lost
+
+
+def test_energy_counter_runs_backwards_during_regeneration():
+    t = np.arange(0.0, 11.0)
+    c = np.array([0, 10, 20, 30, 25, 20, 30, 40, 50, 60, 70], float) * 1e3  # J
+    src = Src("total_energy_j", "counter", "energy_j", 0.0, 1)
+    est = estimate_source(t, {"total_energy_j": c}, src, 0.0, 10.0)
+    assert est.value == pytest.approx(70e3)
+    assert est.counts["counter_resets"] == 0 and est.counts["counter_jumps"] == 0
+
+
+def test_counter_coverage_too_low_is_invalid():
+    t = np.arange(0.0, 1001.0)
+    c = np.where((t > 250) & (t < 750), t * 0.001, np.nan)
+    est = estimate_source(t, {"total_fuel_l": c}, Src("total_fuel_l", "counter", "fuel_l", 0.0, 1),
+                          0.0, 1000.0)
+    assert not est.valid and "coverage" in est.reason
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.lists(st.floats(0, 0.05, allow_nan=False), min_size=2, max_size=200))
+def test_monotone_counter_value_is_last_minus_first(increments):
+    c = 1234.5 + np.cumsum(increments)
+    t = np.arange(c.size, dtype=float)
+    raw = counter_increase(t, c, 0.0, t[-1], resolution=0.0, max_rate=0.1)
+    assert raw.value == pytest.approx(c[-1] - c[0], rel=1e-9, abs=1e-12)
+
+
+# ------------------------------------------------------------------------------- SoC
+
+
+def test_soc_times_capacity():
+    t = np.arange(0.0, 2001.0)
+    soc = np.round(80.0 - 20.0 * t / 2000.0, 2)  # 80.00 % -> 60.00 % in 0.01 % steps
+    cap = 10.0 * 3.6e6  # 10 kWh
+    src = Src("soc_pct", "soc", "energy_j", 0.01, 1, capacity_j=cap)
+    m, _ = measure_trip(t, {"soc_pct": soc}, [src], 0.0, 2000.0)
+    assert m.kind == "energy_j"
+    assert m.value == pytest.approx(0.20 * cap)  # 7.2 MJ = 2 kWh
+    assert m.resolution == pytest.approx(0.0001 * cap)  # 3600 J
+    assert m.uncertainty == pytest.approx(0.0001 * cap / math.sqrt(6), rel=1e-9)
+
+
+def test_soc_uses_first_and_last_valid_readings():
+    t = np.arange(0.0, 101.0)
+    soc = np.full(t.size, np.nan)
+    soc[[2, 50, 98]] = [70.0, 69.0, 68.5]
+    raw = soc_energy(t, soc, 0.0, 100.0, resolution_pct=0.01, capacity_j=1e6)
+    assert raw.value == pytest.approx(0.015 * 1e6)
+    assert raw.coverage == pytest.approx(0.96)
+
+
+def test_soc_without_capacity_is_invalid():
+    t = np.arange(0.0, 11.0)
+    est = estimate_source(t, {"soc_pct": 50 - t}, Src("soc_pct", "soc", "energy_j", 0.01, 1), 0.0, 10.0)
+    assert not est.valid and "capacity" in est.reason
+
+
+# --------------------------------------------------------------------- source choice
+
+
+def _three_fuel_sources():
+    t = np.arange(0.0, 1001.0)
+    cols = {
+        "flowmeter_fuel_lps": np.full(t.size, 0.002),  # 2.00 l
+        "fuel_rate_lps": np.full(t.size, 0.00206),  # 2.06 l: +3.0 %
+        "total_fuel_l": 100.0 + np.floor(t * 0.0019 / 0.5) * 0.5,  # 1.5 l: -25.0 %
+    }
+    sources = [
+        Src("total_fuel_l", "counter", "fuel_l", 0.5, 2),
+        Src("fuel_rate_lps", "rate", "fuel_l", 0.0, 1),
+        Src("flowmeter_fuel_lps", "rate", "fuel_l", 0.0, 0),
+    ]
+    return t, cols, sources
+
+
+def test_most_trusted_valid_source_is_chosen_and_others_cross_checked():
+    t, cols, sources = _three_fuel_sources()
+    m, q = measure_trip(t, cols, sources, 0.0, 1000.0)
+    assert m.source == "flowmeter_fuel_lps"
+    assert m.value == pytest.approx(2.0)
+    assert "fuel_rate_lps vs flowmeter_fuel_lps: +3.0 %" in q["cross_checks"]
+    assert "total_fuel_l vs flowmeter_fuel_lps: -25.0 %" in q["cross_checks"]
+    assert len(q["sources"]) == 3
+
+
+def test_invalid_trusted_source_falls_back_to_next():
+    t, cols, sources = _three_fuel_sources()
+    cols["flowmeter_fuel_lps"] = np.where(t < 500, 0.002, np.nan)  # half the trip only
+    m, q = measure_trip(t, cols, sources, 0.0, 1000.0)
+    assert m.source == "fuel_rate_lps"
+    flow = next(s for s in q["sources"] if s["source"] == "flowmeter_fuel_lps")
+    assert flow["valid"] is False and flow["reason"]
+
+
+def test_missing_column_and_no_sources():
+    t = np.arange(0.0, 11.0)
+    m, q = measure_trip(t, {}, [Src("total_fuel_l", "counter", "fuel_l", 0.5, 0)], 0.0, 10.0)
+    assert m is None and q["sources"][0]["reason"] == "column not in the log"
+    m, q = measure_trip(t, {}, [], 0.0, 10.0)
+    assert m is None and q["source"] is None
+
+
+def test_params_are_used():
+    t = np.arange(0.0, 101.0)
+    keep = (t <= 40) | (t >= 60)  # 20 s gap = 20 % of the trip
+    cols = {"fuel_rate_lps": np.where(keep, 0.001, np.nan)}
+    src = [Src("fuel_rate_lps", "rate", "fuel_l", 0.0, 0)]
+    assert measure_trip(t, cols, src, 0.0, 100.0)[0] is None
+    lenient = ConsumptionParams(max_gap_share=0.25, min_coverage=0.7)
+    m, _ = measure_trip(t, cols, src, 0.0, 100.0, lenient)
+    assert m.value == pytest.approx(0.1)
