@@ -94,6 +94,8 @@ def _use_table(vector: CycleVector, cr: float, n_predictions: int, direct_below:
     if n_predictions >= direct_below or cr in vector._tables:
         return True
     uses = vector._direct_uses.get(cr, 0) + 1
+    if len(vector._direct_uses) >= 1024:  # many distinct Cr (a fit over Cr): stay bounded
+        vector._direct_uses.clear()
     vector._direct_uses[cr] = uses
     return uses > _TABLE_AFTER_DIRECT_USES
 
