@@ -1,0 +1,1612 @@
+"""Reading stage of ``cevm ingest``: logger CSV exports -> canonical log frames.
+
+A *profile* (a small TOML file, see ``configs/loggers/*.toml``) says how one logger
+writes its CSV: how to recognise it from the header, text encoding, separator, decimal
+mark, leading comment/metadata lines, where the time is and in which zone, where the
+vehicle id comes from, which column feeds each canonical column (``CANONICAL_COLUMNS``
+in :mod:`cevm.trip`) in which unit, and which columns measure energy. Supporting a new
+logger means writing a profile, not code.
+
+:func:`read_log` turns one file into one :class:`ParsedLog` per vehicle: a DataFrame
+with canonical columns in SI units (rows in file order; cleaning, sorting and trip
+splitting are later stages), the file's metadata, the energy sources available, and a
+human-readable list of every repair made while reading. Bad input raises
+:class:`cevm.errors.InputError` naming file, line and column.
+
+Everything is vectorised (pandas C parser, numpy); nothing loops over rows in Python.
+
+Profile format (all keys; ``[columns]`` entries and ``[[energy]]`` tables repeat)::
+
+    name = "srf"                         # unique profile name
+    description = "..."                  # free text
+    [detect]
+    required_columns = ["timestamp_utc"] # header must hold all of these
+    [csv]
+    encoding = "utf-8"                   # any Python codec name (utf-8, cp1252, utf-16, ...)
+    separator = ","
+    decimal = "."
+    comment_prefix = "#"                 # leading lines starting with it are comments ("" = none)
+    metadata = "key=value"               # parse comments as key=value, or "none"
+    truncated_last_line = "drop"         # "drop" (and report) or "error"
+    [time]
+    columns = ["timestamp_utc"]          # one datetime column, or [date, time-of-day]
+    format = "ISO8601"                   # one column: "ISO8601" or a strptime format
+    date_format = "%m/%d/%Y"             # two columns: strptime formats of each
+    time_format = "%H:%M:%S"
+    timezone = "UTC"                     # IANA zone of naive times
+    date_repair = "none"                 # two columns only: "none" or "dominant"
+    date_repair_max_days = 1             # a date further from the dominant one is corrupt
+    [vehicle]
+    source = "metadata"                  # metadata | column | file_stem | parent_dir | fixed
+    key = "vehicle_id"                   # metadata key or column name
+    value = "..."                        # for source = "fixed"
+    fallback = "file_stem"               # when the metadata key is absent: file_stem | parent_dir | error
+    [quality]
+    zero_position_is_no_fix = true       # latitude or longitude exactly 0 -> no fix
+    absurd_error_share = 0.5             # more absurd values than this share -> error
+    [columns]
+    wheel_speed_mps = { source = "fms_wheel_speed_kmh", unit = "km/h" }
+    ignition = { source = "Ignition", map = { On = 1, Off = 0 } }
+    gps_alt_m = { source = "ALT", unit = "m", missing_values = [-111] }
+    # per column also: required = true (error if absent from the header), negate = true
+    [[energy]]
+    column = "total_energy_j"            # canonical column carrying the measurement
+    kind = "counter"                     # rate | counter | soc
+    resolution = 0.1                     # quantisation step ...
+    resolution_unit = "kWh"              # ... in this unit (converted to SI)
+    priority = 1                         # 1 = most trusted
+    capacity = 6.1                       # soc only: usable capacity ...
+    capacity_unit = "kWh"                # ... in this unit
+    modulus = 2147483648                 # counter only: wraps to 0 at this value ...
+    modulus_unit = "l"                   # ... in this unit
+    # column may also be "battery_power_w" (rate, W): battery_voltage_v * battery_current_a
+
+Defaults and why: encoding utf-8, separator ',', decimal '.' (the CSV norm); no comment
+prefix and no metadata (most exports have none); ``truncated_last_line = "drop"`` (a
+logger losing power mid-write leaves a cut last line; the rest of the file is good, and
+the drop is reported); timezone UTC; ``date_repair = "none"`` (repairing is opt-in);
+``date_repair_max_days = 1`` (a session lasts under a day, and a drive across midnight
+keeps the next day's date); vehicle id from the file name stem; zero latitude or
+longitude means no fix (GPS modules write 0 without one; a real fix exactly on the
+equator or the Greenwich meridian, to the logged precision, is rare and losing it is
+harmless); ``absurd_error_share = 0.5`` (see :func:`_check_absurd`). Energy ``priority``
+has no default: trust is the profile author's statement.
+
+Not handled: quoted fields holding line breaks (line numbers would shift).
+"""
+
+from __future__ import annotations
+
+import csv
+import gzip
+import hashlib
+import io
+import os
+import re
+import tomllib
+import zlib
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+import pandas as pd
+
+from cevm.errors import InputError
+
+__all__ = [
+    "UNITS",
+    "CANONICAL_DIMENSIONS",
+    "PLAUSIBLE_RANGE_SI",
+    "ColumnMap",
+    "EnergySpec",
+    "EnergySource",
+    "TimeSpec",
+    "Profile",
+    "ParsedLog",
+    "builtin_profile_dirs",
+    "load_profile",
+    "load_profiles",
+    "detect_profile",
+    "read_log",
+]
+
+# --------------------------------------------------------------------------------------
+# Units: the only place where conversion factors live. Profiles name units; code looks
+# them up here. unit name -> (dimension, factor to the SI unit of that dimension).
+# SI units per dimension: angle deg, length m, speed m/s, volume l (litres by project
+# convention), volume_rate l/s, energy J, power W, mass kg, voltage V, current A,
+# percent %, rotational_speed rpm, dimensionless -.
+# --------------------------------------------------------------------------------------
+UNITS: dict[str, tuple[str, float]] = {
+    "deg": ("angle", 1.0),
+    "m": ("length", 1.0),
+    "km": ("length", 1000.0),
+    "mi": ("length", 1609.344),
+    "ft": ("length", 0.3048),
+    "m/s": ("speed", 1.0),
+    "km/h": ("speed", 1.0 / 3.6),
+    "mph": ("speed", 0.44704),
+    "kn": ("speed", 1852.0 / 3600.0),
+    "l": ("volume", 1.0),
+    "ml": ("volume", 1e-3),
+    "gal_us": ("volume", 3.785411784),
+    "gal_imp": ("volume", 4.54609),
+    "l/s": ("volume_rate", 1.0),
+    "l/h": ("volume_rate", 1.0 / 3600.0),
+    "ml/s": ("volume_rate", 1e-3),
+    "gal_us/h": ("volume_rate", 3.785411784 / 3600.0),
+    "J": ("energy", 1.0),
+    "kJ": ("energy", 1e3),
+    "MJ": ("energy", 1e6),
+    "Wh": ("energy", 3600.0),
+    "kWh": ("energy", 3.6e6),
+    "W": ("power", 1.0),
+    "kW": ("power", 1e3),
+    "kg": ("mass", 1.0),
+    "t": ("mass", 1000.0),
+    "lb": ("mass", 0.45359237),
+    "V": ("voltage", 1.0),
+    "A": ("current", 1.0),
+    "%": ("percent", 1.0),
+    "rpm": ("rotational_speed", 1.0),
+    "-": ("dimensionless", 1.0),
+}
+
+# Dimension of every mappable canonical column (time_s, source_line and vehicle_id are
+# produced by the reader itself).
+CANONICAL_DIMENSIONS: dict[str, str] = {
+    "lat_deg": "angle",
+    "lon_deg": "angle",
+    "gps_alt_m": "length",
+    "gps_speed_mps": "speed",
+    "gps_hdop": "dimensionless",
+    "wheel_speed_mps": "speed",
+    "ignition": "dimensionless",
+    "odometer_m": "length",
+    "gross_weight_kg": "mass",
+    "fuel_rate_lps": "volume_rate",
+    "flowmeter_fuel_lps": "volume_rate",
+    "total_fuel_l": "volume",
+    "total_energy_j": "energy",
+    "battery_voltage_v": "voltage",
+    "battery_current_a": "current",
+    "soc_pct": "percent",
+    "accel_pedal_pct": "percent",
+    "brake_switch": "dimensionless",
+    "engine_speed_rpm": "rotational_speed",
+    "engine_torque_pct": "percent",
+}
+
+# Physically possible values (SI, inclusive). A value outside is *absurd*: a logger error
+# or a wrong unit/column in the profile, never a real measurement. Chosen wide so that
+# no real value of any road vehicle falls outside.
+PLAUSIBLE_RANGE_SI: dict[str, tuple[float, float]] = {
+    "lat_deg": (-90.0, 90.0),
+    "lon_deg": (-180.0, 180.0),
+    "gps_alt_m": (-500.0, 9000.0),  # Dead Sea shore -430 m .. highest roads ~5800 m + GPS error
+    "gps_speed_mps": (0.0, 100.0),  # 360 km/h
+    "wheel_speed_mps": (0.0, 100.0),
+    "gps_hdop": (0.0, 100.0),  # 99.99 is the usual "no fix" value
+    "ignition": (0.0, 1.0),
+    "odometer_m": (0.0, 1e10),  # 10 million km
+    "gross_weight_kg": (0.0, 200_000.0),
+    "fuel_rate_lps": (0.0, 0.5),  # 1800 l/h
+    "flowmeter_fuel_lps": (0.0, 0.5),
+    "total_fuel_l": (0.0, 2.2e9),  # FMS counter maximum 0xFFFFFFFF * 0.5 l
+    "total_energy_j": (-3.6e15, 3.6e15),  # +-1e9 kWh
+    "battery_voltage_v": (0.0, 2000.0),
+    "battery_current_a": (-5000.0, 5000.0),
+    "soc_pct": (0.0, 100.0),
+    "accel_pedal_pct": (0.0, 100.0),  # FMS codes above 100 % are error / not available
+    "brake_switch": (0.0, 1.0),
+    "engine_speed_rpm": (-30000.0, 30000.0),  # electric motors may report reverse as negative
+    "engine_torque_pct": (-125.0, 125.0),
+}
+
+# Times outside this window are absurd (unset clocks read 1970 or 2000; corrupt dates).
+_TIME_MIN = np.datetime64("1990-01-01T00:00:00", "ns").astype(np.int64)
+_TIME_MAX = np.datetime64("2100-01-01T00:00:00", "ns").astype(np.int64)
+_NAT = np.iinfo(np.int64).min
+_NS_PER_S = 1_000_000_000
+_NS_PER_DAY = 86_400 * _NS_PER_S
+
+# Energy source kinds and the canonical columns they may use.
+_ENERGY_COLUMNS: dict[str, dict[str, str]] = {
+    # kind -> {canonical column: quantity}
+    "rate": {"fuel_rate_lps": "fuel_l", "flowmeter_fuel_lps": "fuel_l", "battery_power_w": "energy_j"},
+    "counter": {"total_fuel_l": "fuel_l", "total_energy_j": "energy_j"},
+    "soc": {"soc_pct": "energy_j"},
+}
+
+# Virtual energy columns: products of two canonical columns, formed by the consumption
+# stage (cevm.consumption.BATTERY_POWER_COLUMN), not stored in the frame.
+_VIRTUAL_COLUMNS: dict[str, tuple[tuple[str, str], str]] = {
+    "battery_power_w": (("battery_voltage_v", "battery_current_a"), "power"),  # W = V * A, + = discharge
+}
+
+# Text that means "no value" in a numeric column (besides an empty field).
+_NUMERIC_NA = ["", "NA", "N/A", "n/a", "NaN", "nan", "null", "NULL", "None", "-", "--"]
+
+# Default profile directory of a source checkout: src/cevm/../../configs/loggers.
+_REPO_PROFILES = Path(__file__).resolve().parents[2] / "configs" / "loggers"
+# Profiles shipped as package data (if the package is ever built with them).
+_PACKAGE_PROFILES = Path(__file__).resolve().parent / "profiles"
+# Environment variable: extra profile directories (os.pathsep separated).
+PROFILES_ENV = "CEVM_PROFILES"
+
+
+# ======================================================================================
+# Profile data types
+# ======================================================================================
+@dataclass(frozen=True)
+class ColumnMap:
+    """How one canonical column is read: ``canonical = source * factor`` (SI), or through
+    ``value_map`` for categorical text (e.g. ``On`` -> 1.0).
+
+    ``missing_values`` are numbers (in the source unit) that mean "no value" for this
+    logger (e.g. the Twizy's altitude -111); they become NaN and are reported.
+    """
+
+    canonical: str
+    source: str
+    unit: str | None
+    factor: float
+    value_map: tuple[tuple[str, float], ...] | None = None
+    missing_values: tuple[float, ...] = ()
+    required: bool = False
+    negate: bool = False
+
+
+@dataclass(frozen=True)
+class EnergySpec:
+    """An energy measurement the profile's logger can provide (see :class:`EnergySource`)."""
+
+    column: str
+    kind: Literal["rate", "counter", "soc"]
+    quantity: Literal["fuel_l", "energy_j"]
+    resolution: float
+    priority: int
+    capacity_j: float | None = None
+    modulus: float | None = None
+    note: str = ""
+
+
+@dataclass(frozen=True)
+class EnergySource:
+    """A measured-energy column present in a parsed log, for the consumption stage.
+
+    Parameters
+    ----------
+    column : canonical column of ``ParsedLog.frame`` holding the measurement, or the
+        virtual ``"battery_power_w"`` (= battery_voltage_v * battery_current_a, both in
+        the frame; formed by :mod:`cevm.consumption`).
+    kind : ``"rate"`` (fuel rate [l/s] or battery power [W], integrate over time),
+        ``"counter"`` (cumulative total [l] or [J], take differences; may wrap or reset)
+        or ``"soc"`` (state of charge [%]; energy = -delta SoC / 100 * ``capacity_j``).
+    quantity : ``"fuel_l"`` (litres of fuel) or ``"energy_j"`` (joules at the battery).
+    resolution : quantisation step in the column's SI unit: l/s for a fuel rate, W for
+        battery power, l for a fuel counter, J for an energy counter, % for a state of
+        charge; 0 when unknown or continuous.
+    priority : trust rank, 1 = most trusted (e.g. the flow meter on trucks, the FMS total
+        energy on buses, per LOGGERS.md); the consumption stage prefers the lowest number
+        among sources of the same quantity that have usable data.
+    capacity_j : usable battery capacity [J] for ``kind == "soc"`` when the profile knows
+        it (the Twizy's 6.1 kWh); ``None`` otherwise (take it from the vehicle config).
+    source_column : the logger's own column name(s), for messages.
+    modulus : value at which a counter wraps to 0 (same unit), when the profile knows it
+        (the FMS 32-bit fuel counter at 0.5 l per bit: 2**31 l); ``None`` otherwise.
+    """
+
+    column: str
+    kind: Literal["rate", "counter", "soc"]
+    quantity: Literal["fuel_l", "energy_j"]
+    resolution: float
+    priority: int
+    capacity_j: float | None = None
+    source_column: str = ""
+    modulus: float | None = None
+
+
+@dataclass(frozen=True)
+class TimeSpec:
+    """Where the time is and how to read it (see the module docstring for keys)."""
+
+    columns: tuple[str, ...]
+    format: str | None  # single column
+    date_format: str | None  # two columns
+    time_format: str | None
+    timezone: str
+    date_repair: Literal["none", "dominant"] = "none"
+    date_repair_max_days: float = 1.0
+
+
+@dataclass(frozen=True)
+class Profile:
+    """A parsed, validated logger profile. Build with :func:`load_profile`."""
+
+    name: str
+    path: Path | None
+    description: str
+    required_columns: tuple[str, ...]
+    encoding: str
+    separator: str
+    decimal: str
+    comment_prefix: str
+    metadata: Literal["key=value", "none"]
+    truncated_last_line: Literal["drop", "error"]
+    time: TimeSpec
+    vehicle_source: Literal["metadata", "column", "file_stem", "parent_dir", "fixed"]
+    vehicle_key: str | None
+    vehicle_value: str | None
+    vehicle_fallback: Literal["file_stem", "parent_dir", "error"]
+    columns: tuple[ColumnMap, ...]
+    energy: tuple[EnergySpec, ...]
+    zero_position_is_no_fix: bool = True
+    absurd_error_share: float = 0.5
+
+
+@dataclass(frozen=True, eq=False)
+class ParsedLog:
+    """One vehicle's rows of one logger file, in canonical columns.
+
+    ``frame`` has ``time_s`` (UTC seconds since the Unix epoch, float64),
+    ``source_line`` (1-based line in the file, int64), ``vehicle_id`` (str) and every
+    canonical column the profile maps and the file has (float64, SI, NaN = no value),
+    rows in file order. ``repairs`` lists every repair made while reading the file
+    (file-wide, so shared by the logs of a multi-vehicle file). ``sha256`` is the hex
+    digest of the file's raw bytes as stored on disk (compressed bytes for a .gz file).
+    """
+
+    path: Path
+    profile: str
+    vehicle_id: str
+    frame: pd.DataFrame
+    metadata: dict[str, str]
+    energy_sources: tuple[EnergySource, ...]
+    repairs: list[str]
+    sha256: str
+
+
+# ======================================================================================
+# Loading profiles
+# ======================================================================================
+_TOP_KEYS = {"name", "description", "detect", "csv", "time", "vehicle", "quality", "columns", "energy"}
+_SECTION_KEYS = {
+    "detect": {"required_columns"},
+    "csv": {"encoding", "separator", "decimal", "comment_prefix", "metadata", "truncated_last_line"},
+    "time": {"columns", "format", "date_format", "time_format", "timezone", "date_repair", "date_repair_max_days"},
+    "vehicle": {"source", "key", "value", "fallback"},
+    "quality": {"zero_position_is_no_fix", "absurd_error_share"},
+}
+_COLUMN_KEYS = {"source", "unit", "map", "missing_values", "required", "negate"}
+_ENERGY_KEYS = {"column", "kind", "quantity", "resolution", "resolution_unit", "priority", "capacity",
+                "capacity_unit", "modulus", "modulus_unit", "note"}
+
+
+def _convert_unit(value: float, unit: str, want_dim: str, path: Path | None, key: str) -> float:
+    """``value`` in ``unit`` converted to the SI unit of dimension ``want_dim``."""
+    if unit not in UNITS:
+        raise InputError(path, f"unknown unit {unit!r}; known units: {', '.join(UNITS)}", column=key)
+    dim, factor = UNITS[unit]
+    if dim != want_dim:
+        raise InputError(path, f"unit {unit!r} is a {dim}, expected a {want_dim}", column=key)
+    return float(value) * factor
+
+
+def load_profile(source: str | Path | dict, path: Path | None = None) -> Profile:
+    """Parse and validate one profile from a TOML file path or an already-parsed dict.
+
+    Unknown or ill-typed keys raise :class:`InputError` naming the file and the key, so
+    a typo in a user's profile is caught at load time, not silently ignored.
+    """
+    if isinstance(source, dict):
+        doc = source
+    else:
+        path = Path(source)
+        try:
+            doc = tomllib.loads(path.read_text(encoding="utf-8"))
+        except OSError as exc:
+            raise InputError(path, f"cannot read profile: {exc.strerror or exc}") from None
+        except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+            raise InputError(path, f"not a valid TOML profile: {exc}") from None
+
+    def fail(msg: str, key: str) -> InputError:
+        return InputError(path, msg, column=key)
+
+    def check_keys(table: Any, allowed: set[str], where: str) -> dict:
+        if not isinstance(table, dict):
+            raise fail("must be a table", where)
+        for k in table:
+            if k not in allowed:
+                raise fail(f"unknown key (allowed: {', '.join(sorted(allowed))})", f"{where}.{k}" if where else k)
+        return table
+
+    def get(table: dict, key: str, typ: type | tuple, default: Any, where: str) -> Any:
+        if key not in table:
+            if default is _REQUIRED:
+                raise fail("missing required key", f"{where}.{key}" if where else key)
+            return default
+        val = table[key]
+        if typ is float and isinstance(val, int) and not isinstance(val, bool):
+            val = float(val)
+        if not isinstance(val, typ) or (typ is not bool and isinstance(val, bool)):
+            tname = typ.__name__ if isinstance(typ, type) else "/".join(t.__name__ for t in typ)
+            raise fail(f"must be a {tname}, got {val!r}", f"{where}.{key}" if where else key)
+        return val
+
+    def choice(val: str, options: tuple[str, ...], key: str) -> str:
+        if val not in options:
+            raise fail(f"{val!r} is not one of {', '.join(options)}", key)
+        return val
+
+    check_keys(doc, _TOP_KEYS, "")
+    name = get(doc, "name", str, _REQUIRED, "")
+    if not re.fullmatch(r"[A-Za-z0-9_.-]+", name):
+        raise fail("profile name may hold only letters, digits, '_', '.', '-'", "name")
+    description = get(doc, "description", str, "", "")
+    detect = check_keys(doc.get("detect", {}), _SECTION_KEYS["detect"], "detect")
+    csv_t = check_keys(doc.get("csv", {}), _SECTION_KEYS["csv"], "csv")
+    time_t = check_keys(doc.get("time", None) if "time" in doc else {}, _SECTION_KEYS["time"], "time")
+    veh_t = check_keys(doc.get("vehicle", {}), _SECTION_KEYS["vehicle"], "vehicle")
+    qual_t = check_keys(doc.get("quality", {}), _SECTION_KEYS["quality"], "quality")
+
+    # csv
+    encoding = get(csv_t, "encoding", str, "utf-8", "csv")
+    try:
+        "x".encode(encoding)
+    except LookupError:
+        raise fail(f"unknown text encoding {encoding!r}", "csv.encoding") from None
+    separator = get(csv_t, "separator", str, ",", "csv")
+    decimal = get(csv_t, "decimal", str, ".", "csv")
+    if len(separator) != 1 or len(decimal) != 1 or separator == decimal:
+        raise fail("separator and decimal must be single, different characters", "csv.separator")
+    comment_prefix = get(csv_t, "comment_prefix", str, "", "csv")
+    metadata = choice(get(csv_t, "metadata", str, "none", "csv"), ("key=value", "none"), "csv.metadata")
+    if metadata != "none" and not comment_prefix:
+        raise fail("metadata needs a comment_prefix", "csv.metadata")
+    truncated = choice(get(csv_t, "truncated_last_line", str, "drop", "csv"), ("drop", "error"), "csv.truncated_last_line")
+
+    # time
+    tcols = get(time_t, "columns", list, _REQUIRED, "time")
+    if not (1 <= len(tcols) <= 2) or not all(isinstance(c, str) and c for c in tcols):
+        raise fail("must list one datetime column or [date column, time column]", "time.columns")
+    fmt = get(time_t, "format", str, None, "time")
+    dfmt = get(time_t, "date_format", str, None, "time")
+    tfmt = get(time_t, "time_format", str, None, "time")
+    if len(tcols) == 1 and (fmt is None or dfmt or tfmt):
+        raise fail("one time column needs 'format' (and no date_format/time_format)", "time.format")
+    if len(tcols) == 2 and (fmt is not None or not dfmt or not tfmt):
+        raise fail("two time columns need 'date_format' and 'time_format' (and no 'format')", "time.date_format")
+    tz = get(time_t, "timezone", str, "UTC", "time")
+    try:
+        pd.Timestamp("2020-01-01").tz_localize(tz)
+    except Exception:  # noqa: BLE001 - any failure means an unknown zone
+        raise fail(f"unknown time zone {tz!r} (use an IANA name such as 'Europe/London')", "time.timezone") from None
+    date_repair = choice(get(time_t, "date_repair", str, "none", "time"), ("none", "dominant"), "time.date_repair")
+    if date_repair != "none" and len(tcols) != 2:
+        raise fail("date_repair needs separate date and time columns", "time.date_repair")
+    max_days = get(time_t, "date_repair_max_days", float, 1.0, "time")
+    if not max_days >= 0:
+        raise fail("must be >= 0", "time.date_repair_max_days")
+    time_spec = TimeSpec(tuple(tcols), fmt, dfmt, tfmt, tz, date_repair, max_days)
+
+    # vehicle
+    vsrc = choice(
+        get(veh_t, "source", str, "file_stem", "vehicle"),
+        ("metadata", "column", "file_stem", "parent_dir", "fixed"),
+        "vehicle.source",
+    )
+    vkey = get(veh_t, "key", str, None, "vehicle")
+    vval = get(veh_t, "value", str, None, "vehicle")
+    vfb = choice(get(veh_t, "fallback", str, "file_stem", "vehicle"), ("file_stem", "parent_dir", "error"), "vehicle.fallback")
+    if vsrc in ("metadata", "column") and not vkey:
+        raise fail(f"vehicle source {vsrc!r} needs 'key'", "vehicle.key")
+    if vsrc == "metadata" and metadata == "none":
+        raise fail("vehicle source 'metadata' needs csv.metadata = 'key=value'", "vehicle.source")
+    if vsrc == "fixed" and not vval:
+        raise fail("vehicle source 'fixed' needs 'value'", "vehicle.value")
+
+    # quality
+    zero_nofix = get(qual_t, "zero_position_is_no_fix", bool, True, "quality")
+    share = get(qual_t, "absurd_error_share", float, 0.5, "quality")
+    if not 0.0 <= share <= 1.0:
+        raise fail("must be within 0..1", "quality.absurd_error_share")
+
+    # columns
+    cols_t = doc.get("columns", {})
+    if not isinstance(cols_t, dict):
+        raise fail("must be a table", "columns")
+    maps: list[ColumnMap] = []
+    for canon, spec in cols_t.items():
+        key = f"columns.{canon}"
+        if canon not in CANONICAL_DIMENSIONS:
+            raise fail(f"not a mappable canonical column (known: {', '.join(CANONICAL_DIMENSIONS)})", key)
+        if isinstance(spec, str):
+            raise fail("must be a table such as { source = \"...\", unit = \"...\" }", key)
+        check_keys(spec, _COLUMN_KEYS, key)
+        src = get(spec, "source", str, _REQUIRED, key)
+        unit = get(spec, "unit", str, None, key)
+        vmap = get(spec, "map", dict, None, key)
+        if (unit is None) == (vmap is None):
+            raise fail("give exactly one of 'unit' or 'map'", key)
+        factor = 1.0
+        map_t = None
+        if unit is not None:
+            factor = _convert_unit(1.0, unit, CANONICAL_DIMENSIONS[canon], path, f"{key}.unit")
+        else:
+            items = []
+            for k, v in vmap.items():
+                if isinstance(v, bool) or not isinstance(v, (int, float)):
+                    raise fail(f"map value for {k!r} must be a number", f"{key}.map")
+                items.append((str(k), float(v)))
+            if not items:
+                raise fail("map is empty", f"{key}.map")
+            map_t = tuple(items)
+        miss = get(spec, "missing_values", list, [], key)
+        if not all(isinstance(m, (int, float)) and not isinstance(m, bool) for m in miss):
+            raise fail("missing_values must be numbers", f"{key}.missing_values")
+        maps.append(
+            ColumnMap(
+                canonical=canon,
+                source=src,
+                unit=unit,
+                factor=factor,
+                value_map=map_t,
+                missing_values=tuple(float(m) for m in miss),
+                required=get(spec, "required", bool, False, key),
+                negate=get(spec, "negate", bool, False, key),
+            )
+        )
+    mapped = {m.canonical for m in maps}
+    if ("lat_deg" in mapped) != ("lon_deg" in mapped):
+        raise fail("map both lat_deg and lon_deg, or neither", "columns")
+    dup = {s for s in [m.source for m in maps] if [m.source for m in maps].count(s) > 1}
+    if dup:
+        raise fail(f"source column(s) {sorted(dup)} mapped twice", "columns")
+
+    # energy
+    energy_t = doc.get("energy", [])
+    if not isinstance(energy_t, list):
+        raise fail("must be an array of tables ([[energy]])", "energy")
+    specs: list[EnergySpec] = []
+    for i, e in enumerate(energy_t):
+        key = f"energy[{i}]"
+        check_keys(e, _ENERGY_KEYS, key)
+        col = get(e, "column", str, _REQUIRED, key)
+        kind = choice(get(e, "kind", str, _REQUIRED, key), ("rate", "counter", "soc"), f"{key}.kind")
+        allowed = _ENERGY_COLUMNS[kind]
+        if col not in allowed:
+            raise fail(f"a {kind} source must use one of {', '.join(allowed)}", f"{key}.column")
+        needs = _VIRTUAL_COLUMNS[col][0] if col in _VIRTUAL_COLUMNS else (col,)
+        for c in needs:
+            if c not in mapped:
+                raise fail(f"column {c!r} is not mapped in [columns]", f"{key}.column")
+        dim = _VIRTUAL_COLUMNS[col][1] if col in _VIRTUAL_COLUMNS else CANONICAL_DIMENSIONS[col]
+        quantity = allowed[col]
+        if "quantity" in e and get(e, "quantity", str, None, key) != quantity:
+            raise fail(f"column {col!r} measures {quantity}", f"{key}.quantity")
+        res = get(e, "resolution", float, 0.0, key)
+        if not res >= 0:
+            raise fail("must be >= 0", f"{key}.resolution")
+        res_unit = get(e, "resolution_unit", str, None, key)
+        if res_unit is not None:
+            res = _convert_unit(res, res_unit, dim, path, f"{key}.resolution_unit")
+        elif res:
+            raise fail("resolution needs resolution_unit", f"{key}.resolution_unit")
+        prio = get(e, "priority", int, _REQUIRED, key)
+        if prio < 1:
+            raise fail("must be >= 1 (1 = most trusted)", f"{key}.priority")
+        cap = get(e, "capacity", float, None, key)
+        cap_j = None
+        if cap is not None:
+            if kind != "soc":
+                raise fail("capacity applies to soc sources only", f"{key}.capacity")
+            if not cap > 0:
+                raise fail("must be > 0", f"{key}.capacity")
+            cap_j = _convert_unit(cap, get(e, "capacity_unit", str, _REQUIRED, key), "energy", path, f"{key}.capacity_unit")
+        modulus = get(e, "modulus", float, None, key)
+        if modulus is not None:
+            if kind != "counter" or not modulus > 0:
+                raise fail("modulus (> 0) applies to counter sources only", f"{key}.modulus")
+            modulus = _convert_unit(modulus, get(e, "modulus_unit", str, _REQUIRED, key), dim, path,
+                                    f"{key}.modulus_unit")
+        specs.append(EnergySpec(col, kind, quantity, res, prio, cap_j, modulus,  # type: ignore[arg-type]
+                                get(e, "note", str, "", key)))
+
+    req = get(detect, "required_columns", list, _REQUIRED, "detect")
+    if not req or not all(isinstance(c, str) and c for c in req):
+        raise fail("must be a non-empty list of header column names", "detect.required_columns")
+
+    return Profile(
+        name=name,
+        path=path,
+        description=description,
+        required_columns=tuple(req),
+        encoding=encoding,
+        separator=separator,
+        decimal=decimal,
+        comment_prefix=comment_prefix,
+        metadata=metadata,  # type: ignore[arg-type]
+        truncated_last_line=truncated,  # type: ignore[arg-type]
+        time=time_spec,
+        vehicle_source=vsrc,  # type: ignore[arg-type]
+        vehicle_key=vkey,
+        vehicle_value=vval,
+        vehicle_fallback=vfb,  # type: ignore[arg-type]
+        columns=tuple(maps),
+        energy=tuple(specs),
+        zero_position_is_no_fix=zero_nofix,
+        absurd_error_share=share,
+    )
+
+
+class _Required:
+    pass
+
+
+_REQUIRED = _Required()
+
+
+def builtin_profile_dirs() -> list[Path]:
+    """Directories of the profiles shipped with cevm that exist: package data
+    (``cevm/profiles``) and, in a source checkout, ``configs/loggers``."""
+    return [d for d in (_PACKAGE_PROFILES, _REPO_PROFILES) if d.is_dir()]
+
+
+def load_profiles(directory: str | Path | None = None, *, include_env: bool = True) -> dict[str, Profile]:
+    """Load every ``*.toml`` profile, keyed by profile name.
+
+    Parameters
+    ----------
+    directory : directory to read instead of the built-in ones (default ``None``: the
+        profiles shipped with cevm, see :func:`builtin_profile_dirs`).
+    include_env : also read the directories listed in the ``CEVM_PROFILES`` environment
+        variable (``os.pathsep`` separated) after the others (default ``True``), so that
+        a user adds loggers without touching the installation. A later directory's
+        profile replaces an earlier one of the same name.
+    """
+    dirs = [Path(directory)] if directory is not None else builtin_profile_dirs()
+    if include_env and os.environ.get(PROFILES_ENV):
+        dirs += [Path(p) for p in os.environ[PROFILES_ENV].split(os.pathsep) if p]
+    profiles: dict[str, Profile] = {}
+    for d in dirs:
+        if not d.is_dir():
+            raise InputError(d, "profile directory does not exist")
+        seen: dict[str, Path] = {}
+        for f in sorted(d.glob("*.toml")):
+            p = load_profile(f)
+            if p.name in seen:
+                raise InputError(f, f"profile name {p.name!r} already used by {seen[p.name]}", column="name")
+            seen[p.name] = f
+            profiles[p.name] = p
+    return profiles
+
+
+# ======================================================================================
+# Bytes, text and header
+# ======================================================================================
+def _read_raw(path: Path) -> tuple[bytes, bytes]:
+    """(raw bytes on disk, CSV bytes after gzip decompression if the magic bytes say so)."""
+    try:
+        raw = path.read_bytes()
+    except OSError as exc:
+        raise InputError(path, f"cannot read file: {exc.strerror or exc}") from None
+    data = raw
+    if raw[:2] == b"\x1f\x8b":
+        try:
+            data = gzip.decompress(raw)
+        except (OSError, EOFError, zlib.error) as exc:
+            raise InputError(path, f"corrupt gzip data: {exc}") from None
+    return raw, data
+
+
+#: Bytes that never occur in a text CSV: C0 controls other than tab, LF, CR; and DEL.
+_BINARY_BYTES = bytes(b for b in range(32) if b not in (9, 10, 13)) + b"\x7f"
+
+
+def _looks_binary(head: bytes) -> bool:
+    """True when the first bytes hold a NUL, or more than 1 % control bytes: a binary file
+    (an image, a spreadsheet, random junk), whatever the text encoding would be."""
+    sample = head[:8192]
+    if b"\x00" in sample:
+        return True
+    n_ctrl = len(sample) - len(sample.translate(None, _BINARY_BYTES))
+    return n_ctrl > 0.01 * len(sample)
+
+
+def _head_bytes(path: Path, n: int = 65536) -> bytes:
+    """First ``n`` bytes of the (decompressed) file, for detection."""
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(n)
+            if head[:2] == b"\x1f\x8b":
+                fh.seek(0)
+                with gzip.GzipFile(fileobj=fh) as gz:
+                    head = gz.read(n)
+    except (OSError, EOFError, zlib.error) as exc:
+        raise InputError(path, f"cannot read file: {getattr(exc, 'strerror', None) or exc}") from None
+    return head
+
+
+def _to_utf8(data: bytes, prof: Profile, path: Path) -> bytes:
+    """The CSV bytes re-encoded as UTF-8 (no BOM), after checking they decode with the
+    profile's encoding and hold no NUL byte (binary data)."""
+    encoding = prof.encoding
+    enc = encoding.lower().replace("_", "-")
+    try:
+        if enc in ("utf-8", "utf8", "utf-8-sig", "ascii", "us-ascii"):
+            if not data.isascii():  # isascii is a fast scan; otherwise validate by decoding
+                data.decode("utf-8" if "ascii" not in enc else "ascii")
+            out = data
+        else:
+            out = data.decode(encoding).encode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = data.count(b"\n", 0, exc.start) + 1
+        start = data.rfind(b"\n", 0, exc.start) + 1
+        column = None
+        if enc.startswith("utf-8") or enc in ("ascii", "us-ascii", "cp1252", "latin-1", "iso-8859-1"):
+            hdr = _find_header(data[:start].decode(encoding, errors="replace").encode("utf-8"),
+                               prof.comment_prefix, prof.separator)
+            field_no = data.count(prof.separator.encode(), start, exc.start)
+            if hdr is not None and line > hdr.line and field_no < len(hdr.names):
+                column = hdr.names[field_no]
+        raise InputError(
+            path,
+            f"byte 0x{data[exc.start]:02x} is not valid {encoding} text (binary data, or a file in "
+            f"another encoding: check csv.encoding of profile {prof.name!r})",
+            line=line,
+            column=column,
+        ) from None
+    if out.startswith(b"\xef\xbb\xbf"):
+        out = out[3:]
+    nul = out.find(b"\x00")
+    if nul >= 0:
+        raise InputError(path, "binary data (NUL byte), not a CSV text file", line=out.count(b"\n", 0, nul) + 1)
+    return out
+
+
+@dataclass(frozen=True)
+class _Header:
+    names: tuple[str, ...]
+    line: int  # 1-based line of the header
+    body_offset: int  # byte offset of the first data line
+    comments: tuple[str, ...]
+
+
+def _find_header(data: bytes, prefix: str, sep: str) -> _Header | None:
+    """Skip blank and comment lines; parse the header line. ``None`` if there is none."""
+    pbytes = prefix.encode("utf-8") if prefix else None
+    pos, line_no, comments = 0, 0, []
+    n = len(data)
+    while pos < n:
+        nl = data.find(b"\n", pos)
+        end = n if nl < 0 else nl
+        line_no += 1
+        raw_line = data[pos:end].strip()
+        nxt = n if nl < 0 else nl + 1
+        if pbytes and raw_line.startswith(pbytes):
+            comments.append(raw_line[len(pbytes):].decode("utf-8", errors="replace").strip())
+        elif raw_line:
+            text = raw_line.decode("utf-8", errors="replace").replace("\r", " ")
+            names = next(csv.reader([text], delimiter=sep))
+            return _Header(tuple(s.strip() for s in names), line_no, nxt, tuple(comments))
+        pos = nxt
+    return None
+
+
+def _parse_metadata(comments: tuple[str, ...]) -> dict[str, str]:
+    """``key=value`` comment lines as a dict (stripped; later keys win)."""
+    meta = {}
+    for c in comments:
+        k, eq, v = c.partition("=")
+        if eq and k.strip():
+            meta[k.strip()] = v.strip()
+    return meta
+
+
+def detect_profile(path: str | Path, profiles: dict[str, Profile] | None = None) -> Profile:
+    """The profile whose required header columns all appear in the file's header.
+
+    The header is read with each profile's own encoding, comment prefix and separator.
+    When several match, the most specific (most required columns) wins; a tie, or no
+    match, raises :class:`InputError` listing the profiles and the header found.
+    """
+    path = Path(path)
+    profiles = load_profiles() if profiles is None else profiles
+    if not profiles:
+        raise InputError(path, "no logger profiles loaded")
+    head = _head_bytes(path)
+    if not head or head.isspace():
+        raise InputError(path, "file is empty", line=1)
+    if _looks_binary(head):
+        raise InputError(path, "binary data, not a CSV text file", line=1)
+    matches: list[Profile] = []
+    seen_header: tuple[str, ...] = ()
+    for prof in profiles.values():
+        try:
+            text = head.decode(prof.encoding, errors="replace").encode("utf-8")
+        except LookupError:
+            continue
+        if text.startswith(b"\xef\xbb\xbf"):
+            text = text[3:]
+        hdr = _find_header(text, prof.comment_prefix, prof.separator)
+        if hdr is None:
+            continue
+        if len(hdr.names) > len(seen_header):
+            seen_header = hdr.names
+        if set(prof.required_columns) <= set(hdr.names):
+            matches.append(prof)
+    if not matches:
+        shown = ", ".join(seen_header[:12]) + (", ..." if len(seen_header) > 12 else "")
+        listing = "; ".join(f"{p.name} (needs {', '.join(p.required_columns)})" for p in profiles.values())
+        raise InputError(path, f"no logger profile matches the header [{shown}]; profiles: {listing}. "
+                               "Add a profile (see configs/loggers) or force one.")
+    best = max(len(p.required_columns) for p in matches)
+    top = [p for p in matches if len(p.required_columns) == best]
+    if len(top) > 1:
+        raise InputError(path, f"header matches several profiles equally well: {', '.join(p.name for p in top)}; force one")
+    return top[0]
+
+
+# ======================================================================================
+# Time parsing (vectorised)
+# ======================================================================================
+_FIXED_FIELDS = {"%Y": 4, "%m": 2, "%d": 2, "%H": 2, "%M": 2, "%S": 2}
+_ISO_RE = re.compile(r"^\d{4}-\d\d-\d\d([T ])\d\d:\d\d:\d\d(\.\d{1,9})?(Z?)$")
+
+
+@dataclass(frozen=True)
+class _Layout:
+    """A datetime text layout of fixed width: numeric fields (directive -> (start,
+    width)) and literal characters (start, code point)."""
+
+    fields: dict[str, tuple[int, int]]
+    literals: tuple[tuple[int, int], ...]
+    width: int
+
+
+def _fixed_layout(fmt: str, frac_digits: int = 0) -> _Layout | None:
+    """Layout of a strptime format made only of %Y %m %d %H %M %S (and %f with
+    ``frac_digits`` digits) and literal characters; ``None`` otherwise."""
+    fields: dict[str, tuple[int, int]] = {}
+    lits: list[tuple[int, int]] = []
+    i = pos = 0
+    while i < len(fmt):
+        if fmt[i] == "%":
+            d = fmt[i:i + 2]
+            w = frac_digits if d == "%f" else _FIXED_FIELDS.get(d, 0)
+            if w == 0 or d in fields:
+                return None
+            fields[d] = (pos, w)
+            pos += w
+            i += 2
+        else:
+            lits.append((pos, ord(fmt[i])))
+            pos += 1
+            i += 1
+    return _Layout(fields, tuple(lits), pos)
+
+
+def _iso_layout(sample: str) -> tuple[_Layout, bool] | None:
+    """Fixed layout of an ISO 8601 sample such as '2019-05-14T07:00:01.250Z' and whether
+    it is UTC ('Z'); ``None`` for other shapes (offsets, week dates, ...)."""
+    m = _ISO_RE.match(sample)
+    if not m:
+        return None
+    frac = len(m.group(2)) - 1 if m.group(2) else 0
+    fmt = "%Y-%m-%d" + m.group(1) + "%H:%M:%S" + (".%f" if frac else "") + m.group(3)
+    return _fixed_layout(fmt, frac), m.group(3) == "Z"  # type: ignore[return-value]
+
+
+def _parse_codes(cp: np.ndarray, layout: _Layout) -> tuple[np.ndarray, np.ndarray]:
+    """Parse a matrix of character codes (rows = strings, at least ``layout.width``
+    columns; uint8 bytes or uint32 code points) with numpy only.
+
+    Returns (ns since epoch as int64, ok mask). Rows that do not match the layout
+    (non-digits, wrong literals, impossible dates such as 31/02) have ``ok == False``.
+    Missing date fields default to 1900-01-01, as in strptime.
+    """
+    n = cp.shape[0]
+    ok = np.ones(n, bool)
+    for p, ch in layout.literals:
+        ok &= cp[:, p] == ch
+    # one contiguous row per character position; unsigned (uint8 / uint32) so that
+    # non-digits wrap to large values
+    dig = np.ascontiguousarray((cp[:, :layout.width] - cp.dtype.type(48)).T)
+
+    def num(d: str, default: int) -> np.ndarray:
+        if d not in layout.fields:
+            return np.full(n, default, np.int64)
+        p, w = layout.fields[d]
+        acc = np.zeros(n, np.int64 if w > 4 else np.int32)
+        for k in range(p, p + w):  # loop over digits, not rows
+            digit = dig[k]
+            ok[:] &= digit <= 9
+            acc *= 10
+            acc += digit
+        return acc.astype(np.int64)
+
+    year, month, day = num("%Y", 1900), num("%m", 1), num("%d", 1)
+    hour, minute, sec = num("%H", 0), num("%M", 0), num("%S", 0)
+    ok &= (month >= 1) & (month <= 12) & (day >= 1) & (year >= 1678) & (year <= 2261)  # int64 ns range
+    ok &= (hour <= 23) & (minute <= 59) & (sec <= 59)
+    month = np.where(ok, month, 1)
+    leap = (year % 4 == 0) & ((year % 100 != 0) | (year % 400 == 0))
+    ok &= day <= _DAYS_IN_MONTH[month - 1] + (leap & (month == 2))  # e.g. 31/02 fails
+    ns = (_days_from_civil(year, month, day) * 86_400 + (hour * 60 + minute) * 60 + sec) * _NS_PER_S
+    if "%f" in layout.fields:
+        ns += num("%f", 0) * 10 ** (9 - layout.fields["%f"][1])
+    return np.where(ok, ns, _NAT), ok
+
+
+_DAYS_IN_MONTH = np.array([31, 28, 31, 30, 31, 30, 31, 31, 30, 31, 30, 31], np.int64)
+
+
+def _days_from_civil(y: np.ndarray, m: np.ndarray, d: np.ndarray) -> np.ndarray:
+    """Days since 1970-01-01 of proleptic Gregorian dates (H. Hinnant's algorithm),
+    vectorised integer arithmetic; valid for any year."""
+    y = y - (m <= 2)
+    era = np.floor_divide(y, 400)
+    yoe = y - era * 400
+    doy = (153 * (m + np.where(m > 2, -3, 9)) + 2) // 5 + d - 1
+    doe = yoe * 365 + yoe // 4 - yoe // 100 + doy
+    return era * 146_097 + doe - 719_468
+
+
+def _parse_datetimes(values: np.ndarray, fmt: str) -> np.ndarray:
+    """Naive datetimes [ns since epoch, int64; ``_NAT`` where unparseable] of strings
+    (object array, NaN for empty fields) in ``fmt`` ("ISO8601" or strptime).
+
+    Fixed-width numeric formats are parsed with numpy (:func:`_parse_codes`); other rows
+    and formats go through ``pandas.to_datetime`` with the explicit format. ISO 8601
+    strings with a zone designator ('Z', '+01:00') are converted to UTC; the caller must
+    then not localise them again (see :func:`_has_offset`).
+    """
+    n = len(values)
+    out = np.full(n, _NAT, np.int64)
+    rest = np.ones(n, bool)
+    layout = _fixed_layout(fmt) if fmt != "ISO8601" else None
+    if layout is not None and n:
+        u = values.astype("U")
+        cols = u.dtype.itemsize // 4
+        if cols >= layout.width:
+            cp32 = u.view(np.uint32).reshape(n, cols)
+            ok_len = cp32[:, layout.width - 1] != 0
+            if cols > layout.width:
+                ok_len &= cp32[:, layout.width] == 0
+            # to bytes (faster below); non-Latin code points become 255, never a digit
+            cp = np.minimum(cp32[:, :layout.width], 255).astype(np.uint8)
+            ns, ok = _parse_codes(cp, layout)
+            ok &= ok_len
+            out[ok] = ns[ok]
+            rest = ~ok
+    if rest.any():
+        sub = pd.Series(values[rest], dtype=object)
+        kw = {"utc": True} if fmt == "ISO8601" and _has_offset(values) else {}
+        parsed = pd.to_datetime(sub, format=fmt, errors="coerce", **kw)
+        if getattr(parsed.dt, "tz", None) is not None:
+            parsed = parsed.dt.tz_convert("UTC").dt.tz_localize(None)
+        out[rest] = parsed.to_numpy(dtype="datetime64[ns]").astype(np.int64)  # NaT -> _NAT
+    return out
+
+
+@dataclass(frozen=True)
+class _FastTimes:
+    ns: np.ndarray  # int64 ns, naive or UTC (see is_utc)
+    is_utc: bool
+    blank: np.ndarray  # bool, blank lines
+
+
+_CHUNK_BYTES = 1 << 22  # 4 MiB: keeps temporaries in cache and avoids huge allocations
+
+
+def _line_stats(b: np.ndarray, sep: int) -> tuple[np.ndarray, np.ndarray]:
+    """(byte offset of the start of every line, number of ``sep`` bytes on it) of the
+    text ``b`` (uint8 view), computed in chunks (a loop over 4 MiB blocks, not rows)."""
+    parts = [np.zeros(1, np.int64)]
+    for lo in range(0, len(b), _CHUNK_BYTES):
+        parts.append(np.flatnonzero(b[lo:lo + _CHUNK_BYTES] == 10) + (lo + 1))
+    starts = np.concatenate(parts)
+    if starts[-1] >= len(b):
+        starts = starts[:-1]
+    n_sep = np.zeros(len(starts), np.int64)
+    for lo in range(0, len(b), _CHUNK_BYTES):
+        hi = min(lo + _CHUNK_BYTES, len(b))
+        pos = np.flatnonzero(b[lo:hi] == sep) + lo
+        i0, i1 = np.searchsorted(starts, [lo, hi])  # lines starting inside the chunk: i0..i1-1
+        bounds = np.concatenate(([lo], starts[i0:i1], [hi]))
+        counts = np.diff(np.searchsorted(pos, bounds))  # first: tail of the line started before
+        if i0 == 0 or starts[i0 - 1] == lo:  # no line continues into this chunk
+            counts = counts[1:]
+            n_sep[i0:i1] += counts
+        else:
+            n_sep[i0 - 1:i1] += counts
+    return starts, n_sep
+
+
+def _only_trailing_separators(b: np.ndarray, starts: np.ndarray, surplus: np.ndarray, sep: int,
+                              max_surplus: int = 8) -> np.ndarray:
+    """Per line: whether its ``surplus`` (> 0) extra fields are empty, i.e. the line
+    ends with that many separators (before an optional CR). Lines with more than
+    ``max_surplus`` extra fields are never excused (a merged or corrupt line)."""
+    ends = np.append(starts[1:], len(b))  # one past the '\n' (or end of data)
+    last = ends - 1
+    last = np.where((last >= 0) & (b[np.maximum(last, 0)] == 10), last - 1, last)  # skip '\n'
+    last = np.where((last >= 0) & (b[np.maximum(last, 0)] == 13), last - 1, last)  # skip '\r'
+    ok = (surplus > 0) & (surplus <= max_surplus)
+    for k in range(max_surplus):  # loop over surplus fields, not rows
+        need = ok & (surplus > k)
+        pos = last - k
+        ok &= ~need | ((pos >= starts) & (b[np.maximum(pos, 0)] == sep))
+    return ok
+
+
+def _fast_first_column(body: bytes, b: np.ndarray, starts: np.ndarray, sep: str, fmt: str) -> _FastTimes | None:
+    """Parse the first field of every line straight from the bytes (``b``: uint8 view
+    of ``body`` without quote characters, ``starts``: line starts) when it is a
+    fixed-width datetime (ISO 8601 or a fixed strptime layout).
+
+    This avoids one Python string per row (half the reading time of an srf file). Returns
+    ``None`` when the fast path does not apply or any non-blank line fails to parse;
+    the caller then reads the column as text and reports errors with lines.
+    """
+    if not body:
+        return None
+    first_line = body[: body.find(b"\n") if b"\n" in body else len(body)].decode("utf-8", "replace").strip()
+    sample = first_line.split(sep)[0].strip()
+    if fmt == "ISO8601":
+        got = _iso_layout(sample)
+        if got is None:
+            return None
+        layout, is_utc = got
+    else:
+        layout, is_utc = _fixed_layout(fmt), False
+        if layout is None:
+            return None
+    w = layout.width
+    if len(b) < w + 1:
+        return None
+    windows = np.lib.stride_tricks.sliding_window_view(b, w + 1)  # no copy
+    last = len(b) - (w + 1)
+    cp = windows[np.minimum(starts, last)]  # (rows, w + 1) bytes, one gather
+    ns, ok = _parse_codes(cp, layout)
+    ok &= (cp[:, w] == ord(sep)) & (starts <= last)
+    first = b[starts]
+    blank = (first == 10) | (first == 13)
+    if not (ok | blank).all():
+        return None
+    return _FastTimes(ns, is_utc, blank)
+
+
+def _has_offset(values: np.ndarray) -> bool:
+    """Whether the first non-empty ISO 8601 string carries a zone ('Z' or +-HH:MM)."""
+    for v in values[:100]:
+        if isinstance(v, str) and v.strip():
+            return bool(re.search(r"(Z|[+-]\d\d:?\d\d)\s*$", v.strip()))
+    return False
+
+
+def _lines_summary(lines: np.ndarray, limit: int = 6) -> str:
+    """'lines 3-7, 12, 20-21' for sorted line numbers, at most ``limit`` runs shown."""
+    lines = np.asarray(lines, np.int64)
+    if len(lines) == 0:
+        return "no lines"
+    breaks = np.flatnonzero(np.diff(lines) != 1) + 1
+    starts = np.concatenate([[0], breaks])
+    ends = np.concatenate([breaks - 1, [len(lines) - 1]])
+    runs = [f"{lines[s]}" if s == e else f"{lines[s]}-{lines[e]}" for s, e in zip(starts[:limit], ends[:limit])]
+    more = f", ... ({len(starts) - limit} more runs)" if len(starts) > limit else ""
+    return ("line " if len(lines) == 1 else "lines ") + ", ".join(runs) + more
+
+
+def _fmt_ns(ns: int) -> str:
+    return str(np.datetime64(int(ns), "ns").astype("datetime64[s]")).replace("T", " ")
+
+
+def _repair_dates(date_ns: np.ndarray, tod_ns: np.ndarray, raw_dates: np.ndarray, lines: np.ndarray,
+                  max_days: float, path: Path, col: str, repairs: list[str]) -> np.ndarray:
+    """Replace corrupt dates (unparseable, or more than ``max_days`` from the file's
+    most common date) by the date of the nearest preceding good row (following row for
+    a corrupt run at the start), plus or minus one day where the time of day wrapped
+    past midnight between that row and this one (a jump of more than 12 h)."""
+    n = len(date_ns)
+    valid = date_ns != _NAT
+    if not valid.any():
+        raise InputError(path, "no row has a readable date", line=int(lines[0]), column=col)
+    uniq, counts = np.unique(date_ns[valid], return_counts=True)
+    dominant = uniq[np.argmax(counts)]
+    bad = ~valid | (np.abs(date_ns - dominant) > max_days * _NS_PER_DAY)
+    if not bad.any():
+        return date_ns
+    idx = np.arange(n)
+    prev = np.maximum.accumulate(np.where(~bad, idx, -1))
+    nxt = np.minimum.accumulate(np.where(~bad, idx, n)[::-1])[::-1]
+    donor = np.where(prev >= 0, prev, nxt)
+    b = np.flatnonzero(bad)
+    d = donor[b]
+    half_day = _NS_PER_DAY // 2
+    shift = np.zeros(len(b), np.int64)
+    from_prev = prev[b] >= 0
+    shift[from_prev & (tod_ns[b] < tod_ns[d] - half_day)] = _NS_PER_DAY
+    shift[~from_prev & (tod_ns[b] > tod_ns[d] + half_day)] = -_NS_PER_DAY
+    fixed = date_ns.copy()
+    fixed[b] = date_ns[d] + shift
+    examples = pd.unique(pd.Series(raw_dates[b]).astype(str))[:4]
+    repairs.append(
+        f"time: {len(b)} rows with a corrupt date (e.g. {', '.join(repr(x) for x in examples)}; "
+        f"the file's date is {_fmt_ns(dominant)[:10]}) took the date of the neighbouring rows, "
+        f"the time of day kept: {_lines_summary(lines[b])}"
+    )
+    return fixed
+
+
+def _localize(naive: np.ndarray, tz: str, groups: np.ndarray | None, lines: np.ndarray,
+              repairs: list[str]) -> np.ndarray:
+    """UTC ns of naive local times in zone ``tz``, in file order.
+
+    Ambiguous times (the repeated hour when clocks go back) are resolved by row order
+    within each group (vehicle): summer time until the local time first steps backwards
+    inside the repeated hour, standard time from then on. Non-existent times (the hour
+    skipped when clocks go forward) are read with the offset in force just before the
+    jump (a logger clock that has not changed yet). Both are reported as repairs.
+    """
+    if tz in ("UTC", "Etc/UTC", "GMT", "Z"):
+        return naive
+    idx = pd.DatetimeIndex(naive.view("datetime64[ns]"))
+    loc = idx.tz_localize(tz, ambiguous="NaT", nonexistent="NaT")
+    odd = np.asarray(loc.isna()) & (naive != _NAT)
+    if not odd.any():
+        return loc.tz_convert("UTC").as_unit("ns").asi8
+    sub = idx[odd]
+    as_dst = sub.tz_localize(tz, ambiguous=np.ones(len(sub), bool), nonexistent="NaT")
+    nonexist_sub = np.asarray(as_dst.isna())
+    odd_idx = np.flatnonzero(odd)
+    amb_rows = odd_idx[~nonexist_sub]
+    gap_rows = odd_idx[nonexist_sub]
+    dst_flags = np.ones(len(naive), bool)
+    if len(amb_rows):
+        g = groups[amb_rows] if groups is not None else np.zeros(len(amb_rows), np.int64)
+        day = naive[amb_rows] // _NS_PER_DAY
+        frame = pd.DataFrame({"g": g, "day": day, "t": naive[amb_rows]})
+        back = frame.groupby(["g", "day"], sort=False)["t"].diff() < 0
+        second = back.groupby([frame["g"], frame["day"]], sort=False).cumsum() > 0
+        second = second.to_numpy()
+        dst_flags[amb_rows[second]] = False
+        repairs.append(
+            f"time: {len(amb_rows)} rows fall in the repeated hour when clocks went back ({tz}); "
+            f"{int(second.sum())} read as standard time after the local time stepped back, "
+            f"the others as summer time (by row order): {_lines_summary(lines[amb_rows])}"
+        )
+    out = idx.tz_localize(tz, ambiguous=dst_flags, nonexistent="NaT").tz_convert("UTC").as_unit("ns").asi8.copy()
+    if len(gap_rows):
+        before = pd.DatetimeIndex((naive[gap_rows] - _NS_PER_DAY).view("datetime64[ns]"))
+        before_loc = before.tz_localize(tz, ambiguous=True, nonexistent="shift_forward")
+        offset = (before_loc.tz_localize(None).as_unit("ns").asi8
+                  - before_loc.tz_convert("UTC").tz_localize(None).as_unit("ns").asi8)
+        out[gap_rows] = naive[gap_rows] - offset
+        repairs.append(
+            f"time: {len(gap_rows)} rows have local times that do not exist (skipped hour when "
+            f"clocks went forward, {tz}); read with the offset before the change: "
+            f"{_lines_summary(lines[gap_rows])}"
+        )
+    return out
+
+
+# ======================================================================================
+# Reading
+# ======================================================================================
+def _resolve_profile(path: Path, profile: Profile | str | None,
+                     profiles: dict[str, Profile] | None) -> Profile:
+    if isinstance(profile, Profile):
+        return profile
+    if profiles is None:
+        profiles = load_profiles()
+    if profile is None:
+        return detect_profile(path, profiles)
+    if profile not in profiles:
+        raise InputError(path, f"unknown logger profile {profile!r}; known: {', '.join(sorted(profiles))}")
+    return profiles[profile]
+
+
+def _line_col_error(path: Path, msg: str, lines: np.ndarray, bad: np.ndarray, col: str,
+                    values: np.ndarray | None = None) -> InputError:
+    i = int(np.flatnonzero(bad)[0])
+    val = ""
+    if values is not None:
+        v = values[i]
+        val = f" {float(v):g}" if isinstance(v, (float, np.floating, int, np.integer)) else f" {str(v)!r}"
+    extra = f" (and {int(bad.sum()) - 1} more rows)" if bad.sum() > 1 else ""
+    return InputError(path, f"{msg}{val}{extra}", line=int(lines[i]), column=col)
+
+
+def read_log(path: str | Path, profile: Profile | str | None = None,
+             profiles: dict[str, Profile] | None = None, *,
+             vehicle_id: str | None = None) -> list[ParsedLog]:
+    """Read one logger CSV (plain or gzip-compressed) into one :class:`ParsedLog` per vehicle.
+
+    Parameters
+    ----------
+    path : the file. Gzip is recognised by its magic bytes, whatever the extension.
+    profile : a :class:`Profile`, a profile name (looked up in ``profiles``), or ``None``
+        (default) to detect it from the header with :func:`detect_profile`.
+    profiles : available profiles (default ``None``: :func:`load_profiles()`).
+    vehicle_id : override the vehicle id from the profile (default ``None``: use the
+        profile's vehicle source); not allowed for a file split by a vehicle column.
+
+    Returns
+    -------
+    One ParsedLog per vehicle in order of first appearance in the file.
+
+    Raises
+    ------
+    InputError : empty file, header only, bad encoding, binary data, missing time
+        column, unreadable time or number (with line and column), no position and no
+        speed, a column mostly absurd, a truncated last line when the profile says
+        ``truncated_last_line = "error"``.
+    """
+    path = Path(path)
+    prof = _resolve_profile(path, profile, profiles)
+    raw, data = _read_raw(path)
+    sha = hashlib.sha256(raw).hexdigest()
+    if not data or data.isspace():  # isspace stops at the first other byte
+        raise InputError(path, "file is empty", line=1)
+    data = _to_utf8(data, prof, path)
+    hdr = _find_header(data, prof.comment_prefix, prof.separator)
+    if hdr is None:
+        raise InputError(path, "no header line (only comments or blank lines)", line=data.count(b"\n") + 1)
+    metadata = _parse_metadata(hdr.comments) if prof.metadata == "key=value" else {}
+    names = list(hdr.names)
+    repairs: list[str] = []
+
+    # --- which columns are needed
+    missing_req = [c for c in prof.required_columns if c not in names]
+    if missing_req:
+        raise InputError(path, f"header lacks column(s) {missing_req} required by profile {prof.name!r}",
+                         line=hdr.line, column=missing_req[0])
+    for c in prof.time.columns:
+        if c not in names:
+            raise InputError(path, f"no time column: header lacks {c!r} (profile {prof.name!r})", line=hdr.line, column=c)
+    if prof.vehicle_source == "column" and prof.vehicle_key not in names:
+        raise InputError(path, f"header lacks the vehicle column {prof.vehicle_key!r}", line=hdr.line, column=prof.vehicle_key)
+    maps = [m for m in prof.columns if m.source in names]
+    for m in prof.columns:
+        if m.required and m.source not in names:
+            raise InputError(path, f"header lacks required column {m.source!r}", line=hdr.line, column=m.source)
+    text_cols = list(prof.time.columns) + ([prof.vehicle_key] if prof.vehicle_source == "column" else [])
+    text_cols += [m.source for m in maps if m.value_map is not None]
+    num_cols = [m.source for m in maps if m.value_map is None]
+    used = list(dict.fromkeys(text_cols + num_cols))
+    dups = sorted({c for c in used if names.count(c) > 1})
+    if dups:
+        raise InputError(path, f"column name(s) {dups} appear more than once in the header", line=hdr.line, column=dups[0])
+    unique_names = [f"{n}\x00{i}" if names.count(n) > 1 else n for i, n in enumerate(names)]
+
+    # --- truncated last line
+    body = data[hdr.body_offset:]
+    if body and not body.endswith(b"\n"):
+        last_start = body.rfind(b"\n") + 1
+        last = body[last_start:]
+        n_fields = len(next(csv.reader([last.decode("utf-8", errors="replace")], delimiter=prof.separator), [])) if last.strip() else len(names)
+        if last.strip() and n_fields < len(names):
+            line_no = hdr.line + body.count(b"\n") + 1
+            if prof.truncated_last_line == "error":
+                raise InputError(path, f"truncated last line: {n_fields} of {len(names)} fields",
+                                 line=line_no, column=names[n_fields - 1] if n_fields else names[0])
+            body = body[:last_start]
+            repairs.append(f"read: truncated last line ({n_fields} of {len(names)} fields) dropped: line {line_no}")
+    if not body or body.isspace():
+        raise InputError(path, "header only, no data rows", line=hdr.line + 1)
+
+    # --- field counts per line (vectorised): pandas does not check them when reading
+    # only some columns. Files with quotes are read whole instead, letting the tokenizer check.
+    first_line = hdr.line + 1
+    tspec = prof.time
+    quoted = b'"' in body
+    fast = None
+    if not quoted:
+        bview = np.frombuffer(body, np.uint8)
+        starts, n_sep = _line_stats(bview, ord(prof.separator))
+        blank_line = (bview[starts] == 10) | (bview[starts] == 13)
+        more = n_sep > len(names) - 1
+        if more.any():  # surplus fields that are all empty (trailing separators) are harmless
+            more &= ~_only_trailing_separators(bview, starts, n_sep - (len(names) - 1), ord(prof.separator))
+        if more.any():
+            i = int(np.flatnonzero(more)[0])
+            raise InputError(path, f"malformed CSV: {int(n_sep[i]) + 1} fields, more than the {len(names)} of "
+                                   f"the header", line=first_line + i)
+        fewer = (n_sep < len(names) - 1) & ~blank_line
+        if fewer.any():
+            repairs.append(f"read: {int(fewer.sum())} rows with fewer fields than the header (missing fields "
+                           f"read as empty): {_lines_summary(first_line + np.flatnonzero(fewer))}")
+        # the time column straight from the bytes when it is first and fixed-width
+        if len(tspec.columns) == 1 and names[0] == tspec.columns[0] and len(used) > 1 \
+                and tspec.columns[0] not in used[1:]:
+            fast = _fast_first_column(body, bview, starts, prof.separator, tspec.format)  # type: ignore[arg-type]
+    table_cols = used[1:] if fast is not None else used
+    df = _read_table(body, path, prof, unique_names, table_cols, num_cols, text_cols, hdr.line, all_cols=quoted)
+    if fast is not None and len(fast.ns) != len(df):  # alignment lost (should not happen): slow path
+        fast = None
+        df = _read_table(body, path, prof, unique_names, used, num_cols, text_cols, hdr.line)
+    lines = first_line + np.arange(len(df), dtype=np.int64)
+
+    # blank lines and rows without any used value
+    empty = df.isna().all(axis=1).to_numpy().copy()
+    if fast is not None:
+        empty &= fast.blank
+    if empty.any():
+        repairs.append(f"read: {int(empty.sum())} blank rows (no value in any used column) skipped: {_lines_summary(lines[empty])}")
+        df = df.loc[~empty].reset_index(drop=True)
+        lines = lines[~empty]
+        if fast is not None:
+            fast = _FastTimes(fast.ns[~empty], fast.is_utc, fast.blank[~empty])
+    if len(df) == 0:
+        raise InputError(path, "no data rows with values", line=first_line)
+
+    # --- vehicle ids
+    if prof.vehicle_source == "column":
+        if vehicle_id is not None:
+            raise InputError(path, f"profile {prof.name!r} takes vehicle ids from column {prof.vehicle_key!r}; "
+                                   "a vehicle id override does not apply")
+        raw_codes, raw_ids = pd.factorize(df[prof.vehicle_key], sort=False)  # hash, no per-row strip
+        stripped = pd.Series(np.asarray(raw_ids, dtype=object)).str.strip()
+        uniq_codes, vehicles_idx = pd.factorize(stripped, sort=False)  # ' AB12' and 'AB12' merge
+        bad = (raw_codes < 0) | (np.asarray(stripped == "")[np.maximum(raw_codes, 0)] if len(stripped) else True)
+        if np.any(bad):
+            raise _line_col_error(path, "empty vehicle id", lines, np.asarray(bad), prof.vehicle_key)
+        codes = uniq_codes[raw_codes]
+        vehicles = [str(v) for v in vehicles_idx]
+    else:
+        codes = np.zeros(len(df), np.int64)
+        vehicles = [vehicle_id if vehicle_id is not None else _vehicle_from_profile(prof, path, metadata, repairs)]
+
+    # --- time
+    if fast is not None:
+        col = tspec.columns[0]
+        naive, aware = fast.ns, fast.is_utc
+        _check_times(path, naive, lines, col, None)
+        utc = naive if aware else _localize(naive, tspec.timezone, codes, lines, repairs)
+    elif len(tspec.columns) == 1:
+        col = tspec.columns[0]
+        vals = df[col].to_numpy(dtype=object)
+        naive = _parse_datetimes(vals, tspec.format)  # type: ignore[arg-type]
+        aware = tspec.format == "ISO8601" and _has_offset(vals)
+        _check_times(path, naive, lines, col, vals)
+        utc = naive if aware else _localize(naive, tspec.timezone, codes, lines, repairs)
+    else:
+        dcol, tcol = tspec.columns
+        dvals = df[dcol].to_numpy(dtype=object)
+        tvals = df[tcol].to_numpy(dtype=object)
+        dcodes, duniq = pd.factorize(pd.Series(dvals), sort=False)
+        uniq_ns = _parse_datetimes(np.asarray(duniq, dtype=object), tspec.date_format)  # type: ignore[arg-type]
+        uniq_ns = np.where((uniq_ns >= _TIME_MIN) & (uniq_ns < _TIME_MAX), uniq_ns, _NAT)
+        date_ns = np.where(dcodes >= 0, uniq_ns[np.maximum(dcodes, 0)] if len(uniq_ns) else _NAT, _NAT)
+        tod = _parse_datetimes(tvals, tspec.time_format)  # type: ignore[arg-type]
+        ok_t = tod != _NAT
+        day0 = (tod[ok_t] // _NS_PER_DAY) * _NS_PER_DAY
+        tod[ok_t] = tod[ok_t] - day0  # time of day [ns]
+        badt = ~ok_t
+        if badt.any():
+            raise _line_col_error(path, "unreadable time of day", lines, badt, tcol, tvals)
+        if tspec.date_repair == "dominant":
+            date_ns = _repair_dates(date_ns, tod, dvals, lines, tspec.date_repair_max_days, path, dcol, repairs)
+        badd = date_ns == _NAT
+        if badd.any():
+            raise _line_col_error(path, f"unreadable date (format {tspec.date_format!r}):", lines, badd, dcol, dvals)
+        naive = date_ns + tod
+        _check_times(path, naive, lines, dcol, dvals)
+        utc = _localize(naive, tspec.timezone, codes, lines, repairs)
+
+    # --- canonical columns
+    out: dict[str, np.ndarray] = {"time_s": utc / 1e9, "source_line": lines}
+    for m in maps:
+        out[m.canonical] = _convert_column(df[m.source], m, lines, path, prof, repairs)
+    _check_position(out, prof, lines, path, repairs)
+    for m in maps:
+        if m.canonical not in ("lat_deg", "lon_deg"):
+            _check_absurd(out, m, lines, path, prof, repairs)
+
+    has_pos = "lat_deg" in out and np.isfinite(out["lat_deg"]).any()
+    has_speed = any(c in out and np.isfinite(out[c]).any() for c in ("wheel_speed_mps", "gps_speed_mps"))
+    if not (has_pos or has_speed):
+        cands = [m.source for m in prof.columns if m.canonical in ("lat_deg", "lon_deg", "wheel_speed_mps", "gps_speed_mps")]
+        raise InputError(path, "no position and no speed values: cannot derive a drive cycle "
+                               f"(profile {prof.name!r} looks for {', '.join(cands) or 'none'})")
+
+    # --- split per vehicle
+    frame_all = pd.DataFrame(out)
+    logs = []
+    for k, vname in enumerate(vehicles):
+        sel = codes == k
+        fr = frame_all.loc[sel].reset_index(drop=True) if len(vehicles) > 1 else frame_all
+        fr.insert(2, "vehicle_id", vname)
+        sources = tuple(_energy_source(e, fr, maps) for e in prof.energy if _has_energy_data(e, fr))
+        logs.append(ParsedLog(path, prof.name, vname, fr, dict(metadata), sources, list(repairs), sha))
+    return logs
+
+
+def _read_table(body: bytes, path: Path, prof: Profile, names: list[str], usecols: list[str],
+                num_cols: list[str], text_cols: list[str], header_line: int,
+                all_cols: bool = False) -> pd.DataFrame:
+    """The ``usecols`` columns of the data lines with pandas' C parser: numbers as float64
+    (NaN for empty or NA-like fields), text as object. With ``all_cols`` every column is
+    tokenised (so that the parser checks field counts) and the others dropped after.
+    Malformed rows and non-numbers raise InputError with the file line."""
+    kw = dict(sep=prof.separator, decimal=prof.decimal, header=None, names=names, index_col=False,
+              usecols=None if all_cols else usecols, keep_default_na=False, skip_blank_lines=False,
+              engine="c", encoding="utf-8", quotechar='"', low_memory=False)
+    na_values = {c: _NUMERIC_NA for c in num_cols if c in usecols}
+    na_values.update({c: [""] for c in text_cols if c in usecols})
+    dtype = {c: "float64" for c in num_cols if c in usecols}
+    dtype.update({c: object for c in text_cols if c in usecols})
+    if all_cols:
+        dtype.update({c: object for c in names if c not in usecols})
+    try:
+        try:
+            df = pd.read_csv(io.BytesIO(body), dtype=dtype, na_values=na_values, **kw)
+        except ValueError as exc:
+            if isinstance(exc, pd.errors.ParserError):
+                raise
+            # a field that is not a number: find it (slow path, error only)
+            df = pd.read_csv(io.BytesIO(body), dtype=object, na_values=na_values, **kw)
+            lines = header_line + 1 + np.arange(len(df))
+            for c in num_cols:
+                if c not in usecols:
+                    continue
+                col = df[c]
+                txt = col if prof.decimal == "." else col.str.replace(prof.decimal, ".", regex=False)
+                conv = pd.to_numeric(txt, errors="coerce")
+                bad = (conv.isna() & col.notna()).to_numpy()
+                if bad.any():
+                    raise _line_col_error(path, "not a number:", lines, bad, c.split("\x00")[0], col.to_numpy())
+            raise
+    except pd.errors.ParserError as exc:
+        m = re.search(r"line (\d+)", str(exc))
+        line = header_line + int(m.group(1)) if m else None
+        detail = str(exc).split("C error: ")[-1].strip()
+        if m:
+            detail = detail.replace(f"line {m.group(1)}", "this line")
+        raise InputError(path, f"malformed CSV: {detail}", line=line) from None
+    if all_cols:
+        df = df[usecols]
+    df.columns = [c.split("\x00")[0] for c in df.columns]
+    return df
+
+
+def _has_energy_data(e: EnergySpec, fr: pd.DataFrame) -> bool:
+    """Whether the frame has any value of the source (both factors for a virtual one)."""
+    if e.column in _VIRTUAL_COLUMNS:
+        a, b = _VIRTUAL_COLUMNS[e.column][0]
+        return a in fr.columns and b in fr.columns and bool(
+            (np.isfinite(fr[a].to_numpy()).any() and np.isfinite(fr[b].to_numpy()).any()))
+    return e.column in fr.columns and bool(np.isfinite(fr[e.column].to_numpy()).any())
+
+
+def _energy_source(e: EnergySpec, fr: pd.DataFrame, maps: list[ColumnMap]) -> EnergySource:
+    cols = _VIRTUAL_COLUMNS[e.column][0] if e.column in _VIRTUAL_COLUMNS else (e.column,)
+    src = "*".join(next(m.source for m in maps if m.canonical == c) for c in cols)
+    return EnergySource(e.column, e.kind, e.quantity, e.resolution, e.priority, e.capacity_j, src, e.modulus)
+
+
+def _vehicle_from_profile(prof: Profile, path: Path, metadata: dict[str, str], repairs: list[str]) -> str:
+    src = prof.vehicle_source
+    if src == "fixed":
+        return prof.vehicle_value  # type: ignore[return-value]
+    if src == "metadata":
+        val = metadata.get(prof.vehicle_key or "", "").strip()
+        if val:
+            return val
+        if prof.vehicle_fallback == "error":
+            raise InputError(path, f"no '{prof.vehicle_key}=' metadata line for the vehicle id", line=1)
+        src = prof.vehicle_fallback
+        repairs.append(f"vehicle: no '{prof.vehicle_key}' metadata; vehicle id taken from the file's {src.replace('_', ' ')}")
+    name = path.name
+    for suffix in (".gz", ".csv", ".txt"):
+        if name.lower().endswith(suffix):
+            name = name[: -len(suffix)]
+    return path.resolve().parent.name if src == "parent_dir" else name
+
+
+def _check_times(path: Path, naive: np.ndarray, lines: np.ndarray, col: str, vals: np.ndarray | None) -> None:
+    """Unparseable or absurd (before 1990 or from 2100) times are errors with their line."""
+    bad = (naive == _NAT) | (naive < _TIME_MIN) | (naive >= _TIME_MAX)
+    if bad.any():
+        raise _line_col_error(path, "unreadable or impossible time", lines, bad, col, vals)
+
+
+def _convert_column(s: pd.Series, m: ColumnMap, lines: np.ndarray, path: Path, prof: Profile,
+                    repairs: list[str]) -> np.ndarray:
+    """One source column as float64 in SI (NaN = no value)."""
+    if m.value_map is not None:
+        mapping = dict(m.value_map)
+        res = s.map(mapping)
+        todo = (res.isna() & s.notna()).to_numpy()
+        if todo.any():
+            folded = {k.strip().casefold(): v for k, v in m.value_map}
+            res2 = s[todo].str.strip().str.casefold().map(folded)
+            res[todo] = res2
+            still = (res.isna() & s.notna()).to_numpy()
+            if still.any():
+                raise _line_col_error(path, f"value not in the profile's map ({', '.join(k for k, _ in m.value_map)}):",
+                                      lines, still, m.source, s.to_numpy())
+        x = res.to_numpy(dtype=np.float64)
+    else:
+        x = s.to_numpy(dtype=np.float64, copy=True)
+        if m.missing_values:
+            miss = np.isin(x, np.asarray(m.missing_values))
+            if miss.any():
+                x[miss] = np.nan
+                repairs.append(f"{m.canonical}: {int(miss.sum())} values equal to the logger's missing-value "
+                               f"marker ({', '.join(f'{v:g}' for v in m.missing_values)}) in column "
+                               f"'{m.source}' set to NaN: {_lines_summary(lines[miss])}")
+        if m.factor != 1.0:
+            x *= m.factor
+    if m.negate:
+        x = -x
+    return x
+
+
+def _absurd_verdict(n_bad: int, n_values: int, canon: str, src: str, lines: np.ndarray, bad: np.ndarray,
+                    raw: np.ndarray, path: Path, prof: Profile, repairs: list[str], what: str,
+                    unit: str | None) -> None:
+    """Error or repair message for ``n_bad`` absurd values (``raw``: as logged)."""
+    lo, hi = PLAUSIBLE_RANGE_SI[canon]
+    u = f" {unit}" if unit and unit != "-" else ""
+    if n_bad == n_values or n_bad > prof.absurd_error_share * n_values:
+        raise _line_col_error(
+            path, f"{n_bad} of {n_values} values are impossible for {canon} (allowed {lo:g}..{hi:g} in SI; "
+                  f"wrong unit or column in profile {prof.name!r}?), first [{unit or '-'}]:",
+            lines, bad, src, raw)
+    repairs.append(f"{canon}: {n_bad} impossible {what} in column '{src}' (e.g. {raw[np.flatnonzero(bad)[0]]:g}{u}; "
+                   f"allowed {lo:g}..{hi:g} in SI) set to NaN: {_lines_summary(lines[bad])}")
+
+
+def _check_absurd(out: dict[str, np.ndarray], m: ColumnMap, lines: np.ndarray, path: Path,
+                  prof: Profile, repairs: list[str]) -> None:
+    """Mark values outside PLAUSIBLE_RANGE_SI as NaN and report them; too many -> error.
+
+    Policy: absurd values that are a minority are logger glitches (NaN + repair, with
+    count and lines); if every value, or more than ``profile.absurd_error_share`` of them
+    (default 0.5: most values), is absurd, the profile's unit or column must be wrong and
+    guessing would hide it: InputError at the first absurd line. A share, not a count,
+    so that a burst of junk in a short file is still repaired, not refused.
+    """
+    x = out[m.canonical]
+    lo, hi = PLAUSIBLE_RANGE_SI[m.canonical]
+    with np.errstate(invalid="ignore"):
+        bad = (x < lo) | (x > hi)
+    if not bad.any():
+        return
+    n_values = int(np.isfinite(x).sum())
+    as_logged = (-x if m.negate else x) / m.factor  # for messages, in the logger's unit
+    _absurd_verdict(int(bad.sum()), n_values, m.canonical, m.source, lines, bad, as_logged, path, prof,
+                    repairs, "values", m.unit)
+    x[bad] = np.nan
+
+
+def _check_position(out: dict[str, np.ndarray], prof: Profile, lines: np.ndarray, path: Path,
+                    repairs: list[str]) -> None:
+    """A position is one fix: if latitude or longitude is impossible (|lat| > 90,
+    |lon| > 180) or, with ``zero_position_is_no_fix``, exactly 0 (the value GPS modules
+    write without a fix), both become NaN. Zeros are never an error (a logger may have no
+    GPS at all); impossible values follow the absurd-value policy."""
+    if "lat_deg" not in out:
+        return
+    lat, lon = out["lat_deg"], out["lon_deg"]
+    with np.errstate(invalid="ignore"):
+        lat_bad, lon_bad = np.abs(lat) > 90.0, np.abs(lon) > 180.0
+    absurd = lat_bad | lon_bad
+    zero = ((lat == 0.0) | (lon == 0.0)) & ~absurd if prof.zero_position_is_no_fix else np.zeros(len(lat), bool)
+    n_values = int((np.isfinite(lat) & np.isfinite(lon)).sum())
+    for canon, bad, x in (("lat_deg", lat_bad, lat), ("lon_deg", lon_bad, lon)):
+        if bad.any():
+            src = next(m.source for m in prof.columns if m.canonical == canon)
+            _absurd_verdict(int(bad.sum()), n_values, canon, src, lines, bad, x, path, prof, repairs,
+                            "GPS fixes (the whole fix set to NaN)", "deg")
+    if zero.any():
+        repairs.append(f"position: {int(zero.sum())} GPS fixes with latitude or longitude exactly 0 (no fix) "
+                       f"set to NaN: {_lines_summary(lines[zero])}")
+    drop = absurd | zero
+    if drop.any():
+        lat[drop] = np.nan
+        lon[drop] = np.nan
