@@ -15,7 +15,7 @@ import numpy as np
 import typer
 
 from cevm import __version__
-from cevm.cycle import CR0_DEFAULT, cycle_vector
+from cevm.cycle import CR0_DEFAULT, CycleVector, cycle_vector
 from cevm.errors import CevmError
 from cevm.io import load_vehicles, read_cycle_csv
 from cevm.model import ICE_BRAKING_MODES
@@ -25,6 +25,11 @@ from cevm.vehicle import J_PER_KWH, predict
 EXIT_OK = 0
 EXIT_PARTIAL = 1
 EXIT_INPUT = 2
+
+StoreOption = Annotated[
+    Optional[Path],
+    typer.Option("--store", envvar="CEVM_STORE", help="Trip store (SQLite). Default: $CEVM_STORE, else ~/.local/share/cevm/cevm.sqlite."),
+]
 
 app = typer.Typer(
     name="cevm",
@@ -61,8 +66,16 @@ def predict_cmd(
         list[Path], typer.Option("--vehicle", "-v", help="Vehicle TOML file, or a directory of them. Repeatable.")
     ],
     cycle: Annotated[
-        list[Path], typer.Option("--cycle", "-c", help="Cycle CSV (time_s, speed_kmh|speed_mps[, elevation_m]). Repeatable.")
-    ],
+        Optional[list[Path]],
+        typer.Option("--cycle", "-c", help="Cycle CSV (time_s, speed_kmh|speed_mps[, elevation_m]). Repeatable."),
+    ] = None,
+    trip: Annotated[
+        Optional[list[str]], typer.Option("--trip", "-t", help="A stored trip id (see 'cevm trips'). Repeatable.")
+    ] = None,
+    vehicle_id: Annotated[
+        Optional[list[str]], typer.Option("--vehicle-id", help="All stored trips of this vehicle id. Repeatable.")
+    ] = None,
+    store: StoreOption = None,
     mass_kg: Annotated[
         Optional[list[float]],
         typer.Option("--mass-kg", "-m", help="Gross mass [kg]. Repeatable. Default: each vehicle's mass_kg."),
@@ -74,28 +87,35 @@ def predict_cmd(
     ] = None,
     cr0: Annotated[float, typer.Option(help="Conservative rolling coefficient Cr0 of the simplification criterion.")] = CR0_DEFAULT,
 ) -> None:
-    """Predict energy (EV) or fuel (ICE) for every (cycle, vehicle, mass)."""
+    """Predict energy (EV) or fuel (ICE) for every (source, vehicle, mass).
+
+    Sources are cycle files (--cycle) and stored trips (--trip, --vehicle-id); the
+    'cycle' column names each (the file's stem or the trip id)."""
+    if not (cycle or trip or vehicle_id):
+        raise _fail("give at least one source: --cycle, --trip or --vehicle-id")
     if ice_braking is not None and ice_braking not in ICE_BRAKING_MODES:
         raise _fail(f"--ice-braking must be one of: {', '.join(ICE_BRAKING_MODES)}")
     if mass_kg and any(not np.isfinite(m) or m <= 0 for m in mass_kg):
         raise _fail("--mass-kg values must be positive")
     try:
         vehicles = load_vehicles(vehicle)
-        cycles = [read_cycle_csv(c) for c in cycle]
+        sources = [(c.name or str(path), cycle_vector(c, cr0=cr0)) for path, c in
+                   ((p, read_cycle_csv(p)) for p in cycle or [])]
+        if trip or vehicle_id:
+            sources.extend(_stored_vectors(store, trip or [], vehicle_id or []))
     except CevmError as exc:
         raise _fail(str(exc)) from None
     rows = []
-    for path, cyc in zip(cycle, cycles):
-        vec = cycle_vector(cyc, cr0=cr0)
+    for name, vec in sources:
         for veh in vehicles:
-            if veh.cr < cr0:
-                raise _fail(f"vehicle {veh.name!r}: cr {veh.cr:g} is below --cr0 {cr0:g}")
+            if veh.cr < vec.cr0:
+                raise _fail(f"vehicle {veh.name!r}: cr {veh.cr:g} is below the vector's Cr0 {vec.cr0:g}")
             masses = np.asarray(mass_kg if mass_kg else [veh.mass_kg], dtype=np.float64)
             pred = predict(vec, veh, masses, ice_braking=ice_braking)
             dist_km = vec.distance_m / 1000.0
             for i, m in enumerate(masses):
                 row = {
-                    "cycle": cyc.name or str(path),
+                    "cycle": name,
                     "vehicle": veh.name,
                     "powertrain": veh.powertrain,
                     "mass_kg": float(m),
@@ -127,6 +147,24 @@ def predict_cmd(
     write_rows(rows, fmt, columns=columns, title="cevm predict", digits=PREDICT_DIGITS, headers=PREDICT_HEADERS)
 
 
+def _stored_vectors(store: Optional[Path], trip_ids: list[str], vehicle_ids: list[str]) -> list[tuple[str, CycleVector]]:
+    from cevm.store import TripStore, resolve_store_path
+
+    path = resolve_store_path(store)
+    if not path.exists():
+        raise CevmError(f"{path}: no trip store here; run 'cevm ingest' first or give --store")
+    out: dict[str, bytes] = {}
+    with TripStore.open(path) as st:
+        if trip_ids:
+            out.update(st.load_vectors(trip_ids=trip_ids))
+        for vid in vehicle_ids:
+            got = st.load_vectors(vehicle_id=vid)
+            if not got:
+                raise CevmError(f"vehicle id {vid!r} has no stored trips; see 'cevm trips'")
+            out.update(got)
+    return [(tid, CycleVector.from_bytes(b)) for tid, b in out.items()]
+
+
 PREDICT_HEADERS = {
     "mass_kg": "mass kg",
     "distance_km": "km",
@@ -145,9 +183,129 @@ def _not_yet(name: str, issue: str) -> None:
 
 
 @app.command()
-def ingest() -> None:
-    """Read logger CSV exports into the trip store (not yet available)."""
-    _not_yet("ingest", "the ingest capability is being built")
+def ingest(
+    paths: Annotated[list[str], typer.Argument(help="Log files, directories (recursive) or glob patterns; .csv and .csv.gz.")],
+    store: StoreOption = None,
+    dsm: Annotated[
+        Optional[str], typer.Option(help="DSM for road elevation: a GeoTIFF, a directory of tiles, a VRT, or a GDAL URL.")
+    ] = None,
+    profile: Annotated[Optional[str], typer.Option(help="Force a logger profile by name (default: detect from the header).")] = None,
+    profiles_dir: Annotated[Optional[Path], typer.Option(help="A directory of extra logger profiles (TOML).")] = None,
+    force: Annotated[bool, typer.Option(help="Re-ingest files even when unchanged.")] = False,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar and no table: failures and one summary line only.")] = False,
+    log_json: Annotated[bool, typer.Option(help="One JSON object per file on stdout, then a summary object (for cron and scripts).")] = False,
+) -> None:
+    """Read logger CSV exports into the trip store: clean trips, DSM elevation, measured
+    consumption and drive-cycle vectors.
+
+    Each failed file is reported on stderr (file, line, column, why) as it happens and
+    skipped; the rest is stored. Exit 0 if every file was ingested or unchanged, 1 if any
+    failed, 2 for bad options (unknown profile, unreadable DSM)."""
+    import json
+
+    from cevm.ingest import IngestOptions
+    from cevm.ingest import ingest as run_ingest
+    from cevm.store import TripStore, resolve_store_path
+
+    options = IngestOptions(dsm=dsm, profile=profile, profiles_dir=str(profiles_dir) if profiles_dir else None, force=force)
+    store_path = resolve_store_path(store)
+    progress = None
+    if not quiet and not log_json and sys.stderr.isatty():
+        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+        progress = Progress(TextColumn("ingest"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+                            TextColumn("{task.description}"), transient=True)
+    task = None
+
+    def on_start(n: int) -> None:
+        nonlocal task
+        if progress is not None:
+            progress.start()
+            task = progress.add_task("", total=n)
+
+    def on_file(fr) -> None:
+        if log_json:
+            typer.echo(json.dumps({"event": "file", **_file_dict(fr)}))
+        elif fr.status == "failed":
+            (progress.console.print if progress is not None else lambda m: typer.echo(m, err=True))(
+                f"cevm: failed: {fr.error}"
+            )
+        if progress is not None and task is not None:  # inputs that matched nothing come before the bar
+            progress.update(task, advance=1, description=Path(fr.path).name)
+
+    try:
+        with TripStore.open(store_path) as st:
+            report = run_ingest(paths, st, options, on_file=on_file, on_start=on_start)
+    except CevmError as exc:
+        raise _fail(str(exc)) from None
+    finally:
+        if progress is not None:
+            progress.stop()
+    summary = report.summary()
+    if log_json:
+        typer.echo(json.dumps({"event": "summary", "store": str(store_path), **summary}))
+    elif quiet:
+        typer.echo(_summary_line(summary, store_path))
+    else:
+        _print_ingest_table(report, summary, store_path)
+    raise typer.Exit(EXIT_PARTIAL if report.failed else EXIT_OK)
+
+
+def _file_dict(fr) -> dict:
+    return {"path": fr.path, "status": fr.status, "trips": fr.trips, "samples": fr.samples,
+            "km": round(fr.km, 3), "seconds": round(fr.seconds, 4), "profile": fr.profile,
+            "error": fr.error, "duplicates": fr.duplicates, "repairs": list(fr.repairs)}
+
+
+def _summary_line(s: dict, store_path: Path) -> str:
+    return (f"cevm ingest: {s['files']} files ({s['ingested']} ingested, {s['unchanged']} unchanged, "
+            f"{s['failed']} failed), {s['trips']} trips, {s['samples']} samples, {s['km']:.1f} km "
+            f"in {s['seconds']:.2f} s -> {store_path}")
+
+
+def _print_ingest_table(report, summary: dict, store_path: Path) -> None:
+    rows = [
+        {"file": Path(f.path).name, "status": f.status, "profile": f.profile or "-", "trips": f.trips,
+         "samples": f.samples, "km": f.km, "s": f.seconds, "repairs": len(f.repairs)}
+        for f in report.files
+    ]
+    if len(rows) <= 40:
+        write_rows(rows, OutputFormat.table, title="cevm ingest", digits={"km": 1, "s": 2},
+                   columns=["file", "status", "profile", "trips", "samples", "km", "s", "repairs"])
+    typer.echo(_summary_line(summary, store_path))
+
+
+@app.command()
+def trips(
+    store: StoreOption = None,
+    vehicle_id: Annotated[Optional[str], typer.Option("--vehicle-id", help="Only this vehicle's trips.")] = None,
+    fmt: Annotated[OutputFormat, typer.Option("--format", "-f", help="Output format.")] = OutputFormat.table,
+) -> None:
+    """List the stored trips."""
+    from cevm.store import TripStore, format_trips, resolve_store_path
+
+    path = resolve_store_path(store)
+    if not path.exists():
+        raise _fail(f"{path}: no trip store here; run 'cevm ingest' first or give --store")
+    try:
+        with TripStore.open(path) as st:
+            df = format_trips(st.list_trips(vehicle_id=vehicle_id))
+    except CevmError as exc:
+        raise _fail(str(exc)) from None
+    rows = [{k: (None if isinstance(v, float) and v != v else v) for k, v in r.items()} for r in df.to_dict("records")]
+    columns = ["trip_id", "vehicle_id", "start_utc", "distance_km", "duration_s", "measured_fuel_l",
+               "measured_energy_kwh", "dsm_coverage_pct", "elevation_source"]
+    if fmt == OutputFormat.table:
+        columns = [c for c in columns if any(r.get(c) is not None for r in rows)] or columns[:5]
+        write_rows(rows, fmt, columns=columns, title=f"cevm trips ({len(rows)})", headers=TRIPS_HEADERS,
+                   digits={"duration_s": 0, "dsm_coverage_pct": 1, "distance_km": 2})
+    else:
+        write_rows(rows, fmt)
+
+
+TRIPS_HEADERS = {"vehicle_id": "vehicle", "start_utc": "start (UTC)", "distance_km": "km", "duration_s": "s",
+                 "measured_fuel_l": "fuel l", "measured_energy_kwh": "kWh", "dsm_coverage_pct": "DSM %",
+                 "elevation_source": "elevation"}
 
 
 @app.command()

@@ -1,0 +1,241 @@
+"""The ingest pipeline end to end: logger files -> store, through the CLI as a user runs it."""
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from pyproj import Transformer
+from typer.testing import CliRunner
+
+from cevm.cli import app
+from cevm.cycle import CycleVector, drive_cycle_vector
+from cevm.store import TripStore
+
+runner = CliRunner()
+DATA = Path(__file__).parent / "data"
+
+# A DSM that is a tilted plane in British National Grid: z = A + B x + C y [m]
+PLANE = (120.0, 0.004, -0.003)
+ORIGIN_BNG = (485000.0, 238000.0)
+
+
+def plane(x, y):
+    return PLANE[0] + PLANE[1] * (x - ORIGIN_BNG[0]) + PLANE[2] * (y - ORIGIN_BNG[1])
+
+
+@pytest.fixture
+def dsm(tmp_path):
+    import rasterio
+    from rasterio.transform import from_origin
+
+    res = 2.0
+    n = 3000  # 6 km x 6 km
+    x0, y1 = ORIGIN_BNG[0] - 1000.0, ORIGIN_BNG[1] + 5000.0
+    xs = x0 + res * (np.arange(n) + 0.5)
+    ys = y1 - res * (np.arange(n) + 0.5)
+    z = plane(xs[None, :], ys[:, None]).astype(np.float32)
+    path = tmp_path / "dsm.tif"
+    with rasterio.open(path, "w", driver="GTiff", width=n, height=n, count=1, dtype="float32",
+                       crs="EPSG:27700", transform=from_origin(x0, y1, res, res), nodata=-9999.0,
+                       tiled=True, blockxsize=256, blockysize=256, compress="deflate") as ds:
+        ds.write(z, 1)
+    return path
+
+
+def write_srf(path: Path, vehicle_id: str, start_epoch: int, seed: int, *, n: int = 900) -> dict:
+    """A small srf export: 1 Hz, a stop-go speed trace heading north-east from the
+    origin, FMS wheel speed and an energy counter (0.1 kWh). Returns the truth."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(n, dtype=float)
+    v = np.clip(12.0 * np.sin(np.pi * t / 300.0) ** 2 + rng.normal(0, 0.2, n), 0, None)
+    v[:20] = 0.0
+    v[-20:] = 0.0
+    s = np.concatenate([[0.0], np.cumsum(0.5 * (v[1:] + v[:-1]))])
+    x = ORIGIN_BNG[0] + s / np.sqrt(2)
+    y = ORIGIN_BNG[1] + s / np.sqrt(2)
+    lon, lat = Transformer.from_crs("EPSG:27700", "EPSG:4326", always_xy=True).transform(x, y)
+    energy_kwh = 50.0 + np.cumsum(np.concatenate([[0.0], 0.0004 * v[1:] + 0.0001]))
+    iso = [np.datetime_as_string(np.datetime64(start_epoch + int(ti), "s"), unit="ms") + "Z" for ti in t]
+    lines = [f"# vehicle_id={vehicle_id}", "# logger=SRF Logger 2.4.1", f"# started={iso[0]}",
+             "timestamp_utc,gps_lat_deg,gps_lon_deg,gps_alt_m,gps_speed_kmh,fms_wheel_speed_kmh,fms_total_energy_used_kwh"]
+    for i in range(n):
+        counter = f"{np.floor(energy_kwh[i] * 10) / 10:.1f}" if i % 5 == 0 else ""
+        lines.append(f"{iso[i]},{lat[i]:.7f},{lon[i]:.7f},{100 + rng.normal(0, 10):.1f},{v[i] * 3.6:.2f},"
+                     f"{np.round(v[i] * 3.6 * 256) / 256:.4f},{counter}")
+    path.write_text("\n".join(lines) + "\n")
+    return {"x": x, "y": y, "distance_m": s[-1], "energy_kwh": energy_kwh[-1] - energy_kwh[0]}
+
+
+@pytest.fixture
+def fleet(tmp_path):
+    logs = tmp_path / "logs"
+    (logs / "bus1").mkdir(parents=True)
+    truth = {
+        "a": write_srf(logs / "bus1" / "day1.csv", "EB-01", 1_557_820_800, 1),
+        "b": write_srf(logs / "bus1" / "day2.csv", "EB-01", 1_557_907_200, 2),
+        "c": write_srf(logs / "eb02.csv", "EB-02", 1_557_820_800, 3),
+    }
+    return logs, truth
+
+
+def run(*args, env=None):
+    return runner.invoke(app, [str(a) for a in args], env=env)
+
+
+def test_ingest_srf_with_dsm_then_trips_and_predict(tmp_path, fleet, dsm, root):
+    logs, truth = fleet
+    store = tmp_path / "s.sqlite"
+    res = run("ingest", logs, "--store", store, "--dsm", dsm, "--log-json")
+    assert res.exit_code == 0, res.output
+    events = [json.loads(line) for line in res.stdout.splitlines()]
+    summary = events[-1]
+    assert summary["event"] == "summary" and summary["files"] == 3 and summary["failed"] == 0
+    assert summary["trips"] == 3
+
+    rows = json.loads(run("trips", "--store", store, "--format", "json").stdout)
+    assert {r["vehicle_id"] for r in rows} == {"EB-01", "EB-02"}
+    for r in rows:
+        for key in ("trip_id", "vehicle_id", "start_utc", "distance_km", "duration_s", "measured_energy_kwh",
+                    "dsm_coverage_pct"):
+            assert key in r
+        assert r["dsm_coverage_pct"] > 95.0
+        # the counter (0.1 kWh steps, every 5th tick) brackets the true energy
+        assert r["measured_energy_kwh"] == pytest.approx(truth["a"]["energy_kwh"], abs=0.25)
+        assert r["distance_km"] == pytest.approx(truth["a"]["distance_m"] / 1000, rel=0.03)
+
+    with TripStore.open(store) as st:
+        trip = st.load_trip(rows[0]["trip_id"])
+        vec = CycleVector.from_bytes(st.load_vector_bytes(rows[0]["trip_id"]))
+    # road elevation from the DSM follows the plane: climb = plane difference along the route
+    t = truth["a"]
+    climb = plane(t["x"][-1], t["y"][-1]) - plane(t["x"][0], t["y"][0])
+    assert trip.elevation_m[-1] - trip.elevation_m[0] == pytest.approx(climb, abs=1.0)
+    assert trip.elevation_source.startswith("dsm")
+    # the stored vector is the vector of the stored profile (kept as float32 for speed and
+    # elevation, so to float32 rounding; the vector itself was computed in float64)
+    again = drive_cycle_vector(trip.time_s, trip.speed_mps, trip.elevation_m)
+    assert vec.delta == pytest.approx(again.delta, rel=1e-5)
+
+    bus = root / "configs/vehicles/electric-bus.toml"
+    pred = json.loads(run("predict", "-v", bus, "--vehicle-id", "EB-01", "--store", store, "-f", "json").stdout)
+    assert len(pred) == 2 and all(p["energy_kwh"] > 0 for p in pred)
+    one = json.loads(run("predict", "-v", bus, "--trip", rows[0]["trip_id"], "--store", store, "-f", "json").stdout)
+    assert one[0]["cycle"] == rows[0]["trip_id"]
+
+
+def test_ingest_is_idempotent_and_a_changed_file_replaces_its_trips(tmp_path, fleet):
+    logs, _ = fleet
+    store = tmp_path / "s.sqlite"
+    assert run("ingest", logs, "--store", store, "-q").exit_code == 0
+    before = json.loads(run("trips", "--store", store, "-f", "json").stdout)
+    res = run("ingest", logs, "--store", store, "--log-json")
+    assert json.loads(res.stdout.splitlines()[-1])["unchanged"] == 3
+    assert json.loads(run("trips", "--store", store, "-f", "json").stdout) == before
+    # change one file: its trip is replaced, the others are untouched
+    write_srf(logs / "eb02.csv", "EB-02", 1_557_824_400, 9)
+    res = run("ingest", logs, "--store", store, "--log-json")
+    s = json.loads(res.stdout.splitlines()[-1])
+    assert (s["ingested"], s["unchanged"]) == (1, 2)
+    after = json.loads(run("trips", "--store", store, "-f", "json").stdout)
+    assert len(after) == 3
+    old_ids = {r["trip_id"] for r in before if r["vehicle_id"] == "EB-02"}
+    new_ids = {r["trip_id"] for r in after if r["vehicle_id"] == "EB-02"}
+    assert old_ids.isdisjoint(new_ids) and len(new_ids) == 1
+
+
+def test_bad_files_are_reported_skipped_and_the_batch_goes_on(tmp_path, fleet):
+    logs, _ = fleet
+    store = tmp_path / "s.sqlite"
+    assert run("ingest", logs, "--store", store, "-q").exit_code == 0
+    (logs / "junk.csv").write_bytes(np.random.default_rng(5).bytes(2000))
+    (logs / "empty.csv").write_text("")
+    # a previously good file turns bad: its stored trip stays
+    good = (logs / "eb02.csv").read_text().splitlines()
+    (logs / "eb02.csv").write_text("\n".join(good[:10] + [good[10].replace(",", ";x;", 1)] + good[11:]) + "\n")
+    res = run("ingest", logs, "--store", store, "--log-json")
+    assert res.exit_code == 1
+    events = [json.loads(line) for line in res.stdout.splitlines()]
+    failed = {Path(e["path"]).name: e["error"] for e in events if e.get("status") == "failed"}
+    assert set(failed) >= {"junk.csv", "empty.csv"}
+    for name, err in failed.items():
+        assert name in err  # the message names the file
+    trips = json.loads(run("trips", "--store", store, "-f", "json").stdout)
+    assert len(trips) == 3 and "EB-02" in {t["vehicle_id"] for t in trips}
+
+
+def test_missing_input_and_unknown_profile(tmp_path, fleet):
+    logs, _ = fleet
+    store = tmp_path / "s.sqlite"
+    res = run("ingest", tmp_path / "nowhere", "--store", store)
+    assert res.exit_code == 1 and "nowhere" in res.output
+    res = run("ingest", logs, "--store", store, "--profile", "nosuch")
+    assert res.exit_code == 2 and "nosuch" in res.output
+
+
+def test_two_ingests_at_once_store_everything_once(tmp_path, fleet):
+    logs, _ = fleet
+    store = tmp_path / "s.sqlite"
+    cmd = [sys.executable, "-m", "cevm", "ingest", str(logs), "--store", str(store), "-q"]
+    procs = [subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE) for _ in range(2)]
+    for p in procs:
+        out, err = p.communicate(timeout=120)
+        assert p.returncode == 0, err.decode()
+    with TripStore.open(store) as st:
+        assert st.count_trips() == 3
+        assert st.integrity_check() == "ok"
+
+
+def test_twizy_excerpt_ingests_with_its_repairs_reported(tmp_path):
+    src = DATA / "twizy_excerpt.csv"
+    if not src.exists():
+        pytest.skip("no twizy excerpt")
+    store = tmp_path / "s.sqlite"
+    res = run("ingest", src, "--store", store, "--log-json")
+    assert res.exit_code == 0, res.output
+    event = json.loads(res.stdout.splitlines()[0])
+    assert event["profile"] == "twizy" and event["status"] == "ingested"
+
+
+def test_real_twizy_logs_ingest_cleanly(tmp_path):
+    real = Path(__file__).resolve().parents[2] / "shared" / "real-logs" / "twizy"
+    if not real.is_dir():
+        pytest.skip("../shared/real-logs is not beside this checkout")
+    store = tmp_path / "s.sqlite"
+    res = run("ingest", real, "--store", store, "--log-json")
+    assert res.exit_code == 0, res.output
+    summary = json.loads(res.stdout.splitlines()[-1])
+    assert summary["failed"] == 0 and summary["files"] == 17 and summary["trips"] >= 17
+    rows = json.loads(run("trips", "--store", store, "-f", "json").stdout)
+    # a Twizy uses roughly 0.06-0.15 kWh/km
+    per_km = [r["measured_energy_kwh"] / r["distance_km"] for r in rows if r["measured_energy_kwh"]]
+    assert len(per_km) >= 15 and 0.05 < np.median(per_km) < 0.15
+
+
+from hypothesis import HealthCheck, given, settings  # noqa: E402
+from hypothesis import strategies as st  # noqa: E402
+
+from cevm.ingest import IngestOptions, process_file  # noqa: E402
+from cevm.loggers import load_profiles  # noqa: E402
+
+SRF_HEAD = "timestamp_utc,gps_lat_deg,gps_lon_deg,fms_wheel_speed_kmh\n"
+
+
+@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(st.one_of(
+    st.binary(min_size=0, max_size=3000),
+    st.text(min_size=0, max_size=2000),
+    st.text(alphabet="0123456789,.:-TZ\n\r;# ", min_size=0, max_size=2000).map(lambda s: SRF_HEAD + s),
+))
+def test_property_any_bytes_give_a_clear_error_or_trips_never_a_crash(tmp_path, content):
+    path = tmp_path / "f.csv"
+    path.write_bytes(content.encode("utf-8") if isinstance(content, str) else content)
+    out = process_file(path, IngestOptions(), PROFILES)
+    if out.error is not None:
+        assert "internal error" not in out.error, out.error
+        assert str(path) in out.error
+
+
+PROFILES = load_profiles()
