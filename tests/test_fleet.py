@@ -534,3 +534,26 @@ def test_standin_cycles_are_deterministic_and_the_papers_lengths(tmp_path):
         assert np.max(np.abs(np.diff(cyc.speed_mps))) < 1.5  # no jump at the trim
     assert set(STANDIN_CYCLES) == set(targets)
     assert standin_cycle("regional-standin").distance_m == pytest.approx(7900.0, rel=0.01)
+
+
+def test_cli_fleet_plan_json_and_table():
+    from typer.testing import CliRunner
+
+    from cevm.cli import app
+
+    root = Path(__file__).resolve().parents[1]
+    runner = CliRunner()
+    res = runner.invoke(app, ["fleet", "plan", str(root / "configs/fleet/paper-case-study.toml"), "-f", "json"])
+    assert res.exit_code == 0, res.output
+    rep = json.loads(res.stdout)
+    assert [s["day"] for s in rep["summary"]] == ["day 1", "day 2", "day 3"]
+    for s in rep["summary"]:
+        assert s["status"] == "optimal" and s["total"] <= s["default_total"] + 1e-9
+    # every shared stop is served exactly once per day
+    for p in rep["plans"]:
+        served = [s for v in p["vehicles"] for s in v["stops"]]
+        assert sorted(served) == sorted(set(served)) and "LH1S1/R1S2" in served and "LH2S1/R1S4" in served
+    res = runner.invoke(app, ["fleet", "plan", str(root / "configs/fleet/paper-case-study.toml"), "--day", "day 2"])
+    assert res.exit_code == 0 and "table 4" in res.stdout and "day 2" in res.stdout
+    res = runner.invoke(app, ["fleet", "plan", str(root / "nope.toml")])
+    assert res.exit_code == 2 and "nope.toml" in res.output
