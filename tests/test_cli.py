@@ -85,10 +85,3 @@ def test_bad_input_is_one_line_on_stderr_exit_2(tmp_path, files):
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1 and "Traceback" not in proc.stderr
     assert f"{bad}:3: column 'speed_kmh'" in lines[0]
-
-
-def test_not_yet_available_commands_exit_nonzero():
-    # removed once those capabilities land; until then they must not pretend to work
-    for cmd in ("calibrate",):
-        res = runner.invoke(app, [cmd])
-        assert res.exit_code == 2 and "not yet available" in res.output

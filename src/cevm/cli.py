@@ -178,10 +178,6 @@ PREDICT_HEADERS = {
 PREDICT_DIGITS = {"mass_kg": 0, "duration_s": 0, "distance_km": 2, "wheel_energy_kwh": 2, "energy_kwh": 2, "fuel_l": 2, "fuel_l_per_100km": 1}
 
 
-def _not_yet(name: str, issue: str) -> None:
-    raise _fail(f"'cevm {name}' is not yet available ({issue}).", EXIT_INPUT)
-
-
 @app.command()
 def ingest(
     paths: Annotated[list[str], typer.Argument(help="Log files, directories (recursive) or glob patterns; .csv and .csv.gz.")],
@@ -309,9 +305,95 @@ TRIPS_HEADERS = {"vehicle_id": "vehicle", "start_utc": "start (UTC)", "distance_
 
 
 @app.command()
-def calibrate() -> None:
-    """Fit a vehicle's efficiency to measured trips (not yet available)."""
-    _not_yet("calibrate", "the calibration capability is being built")
+def calibrate(
+    vehicle: Annotated[Path, typer.Option("--vehicle", "-v", help="The vehicle file to start from.")],
+    vehicle_id: Annotated[str, typer.Option("--vehicle-id", help="Whose stored trips to fit (see 'cevm trips').")],
+    store: StoreOption = None,
+    fit: Annotated[
+        Optional[list[str]],
+        typer.Option("--fit", help="Parameters to fit: eta (always), aux_power (EV), idle_fuel (ICE), cda, cr. Repeatable or comma-separated."),
+    ] = None,
+    out: Annotated[Optional[Path], typer.Option("--out", "-o", help="Write the calibrated vehicle file here.")] = None,
+    force: Annotated[bool, typer.Option(help="Allow --out to overwrite an existing file.")] = False,
+    cv_folds: Annotated[int, typer.Option(help="Cross-validation folds over days (leave-one-day-out below 10 days).")] = 5,
+    max_rel_uncertainty: Annotated[float, typer.Option(help="Exclude trips measured worse than this (relative 1-sigma).")] = 0.10,
+    plot: Annotated[Optional[Path], typer.Option(help="Write predicted-vs-measured and error-vs-distance plots (PNG).")] = None,
+    fmt: Annotated[OutputFormat, typer.Option("--format", "-f", help="table, or json (figures plus per-trip rows).")] = OutputFormat.table,
+) -> None:
+    """Fit the vehicle's efficiency eta (and optionally more) to its measured trips, with
+    cross-validated errors: the paper's tables 1 and 2 for your own fleet."""
+    from cevm.calibrate_io import (
+        dumps, plot_calibration, result_json, trips_for_calibration, write_calibrated_vehicle,
+    )
+    from cevm.calibration import fit as fit_vehicle
+    from cevm.io import load_vehicle
+    from cevm.store import TripStore, resolve_store_path
+
+    params = ["eta"] + [p.strip() for f in (fit or []) for p in f.split(",") if p.strip() and p.strip() != "eta"]
+    if cv_folds < 2:
+        raise _fail("--cv-folds must be at least 2")
+    path = resolve_store_path(store)
+    if not path.exists():
+        raise _fail(f"{path}: no trip store here; run 'cevm ingest' first or give --store")
+    try:
+        veh = load_vehicle(vehicle)
+        with TripStore.open(path) as st:
+            sel = trips_for_calibration(st, vehicle_id, veh)
+        result = fit_vehicle(veh, sel.trips, params, cv_folds=cv_folds, max_rel_uncertainty=max_rel_uncertainty)
+        if out is not None:
+            write_calibrated_vehicle(vehicle, out, result, force=force,
+                                     note=f"calibrated by cevm calibrate on {len(result.rows)} trips of {vehicle_id} "
+                                          f"(store {path})")
+        if plot is not None:
+            plot_calibration(result, plot, f"{veh.name} ({vehicle_id})")
+    except CevmError as exc:
+        raise _fail(str(exc)) from None
+    report = result_json(result, vehicle_id, sel.notes)
+    if fmt == OutputFormat.json:
+        typer.echo(dumps(report))
+    elif fmt == OutputFormat.csv:
+        write_rows(report["trips"], fmt)
+    else:
+        _print_calibration(report, veh.is_ev)
+    if out is not None and fmt == OutputFormat.table:
+        typer.echo(f"calibrated vehicle written to {out}")
+
+
+#: The paper's CE-model figures (tables 1 and 2), for comparison.
+PAPER_CE = {True: ("electric bus, table 1", 0.4, 4.0, 19e-3, 2.6e-3), False: ("diesel HGV, table 2", 1.3, 3.7, 16.5e-3, 2.5e-3)}
+
+
+def _print_calibration(r: dict, is_ev: bool) -> None:
+    name, mu, sd, tmu, tsd = PAPER_CE[is_ev]
+    ins, cv, t = r["in_sample"], r["cross_validated"], r["time_per_prediction_s"]
+
+    def pct(x):
+        return "-" if x is None else f"{x:+.2f} %" if x else "0.00 %"
+
+    rows = [
+        {"item": "mu(e)", "in-sample": pct(ins["mean_pct"]), "cross-validated": pct(cv and cv["mean_pct"]), f"paper ({name})": f"{mu:+.1f} %"},
+        {"item": "sigma(e)", "in-sample": pct(ins["std_pct"]).lstrip("+"), "cross-validated": pct(cv and cv["std_pct"]).lstrip("+"), f"paper ({name})": f"{sd:.1f} %"},
+        {"item": "mu(t_exe)", "in-sample": "-" if t is None else f"{t['mean'] * 1e6:.1f} us", "cross-validated": "", f"paper ({name})": f"{tmu * 1e3:.1f} ms"},
+        {"item": "sigma(t_exe)", "in-sample": "-" if t is None else f"{t['std'] * 1e6:.1f} us", "cross-validated": "", f"paper ({name})": f"{tsd * 1e3:.1f} ms"},
+        {"item": "trips", "in-sample": str(r["n_trips"]), "cross-validated": r["cv_scheme"], f"paper ({name})": "-"},
+    ]
+    write_rows(rows, OutputFormat.table, title=f"cevm calibrate: {r['vehicle_id']}, error e = (modelled - measured) / measured")
+    fitted = []
+    for k, v in r["fitted"].items():
+        scale, unit = {"aux_power_w": (1e-3, "kW"), "idle_fuel_lps": (3600.0, "l/h")}.get(k, (1.0, ""))
+        fitted.append({"parameter": k.replace("_w", "").replace("_lps", ""), "value": f"{v['value'] * scale:.4g} {unit}".strip(),
+                       "std": f"{v['std'] * scale:.2g} {unit}".strip()})
+    for k, why in r["refused"].items():
+        fitted.append({"parameter": k, "value": "refused", "std": why})
+    write_rows(fitted, OutputFormat.table, title="fitted parameters")
+    for note in r["notes"]:
+        typer.echo(f"note: {note}")
+    if r["excluded"]:
+        typer.echo(f"excluded {len(r['excluded'])} trips:")
+        for tid, why in list(r["excluded"].items())[:20]:
+            typer.echo(f"  {tid}: {why}")
+        if len(r["excluded"]) > 20:
+            typer.echo(f"  ... and {len(r['excluded']) - 20} more (see --format json)")
 
 
 fleet_app = typer.Typer(help="Fleet assignment: which vehicle serves the shared stops (the paper's section 6).",
