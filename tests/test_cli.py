@@ -85,3 +85,22 @@ def test_bad_input_is_one_line_on_stderr_exit_2(tmp_path, files):
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1 and "Traceback" not in proc.stderr
     assert f"{bad}:3: column 'speed_kmh'" in lines[0]
+
+
+def test_simulate_writes_per_second_csv_and_plot(files, tmp_path):
+    import pandas as pd
+
+    out, png = tmp_path / "sim.csv", tmp_path / "sim.png"
+    res = runner.invoke(app, ["simulate", "-v", str(files["bus"]), "-c", str(files["urban"]), "--out", str(out),
+                              "--plot", str(png), "-f", "json"])
+    assert res.exit_code == 0, res.output
+    summary = json.loads(res.stdout)[0]
+    frame = pd.read_csv(out)
+    cyc = read_cycle_csv(files["urban"])
+    assert len(frame) == cyc.time_s.size and {"time_s", "speed_kmh", "soc_pct", "battery_power_kw"} <= set(frame)
+    # the per-second output integrates to the summary: energy and state of charge agree
+    assert frame["energy_cum_kwh"].iloc[-1] == pytest.approx(summary["energy_kwh"], rel=1e-9)
+    assert frame["soc_pct"].iloc[-1] == pytest.approx(summary["soc_end_pct"], rel=1e-9)
+    assert summary["soc_end_pct"] < 100.0 and png.stat().st_size > 10_000
+    res = runner.invoke(app, ["simulate", "-v", str(files["bus"])])
+    assert res.exit_code == 2 and "--cycle or --trip" in res.output
