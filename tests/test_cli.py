@@ -98,9 +98,10 @@ def test_simulate_writes_per_second_csv_and_plot(files, tmp_path):
     frame = pd.read_csv(out)
     cyc = read_cycle_csv(files["urban"])
     assert len(frame) == cyc.time_s.size and {"time_s", "speed_kmh", "soc_pct", "battery_power_kw"} <= set(frame)
-    # the per-second output integrates to the summary: energy and state of charge agree
-    assert frame["energy_cum_kwh"].iloc[-1] == pytest.approx(summary["energy_kwh"], rel=1e-9)
-    assert frame["soc_pct"].iloc[-1] == pytest.approx(summary["soc_end_pct"], rel=1e-9)
+    # the per-second output ends at the summary's energy and state of charge (the CSV is
+    # written with 6 significant digits)
+    assert frame["energy_cum_kwh"].iloc[-1] == pytest.approx(summary["energy_kwh"], rel=1e-5)
+    assert frame["soc_pct"].iloc[-1] == pytest.approx(summary["soc_end_pct"], rel=1e-5)
     assert summary["soc_end_pct"] < 100.0 and png.stat().st_size > 10_000
     res = runner.invoke(app, ["simulate", "-v", str(files["bus"])])
     assert res.exit_code == 2 and "--cycle or --trip" in res.output
