@@ -472,8 +472,9 @@ def _hill_in_gap():
 
 
 def test_long_gap_falls_back_to_gps_joined_to_dsm():
+    # the joining mechanism, with GPS filtered like the DSM (this GPS has white 1 m noise)
     d, true, raw, gap, gps = _hill_in_gap()
-    res = combine_elevation(d, raw, gps)
+    res = combine_elevation(d, raw, gps, ElevationParams(gps_lowpass_sigma_m=15.0, gps_median_window_m=100.0))
     assert res.source == "dsm+gps"
     assert res.dsm_coverage_pct == pytest.approx(100 * (1 - gap.mean()))
     assert res.filled_gps_m == pytest.approx(1200.0) and res.filled_flat_m == 0
@@ -482,6 +483,31 @@ def test_long_gap_falls_back_to_gps_joined_to_dsm():
     np.testing.assert_allclose(res.elevation_m[~gap][(d[~gap] < 1800) | (d[~gap] > 3200)],
                                true[~gap][(d[~gap] < 1800) | (d[~gap] > 3200)], atol=1e-6)
     assert res.notes
+
+
+def test_realistic_gps_altitude_noise_adds_little_false_climb():
+    # A phone's vertical error: 12 m, correlated over about a minute (600 m at 10 m/s).
+    # Climb is what costs energy in a model without braking credit; the GPS default
+    # (300 m low-pass) must add far less false climb than the DSM's 15 m filter would.
+    rng = np.random.default_rng(3)
+    d = np.arange(0.0, 20000.0, 10.0)
+    true = 50 + 15 * np.sin(2 * np.pi * d / 6000.0)
+    phi = np.exp(-10.0 / 600.0)
+    noise = np.zeros(d.size)
+    for i in range(1, d.size):  # an AR(1) series, written plainly
+        noise[i] = phi * noise[i - 1] + rng.normal(0, 12.0 * np.sqrt(1 - phi**2))
+    gps = true + 47 + noise
+
+    def climb(h):
+        return float(np.sum(np.maximum(np.diff(h), 0.0)))
+
+    default = combine_elevation(d, None, gps, have_dsm=False).elevation_m
+    narrow = combine_elevation(d, None, gps, ElevationParams(gps_lowpass_sigma_m=15.0, gps_median_window_m=100.0),
+                               have_dsm=False).elevation_m
+    excess_default = climb(default) - climb(true)
+    excess_narrow = climb(narrow) - climb(true)
+    assert excess_narrow > 2 * excess_default
+    assert abs(excess_default) < 0.5 * climb(true)
 
 
 def test_long_gap_without_gps_is_bridged_straight():

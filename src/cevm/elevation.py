@@ -21,7 +21,7 @@ import math
 import os
 from collections import OrderedDict
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import lru_cache
 from pathlib import Path
 
@@ -85,6 +85,18 @@ class ElevationParams:
         Largest road grade magnitude allowed (0.15 = 15 %), see :func:`bound_grade`.
         Public roads rarely exceed 10-12 % over more than 100 m; 15 % leaves room for
         the steep urban streets that do exist while rejecting DSM cliffs.
+    gps_lowpass_sigma_m : float, default 300.0
+        Gaussian low-pass [m] for GPS altitude (the fallback where the DSM has nothing).
+        A phone's vertical error is 10-30 m and correlated over minutes, so the DSM's
+        15 m filter would keep it as false hills: their climbs cost energy the vehicle
+        never spent (a model without braking credit counts every one). 300 m keeps the
+        hills that matter for energy over a trip and removes most of the noise.
+    gps_median_window_m : float, default 500.0
+        Running-median window [m] of the GPS-altitude profile, whose spike threshold is
+        ``gps_spike_threshold_m``.
+    gps_spike_threshold_m : float, default 30.0
+        GPS altitudes further than this from their running median are dropped as
+        outliers (a lost fix, a multipath jump) before the low-pass.
     gps_min_valid_pct : float, default 50.0
         GPS altitude is used only when at least this share of samples carries a finite
         value inside ``gps_alt_range_m``.
@@ -100,8 +112,16 @@ class ElevationParams:
     spike_threshold_m: float = 1.0
     lowpass_sigma_m: float = 15.0
     max_grade: float = 0.15
+    gps_lowpass_sigma_m: float = 300.0
+    gps_median_window_m: float = 500.0
+    gps_spike_threshold_m: float = 30.0
     gps_min_valid_pct: float = 50.0
     gps_alt_range_m: tuple[float, float] = (-500.0, 9000.0)
+
+    def for_gps(self) -> ElevationParams:
+        """These parameters with the GPS-altitude smoothing in place of the DSM's."""
+        return replace(self, lowpass_sigma_m=self.gps_lowpass_sigma_m, median_window_m=self.gps_median_window_m,
+                       spike_threshold_m=self.gps_spike_threshold_m)
 
     def __post_init__(self) -> None:
         checks = {
@@ -112,6 +132,9 @@ class ElevationParams:
             "lowpass_sigma_m": self.lowpass_sigma_m >= 0,
             "max_grade": self.max_grade > 0,
             "gps_min_valid_pct": 0 <= self.gps_min_valid_pct <= 100,
+            "gps_lowpass_sigma_m": self.gps_lowpass_sigma_m >= 0,
+            "gps_median_window_m": self.gps_median_window_m >= 0,
+            "gps_spike_threshold_m": self.gps_spike_threshold_m >= 0,
         }
         for name, ok in checks.items():
             value = getattr(self, name)
@@ -1024,7 +1047,7 @@ def combine_elevation(distance_m, raw_dsm_m, gps_alt_m=None, params: ElevationPa
     if not valid.any():
         notes.append("no DSM given" if not have_dsm else "no valid DSM value on this trip")
         if gps is not None:
-            g, _ = _profile_grid(d, gps, params, grid, math.inf)
+            g, _ = _profile_grid(d, gps, params.for_gps(), grid, math.inf)
             h, source, filled_gps = g, "gps", float(d[-1] - d[0])
             notes.append("smoothed GPS altitude used")
         else:
@@ -1047,8 +1070,10 @@ def combine_elevation(distance_m, raw_dsm_m, gps_alt_m=None, params: ElevationPa
                     # median_window_m) next to the gap, to average out GPS noise.
                     off_l = _mean_finite(h[max(0, lo - span) : lo] - g[max(0, lo - span) : lo])
                     off_r = _mean_finite(h[hi : hi + span] - g[hi : hi + span])
-                    if not np.isfinite(g[lo:hi]).all() or (off_l is None and off_r is None):
-                        continue  # no GPS here: left to the straight line below
+                    inside = (d >= grid[lo]) & (d <= grid[hi - 1])
+                    gps_inside = np.isfinite(gps[inside]).mean() if inside.any() else 0.0
+                    if gps_inside < 0.5 or not np.isfinite(g[lo:hi]).all() or (off_l is None and off_r is None):
+                        continue  # no GPS here (fixes in under half the gap): left to the straight line below
                     if off_l is None or off_r is None:
                         off = np.full(hi - lo, off_r if off_l is None else off_l)
                     else:
@@ -1088,6 +1113,7 @@ def _gps_around(d, gps, params: ElevationParams, grid, lo: int, hi: int, span: i
     ``span`` cells (for the offsets) and the filters' reach (so that the values there
     are practically those of a whole-trip computation); NaN elsewhere."""
     step = grid[1] - grid[0]
+    params = params.for_gps()
     reach = span + int(params.median_window_m / step) + int(4 * params.lowpass_sigma_m / step) + 2
     a, b = max(0, lo - reach), min(grid.size, hi + reach)
     i, j = np.searchsorted(d, grid[a], side="left"), np.searchsorted(d, grid[b - 1], side="right")
