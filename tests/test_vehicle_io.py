@@ -17,7 +17,8 @@ def test_shipped_vehicles_hold_the_papers_values(root):
     assert 35e6 <= hgv.fuel_lhv_j_per_l <= 36.5e6
     assert hgv.ice_braking == "paper"
     assert hgv.with_payload(26000).mass_kg == 44000.0
-    assert len(load_vehicles([root / "configs/vehicles"])) == 2
+    names = {v.name for v in load_vehicles([root / "configs/vehicles"])}
+    assert {"Optare Metrocity EV", "Scania P320 diesel HGV", "Renault Twizy 80"} <= names
 
 
 GOOD_EV = 'name = "x"\npowertrain = "ev"\nmass_kg = 1000\ncda_m2 = 1\ncr = 0.01\neta = 0.8\nbattery_kwh = 10\n'

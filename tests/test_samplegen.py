@@ -1,0 +1,563 @@
+"""Tests of the synthetic sample-log generator (cevm.samplegen), on its --small fleet.
+
+Files are read back with plain pandas / rasterio and checked against LOGGERS.md and
+against truth.json; reference computations (bilinear interpolation, trapezoid
+integrals, number formatting, UK local time) are written plainly here.
+"""
+
+from __future__ import annotations
+
+import gzip
+import hashlib
+import io
+import json
+import subprocess
+import sys
+from datetime import datetime, timedelta, timezone
+from pathlib import Path
+from zoneinfo import ZoneInfo
+
+import numpy as np
+import pandas as pd
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from cevm import samplegen as sg
+
+SRF_BUS = {
+    "timestamp_utc", "gps_lat_deg", "gps_lon_deg", "gps_alt_m", "gps_speed_kmh", "gps_hdop",
+    "fms_wheel_speed_kmh", "fms_accel_pedal_pct", "fms_brake_switch", "fms_engine_speed_rpm",
+    "fms_engine_torque_pct", "fms_battery_soc_pct", "fms_battery_voltage_v",
+    "fms_battery_current_a", "fms_total_energy_used_kwh",
+}
+SRF_TRUCK_BASE = {
+    "timestamp_utc", "gps_lat_deg", "gps_lon_deg", "gps_alt_m", "gps_speed_kmh", "gps_hdop",
+    "fms_wheel_speed_kmh", "fms_accel_pedal_pct", "fms_brake_switch", "fms_engine_speed_rpm",
+    "fms_engine_torque_pct", "fms_total_fuel_used_l", "fms_fuel_rate_lph", "fms_gross_weight_kg",
+}
+PORTAL = ["Registration", "Date/Time", "Latitude", "Longitude", "Speed (mph)", "Odometer (mi)",
+          "Fuel Used (l)", "Ignition", "Event"]
+
+
+@pytest.fixture(scope="module")
+def small(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("small")
+    sg.generate_sample_logs(out, small=True)
+    return out
+
+
+@pytest.fixture(scope="module")
+def truth(small) -> dict:
+    return json.loads((small / "truth.json").read_text(encoding="utf-8"))
+
+
+def _raw(path: Path) -> bytes:
+    data = path.read_bytes()
+    return gzip.decompress(data) if path.suffix == ".gz" else data
+
+
+def read_srf(path: Path) -> tuple[pd.DataFrame, dict[str, str]]:
+    """srf file -> (frame with a 'line' column = 1-based file line, metadata)."""
+    text = _raw(path).decode("utf-8")
+    lines = text.split("\n")
+    meta = {}
+    k = 0
+    while lines[k].startswith("#"):
+        key, _, val = lines[k][1:].strip().partition("=")
+        meta[key] = val
+        k += 1
+    df = pd.read_csv(io.StringIO("\n".join(lines[k:])), sep=",", dtype={"timestamp_utc": str})
+    df["line"] = np.arange(len(df)) + k + 2
+    return df, meta
+
+
+def srf_files(small: Path) -> list[Path]:
+    return sorted((small / "srf").iterdir())
+
+
+def epoch_s(t: pd.Series) -> np.ndarray:
+    """Seconds since 1970 of naive datetimes (any pandas resolution)."""
+    return ((t - pd.Timestamp(0)) / pd.Timedelta(1, "s")).to_numpy()
+
+
+def utc_s(ts: pd.Series) -> np.ndarray:
+    return epoch_s(pd.to_datetime(ts, format="%Y-%m-%dT%H:%M:%S.%fZ"))
+
+
+def steps_of(x, q) -> np.ndarray:
+    """x / q for the non-empty values (should be integers when x has resolution q)."""
+    x = np.asarray(x, dtype=float)
+    return x[np.isfinite(x)] / q
+
+
+def is_integral(a, tol=1e-6) -> bool:
+    return bool(np.all(np.abs(a - np.round(a)) < tol))
+
+
+# --------------------------------------------------------------------------------------
+# srf dialect
+# --------------------------------------------------------------------------------------
+
+
+def test_srf_columns_metadata_and_resolutions(small, truth):
+    files = srf_files(small)
+    assert any(p.name.endswith(".csv.gz") for p in files)  # one gzipped file exercised
+    for p in files:
+        df, meta = read_srf(p)
+        vid = p.name.split("_")[0]
+        assert meta["vehicle_id"] == vid
+        assert meta["logger"].startswith("SRF Logger")
+        assert meta["started"].endswith("Z") and datetime.strptime(meta["started"], "%Y-%m-%dT%H:%M:%SZ")
+        info = truth["vehicles"][vid]
+        cols = set(df.columns) - {"line"}
+        if info["vehicle_type"] == "electric-bus":
+            assert cols == SRF_BUS
+            assert is_integral(steps_of(df.fms_total_energy_used_kwh, 0.1))
+            assert is_integral(steps_of(df.fms_battery_soc_pct, 0.4))
+        else:
+            assert cols == SRF_TRUCK_BASE | ({"flowmeter_fuel_lph"} if info["flowmeter"] else set())
+            assert is_integral(steps_of(df.fms_total_fuel_used_l, 0.5))
+            assert is_integral(steps_of(df.fms_fuel_rate_lph, 0.05))
+            assert is_integral(steps_of(df.fms_gross_weight_kg, 10.0))
+        assert df.timestamp_utc.str.match(r"^\d{4}-\d\d-\d\dT\d\d:\d\d:\d\d\.\d{3}Z$").all()
+        assert is_integral(steps_of(df.fms_wheel_speed_kmh, 1 / 256))
+        assert is_integral(steps_of(df.fms_accel_pedal_pct, 0.4))
+        assert set(df.fms_brake_switch.dropna().unique()) <= {0.0, 1.0}
+        tq = df.fms_engine_torque_pct.dropna()
+        assert is_integral(tq.to_numpy()) and tq.between(-125, 125).all()
+        assert df.gps_lat_deg.dropna().between(51.5, 53.5).all()
+        assert df.gps_lon_deg.dropna().between(-1.5, 0.0).all()
+        # about 1 Hz
+        dt = np.diff(utc_s(df.timestamp_utc))
+        assert 0.9 < np.median(dt) < 1.1
+
+
+def test_srf_asynchronous_fields_and_gps_gaps(small):
+    for p in srf_files(small):
+        df, _ = read_srf(p)
+        counter = "fms_total_energy_used_kwh" if "fms_total_energy_used_kwh" in df else "fms_total_fuel_used_l"
+        share = df[counter].notna().mean()
+        assert 0.05 < share < 0.4, (p.name, counter, share)  # every 4-10 s: mostly empty
+        assert df.fms_wheel_speed_kmh.notna().mean() > 0.98
+        # no fix at the start of the session (cold start), fixes later
+        assert df.gps_lat_deg.iloc[:5].isna().all() and df.gps_lat_deg.notna().mean() > 0.8
+        # GPS altitude is poor: far from a smooth profile (tens of metres of error)
+        assert df.gps_alt_m.dropna().std() > 3.0
+        if "fms_gross_weight_kg" in df:
+            assert 0.02 < df.fms_gross_weight_kg.notna().mean() < 0.2
+
+
+def test_srf_missed_and_repeated_ticks(small, truth):
+    for f in truth["files"]:
+        if f["dialect"] != "srf":
+            continue
+        lines = _raw(small / f["path"]).decode().split("\n")
+        assert sum(a == b for a, b in zip(lines, lines[1:])) == f["repeated_ticks"] > 0
+        df, _ = read_srf(small / f["path"])
+        dt = np.diff(utc_s(df.timestamp_utc))
+        assert ((dt > 1.5) & (dt < 60)).any()  # missed ticks inside trips
+
+
+def test_srf_clock_step_backwards(small, truth):
+    steps = [(f, x) for f in truth["files"] for x in f["faults"] if x["kind"] == "clock_step_backwards"]
+    assert len(steps) == 1
+    f, fault = steps[0]
+    for g in truth["files"]:
+        if g["dialect"] != "srf":
+            continue
+        df, _ = read_srf(small / g["path"])
+        t = utc_s(df.timestamp_utc)
+        back = np.flatnonzero(np.diff(t) < 0) + 1
+        if g is f:
+            assert df.line.to_numpy()[back].tolist() == [fault["line"]]
+            jump = t[back[0] - 1] - t[back[0]]
+            # the clock was 4.25 s ahead; one tick (1 s, or 2-3 s after missed ticks) passed
+            assert fault["seconds"] - 3.1 < jump < fault["seconds"] - 0.9
+        else:
+            assert back.size == 0
+
+
+def test_srf_fuel_counter_reset_and_large_start(small, truth):
+    resets = [(f, x) for f in truth["files"] for x in f["faults"] if x["kind"] == "fuel_counter_reset"]
+    assert len(resets) == 1
+    f, fault = resets[0]
+    df, _ = read_srf(small / f["path"])
+    c = df[["line", "fms_total_fuel_used_l"]].dropna()
+    assert c.fms_total_fuel_used_l.iloc[0] > 1e6  # an old ECU: counter near 1.84 million litres
+    drop = np.flatnonzero(np.diff(c.fms_total_fuel_used_l.to_numpy()) < 0)
+    assert drop.size == 1
+    after = c.iloc[drop[0] + 1]
+    assert after.line >= fault["line"] and after.fms_total_fuel_used_l < fault["to_l"] + 1.0
+
+
+# --------------------------------------------------------------------------------------
+# portal dialect
+# --------------------------------------------------------------------------------------
+
+
+def portal_file(small: Path) -> Path:
+    (p,) = sorted((small / "portal").iterdir())
+    return p
+
+
+def test_portal_encoding_separators_and_columns(small):
+    raw = portal_file(small).read_bytes()
+    assert raw.count(b"\r\n") == raw.count(b"\n") > 10  # CRLF everywhere
+    with pytest.raises(UnicodeDecodeError):
+        raw.decode("utf-8")  # cp1252, not UTF-8
+    text = raw.decode("cp1252")
+    assert "£" in text and "é" in text
+    df = pd.read_csv(io.BytesIO(raw), sep=";", decimal=",", encoding="cp1252")
+    assert list(df.columns) == PORTAL
+    assert df.Registration.nunique() == 2
+    assert set(df.Ignition) == {"On", "Off"}
+    for c in ("Latitude", "Longitude", "Speed (mph)", "Odometer (mi)", "Fuel Used (l)"):
+        assert df[c].dtype == np.float64, c  # the decimal comma parsed
+    assert is_integral(df["Fuel Used (l)"].to_numpy() / 0.5)
+    assert b"," in raw.split(b"\r\n")[1]  # decimal commas are really there
+    assert pd.to_datetime(df["Date/Time"], format="%d/%m/%Y %H:%M:%S").notna().all()
+
+
+def test_portal_rows_sparser_when_stopped(small):
+    df = pd.read_csv(portal_file(small), sep=";", decimal=",", encoding="cp1252")
+    for _, g in df.groupby("Registration"):
+        t = epoch_s(pd.to_datetime(g["Date/Time"], format="%d/%m/%Y %H:%M:%S"))
+        dt = np.diff(t)
+        on = (g.Ignition.to_numpy()[:-1] == "On") & (dt > 0)
+        moving = on & (g["Speed (mph)"].to_numpy()[:-1] > 3) & (g["Speed (mph)"].to_numpy()[1:] > 3)
+        stopped = on & (g["Speed (mph)"].to_numpy()[:-1] == 0) & (g["Speed (mph)"].to_numpy()[1:] == 0)
+        assert moving.any() and stopped.any()
+        assert np.all((dt[moving] >= 1) & (dt[moving] <= 10))
+        assert np.median(dt[stopped]) > 2 * np.median(dt[moving])
+
+
+def test_portal_local_time_crosses_dst(small, truth):
+    df = pd.read_csv(portal_file(small), sep=";", decimal=",", encoding="cp1252")
+    crossed = 0
+    london = ZoneInfo("Europe/London")
+    for reg, g in df.groupby("Registration", sort=False):
+        local = pd.to_datetime(g["Date/Time"], format="%d/%m/%Y %H:%M:%S")
+        back = np.flatnonzero(np.diff(epoch_s(local)) < 0)
+        if back.size == 0:
+            continue
+        crossed += 1
+        assert back.size == 1
+        i = back[0] + 1
+        assert local.iloc[i - 1].hour == 1 and local.iloc[i].hour == 1  # the repeated hour
+        assert local.iloc[i - 1].strftime("%d/%m/%Y") == "27/10/2019"
+        # rows before the step are BST (fold 0), after it GMT (fold 1): UTC increases
+        utc = [local.iloc[k].to_pydatetime().replace(tzinfo=london, fold=int(k >= i)).astimezone(timezone.utc)
+               for k in range(len(local))]
+        assert all(b > a for a, b in zip(utc, utc[1:]))
+        # the truth trips of this vehicle start at these UTC instants (first_line rows)
+        for r in truth["trips"]:
+            if r["vehicle_id"] == reg:
+                k = r["first_line"] - 2 - int(np.flatnonzero(df.Registration.to_numpy() == reg)[0])
+                assert g.Ignition.iloc[k] == "On"
+                assert abs(utc[k].timestamp() - r["start_utc_s"]) < 1e-6
+    assert crossed == 1
+
+
+# --------------------------------------------------------------------------------------
+# Truth consistency
+# --------------------------------------------------------------------------------------
+
+
+def trip_rows(small: Path, r: dict) -> pd.DataFrame:
+    df, _ = read_srf(small / r["file"])
+    return df[(df.line >= r["first_line"]) & (df.line <= r["last_line"])]
+
+
+def test_truth_bus_energy_counter(small, truth):
+    """Counter difference over a trip vs the truth: within one 0.1 kWh step, plus the
+    consumption at standstill between the trip's ends and the first/last reading (at
+    most 6 s at the stand-in's 5 kW auxiliary load each side: 0.017 kWh)."""
+    bus = [r for r in truth["trips"] if r["vehicle_type"] == "electric-bus"]
+    assert bus
+    for r in bus:
+        rows = trip_rows(small, r)
+        e = rows.fms_total_energy_used_kwh.dropna().to_numpy()
+        measured_kwh = e[-1] - e[0]
+        assert abs(measured_kwh - r["consumption"] / 3.6e6) <= 0.1 + 0.02
+        # voltage x current integrates to the same energy (trapezoid over the ticks)
+        t = utc_s(rows.timestamp_utc)
+        p = (rows.fms_battery_voltage_v * rows.fms_battery_current_a).to_numpy()
+        ok = np.isfinite(p)
+        keep = np.concatenate(([True], np.diff(t) > 0))  # repeated ticks out
+        tt, pp = t[ok & keep], p[ok & keep]
+        e_vi = float(np.sum(0.5 * (pp[1:] + pp[:-1]) * np.diff(tt)))
+        assert e_vi == pytest.approx(r["consumption"], rel=0.03)
+
+
+def test_truth_truck_weight_flowmeter_distance(small, truth):
+    trucks = [r for r in truth["trips"] if r["vehicle_type"] == "diesel-hgv" and r["dialect"] == "srf"]
+    assert trucks
+    for r in trucks:
+        v = truth["vehicles"][r["vehicle_id"]]
+        rows = trip_rows(small, r)
+        gw = rows.fms_gross_weight_kg.dropna()
+        assert len(gw) > 0 and (gw == round(r["mass_kg"] / 10) * 10).all()
+        assert r["mass_kg"] - v["kerb_mass_kg"] == r["load"]
+        assert 0 <= r["load"] <= 26000
+        t = utc_s(rows.timestamp_utc)
+        keep = np.concatenate(([True], np.diff(t) > 0))
+        if v["flowmeter"]:
+            f = rows.flowmeter_fuel_lph.to_numpy()
+            ok = np.isfinite(f) & keep
+            litres = float(np.sum(0.5 * (f[ok][1:] + f[ok][:-1]) * np.diff(t[ok]))) / 3600
+            assert litres == pytest.approx(r["consumption"], rel=0.03)
+        w = rows.fms_wheel_speed_kmh.to_numpy() / 3.6 / v["wheel_speed_scale"]
+        ok = np.isfinite(w) & keep
+        dist = float(np.sum(0.5 * (w[ok][1:] + w[ok][:-1]) * np.diff(t[ok])))
+        assert dist == pytest.approx(r["distance_m"], rel=0.01)
+
+
+def test_truth_trip_times_match_rows(small, truth):
+    for r in truth["trips"]:
+        if r["dialect"] != "srf":
+            continue
+        rows = trip_rows(small, r)
+        assert len(rows) > 60
+        assert r["end_utc_s"] - r["start_utc_s"] == pytest.approx(r["duration_s"], abs=1e-3)
+        assert r["start_utc"] == datetime.fromtimestamp(round(r["start_utc_s"], 3), timezone.utc).strftime("%Y-%m-%dT%H:%M:%S.%f")[:-3] + "Z"
+    # layovers: no rows for more than 5 minutes between the trips of a file
+    by_file: dict[str, list[dict]] = {}
+    for r in truth["trips"]:
+        by_file.setdefault(r["file"], []).append(r)
+    for rs in by_file.values():
+        rs.sort(key=lambda r: r["start_utc_s"])
+        for a, b in zip(rs, rs[1:]):
+            assert b["start_utc_s"] - a["end_utc_s"] > 600
+
+
+def test_injected_consumption_function_is_used(tmp_path):
+    calls = []
+
+    def fake(kind, time_s, speed_mps, elevation_m, mass_kg):
+        calls.append(kind)
+        return 0.01 * time_s if kind == "diesel-hgv" else 2.0e4 * time_s
+
+    doc = sg.generate_sample_logs(tmp_path, fake, small=True, write_dsm=False)
+    assert set(calls) == {"diesel-hgv", "electric-bus"}
+    assert doc["consumption_fn"].endswith("fake")
+    for r in doc["trips"]:
+        rate = 0.01 if r["vehicle_type"] == "diesel-hgv" else 2.0e4
+        assert r["consumption"] == pytest.approx(rate * r["duration_s"], rel=1e-6, abs=1e-4)
+
+
+def test_generator_does_not_import_the_ce_model():
+    code = "import sys, cevm.samplegen; print('cevm.model' in sys.modules)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "False"
+
+
+def test_standin_consumption_by_hand():
+    """Bus at a constant 10 m/s on a flat road for 10 s: rolling + drag at the wheel,
+    through the drive efficiency, plus drive loss and auxiliaries."""
+    p = sg.STANDIN["electric-bus"]
+    m, v = 12000.0, 10.0
+    t = np.arange(11.0)
+    e = sg.standin_consumption("electric-bus", t, np.full(11, v), np.zeros(11), m)
+    cr = p.cr + p.cr_speed_per_mps * v
+    wheel_w = cr * m * 9.81 * v + 0.5 * 1.225 * p.cda_m2 * v**3
+    expect = (wheel_w / p.drive_eff + p.drive_loss_w + p.aux_w) * 10.0
+    assert e[0] == 0.0 and e[-1] == pytest.approx(expect, rel=1e-12)
+    # a truck coasting downhill at speed burns nothing (fuel cut-off)
+    f = sg.standin_consumption("diesel-hgv", t, np.full(11, 20.0), -2.0 * t, 40000.0)
+    assert f[-1] == 0.0
+    with pytest.raises(ValueError):
+        sg.standin_consumption("tram", t, t, t, 1.0)
+
+
+# --------------------------------------------------------------------------------------
+# Determinism
+# --------------------------------------------------------------------------------------
+
+
+def tree_hashes(root: Path) -> dict[str, str]:
+    return {p.relative_to(root).as_posix(): hashlib.sha256(p.read_bytes()).hexdigest()
+            for p in sorted(root.rglob("*")) if p.is_file()}
+
+
+def test_same_bytes_on_every_run(small, tmp_path):
+    sg.generate_sample_logs(tmp_path, small=True)
+    a, b = tree_hashes(small), tree_hashes(tmp_path)
+    assert len(a) >= 6 and a == b
+    sg.generate_sample_logs(tmp_path / "other", small=True, seed=8, write_dsm=False)
+    assert tree_hashes(tmp_path / "other")["truth.json"] != a["truth.json"]
+
+
+# --------------------------------------------------------------------------------------
+# DSM tiles
+# --------------------------------------------------------------------------------------
+
+
+def open_tiles(small: Path, truth: dict):
+    import rasterio
+
+    tiles = []
+    for rel in truth["dsm"]["tiles"]:
+        with rasterio.open(small / rel) as ds:
+            assert ds.crs.to_epsg() == 27700
+            assert ds.dtypes == ("float32",)
+            assert ds.compression.name.lower() == "deflate"
+            assert ds.tags(ns="IMAGE_STRUCTURE").get("PREDICTOR") == "3"
+            assert ds.nodata == -9999.0
+            assert ds.res == (truth["dsm"]["resolution_m"],) * 2
+            tiles.append((ds.bounds, ds.read(1), ds.transform))
+    return tiles
+
+
+def small_world_and_trips():
+    return sg.simulate_fleet(sg.SMALL_FLEET)
+
+
+def test_tiles_cover_routes_except_documented_gaps(small, truth):
+    tiles = open_tiles(small, truth)
+    assert len(tiles) >= 2
+    world, _ = small_world_and_trips()
+    for name, route in world.routes.items():
+        s = np.arange(0.0, route.length_m, 5.0)
+        x, y = route.xy(s)
+        inside = in_any_tile(tiles, x, y)
+        in_gap = np.zeros(s.size, bool)
+        for a, z in truth["routes"][name]["dsm_gaps_m"]:
+            in_gap |= (s >= a - 1.0) & (s <= z + 1.0)
+        edge = np.zeros(s.size, bool)
+        for a, z in truth["routes"][name]["dsm_gaps_m"]:
+            edge |= (np.abs(s - a) <= 1.5) | (np.abs(s - z) <= 1.5)
+        assert np.all(inside[~in_gap]), name
+        assert not np.any(inside[in_gap & ~edge]), name
+        assert inside.any() and (~inside).any()  # partly covered, on purpose
+
+
+def in_any_tile(tiles, x, y) -> np.ndarray:
+    inside = np.zeros(np.shape(x), bool)
+    for b, _, _ in tiles:
+        inside |= (x >= b.left) & (x < b.right) & (y > b.bottom) & (y <= b.top)
+    return inside
+
+
+def mosaic_bilinear(tiles, x, y, nodata=-9999.0):
+    """Bilinear interpolation between pixel centres over a mosaic of same-grid tiles;
+    NaN where a neighbour is nodata or outside every tile."""
+    left = min(b.left for b, _, _ in tiles)
+    top = max(b.top for b, _, _ in tiles)
+    res = tiles[0][2].a
+    right = max(b.right for b, _, _ in tiles)
+    bottom = min(b.bottom for b, _, _ in tiles)
+    W, H = int(round((right - left) / res)), int(round((top - bottom) / res))
+    z = np.full((H, W), np.nan)
+    for b, a, _ in tiles:
+        r0, c0 = int(round((top - b.top) / res)), int(round((b.left - left) / res))
+        z[r0 : r0 + a.shape[0], c0 : c0 + a.shape[1]] = np.where(a == nodata, np.nan, a)
+    fc = (x - left) / res - 0.5
+    fr = (top - y) / res - 0.5
+    c, r = np.floor(fc).astype(int), np.floor(fr).astype(int)
+    ok = (c >= 0) & (r >= 0) & (c + 1 < W) & (r + 1 < H)
+    out = np.full(x.shape, np.nan)
+    c, r, u, v = c[ok], r[ok], fc[ok] - c[ok], fr[ok] - r[ok]
+    out[ok] = (z[r, c] * (1 - u) * (1 - v) + z[r, c + 1] * u * (1 - v) + z[r + 1, c] * (1 - u) * v + z[r + 1, c + 1] * u * v)
+    return out
+
+
+def test_dsm_road_elevation_matches_truth(small, truth):
+    tiles = open_tiles(small, truth)
+    world, trips = small_world_and_trips()
+    checked = spikes = 0
+    for days in trips.values():
+        for tr in (t for day in days for t in day):
+            s = world.routes[tr.vehicle.route].along_m(tr.route_from_m + tr.distance_m)
+            z = mosaic_bilinear(tiles, tr.x_m, tr.y_m)
+            near_object = np.zeros(s.size, bool)
+            for o in truth["routes"][tr.vehicle.route]["surface_objects"]:
+                near_object |= (s >= o["from_m"] - 2.0) & (s <= o["to_m"] + 2.0)
+                if o["kind"] in ("tree", "bridge"):
+                    inside = (s >= o["from_m"]) & (s <= o["to_m"]) & np.isfinite(z)
+                    spikes += int(np.any(z[inside] - tr.elevation_m[inside] > 2.0))
+            ok = np.isfinite(z) & ~near_object
+            assert np.all(np.abs(z[ok] - tr.elevation_m[ok]) < 0.05)
+            checked += int(ok.sum())
+            # inside the tiles, the DSM has no value only near a hole, or within a pixel
+            # of the edge of the tiled area (a bilinear neighbour is missing)
+            explained = np.zeros(s.size, bool)
+            for o in truth["routes"][tr.vehicle.route]["surface_objects"]:
+                if o["kind"] == "hole":
+                    explained |= (s >= o["from_m"]) & (s <= o["to_m"])
+            res = truth["dsm"]["resolution_m"]
+            for dx, dy in ((res, 0), (-res, 0), (0, res), (0, -res)):
+                explained |= ~in_any_tile(tiles, tr.x_m + dx, tr.y_m + dy)
+            missing = ~np.isfinite(z) & in_any_tile(tiles, tr.x_m, tr.y_m)
+            assert np.all(explained[missing])
+    assert checked > 200
+    assert spikes >= 1  # the raw road profile does show trees or bridges
+
+
+def test_dsm_has_buildings_beside_roads_and_holes(small, truth):
+    tiles = open_tiles(small, truth)
+    world, _ = small_world_and_trips()
+    n_nodata = sum(int((a == -9999.0).sum()) for _, a, _ in tiles)
+    assert n_nodata > 0
+    # surface minus terrain: objects (buildings, trees) metres high somewhere
+    b, a, tr = tiles[0]
+    rows, cols = np.mgrid[0 : a.shape[0], 0 : a.shape[1]]
+    x = tr.c + (cols + 0.5) * tr.a
+    y = tr.f + (rows + 0.5) * tr.e
+    terrain = world.terrain.elevation_m(x, y)
+    above = np.where(a == -9999.0, 0.0, a - terrain)
+    assert (above > 3.0).mean() > 0.002
+    assert np.abs(np.where(above > 0.01, 0.0, above)).max() < 0.01  # never below the terrain
+
+
+# --------------------------------------------------------------------------------------
+# Formatting helpers and the benchmark fleet
+# --------------------------------------------------------------------------------------
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.one_of(st.floats(-1e7, 1e7, allow_nan=False), st.just(float("nan"))), min_size=1, max_size=30),
+       st.integers(0, 8), st.booleans())
+def test_number_formatting_matches_python(values, decimals, strip):
+    x = np.array(values)
+    x = np.round(x, decimals)  # the formatter prints numbers already on their grid
+    chars, keep = sg._num_field(x, decimals, strip=strip)
+    got = sg._assemble([(chars, keep)], b",", b"\n").decode().split("\n")[:-1]
+    for g, v in zip(got, x):
+        if not np.isfinite(v):
+            assert g == ""
+            continue
+        ref = f"{v:.{decimals}f}"
+        if ref.startswith("-") and float(ref) == 0:
+            ref = ref[1:]
+        if strip and "." in ref:
+            ref = ref.rstrip("0").rstrip(".")
+        assert g == ref
+
+
+def test_uk_local_time_formatting():
+    london = ZoneInfo("Europe/London")
+    base = datetime(2019, 10, 27, 0, 30, tzinfo=timezone.utc)
+    ts = [base + timedelta(minutes=20 * k) for k in range(6)] + [datetime(2019, 3, 31, 0, 59, 59, tzinfo=timezone.utc), datetime(2019, 3, 31, 1, 0, 0, tzinfo=timezone.utc)]
+    chars, keep = sg._uk_local(np.array([int(t.timestamp()) for t in ts]))
+    got = sg._assemble([(chars, keep)], b";", b"\n").decode().split("\n")[:-1]
+    assert got == [t.astimezone(london).strftime("%d/%m/%Y %H:%M:%S") for t in ts]
+
+
+def test_fleet_for_benchmark(tmp_path):
+    doc = sg.fleet_for_benchmark(2, 1, tmp_path)
+    files = sorted((tmp_path / "srf").glob("*.csv"))
+    assert [p.name for p in files] == ["BM-001_2019-05-13.csv", "BM-002_2019-05-13.csv"]
+    n = 0
+    for p in files:
+        df, meta = read_srf(p)
+        assert set(df.columns) - {"line"} == SRF_BUS
+        n += len(df)
+    assert n == doc["rows"] > 2000
+    assert json.loads((tmp_path / "truth.json").read_text())["rows"] == n
+
+
+def test_os_tile_names():
+    assert sg.os_tile_name(485000, 238000) == "SP8538"
+    assert sg.os_tile_name(530000, 180000) == "TQ3080"  # central London
+    assert sg.os_tile_name(325000, 673000) == "NT2573"  # Edinburgh
