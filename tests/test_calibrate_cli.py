@@ -90,3 +90,15 @@ def test_calibrate_unknown_vehicle_id_is_a_clear_error(store, root):
     res = runner.invoke(app, ["calibrate", "-v", str(root / "configs/vehicles/electric-bus.toml"), "--vehicle-id", "NOPE",
                               "--store", str(store)])
     assert res.exit_code == 2 and "NOPE" in res.output and "EB-09" in res.output
+
+
+def test_calibrated_toml_replaces_values_keeps_the_rest_and_says_so():
+    from cevm.calibrate_io import calibrated_toml
+
+    text = 'name = "x"  # a name\neta = 0.45   # from the paper\ncr = 0.0066\n\n[sources]\neta = "paper"\n'
+    out = calibrated_toml(text, {"eta": 0.3712345678, "ice_braking": "no-credit"}, "calibrated\nfitted: eta")
+    data = tomllib.loads(out)
+    assert data["eta"] == pytest.approx(0.371235) and data["ice_braking"] == "no-credit"
+    assert data["sources"]["eta"] == "paper" and data["cr"] == 0.0066 and data["name"] == "x"
+    assert "# cevm calibrate (was 0.45)" in out and "from the paper" not in out
+    assert out.startswith("# calibrated\n# fitted: eta\n")

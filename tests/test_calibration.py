@@ -25,7 +25,7 @@ FAST = MicroTripSpec(n_trips=3, cruise_kmh=(50.0, 85.0), cruise_s=(60.0, 200.0),
 BUS = Vehicle(name="bus", powertrain="ev", mass_kg=9825.0, cda_m2=3.99, cr=0.0066, eta=0.78,
               battery_j=124 * 3.6e6)
 TRUCK = Vehicle(name="truck", powertrain="ice", mass_kg=30000.0, cda_m2=6.62, cr=0.0066, eta=0.45,
-                fuel_lhv_j_per_l=35.8e6)
+                fuel_lhv_j_per_l=35.8e6, ice_braking="paper")  # the paper's eq. (24), stated
 
 
 @pytest.fixture(scope="module")

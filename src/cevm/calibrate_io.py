@@ -70,18 +70,24 @@ def trips_for_calibration(store: TripStore, vehicle_id: str, vehicle: Vehicle) -
             quality=elevation_quality(r.elevation_source, r.dsm_coverage_pct),
             group=day,
         ))
-    notes = [f"mass: measured gross weight on {n_weight} of {len(out)} trips, "
-             f"{vehicle.mass_kg:,.0f} kg (vehicle file) on the rest"]
+    if n_weight == len(out):
+        notes = [f"mass: the measured gross weight of each of the {len(out)} trips"]
+    else:
+        notes = [f"mass: measured gross weight on {n_weight} of {len(out)} trips, the vehicle file's "
+                 f"{vehicle.mass_kg:,.0f} kg on the other {len(out) - n_weight} (give trips a gross weight for a better fit)"]
     return TripSelection(tuple(out), tuple(notes))
 
 
 _TOP_KEY = re.compile(r"^(?P<key>[A-Za-z0-9_]+)\s*=\s*(?P<value>[^#\n]*?)(?P<rest>\s*(#.*)?)$")
 
 
-def fitted_keys(result: CalibrationResult) -> dict[str, float]:
-    """The vehicle-file keys (file units) of the fitted parameters."""
+def fitted_keys(result: CalibrationResult) -> dict[str, float | str]:
+    """The vehicle-file keys (file units) of the fitted parameters, and for an ICE the
+    braking mode the fit was made under (eta means something else in each)."""
     v = result.vehicle
-    keys: dict[str, float] = {}
+    keys: dict[str, float | str] = {}
+    if not v.is_ev:
+        keys["ice_braking"] = v.ice_braking
     for name in result.fitted:
         if name == "eta":
             keys["eta"] = v.eta
@@ -94,7 +100,11 @@ def fitted_keys(result: CalibrationResult) -> dict[str, float]:
     return keys
 
 
-def calibrated_toml(text: str, values: dict[str, float], header: str) -> str:
+def _toml_value(value: float | str) -> str:
+    return f'"{value}"' if isinstance(value, str) else f"{value:.6g}"
+
+
+def calibrated_toml(text: str, values: dict[str, float | str], header: str) -> str:
     """``text`` (a vehicle TOML file) with top-level ``values`` replaced or added, and a
     comment header; everything else (comments, tables, sources) is kept as it was."""
     lines = text.splitlines()
@@ -104,8 +114,9 @@ def calibrated_toml(text: str, values: dict[str, float], header: str) -> str:
         m = _TOP_KEY.match(lines[i])
         if m and m.group("key") in todo:
             key = m.group("key")
-            lines[i] = f"{key} = {todo.pop(key):.6g}{m.group('rest') or ''}"
-    added = [f"{k} = {v:.6g}  # added by cevm calibrate" for k, v in todo.items()]
+            old = m.group("value").strip()
+            lines[i] = f"{key} = {_toml_value(todo.pop(key))}  # cevm calibrate (was {old})"
+    added = [f"{k} = {_toml_value(v)}  # added by cevm calibrate" for k, v in todo.items()]
     lines[first_table:first_table] = added + ([""] if added and first_table < len(lines) else [])
     head = [f"# {h}" for h in header.splitlines()]
     return "\n".join(head + lines) + "\n"
@@ -116,7 +127,7 @@ def write_calibrated_vehicle(source: Path, out: Path, result: CalibrationResult,
     if out.exists() and not force:
         what = "the input vehicle file" if out.resolve() == source.resolve() else "an existing file"
         raise CevmError(f"{out}: would overwrite {what}; give another --out or --force")
-    fitted = ", ".join(f"{k} = {v:.6g}" for k, v in fitted_keys(result).items())
+    fitted = ", ".join(f"{k} = {_toml_value(v)}" for k, v in fitted_keys(result).items())
     text = calibrated_toml(source.read_text(encoding="utf-8"), fitted_keys(result), f"{note}\nfitted: {fitted}")
     tmp = out.with_name(out.name + ".tmp")
     tmp.write_text(text, encoding="utf-8")

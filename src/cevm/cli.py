@@ -7,6 +7,7 @@ line on stderr, without a traceback.
 
 from __future__ import annotations
 
+import dataclasses
 import sys
 from pathlib import Path
 from typing import Annotated, Optional
@@ -318,6 +319,10 @@ def calibrate(
     cv_folds: Annotated[int, typer.Option(help="Cross-validation folds over days (leave-one-day-out below 10 days).")] = 5,
     max_rel_uncertainty: Annotated[float, typer.Option(help="Exclude trips measured worse than this (relative 1-sigma).")] = 0.10,
     plot: Annotated[Optional[Path], typer.Option(help="Write predicted-vs-measured and error-vs-distance plots (PNG).")] = None,
+    ice_braking: Annotated[
+        Optional[str],
+        typer.Option(help="ICE: fit under this braking mode (no-credit or paper) and write it to --out. Default: the vehicle file's."),
+    ] = None,
     fmt: Annotated[OutputFormat, typer.Option("--format", "-f", help="table, or json (figures plus per-trip rows).")] = OutputFormat.table,
 ) -> None:
     """Fit the vehicle's efficiency eta (and optionally more) to its measured trips, with
@@ -335,8 +340,14 @@ def calibrate(
     path = resolve_store_path(store)
     if not path.exists():
         raise _fail(f"{path}: no trip store here; run 'cevm ingest' first or give --store")
+    if ice_braking is not None and ice_braking not in ICE_BRAKING_MODES:
+        raise _fail(f"--ice-braking must be one of: {', '.join(ICE_BRAKING_MODES)}")
     try:
         veh = load_vehicle(vehicle)
+        if ice_braking is not None:
+            if veh.is_ev:
+                raise CevmError(f"{vehicle}: --ice-braking applies to ICE vehicles only")
+            veh = dataclasses.replace(veh, ice_braking=ice_braking)
         with TripStore.open(path) as st:
             sel = trips_for_calibration(st, vehicle_id, veh)
         result = fit_vehicle(veh, sel.trips, params, cv_folds=cv_folds, max_rel_uncertainty=max_rel_uncertainty)

@@ -16,7 +16,7 @@ Vehicle files (TOML), units in the key names::
     aux_power_kw = 0.0                        # EV, optional: auxiliary load [kW]
     fuel_lhv_mj_per_l = 35.8                  # ICE, required: fuel lower heating value
     idle_fuel_lph = 0.0                       # ICE, optional: idle fuel rate [l/h]
-    ice_braking = "paper"                     # ICE, optional: "paper" or "no-credit"
+    ice_braking = "no-credit"                 # ICE, optional: "no-credit" (default) or "paper"
     tank_l = 400                              # ICE, optional: usable tank volume [l]
 
     [sources]                                  # optional: where each number comes from
@@ -35,6 +35,7 @@ import numpy as np
 from cevm.cycle import CycleVector
 from cevm.errors import InputError
 from cevm.model import (
+    ICE_BRAKING_DEFAULT,
     ICE_BRAKING_MODES,
     Prediction,
     battery_energy_from_wheel_j,
@@ -69,7 +70,7 @@ class Vehicle:
     aux_power_w: float = 0.0  # EV: auxiliary load from the battery [W]
     fuel_lhv_j_per_l: float | None = None  # ICE: lower heating value [J/l]
     idle_fuel_lps: float = 0.0  # ICE: idle fuel rate [l/s]
-    ice_braking: str = "paper"
+    ice_braking: str = ICE_BRAKING_DEFAULT
     tank_l: float | None = None
     sources: dict = field(default_factory=dict, compare=False)
     extra: dict = field(default_factory=dict, compare=False)  # tables for other models
@@ -177,7 +178,7 @@ def vehicle_from_mapping(data: dict[str, Any], source: str = "<vehicle>") -> Veh
         return Vehicle(**common, battery_j=battery * J_PER_KWH, aux_power_w=aux * 1e3)
     lhv = _number(data, "fuel_lhv_mj_per_l", source, required=True, lo=0.0, lo_open=True)
     idle = _number(data, "idle_fuel_lph", source, required=False, lo=0.0) or 0.0
-    braking = data.get("ice_braking", "paper")
+    braking = data.get("ice_braking", ICE_BRAKING_DEFAULT)
     if braking not in ICE_BRAKING_MODES:
         raise InputError(source, f"key 'ice_braking' must be one of {', '.join(ICE_BRAKING_MODES)}; got {braking!r}")
     tank = _number(data, "tank_l", source, required=False, lo=0.0, lo_open=True)
