@@ -458,7 +458,7 @@ def _random_drive(n, seed):
 SOURCES = [Src("fuel_rate_lps", "rate", "fuel_l", 0.0, 0)]
 
 
-def _same_trips(a, b):
+def assert_same_trips(a, b):
     assert len(a.trips) == len(b.trips)
     for x, y in zip(a.trips, b.trips):
         assert x.start_utc_s == y.start_utc_s
@@ -472,7 +472,7 @@ def _same_trips(a, b):
 def test_shuffled_frame_gives_the_same_trips(n, seed):
     frame = _random_drive(n, seed)
     perm = np.random.default_rng(seed + 1).permutation(n)
-    _same_trips(clean_log(frame, SOURCES), clean_log(frame.iloc[perm], SOURCES))
+    assert_same_trips(clean_log(frame, SOURCES), clean_log(frame.iloc[perm], SOURCES))
 
 
 @settings(max_examples=15, deadline=None)
@@ -483,7 +483,7 @@ def test_adjacent_rows_swapped_give_the_same_trips(n, seed, swaps):
     order = np.arange(n)
     for k in pairs:  # disjoint pairs (2k, 2k+1)
         order[[2 * k, 2 * k + 1]] = order[[2 * k + 1, 2 * k]]
-    _same_trips(clean_log(frame, SOURCES), clean_log(frame.iloc[order], SOURCES))
+    assert_same_trips(clean_log(frame, SOURCES), clean_log(frame.iloc[order], SOURCES))
 
 
 @settings(max_examples=25, deadline=None)

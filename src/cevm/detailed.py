@@ -795,19 +795,8 @@ def simulate_ev(params: EvParams, time_s, speed_mps, elevation_m, *, mass_kg: fl
         "friction_brake_power_w": brake,
         "traction_deficit_w": deficit,
     }
-    return SimulationResult(
-        powertrain="ev",
-        mass_kg=float(mass_kg),
-        time_s=t,
-        speed_mps=np.asarray(speed_mps, dtype=np.float64),
-        elevation_m=None if elevation_m is None else np.asarray(elevation_m, dtype=np.float64),
-        steps=MappingProxyType(steps),
-        samples=MappingProxyType({"soc": soc, "energy_cum_j": e_cum}),
-        wheel_energy_j=float(np.dot(road.power, road.dt)),
-        friction_brake_energy_j=float(np.dot(brake, road.dt)),
-        traction_deficit_j=float(np.dot(deficit, road.dt)),
-        energy_j=float(e_cum[-1]),
-    )
+    return _result("ev", mass_kg, t, speed_mps, elevation_m, steps, {"soc": soc, "energy_cum_j": e_cum},
+                   energy_j=float(e_cum[-1]))
 
 
 _GEAR_CHUNK = 2048
@@ -924,19 +913,8 @@ def simulate_diesel(params: DieselParams, time_s, speed_mps, elevation_m, *, mas
         "friction_brake_power_w": brake,
         "traction_deficit_w": deficit,
     }
-    return SimulationResult(
-        powertrain="ice",
-        mass_kg=float(mass_kg),
-        time_s=t,
-        speed_mps=np.asarray(speed_mps, dtype=np.float64),
-        elevation_m=None if elevation_m is None else np.asarray(elevation_m, dtype=np.float64),
-        steps=MappingProxyType(steps),
-        samples=MappingProxyType({"fuel_cum_l": fuel_cum}),
-        wheel_energy_j=float(np.dot(road.power, road.dt)),
-        friction_brake_energy_j=float(np.dot(brake, road.dt)),
-        traction_deficit_j=float(np.dot(deficit, road.dt)),
-        fuel_l=float(fuel_cum[-1]),
-    )
+    return _result("ice", mass_kg, t, speed_mps, elevation_m, steps, {"fuel_cum_l": fuel_cum},
+                   fuel_l=float(fuel_cum[-1]))
 
 
 def decimate_indices(time_s, time_step_s: float) -> np.ndarray:
@@ -954,6 +932,26 @@ def decimate_indices(time_s, time_step_s: float) -> np.ndarray:
     keep[1:] = b[1:] != b[:-1]
     keep[-1] = True
     return np.flatnonzero(keep)
+
+
+def _result(powertrain: str, mass_kg, t, speed_mps, elevation_m, steps: dict, samples: dict,
+            **totals) -> SimulationResult:
+    """A :class:`SimulationResult` from the step channels (``wheel_power_w``, ``dt_s``,
+    ``friction_brake_power_w``, ``traction_deficit_w`` among them) and the sample ones."""
+    dt = steps["dt_s"]
+    return SimulationResult(
+        powertrain=powertrain,
+        mass_kg=float(mass_kg),
+        time_s=t,
+        speed_mps=np.asarray(speed_mps, dtype=np.float64),
+        elevation_m=None if elevation_m is None else np.asarray(elevation_m, dtype=np.float64),
+        steps=MappingProxyType(steps),
+        samples=MappingProxyType(samples),
+        wheel_energy_j=float(np.dot(steps["wheel_power_w"], dt)),
+        friction_brake_energy_j=float(np.dot(steps["friction_brake_power_w"], dt)),
+        traction_deficit_j=float(np.dot(steps["traction_deficit_w"], dt)),
+        **totals,
+    )
 
 
 def simulate(vehicle, time_s, speed_mps, elevation_m=None, mass_kg: float | None = None,
