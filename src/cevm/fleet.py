@@ -59,7 +59,6 @@ import math
 import re
 import sys
 import time
-import tomllib
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -69,7 +68,7 @@ import numpy as np
 
 from cevm.cycle import CycleVector, DriveCycle, drive_cycle_vector
 from cevm.errors import InputError
-from cevm.io import load_vehicle, read_cycle_csv
+from cevm.io import load_vehicle, read_cycle_csv, read_toml
 from cevm.model import battery_energy_from_wheel_j, braking_weight, fuel_from_wheel_energy_l
 from cevm.synth import MicroTripSpec, micro_trip_cycle, write_cycle_csv
 from cevm.vehicle import J_PER_KWH, Vehicle, predict
@@ -373,21 +372,7 @@ def _quote(key: str) -> str:
 
 
 def _read_toml(path: Path) -> dict:
-    try:
-        text = path.read_bytes().decode("utf-8")
-    except FileNotFoundError:
-        raise InputError(path, "scenario file not found") from None
-    except IsADirectoryError:
-        raise InputError(path, "is a directory, not a scenario file") from None
-    except UnicodeDecodeError as exc:
-        raise InputError(path, f"not UTF-8 text ({exc.reason} at byte {exc.start})") from None
-    try:
-        return tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        found = re.search(r"\(at line (\d+), column \d+\)", str(exc))
-        line = getattr(exc, "lineno", None) or (int(found.group(1)) if found else None)
-        msg = getattr(exc, "msg", None) or str(exc)
-        raise InputError(path, f"not valid TOML: {msg}", line=line) from None
+    return read_toml(path, "scenario file")
 
 
 _TOP_KEYS = {

@@ -16,26 +16,30 @@ from cevm.vehicle import Vehicle, vehicle_from_mapping
 KMH_TO_MPS = 1.0 / 3.6
 
 
-def load_vehicle(path: str | Path) -> Vehicle:
-    """Read and validate a vehicle TOML file (keys: see :mod:`cevm.vehicle`)."""
+def read_toml(path: str | Path, what: str = "file") -> dict:
+    """Parse a TOML file; errors name the file, the line and what the file should be."""
     path = Path(path)
     try:
         text = path.read_bytes().decode("utf-8")
     except FileNotFoundError:
-        raise InputError(path, "vehicle file not found") from None
+        raise InputError(path, f"{what} not found") from None
     except IsADirectoryError:
-        raise InputError(path, "is a directory, not a vehicle file") from None
+        raise InputError(path, f"is a directory, not a {what}") from None
     except UnicodeDecodeError as exc:
         raise InputError(path, f"not UTF-8 text ({exc.reason} at byte {exc.start})") from None
     try:
-        data = tomllib.loads(text)
+        return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         # Python 3.11's message ends "(at line L, column C)"; newer ones also set lineno.
         found = re.search(r"\(at line (\d+), column \d+\)", str(exc))
         line = getattr(exc, "lineno", None) or (int(found.group(1)) if found else None)
         msg = getattr(exc, "msg", None) or str(exc)
         raise InputError(path, f"not valid TOML: {msg}", line=line) from None
-    return vehicle_from_mapping(data, str(path))
+
+
+def load_vehicle(path: str | Path) -> Vehicle:
+    """Read and validate a vehicle TOML file (keys: see :mod:`cevm.vehicle`)."""
+    return vehicle_from_mapping(read_toml(path, "vehicle file"), str(path))
 
 
 def load_vehicles(paths: list[str | Path]) -> list[Vehicle]:
