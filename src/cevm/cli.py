@@ -16,12 +16,11 @@ import numpy as np
 import typer
 
 from cevm import __version__
-from cevm.cycle import CR0_DEFAULT, CycleVector, cycle_vector
 from cevm.errors import CevmError
-from cevm.io import load_vehicles, read_cycle_csv
+from cevm.io import read_cycle_csv
 from cevm.model import ICE_BRAKING_MODES
 from cevm.report import OutputFormat, write_rows
-from cevm.vehicle import J_PER_KWH, predict
+from cevm.vehicle import J_PER_KWH
 
 EXIT_OK = 0
 EXIT_PARTIAL = 1
@@ -59,124 +58,6 @@ def _root(
     ] = False,
 ) -> None:
     """cevm: how much diesel or electricity a vehicle uses on a route."""
-
-
-@app.command("predict")
-def predict_cmd(
-    vehicle: Annotated[
-        list[Path], typer.Option("--vehicle", "-v", help="Vehicle TOML file, or a directory of them. Repeatable.")
-    ],
-    cycle: Annotated[
-        Optional[list[Path]],
-        typer.Option("--cycle", "-c", help="Cycle CSV (time_s, speed_kmh|speed_mps[, elevation_m]). Repeatable."),
-    ] = None,
-    trip: Annotated[
-        Optional[list[str]], typer.Option("--trip", "-t", help="A stored trip id (see 'cevm trips'). Repeatable.")
-    ] = None,
-    vehicle_id: Annotated[
-        Optional[list[str]], typer.Option("--vehicle-id", help="All stored trips of this vehicle id. Repeatable.")
-    ] = None,
-    store: StoreOption = None,
-    mass_kg: Annotated[
-        Optional[list[float]],
-        typer.Option("--mass-kg", "-m", help="Gross mass [kg]. Repeatable. Default: each vehicle's mass_kg."),
-    ] = None,
-    fmt: Annotated[OutputFormat, typer.Option("--format", "-f", help="Output format.")] = OutputFormat.table,
-    ice_braking: Annotated[
-        Optional[str],
-        typer.Option(help=f"Override ICE braking mode: {' or '.join(ICE_BRAKING_MODES)}. Default: the vehicle file's."),
-    ] = None,
-    cr0: Annotated[float, typer.Option(help="Conservative rolling coefficient Cr0 of the simplification criterion.")] = CR0_DEFAULT,
-) -> None:
-    """Predict energy (EV) or fuel (ICE) for every (source, vehicle, mass).
-
-    Sources are cycle files (--cycle) and stored trips (--trip, --vehicle-id); the
-    'cycle' column names each (the file's stem or the trip id)."""
-    if not (cycle or trip or vehicle_id):
-        raise _fail("give at least one source: --cycle, --trip or --vehicle-id")
-    if ice_braking is not None and ice_braking not in ICE_BRAKING_MODES:
-        raise _fail(f"--ice-braking must be one of: {', '.join(ICE_BRAKING_MODES)}")
-    if mass_kg and any(not np.isfinite(m) or m <= 0 for m in mass_kg):
-        raise _fail("--mass-kg values must be positive")
-    try:
-        vehicles = load_vehicles(vehicle)
-        sources = [(c.name or str(path), cycle_vector(c, cr0=cr0)) for path, c in
-                   ((p, read_cycle_csv(p)) for p in cycle or [])]
-        if trip or vehicle_id:
-            sources.extend(_stored_vectors(store, trip or [], vehicle_id or []))
-    except CevmError as exc:
-        raise _fail(str(exc)) from None
-    rows = []
-    for name, vec in sources:
-        for veh in vehicles:
-            if veh.cr < vec.cr0:
-                raise _fail(f"vehicle {veh.name!r}: cr {veh.cr:g} is below the vector's Cr0 {vec.cr0:g}")
-            masses = np.asarray(mass_kg if mass_kg else [veh.mass_kg], dtype=np.float64)
-            pred = predict(vec, veh, masses, ice_braking=ice_braking)
-            dist_km = vec.distance_m / 1000.0
-            for i, m in enumerate(masses):
-                row = {
-                    "cycle": name,
-                    "vehicle": veh.name,
-                    "powertrain": veh.powertrain,
-                    "mass_kg": float(m),
-                    "distance_km": dist_km,
-                    "duration_s": vec.duration_s,
-                    "wheel_energy_kwh": float(pred.wheel_energy_j[i]) / J_PER_KWH,
-                }
-                if veh.is_ev:
-                    e_kwh = float(pred.energy_j[i]) / J_PER_KWH
-                    row["energy_kwh"] = e_kwh
-                    row["energy_kwh_per_km"] = e_kwh / dist_km if dist_km > 0 else None
-                else:
-                    fuel = float(pred.fuel_l[i])
-                    row["fuel_l"] = fuel
-                    row["fuel_l_per_100km"] = 100.0 * fuel / dist_km if dist_km > 0 else None
-                    row["ice_braking"] = ice_braking or veh.ice_braking
-                if veh.max_gross_kg is not None and m > veh.max_gross_kg:
-                    typer.echo(
-                        f"cevm: warning: {veh.name}: mass {m:g} kg exceeds max_gross_kg {veh.max_gross_kg:g}",
-                        err=True,
-                    )
-                rows.append(row)
-    columns = [
-        "cycle", "vehicle", "mass_kg", "distance_km", "duration_s", "wheel_energy_kwh",
-        "energy_kwh", "energy_kwh_per_km", "fuel_l", "fuel_l_per_100km",
-    ]
-    if fmt == OutputFormat.table:
-        columns = [c for c in columns if any(c in r for r in rows)]
-    write_rows(rows, fmt, columns=columns, title="cevm predict", digits=PREDICT_DIGITS, headers=PREDICT_HEADERS)
-
-
-def _stored_vectors(store: Optional[Path], trip_ids: list[str], vehicle_ids: list[str]) -> list[tuple[str, CycleVector]]:
-    from cevm.store import TripStore, resolve_store_path
-
-    path = resolve_store_path(store)
-    if not path.exists():
-        raise CevmError(f"{path}: no trip store here; run 'cevm ingest' first or give --store")
-    out: dict[str, bytes] = {}
-    with TripStore.open(path) as st:
-        if trip_ids:
-            out.update(st.load_vectors(trip_ids=trip_ids))
-        for vid in vehicle_ids:
-            got = st.load_vectors(vehicle_id=vid)
-            if not got:
-                raise CevmError(f"vehicle id {vid!r} has no stored trips; see 'cevm trips'")
-            out.update(got)
-    return [(tid, CycleVector.from_bytes(b)) for tid, b in out.items()]
-
-
-PREDICT_HEADERS = {
-    "mass_kg": "mass kg",
-    "distance_km": "km",
-    "duration_s": "s",
-    "wheel_energy_kwh": "wheel kWh",
-    "energy_kwh": "battery kWh",
-    "energy_kwh_per_km": "kWh/km",
-    "fuel_l": "fuel l",
-    "fuel_l_per_100km": "l/100km",
-}
-PREDICT_DIGITS = {"mass_kg": 0, "duration_s": 0, "distance_km": 2, "wheel_energy_kwh": 2, "energy_kwh": 2, "fuel_l": 2, "fuel_l_per_100km": 1}
 
 
 @app.command()
@@ -541,6 +422,10 @@ def fleet_plan(
                 "solve ms": s["solve_time_s"] * 1e3} for s in report["summary"]]
     write_rows(summary, OutputFormat.table, title="optimum against the default assignment",
                digits={f"total {unit}": 2, f"default {unit}": 2, "saving %": 2, "solve ms": 2})
+
+
+# predict, feasibility and route: defined in cevm.cli_predict on this app
+from cevm import cli_predict  # noqa: E402,F401
 
 
 def main() -> None:

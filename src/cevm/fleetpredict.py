@@ -1,0 +1,1193 @@
+"""Fleet predictions (pure): vehicles x sources x masses, state of charge, feasibility.
+
+A *source* is what a vehicle drives: a cycle file, a stored trip or a named route (a
+sequence of legs). It carries its CE drive-cycle vector (:class:`~cevm.cycle.CycleVector`,
+for totals) and its legs' profiles (time, speed, elevation; for the state of charge along
+the way). A :class:`PredictionSet` is the flat list of (vehicle, mass) predictions of a
+sweep; :func:`predict_source` evaluates all of them on one source in numpy arrays, and
+:func:`sweep` yields one such block per source, so a million rows never need a million
+Python objects.
+
+Totals (wheel energy, battery energy, fuel) are the CE model on the source's vector
+(eq. 22-31): :func:`ce_wheel_energy_j` is the formula of :func:`cevm.model.wheel_energy_j`
+with the positive non-simplified steps summed in one pass for any mix of rolling
+coefficients (the model groups predictions by Cr); the two agree to rounding (tested).
+
+State of charge along the way
+-----------------------------
+SoC_j = SoC_start - 100 E_j / E_batt [%], with E_j the battery energy drawn from the
+start to sample j. Over a step, the battery gives g_i = W(Delta_i) / eta + P_aux dt_i
+with W(D) = D if D > 0 else eta^2 D (eq. 27-31); E_j = sum_{i<=j} g_i; the final E_n is
+the CE model's total. The lowest SoC is SoC_start - 100 max(0, max_j E_j) / E_batt.
+
+Computing max_j E_j per (vehicle, mass) by a plain cumulative sum costs O(steps). This
+module gets the same maximum, exactly, at a fraction of that:
+
+1. Per source, once (:class:`SourceSteps`): the per-step terms x = k + e, a, r, dt of
+   every leg (:func:`cevm.cycle.step_terms`), in time order. Steps that draw energy for
+   every admissible vehicle (simplified steps, eq. 8, and standstill on flat ground)
+   have g_i >= 0, so a run of them never holds a maximum inside: each maximal run is
+   merged into one element (exact). The other steps stay single elements. Elements are
+   cut into blocks of about :data:`BLOCK_ELEMENTS`.
+2. Per block and prediction, exactly: the block's energy S_b and two upper bounds of
+   E_j inside it, C_b + (positive part) and C_{b+1} - (regenerated part), where C_b is
+   the energy drawn before block b. These need the sum of the positive Delta_i of the
+   block's non-simplified steps for that vehicle and mass: the sign of each step is
+   decided once for all masses of a vehicle where they agree (most steps), and by one
+   comparison per (vehicle, step) where they differ, then binned by the first mass at
+   which the step turns positive (:func:`_positive_parts`). No work per (prediction,
+   step) pair.
+3. Blocks whose upper bound cannot beat the best value known (0, E_n, the block ends)
+   are skipped; the others are summed step by step. Typically one or two blocks per
+   prediction are summed, near the end of the route or after a descent.
+
+The result equals a plain per-step loop to floating-point rounding (tested). Several
+sources are evaluated together (:func:`sweep`, :data:`SWEEP_BATCH_CELLS`).
+
+ICE rows get the fuel needed (the total) against ``tank_l``: fuel burnt never falls along
+a route (the paper's braking credit lowers the *estimate* of the total, not the tank).
+
+Feasibility and the largest payload
+-----------------------------------
+For a fixed vehicle, every E_j is convex in the mass m: W(D) = eta^2 D + (1 - eta^2)
+max(D, 0) with D affine in m, and eta^2 <= 1 (the same holds for ICE fuel, w = 1 or 0).
+The maximum over j of convex functions is convex. So the payloads that keep the reserve
+form one interval, even on routes where energy *falls* with mass (a long descent: a
+heavier vehicle regenerates more). :func:`feasibility` does not assume monotonicity: it
+tests the empty payload, and if that fails it finds the minimum of the convex function
+(binary search on the sign of its discrete slope) before bisecting each side, all on
+whole kilograms with the exact model: the answer is the largest whole-kg payload that
+keeps the reserve (EV) or fits the tank (ICE) and respects ``max_gross_kg``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from dataclasses import dataclass
+from functools import cached_property
+
+import numpy as np
+
+from cevm.cycle import CR0_DEFAULT, PAPER_PHYSICS, CycleVector, DriveCycle, Physics, cycle_vector, step_terms
+from cevm.errors import CevmError, InputError
+from cevm.model import (
+    battery_energy_from_wheel_j,
+    braking_weight,
+    fuel_from_wheel_energy_l,
+)
+from cevm.vehicle import Vehicle
+
+#: Default state of charge at the start [%]: a vehicle leaving the depot fully charged.
+DEFAULT_SOC_START_PCT = 100.0
+#: Default reserve [%]: the paper's example of the level at which commercial EVs warn the
+#: driver, "e.g., 15%" (section 3.2, figure 4).
+DEFAULT_RESERVE_PCT = 15.0
+#: Target number of elements (merged steps) per block of :class:`SourceSteps`. Smaller
+#: blocks prune more precisely but cost one more bound per block and prediction; 48 and
+#: 64 were the fastest on the benchmark's routes (benchmarks/bench_sweep.py), 32 about
+#: 10 % slower, 128 about 15 %.
+BLOCK_ELEMENTS = 48
+#: Largest number of values a range option may expand to (a typo guard).
+MAX_RANGE_VALUES = 10_000_000
+#: Work arrays are cut into chunks of about this many float64 elements (8 MB).
+_CHUNK_ELEMENTS = 1 << 20
+#: Step-by-step sums of the blocks that may hold the maximum are done in chunks of this
+#: many elements (64 kB arrays, which stay in the processor's cache: 4x larger chunks
+#: were 10 % slower on the benchmark).
+_SCAN_CHUNK_ELEMENTS = 1 << 13
+
+
+# ----------------------------------------------------------------------- value ranges
+
+
+def parse_values(spec: str, option: str = "value") -> np.ndarray:
+    """The numbers of one option value [whatever unit the option has].
+
+    ``spec`` is a number (``"12000"``), a comma-separated list (``"12000,20000"``), or a
+    range ``start:stop:step`` whose ``stop`` is *included* when it lies on the grid:
+    ``"0:26000:2000"`` gives the 14 values 0, 2000, ..., 26000; ``"0:25000:2000"`` gives
+    0 ... 24000 (13 values). Values are ``start + k step`` (no accumulated rounding);
+    the last is snapped to ``stop`` when within 1e-9 steps of it. Items of a list may
+    themselves be ranges. Raises :class:`~cevm.errors.InputError` naming ``option``.
+    """
+    out: list[np.ndarray] = []
+    for item in str(spec).split(","):
+        item = item.strip()
+        if not item:
+            raise InputError(option, f"empty value in {spec!r}")
+        parts = item.split(":")
+        try:
+            nums = [float(p) for p in parts]
+        except ValueError:
+            raise InputError(option, f"not a number or a start:stop:step range: {item!r}") from None
+        if not all(math.isfinite(v) for v in nums):
+            raise InputError(option, f"values must be finite: {item!r}")
+        if len(nums) == 1:
+            out.append(np.array(nums))
+            continue
+        if len(nums) != 3:
+            raise InputError(option, f"a range is start:stop:step (three numbers), got {item!r}")
+        start, stop, step = nums
+        if step <= 0:
+            raise InputError(option, f"range {item!r}: step must be > 0")
+        if stop < start:
+            raise InputError(option, f"range {item!r}: stop is below start")
+        n = int(math.floor((stop - start) / step + 1e-9)) + 1
+        if n > MAX_RANGE_VALUES:
+            raise InputError(option, f"range {item!r} has {n} values, more than {MAX_RANGE_VALUES}")
+        vals = start + step * np.arange(n, dtype=np.float64)
+        if abs(vals[-1] - stop) <= 1e-9 * step:
+            vals[-1] = stop
+        out.append(vals)
+    return np.concatenate(out)
+
+
+# -------------------------------------------------------------------------- sources
+
+
+@dataclass(frozen=True, eq=False)
+class LegProfile:
+    """One leg's samples: time [s] (strictly increasing), speed [m/s], road elevation [m]
+    (None for a flat road). Consecutive legs are *not* joined by a step: a route's
+    vector is the sum of its legs' vectors, and its profile is the legs one after
+    another."""
+
+    time_s: np.ndarray
+    speed_mps: np.ndarray
+    elevation_m: np.ndarray | None = None
+
+    @classmethod
+    def from_profile(cls, profile: Mapping[str, np.ndarray]) -> LegProfile:
+        """From a stored profile dict (:meth:`cevm.store.TripStore.load_profile`)."""
+        h = profile.get("elevation_m")
+        return cls(np.asarray(profile["time_s"], np.float64), np.asarray(profile["speed_mps"], np.float64),
+                   None if h is None else np.asarray(h, np.float64))
+
+
+@dataclass(frozen=True, eq=False)
+class SourceSteps:
+    """A source's time-ordered step terms, compressed for the lowest state of charge.
+
+    Elements (``n_elements``): ``x`` = sum of k + e [J/kg], ``a`` [J/m^2], ``r`` [J/kg
+    per unit Cr], ``dt`` [s]; ``ns`` marks a single non-simplified step (its sign
+    depends on the vehicle), else the element is a merged run of steps that draw energy
+    for every vehicle with Cr >= cr0. ``block_start`` (K+1) cuts elements into K blocks;
+    ``blocks`` (5, K, L) holds each block's x, r, a, dt and ns (1.0 / 0.0) padded with
+    zeros to the longest block, L. Per block (K,): ``fp_x, fp_a, fp_r`` sums over merged
+    elements, ``ns_x, ns_a, ns_r`` over non-simplified ones, ``t_s`` the duration.
+    ``nsel`` the indices of the non-simplified elements, ``nsel_block`` their block,
+    ``nsel_block_start`` (K+1) where each block starts among them.
+    """
+
+    x: np.ndarray
+    a: np.ndarray
+    r: np.ndarray
+    dt: np.ndarray
+    ns: np.ndarray
+    n_steps: int
+    block_start: np.ndarray
+    blocks: np.ndarray
+    fp_x: np.ndarray
+    fp_a: np.ndarray
+    fp_r: np.ndarray
+    ns_x: np.ndarray
+    ns_a: np.ndarray
+    ns_r: np.ndarray
+    t_s: np.ndarray
+    nsel: np.ndarray
+    nsel_block: np.ndarray
+    nsel_block_start: np.ndarray
+    cr0: float
+
+    @property
+    def n_elements(self) -> int:
+        return int(self.x.size)
+
+    @property
+    def n_blocks(self) -> int:
+        return int(self.block_start.size - 1)
+
+
+def _leg_terms(legs: Sequence[LegProfile], physics: Physics) -> tuple[np.ndarray, ...]:
+    xs, as_, rs, dts = [], [], [], []
+    for leg in legs:
+        st = step_terms(leg.time_s, leg.speed_mps, leg.elevation_m, physics)
+        xs.append(st.k + st.e)
+        as_.append(st.a)
+        rs.append(st.r)
+        dts.append(st.dt)
+    if not xs:
+        z = np.zeros(0)
+        return z, z, z, z
+    return np.concatenate(xs), np.concatenate(as_), np.concatenate(rs), np.concatenate(dts)
+
+
+def _block_sums(values: np.ndarray, bounds: np.ndarray) -> np.ndarray:
+    """Sums of ``values`` between consecutive ``bounds`` (empty blocks give 0)."""
+    cum = np.concatenate([[0.0], np.cumsum(values)])
+    return cum[bounds[1:]] - cum[bounds[:-1]]
+
+
+def build_steps(
+    legs: Sequence[LegProfile],
+    *,
+    cr0: float = CR0_DEFAULT,
+    physics: Physics = PAPER_PHYSICS,
+    block_elements: int = BLOCK_ELEMENTS,
+) -> SourceSteps:
+    """Compress the legs' step terms for :func:`peak_energy_j` (see the module notes).
+
+    Parameters
+    ----------
+    legs : the source's legs in driving order
+    cr0 : Cr0 of criterion (8) [-]; use the source vector's, default 0.004
+    physics : air density and gravity (the paper's by default)
+    block_elements : target elements per block, default :data:`BLOCK_ELEMENTS`
+    """
+    x, a, r, dt = _leg_terms(legs, physics)
+    n = x.size
+    simplified = (x + cr0 * r) > 0
+    moving = a > 0
+    # Steps with g >= 0 for every vehicle with Cr >= cr0 and aux >= 0: simplified steps
+    # (Delta > 0) and standstill on flat ground (Delta = 0, only auxiliary power).
+    fp = simplified | (~moving & (x == 0.0))
+    start = np.ones(n, dtype=bool)
+    if n > 1:
+        start[1:] = ~(fp[1:] & fp[:-1])
+    starts = np.flatnonzero(start)
+    if n:
+        ex, ea, er, edt = (np.add.reduceat(v, starts) for v in (x, a, r, dt))
+        ens = ~fp[starts]
+    else:
+        ex = ea = er = edt = np.zeros(0)
+        ens = np.zeros(0, dtype=bool)
+    nc = int(starts.size)
+    k = max(1, int(round(nc / max(1, block_elements))))
+    bounds = (np.arange(k + 1, dtype=np.int64) * nc) // k
+    lens = np.diff(bounds)
+    lmax = max(1, int(lens.max()))
+    fpm = ~ens
+    nsel = np.flatnonzero(ens)
+    idx = bounds[:-1, None] + np.arange(lmax)[None, :]
+    inside = np.arange(lmax)[None, :] < lens[:, None]
+    idx = np.where(inside, idx, 0)
+    blocks = np.stack([np.where(inside, v[idx], 0.0) if nc else np.zeros((k, lmax))
+                       for v in (ex, er, ea, edt, ens.astype(np.float64))])
+    return SourceSteps(
+        x=ex,
+        a=ea,
+        r=er,
+        dt=edt,
+        ns=ens,
+        n_steps=int(n),
+        block_start=bounds,
+        blocks=blocks,
+        fp_x=_block_sums(np.where(fpm, ex, 0.0), bounds),
+        fp_a=_block_sums(np.where(fpm, ea, 0.0), bounds),
+        fp_r=_block_sums(np.where(fpm, er, 0.0), bounds),
+        ns_x=_block_sums(np.where(ens, ex, 0.0), bounds),
+        ns_a=_block_sums(np.where(ens, ea, 0.0), bounds),
+        ns_r=_block_sums(np.where(ens, er, 0.0), bounds),
+        t_s=_block_sums(edt, bounds),
+        nsel=nsel,
+        nsel_block=np.searchsorted(bounds, nsel, side="right") - 1,
+        nsel_block_start=np.searchsorted(nsel, bounds),
+        cr0=float(cr0),
+    )
+
+
+@dataclass(frozen=True, eq=False)
+class Source:
+    """Something to drive: its name, kind (``"cycle"``, ``"trip"`` or ``"route"``), CE
+    vector, and its legs' profiles (a sequence, or a callable returning one, called at
+    most once and only when the state of charge along the way is needed)."""
+
+    name: str
+    kind: str
+    vector: CycleVector
+    legs: Sequence[LegProfile] | Callable[[], Sequence[LegProfile]]
+    block_elements: int = BLOCK_ELEMENTS
+
+    @classmethod
+    def from_cycle(cls, cycle: DriveCycle, name: str | None = None, *, cr0: float = CR0_DEFAULT,
+                   physics: Physics = PAPER_PHYSICS) -> Source:
+        """A cycle as a source: its vector (with ``cr0``) and its one leg."""
+        return cls(name=name if name is not None else (cycle.name or "cycle"), kind="cycle",
+                   vector=cycle_vector(cycle, cr0=cr0, physics=physics),
+                   legs=(LegProfile(cycle.time_s, cycle.speed_mps, cycle.elevation_m),))
+
+    @cached_property
+    def leg_profiles(self) -> tuple[LegProfile, ...]:
+        return tuple(self.legs() if callable(self.legs) else self.legs)
+
+    @cached_property
+    def steps(self) -> SourceSteps:
+        """The compressed step terms (built on first use, then kept)."""
+        return build_steps(self.leg_profiles, cr0=self.vector.cr0, physics=self.vector.physics,
+                           block_elements=self.block_elements)
+
+    def release(self) -> None:
+        """Forget the cached profiles and step terms (their memory): for a sweep that is
+        done with this source. They are rebuilt if asked for again."""
+        self.__dict__.pop("steps", None)
+        self.__dict__.pop("leg_profiles", None)
+
+    @property
+    def distance_m(self) -> float:
+        return self.vector.distance_m
+
+    @property
+    def duration_s(self) -> float:
+        return self.vector.duration_s
+
+
+# ------------------------------------------------------------------------ predictions
+
+
+@dataclass(frozen=True, eq=False)
+class PredictionSet:
+    """The (vehicle, mass) predictions of a sweep, flat, vehicle by vehicle.
+
+    Arrays (P,): ``vehicle_index``, ``mass_kg``, ``payload_kg`` (mass minus kerb mass;
+    NaN without ``kerb_mass_kg``), ``over_max_gross``, and each vehicle's parameters
+    broadcast to its rows: ``cda_m2``, ``cr``, ``eta``, ``negative_weight`` (eta^2 for
+    an EV, 1 or 0 for an ICE by braking mode), ``aux_power_w``, ``battery_j`` (NaN for
+    ICE), ``lhv_j_per_l`` (NaN for EV), ``idle_fuel_lps``, ``tank_l`` (NaN if unknown),
+    ``is_ev``. ``braking`` holds each vehicle's ICE braking mode in force ("" for EV).
+    """
+
+    vehicles: tuple[Vehicle, ...]
+    vehicle_index: np.ndarray
+    mass_kg: np.ndarray
+    payload_kg: np.ndarray
+    over_max_gross: np.ndarray
+    cda_m2: np.ndarray
+    cr: np.ndarray
+    eta: np.ndarray
+    negative_weight: np.ndarray
+    aux_power_w: np.ndarray
+    battery_j: np.ndarray
+    lhv_j_per_l: np.ndarray
+    idle_fuel_lps: np.ndarray
+    tank_l: np.ndarray
+    is_ev: np.ndarray
+    braking: tuple[str, ...]
+
+    @property
+    def n(self) -> int:
+        return int(self.mass_kg.size)
+
+    @classmethod
+    def build(
+        cls,
+        vehicles: Sequence[Vehicle],
+        *,
+        mass_kg: Sequence[float] | np.ndarray | None = None,
+        payload_kg: Sequence[float] | np.ndarray | None = None,
+        ice_braking: str | None = None,
+    ) -> PredictionSet:
+        """Every vehicle at every mass: ``mass_kg`` (gross masses [kg], the same for all
+        vehicles), or ``payload_kg`` (each vehicle's kerb mass + payload [kg]; needs
+        ``kerb_mass_kg``), or neither (each vehicle's default ``mass_kg``).
+        ``ice_braking`` overrides the ICE braking mode of every ICE vehicle."""
+        if mass_kg is not None and payload_kg is not None:
+            raise CevmError("give gross masses or payloads, not both")
+        vehicles = tuple(vehicles)
+        if not vehicles:
+            raise CevmError("no vehicles")
+        masses: list[np.ndarray] = []
+        if mass_kg is not None:
+            m = np.asarray(mass_kg, dtype=np.float64).ravel()
+            if m.size == 0 or not np.all(np.isfinite(m) & (m > 0)):
+                raise CevmError("gross masses must be finite and > 0 kg")
+            masses = [m] * len(vehicles)
+        elif payload_kg is not None:
+            p = np.asarray(payload_kg, dtype=np.float64).ravel()
+            if p.size == 0 or not np.all(np.isfinite(p) & (p >= 0)):
+                raise CevmError("payloads must be finite and >= 0 kg")
+            for v in vehicles:
+                if v.kerb_mass_kg is None:
+                    raise CevmError(f"vehicle {v.name!r} has no kerb_mass_kg, so a payload cannot be added; "
+                                    "give gross masses (--mass-kg) instead")
+                masses.append(v.kerb_mass_kg + p)
+        else:
+            masses = [np.array([v.mass_kg]) for v in vehicles]
+        counts = np.array([m.size for m in masses])
+        vi = np.repeat(np.arange(len(vehicles)), counts)
+        mass = np.concatenate(masses)
+
+        def per_vehicle(fn) -> np.ndarray:
+            return np.array([fn(v) for v in vehicles], dtype=np.float64)[vi]
+
+        braking = []
+        for v in vehicles:
+            if v.is_ev:
+                braking.append("")
+            else:
+                mode = ice_braking or v.ice_braking
+                braking_weight(mode)  # validates
+                braking.append(mode)
+        kerb = per_vehicle(lambda v: np.nan if v.kerb_mass_kg is None else v.kerb_mass_kg)
+        max_gross = per_vehicle(lambda v: np.inf if v.max_gross_kg is None else v.max_gross_kg)
+        is_ev = np.array([v.is_ev for v in vehicles], dtype=bool)[vi]
+        eta = per_vehicle(lambda v: v.eta)
+        w_ice = np.array([0.0 if v.is_ev else braking_weight(b) for v, b in zip(vehicles, braking)])[vi]
+        return cls(
+            vehicles=vehicles,
+            vehicle_index=vi,
+            mass_kg=mass,
+            payload_kg=mass - kerb,
+            over_max_gross=mass > max_gross,
+            cda_m2=per_vehicle(lambda v: v.cda_m2),
+            cr=per_vehicle(lambda v: v.cr),
+            eta=eta,
+            negative_weight=np.where(is_ev, eta * eta, w_ice),
+            aux_power_w=per_vehicle(lambda v: v.aux_power_w if v.is_ev else 0.0),
+            battery_j=per_vehicle(lambda v: v.battery_j if v.is_ev and v.battery_j else np.nan),
+            lhv_j_per_l=per_vehicle(lambda v: np.nan if v.is_ev else v.fuel_lhv_j_per_l),
+            idle_fuel_lps=per_vehicle(lambda v: 0.0 if v.is_ev else v.idle_fuel_lps),
+            tank_l=per_vehicle(lambda v: np.nan if v.is_ev or v.tank_l is None else v.tank_l),
+            is_ev=is_ev,
+            braking=tuple(braking),
+        )
+
+
+# -------------------------------------------------------------- lowest state of charge
+
+
+def _segment_sums(values: np.ndarray, bounds: np.ndarray) -> np.ndarray:
+    """Sums of ``values`` (..., N) over the last axis between consecutive ``bounds``
+    (K+1, non-decreasing, from 0 to N): (..., K), empty segments 0."""
+    k = bounds.size - 1
+    out = np.zeros(values.shape[:-1] + (k,))
+    nonempty = np.flatnonzero(bounds[1:] > bounds[:-1])
+    if nonempty.size:
+        out[..., nonempty] = np.add.reduceat(values, bounds[nonempty], axis=-1)
+    return out
+
+
+def _positive_parts(xs, as_, rs, nsel_block, bs, k, m, cda, cr, group, n_groups) -> np.ndarray:
+    """(P, K): sum of max(Delta_i, 0) = max(m (x_i + Cr r_i) + CdA a_i, 0) [J] over the
+    elements i of each block (``nsel_block``: block of each element, in order;
+    ``bs``: (K+1) where each block starts), exactly, for every prediction. Predictions of
+    one ``group`` (ids 0..n_groups-1) share CdA and Cr."""
+    p_count = m.size
+    if xs.size == 0:
+        return np.zeros((p_count, k))
+    c = cda / m
+    order = np.lexsort((c, group))  # by group, then c ascending
+    counts = np.bincount(group, minlength=n_groups)
+    gstart = np.concatenate([[0], np.cumsum(counts)[:-1]])
+    gsorted = group[order]
+    cda_g = np.empty(n_groups)
+    cda_g[group] = cda
+    cr_g = np.empty(n_groups)
+    cr_g[group] = cr
+    c_lo = c[order][gstart]  # smallest c = CdA / m of each group (its largest mass)
+    c_hi = c[order][gstart + counts - 1]
+    # Delta_i = m (x_i + Cr r_i + c a_i) with r_i, a_i >= 0: positive for every prediction
+    # if positive at the smallest Cr and c, for none if not at the largest. Only the
+    # elements in between are classified group by group.
+    never = (xs + cr_g.max() * rs + c_hi.max() * as_) <= 0
+    always = (xs + cr_g.min() * rs + c_lo.min() * as_) > 0
+    # group-level sums (G, K) of y = x + Cr r and of a over the positive elements
+    yp = np.zeros((n_groups, k))
+    ap = np.zeros((n_groups, k))
+    if always.any():
+        sx, sr, sa = (_segment_sums(np.where(always, v, 0.0), bs) for v in (xs, rs, as_))
+        yp += sx + cr_g[:, None] * sr
+        ap += sa
+    sel = np.flatnonzero(~(never | always))
+    sy = None
+    if sel.size:
+        xs, as_, rs = xs[sel], as_[sel], rs[sel]
+        nblock = nsel_block[sel]
+        bsel = np.searchsorted(sel, bs)
+        y = xs[None, :] + cr_g[:, None] * rs[None, :]  # (G, N) Delta / m without the CdA part
+        # per group: positive for every mass if positive at c_lo, never if not at c_hi
+        pos_all = (y + c_lo[:, None] * as_[None, :]) > 0
+        neg_all = (y + c_hi[:, None] * as_[None, :]) <= 0
+        yp += _segment_sums(np.where(pos_all, y, 0.0), bsel)
+        ap += _segment_sums(np.where(pos_all, as_[None, :], 0.0), bsel)
+        unc = ~(pos_all | neg_all)
+        if unc.any():
+            # Elements whose sign differs between a group's masses. With the group's
+            # predictions sorted by c, element i is positive for those of rank >= j_i,
+            # j_i = #{c_p <= thr_i}, thr_i = -y_i / a_i. Bin y_i and a_i by (group, j_i,
+            # block) and sum over j: each prediction reads its (group, rank) row.
+            gi, ni = np.nonzero(unc)
+            yv = y[gi, ni]
+            av = as_[ni]
+            kk = int(counts.max()) + 1
+            j = _count_not_positive(yv, av, gi, c[order], gsorted, gstart, counts, kk - 1)
+            idx = (gi * kk + j) * k + nblock[ni]
+            sy = np.bincount(idx, weights=yv, minlength=n_groups * kk * k).reshape(n_groups, kk, k)
+            sa = np.bincount(idx, weights=av, minlength=n_groups * kk * k).reshape(n_groups, kk, k)
+            sy[:, 0] += yp
+            sa[:, 0] += ap
+            np.cumsum(sy, axis=1, out=sy)
+            np.cumsum(sa, axis=1, out=sa)
+    if sy is None:
+        return m[:, None] * yp[group] + cda[:, None] * ap[group]
+    row = np.empty(p_count, dtype=np.int64)
+    row[order] = gsorted * kk + (np.arange(p_count) - gstart[gsorted])  # (group, rank) row
+    return m[:, None] * sy.reshape(-1, k)[row] + cda[:, None] * sa.reshape(-1, k)[row]
+
+
+def _count_not_positive(yv, av, gi, c_sorted, gsorted, gstart, counts, kmax) -> np.ndarray:
+    """For each (group g_i, element) pair: j_i = #{c_p of group g_i : y_i + c_p a_i <= 0}
+    (c_sorted ascending within each group), by a vectorised bisection on the group's
+    sorted c values: ceil(log2(kmax + 1)) steps of one comparison each."""
+    n_groups = counts.size
+    cmat = np.full((n_groups, kmax), np.inf)
+    cmat[gsorted, np.arange(c_sorted.size) - gstart[gsorted]] = c_sorted
+    flat = cmat.ravel()
+    lo = np.zeros(gi.size, dtype=np.int64)  # y + c a <= 0 for ranks < lo
+    hi = counts[gi].astype(np.int64)  # and > 0 for ranks >= hi
+    base = gi * kmax
+    for _ in range(int(kmax).bit_length()):
+        mid = (lo + hi) >> 1
+        ok = (hi > lo) & (yv + flat[base + np.minimum(mid, kmax - 1)] * av <= 0)
+        lo = np.where(ok, mid + 1, lo)
+        hi = np.where(ok | (hi <= lo), hi, mid)
+    return lo
+
+
+def ce_wheel_energy_j(vector: CycleVector, mass_kg, cda_m2, cr, negative_weight, *, group=None) -> np.ndarray:
+    """Wheel energy E_DC over the cycle [J]: the CE model of :func:`cevm.model.wheel_energy_j`
+    (eq. 22-30, same formula), with the positive non-simplified steps summed by
+    :func:`_positive_parts`: one pass for any mix of Cr values (the model groups by Cr).
+
+    Parameters: arrays of P predictions (broadcast): mass_kg [kg] (> 0), cda_m2 [m^2],
+    cr [-] (>= vector.cr0), negative_weight w; ``group`` as for :func:`peak_energy_j`
+    (predictions of a group share CdA and Cr; default: grouped by (CdA, Cr)).
+    """
+    m = np.asarray(mass_kg, dtype=np.float64).ravel()
+    cda, crs, w = (np.broadcast_to(np.asarray(v, dtype=np.float64), m.shape).ravel()
+                   for v in (cda_m2, cr, negative_weight))
+    if np.any(m <= 0):
+        raise ValueError("mass_kg must be > 0")
+    if np.any(crs < vector.cr0):
+        raise ValueError(f"rolling coefficient below the vector's Cr0 {vector.cr0:g}")
+    if m.size == 0:
+        return np.zeros(0)
+    return _ce_batch([vector], m, cda, crs, w, _groups(cda, crs, group))[:, 0]
+
+
+def _ce_batch(vectors: Sequence[CycleVector], m, cda, cr, w, group) -> np.ndarray:
+    """(P, R) wheel energy [J] of P predictions on R vectors (see :func:`ce_wheel_energy_j`)."""
+    sc = np.array([[v.s_me, v.s_a, v.s_r, *v.ns_sums] for v in vectors])  # (R, 6)
+    mm = m[:, None]
+    e1 = mm * (sc[:, 0] + cr[:, None] * sc[:, 2]) + cda[:, None] * sc[:, 1]
+    net = mm * (sc[:, 3] + cr[:, None] * sc[:, 5]) + cda[:, None] * sc[:, 4]
+    out = e1 + net  # braking credited (w = 1): affine, no sign to decide
+    need = np.flatnonzero(w != 1.0)
+    if need.size:
+        sizes = np.array([v.ns_x.size for v in vectors])
+        _, grp = np.unique(group[need], return_inverse=True)
+        pos = _positive_parts(
+            np.concatenate([v.ns_x for v in vectors]), np.concatenate([v.ns_a for v in vectors]),
+            np.concatenate([v.ns_r for v in vectors]), np.repeat(np.arange(len(vectors)), sizes),
+            np.concatenate([[0], np.cumsum(sizes)]), len(vectors), m[need], cda[need], cr[need], grp,
+            int(grp.max()) + 1)
+        out[need] = e1[need] + pos + w[need][:, None] * (net[need] - pos)
+    return out
+
+
+def _groups(cda: np.ndarray, cr: np.ndarray, group) -> np.ndarray:
+    """Compact group ids (0..G-1): of ``group`` if given, else of the (CdA, Cr) pairs."""
+    if group is None:
+        _, inv = np.unique(np.stack([cda, cr], axis=1), axis=0, return_inverse=True)
+        return inv.ravel()
+    _, inv = np.unique(np.asarray(group).ravel(), return_inverse=True)
+    return inv
+
+
+@dataclass(frozen=True, eq=False)
+class _StepsBatch:
+    """The :class:`SourceSteps` of R sources side by side: K blocks in all (``kstart``
+    (R+1) the first block of each source, ``source_of_block`` (K,)), block sums and the
+    (5, K, L) block matrix; the non-simplified elements with their global block."""
+
+    kstart: np.ndarray
+    source_of_block: np.ndarray
+    fp_x: np.ndarray
+    fp_a: np.ndarray
+    fp_r: np.ndarray
+    ns_x: np.ndarray
+    ns_a: np.ndarray
+    ns_r: np.ndarray
+    t_s: np.ndarray
+    blocks: np.ndarray
+    el_x: np.ndarray
+    el_a: np.ndarray
+    el_r: np.ndarray
+    el_block: np.ndarray
+    el_bs: np.ndarray
+
+    @classmethod
+    def of(cls, steps: Sequence[SourceSteps]) -> _StepsBatch:
+        ks = np.array([st.n_blocks for st in steps])
+        kstart = np.concatenate([[0], np.cumsum(ks)])
+        lmax = max(st.blocks.shape[2] for st in steps)
+        if all(st.blocks.shape[2] == lmax for st in steps):
+            blocks = np.concatenate([st.blocks for st in steps], axis=1)
+        else:
+            blocks = np.zeros((5, int(kstart[-1]), lmax))
+            for st, k0 in zip(steps, kstart[:-1]):
+                blocks[:, k0 : k0 + st.n_blocks, : st.blocks.shape[2]] = st.blocks
+        nel = np.array([st.nsel.size for st in steps])
+        offs = np.concatenate([[0], np.cumsum(nel)[:-1]])
+        el_bs = np.concatenate([[0]] + [st.nsel_block_start[1:] + off for st, off in zip(steps, offs)])
+
+        def cat(name):
+            return np.concatenate([getattr(st, name) for st in steps])
+
+        return cls(
+            kstart=kstart,
+            source_of_block=np.repeat(np.arange(len(steps)), ks),
+            fp_x=cat("fp_x"), fp_a=cat("fp_a"), fp_r=cat("fp_r"),
+            ns_x=cat("ns_x"), ns_a=cat("ns_a"), ns_r=cat("ns_r"), t_s=cat("t_s"),
+            blocks=blocks,
+            el_x=np.concatenate([st.x[st.nsel] for st in steps]),
+            el_a=np.concatenate([st.a[st.nsel] for st in steps]),
+            el_r=np.concatenate([st.r[st.nsel] for st in steps]),
+            el_block=np.concatenate([st.nsel_block + k0 for st, k0 in zip(steps, kstart[:-1])]),
+            el_bs=el_bs,
+        )
+
+    @property
+    def n_blocks(self) -> int:
+        return int(self.kstart[-1])
+
+
+def _peak_batch(bt: _StepsBatch, m, cda, cr, eta, w, aux, group, end) -> np.ndarray:
+    """(P, R): :func:`peak_energy_j` of P predictions on each of the batch's R sources."""
+    k = bt.n_blocks
+    n_src = bt.kstart.size - 1
+    n_groups = int(group.max()) + 1
+    cr_g = np.empty(n_groups)
+    cr_g[group] = cr
+    mm = m[:, None]
+    cc = cda[:, None]
+    pos = _positive_parts(bt.el_x, bt.el_a, bt.el_r, bt.el_block, bt.el_bs, k, m, cda, cr, group, n_groups)
+    # wheel energy of the merged (always positive) elements, and of the others' negatives
+    e_fp = mm * (bt.fp_x + cr_g[:, None] * bt.fp_r)[group] + cc * bt.fp_a
+    neg = mm * (bt.ns_x + cr_g[:, None] * bt.ns_r)[group] + cc * bt.ns_a
+    neg -= pos  # sum of the non-positive Delta_i of each block (<= 0)
+    up = e_fp + pos  # positive wheel energy of each block
+    up *= (1.0 / eta)[:, None]
+    if np.any(aux != 0):
+        up += aux[:, None] * bt.t_s  # >= sum of the positive g_i of the block
+    regen = (w / eta)[:, None] * neg  # <= sum of the negative g_i of the block (<= 0)
+    s = up + regen  # battery energy of each block
+    c_end = np.cumsum(s, axis=1)
+    if n_src > 1:  # restart the sum at each source
+        base = c_end[:, bt.kstart[1:-1] - 1]
+        c_end[:, bt.kstart[1] :] -= np.repeat(base, np.diff(bt.kstart[1:]), axis=1)
+    c_start = c_end - s
+    best = np.maximum.reduceat(c_end, bt.kstart[:-1], axis=1)
+    np.maximum(best, 0.0, out=best)
+    if end is not None:
+        np.maximum(best, end, out=best)
+    ub = np.minimum(c_start + up, c_end - regen)  # bounds of E_j inside each block
+    # scan more, never less, where rounding blurs a bound (1e-9 of the energy, or 1 mJ)
+    lim = best - (1e-9 * np.abs(best) + 1e-3)
+    pi, bi = np.nonzero(ub > lim[:, bt.source_of_block])
+    if pi.size:
+        flat = best.reshape(-1)
+        lmax = bt.blocks.shape[2]
+        step = max(1, _SCAN_CHUNK_ELEMENTS // lmax)
+        for lo in range(0, pi.size, step):
+            pp = pi[lo : lo + step]
+            bb = bi[lo : lo + step]
+            x, r, a, dt, ns = bt.blocks[:, bb]
+            d = m[pp][:, None] * (x + cr[pp][:, None] * r) + cda[pp][:, None] * a
+            d = np.where((ns > 0) & (d <= 0), w[pp][:, None] * d, d)
+            g = d / eta[pp][:, None]
+            if np.any(aux[pp] != 0):
+                g += aux[pp][:, None] * dt
+            cum = np.cumsum(g, axis=1)
+            cum += c_start[pp, bb][:, None]
+            np.maximum.at(flat, pp * n_src + bt.source_of_block[bb], cum.max(axis=1))
+    return best
+
+
+def peak_energy_j(
+    steps: SourceSteps,
+    mass_kg,
+    cda_m2,
+    cr,
+    eta,
+    negative_weight,
+    aux_power_w=0.0,
+    *,
+    group=None,
+    end_energy_j=None,
+) -> np.ndarray:
+    """Largest cumulative energy drawn along the source, max(0, max_j E_j) [J].
+
+    E_j = sum_{i<=j} (W_i(Delta_i) / eta + P_aux dt_i), with W = 1 for Delta > 0 and
+    ``negative_weight`` otherwise on non-simplified steps (eta^2 for an EV: then E_j is
+    the battery energy and SoC_min = SoC_start - 100 peak / E_batt).
+
+    Parameters (arrays of P predictions, broadcast together)
+    ----------
+    steps : the source's :class:`SourceSteps`
+    mass_kg : gross mass [kg]; cda_m2 [m^2]; cr [-] (>= steps.cr0); eta (0, 1]
+    negative_weight : w in [0, 1]; aux_power_w : auxiliary power [W], >= 0 (default 0)
+    group : optional (P,) ints; predictions with the same group must share CdA and Cr
+        (e.g. the vehicle index). Default: grouped by (CdA, Cr).
+    end_energy_j : optional (P,) E_n from the CE model, used as a known lower bound of the
+        maximum (and included in it, so SoC_min <= SoC_end holds exactly).
+    """
+    m = np.asarray(mass_kg, dtype=np.float64).ravel()
+    cda, crs, et, w, aux = (np.broadcast_to(np.asarray(v, dtype=np.float64), m.shape).ravel()
+                            for v in (cda_m2, cr, eta, negative_weight, aux_power_w))
+    if m.size == 0:
+        return np.zeros(0)
+    if np.any(crs < steps.cr0):
+        raise ValueError(f"rolling coefficient below the source's Cr0 {steps.cr0:g}")
+    end = None
+    if end_energy_j is not None:
+        end = np.broadcast_to(np.asarray(end_energy_j, np.float64), m.shape)[:, None]
+    return _peak_many(_StepsBatch.of([steps]), m, cda, crs, et, w, aux, group, end)[:, 0]
+
+
+def _peak_many(bt: _StepsBatch, m, cda, cr, eta, w, aux, group, end) -> np.ndarray:
+    """:func:`_peak_batch` in chunks of predictions (bounded work arrays): (P, R)."""
+    step = max(1, _CHUNK_ELEMENTS // (4 * bt.n_blocks))
+    grp = None if group is None else np.asarray(group).ravel()
+    if m.size <= step:
+        return _peak_batch(bt, m, cda, cr, eta, w, aux, _groups(cda, cr, grp), end)
+    out = np.empty((m.size, bt.kstart.size - 1))
+    for lo in range(0, m.size, step):
+        sl = slice(lo, lo + step)
+        out[sl] = _peak_batch(bt, m[sl], cda[sl], cr[sl], eta[sl], w[sl], aux[sl],
+                              _groups(cda[sl], cr[sl], None if grp is None else grp[sl]),
+                              None if end is None else end[sl])
+    return out
+
+
+def energy_trajectory(
+    source: Source, vehicle: Vehicle, mass_kg: float, *, ice_braking: str | None = None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Cumulative energy along a source for one vehicle and mass, sample by sample.
+
+    Returns ``(time_s, distance_m, energy)``: time [s] and distance [m] from the start of
+    the first leg (legs follow each other), and the battery energy drawn [J] for an EV,
+    the fuel burnt [l] for an ICE (idle fuel on standstill steps). Plain per-step
+    arithmetic (no compression): for plots and tests.
+    """
+    ts, ds, es = [np.zeros(1)], [np.zeros(1)], [np.zeros(1)]
+    t0 = d0 = e0 = 0.0
+    phys = source.vector.physics
+    w = vehicle.eta**2 if vehicle.is_ev else braking_weight(ice_braking or vehicle.ice_braking)
+    for leg in source.leg_profiles:
+        st = step_terms(leg.time_s, leg.speed_mps, leg.elevation_m, phys)
+        d = mass_kg * (st.k + st.e + vehicle.cr * st.r) + vehicle.cda_m2 * st.a
+        ns = (st.k + st.e + source.vector.cr0 * st.r) <= 0
+        d = np.where(ns & (d <= 0), w * d, d)
+        if vehicle.is_ev:
+            g = d / vehicle.eta + vehicle.aux_power_w * st.dt
+        else:
+            g = d / (vehicle.fuel_lhv_j_per_l * vehicle.eta) + vehicle.idle_fuel_lps * st.dt * (st.a <= 0)
+        ts.append(t0 + np.cumsum(st.dt))
+        ds.append(d0 + np.cumsum(st.r) / phys.g_mps2)
+        es.append(e0 + np.cumsum(g))
+        t0, d0, e0 = float(ts[-1][-1]), float(ds[-1][-1]), float(es[-1][-1])
+    return np.concatenate(ts), np.concatenate(ds), np.concatenate(es)
+
+
+# ---------------------------------------------------------------------------- sweeps
+
+
+@dataclass(frozen=True, eq=False)
+class SweepBlock:
+    """The predictions of one :class:`PredictionSet` on one source (arrays of P rows).
+
+    ``wheel_energy_j`` [J]; ``energy_j`` battery energy [J] (NaN for ICE rows);
+    ``fuel_l`` [l] (NaN for EV rows); ``soc_end_pct``, ``soc_min_pct`` [%] (NaN for ICE
+    rows, and for EVs when not computed); ``reserve_ok`` (EV rows: lowest SoC >=
+    reserve); ``tank_ok`` 1.0 / 0.0 for ICE rows with a known tank, else NaN.
+    """
+
+    source: Source
+    source_index: int
+    pset: PredictionSet
+    wheel_energy_j: np.ndarray
+    energy_j: np.ndarray
+    fuel_l: np.ndarray
+    soc_end_pct: np.ndarray
+    soc_min_pct: np.ndarray
+    reserve_ok: np.ndarray
+    tank_ok: np.ndarray
+
+    @property
+    def n(self) -> int:
+        return self.pset.n
+
+
+def _check_cr(source: Source, pset: PredictionSet) -> None:
+    bad = pset.cr < source.vector.cr0
+    if bad.any():
+        v = pset.vehicles[int(pset.vehicle_index[np.argmax(bad)])]
+        raise CevmError(f"vehicle {v.name!r}: cr {v.cr:g} is below the Cr0 {source.vector.cr0:g} of source "
+                        f"{source.name!r}; the CE split is only exact for Cr >= Cr0 (use a lower --cr0)")
+
+
+def predict_source(
+    source: Source,
+    pset: PredictionSet,
+    *,
+    soc_start_pct: float = DEFAULT_SOC_START_PCT,
+    reserve_pct: float = DEFAULT_RESERVE_PCT,
+    lowest_soc: bool = True,
+    source_index: int = 0,
+) -> SweepBlock:
+    """Every prediction of ``pset`` on ``source``: totals by the CE model, and for EVs
+    the state of charge at the end and at its lowest along the way (``lowest_soc``,
+    default True; False skips the profile and leaves ``soc_min_pct`` NaN).
+
+    ``soc_start_pct`` [%] (default 100: leaving the depot charged) and ``reserve_pct``
+    [%] (default 15, the paper's warning level) are percentages of ``battery_kwh``.
+    The SoC is not capped at 100 %: a full battery cannot take regenerated energy, so on
+    a route that starts downhill from full the model's SoC is optimistic.
+    """
+    return predict_sources([source], pset, soc_start_pct=soc_start_pct, reserve_pct=reserve_pct,
+                           lowest_soc=lowest_soc, first_index=source_index)[0]
+
+
+def predict_sources(
+    sources: Sequence[Source],
+    pset: PredictionSet,
+    *,
+    soc_start_pct: float = DEFAULT_SOC_START_PCT,
+    reserve_pct: float = DEFAULT_RESERVE_PCT,
+    lowest_soc: bool = True,
+    first_index: int = 0,
+) -> list[SweepBlock]:
+    """:func:`predict_source` for several sources at once (one vectorised evaluation,
+    faster than one source at a time); one block per source, in order."""
+    if not sources:
+        return []
+    for src in sources:
+        _check_cr(src, pset)
+    vecs = [src.vector for src in sources]
+    n_src = len(sources)
+    wheel = _ce_batch(vecs, pset.mass_kg, pset.cda_m2, pset.cr, pset.negative_weight,
+                      _groups(pset.cda_m2, pset.cr, pset.vehicle_index))  # (P, R)
+    duration = np.array([v.duration_s for v in vecs])
+    idle = np.array([v.idle_s for v in vecs])
+    ev = pset.is_ev
+    shape = (pset.n, n_src)
+    energy = np.full(shape, np.nan)
+    fuel = np.full(shape, np.nan)
+    soc_end = np.full(shape, np.nan)
+    soc_min = np.full(shape, np.nan)
+    if ev.any():
+        # battery energy E_e = E_DC / eta + P_aux T (eq. 31, cevm.model)
+        e = wheel[ev] / pset.eta[ev][:, None] + pset.aux_power_w[ev][:, None] * duration
+        energy[ev] = e
+        cap = pset.battery_j[ev][:, None]
+        soc_end[ev] = soc_start_pct - 100.0 * e / cap
+        if lowest_soc:
+            bt = _StepsBatch.of([src.steps for src in sources])
+            peak = _peak_many(bt, pset.mass_kg[ev], pset.cda_m2[ev], pset.cr[ev], pset.eta[ev],
+                              pset.negative_weight[ev], pset.aux_power_w[ev], pset.vehicle_index[ev], e)
+            soc_min[ev] = soc_start_pct - 100.0 * peak / cap
+    ice = ~ev
+    if ice.any():
+        # fuel L_f = E_DC / (U_f eta) (eq. 26) + idle rate x time at standstill
+        fuel[ice] = (wheel[ice] / (pset.lhv_j_per_l[ice] * pset.eta[ice])[:, None]
+                     + pset.idle_fuel_lps[ice][:, None] * idle)
+    tank = pset.tank_l[:, None]
+    with np.errstate(invalid="ignore"):
+        tank_ok = np.where(ice[:, None] & np.isfinite(tank), (fuel <= tank).astype(float), np.nan)
+        reserve_ok = ev[:, None] & (soc_min >= reserve_pct)
+    return [SweepBlock(src, first_index + i, pset, wheel[:, i].copy(), energy[:, i].copy(), fuel[:, i].copy(),
+                       soc_end[:, i].copy(), soc_min[:, i].copy(), reserve_ok[:, i].copy(), tank_ok[:, i].copy())
+            for i, src in enumerate(sources)]
+
+
+#: Sources evaluated together by :func:`sweep`: as many as keep about this many
+#: (EV prediction x block) cells in one evaluation (256 kB per work array: larger
+#: batches leave the cache and were slower, smaller ones pay more numpy calls).
+SWEEP_BATCH_CELLS = 1 << 15
+
+
+def sweep(
+    sources: Sequence[Source],
+    pset: PredictionSet,
+    *,
+    soc_start_pct: float = DEFAULT_SOC_START_PCT,
+    reserve_pct: float = DEFAULT_RESERVE_PCT,
+    lowest_soc: bool = True,
+) -> Iterator[SweepBlock]:
+    """Every prediction of ``pset`` on every source: one block of ``pset.n`` rows per
+    source, source-major (then vehicle, then mass), computed when asked for, a few
+    sources at a time (:data:`SWEEP_BATCH_CELLS`)."""
+    n_rows = max(1, int(pset.is_ev.sum()) if lowest_soc else pset.n)
+    i = 0
+    while i < len(sources):
+        cells = 0
+        j = i
+        while j < len(sources) and (j == i or cells < SWEEP_BATCH_CELLS):
+            use_steps = lowest_soc and bool(pset.is_ev.any())
+            cells += n_rows * (sources[j].steps.n_blocks if use_steps else 1)
+            j += 1
+        yield from predict_sources(sources[i:j], pset, soc_start_pct=soc_start_pct, reserve_pct=reserve_pct,
+                                   lowest_soc=lowest_soc, first_index=i)
+        i = j
+
+
+# ----------------------------------------------------------------------- feasibility
+
+
+@dataclass(frozen=True, eq=False)
+class Feasibility:
+    """Can each vehicle run one source, with what margin, and with what payload.
+
+    Arrays (V,), one per vehicle, at the evaluated load (``mass_kg``, ``payload_kg``):
+    ``over_max_gross``; EV: ``soc_end_pct``, ``soc_min_pct``, ``reserve_margin_pct``
+    (SoC_min - reserve, percentage points); ICE: ``fuel_l``, ``tank_margin_l`` (tank -
+    fuel, NaN without ``tank_l``); ``feasible`` 1.0 / 0.0 (NaN: ICE without tank_l).
+    Payload search: ``max_payload_kg`` (largest whole-kg payload keeping the reserve /
+    fitting the tank, within max_gross_kg or the search cap; NaN when none does),
+    ``min_payload_kg`` (0 unless the empty vehicle fails and a heavier one passes,
+    which convexity allows on descents), ``limited_by``: ``"reserve"``, ``"tank"``,
+    ``"max_gross_kg"``, ``"payload_cap"`` or ``"infeasible"``. Payloads count from
+    ``kerb_mass_kg`` (from ``mass_kg`` for a vehicle without one).
+    """
+
+    source: Source
+    vehicles: tuple[Vehicle, ...]
+    mass_kg: np.ndarray
+    payload_kg: np.ndarray
+    over_max_gross: np.ndarray
+    energy_j: np.ndarray
+    fuel_l: np.ndarray
+    soc_end_pct: np.ndarray
+    soc_min_pct: np.ndarray
+    reserve_margin_pct: np.ndarray
+    tank_margin_l: np.ndarray
+    feasible: np.ndarray
+    max_payload_kg: np.ndarray
+    min_payload_kg: np.ndarray
+    limited_by: tuple[str, ...]
+
+
+class _LoadFunction:
+    """f(vehicle, payload): peak battery energy [J] (EV) or fuel [l] (ICE), vectorised
+    over (vehicle index, payload) pairs, and each vehicle's budget (usable energy above
+    the reserve, or the tank)."""
+
+    def __init__(self, source: Source, vehicles: Sequence[Vehicle], base_kg: np.ndarray, soc_start_pct: float,
+                 reserve_pct: float, ice_braking: str | None):
+        self.source = source
+        self.pset = PredictionSet.build(vehicles, ice_braking=ice_braking)  # one row per vehicle
+        _check_cr(source, self.pset)
+        self.base_kg = base_kg
+        ps = self.pset
+        self.budget = np.where(ps.is_ev, (soc_start_pct - reserve_pct) / 100.0 * ps.battery_j, ps.tank_l)
+
+    def __call__(self, vi: np.ndarray, payload_kg: np.ndarray) -> np.ndarray:
+        ps = self.pset
+        vec = self.source.vector
+        m = self.base_kg[vi] + payload_kg
+        wheel = ce_wheel_energy_j(vec, m, ps.cda_m2[vi], ps.cr[vi], ps.negative_weight[vi], group=vi)
+        out = np.empty(vi.size)
+        ev = ps.is_ev[vi]
+        if ev.any():
+            v = vi[ev]
+            e = battery_energy_from_wheel_j(wheel[ev], ps.eta[v], ps.aux_power_w[v], vec.duration_s)
+            out[ev] = peak_energy_j(self.source.steps, m[ev], ps.cda_m2[v], ps.cr[v], ps.eta[v],
+                                    ps.negative_weight[v], ps.aux_power_w[v], group=v, end_energy_j=e)
+        if (~ev).any():
+            v = vi[~ev]
+            out[~ev] = fuel_from_wheel_energy_l(wheel[~ev], ps.eta[v], ps.lhv_j_per_l[v], ps.idle_fuel_lps[v],
+                                                vec.idle_s)
+        return out
+
+    def ok(self, vi: np.ndarray, payload_kg: np.ndarray) -> np.ndarray:
+        return self(vi, payload_kg) <= self.budget[vi]
+
+
+def _last_true(pred, vi: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """Largest integer p in [lo, hi] with pred True, given pred(lo) True and pred(hi)
+    False and pred True-then-False on [lo, hi] (vectorised bisection)."""
+    lo = lo.copy()
+    hi = hi.copy()
+    while True:
+        act = np.flatnonzero(hi - lo > 1)
+        if act.size == 0:
+            return lo
+        mid = (lo[act] + hi[act]) // 2
+        ok = pred(vi[act], mid.astype(np.float64))
+        lo[act] = np.where(ok, mid, lo[act])
+        hi[act] = np.where(ok, hi[act], mid)
+
+
+def _first_true(pred, vi: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """Smallest integer p in [lo, hi] with pred True, given pred(hi) True and pred
+    False-then-True on [lo, hi]."""
+    lo = lo.copy()
+    hi = hi.copy()
+    first = pred(vi, lo.astype(np.float64))
+    res = hi.copy()
+    res[first] = lo[first]
+    act0 = ~first  # pred(lo) False, pred(hi) True
+    while True:
+        act = np.flatnonzero(act0 & (hi - lo > 1))
+        if act.size == 0:
+            res[act0] = hi[act0]
+            return res
+        mid = (lo[act] + hi[act]) // 2
+        ok = pred(vi[act], mid.astype(np.float64))
+        hi[act] = np.where(ok, mid, hi[act])
+        lo[act] = np.where(ok, lo[act], mid)
+
+
+def feasibility(
+    source: Source,
+    vehicles: Sequence[Vehicle],
+    *,
+    soc_start_pct: float = DEFAULT_SOC_START_PCT,
+    reserve_pct: float = DEFAULT_RESERVE_PCT,
+    payload_kg: float | None = None,
+    mass_kg: float | None = None,
+    payload_cap_kg: float | None = None,
+    ice_braking: str | None = None,
+) -> Feasibility:
+    """Feasibility of ``source`` for each vehicle, and the largest payload.
+
+    Parameters
+    ----------
+    source : the route (or cycle, trip)
+    vehicles : the vehicles
+    soc_start_pct : SoC at the start [%], default 100
+    reserve_pct : the SoC that must be kept all along [%], default 15 (the paper's
+        warning level)
+    payload_kg, mass_kg : the load at which margins are reported (at most one): a payload
+        [kg] on each vehicle's kerb mass, or a gross mass [kg]; default each vehicle's
+        default ``mass_kg``
+    payload_cap_kg : where the payload search stops for a vehicle without
+        ``max_gross_kg`` [kg]; default None: its kerb (or base) mass, i.e. at most
+        doubling the vehicle's mass (``limited_by`` says ``"payload_cap"`` then)
+    ice_braking : override of the ICE braking mode
+
+    The payload search is exact on whole kilograms: see the module notes (convexity).
+    An ICE vehicle without ``tank_l`` has no fuel limit: its payload is limited by
+    ``max_gross_kg`` (or the cap) only and ``feasible`` is NaN (unknown).
+    """
+    vehicles = tuple(vehicles)
+    nv = len(vehicles)
+    base = np.array([v.kerb_mass_kg if v.kerb_mass_kg is not None else v.mass_kg for v in vehicles])
+    if payload_kg is not None and mass_kg is not None:
+        raise CevmError("give a payload or a gross mass, not both")
+    if payload_kg is not None:
+        if not (math.isfinite(payload_kg) and payload_kg >= 0):
+            raise CevmError("the payload must be finite and >= 0 kg")
+        mass = base + payload_kg
+    elif mass_kg is not None:
+        if not (math.isfinite(mass_kg) and mass_kg > 0):
+            raise CevmError("the gross mass must be finite and > 0 kg")
+        mass = np.full(nv, float(mass_kg))
+    else:
+        mass = np.array([v.mass_kg for v in vehicles], dtype=np.float64)
+    f = _LoadFunction(source, vehicles, base, soc_start_pct, reserve_pct, ice_braking)
+    ps = f.pset
+    vi = np.arange(nv)
+    at = f(vi, mass - base)
+    max_gross = np.array([np.inf if v.max_gross_kg is None else v.max_gross_kg for v in vehicles])
+    over = mass > max_gross
+    vec = source.vector
+    # totals at the evaluated load
+    wheel = ce_wheel_energy_j(vec, mass, ps.cda_m2, ps.cr, ps.negative_weight, group=vi)
+    energy = np.full(nv, np.nan)
+    fuel = np.full(nv, np.nan)
+    soc_end = np.full(nv, np.nan)
+    soc_min = np.full(nv, np.nan)
+    ev = ps.is_ev
+    if ev.any():
+        energy[ev] = battery_energy_from_wheel_j(wheel[ev], ps.eta[ev], ps.aux_power_w[ev], vec.duration_s)
+        soc_end[ev] = soc_start_pct - 100.0 * energy[ev] / ps.battery_j[ev]
+        soc_min[ev] = soc_start_pct - 100.0 * at[ev] / ps.battery_j[ev]
+    fuel[~ev] = at[~ev]
+    with np.errstate(invalid="ignore"):
+        tank_margin = ps.tank_l - fuel
+        ok_load = np.where(ev, soc_min >= reserve_pct, tank_margin >= 0)
+    known = ev | np.isfinite(ps.tank_l)
+    feasible = np.where(known, (ok_load & ~over).astype(float), np.nan)
+
+    # payload search on whole kg in [0, plim]
+    if payload_cap_kg is not None and not (math.isfinite(payload_cap_kg) and payload_cap_kg >= 0):
+        raise CevmError("the payload cap must be finite and >= 0 kg")
+    cap = np.where(np.isfinite(max_gross), max_gross - base, base if payload_cap_kg is None else payload_cap_kg)
+    plim = np.floor(np.maximum(cap, 0.0) + 1e-9).astype(np.int64)
+    capped_by = np.where(np.isfinite(max_gross), "max_gross_kg", "payload_cap")
+    max_p = np.full(nv, np.nan)
+    min_p = np.full(nv, np.nan)
+    limited = np.array(["infeasible"] * nv, dtype=object)
+    unlimited = ~known  # ICE without tank: only the gross limit / cap
+    max_p[unlimited] = plim[unlimited]
+    min_p[unlimited] = 0.0
+    limited[unlimited] = capped_by[unlimited]
+    idx = np.flatnonzero(known)
+    if idx.size:
+        zero = np.zeros(idx.size, dtype=np.int64)
+        ok0 = f.ok(idx, zero.astype(np.float64))
+        oklim = f.ok(idx, plim[idx].astype(np.float64))
+        kind = np.where(ps.is_ev[idx], "reserve", "tank")
+        # (a) the empty vehicle passes: feasible payloads are [0, p_max] (convexity)
+        a = ok0 & oklim
+        max_p[idx[a]] = plim[idx[a]]
+        limited[idx[a]] = capped_by[idx[a]]
+        b = np.flatnonzero(ok0 & ~oklim)
+        if b.size:
+            max_p[idx[b]] = _last_true(f.ok, idx[b], zero[b], plim[idx[b]])
+            limited[idx[b]] = kind[b]
+        min_p[idx[ok0]] = 0.0
+        # (b) the empty vehicle fails: find the minimum of the convex load function
+        c = np.flatnonzero(~ok0)
+        if c.size:
+            vc = idx[c]
+
+            def rising(v, p):  # f(p + 1) >= f(p): False then True for a convex f
+                return f(v, p + 1.0) >= f(v, p)
+
+            pl = plim[vc]
+            pstar = _first_true(lambda v, p: np.where(p >= plim[v], True, rising(v, np.minimum(p, plim[v]))),
+                                vc, np.zeros(c.size, dtype=np.int64), pl)
+            okstar = f.ok(vc, pstar.astype(np.float64))
+            d = np.flatnonzero(okstar)
+            if d.size:
+                vd = vc[d]
+                min_p[vd] = _first_true(f.ok, vd, np.zeros(d.size, dtype=np.int64), pstar[d])
+                okl = f.ok(vd, plim[vd].astype(np.float64))
+                hi_ok = np.flatnonzero(okl)
+                max_p[vd[hi_ok]] = plim[vd[hi_ok]]
+                limited[vd[hi_ok]] = capped_by[vd[hi_ok]]
+                lo_ok = np.flatnonzero(~okl)
+                if lo_ok.size:
+                    vl = vd[lo_ok]
+                    max_p[vl] = _last_true(f.ok, vl, pstar[d][lo_ok], plim[vl])
+                    limited[vl] = kind[c][d][lo_ok]
+    return Feasibility(
+        source=source,
+        vehicles=vehicles,
+        mass_kg=mass,
+        payload_kg=mass - base,
+        over_max_gross=over,
+        energy_j=energy,
+        fuel_l=fuel,
+        soc_end_pct=soc_end,
+        soc_min_pct=soc_min,
+        reserve_margin_pct=soc_min - reserve_pct,
+        tank_margin_l=tank_margin,
+        feasible=feasible,
+        max_payload_kg=max_p,
+        min_payload_kg=min_p,
+        limited_by=tuple(str(s) for s in limited),
+    )

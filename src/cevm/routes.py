@@ -1,0 +1,400 @@
+"""Named routes in the trip store: a bus block or a delivery round as a sequence of legs.
+
+A route is an ordered list of legs; each leg is a stored trip (by trip id) or a drive
+cycle. A route's CE vector is the sum of its legs' vectors (vectors of consecutive pieces
+add), and its profile is the legs' profiles one after another (no step joins two legs).
+
+Storage (the trip store's SQLite file, own tables, created ``IF NOT EXISTS`` in one
+transaction on first use; ``meta`` key ``routes_schema_version``)::
+
+    routes      name (primary key), created_utc_s, n_legs, note
+    route_legs  (route, position) primary key, kind ('trip' | 'cycle'), ref (trip id, or
+                the cycle file's resolved path when added), label (trip id or file
+                stem), sha256 (of the cycle file), vector, profile (BLOBs, cycle legs)
+
+Cycle legs keep their own copy of the cycle: the CE vector (computed in float64 when the
+route is added, with the Cr0 given) and the profile (time, speed and elevation in
+float64, lossless), so a route does not depend on the file staying where it was, or
+staying the same. Trip legs refer to the trip by id only (no foreign key: re-ingesting a
+changed log file replaces its trips, which a foreign key would forbid); a route whose
+trip has gone is reported when loaded, with the way out (re-create the route).
+"""
+
+from __future__ import annotations
+
+import fnmatch
+import hashlib
+import json
+import re
+import struct
+import time
+import zlib
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from cevm.cycle import CR0_DEFAULT, CycleVector, DriveCycle, cycle_vector
+from cevm.errors import CevmError, InputError
+from cevm.store import TripStore
+
+ROUTES_SCHEMA_VERSION = 1
+"""Version of the route tables' layout (``meta`` key ``routes_schema_version``)."""
+
+_NAME_RE = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,99}\Z")
+_PROFILE_MAGIC = b"CEVMRTP1"
+
+_TABLES = (
+    """CREATE TABLE IF NOT EXISTS routes (
+        name TEXT PRIMARY KEY,
+        created_utc_s REAL NOT NULL,
+        n_legs INTEGER NOT NULL CHECK (n_legs > 0),
+        note TEXT
+    )""",
+    """CREATE TABLE IF NOT EXISTS route_legs (
+        route TEXT NOT NULL REFERENCES routes(name) ON DELETE CASCADE,
+        position INTEGER NOT NULL,
+        kind TEXT NOT NULL CHECK (kind IN ('trip', 'cycle')),
+        ref TEXT NOT NULL,
+        label TEXT NOT NULL,
+        sha256 TEXT,
+        vector BLOB,
+        profile BLOB,
+        PRIMARY KEY (route, position),
+        CHECK ((kind = 'cycle') = (vector IS NOT NULL AND profile IS NOT NULL))
+    )""",
+)
+
+
+# ------------------------------------------------------------------------ leg inputs
+
+
+@dataclass(frozen=True)
+class TripLeg:
+    """A leg that is a stored trip."""
+
+    trip_id: str
+
+
+@dataclass(frozen=True, eq=False)
+class CycleLeg:
+    """A leg that is a drive cycle (read from ``ref``, a file path, by the caller)."""
+
+    cycle: DriveCycle
+    ref: str
+    sha256: str | None = None
+
+    @classmethod
+    def from_file(cls, path: str | Path) -> CycleLeg:
+        """Read a cycle CSV (:func:`cevm.io.read_cycle_csv`) and hash its bytes."""
+        from cevm.io import read_cycle_csv
+
+        cyc = read_cycle_csv(path)
+        p = Path(path)
+        return cls(cycle=cyc, ref=str(p.expanduser().resolve()), sha256=hashlib.sha256(p.read_bytes()).hexdigest())
+
+
+LegInput = TripLeg | CycleLeg
+
+
+@dataclass(frozen=True)
+class RouteLegInfo:
+    """One stored leg: position (0-based), kind, ref (trip id or cycle path), label."""
+
+    position: int
+    kind: str
+    ref: str
+    label: str
+
+
+@dataclass(frozen=True)
+class RouteInfo:
+    """A stored route: name, when it was added [s since the epoch, UTC], legs, note."""
+
+    name: str
+    created_utc_s: float
+    legs: tuple[RouteLegInfo, ...]
+    note: str | None = None
+
+
+@dataclass(frozen=True, eq=False)
+class StoredLeg:
+    """A leg as loaded: its info, CE vector, and profile (arrays keyed as
+    :data:`cevm.store.PROFILE_DTYPES`; a cycle leg has NaN latitude and longitude)."""
+
+    info: RouteLegInfo
+    vector: CycleVector
+    profile: dict[str, np.ndarray]
+
+
+# --------------------------------------------------------------------------- helpers
+
+
+def check_route_name(name: str) -> str:
+    """Return ``name`` if valid, else raise :class:`~cevm.errors.InputError`: 1 to 100
+    characters, letters, digits, ``.``, ``_`` and ``-``, starting with a letter or
+    digit (no glob characters, so ``--route 'block-*'`` can select routes)."""
+    if not isinstance(name, str) or not _NAME_RE.match(name):
+        raise InputError("route name", f"{name!r} is not a valid route name: use 1-100 letters, digits, '.', '_' "
+                                       "or '-', starting with a letter or digit")
+    return name
+
+
+def encode_cycle_profile(cycle: DriveCycle) -> bytes:
+    """Lossless BLOB of a cycle's time [s], speed [m/s] and elevation [m]: ``b"CEVMRTP1"``,
+    a little-endian uint32 sample count and uint32 flag (1: with elevation), then the
+    zlib-compressed (level 6) float64 arrays one after another. A flat cycle stores no
+    elevation. Raw arrays rather than an npz: decoding is a ``frombuffer``."""
+    t = np.ascontiguousarray(cycle.time_s, dtype="<f8")
+    parts = [t, np.ascontiguousarray(cycle.speed_mps, dtype="<f8")]
+    if cycle.elevation_m is not None:
+        parts.append(np.ascontiguousarray(cycle.elevation_m, dtype="<f8"))
+    head = struct.pack("<II", t.size, int(cycle.elevation_m is not None))
+    return _PROFILE_MAGIC + head + zlib.compress(b"".join(a.tobytes() for a in parts), 6)
+
+
+def decode_cycle_profile(blob: bytes) -> dict[str, np.ndarray]:
+    """Inverse of :func:`encode_cycle_profile`, as a profile dict (keys of
+    :data:`cevm.store.PROFILE_DTYPES`): distance is the trapezoidal cumulative distance
+    [m], elevation zeros for a flat cycle, latitude and longitude NaN."""
+    blob = bytes(blob)
+    if not blob.startswith(_PROFILE_MAGIC):
+        raise CevmError("corrupt cycle profile in a route (bad magic); re-create the route")
+    n, has_h = struct.unpack_from("<II", blob, len(_PROFILE_MAGIC))
+    raw = np.frombuffer(zlib.decompress(blob[len(_PROFILE_MAGIC) + 8 :]), dtype="<f8")
+    if raw.size != n * (3 if has_h else 2):
+        raise CevmError("corrupt cycle profile in a route (bad length); re-create the route")
+    t = raw[:n].astype(np.float64)
+    v = raw[n : 2 * n].astype(np.float64)
+    h = raw[2 * n :].astype(np.float64) if has_h else np.zeros(n)
+    dist = np.concatenate([[0.0], np.cumsum(0.5 * (v[1:] + v[:-1]) * np.diff(t))])
+    nan = np.full(n, np.nan)
+    return {"time_s": t, "speed_mps": v, "distance_m": dist, "elevation_m": h, "lat_deg": nan, "lon_deg": nan.copy()}
+
+
+def _begin(store: TripStore) -> None:
+    store.con.execute("BEGIN IMMEDIATE")
+
+
+def _finish(store: TripStore, ok: bool) -> None:
+    con = store.con
+    if ok:
+        con.execute("COMMIT")
+    elif con.in_transaction:
+        con.execute("ROLLBACK")
+
+
+def ensure_route_tables(store: TripStore) -> None:
+    """Create the route tables if missing (one transaction; a no-op once done)."""
+    con = store.con
+    have = {r[0] for r in con.execute("SELECT name FROM sqlite_master WHERE type='table' AND name LIKE 'route%'")}
+    if {"routes", "route_legs"} <= have:
+        return
+    _begin(store)
+    ok = False
+    try:
+        for stmt in _TABLES:
+            con.execute(stmt)
+        con.execute("INSERT OR IGNORE INTO meta (key, value) VALUES ('routes_schema_version', ?)",
+                    (str(ROUTES_SCHEMA_VERSION),))
+        ok = True
+    finally:
+        _finish(store, ok)
+
+
+def _has_tables(store: TripStore) -> bool:
+    row = store.con.execute("SELECT COUNT(*) FROM sqlite_master WHERE type='table' AND name IN ('routes', 'route_legs')")
+    return int(row.fetchone()[0]) == 2
+
+
+# ---------------------------------------------------------------------------- writing
+
+
+def add_route(
+    store: TripStore,
+    name: str,
+    legs: Sequence[LegInput],
+    *,
+    replace: bool = False,
+    cr0: float = CR0_DEFAULT,
+    note: str | None = None,
+) -> RouteInfo:
+    """Store the route ``name`` as ``legs`` in order, in one transaction.
+
+    Trip legs must be stored trips (unknown ids raise :class:`CevmError`); cycle legs
+    are stored with their vector (computed with ``cr0``, default 0.004 as at ingest) and
+    lossless profile. All legs' vectors must share Cr0 and physics (they are summed).
+    An existing route of that name is an error unless ``replace`` (default False).
+    """
+    check_route_name(name)
+    if not legs:
+        raise CevmError(f"route {name!r}: give at least one leg (--trip or --cycle)")
+    ensure_route_tables(store)
+    trip_ids = [leg.trip_id for leg in legs if isinstance(leg, TripLeg)]
+    vectors: dict[str, CycleVector] = {}
+    if trip_ids:
+        vectors = {tid: CycleVector.from_bytes(b) for tid, b in store.load_vectors(trip_ids=trip_ids).items()}
+    rows = []
+    total: CycleVector | None = None
+    for pos, leg in enumerate(legs):
+        if isinstance(leg, TripLeg):
+            vec = vectors[leg.trip_id]
+            rows.append((name, pos, "trip", leg.trip_id, leg.trip_id, None, None, None))
+        elif isinstance(leg, CycleLeg):
+            vec = cycle_vector(leg.cycle, cr0=cr0)
+            label = leg.cycle.name or Path(leg.ref).stem
+            rows.append((name, pos, "cycle", leg.ref, label, leg.sha256, vec.to_bytes(),
+                         encode_cycle_profile(leg.cycle)))
+        else:
+            raise TypeError(f"a leg is a TripLeg or a CycleLeg, not {type(leg).__name__}")
+        try:
+            total = vec if total is None else total + vec
+        except ValueError as exc:
+            raise CevmError(f"route {name!r}: leg {pos + 1} cannot follow the others: {exc} "
+                            f"(trips were ingested with another --cr0?)") from None
+    con = store.con
+    _begin(store)
+    ok = False
+    try:
+        exists = con.execute("SELECT 1 FROM routes WHERE name = ?", (name,)).fetchone() is not None
+        if exists and not replace:
+            raise CevmError(f"route {name!r} already exists; add --replace to overwrite it, "
+                            f"or 'cevm route remove {name}'")
+        if exists:
+            con.execute("DELETE FROM route_legs WHERE route = ?", (name,))
+            con.execute("DELETE FROM routes WHERE name = ?", (name,))
+        created = time.time()
+        con.execute("INSERT INTO routes (name, created_utc_s, n_legs, note) VALUES (?, ?, ?, ?)",
+                    (name, created, len(rows), note))
+        con.executemany("INSERT INTO route_legs (route, position, kind, ref, label, sha256, vector, profile) "
+                        "VALUES (?, ?, ?, ?, ?, ?, ?, ?)", rows)
+        ok = True
+    finally:
+        _finish(store, ok)
+    return RouteInfo(name, created, tuple(RouteLegInfo(r[1], r[2], r[3], r[4]) for r in rows), note)
+
+
+def remove_route(store: TripStore, name: str) -> bool:
+    """Delete the route ``name`` (one transaction); False if there was none."""
+    if not _has_tables(store):
+        return False
+    _begin(store)
+    ok = False
+    try:
+        store.con.execute("DELETE FROM route_legs WHERE route = ?", (name,))
+        n = store.con.execute("DELETE FROM routes WHERE name = ?", (name,)).rowcount
+        ok = True
+    finally:
+        _finish(store, ok)
+    return n > 0
+
+
+# ---------------------------------------------------------------------------- reading
+
+
+def list_routes(store: TripStore) -> list[RouteInfo]:
+    """All stored routes, by name."""
+    if not _has_tables(store):
+        return []
+    legs: dict[str, list[RouteLegInfo]] = {}
+    for route, pos, kind, ref, label in store.con.execute(
+        "SELECT route, position, kind, ref, label FROM route_legs ORDER BY route, position"
+    ):
+        legs.setdefault(route, []).append(RouteLegInfo(int(pos), kind, ref, label))
+    return [RouteInfo(name, float(created), tuple(legs.get(name, ())), note)
+            for name, created, note in store.con.execute("SELECT name, created_utc_s, note FROM routes ORDER BY name")]
+
+
+def route_names(store: TripStore, pattern: str | None = None) -> list[str]:
+    """Names of the stored routes, sorted; only those matching the glob ``pattern``
+    (``fnmatch``, case-sensitive) if given."""
+    if not _has_tables(store):
+        return []
+    names = [r[0] for r in store.con.execute("SELECT name FROM routes ORDER BY name")]
+    return names if pattern is None else [n for n in names if fnmatch.fnmatchcase(n, pattern)]
+
+
+def resolve_route_patterns(store: TripStore, patterns: Sequence[str]) -> list[str]:
+    """Route names for ``--route`` values: exact names, or glob patterns (``*?[``) that
+    must match at least one route. Order of the patterns, duplicates dropped. Unknown
+    names raise :class:`CevmError` listing what is stored."""
+    names = route_names(store)
+    known = set(names)
+    out: dict[str, None] = {}
+    for pat in patterns:
+        if any(c in pat for c in "*?["):
+            hits = [n for n in names if fnmatch.fnmatchcase(n, pat)]
+            if not hits:
+                raise CevmError(f"no stored route matches {pat!r}; {_routes_hint(names, store)}")
+            out.update(dict.fromkeys(hits))
+        elif pat in known:
+            out[pat] = None
+        else:
+            raise CevmError(f"unknown route {pat!r}; {_routes_hint(names, store)}")
+    return list(out)
+
+
+def _routes_hint(names: list[str], store: TripStore) -> str:
+    if not names:
+        return f"the store {store.path} holds no routes ('cevm route add' creates one)"
+    shown = ", ".join(names[:10]) + (", ..." if len(names) > 10 else "")
+    return f"the store {store.path} holds {len(names)} route(s): {shown} ('cevm route list')"
+
+
+def _leg_rows(store: TripStore, name: str, columns: str) -> list[tuple]:
+    """Rows (position, kind, ref, label, *columns) of route ``name``'s legs, checked:
+    unknown routes and trips no longer stored raise :class:`CevmError`."""
+    rows = []
+    if _has_tables(store):
+        rows = store.con.execute(
+            f"SELECT position, kind, ref, label{columns} FROM route_legs WHERE route = ? ORDER BY position", (name,)
+        ).fetchall()
+    if not rows:
+        raise CevmError(f"unknown route {name!r}; {_routes_hint(route_names(store), store)}")
+    trip_ids = [r[2] for r in rows if r[1] == "trip"]
+    if trip_ids:
+        present = {r[0] for r in store.con.execute(
+            "SELECT trip_id FROM trips WHERE trip_id IN (SELECT value FROM json_each(?))", (json.dumps(trip_ids),))}
+        for pos, kind, ref, *_ in rows:
+            if kind == "trip" and ref not in present:
+                raise CevmError(
+                    f"route {name!r}: leg {pos + 1} is trip {ref!r}, which is no longer in the store (its log file "
+                    f"was re-ingested with new content, or forgotten); re-create the route with "
+                    f"'cevm route add {name} --replace ...'")
+    return rows
+
+
+def load_route_legs(store: TripStore, name: str, *, profiles: bool = True) -> list[StoredLeg]:
+    """The legs of route ``name`` with vectors and (if ``profiles``, default True)
+    profiles; an empty dict as profile otherwise. Raises :class:`CevmError` for an
+    unknown route or a trip that is no longer stored."""
+    out = []
+    for pos, kind, ref, label, vblob, pblob in _leg_rows(store, name, ", vector, profile" if profiles else
+                                                         ", vector, NULL"):
+        info = RouteLegInfo(int(pos), kind, ref, label)
+        if kind == "trip":
+            vec = CycleVector.from_bytes(store.load_vector_bytes(ref))
+            prof = store.load_profile(ref) if profiles else {}
+        else:
+            vec = CycleVector.from_bytes(vblob)
+            prof = decode_cycle_profile(pblob) if profiles else {}
+        out.append(StoredLeg(info, vec, prof))
+    return out
+
+
+def load_route_vector(store: TripStore, name: str) -> CycleVector:
+    """The CE vector of route ``name``: the sum of its legs' vectors."""
+    legs = load_route_legs(store, name, profiles=False)
+    total = legs[0].vector
+    for leg in legs[1:]:
+        total = total + leg.vector
+    return total
+
+
+def load_route_profiles(store: TripStore, name: str) -> list[dict[str, np.ndarray]]:
+    """The profiles of route ``name``'s legs, in order (one dict per leg, keys of
+    :data:`cevm.store.PROFILE_DTYPES`, float64; trip legs as stored, so speed and
+    elevation carry float32 rounding; cycle legs lossless). Reads no vectors."""
+    return [store.load_profile(ref) if kind == "trip" else decode_cycle_profile(pblob)
+            for _, kind, ref, _, pblob in _leg_rows(store, name, ", profile")]
