@@ -497,3 +497,66 @@ def test_trip_invariants(n, seed):
         trapezoid = sum((v[i] + v[i + 1]) / 2 * (t[i + 1] - t[i]) for i in range(v.size - 1))
         assert trip.length_m == pytest.approx(trapezoid, rel=1e-12)
         assert math.isfinite(trip.start_utc_s) and trip.start_utc_s == round(trip.start_utc_s)
+
+
+# ------------------------------------------------------- tick merging against pandas
+
+
+def _dedupe_reference(t, line, cols):
+    """Plain pandas statement of the tick rules (module docstring, step 2): drop rows
+    equal to an earlier one in time and every field, merge the rest per time (last
+    non-NaN value per field, lowest line), count merged ticks and conflicting fields."""
+    names = list(cols)
+    df = pd.DataFrame({"t": t, "line": line, **cols})
+    dup = df.duplicated(subset=["t", *names], keep="first").to_numpy()
+    kept = df.loc[~dup]
+    g = kept.groupby("t", sort=True)
+    merged = g.last()
+    sizes = g.size()
+    conflicts = int((g[names].nunique() > 1).to_numpy().sum()) if names else 0
+    return (merged.index.to_numpy(), g["line"].min().to_numpy(),
+            {k: merged[k].to_numpy(dtype=float) for k in names},
+            int(dup.sum()), int((sizes > 1).sum()), conflicts)
+
+
+@settings(max_examples=60, deadline=None)
+@given(n=st.integers(1, 40), n_cols=st.integers(0, 3), seed=st.integers(0, 2**32 - 1))
+def test_tick_merging_matches_a_pandas_statement_of_the_rules(n, n_cols, seed):
+    from cevm.clean import _dedupe, _Events
+
+    rng = np.random.default_rng(seed)
+    t = np.sort(rng.integers(0, max(2, n // 2), n)).astype(float)  # many shared times
+    line = rng.permutation(n).astype(np.int64) + 2
+    # few distinct values (duplicates and conflicts), NaN often, signed zeros
+    pool = np.array([np.nan, np.nan, 0.0, -0.0, 1.5, 2.0])
+    cols = {f"c{j}": pool[rng.integers(0, pool.size, n)] for j in range(n_cols)}
+    ev = _Events()
+    t_out, line_out, cols_out = _dedupe(t, line, dict(cols), ev)
+    ev.finish()
+    want_t, want_line, want_cols, n_dup, n_merged, n_conf = _dedupe_reference(t, line, cols)
+    np.testing.assert_array_equal(t_out, want_t)
+    np.testing.assert_array_equal(line_out, want_line)
+    for k in cols:
+        np.testing.assert_array_equal(cols_out[k], want_cols[k])  # NaN where NaN
+    counts = ev.totals()
+    if (t[1:] == t[:-1]).any():
+        assert (counts["duplicate_rows_dropped"], counts["ticks_merged"], counts["conflicting_values"]) == (
+            n_dup, n_merged, n_conf)
+    else:  # nothing to merge: the input comes back as it is
+        assert counts["ticks_merged"] == 0 and t_out is t
+
+
+@settings(max_examples=60, deadline=None)
+@given(n=st.integers(1, 60), seed=st.integers(0, 2**32 - 1), share=st.floats(0.0, 1.0))
+def test_row_interpolation_shortcut_equals_general_interpolation(n, seed, share):
+    from cevm.clean import _interp_rows
+    from cevm.consumption import _interp_limited
+
+    rng = np.random.default_rng(seed)
+    t = np.cumsum(rng.choice([0.5, 1.0, 3.0, 20.0], n))  # strictly increasing, some gaps
+    v = rng.normal(size=n)
+    ok = rng.random(n) < share
+    got = _interp_rows(t, ok, v, 15.0)
+    want = _interp_limited(t, t[ok], v[ok], 15.0)  # the general path: binary search
+    np.testing.assert_array_equal(got, want)
+    assert np.isnan(_interp_rows(t, None, None, 15.0)).all()

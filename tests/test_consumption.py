@@ -292,3 +292,38 @@ def test_params_are_used():
     lenient = ConsumptionParams(max_gap_share=0.25, min_coverage=0.7)
     m, _ = measure_trip(t, cols, src, 0.0, 100.0, lenient)
     assert m.value == pytest.approx(0.1)
+
+
+@settings(max_examples=60, deadline=None)
+@given(n=st.integers(2, 60), seed=st.integers(0, 2**32 - 1), share_v=st.floats(0.0, 1.0),
+       share_i=st.floats(0.0, 1.0))
+def test_battery_power_samples_equal_a_plain_loop(n, seed, share_v, share_i):
+    """Power = V * I at every time where either is logged, each factor interpolated
+    over at most max_gap_s between its own samples (plain-loop reference)."""
+    from cevm.consumption import source_samples
+
+    rng = np.random.default_rng(seed)
+    t = np.cumsum(rng.choice([1.0, 2.0, 30.0], n))
+    volt = np.where(rng.random(n) < share_v, rng.uniform(300, 400, n), np.nan)
+    amp = np.where(rng.random(n) < share_i, rng.uniform(-50, 200, n), np.nan)
+    ts, p = source_samples(t, {"battery_voltage_v": volt, "battery_current_a": amp}, "battery_power_w", 15.0)
+
+    def at(tq, x):
+        ti, xi = t[np.isfinite(x)], x[np.isfinite(x)]
+        for k in range(ti.size):
+            if ti[k] == tq:
+                return xi[k]
+        for k in range(ti.size - 1):
+            if ti[k] < tq < ti[k + 1] and ti[k + 1] - ti[k] <= 15.0:
+                return xi[k] + (tq - ti[k]) / (ti[k + 1] - ti[k]) * (xi[k + 1] - xi[k])
+        return math.nan
+
+    want_t, want_p = [], []
+    for k in range(n):
+        if np.isfinite(volt[k]) or np.isfinite(amp[k]):
+            pk = at(t[k], volt) * at(t[k], amp)
+            if math.isfinite(pk):
+                want_t.append(t[k])
+                want_p.append(pk)
+    np.testing.assert_array_equal(ts, want_t)
+    np.testing.assert_allclose(p, want_p, rtol=1e-12, atol=1e-9)

@@ -596,3 +596,118 @@ def test_degenerate_trips():
     assert combine_elevation([], [], None).elevation_m.size == 0
     still = combine_elevation([5.0, 5.0, 5.0], [np.nan] * 3, [101.0, 103.0, 102.0])
     assert still.source == "gps" and still.elevation_m.tolist() == [102.0] * 3
+
+
+# ------------------------------------------------------- sampler internals, references
+
+
+@settings(max_examples=30, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), n_tiles=st.integers(9, 40))
+def test_tile_index_finds_the_first_tile_holding_each_point(seed, n_tiles):
+    """The bucket index (more than 8 tiles) against a loop over the tiles in order:
+    x in [xmin, xmax), y in (ymin, ymax], overlapping tiles of mixed sizes."""
+    from cevm.elevation import _CrsGroup, _Tile
+
+    rng = np.random.default_rng(seed)
+    tiles = []
+    for k in range(n_tiles):
+        w, h = int(rng.integers(1, 40)), int(rng.integers(1, 40))
+        x0, y0 = float(rng.integers(0, 100)), float(rng.integers(0, 100))
+        tiles.append(_Tile(f"t{k}", BNG, w, h, x0, y0 + h, 1.0, -1.0, None, 1.0, 0.0))
+    grp = _CrsGroup(BNG, list(range(n_tiles)), tiles)
+    corners = np.array([(t.x0, t.y0) for t in tiles] + [(t.x0 + t.width, t.y0 - t.height) for t in tiles])
+    x = np.concatenate((rng.uniform(-10, 150, 500), corners[:, 0], [np.nan, 5.0]))
+    y = np.concatenate((rng.uniform(-10, 150, 500), corners[:, 1], [5.0, np.inf]))
+    want = []
+    for xi, yi in zip(x, y):
+        hit = -1
+        for k, t in enumerate(tiles):
+            xmin, xmax = t.x0, t.x0 + t.width
+            ymin, ymax = t.y0 - t.height, t.y0
+            if xmin <= xi < xmax and ymin < yi <= ymax:
+                hit = k
+                break
+        want.append(hit)
+    np.testing.assert_array_equal(grp.locate(x, y), want)
+
+
+def test_tiles_of_mixed_shapes_and_dtypes_equal_the_mosaic(tmp_path):
+    """Tiles of different sizes, float32 and float64 and small blocks (several block
+    pools, blocks cut at tile edges) give the bilinear values of the mosaic."""
+    rng = np.random.default_rng(11)
+    widths, heights = [7, 19, 12, 30], [9, 14, 21]
+    big = rng.normal(100, 20, (sum(heights), sum(widths)))
+    for j, (r0, h) in enumerate(zip(np.cumsum([0] + heights[:-1]), heights)):
+        for i, (c0, w) in enumerate(zip(np.cumsum([0] + widths[:-1]), widths)):
+            part = big[r0:r0 + h, c0:c0 + w]
+            if (i + j) % 2:
+                part = part.astype(np.float32)
+                big[r0:r0 + h, c0:c0 + w] = part  # the values as stored
+            write_tif(tmp_path / f"t{j}{i}.tif", part, X0 + c0, Y0 - r0, 1.0, 1.0, BNG)
+    x = X0 + rng.uniform(0.5, sum(widths) - 0.5, 4000)
+    y = Y0 - rng.uniform(0.5, sum(heights) - 0.5, 4000)
+    with DsmSampler.open(tmp_path, block_px=8, cache_mb=0.002) as s:
+        z = s.sample_xy(x, y, BNG)
+        z2 = s.sample_xy(x[::-1], y[::-1], BNG)  # other order, blocks evicted and re-read
+        assert s.stats.windows_read > 12
+    want = ref_bilinear(big, X0, Y0, 1.0, 1.0, x, y)
+    np.testing.assert_allclose(z, want, rtol=0, atol=1e-9)
+    np.testing.assert_array_equal(z2, z[::-1])
+
+
+@pytest.mark.parametrize("sigma", [3.0, 60.0])
+@pytest.mark.parametrize("n", [1, 7, 300, 2000])
+def test_lowpass_equals_the_direct_gaussian_filter(sigma, n):
+    from scipy import ndimage
+
+    from cevm.elevation import _gaussian_valid, _odd_pad
+
+    x = np.cumsum(np.random.default_rng(n).normal(0, 1, n))
+    r = int(4.0 * sigma + 0.5)
+    padded = _odd_pad(x, r)
+    want = ndimage.gaussian_filter1d(padded, sigma, mode="nearest", truncate=4.0)[r:-r]
+    np.testing.assert_allclose(_gaussian_valid(padded, sigma, r), want, rtol=0, atol=1e-9)
+
+
+@settings(max_examples=80, deadline=None)
+@given(n=st.integers(1, 30), r=st.integers(0, 40), seed=st.integers(0, 2**32 - 1))
+def test_odd_pad_is_point_reflection(n, r, seed):
+    from cevm.elevation import _odd_pad
+
+    x = np.random.default_rng(seed).normal(size=n)
+    got = _odd_pad(x, r)
+    if r == 0:
+        want = x
+    elif n == 1:
+        want = np.full(2 * r + 1, x[0])
+    else:
+        want = np.pad(x, r, mode="reflect", reflect_type="odd")
+    np.testing.assert_array_equal(got, want)
+
+
+@settings(max_examples=60, deadline=None)
+@given(keys=st.lists(st.integers(0, 2**50), min_size=1, max_size=300), runs=st.integers(1, 5))
+def test_unique_inverse_equals_numpy_unique(keys, runs):
+    from cevm.elevation import _unique_inverse
+
+    k = np.repeat(np.array(keys, dtype=np.int64), runs)  # runs of equal keys, and not
+    uniq, inv = _unique_inverse(k)
+    want_u, want_inv = np.unique(k, return_inverse=True)
+    np.testing.assert_array_equal(uniq, want_u)
+    np.testing.assert_array_equal(inv, want_inv)
+
+
+def test_fft_size_is_the_next_5_smooth_number():
+    from cevm.elevation import _fft_size
+
+    def smooth(m):
+        for p in (2, 3, 5):
+            while m % p == 0:
+                m //= p
+        return m == 1
+
+    for n in list(range(1, 600)) + [4097, 65537, 1_000_001]:
+        m = n
+        while not smooth(m):
+            m += 1
+        assert _fft_size(n) == m

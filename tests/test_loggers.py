@@ -738,3 +738,22 @@ def test_line_stats_match_plain_python(text, chunk):
             want_counts.append(line.count(b","))
         pos += len(line) + 1
     assert starts.tolist() == want_starts and n_sep.tolist() == want_counts
+
+
+def test_ascii_heads_skip_re_encoding_only_for_ascii_compatible_codecs(tmp_path, profiles):
+    import pandas as pd
+
+    from cevm.loggers import _ascii_transparent
+
+    assert all(_ascii_transparent(e) for e in ("utf-8", "utf-8-sig", "cp1252", "latin-1", "ascii"))
+    assert not any(_ascii_transparent(e) for e in ("utf-16", "utf-32", "utf-7", "cp500", "no-such-codec"))
+    # the cp1252 portal export with its few non-ASCII bytes replaced: detected the same
+    raw = (DATA / "portal_dst.csv").read_bytes()
+    f = tmp_path / "ascii_portal.csv"
+    f.write_bytes(bytes(b if b < 128 else ord("?") for b in raw))
+    assert detect_profile(f, profiles).name == "portal"
+    logs = read_log(f, profiles=profiles)
+    assert [g.profile for g in logs] == ["portal", "portal"]
+    want = read_log(DATA / "portal_dst.csv", profiles=profiles)
+    for a, b in zip(logs, want):
+        pd.testing.assert_frame_equal(a.frame, b.frame)  # no used column held those bytes

@@ -307,6 +307,11 @@ def _runs(mask: np.ndarray, breaks: np.ndarray | None = None) -> tuple[np.ndarra
 
 
 def _jsonable(x):
+    t = type(x)
+    if t is str or t is int or x is None or t is bool:
+        return x
+    if t is float:
+        return x if math.isfinite(x) else None
     if isinstance(x, dict):
         return {str(k): _jsonable(v) for k, v in x.items()}
     if isinstance(x, (list, tuple)):
@@ -366,13 +371,18 @@ def _load(frame: pd.DataFrame, path) -> tuple[np.ndarray, np.ndarray, dict[str, 
         raise InputError(path, "no time column (canonical 'time_s')", column="time_s")
     n = len(frame)
     if "source_line" in frame.columns:
-        line = pd.to_numeric(frame["source_line"], errors="coerce").to_numpy(dtype=float)
-        line = np.where(np.isfinite(line), line, -1).astype(np.int64)
+        s = frame["source_line"]
+        if isinstance(s.dtype, np.dtype) and s.dtype.kind in "iu":  # the reader's int64 lines
+            line = s.to_numpy(dtype=np.int64)
+        else:
+            line = pd.to_numeric(s, errors="coerce").to_numpy(dtype=float)
+            line = np.where(np.isfinite(line), line, -1).astype(np.int64)
     else:
         line = np.arange(1, n + 1, dtype=np.int64)
     cols: dict[str, np.ndarray] = {}
+    present = set(frame.columns)
     for name in CANONICAL_COLUMNS:
-        if name in ("source_line", "vehicle_id") or name not in frame.columns:
+        if name in ("source_line", "vehicle_id") or name not in present:
             continue
         s = frame[name]
         try:
@@ -514,7 +524,15 @@ def _repair_time(t, line, cols, p: CleanParams, ev: _Events):
 
 def _dedupe(t, line, cols, ev: _Events):
     """Sorted frame -> strictly increasing time: exact duplicates dropped, ticks with
-    the same time merged (last non-NaN value per field)."""
+    the same time merged (last non-NaN value per field).
+
+    Rows equal in time and every field (NaN equal to NaN, -0.0 to 0.0) but the first are
+    dropped (``duplicate_rows_dropped``); the remaining rows of one time are merged into
+    one (``ticks_merged`` per merged tick): per field the last non-NaN value in file
+    order, the lowest ``source_line``; a field with two or more distinct non-NaN values
+    in one tick counts once in ``conflicting_values``. Numpy only: a (rows x fields)
+    matrix of the rows in ticks of more than one row, reduced per tick.
+    """
     same = t[1:] == t[:-1]
     if not same.any():
         return t, line, cols
@@ -524,40 +542,56 @@ def _dedupe(t, line, cols, ev: _Events):
     multi = size[gid] > 1
     rows = np.flatnonzero(multi)
     names = list(cols)
-    sub = pd.DataFrame({"__t": t[rows], **{k: cols[k][rows] for k in names}})
-    dup = sub.duplicated(keep="first").to_numpy()
+    # (rows x fields) of the rows in multi-row ticks, time first (rows are time-sorted)
+    m = np.empty((rows.size, len(names) + 1))
+    m[:, 0] = t[rows]
+    for j, k in enumerate(names):
+        m[:, j + 1] = cols[k][rows]
+    g = gid[rows]
+    # exact duplicates: sort rows by all fields (stable: file order among equals; NaN
+    # sort last, together), a row equal to its predecessor in every field is a duplicate
+    order = np.lexsort(m.T[::-1])
+    ms = m[order]
+    nan = np.isnan(ms)
+    eq = (ms[1:] == ms[:-1]) | (nan[1:] & nan[:-1])
+    dup_sorted = np.concatenate(([False], eq.all(axis=1)))
+    dup = np.zeros(rows.size, dtype=bool)
+    dup[order] = dup_sorted
     if dup.any():
         ev.add("duplicate_rows_dropped", t[rows[dup]])
-    sub = sub.loc[~dup]
-    sub["__g"] = gid[rows[~dup]]
-    sub["__line"] = line[rows[~dup]]
-    g = sub.groupby("__g", sort=True)
-    merged = g.last()  # last non-NaN per column
-    nrows = g.size()
-    merged_groups = nrows.index[nrows.to_numpy() > 1]
-    if len(merged_groups):
-        ev.add("ticks_merged", merged.loc[merged_groups, "__t"].to_numpy())
+        keep = ~dup
+        m, g, kept_rows = m[keep], g[keep], rows[keep]
+    else:
+        kept_rows = rows
+    # per tick: reduceat over runs of the same group id
+    gstart = np.flatnonzero(np.concatenate(([True], g[1:] != g[:-1])))
+    ug = g[gstart]
+    n_in = np.diff(np.append(gstart, g.size))
+    gt = m[gstart, 0]
+    merged_ticks = n_in > 1
+    if merged_ticks.any():
+        ev.add("ticks_merged", gt[merged_ticks])
         if names:
-            nun = g[names].nunique()
-            conflicts = nun.to_numpy() > 1
-            per_group = conflicts.sum(axis=1)
-            gt = merged["__t"].to_numpy()
+            vals = m[:, 1:]
+            with np.errstate(invalid="ignore"):
+                lo = np.fmin.reduceat(vals, gstart, axis=0)
+                hi = np.fmax.reduceat(vals, gstart, axis=0)
+            per_group = ((lo != hi) & ~np.isnan(lo)).sum(axis=1)
             ev.add("conflicting_values", np.repeat(gt, per_group))
-    lines_min = g["__line"].min()
-    ng = size.size
-    t_out = np.empty(ng)
-    line_out = np.empty(ng, dtype=np.int64)
-    single = ~multi
-    t_out[gid[single]] = t[single]
-    line_out[gid[single]] = line[single]
-    mi = merged.index.to_numpy()
-    t_out[mi] = merged["__t"].to_numpy()
-    line_out[mi] = lines_min.to_numpy()
+    # one row per tick: its first row, then the merged ticks' values
+    first_rows = np.flatnonzero(start)
+    t_out = t[first_rows]
+    line_out = line[first_rows]
+    line_out[ug] = np.minimum.reduceat(line[kept_rows], gstart)
     cols_out = {}
-    for k in names:
-        a = np.empty(ng)
-        a[gid[single]] = cols[k][single]
-        a[mi] = merged[k].to_numpy(dtype=float, na_value=np.nan)
+    if names:
+        # last non-NaN value of each field per tick (NaN if none)
+        pos = np.where(np.isnan(m[:, 1:]), -1, np.arange(g.size)[:, None])
+        last = np.maximum.reduceat(pos, gstart, axis=0)
+        last_val = np.where(last >= 0, m[np.maximum(last, 0), np.arange(1, len(names) + 1)], np.nan)
+    for j, k in enumerate(names):
+        a = cols[k][first_rows]
+        a[ug] = last_val[:, j]
         cols_out[k] = a
     return t_out, line_out, cols_out
 
@@ -583,6 +617,7 @@ class _Fixes:
     lon: np.ndarray
     alt_t: np.ndarray
     alt: np.ndarray
+    step_m: np.ndarray = field(default_factory=lambda: np.empty(0))  # between fixes, len - 1 (len > 1)
 
 
 def _clean_gps(t, cols, moving, p: CleanParams, ev: _Events) -> tuple[_Fixes, np.ndarray]:
@@ -602,6 +637,7 @@ def _clean_gps(t, cols, moving, p: CleanParams, ev: _Events) -> tuple[_Fixes, np
         stale_rows[f[1:][rep]] = True
         ev.add("gps_rejected_stale", t[f[1:][rep]])
         f = f[np.concatenate(([True], ~rep))]
+    step_m = np.empty(0)
     if f.size > 1:
         dist = local_distance_m(lat[f[:-1]], lon[f[:-1]], lat[f[1:]], lon[f[1:]])
         jump = dist > p.max_speed_mps * np.diff(t[f]) + p.gps_jump_tolerance_m
@@ -613,11 +649,14 @@ def _clean_gps(t, cols, moving, p: CleanParams, ev: _Events) -> tuple[_Fixes, np
                 bad = small[run]
                 ev.add("gps_rejected_jump", t[f[bad]])
                 f = f[~bad]
+                if f.size > 1:
+                    dist = local_distance_m(lat[f[:-1]], lon[f[:-1]], lat[f[1:]], lon[f[1:]])
+                    jump = dist > p.max_speed_mps * np.diff(t[f]) + p.gps_jump_tolerance_m
             if f.size > 1:
-                dist = local_distance_m(lat[f[:-1]], lon[f[:-1]], lat[f[1:]], lon[f[1:]])
-                jump = dist > p.max_speed_mps * np.diff(t[f]) + p.gps_jump_tolerance_m
                 ev.add("gps_unresolved_jumps", t[f[1:][jump]])
-    fixes = _Fixes(t[f], lat[f], lon[f], np.empty(0), np.empty(0))
+        if f.size > 1:
+            step_m = dist
+    fixes = _Fixes(t[f], lat[f], lon[f], np.empty(0), np.empty(0), step_m)
     if "gps_alt_m" in cols:
         alt = cols["gps_alt_m"][f]
         ok = np.isfinite(alt) & (alt > -500) & (alt < 9000)
@@ -625,30 +664,40 @@ def _clean_gps(t, cols, moving, p: CleanParams, ev: _Events) -> tuple[_Fixes, np
     return fixes, stale_rows
 
 
-def _speed_samples(t, cols, name, p: CleanParams, ev: _Events, exclude=None):
+def _speed_rows(t, cols, name, p: CleanParams, ev: _Events) -> np.ndarray | None:
+    """Rows with a plausible value of the speed column ``name`` (None without the
+    column); implausible values are counted as ``speed_values_rejected``."""
     if name not in cols:
-        return np.empty(0), np.empty(0)
+        return None
     v = cols[name]
     fin = np.isfinite(v)
     ok = fin & (v >= 0) & (v <= p.max_speed_mps)
     ev.add("speed_values_rejected", t[fin & ~ok])
-    if exclude is not None:
-        ok &= ~exclude
-    return t[ok], v[ok]
+    return ok
+
+
+def _interp_rows(t: np.ndarray, ok: np.ndarray | None, v: np.ndarray | None, max_fill_s: float) -> np.ndarray:
+    """``_interp_limited(t, t[ok], v[ok], max_fill_s)`` (all NaN for ``ok`` None) for a
+    strictly increasing ``t``: the rows' own values where ``ok``, interpolated between
+    them elsewhere; cheaper, as the sample positions in ``t`` are known."""
+    if ok is None:
+        return np.full(t.shape, np.nan)
+    if ok.all():  # every row is a sample: its own value (exact times)
+        return v.copy()
+    return _interp_limited(t, t[ok], v[ok], max_fill_s, right=np.cumsum(ok) - ok)
 
 
 def _row_speed(t, cols, p: CleanParams, ev: _Events):
     """Per-row speed [m/s] and source code (0 wheel, 1 GPS speed, 2 positions, -1 none),
     plus the cleaned GPS fixes."""
-    tw, vw = _speed_samples(t, cols, "wheel_speed_mps", p, ev)
-    ev_tmp = _Events()  # GPS speed rejections are counted once, below
-    tg, vg = _speed_samples(t, cols, "gps_speed_mps", p, ev_tmp)
-    v_w = _interp_limited(t, tw, vw, p.max_fill_s)
-    v_g = _interp_limited(t, tg, vg, p.max_fill_s)
+    ok_w = _speed_rows(t, cols, "wheel_speed_mps", p, ev)
+    ok_g = _speed_rows(t, cols, "gps_speed_mps", p, ev)
+    v_w = _interp_rows(t, ok_w, cols.get("wheel_speed_mps"), p.max_fill_s)
+    v_g = _interp_rows(t, ok_g, cols.get("gps_speed_mps"), p.max_fill_s)
     moving = np.where(np.isfinite(v_w), v_w, v_g) > p.standstill_mps
     fixes, stale = _clean_gps(t, cols, moving, p, ev)
-    tg, vg = _speed_samples(t, cols, "gps_speed_mps", p, ev, exclude=stale)
-    v_g = _interp_limited(t, tg, vg, p.max_fill_s)
+    if ok_g is not None and (ok_g & stale).any():  # GPS speeds of stale fixes dropped too
+        v_g = _interp_rows(t, ok_g & ~stale, cols["gps_speed_mps"], p.max_fill_s)
     v = v_w.copy()
     src = np.where(np.isfinite(v), 0, -1)
     use = ~np.isfinite(v) & np.isfinite(v_g)
@@ -657,7 +706,7 @@ def _row_speed(t, cols, p: CleanParams, ev: _Events):
     need = ~np.isfinite(v)
     if need.any() and fixes.t.size > 1:
         dt = np.diff(fixes.t)
-        vm = local_distance_m(fixes.lat[:-1], fixes.lon[:-1], fixes.lat[1:], fixes.lon[1:]) / dt
+        vm = fixes.step_m / dt
         ok = (dt <= p.max_fill_s) & (vm <= p.max_speed_mps)
         tm = 0.5 * (fixes.t[1:] + fixes.t[:-1])
         v_p = _interp_limited(t, tm[ok], vm[ok], p.max_fill_s)

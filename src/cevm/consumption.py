@@ -179,18 +179,22 @@ def _jsonable(x: float) -> float | None:
 
 
 def _interp_limited(
-    q: np.ndarray, ts: np.ndarray, vs: np.ndarray, max_gap_s: float, *more: np.ndarray
+    q: np.ndarray, ts: np.ndarray, vs: np.ndarray, max_gap_s: float, *more: np.ndarray,
+    right: np.ndarray | None = None,
 ):
     """Linear interpolation of samples (ts strictly increasing, vs) at times q, NaN
     where q lies outside the samples or between two samples more than ``max_gap_s``
     apart (exact sample times always get their value). Further value arrays in
-    ``more`` (same sample times) are interpolated too; then a list is returned."""
+    ``more`` (same sample times) are interpolated too; then a list is returned.
+    ``right``: ``np.searchsorted(ts, q, side="left")`` when the caller knows it (for
+    samples at ``q[mask]`` of a strictly increasing ``q``: ``cumsum(mask) - mask``)."""
     n = ts.size
     arrays = (vs, *more)
     if n == 0:
         outs = [np.full(q.shape, np.nan) for _ in arrays]
         return outs if more else outs[0]
-    right = np.searchsorted(ts, q, side="left")
+    if right is None:
+        right = np.searchsorted(ts, q, side="left")
     rc = np.minimum(right, n - 1)
     exact = ts[rc] == q
     lc = np.maximum(right - 1, 0)
@@ -236,7 +240,11 @@ def source_samples(
     prod = np.ones(q.shape)
     for a in arrays:
         ok = np.isfinite(a)
-        prod *= _interp_limited(q, time_s[ok], a[ok], max_gap_s)
+        if np.array_equal(ok, any_ok):  # sampled at every q: its own values (exact times)
+            prod *= a[ok]
+        else:  # samples at q[mask] of the strictly increasing q
+            mask = ok[any_ok]
+            prod *= _interp_limited(q, time_s[ok], a[ok], max_gap_s, right=np.cumsum(mask) - mask)
     ok = np.isfinite(prod)
     return q[ok], prod[ok]
 
@@ -409,7 +417,9 @@ def estimate_source(
     lo = np.searchsorted(time_s, t0 - params.max_gap_s, side="left")
     hi = np.searchsorted(time_s, t1 + params.max_gap_s, side="right")
     window_t = time_s[lo:hi]
-    window = {k: np.asarray(v)[lo:hi] for k, v in columns.items()}
+    # only the columns source_samples may read: the source, or a product's factors
+    needed = {name, *_BATTERY_POWER_FACTORS, *(part.strip() for part in name.split("*"))}
+    window = {k: np.asarray(columns[k])[lo:hi] for k in needed if k in columns}
     try:
         ts, vs = source_samples(window_t, window, name, params.max_gap_s)
     except KeyError:

@@ -326,30 +326,23 @@ def _list_sources(source: str | os.PathLike | Sequence[str | os.PathLike]) -> li
     return [text]
 
 
-def _group_by_key(keys: np.ndarray) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
-    """Group positions of equal ``keys``.
-
-    Returns ``(unique_keys, order, bounds)``: positions of group g are
-    ``order[bounds[g]:bounds[g + 1]]`` (``order`` is None when there is one group: all
-    positions in their natural order). O(n) for spatially coherent keys (runs): unique
-    keys come from run starts, and the group ids are sorted with a stable radix sort.
-    """
+def _unique_inverse(keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``np.unique(keys, return_inverse=True)``, cheap for spatially coherent keys:
+    only the keys at the starts of runs of equal keys are sorted."""
     n = keys.size
-    if n == 0:
-        return keys[:0], None, np.zeros(1, dtype=np.intp)
     starts = np.flatnonzero(keys[1:] != keys[:-1]) + 1
     if starts.size == 0:
-        return keys[:1], None, np.array([0, n], dtype=np.intp)
+        return keys[:1], np.zeros(n, dtype=np.intp)
     starts = np.concatenate(([0], starts))
-    uniq, inv = np.unique(keys[starts], return_inverse=True)
-    if uniq.size == 1:
-        return uniq, None, np.array([0, n], dtype=np.intp)
-    lengths = np.diff(np.append(starts, n))
-    gid = np.repeat(inv.astype(np.uint16 if uniq.size < 65536 else np.int64), lengths)
-    order = np.argsort(gid, kind="stable")
-    bounds = np.zeros(uniq.size + 1, dtype=np.intp)
-    np.cumsum(np.bincount(gid, minlength=uniq.size), out=bounds[1:])
-    return uniq, order, bounds
+    if starts.size <= 64:  # a few runs: sorting in Python costs less than np.unique's setup
+        run_keys = keys[starts].tolist()
+        uniq_list = sorted(set(run_keys))
+        index = {k: i for i, k in enumerate(uniq_list)}
+        uniq = np.array(uniq_list, dtype=keys.dtype)
+        inv = np.array([index[k] for k in run_keys], dtype=np.intp)
+    else:
+        uniq, inv = np.unique(keys[starts], return_inverse=True)
+    return uniq, np.repeat(inv, np.diff(np.append(starts, n)))
 
 
 class _CrsGroup:
@@ -365,14 +358,25 @@ class _CrsGroup:
         # overlapping it, in index order (the first tile containing a point wins).
         size = float(np.median(np.maximum(b[:, 2] - b[:, 0], b[:, 3] - b[:, 1])))
         self.cell = size if size > 0 else 1.0
-        self.buckets: dict[int, list[int]] = {}
+        # As sorted bucket keys with CSR lists of candidates (ascending tile index).
+        self._bkeys: np.ndarray | None = None
         if len(tile_ids) > 8:
+            keys: list[int] = []
+            cands: list[int] = []
             for k in range(len(tile_ids)):
                 cx0, cy0 = self._cell(b[k, 0], b[k, 1])
                 cx1, cy1 = self._cell(b[k, 2], b[k, 3])
                 for cx in range(int(cx0), int(cx1) + 1):
                     for cy in range(int(cy0), int(cy1) + 1):
-                        self.buckets.setdefault(self._key(cx, cy), []).append(k)
+                        keys.append(int(self._key(cx, cy)))
+                        cands.append(k)
+            ka, ca = np.array(keys, dtype=np.int64), np.array(cands, dtype=np.int64)
+            order = np.lexsort((ca, ka))
+            ka, ca = ka[order], ca[order]
+            first = np.concatenate(([True], ka[1:] != ka[:-1]))
+            self._bkeys = ka[first]
+            self._bptr = np.append(np.flatnonzero(first), ka.size).astype(np.int64)
+            self._bcand = ca
         self.lonlat_bbox: dict[str, tuple[float, float, float, float] | None] = {}
 
     def _cell(self, x, y):
@@ -388,7 +392,7 @@ class _CrsGroup:
         out = np.full(x.shape, -1, dtype=np.int64)
         if x.size == 0:
             return out
-        if not self.buckets:  # few tiles: test each
+        if self._bkeys is None:  # few tiles: test each
             for k in range(self.tile_ids.size):
                 m = (out < 0) & (x >= self.xmin[k]) & (x < self.xmax[k]) & (y > self.ymin[k]) & (y <= self.ymax[k])
                 out[m] = self.tile_ids[k]
@@ -396,19 +400,55 @@ class _CrsGroup:
         cx, cy = self._cell(x, y)
         ok = np.isfinite(cx) & np.isfinite(cy)
         keys = np.where(ok, self._key(np.where(ok, cx, 0), np.where(ok, cy, 0)), -1)
-        uniq, order, bounds = _group_by_key(keys)
-        for g, key in enumerate(uniq):
-            cands = self.buckets.get(int(key))
-            if not cands:
-                continue
-            idx = np.arange(x.size) if order is None else order[bounds[g] : bounds[g + 1]]
-            xs, ys = x[idx], y[idx]
-            got = np.full(idx.size, -1, dtype=np.int64)
-            for k in cands:
-                m = (got < 0) & (xs >= self.xmin[k]) & (xs < self.xmax[k]) & (ys > self.ymin[k]) & (ys <= self.ymax[k])
-                got[m] = self.tile_ids[k]
-            out[idx] = got
+        pos = np.minimum(np.searchsorted(self._bkeys, keys), self._bkeys.size - 1)
+        idx = np.flatnonzero(ok & (self._bkeys[pos] == keys))
+        if idx.size == 0:
+            return out
+        b = pos[idx]
+        first, count = self._bptr[b], self._bptr[b + 1] - self._bptr[b]
+        xs, ys = x[idx], y[idx]
+        got = np.full(idx.size, -1, dtype=np.int64)
+        for r in range(int(count.max())):  # candidates of a bucket in order: the first hit wins
+            live = (got < 0) & (count > r)
+            k = self._bcand[np.where(live, first + r, 0)]
+            m = live & (xs >= self.xmin[k]) & (xs < self.xmax[k]) & (ys > self.ymin[k]) & (ys <= self.ymax[k])
+            got[m] = self.tile_ids[k[m]]
+        out[idx] = got
         return out
+
+
+class _Pool:
+    """Cached raster blocks of one shape and dtype: row ``slot`` of ``data`` holds one
+    block, C order, ``shape[1]`` pixels per row (blocks at a tile's right or bottom edge
+    fill only the top-left part of their slot). Room for ``max_slots`` blocks (the
+    cache budget's worth) is allocated at once, uninitialised: the operating system
+    commits pages only as blocks are written, and no block is ever copied to grow the
+    pool (it grows by doubling only when one lookup needs more blocks than the budget).
+    Freed slots are reused."""
+
+    def __init__(self, shape: tuple[int, int], dtype: np.dtype, max_slots: int):
+        self.shape = shape
+        self.size = shape[0] * shape[1]
+        self.data = np.empty((0, self.size), dtype=dtype)
+        self.free: list[int] = []
+        self.used = 0
+        self.max_slots = max(1, max_slots)
+
+    def put(self, arr: np.ndarray) -> int:
+        """Store a block (at most ``shape``) in a free slot; return the slot."""
+        if self.free:
+            slot = self.free.pop()
+        else:
+            if self.used == self.data.shape[0]:
+                cap = self.max_slots if self.used < self.max_slots else 2 * self.used
+                grown = np.empty((cap, self.size), dtype=self.data.dtype)
+                grown[: self.used] = self.data[: self.used]
+                self.data = grown
+            slot = self.used
+            self.used += 1
+        h, w = arr.shape
+        self.data[slot].reshape(self.shape)[:h, :w] = arr
+        return slot
 
 
 class DsmSampler:
@@ -419,11 +459,14 @@ class DsmSampler:
 
     How a lookup works: fixes are transformed with pyproj into each tile CRS (one
     cached transformer per CRS); a tile index (bounds from the headers, read once when
-    the sampler opens) finds the tile holding each point; points are grouped by
-    square blocks of their tile (``block_px``), and each block is read once
-    (with a one-pixel margin for the bilinear neighbours) and interpolated with numpy.
-    Blocks stay in an LRU cache of ``cache_mb`` megabytes across calls, so nothing
-    bigger than a block is ever read for a point and a national mosaic is never loaded.
+    the sampler opens) finds the tile holding each point; points are grouped by square blocks of their tile
+    (``block_px``), and each block is read once (with a one-pixel margin for the
+    bilinear neighbours) and interpolated with numpy. Blocks stay in an LRU cache of
+    ``cache_mb`` megabytes across calls (the blocks of one call stay until it is done),
+    so nothing bigger than a block is ever read for a point and a national mosaic is
+    never loaded. Cached blocks of one shape share one array, so a call gathers its
+    pixels with one fancy index whatever the number of blocks (Python loops run over
+    the distinct blocks of a call, one cache lookup each, never over points).
 
     Bilinear interpolation is between pixel centres. If any of the four neighbours is
     nodata or NaN, the point is NaN. Points within half a pixel of a tile's edge take
@@ -441,8 +484,14 @@ class DsmSampler:
         self.cache_bytes = int(cache_mb * 1e6)
         self.max_open = int(max_open)
         self.stats = SamplerStats()
-        self._blocks: OrderedDict[tuple[int, int, int], np.ndarray] = OrderedDict()
+        # Block cache: key (tile << 42 | brow << 21 | bcol) -> (pool, slot, nbytes), LRU
+        # order. A block lives in a slot of a pool: one 2-D array per (slot height,
+        # width, dtype), one row per slot, so that a lookup gathers from every cached
+        # block with one fancy index.
+        self._blocks: OrderedDict[int, tuple[int, int, int]] = OrderedDict()
         self._cached_bytes = 0
+        self._pools: list[_Pool] = []
+        self._pool_index: dict[tuple[int, int, str], int] = {}
         self._open: OrderedDict[int, object] = OrderedDict()
         by_crs: dict[str, list[int]] = {}
         for i, t in enumerate(self.tiles):
@@ -497,6 +546,8 @@ class DsmSampler:
         self._open.clear()
         self._blocks.clear()
         self._cached_bytes = 0
+        self._pools.clear()
+        self._pool_index.clear()
 
     def __enter__(self) -> DsmSampler:
         return self
@@ -528,15 +579,9 @@ class DsmSampler:
             old.close()
         return ds
 
-    def _block(self, tile: int, brow: int, bcol: int) -> np.ndarray:
+    def _read_block(self, tile: int, brow: int, bcol: int) -> np.ndarray:
         """Pixels of block (brow, bcol) of a tile plus a one-pixel margin right and
         below, as float (float32 for float32 rasters) with NaN for nodata."""
-        key = (tile, brow, bcol)
-        arr = self._blocks.get(key)
-        if arr is not None:
-            self._blocks.move_to_end(key)
-            self.stats.cache_hits += 1
-            return arr
         from rasterio.errors import RasterioError
         from rasterio.windows import Window
 
@@ -558,12 +603,38 @@ class DsmSampler:
             arr = arr * t.scale + t.offset
         self.stats.windows_read += 1
         self.stats.pixels_read += arr.size
-        self._blocks[key] = arr
-        self._cached_bytes += arr.nbytes
-        while self._cached_bytes > self.cache_bytes and len(self._blocks) > 1:
-            _, old = self._blocks.popitem(last=False)
-            self._cached_bytes -= old.nbytes
         return arr
+
+    def _block_slot(self, key: int) -> tuple[int, int]:
+        """(pool, slot) of the cached block ``key`` (tile << 42 | brow << 21 | bcol),
+        read on a miss. The cache is trimmed to its budget by :meth:`_trim`, after each
+        lookup, so the blocks of one lookup stay while it gathers."""
+        hit = self._blocks.get(key)
+        if hit is not None:
+            self._blocks.move_to_end(key)
+            self.stats.cache_hits += 1
+            return hit[0], hit[1]
+        tile, brow, bcol = key >> 42, (key >> 21) & ((1 << 21) - 1), key & ((1 << 21) - 1)
+        arr = self._read_block(tile, brow, bcol)
+        t, b = self.tiles[tile], int(self._blk[tile])
+        shape = (min(b + 1, t.height), min(b + 1, t.width))  # every block of the tile fits
+        pk = (shape[0], shape[1], arr.dtype.str)
+        pi = self._pool_index.get(pk)
+        if pi is None:
+            pi = self._pool_index[pk] = len(self._pools)
+            slot_bytes = shape[0] * shape[1] * arr.dtype.itemsize
+            self._pools.append(_Pool(shape, arr.dtype, self.cache_bytes // slot_bytes + 1))
+        slot = self._pools[pi].put(arr)
+        self._blocks[key] = (pi, slot, arr.nbytes)
+        self._cached_bytes += arr.nbytes
+        return pi, slot
+
+    def _trim(self) -> None:
+        """Evict least recently used blocks beyond the cache budget (keeping one)."""
+        while self._cached_bytes > self.cache_bytes and len(self._blocks) > 1:
+            _, (pi, slot, nbytes) = self._blocks.popitem(last=False)
+            self._pools[pi].free.append(slot)
+            self._cached_bytes -= nbytes
 
     def _gather(self, tile: np.ndarray, row: np.ndarray, col: np.ndarray, quad: bool) -> np.ndarray:
         """Pixel values at (tile, row, col); with ``quad`` also the right, lower and
@@ -575,27 +646,29 @@ class DsmSampler:
             return out
         blk = self._blk[tile]
         brow, bcol = row // blk, col // blk
-        keys = (tile << 42) | (brow << 21) | bcol
-        uniq, order, bounds = _group_by_key(keys)
-        for g, key in enumerate(uniq):
-            key = int(key)
-            t, br, bc = key >> 42, (key >> 21) & ((1 << 21) - 1), key & ((1 << 21) - 1)
-            arr = self._block(t, br, bc)
-            b = int(self._blk[t])
-            stride = arr.shape[1]
-            flat_arr = arr.ravel()
-            if order is None:
-                idx = slice(None)
-            else:
-                idx = order[bounds[g] : bounds[g + 1]]
-            flat = (row[idx] - br * b) * stride + (col[idx] - bc * b)
+        uniq, inv = _unique_inverse((tile << 42) | (brow << 21) | bcol)
+        pool_of = np.empty(uniq.size, dtype=np.int64)
+        slot_of = np.empty(uniq.size, dtype=np.int64)
+        try:
+            for i, key in enumerate(uniq.tolist()):
+                pool_of[i], slot_of[i] = self._block_slot(key)
+        finally:
+            self._trim()
+        pools = [int(pool_of[0])] if (pool_of == pool_of[0]).all() else np.unique(pool_of).tolist()
+        for pi in pools:
+            pool = self._pools[pi]
+            stride = pool.shape[1]
+            sel = slice(None) if len(pools) == 1 else np.flatnonzero(pool_of[inv] == pi)
+            ii = inv[sel]
+            flat = slot_of[ii] * pool.size + (row[sel] - brow[sel] * blk[sel]) * stride + (col[sel] - bcol[sel] * blk[sel])
+            data = pool.data.reshape(-1)
             if quad:
-                out[0, idx] = flat_arr[flat]
-                out[1, idx] = flat_arr[flat + 1]
-                out[2, idx] = flat_arr[flat + stride]
-                out[3, idx] = flat_arr[flat + stride + 1]
+                out[0, sel] = data[flat]
+                out[1, sel] = data[flat + 1]
+                out[2, sel] = data[flat + stride]
+                out[3, sel] = data[flat + stride + 1]
             else:
-                out[idx] = flat_arr[flat]
+                out[sel] = data[flat]
         return out
 
     # ---- lookup --------------------------------------------------------------------------
@@ -698,21 +771,26 @@ class DsmSampler:
         of the same CRS holds it."""
         c0 = np.floor(colf)
         r0 = np.floor(rowf)
-        z = np.full((4, t.size), np.nan)
-        for q, (dr, dc) in enumerate(((0, 0), (0, 1), (1, 0), (1, 1))):
-            cx = self._x0[t] + self._a[t] * (c0 + dc + 0.5)
-            cy = self._y0[t] + self._e[t] * (r0 + dr + 0.5)
-            for gi in np.unique(self._group_of_tile[t]):
-                m = np.flatnonzero(self._group_of_tile[t] == gi)
-                nt = self._groups[gi].locate(cx[m], cy[m])
-                ok = nt >= 0
-                m, nt = m[ok], nt[ok]
-                col = np.floor((cx[m] - self._x0[nt]) / self._a[nt]).astype(np.int64)
-                row = np.floor((cy[m] - self._y0[nt]) / self._e[nt]).astype(np.int64)
-                col = np.clip(col, 0, self._w[nt] - 1)
-                row = np.clip(row, 0, self._h[nt] - 1)
-                z[q, m] = self._gather(nt, row, col, quad=False)
-        return _bilinear(z, colf - c0, rowf - r0)
+        m = t.size
+        # the four neighbours (0, 0), (0, 1), (1, 0), (1, 1) of every point, one batch
+        dr = np.repeat(np.array([0, 0, 1, 1]), m)
+        dc = np.repeat(np.array([0, 1, 0, 1]), m)
+        tt = np.tile(t, 4)
+        cx = self._x0[tt] + self._a[tt] * (np.tile(c0, 4) + dc + 0.5)
+        cy = self._y0[tt] + self._e[tt] * (np.tile(r0, 4) + dr + 0.5)
+        z = np.full(4 * m, np.nan)
+        grp = self._group_of_tile[tt]
+        for gi in np.unique(grp).tolist():
+            sel = np.flatnonzero(grp == gi)
+            nt = self._groups[gi].locate(cx[sel], cy[sel])
+            ok = nt >= 0
+            sel, nt = sel[ok], nt[ok]
+            col = np.floor((cx[sel] - self._x0[nt]) / self._a[nt]).astype(np.int64)
+            row = np.floor((cy[sel] - self._y0[nt]) / self._e[nt]).astype(np.int64)
+            col = np.clip(col, 0, self._w[nt] - 1)
+            row = np.clip(row, 0, self._h[nt] - 1)
+            z[sel] = self._gather(nt, row, col, quad=False)
+        return _bilinear(z.reshape(4, m), colf - c0, rowf - r0)
 
     def _in_group_bbox(self, grp: _CrsGroup, x: np.ndarray, y: np.ndarray, crs: str) -> np.ndarray:
         """Cheap pre-filter: points inside the group's bounding box seen in ``crs``
@@ -837,7 +915,13 @@ def _odd_pad(x: np.ndarray, r: int) -> np.ndarray:
         return x
     if x.size == 1:
         return np.full(2 * r + 1, x[0])
-    return np.pad(x, r, mode="reflect", reflect_type="odd")
+    if r >= x.size:  # reflected more than once
+        return np.pad(x, r, mode="reflect", reflect_type="odd")
+    out = np.empty(x.size + 2 * r)
+    out[r : r + x.size] = x
+    out[:r] = 2 * x[0] - x[r:0:-1]  # as np.pad(x, r, mode="reflect", reflect_type="odd")
+    out[r + x.size :] = 2 * x[-1] - x[-2 : -r - 2 : -1]
+    return out
 
 
 def _smooth(h: np.ndarray, step: float, params: ElevationParams) -> np.ndarray:
@@ -864,8 +948,51 @@ def _smooth(h: np.ndarray, step: float, params: ElevationParams) -> np.ndarray:
     sigma = params.lowpass_sigma_m / step
     if sigma > 0 and h.size > 1:
         r = int(4.0 * sigma + 0.5)
-        h = ndimage.gaussian_filter1d(_odd_pad(h, r), sigma, mode="nearest", truncate=4.0)[r:-r]
+        h = _gaussian_valid(_odd_pad(h, r), sigma, r)
     return h
+
+
+#: Kernels longer than this [taps] are applied by FFT (same result within rounding).
+_FFT_MIN_TAPS = 96
+
+
+def _gaussian_valid(x: np.ndarray, sigma: float, r: int) -> np.ndarray:
+    """Gaussian low-pass (standard deviation ``sigma`` cells, radius ``r`` cells) of
+    ``x`` at the cells ``r .. len(x) - r - 1``, whose windows lie inside ``x``: what
+    ``ndimage.gaussian_filter1d(x, sigma, truncate=4.0)[r:-r]`` gives for
+    ``r = int(4 * sigma + 0.5)``, whatever its boundary mode. Long kernels (the GPS
+    profile's, 481 taps) go through an FFT, O(n log n) instead of O(n r); the result
+    differs only by floating-point rounding (about 1e-12 m)."""
+    if 2 * r + 1 < _FFT_MIN_TAPS:
+        return ndimage.gaussian_filter1d(x, sigma, mode="nearest", truncate=4.0)[r:-r]
+    k = np.exp(-0.5 / (sigma * sigma) * np.arange(-r, r + 1, dtype=np.float64) ** 2)
+    k /= k.sum()
+    nfft = _fft_size(x.size + k.size - 1)
+    y = np.fft.irfft(np.fft.rfft(x, nfft) * np.fft.rfft(k, nfft), nfft)
+    return y[2 * r : x.size]
+
+
+@lru_cache(maxsize=1)
+def _smooth_sizes() -> np.ndarray:
+    """Sorted numbers 2^a 3^b 5^c up to 2**26: lengths the FFT handles fastest."""
+    limit, out, a = 1 << 26, [], 1
+    while a <= limit:
+        b = a
+        while b <= limit:
+            c = b
+            while c <= limit:
+                out.append(c)
+                c *= 5
+            b *= 3
+        a *= 2
+    return np.array(sorted(out), dtype=np.int64)
+
+
+def _fft_size(n: int) -> int:
+    """The smallest 5-smooth length >= n (n itself beyond 2**26)."""
+    sizes = _smooth_sizes()
+    i = int(np.searchsorted(sizes, n))
+    return int(sizes[i]) if i < sizes.size else n
 
 
 def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
@@ -1047,7 +1174,7 @@ def combine_elevation(distance_m, raw_dsm_m, gps_alt_m=None, params: ElevationPa
     if not valid.any():
         notes.append("no DSM given" if not have_dsm else "no valid DSM value on this trip")
         if gps is not None:
-            g, _ = _profile_grid(d, gps, params.for_gps(), grid, math.inf)
+            g, _ = _profile_grid(d, gps, _gps_params(params), grid, math.inf)
             h, source, filled_gps = g, "gps", float(d[-1] - d[0])
             notes.append("smoothed GPS altitude used")
         else:
@@ -1113,7 +1240,7 @@ def _gps_around(d, gps, params: ElevationParams, grid, lo: int, hi: int, span: i
     ``span`` cells (for the offsets) and the filters' reach (so that the values there
     are practically those of a whole-trip computation); NaN elsewhere."""
     step = grid[1] - grid[0]
-    params = params.for_gps()
+    params = _gps_params(params)
     reach = span + int(params.median_window_m / step) + int(4 * params.lowpass_sigma_m / step) + 2
     a, b = max(0, lo - reach), min(grid.size, hi + reach)
     i, j = np.searchsorted(d, grid[a], side="left"), np.searchsorted(d, grid[b - 1], side="right")
@@ -1121,6 +1248,12 @@ def _gps_around(d, gps, params: ElevationParams, grid, lo: int, hi: int, span: i
     g = np.full(grid.size, np.nan)
     g[a:b], _ = _profile_grid(d[i:j], gps[i:j], params, grid[a:b], math.inf)
     return g
+
+
+@lru_cache(maxsize=16)
+def _gps_params(params: ElevationParams) -> ElevationParams:
+    """``params.for_gps()``, made once per parameter set."""
+    return params.for_gps()
 
 
 def _gap_str(params: ElevationParams) -> str:

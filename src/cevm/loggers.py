@@ -85,7 +85,8 @@ import os
 import re
 import tomllib
 import zlib
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from functools import cached_property, lru_cache
 from pathlib import Path
 from typing import Any, Literal
 
@@ -354,8 +355,10 @@ class ParsedLog:
     ``source_line`` (1-based line in the file, int64), ``vehicle_id`` (str) and every
     canonical column the profile maps and the file has (float64, SI, NaN = no value),
     rows in file order. ``repairs`` lists every repair made while reading the file
-    (file-wide, so shared by the logs of a multi-vehicle file). ``sha256`` is the hex
-    digest of the file's raw bytes as stored on disk (compressed bytes for a .gz file).
+    (file-wide, so shared by the logs of a multi-vehicle file). ``raw_bytes`` are the
+    file's bytes as stored on disk (compressed bytes for a .gz file; shared by the logs
+    of a file) and ``sha256`` their hex digest, computed on first use (the ingest
+    pipeline hashes files itself, before reading them).
     """
 
     path: Path
@@ -365,7 +368,12 @@ class ParsedLog:
     metadata: dict[str, str]
     energy_sources: tuple[EnergySource, ...]
     repairs: list[str]
-    sha256: str
+    raw_bytes: bytes = field(default=b"", repr=False)
+
+    @cached_property
+    def sha256(self) -> str:
+        """Hex SHA-256 of ``raw_bytes``."""
+        return hashlib.sha256(self.raw_bytes).hexdigest()
 
 
 # ======================================================================================
@@ -688,10 +696,18 @@ def load_profiles(directory: str | Path | None = None, *, include_env: bool = Tr
 # ======================================================================================
 def _read_raw(path: Path) -> tuple[bytes, bytes]:
     """(raw bytes on disk, CSV bytes after gzip decompression if the magic bytes say so)."""
+    return _decompress(_read_bytes(path), path)
+
+
+def _read_bytes(path: Path) -> bytes:
     try:
-        raw = path.read_bytes()
+        return path.read_bytes()
     except OSError as exc:
         raise InputError(path, f"cannot read file: {exc.strerror or exc}") from None
+
+
+def _decompress(raw: bytes, path: Path) -> tuple[bytes, bytes]:
+    """(raw, CSV bytes): gunzipped if the magic bytes say so."""
     data = raw
     if raw[:2] == b"\x1f\x8b":
         try:
@@ -700,6 +716,9 @@ def _read_raw(path: Path) -> tuple[bytes, bytes]:
             raise InputError(path, f"corrupt gzip data: {exc}") from None
     return raw, data
 
+
+#: Bytes read from the start of a file to detect its profile.
+_HEAD_BYTES = 65536
 
 #: Bytes that never occur in a text CSV: C0 controls other than tab, LF, CR; and DEL.
 _BINARY_BYTES = bytes(b for b in range(32) if b not in (9, 10, 13)) + b"\x7f"
@@ -715,7 +734,7 @@ def _looks_binary(head: bytes) -> bool:
     return n_ctrl > 0.01 * len(sample)
 
 
-def _head_bytes(path: Path, n: int = 65536) -> bytes:
+def _head_bytes(path: Path, n: int = _HEAD_BYTES) -> bytes:
     """First ``n`` bytes of the (decompressed) file, for detection."""
     try:
         with open(path, "rb") as fh:
@@ -816,16 +835,34 @@ def detect_profile(path: str | Path, profiles: dict[str, Profile] | None = None)
     profiles = load_profiles() if profiles is None else profiles
     if not profiles:
         raise InputError(path, "no logger profiles loaded")
-    head = _head_bytes(path)
+    return _detect_in_head(path, _head_bytes(path), profiles)
+
+
+@lru_cache(maxsize=64)
+def _ascii_transparent(encoding: str) -> bool:
+    """Whether ``encoding`` decodes every ASCII byte to that character (utf-8, cp1252,
+    latin-1, ...; not utf-16 or utf-7), so that ASCII text needs no re-encoding."""
+    try:
+        return bytes(range(128)).decode(encoding) == "".join(map(chr, range(128)))
+    except (UnicodeDecodeError, LookupError):
+        return False
+
+
+def _detect_in_head(path: Path, head: bytes, profiles: dict[str, Profile]) -> Profile:
+    """:func:`detect_profile` on the first bytes ``head`` of the (decompressed) file."""
     if not head or head.isspace():
         raise InputError(path, "file is empty", line=1)
     if _looks_binary(head):
         raise InputError(path, "binary data, not a CSV text file", line=1)
     matches: list[Profile] = []
     seen_header: tuple[str, ...] = ()
+    ascii_head = head.isascii()
     for prof in profiles.values():
         try:
-            text = head.decode(prof.encoding, errors="replace").encode("utf-8")
+            if ascii_head and _ascii_transparent(prof.encoding):
+                text = head  # what decoding and re-encoding as UTF-8 would give
+            else:
+                text = head.decode(prof.encoding, errors="replace").encode("utf-8")
         except LookupError:
             continue
         if text.startswith(b"\xef\xbb\xbf"):
@@ -909,32 +946,48 @@ def _parse_codes(cp: np.ndarray, layout: _Layout) -> tuple[np.ndarray, np.ndarra
     """
     n = cp.shape[0]
     ok = np.ones(n, bool)
-    for p, ch in layout.literals:
-        ok &= cp[:, p] == ch
-    # one contiguous row per character position; unsigned (uint8 / uint32) so that
-    # non-digits wrap to large values
-    dig = np.ascontiguousarray((cp[:, :layout.width] - cp.dtype.type(48)).T)
+    if layout.literals:
+        lit_pos = np.array([p for p, _ in layout.literals], np.intp)
+        lit_chr = np.array([ch for _, ch in layout.literals], cp.dtype)
+        ok &= (cp[:, lit_pos] == lit_chr).all(axis=1)
+    values: dict[str, np.ndarray] = {}
+    if layout.fields:
+        spans = list(layout.fields.values())
+        pos = np.concatenate([np.arange(p, p + w) for p, w in spans])
+        # unsigned (uint8 / uint32) so that non-digits wrap to large values
+        dig = cp[:, pos] - cp.dtype.type(48)
+        ok &= (dig <= 9).all(axis=1)
+        # every field's number from its digits' place values, in integer arithmetic (a
+        # float matrix product would start a BLAS thread pool for a handful of columns)
+        dig = dig.astype(np.int64)
+        nums = np.empty((dig.shape[0], len(spans)), dtype=np.int64)
+        k = 0
+        for j, (_, w) in enumerate(spans):  # a few fields, not rows
+            nums[:, j] = dig[:, k:k + w] @ (10 ** np.arange(w - 1, -1, -1, dtype=np.int64))
+            k += w
+        values = {d: nums[:, j] for j, d in enumerate(layout.fields)}
 
     def num(d: str, default: int) -> np.ndarray:
-        if d not in layout.fields:
-            return np.full(n, default, np.int64)
-        p, w = layout.fields[d]
-        acc = np.zeros(n, np.int64 if w > 4 else np.int32)
-        for k in range(p, p + w):  # loop over digits, not rows
-            digit = dig[k]
-            ok[:] &= digit <= 9
-            acc *= 10
-            acc += digit
-        return acc.astype(np.int64)
+        got = values.get(d)
+        return np.full(n, default, np.int64) if got is None else got
 
     year, month, day = num("%Y", 1900), num("%m", 1), num("%d", 1)
     hour, minute, sec = num("%H", 0), num("%M", 0), num("%S", 0)
-    ok &= (month >= 1) & (month <= 12) & (day >= 1) & (year >= 1678) & (year <= 2261)  # int64 ns range
     ok &= (hour <= 23) & (minute <= 59) & (sec <= 59)
-    month = np.where(ok, month, 1)
-    leap = (year % 4 == 0) & ((year % 100 != 0) | (year % 400 == 0))
-    ok &= day <= _DAYS_IN_MONTH[month - 1] + (leap & (month == 2))  # e.g. 31/02 fails
-    ns = (_days_from_civil(year, month, day) * 86_400 + (hour * 60 + minute) * 60 + sec) * _NS_PER_S
+    # The date's checks and day number once per run of rows with one date (a log holds
+    # few dates). Rows rejected so far share key -1; the others hold digits only, so
+    # their fields are below 2**14 and the key is exact.
+    key = np.where(ok, (year << 28) | (month << 14) | day, -1)
+    first = np.flatnonzero(np.concatenate(([True], key[1:] != key[:-1]))) if n else np.zeros(0, np.intp)
+    y, m, d = year[first], month[first], day[first]
+    date_ok = (m >= 1) & (m <= 12) & (d >= 1) & (y >= 1678) & (y <= 2261)  # int64 ns range
+    m = np.where(date_ok, m, 1)
+    leap = (y % 4 == 0) & ((y % 100 != 0) | (y % 400 == 0))
+    date_ok &= d <= _DAYS_IN_MONTH[m - 1] + (leap & (m == 2))  # e.g. 31/02 fails
+    run_length = np.diff(np.append(first, n))
+    ok &= np.repeat(date_ok, run_length)
+    days = np.repeat(_days_from_civil(y, m, d), run_length)
+    ns = (days * 86_400 + (hour * 60 + minute) * 60 + sec) * _NS_PER_S
     if "%f" in layout.fields:
         ns += num("%f", 0) * 10 ** (9 - layout.fields["%f"][1])
     return np.where(ok, ns, _NAT), ok
@@ -1003,25 +1056,24 @@ _CHUNK_BYTES = 1 << 22  # 4 MiB: keeps temporaries in cache and avoids huge allo
 
 def _line_stats(b: np.ndarray, sep: int) -> tuple[np.ndarray, np.ndarray]:
     """(byte offset of the start of every line, number of ``sep`` bytes on it) of the
-    text ``b`` (uint8 view), computed in chunks (a loop over 4 MiB blocks, not rows)."""
+    text ``b`` (uint8 view), computed in chunks of whole lines of about 4 MiB (a loop
+    over blocks, not rows): counts per line by ``np.add.reduceat`` of the separator
+    mask, no array of separator positions."""
     parts = [np.zeros(1, np.int64)]
     for lo in range(0, len(b), _CHUNK_BYTES):
         parts.append(np.flatnonzero(b[lo:lo + _CHUNK_BYTES] == 10) + (lo + 1))
     starts = np.concatenate(parts)
     if starts[-1] >= len(b):
         starts = starts[:-1]
-    n_sep = np.zeros(len(starts), np.int64)
-    for lo in range(0, len(b), _CHUNK_BYTES):
-        hi = min(lo + _CHUNK_BYTES, len(b))
-        pos = np.flatnonzero(b[lo:hi] == sep) + lo
-        i0, i1 = np.searchsorted(starts, [lo, hi])  # lines starting inside the chunk: i0..i1-1
-        bounds = np.concatenate(([lo], starts[i0:i1], [hi]))
-        counts = np.diff(np.searchsorted(pos, bounds))  # first: tail of the line started before
-        if i0 == 0 or starts[i0 - 1] == lo:  # no line continues into this chunk
-            counts = counts[1:]
-            n_sep[i0:i1] += counts
-        else:
-            n_sep[i0 - 1:i1] += counts
+    n_sep = np.empty(len(starts), np.int64)
+    i, n = 0, len(starts)
+    while i < n:  # lines i..j-1, bytes starts[i]..hi
+        lo = int(starts[i])
+        j = max(int(np.searchsorted(starts, lo + _CHUNK_BYTES, side="left")), i + 1)
+        hi = int(starts[j]) if j < n else len(b)
+        is_sep = (b[lo:hi] == sep).view(np.uint8)
+        n_sep[i:j] = np.add.reduceat(is_sep, starts[i:j] - lo, dtype=np.int32)
+        i = j
     return starts, n_sep
 
 
@@ -1246,9 +1298,19 @@ def read_log(path: str | Path, profile: Profile | str | None = None,
         ``truncated_last_line = "error"``.
     """
     path = Path(path)
-    prof = _resolve_profile(path, profile, profiles)
-    raw, data = _read_raw(path)
-    sha = hashlib.sha256(raw).hexdigest()
+    if profile is None:  # detect from the bytes read for the file itself (one read)
+        profiles = load_profiles() if profiles is None else profiles
+        if not profiles:
+            raise InputError(path, "no logger profiles loaded")
+        raw = _read_bytes(path)
+        if raw[:2] == b"\x1f\x8b":  # gzip: detect from the decompressed head, as before
+            prof = detect_profile(path, profiles)
+        else:
+            prof = _detect_in_head(path, raw[:_HEAD_BYTES], profiles)
+        raw, data = _decompress(raw, path)
+    else:
+        prof = _resolve_profile(path, profile, profiles)
+        raw, data = _read_raw(path)
     if not data or data.isspace():  # isspace stops at the first other byte
         raise InputError(path, "file is empty", line=1)
     data = _to_utf8(data, prof, path)
@@ -1330,10 +1392,14 @@ def read_log(path: str | Path, profile: Profile | str | None = None,
         df = _read_table(body, path, prof, unique_names, used, num_cols, text_cols, hdr.line)
     lines = first_line + np.arange(len(df), dtype=np.int64)
 
-    # blank lines and rows without any used value
-    empty = df.isna().all(axis=1).to_numpy().copy()
+    # blank lines and rows without any used value (with the fast time column, only a
+    # blank line can be one: every other line holds a time)
     if fast is not None:
-        empty &= fast.blank
+        empty = fast.blank.copy()
+        if empty.any():
+            empty &= df.isna().all(axis=1).to_numpy()
+    else:
+        empty = df.isna().all(axis=1).to_numpy().copy()
     if empty.any():
         repairs.append(f"read: {int(empty.sum())} blank rows (no value in any used column) skipped: {_lines_summary(lines[empty])}")
         df = df.loc[~empty].reset_index(drop=True)
@@ -1413,15 +1479,18 @@ def read_log(path: str | Path, profile: Profile | str | None = None,
         raise InputError(path, "no position and no speed values: cannot derive a drive cycle "
                                f"(profile {prof.name!r} looks for {', '.join(cands) or 'none'})")
 
-    # --- split per vehicle
-    frame_all = pd.DataFrame(out)
+    # --- split per vehicle: one frame per vehicle, built around the arrays (no copy)
     logs = []
     for k, vname in enumerate(vehicles):
-        sel = codes == k
-        fr = frame_all.loc[sel].reset_index(drop=True) if len(vehicles) > 1 else frame_all
+        if len(vehicles) > 1:
+            sel = codes == k
+            arrays = {c: a[sel] for c, a in out.items()}
+        else:
+            arrays = out
+        fr = pd.DataFrame(arrays, copy=False)
         fr.insert(2, "vehicle_id", vname)
-        sources = tuple(_energy_source(e, fr, maps) for e in prof.energy if _has_energy_data(e, fr))
-        logs.append(ParsedLog(path, prof.name, vname, fr, dict(metadata), sources, list(repairs), sha))
+        sources = tuple(_energy_source(e, fr, maps) for e in prof.energy if _has_energy_data(e, arrays))
+        logs.append(ParsedLog(path, prof.name, vname, fr, dict(metadata), sources, list(repairs), raw))
     return logs
 
 
@@ -1441,6 +1510,10 @@ def _read_table(body: bytes, path: Path, prof: Profile, names: list[str], usecol
     dtype.update({c: object for c in text_cols if c in usecols})
     if all_cols:
         dtype.update({c: object for c in names if c not in usecols})
+    elif len(na_values) == len(usecols) and all(v is _NUMERIC_NA for v in na_values.values()):
+        # only numeric columns: the same settings given once (per-column dicts cost
+        # pandas a third of the parse time on a 5000-row file)
+        na_values, dtype = _NUMERIC_NA, np.dtype(np.float64)  # type: ignore[assignment]
     try:
         try:
             df = pd.read_csv(io.BytesIO(body), dtype=dtype, na_values=na_values, **kw)
@@ -1473,13 +1546,14 @@ def _read_table(body: bytes, path: Path, prof: Profile, names: list[str], usecol
     return df
 
 
-def _has_energy_data(e: EnergySpec, fr: pd.DataFrame) -> bool:
-    """Whether the frame has any value of the source (both factors for a virtual one)."""
+def _has_energy_data(e: EnergySpec, arrays: dict[str, np.ndarray]) -> bool:
+    """Whether the canonical columns ``arrays`` hold any value of the source (both
+    factors for a virtual one)."""
     if e.column in _VIRTUAL_COLUMNS:
         a, b = _VIRTUAL_COLUMNS[e.column][0]
-        return a in fr.columns and b in fr.columns and bool(
-            (np.isfinite(fr[a].to_numpy()).any() and np.isfinite(fr[b].to_numpy()).any()))
-    return e.column in fr.columns and bool(np.isfinite(fr[e.column].to_numpy()).any())
+        return a in arrays and b in arrays and bool(
+            (np.isfinite(arrays[a]).any() and np.isfinite(arrays[b]).any()))
+    return e.column in arrays and bool(np.isfinite(arrays[e.column]).any())
 
 
 def _energy_source(e: EnergySpec, fr: pd.DataFrame, maps: list[ColumnMap]) -> EnergySource:
