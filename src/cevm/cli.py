@@ -72,18 +72,30 @@ def ingest(
     force: Annotated[bool, typer.Option(help="Re-ingest files even when unchanged.")] = False,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar and no table: failures and one summary line only.")] = False,
     log_json: Annotated[bool, typer.Option(help="One JSON object per file on stdout, then a summary object (for cron and scripts).")] = False,
+    workers: Annotated[
+        Optional[int], typer.Option("--workers", "-w", min=1, help="Worker processes, one file per task (default: the machine's cores; 1: serial, in this process).")
+    ] = None,
+    scheduler: Annotated[
+        Optional[str], typer.Option(help="Dask scheduler address (tcp://HOST:8786): run the per-file work on that cluster (pip install 'cevm[dask]'); the workers must read the log files at the same paths, and the DSM.")
+    ] = None,
 ) -> None:
     """Read logger CSV exports into the trip store: clean trips, DSM elevation, measured
     consumption and drive-cycle vectors.
 
+    Files are processed in parallel (--workers, or a Dask cluster with --scheduler); this
+    process alone writes the store, in input order, so the result is that of a serial run.
     Each failed file is reported on stderr (file, line, column, why) as it happens and
     skipped; the rest is stored. Exit 0 if every file was ingested or unchanged, 1 if any
-    failed, 2 for bad options (unknown profile, unreadable DSM)."""
+    failed, 2 for bad options (unknown profile, unreadable DSM, unreachable scheduler)."""
     import json
 
     from cevm.ingest import IngestOptions
     from cevm.ingest import ingest as run_ingest
+    from cevm.parallel import make_executor
     from cevm.store import TripStore, resolve_store_path
+
+    if workers is not None and scheduler is not None:
+        raise _fail("give --workers (local processes) or --scheduler (a Dask cluster), not both")
 
     options = IngestOptions(dsm=dsm, profile=profile, profiles_dir=str(profiles_dir) if profiles_dir else None, force=force)
     store_path = resolve_store_path(store)
@@ -112,8 +124,8 @@ def ingest(
             progress.update(task, advance=1, description=Path(fr.path).name)
 
     try:
-        with TripStore.open(store_path) as st:
-            report = run_ingest(paths, st, options, on_file=on_file, on_start=on_start)
+        with make_executor(workers, scheduler) as executor, TripStore.open(store_path) as st:
+            report = run_ingest(paths, st, options, on_file=on_file, on_start=on_start, executor=executor)
     except CevmError as exc:
         raise _fail(str(exc)) from None
     finally:

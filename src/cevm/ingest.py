@@ -10,6 +10,11 @@ DSM, and returns everything to store; it never writes): read with a logger profi
 transaction per file, so a crash mid-file leaves the store as it was, an unchanged file
 is skipped, a changed file replaces its trips, and a bad file is reported and skipped
 while the batch goes on (its previously stored trips are kept).
+
+Parallel runs (:mod:`cevm.parallel`): the same :func:`process_file` runs in worker
+processes or on a Dask cluster; the outcomes come back to :func:`ingest`, which writes
+them in input order, so the store ends up exactly as after a serial run. A worker opens
+the DSM once (:func:`worker_sampler`), not once per file.
 """
 
 from __future__ import annotations
@@ -20,6 +25,7 @@ import hashlib
 import time
 import traceback
 from collections.abc import Callable, Iterable
+from contextlib import closing
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -30,6 +36,7 @@ from cevm.cycle import CR0_DEFAULT, drive_cycle_vector
 from cevm.elevation import DsmSampler, ElevationParams, trip_elevation
 from cevm.errors import CevmError, InputError
 from cevm.loggers import Profile, load_profiles, read_log
+from cevm.parallel import Executor, SerialExecutor, Task, TaskResult, worker_cache
 from cevm.store import TripStore
 from cevm.trip import Trip
 
@@ -187,6 +194,11 @@ def process_file(
 ) -> FileOutcome:
     """Read, clean, add elevation and compute vectors for one file; never raises for
     bad input: the outcome carries the error (file, line, column, why).
+
+    The one task of every ingest, serial, in a process pool or on a Dask cluster.
+    ``profiles``: the logger profiles (None: :func:`~cevm.loggers.load_profiles`).
+    ``sampler``: an open sampler of ``options.dsm``; None with ``options.dsm`` set: this
+    worker's own, opened on first use and kept (:func:`worker_sampler`).
     ``sha256`` is the file's hash if the caller has it already."""
     path = Path(path)
     stage: dict[str, float] = {}
@@ -197,6 +209,8 @@ def process_file(
     except OSError as exc:
         return FileOutcome(str(path), None, None, None, error=f"{path}: cannot read: {exc.strerror}")
     try:
+        if sampler is None and options.dsm is not None:
+            sampler = worker_sampler(options.dsm)
         t0 = time.perf_counter()
         logs = read_log(path, options.profile, profiles)
         stage["read"] = time.perf_counter() - t0
@@ -255,6 +269,12 @@ def open_sampler(dsm: str | None) -> DsmSampler | None:
         raise InputError(dsm, f"cannot open the DSM: {exc}") from None
 
 
+def worker_sampler(dsm: str) -> DsmSampler:
+    """This worker's (process and thread) sampler of ``dsm``, opened on first use and
+    kept for the next files (:func:`cevm.parallel.worker_cache`)."""
+    return worker_cache(("cevm.ingest.DsmSampler", dsm), lambda: open_sampler(dsm))
+
+
 def ingest(
     inputs: Iterable[str | Path],
     store: TripStore,
@@ -262,11 +282,18 @@ def ingest(
     *,
     on_file: Callable[[FileReport], None] | None = None,
     on_start: Callable[[int], None] | None = None,
+    executor: Executor | None = None,
 ) -> IngestReport:
     """Ingest files into ``store`` (the single writer); return the run's report.
 
     ``on_start(n_files)`` is called once the inputs are expanded, ``on_file(report)``
-    after each file (for progress bars and JSON logs).
+    after each file, in input order (for progress bars and JSON logs).
+
+    ``executor`` runs :func:`process_file` on each file to (re-)ingest (default None:
+    serially in this thread; see :func:`cevm.parallel.make_executor`); it stays open
+    for the caller to reuse and close. The hashing of files and the store writes stay
+    here, and results are written in input order, so the store holds the same after a
+    serial or a parallel run. A file whose worker died twice is failed, as a bad file.
     """
     t_start = time.perf_counter()
     files, missing = discover(inputs)
@@ -281,16 +308,23 @@ def ingest(
     profiles = load_profiles(options.profiles_dir) if options.profiles_dir else load_profiles()
     if options.profile is not None and options.profile not in profiles:
         raise InputError(options.profile, f"unknown logger profile; available: {', '.join(sorted(profiles))}")
-    sampler = open_sampler(options.dsm)
+    sampler = open_sampler(options.dsm)  # here too: a bad DSM stops the run before any work
+    if executor is None or len(files) < 2:  # one file cannot run in parallel
+        executor = SerialExecutor()
+    if not executor.inline and sampler is not None:
+        sampler.close()  # workers open their own
+        sampler = None
     run_id = store.start_run()
     try:
-        for path in files:
-            t0 = time.perf_counter()
-            fr = _ingest_one(path, store, options, profiles, sampler, report)
-            fr.seconds = time.perf_counter() - t0
-            report.files.append(fr)
-            if on_file:
-                on_file(fr)
+        jobs = (_prepare(path, store, options, profiles, sampler) for path in files)
+        with closing(executor.run(process_file, jobs)) as results:  # closing: cancels what is left on errors
+            for res in results:
+                t0 = time.perf_counter()
+                fr = _write_result(res, store, options, report)
+                fr.seconds += time.perf_counter() - t0
+                report.files.append(fr)
+                if on_file:
+                    on_file(fr)
     finally:
         if sampler is not None:
             sampler.close()
@@ -299,15 +333,42 @@ def ingest(
     return report
 
 
-def _ingest_one(path: Path, store: TripStore, options: IngestOptions, profiles, sampler,
-                report: IngestReport) -> FileReport:
+def _prepare(path: Path, store: TripStore, options: IngestOptions, profiles, sampler) -> FileReport | Task:
+    """In the writer, before the task: hash the file and skip it if unchanged; else the
+    task's arguments (``sampler`` is None for workers: they open their own)."""
+    t0 = time.perf_counter()
     try:
         sha = file_sha256(path)
     except OSError as exc:
-        return FileReport(str(path), "failed", error=f"{path}: cannot read: {exc.strerror}")
+        return FileReport(str(path), "failed", error=f"{path}: cannot read: {exc.strerror}",
+                          seconds=time.perf_counter() - t0)
     if not options.force and not store.needs_ingest(path, sha):
-        return FileReport(str(path), "unchanged")
-    out = process_file(path, options, profiles, sampler, sha256=sha)
+        return FileReport(str(path), "unchanged", seconds=time.perf_counter() - t0)
+    return Task(str(path), (path, options, profiles, sampler, sha))
+
+
+def _write_result(res: TaskResult, store: TripStore, options: IngestOptions, report: IngestReport) -> FileReport:
+    """Write one task's outcome to the store (or report the file that needed no task);
+    ``seconds`` is the worker's time, the writer's is added by the caller."""
+    if res.task is None:
+        return res.value
+    path, sha = Path(res.task.key), res.task.args[4]
+    if not res.ok:  # the task itself failed: its worker died max_attempts times, or it raised
+        error = f"{path}: {res.error}"
+        try:
+            st = path.stat()
+            size, mtime = st.st_size, st.st_mtime
+        except OSError:
+            size = mtime = None
+        store.record_failure(path, error, sha256=sha, size_bytes=size, mtime_s=mtime)
+        return FileReport(str(path), "failed", error=error)
+    fr = _store_outcome(path, res.value, store, options, report)
+    fr.seconds = res.seconds
+    return fr
+
+
+def _store_outcome(path: Path, out: FileOutcome, store: TripStore, options: IngestOptions,
+                   report: IngestReport) -> FileReport:
     for k, v in out.stage_s.items():
         report.stage_s[k] = report.stage_s.get(k, 0.0) + v
     report.rows += out.n_rows

@@ -1,0 +1,345 @@
+"""Benchmark of parallel ingest: serial vs a local process pool vs a Dask LocalCluster.
+
+    python benchmarks/bench_ingest_parallel.py [--quick] [--vehicles N] [--days D]
+                                               [--workers W] [--repeat R] [--no-dask]
+                                               [--days-per-file K]
+
+Generates a fleet of srf logs with ``cevm.samplegen.fleet_for_benchmark`` (default 40
+vehicles x 5 days, ~1e6 samples, with its DSM tiles; ``--quick``: 8 x 2), then ingests
+it into a fresh store with :func:`cevm.ingest.ingest`, DSM lookup included:
+
+- ``serial``: one process (:class:`~cevm.parallel.SerialExecutor`, ``--workers 1``),
+  single-threaded BLAS like the workers (set before numpy loads);
+- ``pool``: ``W`` worker processes (:class:`~cevm.parallel.ProcessExecutor`), default 2;
+  ``pool warm``: the same workers again (DSM samplers open, imports done: the steady
+  state of a long run);
+- ``dask``: a LocalCluster of ``W`` worker processes x 1 thread on 127.0.0.1
+  (:class:`~cevm.parallel.DaskExecutor`), started before the clock starts; ``dask
+  warm``: the same workers again;
+- ``2 x serial``: the fleet split in two halves ingested by two independent serial
+  processes at once, into two stores: what this machine gives two processes running
+  this workload with no executor, no single writer and no pickling at all. It is the
+  ceiling against which the pool's overhead is judged.
+
+``--days-per-file K`` merges K days of a vehicle into one file, for tasks K times
+bigger (a sample-generator vehicle-day is ~5,000 samples, ~25 ms of work; a real bus
+logging 16 h at 1 Hz gives 57,600 samples a day).
+
+Every run starts cold (DSM blocks not yet read), as a ``cevm ingest`` command does: a
+new pool each time (the pool's start-up, ~30 ms once the forkserver runs, is counted;
+the forkserver's own start, ~0.5 s once per command, is printed apart), and Dask workers
+restarted before each run (not counted: a cluster outlives the runs). Each mode runs
+``R`` times interleaved (default 2, ``--quick``: 1); the best wall time
+is shown, and the medians. Samples/s, the speed-up and the efficiency (speed-up / W) are against the
+serial run of the same invocation. Also printed: the CPU seconds used by this process
+tree (psutil, if installed) and by the whole machine, with the hypervisor's steal time
+(/proc/stat): other programs on a shared machine show up there. The stores of the
+three modes are compared (trips, vectors and profiles must be identical).
+
+Targets (issue 9): pool >= 1.7x the serial throughput on 2 cores; Dask overhead under
+15 % against the pool at this size.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sqlite3
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+# One BLAS thread everywhere, as the pool and Dask workers have (cevm.parallel.WORKER_ENV):
+# the serial baseline is then one core, and the "2 x serial" children do not spin
+# OpenBLAS threads against each other.
+for _k in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
+    os.environ.setdefault(_k, "1")
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "src"))
+
+from cevm.ingest import IngestOptions, ingest  # noqa: E402
+from cevm.parallel import DaskExecutor, ProcessExecutor, SerialExecutor, Task, local_dask_cluster  # noqa: E402
+from cevm.store import TripStore  # noqa: E402
+
+try:
+    import psutil
+except ImportError:  # CPU accounting is optional
+    psutil = None
+
+
+# ------------------------------------------------------------------------ accounting
+
+
+def machine_ticks() -> dict:
+    """Cumulative CPU time of the whole machine [s] from /proc/stat (Linux)."""
+    try:
+        fields = [int(x) for x in Path("/proc/stat").read_text().splitlines()[0].split()[1:]]
+    except OSError:
+        return {}
+    hz = os.sysconf("SC_CLK_TCK")
+    user, nice, system, idle, iowait, irq, softirq, steal = (fields + [0] * 8)[:8]
+    return {"busy": (user + nice + system + irq + softirq) / hz, "idle": (idle + iowait) / hz, "steal": steal / hz}
+
+
+def tree_cpu_s() -> dict[int, float]:
+    """CPU seconds of this process and of each live descendant (pool and Dask
+    workers), by pid."""
+    if psutil is None:
+        return {}
+    me = psutil.Process()
+    out = {}
+    for p in [me, *me.children(recursive=True)]:
+        try:
+            t = p.cpu_times()
+            out[p.pid] = t.user + t.system
+        except psutil.Error:
+            pass
+    return out
+
+
+class Meter:
+    def __enter__(self):
+        self.t0, self.cpu0, self.m0 = time.perf_counter(), tree_cpu_s(), machine_ticks()
+        return self
+
+    def stop(self) -> None:  # before the workers exit: their CPU time is read from them
+        self.wall = time.perf_counter() - self.t0
+        cpu1 = tree_cpu_s()
+        self.main_cpu = cpu1.get(os.getpid(), float("nan")) - self.cpu0.get(os.getpid(), float("nan"))
+        self.cpu = sum(v - self.cpu0.get(k, 0.0) for k, v in cpu1.items()) if cpu1 else float("nan")
+        m1 = machine_ticks()
+        self.machine = {k: m1[k] - self.m0[k] for k in m1}
+
+    def __exit__(self, *exc):
+        if not hasattr(self, "wall"):
+            self.stop()
+
+
+# --------------------------------------------------------------------------- the runs
+
+
+def run_ingest(files, store: Path, dsm: str, executor) -> tuple[dict, Meter]:
+    with TripStore(store) as st, Meter() as m:
+        report = ingest(files, st, IngestOptions(dsm=dsm), executor=executor)
+        m.stop()
+    return report.summary(), m
+
+
+def run_two_serial(files, stores: list[Path], dsm: str) -> tuple[int, Meter]:
+    """Two independent serial ingest processes on the two halves of ``files``, started
+    together once both have imported cevm; their CPU time is what they report."""
+    halves = [files[0::2], files[1::2]]
+    procs = [subprocess.Popen([sys.executable, __file__, "--child", str(s), dsm, *map(str, h)],
+                              stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True) for s, h in zip(stores, halves)]
+    for p in procs:
+        assert p.stdout.readline().strip() == "ready"
+    with Meter() as m:
+        for p in procs:
+            p.stdin.write("go\n")
+            p.stdin.flush()
+        outs = [json.loads(p.communicate()[0]) for p in procs]
+        m.stop()
+    if any(p.returncode for p in procs):
+        raise SystemExit("a serial child failed")
+    m.cpu = sum(o["cpu_s"] for o in outs)
+    m.main_cpu = float("nan")
+    return sum(o["samples"] for o in outs), m
+
+
+def child(argv: list[str]) -> None:
+    store, dsm, *files = argv
+    print("ready", flush=True)
+    sys.stdin.readline()
+    cpu0 = time.process_time()
+    with TripStore(store) as st:
+        report = ingest(files, st, IngestOptions(dsm=dsm), executor=SerialExecutor())
+    print(json.dumps({**report.summary(), "cpu_s": time.process_time() - cpu0}))
+
+
+def store_content(path: Path) -> tuple:
+    con = sqlite3.connect(path)
+    try:
+        return (con.execute("SELECT * FROM trips ORDER BY trip_id").fetchall(),
+                con.execute("SELECT * FROM trip_blobs ORDER BY trip_id").fetchall())
+    finally:
+        con.close()
+
+
+def generate(outdir: Path, n_vehicles: int, n_days: int) -> tuple[list[Path], str]:
+    try:
+        from cevm.samplegen import fleet_for_benchmark
+    except ImportError:
+        raise SystemExit("cevm.samplegen.fleet_for_benchmark is needed to generate the fleet") from None
+    t0 = time.perf_counter()
+    truth = fleet_for_benchmark(n_vehicles, n_days, outdir / "fleet", dsm_dir=outdir / "dsm")
+    files = sorted((outdir / "fleet").rglob("*.csv"))
+    print(f"fleet: {n_vehicles} vehicles x {n_days} days = {len(files)} srf files, {truth['rows']:,} rows, "
+          f"{truth['bytes'] / 1e6:.0f} MB; {len(truth['dsm_tiles'])} DSM tiles "
+          f"(generated in {time.perf_counter() - t0:.1f} s)")
+    return files, str(outdir / "dsm")
+
+
+def merge_days(files: list[Path], per_file: int, outdir: Path) -> list[Path]:
+    """Bigger tasks: ``per_file`` consecutive days of a vehicle in one srf file (the
+    first day's header, then every day's rows), as a logger that uploads weekly makes."""
+    outdir.mkdir()
+    by_vehicle: dict[str, list[Path]] = {}
+    for f in files:
+        by_vehicle.setdefault(f.name.split("_")[0], []).append(f)
+    merged = []
+    for vid, days in by_vehicle.items():
+        for k in range(0, len(days), per_file):
+            group = days[k : k + per_file]
+            parts = []
+            for j, f in enumerate(group):
+                lines = f.read_text().splitlines(keepends=True)
+                head = next(i for i, ln in enumerate(lines) if not ln.startswith("#")) + 1  # comments + column names
+                parts.extend(lines if j == 0 else lines[head:])
+            out = outdir / f"{vid}_{k // per_file:03d}.csv"
+            out.write_text("".join(parts))
+            merged.append(out)
+    print(f"merged into {len(merged)} files of {per_file} days each")
+    return sorted(merged)
+
+
+def line(name: str, samples: int, m: Meter, serial_rate: float | None, workers: int) -> float:
+    rate = samples / m.wall
+    extra = ""
+    if serial_rate:
+        speedup = rate / serial_rate
+        extra = f"  x{speedup:4.2f}  eff {100 * speedup / workers:3.0f} %"
+    mach = m.machine
+    others = mach.get("busy", float("nan")) - m.cpu
+    print(f"  {name:<11} {m.wall:7.2f} s  {rate / 1e3:7.0f} k samples/s{extra:<22}"
+          f" cpu ours {m.cpu:5.2f} s (this process {m.main_cpu:4.2f}), machine busy {mach.get('busy', float('nan')):6.2f} s "
+          f"(others ~{others:5.2f}), steal {mach.get('steal', float('nan')):4.2f} s")
+    return rate
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="8 vehicles x 2 days, one repeat")
+    ap.add_argument("--vehicles", type=int, default=None)
+    ap.add_argument("--days", type=int, default=None)
+    ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--repeat", type=int, default=None)
+    ap.add_argument("--no-dask", action="store_true")
+    ap.add_argument("--days-per-file", type=int, default=1,
+                    help="merge this many days of a vehicle into one file: bigger tasks (default 1)")
+    ap.add_argument("--child", nargs=argparse.REMAINDER, help=argparse.SUPPRESS)
+    args = ap.parse_args()
+    if args.child is not None:
+        return child(args.child)
+    n_veh = args.vehicles or (8 if args.quick else 40)
+    n_days = args.days or (2 if args.quick else 5)
+    repeat = args.repeat or (1 if args.quick else 2)
+    w = args.workers
+    dask_ok = not args.no_dask
+    if dask_ok:
+        try:
+            import distributed  # noqa: F401
+        except ImportError:
+            print("(distributed not installed: no Dask run; pip install 'cevm[dask]')")
+            dask_ok = False
+    print(f"machine: {os.cpu_count()} CPUs; load average before: {os.getloadavg()[0]:.2f}")
+
+    with tempfile.TemporaryDirectory(prefix="cevm-bench-par-") as tmp:
+        tmp = Path(tmp)
+        files, dsm = generate(tmp, n_veh, n_days)
+        if args.days_per_file > 1:
+            files = merge_days(files, args.days_per_file, tmp / "merged")
+        pool = ProcessExecutor(w)
+        t0 = time.perf_counter()
+        list(pool.run(abs, [Task(str(i), (i,)) for i in range(w)]))  # forkserver + preload
+        print(f"process pool start-up (forkserver importing cevm, first use in a process): "
+              f"{time.perf_counter() - t0:.2f} s, not counted below")
+        cluster = client_ex = None
+        if dask_ok:
+            t0 = time.perf_counter()
+            cluster = local_dask_cluster(w, 1, processes=True)
+            client_ex = DaskExecutor(cluster.scheduler_address)
+            list(client_ex.run(abs, [Task(str(i), (i,)) for i in range(w)]))
+            print(f"Dask LocalCluster start-up ({w} workers x 1 thread): {time.perf_counter() - t0:.2f} s, not counted")
+
+        best: dict[str, tuple] = {}
+        walls: dict[str, list[float]] = {}
+        stage = {}
+        stores = {}
+        for rep in range(repeat):
+            modes = ["serial", "pool", "pool warm"] + (["dask", "dask warm"] if dask_ok else [])
+            for name in modes:
+                # every run starts cold, as a cevm ingest command does: a new pool (the
+                # forkserver stays: its start-up is printed above) and restarted Dask
+                # workers, so no worker keeps a DSM sampler warm from the previous run
+                if name == "pool":
+                    pool.close()
+                    ex = pool = ProcessExecutor(w)
+                elif name == "dask":
+                    client_ex.client.restart()
+                    ex = client_ex
+                elif name == "pool warm":  # the same workers again: their DSM samplers are open
+                    ex = pool
+                elif name == "dask warm":
+                    ex = client_ex
+                else:
+                    ex = SerialExecutor()
+                store = tmp / f"{name.replace(' ', '-')}-{rep}.sqlite"
+                summary, m = run_ingest(files, store, dsm, ex)
+                if summary["failed"]:
+                    raise SystemExit(f"{name}: {summary['failed']} files failed")
+                stores[name] = store
+                if name == "serial":
+                    stage = summary["stage_s"]
+                walls.setdefault(name, []).append(m.wall)
+                if name not in best or m.wall < best[name][1].wall:
+                    best[name] = (summary["samples"], m)
+            samples2, m2 = run_two_serial(files, [tmp / f"half{k}-{rep}.sqlite" for k in range(2)], dsm)
+            walls.setdefault("2 x serial", []).append(m2.wall)
+            if "2 x serial" not in best or m2.wall < best["2 x serial"][1].wall:
+                best["2 x serial"] = (samples2, m2)
+
+        print(f"\ningest of {best['serial'][0]:,} samples, best of {repeat} (wall; throughput; vs serial):")
+        serial_rate = line("serial", *best["serial"], None, 1)
+        rates = {}
+        for name in ("pool", "pool warm", "dask", "dask warm", "2 x serial"):
+            if name in best:
+                rates[name] = line(name.replace("pool", f"pool x{w}"), *best[name], serial_rate, w)
+        total_stage = sum(stage.values())
+        print(f"\nserial stages [s]: " + ", ".join(f"{k} {v:.2f}" for k, v in stage.items())
+              + f"; the writer's share (store) {100 * stage.get('store', 0) / max(total_stage, 1e-9):.0f} %")
+        if "pool" in rates:
+            ceiling = rates.get("2 x serial", float("nan")) / serial_rate
+            print(f"pool: x{rates['pool'] / serial_rate:.2f} vs serial, x{rates['pool warm'] / serial_rate:.2f} with warm "
+                  f"workers (target >= 1.7 on 2 cores); "
+                  f"two independent serial processes reach x{ceiling:.2f} on this machine now")
+        if repeat > 1:
+            med = {k: statistics.median(v) for k, v in walls.items()}
+            print("median walls [s]: " + ", ".join(f"{k} {v:.2f}" for k, v in med.items())
+                  + f"; pool x{med['serial'] / med['pool']:.2f}, warm x{med['serial'] / med['pool warm']:.2f}"
+                  + (f"; dask overhead vs pool {100 * (med['dask'] / med['pool'] - 1):+.0f} %, warm "
+                     f"{100 * (med['dask warm'] / med['pool warm'] - 1):+.0f} %" if "dask" in med else ""))
+        if "dask" in rates:
+            per_task_ms = 1e3 * (best["dask"][1].wall - best["pool"][1].wall) / len(files) * w
+            cpu_ms = 1e3 * (best["dask"][1].cpu - best["pool"][1].cpu) / len(files)
+            print(f"dask overhead vs the pool: {100 * (rates['pool'] / rates['dask'] - 1):+.0f} % cold, "
+                  f"{100 * (rates['pool warm'] / rates['dask warm'] - 1):+.0f} % warm (target < 15 %); cold: "
+                  f"{per_task_ms:.1f} ms of a worker slot and {cpu_ms:.1f} ms of CPU per file-task of "
+                  f"{best['serial'][0] / len(files):,.0f} samples ({1e3 * best['serial'][1].wall / len(files):.0f} ms serial)")
+        print(f"per-core throughput (serial): {serial_rate / 1e3:.0f} k samples/s")
+        same = [n for n in ("pool", "dask") if n in stores and store_content(stores[n]) == store_content(stores["serial"])]
+        print(f"stores identical to the serial one: {', '.join(same) or 'none'}"
+              f"{'' if len(same) == len([n for n in ('pool', 'dask') if n in stores]) else '  <-- MISMATCH'}")
+        print(f"load average after: {os.getloadavg()[0]:.2f}")
+        pool.close()
+        if client_ex is not None:
+            client_ex.close()
+            cluster.close()
+
+
+if __name__ == "__main__":
+    main()

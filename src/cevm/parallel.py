@@ -1,0 +1,628 @@
+"""Run one task function over many inputs: in this process, on a local process pool, or
+on a Dask distributed cluster, with one driver and the same results.
+
+The caller (e.g. :func:`cevm.ingest.ingest`, the store's single writer) gives a task
+function and an iterable of :class:`Task` items (``fn(*task.args)`` is one unit of work,
+such as one log file) and consumes :class:`TaskResult` objects **in input order**, while
+the tasks run elsewhere. Items that are not a :class:`Task` pass through unchanged (as
+results with ``attempts == 0``), so a caller can mix work it resolved itself (an
+unchanged file) with work to do and still see everything in order.
+
+Executors (thin wrappers, no home-made scheduling):
+
+* :class:`SerialExecutor`: runs each task inline, one at a time (``--workers 1``).
+* :class:`ProcessExecutor`: a :class:`concurrent.futures.ProcessPoolExecutor` with
+  ``forkserver`` workers (no fork of a process with threads).
+* :class:`DaskExecutor`: a :class:`distributed.Client` (``pip install cevm[dask]``);
+  the scheduler places tasks, results come back to the client.
+
+:func:`make_executor` picks one from ``--workers`` / ``--scheduler``.
+
+Faults
+    A task whose worker process dies is run again elsewhere; after ``max_attempts``
+    (default 2) deaths that are provably its own, it is reported as a failed result
+    (``error`` set), never silently dropped. In a process pool a dead worker breaks the
+    whole pool (:class:`~concurrent.futures.process.BrokenProcessPool`): the pool is
+    recreated, tasks that had not started are resubmitted for free, and the tasks that
+    were running are suspects. Each worker writes the index of the task it runs into a
+    shared array, so suspects are known exactly. Each suspect is charged an attempt and
+    re-run **alone** in the pool (when several were running together, only one of them
+    killed its worker; the pool terminated the others), where a death is its own. A task
+    is failed on a death it alone was running for, once it has been a suspect
+    ``max_attempts`` times: a task that kills every worker it runs on kills exactly
+    ``max_attempts`` of them, and one that ran beside it is not blamed. On Dask, the
+    scheduler does this itself: a dead worker's tasks are rescheduled, and a task that
+    was on ``distributed.scheduler.allowed-failures + 1`` dead workers fails with
+    ``KilledWorker`` (:class:`DaskExecutor` sets ``allowed-failures = max_attempts - 1``
+    on the clusters it creates; start a remote scheduler with
+    ``DASK_DISTRIBUTED__SCHEDULER__ALLOWED_FAILURES=1`` for the same rule); exceptions
+    raised by the task are retried ``max_attempts - 1`` times (``retries``).
+
+Worker resources
+    :func:`worker_cache` keeps objects that are costly to open (a DSM sampler) once per
+    worker process and thread, keyed by what they were opened from.
+
+Determinism
+    Results are yielded in input order whatever the completion order, so a caller that
+    writes them as they come writes exactly what a serial run writes. At most
+    ``window`` items (default: four per worker slot, at least 32) are in flight or
+    waiting for an earlier one, which bounds memory whatever the number of items.
+"""
+
+from __future__ import annotations
+
+import multiprocessing as mp
+import os
+import threading
+import time
+import uuid
+from collections import OrderedDict, deque
+from collections.abc import Callable, Iterable, Iterator
+from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor
+from concurrent.futures import wait as cf_wait
+from concurrent.futures.process import BrokenProcessPool
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from cevm.errors import CevmError
+
+__all__ = [
+    "CRASH_ENV_VAR",
+    "DaskExecutor",
+    "Executor",
+    "ProcessExecutor",
+    "SerialExecutor",
+    "Task",
+    "TaskResult",
+    "make_executor",
+    "worker_cache",
+]
+
+MAX_ATTEMPTS = 2
+"""Default number of worker deaths (or raised exceptions) a task may cause before it is
+reported failed: one retry, as a file that kills a worker twice will do it again."""
+
+WINDOW_PER_SLOT = 4
+"""Default items in flight or waiting, per worker slot: enough that a slow task does not
+idle the other workers at once, few enough to bound the results held in memory (an
+ingest result is a few MB per vehicle-day)."""
+
+MIN_WINDOW = 32
+"""Least default window of a parallel run: a Dask round trip costs milliseconds, so a
+few tasks queued ahead per worker keep them busy (32 ingest results: ~100 MB at most)."""
+
+CRASH_ENV_VAR = "CEVM_TEST_CRASH_DIR"
+"""Test-only fault injection. When this variable is set in the *submitting* process to a
+directory, a worker about to run the task with key ``K`` looks in it for files named
+``<anything>.<basename of K>``; it renames one of them to ``done-<pid>-<name>``
+(atomically: one worker wins) and exits at once with ``os._exit(1)``, as a process killed mid-file would. Each
+marker kills one worker once. Never set it in production; it is read once per run."""
+
+WORKER_ENV = {"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}
+"""Environment of the local worker processes (where the user has not set these): one
+thread per BLAS/OpenMP library, as Dask's nanny sets for its workers. The processes are
+the parallelism; BLAS threads of their own oversubscribe the cores, and OpenBLAS's
+spin after each call (a matrix product in the timestamp parser of cevm.loggers made
+two workers slower than one)."""
+
+WORKER_CACHE_SIZE = 4
+"""Objects :func:`worker_cache` keeps per worker thread: a run uses one or two (a DSM);
+a Dask worker that lives for many runs with other DSMs must not keep every one of them
+(a sampler's block cache is up to 256 MB)."""
+
+DASK_CONNECT_TIMEOUT_S = 20.0
+"""How long :class:`DaskExecutor` waits for a scheduler [s] before giving up: a scheduler
+on a LAN answers in milliseconds; 20 s allows for one starting up."""
+
+
+# --------------------------------------------------------------------------- values
+
+
+@dataclass(frozen=True)
+class Task:
+    """One unit of work: ``fn(*args)`` for the run's task function ``fn``. ``key``
+    names it in messages (for ingest: the file path); ``args`` must pickle."""
+
+    key: str
+    args: tuple = ()
+
+
+@dataclass(frozen=True, eq=False)
+class TaskResult:
+    """What became of item ``index`` of a run.
+
+    ``value``: the task function's return value, or the item itself when it was not a
+    :class:`Task` (``attempts == 0``). ``error``: why there is no value (the task raised,
+    or its workers died ``max_attempts`` times); None if ok. ``attempts``: runs started
+    (1 for a task that ran once). ``seconds``: wall time of the successful run in the
+    worker [s] (0 if none). ``task``: the submitted :class:`Task` (None for a
+    pass-through item).
+    """
+
+    index: int
+    task: Task | None
+    value: Any = None
+    error: str | None = None
+    attempts: int = 0
+    seconds: float = 0.0
+
+    @property
+    def ok(self) -> bool:
+        return self.error is None
+
+
+# --------------------------------------------------------------------- worker side
+
+_local = threading.local()
+
+
+def worker_cache(key: Any, factory: Callable[[], Any]) -> Any:
+    """The object ``factory()`` made for ``key`` in this process and thread, made on
+    first use and kept for the next tasks.
+
+    For resources that are costly to open and not thread-safe (a
+    :class:`~cevm.elevation.DsmSampler`: headers over HTTP, a block cache), so that a
+    worker opens them once and not once per task. Per thread because Dask workers run
+    tasks in threads. ``key`` must be hashable and name everything the object depends
+    on (e.g. the DSM path). A long-lived worker keeps the :data:`WORKER_CACHE_SIZE`
+    most recently used objects; older ones are dropped (and closed if they have a
+    ``close`` method).
+    """
+    cache = getattr(_local, "cache", None)
+    if cache is None:
+        cache = _local.cache = OrderedDict()
+    try:
+        cache.move_to_end(key)
+        return cache[key]
+    except KeyError:
+        obj = cache[key] = factory()
+        while len(cache) > WORKER_CACHE_SIZE:
+            _, old = cache.popitem(last=False)
+            close = getattr(old, "close", None)
+            if callable(close):
+                close()
+        return obj
+
+
+def _crash_hook(key: str, crash_dir: str) -> None:
+    """Test-only fault injection, see :data:`CRASH_ENV_VAR`."""
+    name = Path(key).name
+    try:
+        entries = sorted(os.listdir(crash_dir))
+    except OSError:
+        return
+    for entry in entries:
+        if entry.startswith("done-") or entry.partition(".")[2] != name:
+            continue
+        try:
+            os.rename(os.path.join(crash_dir, entry), os.path.join(crash_dir, f"done-{os.getpid()}-{entry}"))
+        except OSError:
+            continue  # another worker took this marker
+        os._exit(1)
+
+
+def _execute(fn: Callable, key: str, args: tuple, crash_dir: str | None) -> tuple[Any, float]:
+    """Run one task in a worker: ``(fn(*args), wall seconds)``."""
+    if crash_dir:
+        _crash_hook(key, crash_dir)
+    t0 = time.perf_counter()
+    value = fn(*args)
+    return value, time.perf_counter() - t0
+
+
+_SLOTS = None  # shared array: index of the task each pool worker runs, -1 when idle
+_SLOT = -1
+
+
+def _pool_init(slots, counter) -> None:
+    global _SLOTS, _SLOT
+    with counter.get_lock():
+        _SLOT = counter.value % len(slots)
+        counter.value += 1
+    _SLOTS = slots
+
+
+def _pool_execute(fn: Callable, index: int, key: str, args: tuple, crash_dir: str | None) -> tuple[Any, float]:
+    _SLOTS[_SLOT] = index
+    try:
+        return _execute(fn, key, args, crash_dir)
+    finally:
+        _SLOTS[_SLOT] = -1
+
+
+# ---------------------------------------------------------------------------- driver
+
+
+@dataclass(eq=False)
+class _Entry:
+    index: int
+    task: Task
+    attempts: int = 0  # runs started (deaths suspected of it + the current run)
+
+
+@dataclass
+class _RunState:
+    pending: dict = field(default_factory=dict)  # handle -> _Entry
+    retry: deque = field(default_factory=deque)  # entries to resubmit, any company
+    alone: deque = field(default_factory=deque)  # entries to resubmit with nothing else running
+
+
+class Executor:
+    """Base class: the driver (:meth:`run`) over an executor's submit/wait."""
+
+    #: Runs tasks in the calling thread (objects need not pickle; nothing to protect).
+    inline: bool = False
+    #: Tasks that can run at once.
+    slots: int = 1
+    max_attempts: int = MAX_ATTEMPTS
+    name: str = "executor"
+
+    # ---- per-executor hooks ---------------------------------------------------------
+
+    def _submit(self, fn: Callable, entry: _Entry, crash_dir: str | None):
+        raise NotImplementedError
+
+    def _wait(self, handles: list) -> Iterable:
+        raise NotImplementedError
+
+    def _finish(self, handle, entry: _Entry, st: _RunState) -> list[TaskResult]:
+        """Results made final by ``handle`` being done (none if it was resubmitted)."""
+        raise NotImplementedError
+
+    def _cancel(self, handles: list) -> None:
+        for h in handles:
+            h.cancel()
+
+    # ---- the driver -------------------------------------------------------------------
+
+    def run(self, fn: Callable, items: Iterable, *, window: int | None = None) -> Iterator[TaskResult]:
+        """Run ``fn(*task.args)`` for every :class:`Task` in ``items``; yield one
+        :class:`TaskResult` per item, in input order.
+
+        ``items`` is consumed lazily, at most ``window`` items ahead of the last one
+        yielded (default: :data:`WINDOW_PER_SLOT` per slot, at least :data:`MIN_WINDOW`;
+        1 for a serial executor, which runs a task as it is submitted), so
+        work the caller does to make an item (hashing a file) overlaps the running tasks.
+        ``fn`` must be a module-level function (workers import it by name). Closing
+        the generator (breaking out of the loop, an exception in it) cancels the tasks
+        not yet started.
+        """
+        if window is None:
+            window = 1 if self.inline else max(MIN_WINDOW, WINDOW_PER_SLOT * self.slots)
+        window = max(1, int(window))
+        crash_dir = None if self.inline else (os.environ.get(CRASH_ENV_VAR) or None)
+        source = enumerate(items)
+        exhausted = False
+        st = _RunState()
+        ready: dict[int, TaskResult] = {}
+        next_in = next_out = 0
+        try:
+            while True:
+                if st.alone:
+                    if not st.pending:
+                        self._put(fn, st.alone.popleft(), st, crash_dir)
+                else:
+                    while st.retry:
+                        self._put(fn, st.retry.popleft(), st, crash_dir)
+                    while not exhausted and not st.alone and next_in - next_out < window:
+                        try:
+                            i, item = next(source)
+                        except StopIteration:
+                            exhausted = True
+                            break
+                        next_in = i + 1
+                        if isinstance(item, Task):
+                            self._put(fn, _Entry(i, item), st, crash_dir)
+                        else:
+                            ready[i] = TaskResult(i, None, value=item)
+                        while next_out in ready:  # overlap the caller's work with the tasks
+                            yield ready.pop(next_out)
+                            next_out += 1
+                while next_out in ready:
+                    yield ready.pop(next_out)
+                    next_out += 1
+                if not st.pending:
+                    if exhausted and not st.retry and not st.alone:
+                        break
+                    continue
+                for h in list(self._wait(list(st.pending))):
+                    entry = st.pending.pop(h, None)
+                    if entry is None:  # handled with an earlier one (a broken pool)
+                        continue
+                    for res in self._finish(h, entry, st):
+                        ready[res.index] = res
+        finally:
+            if st.pending:
+                self._cancel(list(st.pending))
+
+    def _put(self, fn: Callable, entry: _Entry, st: _RunState, crash_dir: str | None) -> None:
+        entry.attempts += 1
+        st.pending[self._submit(fn, entry, crash_dir)] = entry
+
+    def close(self) -> None:
+        """Release the workers (a no-op for executors that hold none)."""
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}({self.name!r}, slots={self.slots})"
+
+
+def _error_text(exc: BaseException) -> str:
+    text = str(exc).strip().splitlines()
+    return f"{type(exc).__name__}: {text[0]}" if text else type(exc).__name__
+
+
+class SerialExecutor(Executor):
+    """Runs each task inline in the calling thread, one at a time (``--workers 1``).
+    Task arguments are passed as they are (an open DSM sampler may be one)."""
+
+    inline = True
+    slots = 1
+    name = "serial"
+
+    def _submit(self, fn, entry, crash_dir):
+        fut: Future = Future()
+        t0 = time.perf_counter()
+        try:
+            value = fn(*entry.task.args)
+        except Exception as exc:  # a task that raises fails alone, as in a pool
+            fut.set_exception(exc)
+        else:
+            fut.set_result((value, time.perf_counter() - t0))
+        return fut
+
+    def _wait(self, handles):
+        return handles
+
+    def _finish(self, handle, entry, st):
+        exc = handle.exception()
+        if exc is not None:
+            return [TaskResult(entry.index, entry.task, error=_error_text(exc), attempts=entry.attempts)]
+        value, seconds = handle.result()
+        return [TaskResult(entry.index, entry.task, value=value, attempts=entry.attempts, seconds=seconds)]
+
+
+class ProcessExecutor(Executor):
+    """Tasks on a local :class:`~concurrent.futures.ProcessPoolExecutor` of ``workers``
+    processes (started on first use, kept until :meth:`close`).
+
+    Parameters
+    ----------
+    workers : int
+        Worker processes; the machine's cores (``os.cpu_count()``) are the useful most
+        for CPU-bound tasks.
+    max_attempts : int, default :data:`MAX_ATTEMPTS` (2)
+        Worker deaths a task may provably cause before it is failed (see the module
+        docstring for how deaths are attributed).
+    start_method : str, default ``"forkserver"``
+        How workers start. ``forkserver`` forks them from a clean server process that
+        imported ``preload`` once (~0.5 s the first time in a process, ~30 ms for a
+        pool after that), never from this process: ``fork`` from a process with threads
+        (a progress bar, a Dask client) can deadlock a child. ``spawn`` works too and
+        pays the imports in every worker. With ``forkserver`` the workers run with
+        :data:`WORKER_ENV` (single-threaded BLAS).
+    preload : tuple of str, default ``("cevm.ingest", "rasterio", "pyproj", "scipy.ndimage")``
+        Modules the forkserver imports before forking workers (the ingest task's, some
+        imported lazily), so that a new worker does not import them again.
+    """
+
+    name = "processes"
+
+    def __init__(self, workers: int, *, max_attempts: int = MAX_ATTEMPTS, start_method: str = "forkserver",
+                 preload: tuple[str, ...] = ("cevm.ingest", "rasterio", "pyproj", "scipy.ndimage")):
+        if workers < 1:
+            raise ValueError("workers must be >= 1")
+        if max_attempts < 1:
+            raise ValueError("max_attempts must be >= 1")
+        self.slots = int(workers)
+        self.max_attempts = int(max_attempts)
+        self._ctx = mp.get_context(start_method)
+        if start_method == "forkserver" and preload:
+            self._ctx.set_forkserver_preload(list(preload))
+        self._pool: ProcessPoolExecutor | None = None
+        self._slots_arr = None
+        self.restarts = 0  # pools recreated after a worker died
+
+    def _ensure_pool(self) -> ProcessPoolExecutor:
+        if self._pool is None:
+            if self._ctx.get_start_method() == "forkserver":
+                _start_forkserver()
+            self._slots_arr = self._ctx.Array("q", [-1] * self.slots, lock=False)
+            counter = self._ctx.Value("i", 0)
+            self._pool = ProcessPoolExecutor(self.slots, mp_context=self._ctx, initializer=_pool_init,
+                                             initargs=(self._slots_arr, counter))
+        return self._pool
+
+    def _submit(self, fn, entry, crash_dir):
+        try:
+            return self._ensure_pool().submit(_pool_execute, fn, entry.index, entry.task.key, entry.task.args, crash_dir)
+        except BrokenProcessPool as exc:  # broke since the last wait: _finish sorts it out
+            fut: Future = Future()
+            fut.set_exception(exc)
+            return fut
+
+    def _wait(self, handles):
+        return cf_wait(handles, return_when=FIRST_COMPLETED).done
+
+    def _finish(self, handle, entry, st):
+        exc = handle.exception()
+        if isinstance(exc, BrokenProcessPool):
+            return self._on_broken(entry, st)
+        if exc is not None:
+            return [TaskResult(entry.index, entry.task, error=_error_text(exc), attempts=entry.attempts)]
+        value, seconds = handle.result()
+        return [TaskResult(entry.index, entry.task, value=value, attempts=entry.attempts, seconds=seconds)]
+
+    def _on_broken(self, first: _Entry, st: _RunState) -> list[TaskResult]:
+        """A worker died: sort the tasks the pool held into done, free to resubmit and
+        suspects (running when it broke); recreate the pool lazily."""
+        started = {int(i) for i in self._slots_arr if i >= 0} if self._slots_arr is not None else set()
+        pool, self._pool = self._pool, None
+        if pool is not None:
+            pool.shutdown(wait=True, cancel_futures=True)  # every future is now done
+        self.restarts += 1
+        results: list[TaskResult] = []
+        victims = [first]
+        for h, e in list(st.pending.items()):
+            del st.pending[h]
+            if h.done() and not h.cancelled() and h.exception() is None:
+                value, seconds = h.result()  # finished before the break
+                results.append(TaskResult(e.index, e.task, value=value, attempts=e.attempts, seconds=seconds))
+            else:
+                victims.append(e)
+        suspects = sorted((e for e in victims if e.index in started), key=lambda e: e.index)
+        for e in sorted((e for e in victims if e.index not in started), key=lambda e: e.index):
+            e.attempts -= 1  # never started: this run does not count
+            st.retry.append(e)
+        if len(suspects) == 1 and suspects[0].attempts >= self.max_attempts:
+            e = suspects.pop()
+            results.append(TaskResult(
+                e.index, e.task, attempts=e.attempts,
+                error=f"its worker process died {e.attempts} times while running it (killed, out of memory "
+                      "or crashed in native code)"))
+        st.alone.extend(suspects)  # from now on each runs alone: a death is then its own
+        return results
+
+    def close(self) -> None:
+        if self._pool is not None:
+            self._pool.shutdown(wait=True, cancel_futures=True)
+            self._pool = None
+
+
+def _start_forkserver() -> None:
+    """Start this process's forkserver (if not running) with :data:`WORKER_ENV`: its
+    preload imports numpy, whose BLAS reads the thread count then, and the workers it
+    forks inherit that."""
+    from multiprocessing import forkserver
+
+    saved = {k: os.environ.get(k) for k in WORKER_ENV}
+    try:
+        for k, v in WORKER_ENV.items():
+            os.environ.setdefault(k, v)
+        forkserver.ensure_running()
+    finally:
+        for k, v in saved.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
+
+
+class DaskExecutor(Executor):
+    """Tasks on a Dask distributed cluster (``pip install cevm[dask]``).
+
+    Parameters
+    ----------
+    address : str or None
+        The scheduler, e.g. ``tcp://10.0.0.5:8786`` (``dask scheduler`` prints it).
+        Workers must import cevm (same version) and read the task's inputs (for ingest:
+        the log files at the same paths, and the DSM) themselves.
+    client : distributed.Client or None
+        An existing client instead of ``address`` (it is not closed by :meth:`close`).
+    max_attempts : int, default :data:`MAX_ATTEMPTS` (2)
+        A task that raises is retried ``max_attempts - 1`` times (``retries``). Worker
+        deaths are counted by the scheduler (``allowed-failures``, see module docstring).
+    timeout_s : float, default :data:`DASK_CONNECT_TIMEOUT_S`
+        How long to wait for the scheduler [s].
+    """
+
+    name = "dask"
+
+    def __init__(self, address: str | None = None, *, client=None, max_attempts: int = MAX_ATTEMPTS,
+                 timeout_s: float = DASK_CONNECT_TIMEOUT_S):
+        try:
+            import distributed
+        except ImportError:
+            raise CevmError("a Dask scheduler needs the optional extra: pip install 'cevm[dask]'") from None
+        if client is None and address is None:
+            raise ValueError("give a scheduler address or a client")
+        self.max_attempts = int(max_attempts)
+        self._own = client is None
+        if client is None:
+            try:
+                client = distributed.Client(address, timeout=timeout_s, set_as_default=False)
+            except (OSError, TimeoutError, ValueError) as exc:
+                raise CevmError(f"cannot reach the Dask scheduler at {address}: {_error_text(exc)}") from None
+        self.client = client
+        self.slots = max(1, sum(w.get("nthreads", 1) for w in client.scheduler_info()["workers"].values()))
+        self._token = uuid.uuid4().hex[:12]
+        # Completed futures and their results arrive here from the client's event loop
+        # (no round trip per task, as future.result() or wait() would make).
+        self._done = distributed.as_completed(loop=client.loop, with_results=True, raise_errors=False)
+        self._results: dict = {}
+
+    def _submit(self, fn, entry, crash_dir):
+        fut = self.client.submit(
+            _execute, fn, entry.task.key, entry.task.args, crash_dir,
+            key=f"{getattr(fn, '__name__', 'task')}-{self._token}-{entry.index}-{entry.attempts}",
+            pure=False, retries=self.max_attempts - 1,
+        )
+        self._done.add(fut)
+        return fut
+
+    def _wait(self, handles):
+        done = []
+        for fut, result in self._done.next_batch(block=True):
+            self._results[fut] = result
+            done.append(fut)
+        return done
+
+    def _finish(self, handle, entry, st):
+        from distributed import KilledWorker
+
+        result = self._results.pop(handle)
+        status = handle.status
+        handle.release()
+        if status == "finished":
+            value, seconds = result
+            return [TaskResult(entry.index, entry.task, value=value, attempts=entry.attempts, seconds=seconds)]
+        exc = result[1] if isinstance(result, tuple) and len(result) == 3 else result
+        if isinstance(exc, KilledWorker):
+            return [TaskResult(entry.index, entry.task, attempts=self.max_attempts,
+                               error=f"its Dask worker died while running it, on every attempt ({_error_text(exc)})")]
+        return [TaskResult(entry.index, entry.task, error=_error_text(exc), attempts=entry.attempts)]
+
+    def _cancel(self, handles):
+        self.client.cancel(handles)
+
+    def close(self) -> None:
+        if self._own:
+            self.client.close()
+
+
+def local_dask_cluster(n_workers: int = 2, threads_per_worker: int = 1, *, processes: bool = True,
+                       max_attempts: int = MAX_ATTEMPTS):
+    """A :class:`distributed.LocalCluster` on the loopback address with
+    ``allowed-failures = max_attempts - 1`` (for tests and benchmarks; close it after).
+    ``threads_per_worker`` defaults to 1: the tasks are CPU-bound Python/numpy."""
+    import dask
+    from distributed import LocalCluster
+
+    with dask.config.set({"distributed.scheduler.allowed-failures": max_attempts - 1,
+                          "distributed.worker.profile.enabled": False}):
+        return LocalCluster(n_workers=n_workers, threads_per_worker=threads_per_worker, processes=processes,
+                            host="127.0.0.1", dashboard_address=None)
+
+
+def make_executor(workers: int | None = None, scheduler: str | None = None, *,
+                  max_attempts: int = MAX_ATTEMPTS) -> Executor:
+    """The executor for ``--workers N`` / ``--scheduler ADDRESS``.
+
+    ``scheduler`` set: a :class:`DaskExecutor` on it (``workers`` must then be None).
+    Else ``workers`` (default: ``os.cpu_count()``, every core): 1 gives the
+    :class:`SerialExecutor`, more a :class:`ProcessExecutor`.
+    """
+    if scheduler is not None:
+        if workers is not None:
+            raise ValueError("give either a number of local workers or a Dask scheduler, not both")
+        return DaskExecutor(scheduler, max_attempts=max_attempts)
+    n = (os.cpu_count() or 1) if workers is None else int(workers)
+    if n < 1:
+        raise ValueError(f"workers must be >= 1, got {n}")
+    return SerialExecutor() if n == 1 else ProcessExecutor(n, max_attempts=max_attempts)
