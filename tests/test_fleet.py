@@ -557,3 +557,31 @@ def test_cli_fleet_plan_json_and_table():
     assert res.exit_code == 0 and "table 4" in res.stdout and "day 2" in res.stdout
     res = runner.invoke(app, ["fleet", "plan", str(root / "nope.toml")])
     assert res.exit_code == 2 and "nope.toml" in res.output
+
+
+def test_cli_fleet_plan_with_legs_from_stored_routes_equals_the_cycle_files(tmp_path):
+    from typer.testing import CliRunner
+
+    from cevm.cli import app
+
+    root = Path(__file__).resolve().parents[1]
+    runner = CliRunner()
+    store = tmp_path / "s.sqlite"
+    for name, cyc in (("lh", "long-haul-standin.csv"), ("reg", "regional-standin.csv")):
+        res = runner.invoke(app, ["route", "add", name, "--cycle", str(root / "configs/cycles" / cyc), "--store", str(store)])
+        assert res.exit_code == 0, res.output
+    text = (root / "configs/fleet/paper-case-study.toml").read_text()
+    text = text.replace('leg = { cycle = "../cycles/long-haul-standin.csv" }', 'leg = { route = "lh" }')
+    text = text.replace('leg = { cycle = "../cycles/regional-standin.csv", repeat = 3 }', 'leg = { route = "reg", repeat = 3 }')
+    text = text.replace('file = "../vehicles/', f'file = "{root}/configs/vehicles/')
+    assert 'route = "lh"' in text and 'route = "reg"' in text
+    scen = tmp_path / "routes.toml"
+    scen.write_text(text)
+    via_routes = json.loads(runner.invoke(app, ["fleet", "plan", str(scen), "--store", str(store), "-f", "json"]).stdout)
+    via_files = json.loads(runner.invoke(app, ["fleet", "plan", str(root / "configs/fleet/paper-case-study.toml"),
+                                                "--store", str(tmp_path / "none.sqlite"), "-f", "json"]).stdout)
+    for a, b in zip(via_routes["summary"], via_files["summary"]):
+        assert a["total"] == pytest.approx(b["total"], rel=1e-12)
+    assert via_routes["table"] == via_files["table"]
+    res = runner.invoke(app, ["fleet", "plan", str(scen), "--store", str(tmp_path / "none.sqlite")])
+    assert res.exit_code == 2 and "store" in res.output

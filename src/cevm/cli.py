@@ -79,8 +79,9 @@ def ingest(
         Optional[str], typer.Option(help="Dask scheduler address (tcp://HOST:8786): run the per-file work on that cluster (pip install 'cevm[dask]'); the workers must read the log files at the same paths, and the DSM.")
     ] = None,
 ) -> None:
-    """Read logger CSV exports into the trip store: clean trips, DSM elevation, measured
-    consumption and drive-cycle vectors.
+    """Read logger CSV exports into the trip store (clean trips, DSM elevation, vectors).
+
+    Clean trips, DSM elevation, measured consumption and drive-cycle vectors.
 
     Files are processed in parallel (--workers, or a Dask cluster with --scheduler); this
     process alone writes the store, in input order, so the result is that of a serial run.
@@ -218,8 +219,9 @@ def calibrate(
     ] = None,
     fmt: Annotated[OutputFormat, typer.Option("--format", "-f", help="table, or json (figures plus per-trip rows).")] = OutputFormat.table,
 ) -> None:
-    """Fit the vehicle's efficiency eta (and optionally more) to its measured trips, with
-    cross-validated errors: the paper's tables 1 and 2 for your own fleet."""
+    """Fit eta (and what the data supports) to a vehicle's measured trips.
+
+    With in-sample and cross-validated errors: the paper's tables 1 and 2 for your fleet."""
     from cevm.calibrate_io import (
         dumps, plot_calibration, result_json, trips_for_calibration, write_calibrated_vehicle,
     )
@@ -312,8 +314,9 @@ def simulate(
     plot: Annotated[Optional[Path], typer.Option(help="PNG: state of charge (EV, the paper's figure 4) or fuel and elevation (ICE, figure 6).")] = None,
     fmt: Annotated[OutputFormat, typer.Option("--format", "-f", help="Format of the summary.")] = OutputFormat.table,
 ) -> None:
-    """Detailed time-step simulation of one vehicle over a trace (the baseline model):
-    motor map, regeneration limits and battery for an EV; gearbox and fuel map for a diesel."""
+    """Detailed time-step simulation of one vehicle over a trace (the baseline model).
+
+    Motor map, regeneration limits and battery for an EV; gearbox and fuel map for a diesel."""
     from cevm.detailed import simulate as run_simulation
     from cevm.io import load_vehicle
 
@@ -397,19 +400,26 @@ def fleet_plan(
     scenario: Annotated[Path, typer.Argument(help="Scenario TOML (see configs/fleet/paper-case-study.toml).")],
     day: Annotated[Optional[list[str]], typer.Option("--day", "-d", help="Day name or 0-based index. Repeatable. Default: every day.")] = None,
     method: Annotated[str, typer.Option(help="auto (enumerate when small, else MILP), enumerate, or milp.")] = "auto",
+    store: StoreOption = None,
     fmt: Annotated[OutputFormat, typer.Option("--format", "-f", help="Output format.")] = OutputFormat.table,
 ) -> None:
     """The assignment of shared stops that minimises total fuel (or energy, or cost),
     within gross-weight limits and EV reserves: proven optimal (enumeration or MILP)."""
     import json
 
-    from cevm.fleet import fleet_report
+    from cevm.fleet import default_resolver, fleet_report, store_resolver
+    from cevm.store import TripStore, resolve_store_path
 
     if method not in ("auto", "enumerate", "milp"):
         raise _fail("--method must be auto, enumerate or milp")
     days = [int(d) if d.isdigit() else d for d in day] if day else None
     try:
-        report = fleet_report(scenario, days, method=method)
+        store_path = resolve_store_path(store)
+        if store_path.exists():  # legs may be stored trips or routes
+            with TripStore.open(store_path) as st:
+                report = fleet_report(scenario, days, method=method, resolve_leg=store_resolver(st))
+        else:
+            report = fleet_report(scenario, days, method=method, resolve_leg=default_resolver)
     except CevmError as exc:
         raise _fail(str(exc)) from None
     if fmt == OutputFormat.json:

@@ -676,9 +676,11 @@ def feasibility_cmd(
     ice_braking: IceBrakingOption = None,
     cr0: Cr0Option = CR0_DEFAULT,
 ) -> None:
-    """Can each vehicle run each route? Margins (EV: lowest state of charge above the
-    reserve; ICE: fuel against tank_l) and the largest payload that keeps the reserve (or
-    fits the tank) within max_gross_kg, exact to the kilogram."""
+    """Can each vehicle run each route, with what margin, and the largest payload?
+
+    Margins (EV: lowest state of charge above the reserve; ICE: fuel against tank_l) and
+    the largest payload that keeps the reserve (or fits the tank) within max_gross_kg,
+    exact to the kilogram."""
     if not (cycle or trip or vehicle_id or route):
         raise _fail("give at least one route: --route (or --cycle, --trip, --vehicle-id)")
     if payload_kg is not None and mass_kg is not None:

@@ -146,6 +146,21 @@ def default_resolver(source: LegSource, base_dir: Path) -> CycleVector:
     )
 
 
+def store_resolver(store) -> LegResolver:
+    """A resolver that also reads ``trip`` (a stored trip id) and ``route`` (a stored
+    route name) leg sources from an open :class:`cevm.store.TripStore`."""
+    from cevm.routes import load_route_vector
+
+    def resolve(source: LegSource, base_dir: Path) -> CycleVector:
+        if source.kind == "trip":
+            return CycleVector.from_bytes(store.load_vector_bytes(source.ref))
+        if source.kind == "route":
+            return load_route_vector(store, source.ref)
+        return default_resolver(source, base_dir)
+
+    return resolve
+
+
 @dataclass(frozen=True, eq=False)
 class Leg:
     """One leg of a route: its drive-cycle vector (repeats included) and its source."""
