@@ -226,7 +226,6 @@ def reference_optimum(sc: Scenario, d: int):
             if s not in stops:
                 stops.append(s)
     choices = [[i for i, r in enumerate(sc.routes) if s in r.stops] for s in stops]
-    vehicles = {v.id: v for v in sc.vehicles}
     best = math.inf
     for combo in itertools.product(*choices):
         who = dict(zip(stops, combo))

@@ -727,7 +727,6 @@ def _segment(ts, vs, on, p: CleanParams):
 
     Returns kept row indices (into ts), trip id per kept row, and the reason each trip
     started ('start', 'ignition', 'gap', 'speed_gap', 'long_stop')."""
-    m = ts.size
     prev_on = np.concatenate(([False], on[:-1]))
     keep = on | prev_on  # the first "off" row ends the trip before it
     idx = np.flatnonzero(keep)
