@@ -45,6 +45,16 @@ def _fail(message: str, code: int = EXIT_INPUT) -> typer.Exit:
     return typer.Exit(code)
 
 
+def _existing_store(store: Optional[Path], hint: Optional[str] = None) -> Path:
+    """The store a reading command needs, or the usual one-line error (exit 2)."""
+    from cevm.store import NO_STORE_HINT, existing_store_path
+
+    try:
+        return existing_store_path(store, hint or NO_STORE_HINT)
+    except CevmError as exc:
+        raise _fail(str(exc)) from None
+
+
 def _version(value: bool) -> None:
     if value:
         typer.echo(f"cevm {__version__}")
@@ -173,11 +183,9 @@ def trips(
     fmt: Annotated[OutputFormat, typer.Option("--format", "-f", help="Output format.")] = OutputFormat.table,
 ) -> None:
     """List the stored trips."""
-    from cevm.store import TripStore, format_trips, resolve_store_path
+    from cevm.store import TripStore, format_trips
 
-    path = resolve_store_path(store)
-    if not path.exists():
-        raise _fail(f"{path}: no trip store here; run 'cevm ingest' first or give --store")
+    path = _existing_store(store)
     try:
         with TripStore.open(path) as st:
             df = format_trips(st.list_trips(vehicle_id=vehicle_id))
@@ -227,14 +235,12 @@ def calibrate(
     )
     from cevm.calibration import fit as fit_vehicle
     from cevm.io import load_vehicle
-    from cevm.store import TripStore, resolve_store_path
+    from cevm.store import TripStore
 
     params = ["eta"] + [p.strip() for f in (fit or []) for p in f.split(",") if p.strip() and p.strip() != "eta"]
     if cv_folds < 2:
         raise _fail("--cv-folds must be at least 2")
-    path = resolve_store_path(store)
-    if not path.exists():
-        raise _fail(f"{path}: no trip store here; run 'cevm ingest' first or give --store")
+    path = _existing_store(store)
     if ice_braking is not None and ice_braking not in ICE_BRAKING_MODES:
         raise _fail(f"--ice-braking must be one of: {', '.join(ICE_BRAKING_MODES)}")
     try:

@@ -34,7 +34,7 @@ from typing import IO, Annotated, Optional
 import numpy as np
 import typer
 
-from cevm.cli import StoreOption, _fail, app
+from cevm.cli import StoreOption, _existing_store, _fail, app
 from cevm.cycle import CR0_DEFAULT
 from cevm.errors import CevmError
 from cevm.fleetpredict import (
@@ -141,11 +141,9 @@ def _load_sources(stack: ExitStack, store: Optional[Path], cycles: Sequence[Path
         return sources
     from cevm.cycle import CycleVector
     from cevm.routes import load_route_legs, load_route_profiles, resolve_route_patterns
-    from cevm.store import TripStore, resolve_store_path
+    from cevm.store import TripStore, existing_store_path
 
-    path = resolve_store_path(store)
-    if not path.exists():
-        raise CevmError(f"{path}: no trip store here; run 'cevm ingest' first or give --store")
+    path = existing_store_path(store)
     st = stack.enter_context(TripStore.open(path))
     vectors: dict[str, bytes] = {}
     if trips:
@@ -799,11 +797,9 @@ def route_list(
 ) -> None:
     """List the stored routes: legs, distance, duration."""
     from cevm.routes import list_routes, load_route_legs
-    from cevm.store import TripStore, format_utc, resolve_store_path
+    from cevm.store import TripStore, format_utc
 
-    path = resolve_store_path(store)
-    if not path.exists():
-        raise _fail(f"{path}: no trip store here; run 'cevm ingest' or 'cevm route add' first, or give --store")
+    path = _existing_store(store, "run 'cevm ingest' or 'cevm route add' first, or give --store")
     rows = []
     try:
         with TripStore.open(path) as st:
@@ -852,11 +848,9 @@ def route_remove(
 ) -> None:
     """Delete a stored route (its trips stay in the store)."""
     from cevm.routes import remove_route
-    from cevm.store import TripStore, resolve_store_path
+    from cevm.store import TripStore
 
-    path = resolve_store_path(store)
-    if not path.exists():
-        raise _fail(f"{path}: no trip store here; give --store")
+    path = _existing_store(store, "give --store")
     try:
         with TripStore.open(path) as st:
             gone = remove_route(st, name)

@@ -239,6 +239,18 @@ def resolve_store_path(store: str | Path | None = None) -> Path:
     return default_store_path()
 
 
+NO_STORE_HINT = "run 'cevm ingest' first or give --store"
+
+
+def existing_store_path(store: str | Path | None = None, hint: str = NO_STORE_HINT) -> Path:
+    """:func:`resolve_store_path`, for commands that read: a missing store is the user's
+    error (:class:`CevmError` ending with ``hint``), not a new empty one."""
+    path = resolve_store_path(store)
+    if not path.exists():
+        raise CevmError(f"{path}: no trip store here; {hint}")
+    return path
+
+
 def file_key(path: str | Path) -> str:
     """The key of a source file in the store: its absolute path with symlinks resolved
     (the file need not exist)."""
