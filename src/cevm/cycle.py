@@ -77,8 +77,14 @@ class DriveCycle:
     @property
     def distance_m(self) -> float:
         """Trapezoidal distance [m], consistent with the r_i term."""
-        v = self.speed_mps
-        return float(np.sum((v[:-1] + v[1:]) * np.diff(self.time_s)) * 0.5)
+        return trapezoid_distance_m(self.time_s, self.speed_mps)
+
+
+def trapezoid_distance_m(time_s: np.ndarray, speed_mps: np.ndarray) -> float:
+    """Distance [m] of a speed trace by the trapezoid rule: sum (v_i + v_{i+1}) / 2 dt_i,
+    the distance the CE model's r_i terms use."""
+    v = np.asarray(speed_mps, dtype=np.float64)
+    return float(np.sum((v[:-1] + v[1:]) * np.diff(np.asarray(time_s, dtype=np.float64))) * 0.5)
 
 
 def validate_cycle(time_s, speed_mps, elevation_m=None) -> None:

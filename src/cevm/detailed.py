@@ -92,7 +92,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from cevm.cycle import PAPER_PHYSICS, Physics, step_terms, validate_cycle
+from cevm.cycle import PAPER_PHYSICS, Physics, step_terms, trapezoid_distance_m, validate_cycle
 from cevm.errors import InputError
 
 RPM = 2.0 * math.pi / 60.0  # rad/s per rpm
@@ -583,8 +583,7 @@ class SimulationResult:
     @property
     def distance_m(self) -> float:
         """Trapezoidal distance [m]."""
-        v = self.speed_mps
-        return float(np.sum((v[:-1] + v[1:]) * np.diff(self.time_s)) * 0.5)
+        return trapezoid_distance_m(self.time_s, self.speed_mps)
 
     @property
     def soc(self) -> np.ndarray | None:
