@@ -51,6 +51,8 @@ Determinism
 
 from __future__ import annotations
 
+from abc import ABC, abstractmethod
+
 import multiprocessing as mp
 import os
 import threading
@@ -248,8 +250,8 @@ class _RunState:
     alone: deque = field(default_factory=deque)  # entries to resubmit with nothing else running
 
 
-class Executor:
-    """Base class: the driver (:meth:`run`) over an executor's submit/wait."""
+class Executor(ABC):
+    """Base class: the driver (:meth:`run`) over an executor's submit/wait hooks."""
 
     #: Runs tasks in the calling thread (objects need not pickle; nothing to protect).
     inline: bool = False
@@ -260,15 +262,17 @@ class Executor:
 
     # ---- per-executor hooks ---------------------------------------------------------
 
+    @abstractmethod
     def _submit(self, fn: Callable, entry: _Entry, crash_dir: str | None):
-        raise NotImplementedError
+        """Start ``fn`` on ``entry``'s task; return a handle."""
 
+    @abstractmethod
     def _wait(self, handles: list) -> Iterable:
-        raise NotImplementedError
+        """The handles that are done, waiting for at least one."""
 
+    @abstractmethod
     def _finish(self, handle, entry: _Entry, st: _RunState) -> list[TaskResult]:
         """Results made final by ``handle`` being done (none if it was resubmitted)."""
-        raise NotImplementedError
 
     def _cancel(self, handles: list) -> None:
         for h in handles:
