@@ -201,6 +201,32 @@ def test_lowest_soc_in_mid_route_before_a_long_descent():
     assert block.soc_end_pct[0] == pytest.approx(100 - 100 * end / veh.battery_j, abs=1e-9)
 
 
+def test_both_searches_for_the_sign_change_give_the_plain_loop(hilly, monkeypatch):
+    # many vehicles with distinct CdA/Cr and payloads: a step's sign differs between the
+    # masses of a vehicle, found by a table of prefix counts or (large sweeps) by a binary
+    # search on complex keys; both must give the plain loop's totals and lowest SoC
+    import cevm.fleetpredict as fp
+
+    rng = np.random.default_rng(3)
+    vehicles = [ev(f"ev{i}", kerb=float(rng.uniform(2000, 16000)), cda=float(rng.uniform(2, 7)),
+                   cr=float(rng.choice([0.004, 0.0055, 0.0081])), eta=float(rng.uniform(0.7, 0.9)),
+                   battery_kwh=300.0, aux_w=float(rng.choice([0.0, 2500.0]))) for i in range(7)]
+    pset = PredictionSet.build(vehicles, payload_kg=parse_values("0:20000:2500"))
+    src = Source.from_cycle(hilly[0])
+    results = []
+    for cells in (fp._COUNT_TABLE_CELLS, 0):
+        monkeypatch.setattr(fp, "_COUNT_TABLE_CELLS", cells)
+        results.append(predict_source(src, pset))
+    for block in results:
+        for i in range(0, pset.n, 4):
+            v = vehicles[pset.vehicle_index[i]]
+            end, peak = plain_run(legs_of(hilly[0]), float(pset.mass_kg[i]), v.cda_m2, v.cr, v.eta, v.eta**2,
+                                  v.aux_power_w)
+            assert block.energy_j[i] == pytest.approx(end, rel=1e-9)
+            assert block.soc_min_pct[i] == pytest.approx(100.0 - 100.0 * peak / v.battery_j, abs=1e-9)
+    np.testing.assert_allclose(results[0].soc_min_pct, results[1].soc_min_pct, rtol=0, atol=1e-12)
+
+
 @settings(max_examples=30, deadline=None)
 @given(
     m=st.floats(300.0, 60000.0), cda=st.floats(0.0, 9.0), cr=st.sampled_from([0.004, 0.0066, 0.012]),

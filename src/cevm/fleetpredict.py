@@ -173,8 +173,8 @@ class SourceSteps:
     per unit Cr], ``dt`` [s]; ``ns`` marks a single non-simplified step (its sign
     depends on the vehicle), else the element is a merged run of steps that draw energy
     for every vehicle with Cr >= cr0. ``block_start`` (K+1) cuts elements into K blocks;
-    ``blocks`` (5, K, L) holds each block's x, r, a, dt and ns (1.0 / 0.0) padded with
-    zeros to the longest block, L. Per block (K,): ``fp_x, fp_a, fp_r`` sums over merged
+    ``blocks`` (4, K, L) holds each block's x, r, a and dt padded with zeros to the
+    longest block, L. Per block (K,): ``fp_x, fp_a, fp_r`` sums over merged
     elements, ``ns_x, ns_a, ns_r`` over non-simplified ones, ``t_s`` the duration.
     ``nsel`` the indices of the non-simplified elements, ``nsel_block`` their block,
     ``nsel_block_start`` (K+1) where each block starts among them.
@@ -273,7 +273,7 @@ def build_steps(
     inside = np.arange(lmax)[None, :] < lens[:, None]
     idx = np.where(inside, idx, 0)
     blocks = np.stack([np.where(inside, v[idx], 0.0) if nc else np.zeros((k, lmax))
-                       for v in (ex, er, ea, edt, ens.astype(np.float64))])
+                       for v in (ex, er, ea, edt)])
     return SourceSteps(
         x=ex,
         a=ea,
@@ -520,7 +520,7 @@ def _positive_parts(xs, as_, rs, nsel_block, bs, k, m, cda, cr, group, n_groups)
             yv = y[gi, ni]
             av = as_[ni]
             kk = int(counts.max()) + 1
-            j = _count_not_positive(yv, av, gi, c[order], gsorted, gstart, counts, kk - 1)
+            j = _count_not_positive(yv, av, gi, c[order], gsorted, gstart)
             idx = (gi * kk + j) * k + nblock[ni]
             sy = np.bincount(idx, weights=yv, minlength=n_groups * kk * k).reshape(n_groups, kk, k)
             sa = np.bincount(idx, weights=av, minlength=n_groups * kk * k).reshape(n_groups, kk, k)
@@ -532,26 +532,38 @@ def _positive_parts(xs, as_, rs, nsel_block, bs, k, m, cda, cr, group, n_groups)
         return m[:, None] * yp[group] + cda[:, None] * ap[group]
     row = np.empty(p_count, dtype=np.int64)
     row[order] = gsorted * kk + (np.arange(p_count) - gstart[gsorted])  # (group, rank) row
-    return m[:, None] * sy.reshape(-1, k)[row] + cda[:, None] * sa.reshape(-1, k)[row]
+    out = np.take(sy.reshape(-1, k), row, axis=0)  # np.take: faster than fancy indexing
+    out *= m[:, None]
+    sa = np.take(sa.reshape(-1, k), row, axis=0)
+    sa *= cda[:, None]
+    out += sa
+    return out
 
 
-def _count_not_positive(yv, av, gi, c_sorted, gsorted, gstart, counts, kmax) -> np.ndarray:
-    """For each (group g_i, element) pair: j_i = #{c_p of group g_i : y_i + c_p a_i <= 0}
-    (c_sorted ascending within each group), by a vectorised bisection on the group's
-    sorted c values: ceil(log2(kmax + 1)) steps of one comparison each."""
-    n_groups = counts.size
-    cmat = np.full((n_groups, kmax), np.inf)
-    cmat[gsorted, np.arange(c_sorted.size) - gstart[gsorted]] = c_sorted
-    flat = cmat.ravel()
-    lo = np.zeros(gi.size, dtype=np.int64)  # y + c a <= 0 for ranks < lo
-    hi = counts[gi].astype(np.int64)  # and > 0 for ranks >= hi
-    base = gi * kmax
-    for _ in range(int(kmax).bit_length()):
-        mid = (lo + hi) >> 1
-        ok = (hi > lo) & (yv + flat[base + np.minimum(mid, kmax - 1)] * av <= 0)
-        lo = np.where(ok, mid + 1, lo)
-        hi = np.where(ok | (hi <= lo), hi, mid)
-    return lo
+#: Largest (groups x predictions) table of prefix counts :func:`_count_not_positive` builds
+#: (8 MB); past it, a binary search on complex keys (1.5x slower, no table).
+_COUNT_TABLE_CELLS = 1 << 20
+
+
+def _count_not_positive(yv, av, gi, c_sorted, gsorted, gstart) -> np.ndarray:
+    """For each (group g_i, element) pair with a_i > 0: j_i = #{c_p of group g_i :
+    y_i + c_p a_i <= 0} = #{c_p <= -y_i / a_i}, with ``c_sorted`` ascending within each
+    group (``gsorted`` the group of each, ``gstart`` where each group starts).
+
+    One binary search among all the c values and a table of prefix counts per group
+    (``table[g, r]``: how many of the r smallest c are group g's), or, for a table larger
+    than :data:`_COUNT_TABLE_CELLS`, one binary search on complex keys g + i c, which
+    numpy orders by group and then by c."""
+    thr = -yv / av
+    n_groups, n = gstart.size, c_sorted.size
+    if n_groups * (n + 1) > _COUNT_TABLE_CELLS:
+        keys = gsorted + 1j * c_sorted
+        return np.searchsorted(keys, gi + 1j * thr, side="right") - gstart[gi]
+    order = np.argsort(c_sorted, kind="stable")
+    table = np.zeros((n_groups, n + 1), dtype=np.int64)
+    table[gsorted[order], np.arange(1, n + 1)] = 1
+    np.cumsum(table, axis=1, out=table)
+    return table[gi, np.searchsorted(c_sorted[order], thr, side="right")]
 
 
 def ce_wheel_energy_j(vector: CycleVector, mass_kg, cda_m2, cr, negative_weight, *, group=None) -> np.ndarray:
@@ -608,7 +620,7 @@ def _groups(cda: np.ndarray, cr: np.ndarray, group) -> np.ndarray:
 class _StepsBatch:
     """The :class:`SourceSteps` of R sources side by side: K blocks in all (``kstart``
     (R+1) the first block of each source, ``source_of_block`` (K,)), block sums and the
-    (5, K, L) block matrix; the non-simplified elements with their global block."""
+    (4, K, L) block matrix; the non-simplified elements with their global block."""
 
     kstart: np.ndarray
     source_of_block: np.ndarray
@@ -634,7 +646,7 @@ class _StepsBatch:
         if all(st.blocks.shape[2] == lmax for st in steps):
             blocks = np.concatenate([st.blocks for st in steps], axis=1)
         else:
-            blocks = np.zeros((5, int(kstart[-1]), lmax))
+            blocks = np.zeros((4, int(kstart[-1]), lmax))
             for st, k0 in zip(steps, kstart[:-1]):
                 blocks[:, k0 : k0 + st.n_blocks, : st.blocks.shape[2]] = st.blocks
         nel = np.array([st.nsel.size for st in steps])
@@ -662,8 +674,12 @@ class _StepsBatch:
         return int(self.kstart[-1])
 
 
-def _peak_batch(bt: _StepsBatch, m, cda, cr, eta, w, aux, group, end) -> np.ndarray:
-    """(P, R): :func:`peak_energy_j` of P predictions on each of the batch's R sources."""
+def _peak_batch(bt: _StepsBatch, m, cda, cr, eta, w, aux, group, end, duration=None) -> tuple[np.ndarray, np.ndarray]:
+    """``(wheel, peak)``, both (P, R): the wheel energy E_DC [J] (the CE model's, summed
+    block by block) and :func:`peak_energy_j` of P predictions on each of the batch's R
+    sources. ``end`` (P, R) is a known E_n to include in the peak; if None and
+    ``duration`` (R,) [s] is given, E_n = E_DC / eta + P_aux T is computed here (one
+    positive-part pass serves the total and the peak)."""
     k = bt.n_blocks
     n_src = bt.kstart.size - 1
     n_groups = int(group.max()) + 1
@@ -677,6 +693,9 @@ def _peak_batch(bt: _StepsBatch, m, cda, cr, eta, w, aux, group, end) -> np.ndar
     neg = mm * (bt.ns_x + cr_g[:, None] * bt.ns_r)[group] + cc * bt.ns_a
     neg -= pos  # sum of the non-positive Delta_i of each block (<= 0)
     up = e_fp + pos  # positive wheel energy of each block
+    wheel = np.add.reduceat(up + w[:, None] * neg, bt.kstart[:-1], axis=1)
+    if end is None and duration is not None:
+        end = wheel / eta[:, None] + aux[:, None] * duration
     up *= (1.0 / eta)[:, None]
     if np.any(aux != 0):
         up += aux[:, None] * bt.t_s  # >= sum of the positive g_i of the block
@@ -699,19 +718,27 @@ def _peak_batch(bt: _StepsBatch, m, cda, cr, eta, w, aux, group, end) -> np.ndar
         flat = best.reshape(-1)
         lmax = bt.blocks.shape[2]
         step = max(1, _SCAN_CHUNK_ELEMENTS // lmax)
+        # g_i = W(Delta_i) / eta + P_aux dt_i with Delta_i / eta = (m / eta) x_i +
+        # (m Cr / eta) r_i + (CdA / eta) a_i, and W(D) = D + (w - 1) min(D, 0): merged
+        # elements have Delta > 0, so only single non-simplified steps are weighted
+        k_x, k_r, k_a, k_w = m / eta, m * cr / eta, cda / eta, w - 1.0
+        any_aux = bool(np.any(aux != 0))
         for lo in range(0, pi.size, step):
             pp = pi[lo : lo + step]
             bb = bi[lo : lo + step]
-            x, r, a, dt, ns = bt.blocks[:, bb]
-            d = m[pp][:, None] * (x + cr[pp][:, None] * r) + cda[pp][:, None] * a
-            d = np.where((ns > 0) & (d <= 0), w[pp][:, None] * d, d)
-            g = d / eta[pp][:, None]
-            if np.any(aux[pp] != 0):
-                g += aux[pp][:, None] * dt
-            cum = np.cumsum(g, axis=1)
-            cum += c_start[pp, bb][:, None]
-            np.maximum.at(flat, pp * n_src + bt.source_of_block[bb], cum.max(axis=1))
-    return best
+            x, r, a, dt = bt.blocks[:, bb]
+            g = k_x[pp][:, None] * x
+            g += k_r[pp][:, None] * r
+            g += k_a[pp][:, None] * a
+            neg = np.minimum(g, 0.0)
+            neg *= k_w[pp][:, None]
+            g += neg
+            if any_aux:
+                dt *= aux[pp][:, None]
+                g += dt
+            np.cumsum(g, axis=1, out=g)
+            np.maximum.at(flat, pp * n_src + bt.source_of_block[bb], g.max(axis=1) + c_start[pp, bb])
+    return wheel, best
 
 
 def peak_energy_j(
@@ -752,22 +779,24 @@ def peak_energy_j(
     end = None
     if end_energy_j is not None:
         end = np.broadcast_to(np.asarray(end_energy_j, np.float64), m.shape)[:, None]
-    return _peak_many(_StepsBatch.of([steps]), m, cda, crs, et, w, aux, group, end)[:, 0]
+    return _peak_many(_StepsBatch.of([steps]), m, cda, crs, et, w, aux, group, end)[1][:, 0]
 
 
-def _peak_many(bt: _StepsBatch, m, cda, cr, eta, w, aux, group, end) -> np.ndarray:
-    """:func:`_peak_batch` in chunks of predictions (bounded work arrays): (P, R)."""
+def _peak_many(bt: _StepsBatch, m, cda, cr, eta, w, aux, group, end, duration=None) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`_peak_batch` in chunks of predictions (bounded work arrays): ``(wheel,
+    peak)``, (P, R) each."""
     step = max(1, _CHUNK_ELEMENTS // (4 * bt.n_blocks))
     grp = None if group is None else np.asarray(group).ravel()
     if m.size <= step:
-        return _peak_batch(bt, m, cda, cr, eta, w, aux, _groups(cda, cr, grp), end)
-    out = np.empty((m.size, bt.kstart.size - 1))
+        return _peak_batch(bt, m, cda, cr, eta, w, aux, _groups(cda, cr, grp), end, duration)
+    wheel = np.empty((m.size, bt.kstart.size - 1))
+    peak = np.empty_like(wheel)
     for lo in range(0, m.size, step):
         sl = slice(lo, lo + step)
-        out[sl] = _peak_batch(bt, m[sl], cda[sl], cr[sl], eta[sl], w[sl], aux[sl],
-                              _groups(cda[sl], cr[sl], None if grp is None else grp[sl]),
-                              None if end is None else end[sl])
-    return out
+        wheel[sl], peak[sl] = _peak_batch(bt, m[sl], cda[sl], cr[sl], eta[sl], w[sl], aux[sl],
+                                          _groups(cda[sl], cr[sl], None if grp is None else grp[sl]),
+                                          None if end is None else end[sl], duration)
+    return wheel, peak
 
 
 def energy_trajectory(
@@ -876,26 +905,37 @@ def predict_sources(
         _check_cr(src, pset)
     vecs = [src.vector for src in sources]
     n_src = len(sources)
-    wheel = _ce_batch(vecs, pset.mass_kg, pset.cda_m2, pset.cr, pset.negative_weight,
-                      _groups(pset.cda_m2, pset.cr, pset.vehicle_index))  # (P, R)
     duration = np.array([v.duration_s for v in vecs])
     idle = np.array([v.idle_s for v in vecs])
     ev = pset.is_ev
     shape = (pset.n, n_src)
+    wheel = np.empty(shape)
     energy = np.full(shape, np.nan)
     fuel = np.full(shape, np.nan)
     soc_end = np.full(shape, np.nan)
     soc_min = np.full(shape, np.nan)
+    # EV rows with the lowest SoC: the step terms give the total and the peak in one
+    # pass; every other row: the CE vector
+    by_steps = ev if lowest_soc else np.zeros_like(ev)
+    by_vector = ~by_steps
+    if by_vector.any():
+        wheel[by_vector] = _ce_batch(vecs, pset.mass_kg[by_vector], pset.cda_m2[by_vector], pset.cr[by_vector],
+                                     pset.negative_weight[by_vector],
+                                     _groups(pset.cda_m2[by_vector], pset.cr[by_vector],
+                                             pset.vehicle_index[by_vector]))  # (P, R)
+    peak = None
+    if by_steps.any():
+        bt = _StepsBatch.of([src.steps for src in sources])
+        wheel[ev], peak = _peak_many(bt, pset.mass_kg[ev], pset.cda_m2[ev], pset.cr[ev], pset.eta[ev],
+                                     pset.negative_weight[ev], pset.aux_power_w[ev], pset.vehicle_index[ev],
+                                     None, duration)
     if ev.any():
         # battery energy E_e = E_DC / eta + P_aux T (eq. 31, cevm.model)
         e = wheel[ev] / pset.eta[ev][:, None] + pset.aux_power_w[ev][:, None] * duration
         energy[ev] = e
         cap = pset.battery_j[ev][:, None]
         soc_end[ev] = soc_start_pct - 100.0 * e / cap
-        if lowest_soc:
-            bt = _StepsBatch.of([src.steps for src in sources])
-            peak = _peak_many(bt, pset.mass_kg[ev], pset.cda_m2[ev], pset.cr[ev], pset.eta[ev],
-                              pset.negative_weight[ev], pset.aux_power_w[ev], pset.vehicle_index[ev], e)
+        if peak is not None:
             soc_min[ev] = soc_start_pct - 100.0 * peak / cap
     ice = ~ev
     if ice.any():
@@ -912,9 +952,9 @@ def predict_sources(
 
 
 #: Sources evaluated together by :func:`sweep`: as many as keep about this many
-#: (EV prediction x block) cells in one evaluation (256 kB per work array: larger
-#: batches leave the cache and were slower, smaller ones pay more numpy calls).
-SWEEP_BATCH_CELLS = 1 << 15
+#: (EV prediction x block) cells in one evaluation (512 kB per work array; measured
+#: with benchmarks/bench_sweep.py: 2x smaller or larger batches were 10-50 % slower).
+SWEEP_BATCH_CELLS = 1 << 16
 
 
 def sweep(
