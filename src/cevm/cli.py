@@ -458,6 +458,9 @@ from cevm import cli_predict  # noqa: E402,F401
 
 def main() -> None:
     """Console entry point."""
+    from cevm.runtime import tune_allocator
+
+    tune_allocator()
     try:
         app()
     except CevmError as exc:  # a user's mistake that escaped a command: one line, no traceback

@@ -1,0 +1,49 @@
+"""Process-wide settings for long numerical runs (the CLI applies them; a library user
+may call them in their own program).
+
+glibc's allocator returns freed memory at the top of the heap to the system once more
+than a (dynamic) threshold is free, and serves large arrays with fresh ``mmap`` pages.
+A sweep that allocates and frees many arrays of a few hundred kB then pays a page fault
+per 4 kB on every new array: about a quarter of the run time of
+``benchmarks/bench_sweep.py``. :func:`tune_allocator` keeps freed memory in the process
+instead (it is reused by the next arrays), at the cost of a higher resident size after
+a peak.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import ctypes.util
+import sys
+
+#: glibc's mallopt parameters (malloc.h)
+_M_TRIM_THRESHOLD = -1
+_M_TOP_PAD = -2
+_M_MMAP_THRESHOLD = -3
+
+#: Free memory kept at the top of the heap before any is returned to the system [bytes].
+TRIM_THRESHOLD_BYTES = 256 << 20
+#: Extra memory taken from the system whenever the heap grows [bytes].
+TOP_PAD_BYTES = 64 << 20
+#: Arrays larger than this still get their own mapping (returned when freed) [bytes].
+MMAP_THRESHOLD_BYTES = 32 << 20
+
+
+def tune_allocator() -> bool:
+    """Keep freed memory for reuse instead of returning it to the system (glibc only).
+
+    Returns True if the settings were applied, False where they do not apply (another C
+    library or operating system), which is harmless: only speed differs.
+    """
+    if not sys.platform.startswith("linux"):
+        return False
+    try:
+        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
+        mallopt = libc.mallopt
+    except (OSError, AttributeError):
+        return False
+    mallopt.argtypes = (ctypes.c_int, ctypes.c_int)
+    mallopt.restype = ctypes.c_int
+    settings = ((_M_MMAP_THRESHOLD, MMAP_THRESHOLD_BYTES), (_M_TRIM_THRESHOLD, TRIM_THRESHOLD_BYTES),
+                (_M_TOP_PAD, TOP_PAD_BYTES))
+    return all([mallopt(param, value) == 1 for param, value in settings])
