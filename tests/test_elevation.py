@@ -283,6 +283,25 @@ def test_tiles_in_two_crs(tmp_path):
     np.testing.assert_allclose(z, expect, rtol=0, atol=1e-9)
 
 
+def test_sampler_from_headers_read_elsewhere_equals_the_opened_one(tmp_path):
+    """A worker's sampler made from the writer's headers (pickled, as they travel to a
+    worker) samples exactly as the sampler that read them, and opens no raster until a
+    window of it is needed."""
+    import pickle
+
+    rng = np.random.default_rng(5)
+    big, tdir, _ = _mosaic_and_tiles(tmp_path, 3, 2, 16, 12, rng)
+    x, y = _seam_points(3, 2, 16, 12, rng)
+    with DsmSampler.open(tdir) as opened:
+        headers = pickle.loads(pickle.dumps(opened.headers))
+        assert headers == opened.headers and hash(headers) == hash(opened.headers)
+        want = opened.sample_xy(x, y, BNG)
+    with DsmSampler.from_headers(headers) as made:
+        assert made.label == headers.label and made.stats.windows_read == 0
+        np.testing.assert_array_equal(made.sample_xy(x, y, BNG), want)
+    np.testing.assert_allclose(want, ref_bilinear(big, X0, Y0, 1.0, 1.0, x, y), rtol=0, atol=1e-9)
+
+
 def test_reads_only_windows_and_caches_them(tmp_path):
     n = 2048
     data = np.arange(n * n, dtype=np.float32).reshape(n, n) % 1000

@@ -240,6 +240,17 @@ class _Tile:
         return min(xs), min(ys), max(xs), max(ys)
 
 
+@dataclass(frozen=True)
+class DsmHeaders:
+    """What :meth:`DsmSampler.open` read from a DSM's rasters (their headers) and its
+    label: enough to make an equal sampler elsewhere (:meth:`DsmSampler.from_headers`,
+    e.g. in a worker process) without reading the headers again. Picklable and
+    hashable."""
+
+    tiles: tuple[_Tile, ...]
+    label: str
+
+
 def _is_gdal_name(source: str) -> bool:
     """True for names GDAL resolves itself (URLs, /vsi paths): never checked on disk."""
     return source.startswith("/vsi") or "://" in source
@@ -538,6 +549,17 @@ class DsmSampler:
         shown = os.fspath(source) if not isinstance(source, (list, tuple)) else None
         tiles = [_read_header(n, n) for n in names]
         return cls(tiles, block_px=block_px, cache_mb=cache_mb, label=shown or f"{len(names)} rasters")
+
+    @property
+    def headers(self) -> DsmHeaders:
+        """The rasters' headers (see :class:`DsmHeaders`)."""
+        return DsmHeaders(tuple(self.tiles), self.label)
+
+    @classmethod
+    def from_headers(cls, headers: DsmHeaders, *, block_px: int | None = None, cache_mb: float = 256.0) -> DsmSampler:
+        """A sampler from headers read elsewhere (:attr:`headers`); rasters are opened
+        when first read, so a raster that vanished since is an error then."""
+        return cls(headers.tiles, block_px=block_px, cache_mb=cache_mb, label=headers.label)
 
     def close(self) -> None:
         """Close open datasets and drop the block cache."""

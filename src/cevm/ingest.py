@@ -33,7 +33,7 @@ import numpy as np
 
 from cevm.clean import CleanParams, CleanTrip, clean_log
 from cevm.cycle import CR0_DEFAULT, drive_cycle_vector
-from cevm.elevation import DsmSampler, ElevationParams, trip_elevation
+from cevm.elevation import DsmHeaders, DsmSampler, ElevationParams, trip_elevation
 from cevm.errors import CevmError, InputError
 from cevm.loggers import Profile, load_profiles, read_log
 from cevm.parallel import Executor, SerialExecutor, Task, TaskResult, worker_cache
@@ -191,6 +191,7 @@ def process_file(
     profiles: dict[str, Profile] | None = None,
     sampler: DsmSampler | None = None,
     sha256: str | None = None,
+    dsm_headers: DsmHeaders | None = None,
 ) -> FileOutcome:
     """Read, clean, add elevation and compute vectors for one file; never raises for
     bad input: the outcome carries the error (file, line, column, why).
@@ -199,7 +200,8 @@ def process_file(
     ``profiles``: the logger profiles (None: :func:`~cevm.loggers.load_profiles`).
     ``sampler``: an open sampler of ``options.dsm``; None with ``options.dsm`` set: this
     worker's own, opened on first use and kept (:func:`worker_sampler`).
-    ``sha256`` is the file's hash if the caller has it already."""
+    ``sha256`` is the file's hash if the caller has it already; ``dsm_headers`` the
+    DSM's headers if the caller read them (:func:`worker_sampler`)."""
     path = Path(path)
     stage: dict[str, float] = {}
     try:
@@ -210,7 +212,7 @@ def process_file(
         return FileOutcome(str(path), None, None, None, error=f"{path}: cannot read: {exc.strerror}")
     try:
         if sampler is None and options.dsm is not None:
-            sampler = worker_sampler(options.dsm)
+            sampler = worker_sampler(options.dsm, dsm_headers)
         t0 = time.perf_counter()
         logs = read_log(path, options.profile, profiles)
         stage["read"] = time.perf_counter() - t0
@@ -269,10 +271,16 @@ def open_sampler(dsm: str | None) -> DsmSampler | None:
         raise InputError(dsm, f"cannot open the DSM: {exc}") from None
 
 
-def worker_sampler(dsm: str) -> DsmSampler:
+def worker_sampler(dsm: str, headers: DsmHeaders | None = None) -> DsmSampler:
     """This worker's (process and thread) sampler of ``dsm``, opened on first use and
-    kept for the next files (:func:`cevm.parallel.worker_cache`)."""
-    return worker_cache(("cevm.ingest.DsmSampler", dsm), lambda: open_sampler(dsm))
+    kept for the next files (:func:`cevm.parallel.worker_cache`). ``headers``: the
+    rasters' headers as the writer read them (:attr:`DsmSampler.headers`), so that a
+    new worker does not read every tile's header again (~1.5 ms a tile); rasters
+    are then opened when a window of them is needed. A long-lived worker given other
+    headers (a DSM changed between runs) opens a new sampler."""
+    if headers is None:
+        return worker_cache(("cevm.ingest.DsmSampler", dsm), lambda: open_sampler(dsm))
+    return worker_cache(("cevm.ingest.DsmSampler", dsm, headers), lambda: DsmSampler.from_headers(headers))
 
 
 def ingest(
@@ -311,12 +319,14 @@ def ingest(
     sampler = open_sampler(options.dsm)  # here too: a bad DSM stops the run before any work
     if executor is None or len(files) < 2:  # one file cannot run in parallel
         executor = SerialExecutor()
+    headers = None
     if not executor.inline and sampler is not None:
-        sampler.close()  # workers open their own
+        headers = sampler.headers  # workers open their own, from these headers
+        sampler.close()
         sampler = None
     run_id = store.start_run()
     try:
-        jobs = (_prepare(path, store, options, profiles, sampler) for path in files)
+        jobs = (_prepare(path, store, options, profiles, sampler, headers) for path in files)
         with closing(executor.run(process_file, jobs)) as results:  # closing: cancels what is left on errors
             for res in results:
                 t0 = time.perf_counter()
@@ -333,7 +343,7 @@ def ingest(
     return report
 
 
-def _prepare(path: Path, store: TripStore, options: IngestOptions, profiles, sampler) -> FileReport | Task:
+def _prepare(path: Path, store: TripStore, options: IngestOptions, profiles, sampler, headers) -> FileReport | Task:
     """In the writer, before the task: hash the file and skip it if unchanged; else the
     task's arguments (``sampler`` is None for workers: they open their own)."""
     t0 = time.perf_counter()
@@ -344,7 +354,7 @@ def _prepare(path: Path, store: TripStore, options: IngestOptions, profiles, sam
                           seconds=time.perf_counter() - t0)
     if not options.force and not store.needs_ingest(path, sha):
         return FileReport(str(path), "unchanged", seconds=time.perf_counter() - t0)
-    return Task(str(path), (path, options, profiles, sampler, sha))
+    return Task(str(path), (path, options, profiles, sampler, sha, headers))
 
 
 def _write_result(res: TaskResult, store: TripStore, options: IngestOptions, report: IngestReport) -> FileReport:
