@@ -1022,7 +1022,9 @@ MAX_DEFICIT_SHARE = 0.02
 def _project_vehicle(kind: str):
     from cevm.io import load_vehicle
 
-    path = Path(__file__).resolve().parents[2] / "configs" / "vehicles" / f"{kind}.toml"
+    from cevm.configs_dir import shipped_configs_dir
+
+    path = shipped_configs_dir() / "vehicles" / f"{kind}.toml"
     return load_vehicle(path)
 
 

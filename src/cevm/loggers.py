@@ -93,6 +93,7 @@ from typing import Any, Literal
 import numpy as np
 import pandas as pd
 
+from cevm.configs_dir import shipped_configs_dir
 from cevm.errors import InputError
 
 __all__ = [
@@ -229,10 +230,8 @@ _VIRTUAL_COLUMNS: dict[str, tuple[tuple[str, str], str]] = {
 # Text that means "no value" in a numeric column (besides an empty field).
 _NUMERIC_NA = ["", "NA", "N/A", "n/a", "NaN", "nan", "null", "NULL", "None", "-", "--"]
 
-# Default profile directory of a source checkout: src/cevm/../../configs/loggers.
-_REPO_PROFILES = Path(__file__).resolve().parents[2] / "configs" / "loggers"
-# Profiles shipped as package data (if the package is ever built with them).
-_PACKAGE_PROFILES = Path(__file__).resolve().parent / "profiles"
+# The profiles shipped with cevm: configs/loggers (a checkout's, or an installed wheel's).
+_SHIPPED_PROFILES = shipped_configs_dir() / "loggers"
 # Environment variable: extra profile directories (os.pathsep separated).
 PROFILES_ENV = "CEVM_PROFILES"
 
@@ -657,9 +656,9 @@ _REQUIRED = _Required()
 
 
 def builtin_profile_dirs() -> list[Path]:
-    """Directories of the profiles shipped with cevm that exist: package data
-    (``cevm/profiles``) and, in a source checkout, ``configs/loggers``."""
-    return [d for d in (_PACKAGE_PROFILES, _REPO_PROFILES) if d.is_dir()]
+    """Directories of the profiles shipped with cevm that exist: ``configs/loggers`` of
+    the source checkout or of the installed package (:mod:`cevm.configs_dir`)."""
+    return [d for d in (_SHIPPED_PROFILES,) if d.is_dir()]
 
 
 def load_profiles(directory: str | Path | None = None, *, include_env: bool = True) -> dict[str, Profile]:
