@@ -178,6 +178,32 @@ def test_serialisation_round_trip():
         np.testing.assert_array_equal(getattr(back, name), getattr(vec, name))
 
 
+
+def test_vectors_stored_as_npz_by_earlier_versions_still_read():
+    # version 1 stored an npz archive (written here as it did): stores made then stay usable
+    import io
+
+    rng = np.random.default_rng(4)
+    t, v, h = random_cycle(rng, 300)
+    vec = drive_cycle_vector(t, v, h)
+    buf = io.BytesIO()
+    scalars = np.array([vec.s_me, vec.s_a, vec.s_r, vec.stand_x, vec.cr0, vec.duration_s, vec.distance_m,
+                        vec.idle_s, float(vec.n_samples), vec.physics.rho_air_kg_m3, vec.physics.g_mps2])
+    np.savez(buf, version=np.array([1]), scalars=scalars, ns=np.stack([vec.ns_x, vec.ns_a, vec.ns_r]))
+    old = CycleVector.from_bytes(buf.getvalue())
+    assert old.delta.tolist() == vec.delta.tolist() and old.n_samples == vec.n_samples
+    np.testing.assert_array_equal(old.ns_a, vec.ns_a)
+    assert wheel_energy_j(old, 12000.0, 5.0, 0.006, 0.5) == wheel_energy_j(vec, 12000.0, 5.0, 0.006, 0.5)
+
+
+def test_corrupt_vector_bytes_are_refused():
+    data = drive_cycle_vector(np.arange(50.0), np.full(50, 8.0)).to_bytes()
+    with pytest.raises(ValueError, match="truncated"):
+        CycleVector.from_bytes(data[:-8])
+    with pytest.raises(ValueError, match="magic"):
+        CycleVector.from_bytes(b"XXXXXXXX" + data[8:])
+
+
 # --- properties -----------------------------------------------------------------------
 
 @st.composite
