@@ -23,3 +23,8 @@ def test_tune_allocator_applies_on_glibc_and_can_be_repeated():
 
 def test_tune_allocator_never_raises():
     assert isinstance(tune_allocator(), bool)
+
+
+def test_tune_allocator_can_be_switched_off(monkeypatch):
+    monkeypatch.setenv("CEVM_TUNE_ALLOCATOR", "0")
+    assert tune_allocator() is False

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import ctypes
 import ctypes.util
+import os
 import sys
 
 #: glibc's mallopt parameters (malloc.h)
@@ -29,13 +30,19 @@ TOP_PAD_BYTES = 64 << 20
 MMAP_THRESHOLD_BYTES = 32 << 20
 
 
+#: Set to ``0`` to leave the allocator alone (e.g. workers under a tight memory limit).
+TUNE_ENV = "CEVM_TUNE_ALLOCATOR"
+
+
 def tune_allocator() -> bool:
     """Keep freed memory for reuse instead of returning it to the system (glibc only).
 
     Returns True if the settings were applied, False where they do not apply (another C
-    library or operating system), which is harmless: only speed differs.
+    library or operating system) or ``$CEVM_TUNE_ALLOCATOR`` is ``0``, which is
+    harmless: only speed differs. A process keeps up to :data:`TRIM_THRESHOLD_BYTES`
+    of freed memory (plus :data:`TOP_PAD_BYTES`) after a peak.
     """
-    if not sys.platform.startswith("linux"):
+    if not sys.platform.startswith("linux") or os.environ.get(TUNE_ENV, "").strip() == "0":
         return False
     try:
         libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
