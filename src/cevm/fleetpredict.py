@@ -674,12 +674,11 @@ class _StepsBatch:
         return int(self.kstart[-1])
 
 
-def _peak_batch(bt: _StepsBatch, m, cda, cr, eta, w, aux, group, end, duration=None) -> tuple[np.ndarray, np.ndarray]:
+def _peak_batch(bt: _StepsBatch, m, cda, cr, eta, w, aux, group, end) -> tuple[np.ndarray, np.ndarray]:
     """``(wheel, peak)``, both (P, R): the wheel energy E_DC [J] (the CE model's, summed
-    block by block) and :func:`peak_energy_j` of P predictions on each of the batch's R
-    sources. ``end`` (P, R) is a known E_n to include in the peak; if None and
-    ``duration`` (R,) [s] is given, E_n = E_DC / eta + P_aux T is computed here (one
-    positive-part pass serves the total and the peak)."""
+    block by block: one positive-part pass serves the total and the peak) and
+    :func:`peak_energy_j` of P predictions on each of the batch's R sources. ``end``
+    (P, R) or None: a known E_n to include in the peak."""
     k = bt.n_blocks
     n_src = bt.kstart.size - 1
     n_groups = int(group.max()) + 1
@@ -694,8 +693,6 @@ def _peak_batch(bt: _StepsBatch, m, cda, cr, eta, w, aux, group, end, duration=N
     neg -= pos  # sum of the non-positive Delta_i of each block (<= 0)
     up = e_fp + pos  # positive wheel energy of each block
     wheel = np.add.reduceat(up + w[:, None] * neg, bt.kstart[:-1], axis=1)
-    if end is None and duration is not None:
-        end = wheel / eta[:, None] + aux[:, None] * duration
     up *= (1.0 / eta)[:, None]
     if np.any(aux != 0):
         up += aux[:, None] * bt.t_s  # >= sum of the positive g_i of the block
@@ -782,20 +779,20 @@ def peak_energy_j(
     return _peak_many(_StepsBatch.of([steps]), m, cda, crs, et, w, aux, group, end)[1][:, 0]
 
 
-def _peak_many(bt: _StepsBatch, m, cda, cr, eta, w, aux, group, end, duration=None) -> tuple[np.ndarray, np.ndarray]:
+def _peak_many(bt: _StepsBatch, m, cda, cr, eta, w, aux, group, end) -> tuple[np.ndarray, np.ndarray]:
     """:func:`_peak_batch` in chunks of predictions (bounded work arrays): ``(wheel,
     peak)``, (P, R) each."""
     step = max(1, _CHUNK_ELEMENTS // (4 * bt.n_blocks))
     grp = None if group is None else np.asarray(group).ravel()
     if m.size <= step:
-        return _peak_batch(bt, m, cda, cr, eta, w, aux, _groups(cda, cr, grp), end, duration)
+        return _peak_batch(bt, m, cda, cr, eta, w, aux, _groups(cda, cr, grp), end)
     wheel = np.empty((m.size, bt.kstart.size - 1))
     peak = np.empty_like(wheel)
     for lo in range(0, m.size, step):
         sl = slice(lo, lo + step)
         wheel[sl], peak[sl] = _peak_batch(bt, m[sl], cda[sl], cr[sl], eta[sl], w[sl], aux[sl],
                                           _groups(cda[sl], cr[sl], None if grp is None else grp[sl]),
-                                          None if end is None else end[sl], duration)
+                                          None if end is None else end[sl])
     return wheel, peak
 
 
@@ -927,8 +924,7 @@ def predict_sources(
     if by_steps.any():
         bt = _StepsBatch.of([src.steps for src in sources])
         wheel[ev], peak = _peak_many(bt, pset.mass_kg[ev], pset.cda_m2[ev], pset.cr[ev], pset.eta[ev],
-                                     pset.negative_weight[ev], pset.aux_power_w[ev], pset.vehicle_index[ev],
-                                     None, duration)
+                                     pset.negative_weight[ev], pset.aux_power_w[ev], pset.vehicle_index[ev], None)
     if ev.any():
         # battery energy E_e = E_DC / eta + P_aux T (eq. 31, cevm.model)
         e = wheel[ev] / pset.eta[ev][:, None] + pset.aux_power_w[ev][:, None] * duration
@@ -936,6 +932,7 @@ def predict_sources(
         cap = pset.battery_j[ev][:, None]
         soc_end[ev] = soc_start_pct - 100.0 * e / cap
         if peak is not None:
+            np.maximum(peak, e, out=peak)  # E_n is one of the E_j: SoC_min <= SoC_end exactly
             soc_min[ev] = soc_start_pct - 100.0 * peak / cap
     ice = ~ev
     if ice.any():
