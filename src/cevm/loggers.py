@@ -658,7 +658,7 @@ _REQUIRED = _Required()
 def builtin_profile_dirs() -> list[Path]:
     """Directories of the profiles shipped with cevm that exist: ``configs/loggers`` of
     the source checkout or of the installed package (:mod:`cevm.configs_dir`)."""
-    return [d for d in (_SHIPPED_PROFILES,) if d.is_dir()]
+    return [_SHIPPED_PROFILES] if _SHIPPED_PROFILES.is_dir() else []
 
 
 def load_profiles(directory: str | Path | None = None, *, include_env: bool = True) -> dict[str, Profile]:
