@@ -30,6 +30,7 @@ from cevm.store import (
     encode_profile,
     format_trips,
     resolve_store_path,
+    trip_profile_blob,
 )
 from cevm.trip import Measurement, Trip
 
@@ -148,6 +149,25 @@ def test_default_store_path_honours_env(monkeypatch, tmp_path):
 
 
 # ---------------------------------------------------------------------------- profile
+
+
+def test_profiles_encoded_by_a_worker_store_the_same_bytes(tmp_path):
+    trips, vectors = make_file_trips("w")
+    blobs = [trip_profile_blob(t) for t in trips]
+    for t, b in zip(trips, blobs):
+        np.testing.assert_array_equal(decode_profile(b)["time_s"], t.time_s)
+    dbs = []
+    for name, kw in (("here", {}), ("worker", {"profile_blobs": blobs})):
+        dbs.append(tmp_path / f"{name}.sqlite")
+        with TripStore(dbs[-1]) as st:
+            st.replace_file_trips("/logs/w.csv", trips, vectors, sha256=sha_of("w"), size_bytes=1, mtime_s=1.0,
+                                  profile="srf", **kw)
+            with pytest.raises(ValueError, match="profiles"):
+                st.replace_file_trips("/logs/w.csv", trips, vectors, sha256=sha_of("w"), size_bytes=1, mtime_s=1.0,
+                                      profile="srf", force=True, profile_blobs=blobs[:1])
+    a, b = snapshot(dbs[0]), snapshot(dbs[1])
+    assert a["trip_blobs"] == b["trip_blobs"] and len(a["trip_blobs"]) == 3
+    assert a["trips"] == b["trips"]
 
 
 def test_profile_round_trip_precision():

@@ -37,7 +37,7 @@ from cevm.elevation import DsmHeaders, DsmSampler, ElevationParams, trip_elevati
 from cevm.errors import CevmError, InputError
 from cevm.loggers import Profile, load_profiles, read_log
 from cevm.parallel import Executor, SerialExecutor, Task, TaskResult, worker_cache
-from cevm.store import TripStore
+from cevm.store import TripStore, trip_profile_blob
 from cevm.trip import Trip
 
 #: File names taken from a directory (recursively).
@@ -68,6 +68,7 @@ class FileOutcome:
     profile: str | None = None
     trips: tuple[Trip, ...] = ()
     vectors: tuple[bytes, ...] = ()
+    profile_blobs: tuple[bytes, ...] = ()  # each trip's stored profile (trip_profile_blob)
     n_rows: int = 0
     n_samples: int = 0
     dropped: tuple[dict, ...] = ()
@@ -218,6 +219,7 @@ def process_file(
         stage["read"] = time.perf_counter() - t0
         trips: list[Trip] = []
         vectors: list[bytes] = []
+        blobs: list[bytes] = []
         dropped: list[dict] = []
         n_rows = 0
         for log in logs:
@@ -235,13 +237,16 @@ def process_file(
                 t1 = time.perf_counter()
                 vec = drive_cycle_vector(trip.time_s, trip.speed_mps, trip.elevation_m, cr0=options.cr0)
                 vectors.append(vec.to_bytes())
+                t2 = time.perf_counter()
+                blobs.append(trip_profile_blob(trip))
                 stage["elevation"] = stage.get("elevation", 0.0) + t1 - t0
-                stage["vector"] = stage.get("vector", 0.0) + time.perf_counter() - t1
+                stage["vector"] = stage.get("vector", 0.0) + t2 - t1
+                stage["profile"] = stage.get("profile", 0.0) + time.perf_counter() - t2
                 trips.append(trip)
         return FileOutcome(
             str(path), sha, size, mtime,
             profile=logs[0].profile if logs else None,
-            trips=tuple(trips), vectors=tuple(vectors), n_rows=n_rows,
+            trips=tuple(trips), vectors=tuple(vectors), profile_blobs=tuple(blobs), n_rows=n_rows,
             n_samples=sum(len(t.time_s) for t in trips),
             dropped=tuple(dropped), repairs=tuple(logs[0].repairs) if logs else (),
             stage_s=stage,
@@ -391,7 +396,7 @@ def _store_outcome(path: Path, out: FileOutcome, store: TripStore, options: Inge
     t0 = time.perf_counter()
     res = store.replace_file_trips(
         path, list(out.trips), list(out.vectors), sha256=out.sha256, size_bytes=out.size_bytes,
-        mtime_s=out.mtime_s, profile=out.profile, force=options.force,
+        mtime_s=out.mtime_s, profile=out.profile, force=options.force, profile_blobs=list(out.profile_blobs),
     )
     report.stage_s["store"] = report.stage_s.get("store", 0.0) + time.perf_counter() - t0
     if res.unchanged:

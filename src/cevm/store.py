@@ -291,6 +291,12 @@ def encode_profile(arrays: Mapping[str, np.ndarray]) -> bytes:
     return b"".join([_PROFILE_MAGIC, struct.pack("<I", len(header)), header, *payloads])
 
 
+def trip_profile_blob(trip: Trip) -> bytes:
+    """A trip's profile BLOB as the store keeps it (:func:`encode_profile` of its
+    arrays); made by ingest's workers so that the single writer does not."""
+    return encode_profile({name: getattr(trip, name) for name in PROFILE_DTYPES})
+
+
 def decode_profile(blob: bytes) -> dict[str, np.ndarray]:
     """Unpack :func:`encode_profile`'s BLOB into float64 arrays (speed and elevation
     carry the float32 rounding of their storage)."""
@@ -569,6 +575,7 @@ class TripStore:
         mtime_s: float | None,
         profile: str | None,
         force: bool = False,
+        profile_blobs: Sequence[bytes] | None = None,
     ) -> WriteResult:
         """Store the trips of one source file, replacing all its earlier trips, in one
         transaction.
@@ -585,6 +592,8 @@ class TripStore:
         profile : name of the logger profile used.
         force : default False; True rewrites even if this version is already stored
             (e.g. after a DSM or cevm update).
+        profile_blobs : each trip's :func:`trip_profile_blob`, same order, if made
+            already (by a worker); default None: made here.
 
         Returns a :class:`WriteResult`. If the same path and sha256 are already stored
         with status ``'ok'`` (checked inside the write lock, so two processes racing on
@@ -595,6 +604,10 @@ class TripStore:
         key = file_key(path)
         if len(trips) != len(vectors):
             raise ValueError(f"{len(trips)} trips but {len(vectors)} vectors for {key}")
+        if profile_blobs is None:
+            profile_blobs = [trip_profile_blob(t) for t in trips]
+        elif len(profile_blobs) != len(trips):
+            raise ValueError(f"{len(trips)} trips but {len(profile_blobs)} profiles for {key}")
         for t in trips:
             if t.source_sha256 != sha256:
                 raise ValueError(
@@ -607,17 +620,9 @@ class TripStore:
 
         # Everything that costs CPU happens before the write lock is taken.
         trip_rows, blob_rows, ids = [], [], []
-        for t, vec in zip(trips, vectors):
+        for t, vec, prof in zip(trips, vectors, profile_blobs):
             trip_rows.append(self._trip_row(t, key))
-            blob_rows.append(
-                (
-                    t.trip_id,
-                    sqlite3.Binary(bytes(vec)),
-                    encode_profile(
-                        {name: getattr(t, name) for name in PROFILE_DTYPES}
-                    ),
-                )
-            )
+            blob_rows.append((t.trip_id, sqlite3.Binary(bytes(vec)), prof))
             ids.append(t.trip_id)
 
         con = self.con
