@@ -686,31 +686,46 @@ def _peak_batch(bt: _StepsBatch, m, cda, cr, eta, w, aux, group, end) -> tuple[n
     cr_g[group] = cr
     mm = m[:, None]
     cc = cda[:, None]
+    # (P, K) arithmetic in place, in a few buffers: fresh arrays of this size cost page
+    # faults (glibc returns freed memory to the system), as much as the arithmetic
     pos = _positive_parts(bt.el_x, bt.el_a, bt.el_r, bt.el_block, bt.el_bs, k, m, cda, cr, group, n_groups)
+    tmp = np.empty_like(pos)
     # wheel energy of the merged (always positive) elements, and of the others' negatives
-    e_fp = mm * (bt.fp_x + cr_g[:, None] * bt.fp_r)[group] + cc * bt.fp_a
-    neg = mm * (bt.ns_x + cr_g[:, None] * bt.ns_r)[group] + cc * bt.ns_a
+    up = (bt.fp_x + cr_g[:, None] * bt.fp_r)[group]
+    up *= mm
+    up += np.multiply(cc, bt.fp_a, out=tmp)
+    neg = (bt.ns_x + cr_g[:, None] * bt.ns_r)[group]
+    neg *= mm
+    neg += np.multiply(cc, bt.ns_a, out=tmp)
     neg -= pos  # sum of the non-positive Delta_i of each block (<= 0)
-    up = e_fp + pos  # positive wheel energy of each block
-    wheel = np.add.reduceat(up + w[:, None] * neg, bt.kstart[:-1], axis=1)
+    up += pos  # positive wheel energy of each block
+    np.multiply(w[:, None], neg, out=tmp)
+    tmp += up
+    wheel = np.add.reduceat(tmp, bt.kstart[:-1], axis=1)
     up *= (1.0 / eta)[:, None]
     if np.any(aux != 0):
-        up += aux[:, None] * bt.t_s  # >= sum of the positive g_i of the block
-    regen = (w / eta)[:, None] * neg  # <= sum of the negative g_i of the block (<= 0)
-    s = up + regen  # battery energy of each block
+        up += np.multiply(aux[:, None], bt.t_s, out=tmp)  # >= sum of the positive g_i of the block
+    regen = neg
+    regen *= (w / eta)[:, None]  # <= sum of the negative g_i of the block (<= 0)
+    s = np.add(up, regen, out=pos)  # battery energy of each block
     c_end = np.cumsum(s, axis=1)
-    if n_src > 1:  # restart the sum at each source
-        base = c_end[:, bt.kstart[1:-1] - 1]
-        c_end[:, bt.kstart[1] :] -= np.repeat(base, np.diff(bt.kstart[1:]), axis=1)
-    c_start = c_end - s
+    for j in range(n_src - 1, 0, -1):  # restart the sum at each source (last first: the
+        lo, hi = bt.kstart[j], bt.kstart[j + 1]  # column before it is still the running sum)
+        c_end[:, lo:hi] -= c_end[:, lo - 1 : lo]
+    c_start = np.subtract(c_end, s, out=tmp)
     best = np.maximum.reduceat(c_end, bt.kstart[:-1], axis=1)
     np.maximum(best, 0.0, out=best)
     if end is not None:
         np.maximum(best, end, out=best)
-    ub = np.minimum(c_start + up, c_end - regen)  # bounds of E_j inside each block
+    # bounds of E_j inside each block: min(C_b + up, C_{b+1} - regen)
+    ub = np.minimum(np.add(c_start, up, out=up), np.subtract(c_end, regen, out=regen), out=up)
     # scan more, never less, where rounding blurs a bound (1e-9 of the energy, or 1 mJ)
     lim = best - (1e-9 * np.abs(best) + 1e-3)
-    pi, bi = np.nonzero(ub > lim[:, bt.source_of_block])
+    cand = np.empty(ub.shape, dtype=bool)
+    for j in range(n_src):
+        lo, hi = bt.kstart[j], bt.kstart[j + 1]
+        np.greater(ub[:, lo:hi], lim[:, j : j + 1], out=cand[:, lo:hi])
+    pi, bi = np.nonzero(cand)
     if pi.size:
         flat = best.reshape(-1)
         lmax = bt.blocks.shape[2]
