@@ -25,12 +25,14 @@ Faults
     whole pool (:class:`~concurrent.futures.process.BrokenProcessPool`): the pool is
     recreated, tasks that had not started are resubmitted for free, and the tasks that
     were running are suspects. Each worker writes the index of the task it runs into a
-    shared array, so suspects are known exactly. Each suspect is charged an attempt and
-    re-run **alone** in the pool (when several were running together, only one of them
-    killed its worker; the pool terminated the others), where a death is its own. A task
-    is failed on a death it alone was running for, once it has been a suspect
-    ``max_attempts`` times: a task that kills every worker it runs on kills exactly
-    ``max_attempts`` of them, and one that ran beside it is not blamed. On Dask, the
+    shared array, so suspects are known exactly. A lone suspect is charged the death;
+    several suspects are not (only one of them killed its worker; the pool terminated
+    the others, and which is which is unknown). Every suspect is then re-run **alone**
+    in the pool, where a death is its own. A task is failed once it has been charged
+    ``max_attempts`` deaths: a task that kills every worker it runs on kills
+    ``max_attempts`` of them (one more if its first death was beside another task), and
+    neither a task that ran beside it nor one that killed its worker once, beside it,
+    and then ran clean, is blamed. On Dask, the
     scheduler does this itself: a dead worker's tasks are rescheduled, and a task that
     was on ``distributed.scheduler.allowed-failures + 1`` dead workers fails with
     ``KilledWorker`` (:class:`DaskExecutor` sets ``allowed-failures = max_attempts - 1``
@@ -496,6 +498,9 @@ class ProcessExecutor(Executor):
         for e in sorted((e for e in victims if e.index not in started), key=lambda e: e.index):
             e.attempts -= 1  # never started: this run does not count
             st.retry.append(e)
+        if len(suspects) > 1:
+            for e in suspects:
+                e.attempts -= 1  # not provably its death: run alone, uncharged
         if len(suspects) == 1 and suspects[0].attempts >= self.max_attempts:
             e = suspects.pop()
             results.append(TaskResult(
