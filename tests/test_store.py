@@ -156,12 +156,19 @@ def test_profiles_encoded_by_a_worker_store_the_same_bytes(tmp_path):
     blobs = [trip_profile_blob(t) for t in trips]
     for t, b in zip(trips, blobs):
         np.testing.assert_array_equal(decode_profile(b)["time_s"], t.time_s)
+    records = [t.record() for t in trips]  # what a worker sends back: no arrays
+    assert [r.trip_id for r in records] == [t.trip_id for t in trips]
+    assert [(r.n_samples, r.duration_s, r.length_m) for r in records] == \
+        [(len(t.time_s), t.time_s[-1] - t.time_s[0], t.distance_m[-1]) for t in trips]
     dbs = []
-    for name, kw in (("here", {}), ("worker", {"profile_blobs": blobs})):
+    for name, got, kw in (("here", trips, {}), ("worker", records, {"profile_blobs": blobs})):
         dbs.append(tmp_path / f"{name}.sqlite")
         with TripStore(dbs[-1]) as st:
-            st.replace_file_trips("/logs/w.csv", trips, vectors, sha256=sha_of("w"), size_bytes=1, mtime_s=1.0,
+            st.replace_file_trips("/logs/w.csv", got, vectors, sha256=sha_of("w"), size_bytes=1, mtime_s=1.0,
                                   profile="srf", **kw)
+            with pytest.raises(ValueError, match="records without arrays"):
+                st.replace_file_trips("/logs/w.csv", records, vectors, sha256=sha_of("w"), size_bytes=1,
+                                      mtime_s=1.0, profile="srf", force=True)
             with pytest.raises(ValueError, match="profiles"):
                 st.replace_file_trips("/logs/w.csv", trips, vectors, sha256=sha_of("w"), size_bytes=1, mtime_s=1.0,
                                       profile="srf", force=True, profile_blobs=blobs[:1])

@@ -38,7 +38,7 @@ from cevm.errors import CevmError, InputError
 from cevm.loggers import Profile, load_profiles, read_log
 from cevm.parallel import Executor, SerialExecutor, Task, TaskResult, worker_cache
 from cevm.store import TripStore, trip_profile_blob
-from cevm.trip import Trip
+from cevm.trip import Trip, TripRecord
 
 #: File names taken from a directory (recursively).
 LOG_PATTERNS = ("*.csv", "*.csv.gz", "*.CSV", "*.CSV.GZ")
@@ -66,7 +66,7 @@ class FileOutcome:
     size_bytes: int | None
     mtime_s: float | None
     profile: str | None = None
-    trips: tuple[Trip, ...] = ()
+    trips: tuple[TripRecord, ...] = ()  # the arrays are in vectors and profile_blobs
     vectors: tuple[bytes, ...] = ()
     profile_blobs: tuple[bytes, ...] = ()  # each trip's stored profile (trip_profile_blob)
     n_rows: int = 0
@@ -217,7 +217,7 @@ def process_file(
         t0 = time.perf_counter()
         logs = read_log(path, options.profile, profiles)
         stage["read"] = time.perf_counter() - t0
-        trips: list[Trip] = []
+        trips: list[TripRecord] = []
         vectors: list[bytes] = []
         blobs: list[bytes] = []
         dropped: list[dict] = []
@@ -242,12 +242,12 @@ def process_file(
                 stage["elevation"] = stage.get("elevation", 0.0) + t1 - t0
                 stage["vector"] = stage.get("vector", 0.0) + t2 - t1
                 stage["profile"] = stage.get("profile", 0.0) + time.perf_counter() - t2
-                trips.append(trip)
+                trips.append(trip.record())
         return FileOutcome(
             str(path), sha, size, mtime,
             profile=logs[0].profile if logs else None,
             trips=tuple(trips), vectors=tuple(vectors), profile_blobs=tuple(blobs), n_rows=n_rows,
-            n_samples=sum(len(t.time_s) for t in trips),
+            n_samples=sum(t.n_samples for t in trips),
             dropped=tuple(dropped), repairs=tuple(logs[0].repairs) if logs else (),
             stage_s=stage,
         )

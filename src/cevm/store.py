@@ -69,7 +69,7 @@ import pandas as pd
 
 from cevm import __version__
 from cevm.errors import CevmError
-from cevm.trip import Measurement, Trip
+from cevm.trip import Measurement, Trip, TripRecord
 
 SCHEMA_VERSION = 1
 """Version of the table layout written by this code. A store with a higher version was
@@ -567,7 +567,7 @@ class TripStore:
     def replace_file_trips(
         self,
         path: str | Path,
-        trips: Sequence[Trip],
+        trips: Sequence[Trip | TripRecord],
         vectors: Sequence[bytes],
         *,
         sha256: str,
@@ -584,7 +584,8 @@ class TripStore:
         ----------
         path : the source file; keyed on its resolved absolute path (:func:`file_key`),
             which is also stored as each trip's ``source_file``.
-        trips : the file's trips; every ``trip.source_sha256`` must equal ``sha256``.
+        trips : the file's trips (or their :class:`~cevm.trip.TripRecord`, with
+            ``profile_blobs``); every ``trip.source_sha256`` must equal ``sha256``.
         vectors : the drive-cycle vector bytes of each trip, same order (opaque here).
         sha256 : hex sha256 of the file's content.
         size_bytes, mtime_s : file size [bytes] and modification time [s since epoch],
@@ -605,6 +606,8 @@ class TripStore:
         if len(trips) != len(vectors):
             raise ValueError(f"{len(trips)} trips but {len(vectors)} vectors for {key}")
         if profile_blobs is None:
+            if not all(isinstance(t, Trip) for t in trips):
+                raise ValueError(f"trip records without arrays need their profile_blobs ({key})")
             profile_blobs = [trip_profile_blob(t) for t in trips]
         elif len(profile_blobs) != len(trips):
             raise ValueError(f"{len(trips)} trips but {len(profile_blobs)} profiles for {key}")
@@ -705,7 +708,7 @@ class TripStore:
         )
 
     @staticmethod
-    def _trip_row(t: Trip, key: str) -> tuple:
+    def _trip_row(t: Trip | TripRecord, key: str) -> tuple:
         m = t.measured
         return (
             t.trip_id,
@@ -716,7 +719,7 @@ class TripStore:
             float(t.start_utc_s),
             t.duration_s,
             t.length_m,
-            int(len(t.time_s)),
+            int(t.n_samples),
             str(t.elevation_source),
             _real(t.dsm_coverage_pct),
             _real(t.gross_weight_kg),

@@ -90,7 +90,7 @@ class Trip:
     @property
     def trip_id(self) -> str:
         """Stable id: vehicle, start time and source content hash."""
-        return f"{self.vehicle_id}:{int(round(self.start_utc_s))}:{self.source_sha256[:8]}"
+        return trip_id_of(self.vehicle_id, self.start_utc_s, self.source_sha256)
 
     @property
     def duration_s(self) -> float:
@@ -99,3 +99,46 @@ class Trip:
     @property
     def length_m(self) -> float:
         return float(self.distance_m[-1]) if len(self.distance_m) else 0.0
+
+    @property
+    def n_samples(self) -> int:
+        return int(len(self.time_s))
+
+    def record(self) -> TripRecord:
+        """The trip without its arrays: what the store keeps in its ``trips`` table."""
+        return TripRecord(
+            self.vehicle_id, self.source_file, self.source_sha256, int(self.trip_index), float(self.start_utc_s),
+            self.duration_s, self.length_m, self.n_samples, self.elevation_source, self.dsm_coverage_pct,
+            self.measured, self.gross_weight_kg, self.quality,
+        )
+
+
+@dataclass(frozen=True)
+class TripRecord:
+    """A trip's summary without its sample arrays (:meth:`Trip.record`): what the
+    store's ``trips`` table holds, and what ingest's workers send back to the writer
+    (the arrays travel as the encoded profile, a third of their size)."""
+
+    vehicle_id: str
+    source_file: str
+    source_sha256: str
+    trip_index: int
+    start_utc_s: float  # [s since the Unix epoch, UTC]
+    duration_s: float
+    length_m: float
+    n_samples: int
+    elevation_source: str
+    dsm_coverage_pct: float
+    measured: Measurement | None
+    gross_weight_kg: float | None
+    quality: dict = field(default_factory=dict, hash=False)
+
+    @property
+    def trip_id(self) -> str:
+        """Stable id: vehicle, start time and source content hash (as :attr:`Trip.trip_id`)."""
+        return trip_id_of(self.vehicle_id, self.start_utc_s, self.source_sha256)
+
+
+def trip_id_of(vehicle_id: str, start_utc_s: float, source_sha256: str) -> str:
+    """A trip's stable id: ``vehicle:start second:first 8 hex digits of the file hash``."""
+    return f"{vehicle_id}:{int(round(start_utc_s))}:{source_sha256[:8]}"
