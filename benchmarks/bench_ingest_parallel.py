@@ -2,11 +2,12 @@
 
     python benchmarks/bench_ingest_parallel.py [--quick] [--vehicles N] [--days D]
                                                [--workers W] [--repeat R] [--no-dask]
-                                               [--days-per-file K]
+                                               [--short-days] [--days-per-file K]
 
 Generates a fleet of srf logs with ``cevm.samplegen.fleet_for_benchmark`` (default 40
-vehicles x 5 days, ~1e6 samples, with its DSM tiles; ``--quick``: 8 x 2), then ingests
-it into a fresh store with :func:`cevm.ingest.ingest`, DSM lookup included:
+vehicles x 5 working days, one file per vehicle-day of 4-6 h of driving, ~17,000
+samples: 3.4e6 samples, with its DSM tiles; ``--quick``: 8 x 2), then ingests it into a
+fresh store with :func:`cevm.ingest.ingest`, DSM lookup included:
 
 - ``serial``: one process (:class:`~cevm.parallel.SerialExecutor`, ``--workers 1``),
   single-threaded BLAS like the workers (set before numpy loads);
@@ -21,9 +22,12 @@ it into a fresh store with :func:`cevm.ingest.ingest`, DSM lookup included:
   this workload with no executor, no single writer and no pickling at all. It is the
   ceiling against which the pool's overhead is judged.
 
-``--days-per-file K`` merges K days of a vehicle into one file, for tasks K times
-bigger (a sample-generator vehicle-day is ~5,000 samples, ~25 ms of work; a real bus
-logging 16 h at 1 Hz gives 57,600 samples a day).
+Task size matters (the per-task cost of a Dask cluster is fixed, ~5-10 ms of CPU here,
+and so is each new worker's start: transformer, DSM blocks): ``--short-days`` makes
+the vehicle-days the sample fleet's (2-3 trips, ~1.4 h of driving, ~5,000 samples,
+~20 ms of work per file: 1e6 samples in all), ``--days-per-file K`` merges K days of a
+vehicle into one file, for tasks K times bigger. The issue's own fleet logs 16 h a day
+at 1 Hz: 57,600 samples per bus-day.
 
 Every process runs with :func:`cevm.runtime.tune_allocator` applied, as under the
 ``cevm`` command (this one and the ``2 x serial`` children at start, workers on their
@@ -176,15 +180,16 @@ def store_content(path: Path) -> tuple:
         con.close()
 
 
-def generate(outdir: Path, n_vehicles: int, n_days: int) -> tuple[list[Path], str]:
+def generate(outdir: Path, n_vehicles: int, n_days: int, full_days: bool) -> tuple[list[Path], str]:
     try:
         from cevm.samplegen import fleet_for_benchmark
     except ImportError:
         raise SystemExit("cevm.samplegen.fleet_for_benchmark is needed to generate the fleet") from None
     t0 = time.perf_counter()
-    truth = fleet_for_benchmark(n_vehicles, n_days, outdir / "fleet", dsm_dir=outdir / "dsm")
+    truth = fleet_for_benchmark(n_vehicles, n_days, outdir / "fleet", dsm_dir=outdir / "dsm", full_days=full_days)
     files = sorted((outdir / "fleet").rglob("*.csv"))
-    print(f"fleet: {n_vehicles} vehicles x {n_days} days = {len(files)} srf files, {truth['rows']:,} rows, "
+    print(f"fleet: {n_vehicles} vehicles x {n_days} {'working' if full_days else 'short'} days = "
+          f"{len(files)} srf files, {truth['rows']:,} rows, "
           f"{truth['bytes'] / 1e6:.0f} MB; {len(truth['dsm_tiles'])} DSM tiles "
           f"(generated in {time.perf_counter() - t0:.1f} s)")
     return files, str(outdir / "dsm")
@@ -235,6 +240,8 @@ def main() -> None:
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--repeat", type=int, default=None)
     ap.add_argument("--no-dask", action="store_true")
+    ap.add_argument("--short-days", action="store_true",
+                    help="the sample fleet's ~1.4 h vehicle-days (5,000 samples a file) instead of working days")
     ap.add_argument("--days-per-file", type=int, default=1,
                     help="merge this many days of a vehicle into one file: bigger tasks (default 1)")
     ap.add_argument("--child", nargs=argparse.REMAINDER, help=argparse.SUPPRESS)
@@ -260,7 +267,7 @@ def main() -> None:
 
     with tempfile.TemporaryDirectory(prefix="cevm-bench-par-") as tmp:
         tmp = Path(tmp)
-        files, dsm = generate(tmp, n_veh, n_days)
+        files, dsm = generate(tmp, n_veh, n_days, full_days=not args.short_days)
         if args.days_per_file > 1:
             files = merge_days(files, args.days_per_file, tmp / "merged")
         pool = ProcessExecutor(w)

@@ -555,6 +555,14 @@ def test_fleet_for_benchmark(tmp_path):
         n += len(df)
     assert n == doc["rows"] > 2000
     assert json.loads((tmp_path / "truth.json").read_text())["rows"] == n
+    # working days: the same vehicles and routes, more trips a day (about 3x the samples)
+    full = sg.fleet_for_benchmark(2, 1, tmp_path / "full", full_days=True)
+    per_day = {t["vehicle_id"]: 0 for t in doc["trips"]}
+    for t in doc["trips"]:
+        per_day[t["vehicle_id"]] += 1
+    full_per_day = {v: sum(t["vehicle_id"] == v for t in full["trips"]) for v in per_day}
+    assert full_per_day == {v: 4 * k for v, k in per_day.items()}
+    assert 2.5 * doc["rows"] < full["rows"] < 6 * doc["rows"]
 
 
 def test_os_tile_names():

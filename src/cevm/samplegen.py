@@ -812,6 +812,10 @@ DUTIES: dict[str, DutySpec] = {
     "longhaul": DutySpec(((TOWN_TRUCK, (2, 3)), (MOTORWAY, (2, 3)), (TOWN_TRUCK, (1, 2))), (2, 2), (1800.0, 2700.0), (4.0, 4.5), 89.5, "out_back"),
     # Night trunk for the portal: first trip starts 23:40-23:50 UTC the evening before.
     "night": DutySpec(((TOWN_TRUCK, (2, 3)), (MOTORWAY, (2, 2)), (TOWN_TRUCK, (1, 2))), (2, 2), (1200.0, 1800.0), (-0.33, -0.17), 89.5, "out_back"),
+    # Full working days (benchmark fleets): the same duties, about 5-8 h of driving.
+    "bus-day": DutySpec(((URBAN_BUS, (14, 20)),), (12, 12), (720.0, 1500.0), (5.0, 5.6), 50.0, "passengers"),
+    "regional-day": DutySpec(((TOWN_TRUCK, (2, 4)), (RURAL_TRUCK, (3, 5)), (TOWN_TRUCK, (1, 3))), (9, 9), (900.0, 1800.0), (5.5, 6.5), 89.5, "drops"),
+    "longhaul-day": DutySpec(((TOWN_TRUCK, (2, 3)), (MOTORWAY, (2, 3)), (TOWN_TRUCK, (1, 2))), (6, 6), (1800.0, 2700.0), (4.0, 4.5), 89.5, "out_back"),
     # --small duties: a few minutes of driving.
     "bus-short": DutySpec(((URBAN_BUS, (3, 4)),), (2, 2), (700.0, 800.0), (5.0, 5.1), 50.0, "passengers"),
     "truck-short": DutySpec(((TOWN_TRUCK, (2, 3)),), (2, 2), (700.0, 800.0), (6.0, 6.1), 89.5, "drops"),
@@ -1641,17 +1645,21 @@ _BENCH_TEMPLATES = (
 )
 
 
-def fleet_for_benchmark(n_vehicles: int, n_days: int, outdir: str | Path, *, seed: int = DEFAULT_SEED, consumption_fn: ConsumptionFn = standin_consumption, first_date: str = "2019-05-13", dsm_dir: str | Path | None = None) -> dict:
+def fleet_for_benchmark(n_vehicles: int, n_days: int, outdir: str | Path, *, seed: int = DEFAULT_SEED, consumption_fn: ConsumptionFn = standin_consumption, first_date: str = "2019-05-13", dsm_dir: str | Path | None = None, full_days: bool = False) -> dict:
     """A larger srf fleet for the ingest benchmark: ``n_vehicles`` (cycling through two
     buses, a regional and a long-haul truck, ids ``BM-001``...) x ``n_days`` consecutive
     days from ``first_date``, on the same routes as the sample logs (so the sample's DSM
-    tiles cover them; pass ``dsm_dir`` to write the tiles too). Writes
+    tiles cover them; pass ``dsm_dir`` to write the tiles too). A vehicle-day has the
+    sample fleet's 2-3 trips (~1.4 h of driving, ~5,000 samples), or with
+    ``full_days`` a working day of 6-12 trips (~5-8 h, ~25,000 samples). Writes
     ``outdir/srf/*.csv`` and ``outdir/truth.json``; returns the truth dictionary (with
     ``rows`` and ``bytes`` totals)."""
     outdir = Path(outdir)
     vehicles = []
     for i in range(n_vehicles):
         vt, duty, route = _BENCH_TEMPLATES[i % len(_BENCH_TEMPLATES)]
+        if full_days:
+            duty = f"{duty}-day"
         vid = f"BM-{i + 1:03d}"
         vehicles.append(VehicleSpec(vid, vt, duty, route, _BUS_KERB if vt == "electric-bus" else _HGV_KERB,
                                     flowmeter=(i % 8 == 2), fuel_counter_start_l=1000.0 * (i + 1), energy_counter_start_kwh=500.0 * (i + 1)))
