@@ -20,6 +20,7 @@ from typer.testing import CliRunner
 from cevm.cli import app
 from cevm.parallel import (
     CRASH_ENV_VAR,
+    DaskExecutor,
     ProcessExecutor,
     SerialExecutor,
     Task,
@@ -354,6 +355,29 @@ def test_serial_process_pool_and_dask_cluster_store_exactly_the_same(logs, tmp_p
         assert files == serial_files, name  # same reports, same (input) order of on_file calls
         for k in ("files", "ingested", "unchanged", "failed", "trips", "samples", "rows"):
             assert summary[k] == serial_summary[k], (name, k)
+
+
+def _weigh(table: dict, key: str) -> float:
+    return table[key] * len(table)
+
+
+def test_dask_sends_a_recurring_argument_once_and_again_after_a_restart(dask_cluster):
+    """The same object in every task travels as one shared future (made again when
+    the cluster restarted); the tasks' own arguments go by value; results are exact."""
+    from distributed import Client
+
+    table = {f"k{i}": float(i) for i in range(500)}
+    with Client(dask_cluster.scheduler_address, set_as_default=False) as client:
+        ex = DaskExecutor(client=client)
+        tasks = [Task(f"k{i}", (table, f"k{i}")) for i in range(40)]
+        got = [r.value for r in ex.run(_weigh, tasks)]
+        assert got == [500.0 * i for i in range(40)]
+        assert len(ex._shared) == 1 and next(iter(ex._shared.values()))[0] is table
+        client.restart()
+        got = [r.value for r in ex.run(_weigh, tasks[:5])]
+        assert got == [500.0 * i for i in range(5)] and len(ex._shared) == 1
+        ex.close()
+        assert ex._shared == {}
 
 
 # ------------------------------------------------------------------------- faults
