@@ -111,6 +111,9 @@ spin after each call (a matrix product in the timestamp parser of cevm.loggers m
 two workers slower than one)."""
 
 WORKER_CACHE_SIZE = 4
+"""Objects :func:`worker_cache` keeps per worker thread: a run uses one or two (a DSM);
+a Dask worker that lives for many runs with other DSMs must not keep every one of them
+(a sampler's block cache is up to 256 MB)."""
 
 #: Recurring task arguments a :class:`DaskExecutor` keeps on the cluster (oldest dropped).
 SHARED_ARGS_KEPT = 16
@@ -119,9 +122,7 @@ SHARED_ARGS_KEPT = 16
 def _identity(obj: Any) -> Any:
     """A task that returns its argument: how a recurring argument is put on a cluster."""
     return obj
-"""Objects :func:`worker_cache` keeps per worker thread: a run uses one or two (a DSM);
-a Dask worker that lives for many runs with other DSMs must not keep every one of them
-(a sampler's block cache is up to 256 MB)."""
+
 
 DASK_CONNECT_TIMEOUT_S = 20.0
 """How long :class:`DaskExecutor` waits for a scheduler [s] before giving up: a scheduler

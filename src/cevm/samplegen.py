@@ -812,7 +812,7 @@ DUTIES: dict[str, DutySpec] = {
     "longhaul": DutySpec(((TOWN_TRUCK, (2, 3)), (MOTORWAY, (2, 3)), (TOWN_TRUCK, (1, 2))), (2, 2), (1800.0, 2700.0), (4.0, 4.5), 89.5, "out_back"),
     # Night trunk for the portal: first trip starts 23:40-23:50 UTC the evening before.
     "night": DutySpec(((TOWN_TRUCK, (2, 3)), (MOTORWAY, (2, 2)), (TOWN_TRUCK, (1, 2))), (2, 2), (1200.0, 1800.0), (-0.33, -0.17), 89.5, "out_back"),
-    # Full working days (benchmark fleets): the same duties, about 5-8 h of driving.
+    # Full working days (benchmark fleets): the same duties, 4-6 h of driving.
     "bus-day": DutySpec(((URBAN_BUS, (14, 20)),), (12, 12), (720.0, 1500.0), (5.0, 5.6), 50.0, "passengers"),
     "regional-day": DutySpec(((TOWN_TRUCK, (2, 4)), (RURAL_TRUCK, (3, 5)), (TOWN_TRUCK, (1, 3))), (9, 9), (900.0, 1800.0), (5.5, 6.5), 89.5, "drops"),
     "longhaul-day": DutySpec(((TOWN_TRUCK, (2, 3)), (MOTORWAY, (2, 3)), (TOWN_TRUCK, (1, 2))), (6, 6), (1800.0, 2700.0), (4.0, 4.5), 89.5, "out_back"),
@@ -1651,7 +1651,7 @@ def fleet_for_benchmark(n_vehicles: int, n_days: int, outdir: str | Path, *, see
     days from ``first_date``, on the same routes as the sample logs (so the sample's DSM
     tiles cover them; pass ``dsm_dir`` to write the tiles too). A vehicle-day has the
     sample fleet's 2-3 trips (~1.4 h of driving, ~5,000 samples), or with
-    ``full_days`` a working day of 6-12 trips (~5-8 h, ~25,000 samples). Writes
+    ``full_days`` a working day of 6-12 trips (4-6 h, 15,000-22,000 samples). Writes
     ``outdir/srf/*.csv`` and ``outdir/truth.json``; returns the truth dictionary (with
     ``rows`` and ``bytes`` totals)."""
     outdir = Path(outdir)
