@@ -380,6 +380,69 @@ def test_dask_sends_a_recurring_argument_once_and_again_after_a_restart(dask_clu
         assert ex._shared == {}
 
 
+# ----------------------------------------------------------- predictions on workers
+
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _sweep_case():
+    from cevm.fleetpredict import PredictionSet, Source, parse_values
+    from cevm.io import load_vehicles
+    from cevm.synth import MicroTripSpec, micro_trip_cycle
+
+    vehicles = load_vehicles([ROOT / "configs/vehicles/electric-bus.toml", ROOT / "configs/vehicles/diesel-hgv.toml"])
+    pset = PredictionSet.build(vehicles, payload_kg=parse_values("0:10000:2500", "--payload-kg"))
+    cycles = [micro_trip_cycle(MicroTripSpec(n_trips=3 + k % 4), seed=k, name=f"r{k}") for k in range(14)]
+    return pset, [Source.from_cycle(c) for c in cycles]
+
+
+def _sweep_arrays(blocks):
+    from cevm.fleetpredict import _BLOCK_ARRAYS
+
+    return [(b.source_index, b.source.name, *(getattr(b, f).tobytes() for f in _BLOCK_ARRAYS)) for b in blocks]
+
+
+def _check_sweep_on(executor, monkeypatch):
+    import cevm.fleetpredict as fp
+
+    monkeypatch.setattr(fp, "SWEEP_BATCH_CELLS", 12)  # several batches of a few sources
+    pset, sources = _sweep_case()
+    want = _sweep_arrays(fp.sweep(sources, pset))
+    assert len({len(r) for r in want}) == 1 and [r[0] for r in want] == list(range(len(sources)))
+    pset, sources = _sweep_case()  # fresh sources: nothing cached by the serial sweep
+    blocks = list(fp.sweep(sources, pset, executor=executor))
+    assert [b.source for b in blocks] == sources  # the caller's sources, in order
+    assert _sweep_arrays(blocks) == want  # bit for bit: the same batches
+    assert len(list(fp._batches(sources, pset, True))) > 3
+
+
+def test_sweep_on_worker_processes_equals_the_serial_sweep_bit_for_bit(monkeypatch):
+    with ProcessExecutor(2) as ex:
+        _check_sweep_on(ex, monkeypatch)
+
+
+def test_sweep_on_a_dask_cluster_equals_the_serial_sweep_bit_for_bit(monkeypatch, dask_cluster):
+    with DaskExecutor(dask_cluster.scheduler_address) as ex:
+        _check_sweep_on(ex, monkeypatch)
+
+
+def test_predict_cli_with_workers_writes_what_a_serial_run_writes(monkeypatch):
+    import cevm.fleetpredict as fp
+
+    monkeypatch.setattr(fp, "SWEEP_BATCH_CELLS", 1)
+    args = ["predict", "-v", ROOT / "configs/vehicles/electric-bus.toml", "-v", ROOT / "configs/vehicles/diesel-hgv.toml",
+            "-c", ROOT / "configs/cycles/urban-bus.csv", "-c", ROOT / "configs/cycles/regional-delivery.csv",
+            "-p", "0:10000:2500", "-f", "csv"]
+    serial = run(*args)
+    assert serial.exit_code == 0, serial.output
+    pool = run(*args, "--workers", "2")
+    assert pool.exit_code == 0, pool.output
+    assert pool.stdout == serial.stdout and serial.stdout.count("\n") == 1 + 2 * 2 * 5
+    both = run(*args, "--workers", "2", "--scheduler", "tcp://127.0.0.1:1")
+    assert both.exit_code == 2 and "not both" in both.output
+
+
 # ------------------------------------------------------------------------- faults
 
 

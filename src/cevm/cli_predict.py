@@ -51,6 +51,7 @@ from cevm.fleetpredict import (
     sweep,
 )
 from cevm.model import ICE_BRAKING_MODES
+from cevm.parallel import make_executor
 from cevm.report import OutputFormat, write_rows
 
 J_PER_KWH = 3.6e6
@@ -570,6 +571,15 @@ def predict_cmd(
     ] = None,
     ice_braking: IceBrakingOption = None,
     cr0: Cr0Option = CR0_DEFAULT,
+    workers: Annotated[
+        Optional[int], typer.Option("--workers", "-w", min=1, help="Worker processes, a batch of sources per task "
+                                    "(default 1: in this process; a large sweep of many routes runs ~1.3x faster "
+                                    "on 2 cores, a small one is slower for the processes' start).")
+    ] = None,
+    scheduler: Annotated[
+        Optional[str], typer.Option(help="Dask scheduler address (tcp://HOST:8786): evaluate the batches on that "
+                                         "cluster (pip install 'cevm[dask]'). Sources are read here and sent.")
+    ] = None,
 ) -> None:
     """Predict energy (EV) or fuel (ICE) for every source x vehicle x mass.
 
@@ -582,6 +592,8 @@ def predict_cmd(
         raise _fail("give at least one source: --cycle, --trip, --vehicle-id or --route")
     if mass_kg and payload_kg:
         raise _fail("give --mass-kg or --payload-kg, not both")
+    if workers is not None and scheduler is not None:
+        raise _fail("give --workers (local processes) or --scheduler (a Dask cluster), not both")
     _check_common(ice_braking, soc_start, reserve_pct)
     try:
         masses = _values(mass_kg, "--mass-kg")
@@ -596,11 +608,12 @@ def predict_cmd(
         pset = PredictionSet.build(vehicles, mass_kg=masses, payload_kg=payloads, ice_braking=ice_braking)
         with ExitStack() as stack:
             sources = _load_sources(stack, store, cycle or [], trip or [], vehicle_id or [], route or [], cr0)
+            executor = stack.enter_context(make_executor(None if scheduler else (workers or 1), scheduler))
             stream = _open_out(stack, out)
             writer = _PredictWriter(fmt, stream)
             keep_for_plot = plot is not None and np.bincount(pset.vehicle_index).max() > 1
             plot_data = []
-            for block in sweep(sources, pset, soc_start_pct=soc_start, reserve_pct=reserve_pct):
+            for block in sweep(sources, pset, soc_start_pct=soc_start, reserve_pct=reserve_pct, executor=executor):
                 writer.add(block)
                 if keep_for_plot and block.source_index < PLOT_MAX_LINES:
                     plot_data.append({"energy_kwh": block.energy_j / J_PER_KWH, "fuel_l": block.fuel_l})

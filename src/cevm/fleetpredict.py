@@ -76,6 +76,7 @@ from cevm.model import (
     braking_weight,
     fuel_from_wheel_energy_l,
 )
+from cevm.parallel import Executor, Task
 from cevm.vehicle import Vehicle
 
 #: Default state of charge at the start [%]: a vehicle leaving the depot fully charged.
@@ -958,15 +959,59 @@ def predict_sources(
     with np.errstate(invalid="ignore"):
         tank_ok = np.where(ice[:, None] & np.isfinite(tank), (fuel <= tank).astype(float), np.nan)
         reserve_ok = ev[:, None] & (soc_min >= reserve_pct)
-    return [SweepBlock(src, first_index + i, pset, wheel[:, i].copy(), energy[:, i].copy(), fuel[:, i].copy(),
-                       soc_end[:, i].copy(), soc_min[:, i].copy(), reserve_ok[:, i].copy(), tank_ok[:, i].copy())
+    return _as_blocks(sources, pset, (wheel, energy, fuel, soc_end, soc_min, reserve_ok, tank_ok), first_index)
+
+
+def _as_blocks(sources: Sequence[Source], pset: PredictionSet, arrays: tuple[np.ndarray, ...],
+               first_index: int) -> list[SweepBlock]:
+    """One :class:`SweepBlock` per source from the (P, n_sources) arrays of
+    :func:`predict_sources`, in :class:`SweepBlock`'s field order."""
+    return [SweepBlock(src, first_index + i, pset, *(a[:, i].copy() for a in arrays))
             for i, src in enumerate(sources)]
+
+
+_BLOCK_ARRAYS = ("wheel_energy_j", "energy_j", "fuel_l", "soc_end_pct", "soc_min_pct", "reserve_ok", "tank_ok")
+
+
+def _predict_task(sources: Sequence[Source], pset: PredictionSet, soc_start_pct: float, reserve_pct: float,
+                  lowest_soc: bool) -> tuple[np.ndarray, ...]:
+    """A worker's part of a parallel :func:`sweep`: :func:`predict_sources` on a batch,
+    returned as (P, n_sources) arrays only (the sources and the set stay with the
+    caller)."""
+    blocks = predict_sources(sources, pset, soc_start_pct=soc_start_pct, reserve_pct=reserve_pct,
+                             lowest_soc=lowest_soc)
+    return tuple(np.stack([getattr(b, name) for b in blocks], axis=1) for name in _BLOCK_ARRAYS)
+
+
+def _portable(source: Source, lowest_soc: bool) -> Source:
+    """What a worker needs of ``source``: its vector, and its step terms when the lowest
+    state of charge is asked for (the legs' profiles, and any store access behind them,
+    stay here)."""
+    out = Source(source.name, source.kind, source.vector, legs=(), block_elements=source.block_elements)
+    if lowest_soc:
+        out.__dict__["steps"] = source.steps  # the cached_property's slot: set, not recomputed
+    return out
 
 
 #: Sources evaluated together by :func:`sweep`: as many as keep about this many
 #: (EV prediction x block) cells in one evaluation (512 kB per work array; measured
 #: with benchmarks/bench_sweep.py: 2x smaller or larger batches were 10-50 % slower).
 SWEEP_BATCH_CELLS = 1 << 16
+
+
+def _batches(sources: Sequence[Source], pset: PredictionSet, lowest_soc: bool) -> Iterator[tuple[int, int]]:
+    """The (start, stop) source ranges :func:`sweep` evaluates together, in order."""
+    n_rows = max(1, int(pset.is_ev.sum()) if lowest_soc else pset.n)
+    use_steps = lowest_soc and bool(pset.is_ev.any())
+    i = 0
+    while i < len(sources):
+        cells = 0
+        j = i
+        while j < len(sources) and (j == i or cells < SWEEP_BATCH_CELLS):
+            cells += n_rows * (sources[j].steps.n_blocks if use_steps else 1)
+            j += 1
+        yield i, j
+        i = j
 
 
 def sweep(
@@ -976,22 +1021,36 @@ def sweep(
     soc_start_pct: float = DEFAULT_SOC_START_PCT,
     reserve_pct: float = DEFAULT_RESERVE_PCT,
     lowest_soc: bool = True,
+    executor: Executor | None = None,
 ) -> Iterator[SweepBlock]:
     """Every prediction of ``pset`` on every source: one block of ``pset.n`` rows per
     source, source-major (then vehicle, then mass), computed when asked for, a few
-    sources at a time (:data:`SWEEP_BATCH_CELLS`)."""
-    n_rows = max(1, int(pset.is_ev.sum()) if lowest_soc else pset.n)
-    i = 0
-    while i < len(sources):
-        cells = 0
-        j = i
-        while j < len(sources) and (j == i or cells < SWEEP_BATCH_CELLS):
-            use_steps = lowest_soc and bool(pset.is_ev.any())
-            cells += n_rows * (sources[j].steps.n_blocks if use_steps else 1)
-            j += 1
-        yield from predict_sources(sources[i:j], pset, soc_start_pct=soc_start_pct, reserve_pct=reserve_pct,
-                                   lowest_soc=lowest_soc, first_index=i)
-        i = j
+    sources at a time (:data:`SWEEP_BATCH_CELLS`).
+
+    ``executor`` (:func:`cevm.parallel.make_executor`: worker processes or a Dask
+    cluster) evaluates the batches in parallel: each task gets a batch's vectors and
+    step terms (built here, with any profile reading) and the set, and returns the
+    arrays; blocks still come in source order, and equal a serial sweep's bit for bit
+    (the batches are the same). Raises :class:`CevmError` if a task fails."""
+    if executor is None or executor.inline:
+        for i, j in _batches(sources, pset, lowest_soc):
+            yield from predict_sources(sources[i:j], pset, soc_start_pct=soc_start_pct, reserve_pct=reserve_pct,
+                                       lowest_soc=lowest_soc, first_index=i)
+        return
+    use_steps = lowest_soc and bool(pset.is_ev.any())
+    ranges: list[tuple[int, int]] = []
+
+    def tasks() -> Iterator[Task]:
+        for i, j in _batches(sources, pset, lowest_soc):
+            ranges.append((i, j))
+            batch = tuple(_portable(src, use_steps) for src in sources[i:j])
+            yield Task(f"sources {i + 1}-{j} ({sources[i].name})", (batch, pset, soc_start_pct, reserve_pct, lowest_soc))
+
+    for k, res in enumerate(executor.run(_predict_task, tasks())):
+        i, j = ranges[k]
+        if not res.ok:
+            raise CevmError(f"predictions for sources {i + 1}-{j} failed on a worker: {res.error}")
+        yield from _as_blocks(sources[i:j], pset, res.value, i)
 
 
 # ----------------------------------------------------------------------- feasibility
