@@ -914,6 +914,15 @@ def predict_sources(
     faster than one source at a time); one block per source, in order."""
     if not sources:
         return []
+    arrays = _predict_arrays(sources, pset, soc_start_pct, reserve_pct, lowest_soc)
+    return _as_blocks(sources, pset, arrays, first_index)
+
+
+def _predict_arrays(sources: Sequence[Source], pset: PredictionSet, soc_start_pct: float, reserve_pct: float,
+                    lowest_soc: bool) -> tuple[np.ndarray, ...]:
+    """The (P, n_sources) arrays of :func:`predict_sources`, in :data:`_BLOCK_ARRAYS`
+    order. Also the task of a parallel :func:`sweep` (the sources and the set stay with
+    the caller; only these arrays come back)."""
     for src in sources:
         _check_cr(src, pset)
     vecs = [src.vector for src in sources]
@@ -959,28 +968,19 @@ def predict_sources(
     with np.errstate(invalid="ignore"):
         tank_ok = np.where(ice[:, None] & np.isfinite(tank), (fuel <= tank).astype(float), np.nan)
         reserve_ok = ev[:, None] & (soc_min >= reserve_pct)
-    return _as_blocks(sources, pset, (wheel, energy, fuel, soc_end, soc_min, reserve_ok, tank_ok), first_index)
+    return wheel, energy, fuel, soc_end, soc_min, reserve_ok, tank_ok
+
+
+#: The arrays of a :class:`SweepBlock`, in the order :func:`_predict_arrays` returns them.
+_BLOCK_ARRAYS = ("wheel_energy_j", "energy_j", "fuel_l", "soc_end_pct", "soc_min_pct", "reserve_ok", "tank_ok")
 
 
 def _as_blocks(sources: Sequence[Source], pset: PredictionSet, arrays: tuple[np.ndarray, ...],
                first_index: int) -> list[SweepBlock]:
     """One :class:`SweepBlock` per source from the (P, n_sources) arrays of
-    :func:`predict_sources`, in :class:`SweepBlock`'s field order."""
-    return [SweepBlock(src, first_index + i, pset, *(a[:, i].copy() for a in arrays))
+    :func:`_predict_arrays`."""
+    return [SweepBlock(src, first_index + i, pset, **{name: a[:, i].copy() for name, a in zip(_BLOCK_ARRAYS, arrays)})
             for i, src in enumerate(sources)]
-
-
-_BLOCK_ARRAYS = ("wheel_energy_j", "energy_j", "fuel_l", "soc_end_pct", "soc_min_pct", "reserve_ok", "tank_ok")
-
-
-def _predict_task(sources: Sequence[Source], pset: PredictionSet, soc_start_pct: float, reserve_pct: float,
-                  lowest_soc: bool) -> tuple[np.ndarray, ...]:
-    """A worker's part of a parallel :func:`sweep`: :func:`predict_sources` on a batch,
-    returned as (P, n_sources) arrays only (the sources and the set stay with the
-    caller)."""
-    blocks = predict_sources(sources, pset, soc_start_pct=soc_start_pct, reserve_pct=reserve_pct,
-                             lowest_soc=lowest_soc)
-    return tuple(np.stack([getattr(b, name) for b in blocks], axis=1) for name in _BLOCK_ARRAYS)
 
 
 def _portable(source: Source, lowest_soc: bool) -> Source:
@@ -1046,7 +1046,7 @@ def sweep(
             batch = tuple(_portable(src, use_steps) for src in sources[i:j])
             yield Task(f"sources {i + 1}-{j} ({sources[i].name})", (batch, pset, soc_start_pct, reserve_pct, lowest_soc))
 
-    for k, res in enumerate(executor.run(_predict_task, tasks())):
+    for k, res in enumerate(executor.run(_predict_arrays, tasks())):
         i, j = ranges[k]
         if not res.ok:
             raise CevmError(f"predictions for sources {i + 1}-{j} failed on a worker: {res.error}")
