@@ -43,7 +43,7 @@ sys.path.insert(0, str(ROOT / "src"))
 from cevm.cycle import drive_cycle_vector  # noqa: E402
 from cevm.fleet import FleetVehicle, Leg, Route, Scenario, load_scenario, plan  # noqa: E402
 from cevm.io import load_vehicle, read_cycle_csv  # noqa: E402
-from cevm.synth import MicroTripSpec, micro_trip_cycle  # noqa: E402
+from cevm_samplegen.cycles import MicroTripSpec, micro_trip_cycle  # noqa: E402
 
 RHO, G = 1.225, 9.81
 PAPER = ROOT / "configs" / "fleet" / "paper-case-study.toml"

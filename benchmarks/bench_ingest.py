@@ -2,7 +2,7 @@
 
     python benchmarks/bench_ingest.py [--quick] [--vehicles N] [--days D]
 
-Generates a fleet of srf logs on the sample routes (cevm.samplegen.fleet_for_benchmark,
+Generates a fleet of srf logs on the sample routes (cevm_samplegen.fleet_for_benchmark,
 the stand-in consumption: the benchmark measures ingest, not the detailed model) with
 the sample DSM tiles, then ingests it serially into a fresh store and prints samples/s
 end to end (CSV bytes to stored vector, DSM lookup included) and each stage's share.
@@ -32,7 +32,7 @@ import pandas as pd  # noqa: E402
 
 from cevm.ingest import IngestOptions, ingest  # noqa: E402
 from cevm.runtime import tune_allocator  # noqa: E402
-from cevm.samplegen import fleet_for_benchmark, generate_sample_logs  # noqa: E402
+from cevm_samplegen import fleet_for_benchmark, generate_sample_logs  # noqa: E402
 from cevm.store import TripStore  # noqa: E402
 
 

@@ -4,7 +4,7 @@
                                                [--workers W] [--repeat R] [--no-dask]
                                                [--short-days] [--days-per-file K]
 
-Generates a fleet of srf logs with ``cevm.samplegen.fleet_for_benchmark`` (default 40
+Generates a fleet of srf logs with ``cevm_samplegen.fleet_for_benchmark`` (default 40
 vehicles x 5 working days, one file per vehicle-day of 4-6 h of driving, ~17,000
 samples: 3.4e6 samples, with its DSM tiles; ``--quick``: 8 x 2), then ingests it into a
 fresh store with :func:`cevm.ingest.ingest`, DSM lookup included:
@@ -182,9 +182,9 @@ def store_content(path: Path) -> tuple:
 
 def generate(outdir: Path, n_vehicles: int, n_days: int, full_days: bool) -> tuple[list[Path], str]:
     try:
-        from cevm.samplegen import fleet_for_benchmark
+        from cevm_samplegen import fleet_for_benchmark
     except ImportError:
-        raise SystemExit("cevm.samplegen.fleet_for_benchmark is needed to generate the fleet") from None
+        raise SystemExit("cevm_samplegen.fleet_for_benchmark is needed to generate the fleet") from None
     t0 = time.perf_counter()
     truth = fleet_for_benchmark(n_vehicles, n_days, outdir / "fleet", dsm_dir=outdir / "dsm", full_days=full_days)
     files = sorted((outdir / "fleet").rglob("*.csv"))

@@ -4,7 +4,7 @@
 
 A realistic fleet decision: 50 heavy vehicles (25 battery-electric trucks, 25 diesel
 trucks; kerb 8-20 t, max gross 44 t) x 500 delivery rounds (synthetic 1 Hz micro-trip
-cycles of 30 to 110 min, median 59, with hills, cevm.synth) x 14 payloads
+cycles of 30 to 110 min, median 59, with hills, cevm_samplegen.cycles) x 14 payloads
 (0:26000:2000 kg) = 350,000 predictions. Every EV row has its final and lowest state of charge along the way, every
 ICE row whether the fuel fits the tank.
 
@@ -54,7 +54,7 @@ from cevm.cycle import step_terms  # noqa: E402
 from cevm.fleetpredict import PredictionSet, Source, feasibility, parse_values, predict_source, sweep  # noqa: E402
 from cevm.parallel import ProcessExecutor  # noqa: E402
 from cevm.runtime import tune_allocator  # noqa: E402
-from cevm.synth import MicroTripSpec, micro_trip_cycle  # noqa: E402
+from cevm_samplegen.cycles import MicroTripSpec, micro_trip_cycle  # noqa: E402
 from cevm.vehicle import Vehicle, predict  # noqa: E402
 
 TYRE_CR = (0.0045, 0.0055, 0.0065, 0.0075)

@@ -11,7 +11,7 @@ from cevm.cli import app
 from cevm.cycle import drive_cycle_vector
 from cevm.io import load_vehicle
 from cevm.store import TripStore
-from cevm.synth import MicroTripSpec, micro_trip_cycle
+from cevm_samplegen.cycles import MicroTripSpec, micro_trip_cycle
 from cevm.trip import Measurement, Trip
 from reference import reference_wheel_energy_j
 

@@ -13,7 +13,7 @@ import pytest
 
 from cevm.calibration import CalibrationError, TripData, fit, predict_trips
 from cevm.cycle import cycle_vector, drive_cycle_vector
-from cevm.synth import MicroTripSpec, micro_trip_cycle
+from cevm_samplegen.cycles import MicroTripSpec, micro_trip_cycle
 from cevm.trip import Measurement
 from cevm.vehicle import Vehicle
 from reference import reference_wheel_energy_j

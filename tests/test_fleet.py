@@ -17,7 +17,6 @@ from cevm.cycle import drive_cycle_vector
 from cevm.errors import InputError
 from cevm.fleet import (
     BUDGET_RTOL,
-    STANDIN_CYCLES,
     FleetVehicle,
     Leg,
     LegSource,
@@ -29,12 +28,11 @@ from cevm.fleet import (
     leg_curve,
     load_scenario,
     plan,
-    standin_cycle,
     table4_rows,
-    write_standin_cycles,
 )
+from cevm_samplegen.standin import STANDIN_CYCLES, standin_cycle, write_standin_cycles
 from cevm.io import read_cycle_csv
-from cevm.synth import MicroTripSpec, micro_trip_cycle
+from cevm_samplegen.cycles import MicroTripSpec, micro_trip_cycle
 from cevm.vehicle import Vehicle, predict
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -32,7 +32,7 @@ from cevm.fleetpredict import (
 )
 from cevm.io import read_cycle_csv
 from cevm.model import ev_energy_j, ice_fuel_l
-from cevm.synth import MicroTripSpec, micro_trip_cycle
+from cevm_samplegen.cycles import MicroTripSpec, micro_trip_cycle
 from cevm.vehicle import Vehicle
 
 RHO, G, CR0 = 1.225, 9.81, 0.004

@@ -389,7 +389,7 @@ ROOT = Path(__file__).resolve().parents[1]
 def _sweep_case():
     from cevm.fleetpredict import PredictionSet, Source, parse_values
     from cevm.io import load_vehicles
-    from cevm.synth import MicroTripSpec, micro_trip_cycle
+    from cevm_samplegen.cycles import MicroTripSpec, micro_trip_cycle
 
     vehicles = load_vehicles([ROOT / "configs/vehicles/electric-bus.toml", ROOT / "configs/vehicles/diesel-hgv.toml"])
     pset = PredictionSet.build(vehicles, payload_kg=parse_values("0:10000:2500", "--payload-kg"))

@@ -25,7 +25,7 @@ from cevm.routes import (
     route_names,
 )
 from cevm.store import TripStore
-from cevm.synth import MicroTripSpec, micro_trip_cycle
+from cevm_samplegen.cycles import MicroTripSpec, micro_trip_cycle
 from cevm.trip import Trip
 
 runner = CliRunner()

@@ -1,4 +1,4 @@
-"""Tests of the synthetic sample-log generator (cevm.samplegen), on its --small fleet.
+"""Tests of the synthetic sample-log generator (cevm_samplegen), on its --small fleet.
 
 Files are read back with plain pandas / rasterio and checked against LOGGERS.md and
 against truth.json; reference computations (bilinear interpolation, trapezoid
@@ -23,7 +23,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from cevm import samplegen as sg
+import cevm_samplegen as sg
 
 SRF_BUS = {
     "timestamp_utc", "gps_lat_deg", "gps_lon_deg", "gps_alt_m", "gps_speed_kmh", "gps_hdop",
@@ -347,7 +347,7 @@ def test_injected_consumption_function_is_used(tmp_path):
 
 
 def test_generator_does_not_import_the_ce_model():
-    code = "import sys, cevm.samplegen; print('cevm.model' in sys.modules)"
+    code = "import sys, cevm_samplegen; print('cevm.model' in sys.modules)"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "False"
 

@@ -85,7 +85,6 @@ from __future__ import annotations
 import difflib
 import math
 from dataclasses import dataclass
-from functools import lru_cache
 from pathlib import Path
 from types import MappingProxyType
 from typing import Any, Mapping
@@ -1009,42 +1008,3 @@ def simulate(vehicle, time_s, speed_mps, elevation_m=None, mass_kg: float | None
         raise TypeError("an ICE vehicle needs DieselParams")
     return simulate_diesel(ice, time_s, speed_mps, elevation_m, mass_kg=m, cda_m2=vehicle.cda_m2, cr=vehicle.cr,
                            fuel_lhv_j_per_l=vehicle.fuel_lhv_j_per_l, physics=physics)
-
-
-# --- "measured" consumption for synthetic logs (cevm.samplegen) ---------------------------
-
-#: Deficits above this share of the wheel work are reported by
-#: :func:`logged_consumption`: the trace asks more than the vehicle can do.
-MAX_DEFICIT_SHARE = 0.02
-
-
-@lru_cache(maxsize=8)
-def _project_vehicle(kind: str):
-    from cevm.io import load_vehicle
-
-    from cevm.configs_dir import shipped_configs_dir
-
-    path = shipped_configs_dir() / "vehicles" / f"{kind}.toml"
-    return load_vehicle(path)
-
-
-def logged_consumption(kind: str, time_s, speed_mps, elevation_m, mass_kg: float) -> np.ndarray:
-    """Cumulative consumption per sample, as a logger would measure it: the detailed
-    model of the project's vehicle ``configs/vehicles/<kind>.toml`` over a true trace.
-
-    Joules at the battery (EV, net of regeneration, auxiliaries included) or litres of
-    fuel (diesel), from 0 at the first sample. The consumption function of
-    :func:`cevm.samplegen.generate_sample_logs` (``--consumption
-    cevm.detailed:logged_consumption``). Raises ValueError if the vehicle could not follow
-    the trace (traction deficit above :data:`MAX_DEFICIT_SHARE` of the wheel work).
-    """
-    vehicle = _project_vehicle(kind)
-    res = simulate(vehicle, time_s, speed_mps, elevation_m, mass_kg=mass_kg, time_step_s=None)
-    positive = float(np.sum(np.maximum(res.steps["wheel_power_w"] * res.steps["dt_s"], 0.0)))
-    if res.traction_deficit_j > MAX_DEFICIT_SHARE * max(positive, 1.0):
-        raise ValueError(
-            f"{kind} at {mass_kg:.0f} kg cannot follow the trace: {res.traction_deficit_j / 3.6e6:.2f} kWh "
-            f"beyond its powertrain ({100 * res.traction_deficit_j / positive:.1f} % of the wheel work)"
-        )
-    key = "energy_cum_j" if vehicle.is_ev else "fuel_cum_l"
-    return np.asarray(res.samples[key], dtype=np.float64)

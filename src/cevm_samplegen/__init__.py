@@ -1,6 +1,6 @@
 """Deterministic synthetic logger exports and DSM tiles: the project's ``sample_logs/``.
 
-``python -m cevm.samplegen OUTDIR [--small] [--seed N] [--consumption MODULE:FUNC]``
+``python -m cevm_samplegen OUTDIR [--small] [--seed N] [--consumption MODULE:FUNC]``
 writes, from a seed alone (no wall clock, no network; same bytes on every run)::
 
     OUTDIR/srf/<vehicle>_<yyyy-mm-dd>.csv[.gz]   one file per vehicle and logging day
@@ -9,7 +9,7 @@ writes, from a seed alone (no wall clock, no network; same bytes on every run)::
     OUTDIR/truth.json                              what really happened (see below)
 
 **Truth first, then sensors.** For every trip the generator draws a speed trace (the
-micro-trip generator of :mod:`cevm.synth`: stop-to-stop runs; long haul adds motorway
+micro-trip generator of :mod:`cevm_samplegen.cycles`: stop-to-stop runs; long haul adds motorway
 cruise blocks), lays it along a smooth road polyline in British National Grid (BNG,
 EPSG:27700) around Milton Keynes (position = the route point at the cumulative distance),
 takes the TRUE road elevation from a smooth terrain function (the road surface: no
@@ -99,7 +99,11 @@ the terrain, to 1/128 m), embankments, cuttings and bridge ramps, vehicles in th
 
 Public API: :func:`generate_sample_logs`, :func:`fleet_for_benchmark`,
 :func:`simulate_fleet`, :func:`build_world`, :func:`standin_consumption`,
-:class:`FleetSpec`, :data:`SAMPLE_FLEET`, :data:`SMALL_FLEET`.
+:func:`logged_consumption`, :class:`FleetSpec`, :data:`SAMPLE_FLEET`, :data:`SMALL_FLEET`.
+
+This package is the project's developer tool, apart from the runtime package ``cevm``:
+``cevm`` never imports it. Demo cycles: ``python -m cevm_samplegen demo-cycles OUTDIR``; the
+fleet case study's stand-in cycles: ``python -m cevm_samplegen standin-cycles OUTDIR``.
 """
 
 from __future__ import annotations
@@ -115,11 +119,12 @@ import zlib
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from datetime import datetime, timezone
+from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
 
-from cevm.synth import MicroTripSpec, micro_trip_cycle
+from cevm_samplegen.cycles import MicroTripSpec, micro_trip_cycle
 
 __all__ = [
     "ConsumptionFn",
@@ -138,6 +143,7 @@ __all__ = [
     "dsm_tile",
     "fleet_for_benchmark",
     "generate_sample_logs",
+    "logged_consumption",
     "main",
     "simulate_fleet",
     "standin_consumption",
@@ -307,6 +313,47 @@ def standin_consumption(kind: str, time_s, speed_mps, elevation_m, mass_kg: floa
         fuel_w = np.where(pe > 0, p.idle_fuel_w + pe / p.marginal_eff, np.where(vm > 2.0, 0.0, p.idle_fuel_w))
         step = fuel_w * dt / p.fuel_lhv_j_per_l
     return np.concatenate(([0.0], np.cumsum(step)))
+
+
+#: Deficits above this share of the wheel work are reported by
+#: :func:`logged_consumption`: the trace asks more than the vehicle can do.
+MAX_DEFICIT_SHARE = 0.02
+
+
+@lru_cache(maxsize=8)
+def _project_vehicle(kind: str):
+    from cevm.io import load_vehicle
+
+    from cevm.configs_dir import shipped_configs_dir
+
+    path = shipped_configs_dir() / "vehicles" / f"{kind}.toml"
+    return load_vehicle(path)
+
+
+def logged_consumption(kind: str, time_s, speed_mps, elevation_m, mass_kg: float) -> np.ndarray:
+    """Cumulative consumption per sample, as a logger would measure it: the detailed
+    model (:func:`cevm.detailed.simulate`) of the project's vehicle
+    ``configs/vehicles/<kind>.toml`` over a true trace.
+
+    Joules at the battery (EV, net of regeneration, auxiliaries included) or litres of
+    fuel (diesel), from 0 at the first sample. The consumption function of the shipped
+    sample logs (``--consumption cevm_samplegen:logged_consumption``). Raises ValueError
+    if the vehicle could not follow the trace (traction deficit above
+    :data:`MAX_DEFICIT_SHARE` of the wheel work). It lives here, not in the detailed
+    model's module, because it reads the project's vehicle files.
+    """
+    from cevm.detailed import simulate
+
+    vehicle = _project_vehicle(kind)
+    res = simulate(vehicle, time_s, speed_mps, elevation_m, mass_kg=mass_kg, time_step_s=None)
+    positive = float(np.sum(np.maximum(res.steps["wheel_power_w"] * res.steps["dt_s"], 0.0)))
+    if res.traction_deficit_j > MAX_DEFICIT_SHARE * max(positive, 1.0):
+        raise ValueError(
+            f"{kind} at {mass_kg:.0f} kg cannot follow the trace: {res.traction_deficit_j / 3.6e6:.2f} kWh "
+            f"beyond its powertrain ({100 * res.traction_deficit_j / positive:.1f} % of the wheel work)"
+        )
+    key = "energy_cum_j" if vehicle.is_ev else "fuel_cum_l"
+    return np.asarray(res.samples[key], dtype=np.float64)
 
 
 # ======================================================================================
@@ -1614,7 +1661,7 @@ def generate_sample_logs(outdir: str | Path, consumption_fn: ConsumptionFn = sta
     if write_dsm:
         tiles = [p.relative_to(outdir).as_posix() for p in write_dsm_tiles(world, outdir / "dsm")]
     doc = {
-        "generator": "cevm.samplegen",
+        "generator": "cevm_samplegen",
         "format_version": 1,
         "seed": seed,
         "small": bool(small),
@@ -1673,7 +1720,7 @@ def fleet_for_benchmark(n_vehicles: int, n_days: int, outdir: str | Path, *, see
     if dsm_dir is not None:
         tiles = [p.as_posix() for p in write_dsm_tiles(world, Path(dsm_dir))]
     doc = {
-        "generator": "cevm.samplegen.fleet_for_benchmark", "format_version": 1, "seed": seed,
+        "generator": "cevm_samplegen.fleet_for_benchmark", "format_version": 1, "seed": seed,
         "consumption_fn": _qualname(consumption_fn), "vehicles": _vehicles_json(fleet.srf_vehicles),
         "files": files, "trips": records, "rows": int(sum(f["rows"] for f in files)),
         "bytes": int(sum(f["bytes"] for f in files)), "dsm_tiles": tiles,
@@ -1693,15 +1740,15 @@ def _load_fn(spec: str) -> ConsumptionFn:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """``python -m cevm.samplegen OUTDIR [--small] [--seed N] [--consumption MODULE:FUNC]
+    """``python -m cevm_samplegen OUTDIR [--small] [--seed N] [--consumption MODULE:FUNC]
     [--benchmark N_VEHICLES N_DAYS]``."""
     import argparse
 
-    ap = argparse.ArgumentParser(prog="python -m cevm.samplegen", description="Generate synthetic logger exports, DSM tiles and truth.json.")
+    ap = argparse.ArgumentParser(prog="python -m cevm_samplegen", description="Generate synthetic logger exports, DSM tiles and truth.json.")
     ap.add_argument("outdir", type=Path)
     ap.add_argument("--small", action="store_true", help="tiny fleet for tests (well under a second)")
     ap.add_argument("--seed", type=int, default=DEFAULT_SEED)
-    ap.add_argument("--consumption", default="cevm.samplegen:standin_consumption", help="MODULE:FUNCTION giving the measured consumption (default: the stand-in)")
+    ap.add_argument("--consumption", default="cevm_samplegen:standin_consumption", help="MODULE:FUNCTION giving the measured consumption (default: the stand-in)")
     ap.add_argument("--benchmark", nargs=2, type=int, metavar=("N_VEHICLES", "N_DAYS"), help="write a benchmark srf fleet instead")
     a = ap.parse_args(argv)
     fn = _load_fn(a.consumption)
@@ -1713,6 +1760,3 @@ def main(argv: list[str] | None = None) -> int:
     print(f"{len(doc['files'])} log files, {len(doc['trips'])} trips, {len(doc['dsm']['tiles'])} DSM tiles in {a.outdir}")
     return 0
 
-
-if __name__ == "__main__":
-    sys.exit(main())

@@ -6,7 +6,7 @@ dwell. Elevation is a smooth function of distance (a sum of sinusoids), so grade
 realistic and bounded. Everything is drawn from ``numpy.random.default_rng(seed)``:
 the same arguments give the same cycle on every machine.
 
-``python -m cevm.synth OUTDIR`` writes the project's demo cycles (see :data:`DEMO_CYCLES`).
+``python -m cevm_samplegen demo-cycles OUTDIR`` writes the project's demo cycles (see :data:`DEMO_CYCLES`).
 """
 
 from __future__ import annotations
