@@ -26,8 +26,8 @@ import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "src"))
 
-from cevm.cycle import CR0_DEFAULT, drive_cycle_vector  # noqa: E402
-from cevm.model import wheel_energy_j  # noqa: E402
+from cevm.core.cycle import CR0_DEFAULT, drive_cycle_vector  # noqa: E402
+from cevm.core.model import wheel_energy_j  # noqa: E402
 from cevm_samplegen.cycles import DEMO_CYCLES, micro_trip_cycle  # noqa: E402
 
 RHO, G = 1.225, 9.81

@@ -1,4 +1,4 @@
-"""Benchmark of the fleet assignment (cevm.fleet, paper section 6).
+"""Benchmark of the fleet assignment (cevm.core.assignment, paper section 6).
 
     python benchmarks/bench_fleet.py [--quick]
 
@@ -40,8 +40,9 @@ import numpy as np  # noqa: E402
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
-from cevm.cycle import drive_cycle_vector  # noqa: E402
-from cevm.fleet import FleetVehicle, Leg, Route, Scenario, load_scenario, plan  # noqa: E402
+from cevm.core.cycle import drive_cycle_vector  # noqa: E402
+from cevm.core.assignment import FleetVehicle, Leg, Route, Scenario, plan  # noqa: E402
+from cevm.io.scenario import load_scenario  # noqa: E402
 from cevm.io import load_vehicle, read_cycle_csv  # noqa: E402
 from cevm_samplegen.cycles import MicroTripSpec, micro_trip_cycle  # noqa: E402
 

@@ -9,13 +9,13 @@ vehicles x 5 working days, one file per vehicle-day of 4-6 h of driving, ~17,000
 samples: 3.4e6 samples, with its DSM tiles; ``--quick``: 8 x 2), then ingests it into a
 fresh store with :func:`cevm.ingest.ingest`, DSM lookup included:
 
-- ``serial``: one process (:class:`~cevm.parallel.SerialExecutor`, ``--workers 1``),
+- ``serial``: one process (:class:`~cevm.executors.SerialExecutor`, ``--workers 1``),
   single-threaded BLAS like the workers (set before numpy loads);
-- ``pool``: ``W`` worker processes (:class:`~cevm.parallel.ProcessExecutor`), default 2;
+- ``pool``: ``W`` worker processes (:class:`~cevm.executors.ProcessExecutor`), default 2;
   ``pool warm``: the same workers again (DSM samplers open, imports done: the steady
   state of a long run);
 - ``dask``: a LocalCluster of ``W`` worker processes x 1 thread on 127.0.0.1
-  (:class:`~cevm.parallel.DaskExecutor`), started before the clock starts; ``dask
+  (:class:`~cevm.executors.DaskExecutor`), started before the clock starts; ``dask
   warm``: the same workers again;
 - ``2 x serial``: the fleet split in two halves ingested by two independent serial
   processes at once, into two stores: what this machine gives two processes running
@@ -61,7 +61,7 @@ import tempfile
 import time
 from pathlib import Path
 
-# One BLAS thread everywhere, as the pool and Dask workers have (cevm.parallel.WORKER_ENV):
+# One BLAS thread everywhere, as the pool and Dask workers have (cevm.executors.WORKER_ENV):
 # the serial baseline is then one core, and the "2 x serial" children do not spin
 # OpenBLAS threads against each other.
 for _k in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
@@ -72,7 +72,7 @@ sys.path.insert(0, str(ROOT / "src"))
 
 from cevm.ingest import IngestOptions, ingest  # noqa: E402
 from cevm.runtime import tune_allocator  # noqa: E402
-from cevm.parallel import DaskExecutor, ProcessExecutor, SerialExecutor, Task, local_dask_cluster  # noqa: E402
+from cevm.executors import DaskExecutor, ProcessExecutor, SerialExecutor, Task, local_dask_cluster  # noqa: E402
 from cevm.store import TripStore  # noqa: E402
 
 try:

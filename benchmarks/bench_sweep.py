@@ -1,4 +1,4 @@
-"""Benchmark of fleet sweeps (cevm.fleetpredict, ``cevm predict``): predictions per second.
+"""Benchmark of fleet sweeps (cevm.core.sweep, ``cevm predict``): predictions per second.
 
     python benchmarks/bench_sweep.py [--quick]
 
@@ -16,12 +16,12 @@ as after fitting Cr vehicle by vehicle), the fleet otherwise the same.
 Timed, on one core (OMP/BLAS threads set to 1):
 1. precompute, once per route: the CE vector from the samples and the compressed step
    terms for the state of charge (SourceSteps);
-2. the library sweep (cevm.fleetpredict.sweep over all routes, every row with its
+2. the library sweep (cevm.core.sweep.sweep over all routes, every row with its
    totals, and its SoC or tank check). Target: < 1 s. Measured with the default
    allocator, then again after cevm.runtime.tune_allocator() (what the CLI runs with:
    freed memory kept for reuse, no page faults per new array); then, tuned, the totals
    alone, the sweep with every vehicle its own Cr, and a feasibility matrix;
-3. baseline in the same run: a per-prediction loop (cevm.vehicle.predict for the total,
+3. baseline in the same run: a per-prediction loop (cevm.core.vehicle.predict for the total,
    and a numpy cumulative sum over the route's steps for the lowest SoC), on a random
    sample of predictions, extrapolated;
 4. the CLI as a subprocess: ``cevm predict -v DIR -r 'bench-*' --store S
@@ -50,12 +50,13 @@ import numpy as np  # noqa: E402
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
-from cevm.cycle import step_terms  # noqa: E402
-from cevm.fleetpredict import PredictionSet, Source, feasibility, parse_values, predict_source, sweep  # noqa: E402
-from cevm.parallel import ProcessExecutor  # noqa: E402
+from cevm.core.cycle import step_terms  # noqa: E402
+from cevm.core.sweep import PredictionSet, Source, parse_values, predict_source, sweep  # noqa: E402
+from cevm.core.feasibility import feasibility  # noqa: E402
+from cevm.executors import ProcessExecutor  # noqa: E402
 from cevm.runtime import tune_allocator  # noqa: E402
 from cevm_samplegen.cycles import MicroTripSpec, micro_trip_cycle  # noqa: E402
-from cevm.vehicle import Vehicle, predict  # noqa: E402
+from cevm.core.vehicle import Vehicle, predict  # noqa: E402
 
 TYRE_CR = (0.0045, 0.0055, 0.0065, 0.0075)
 
@@ -122,7 +123,7 @@ def library_sweep(sources, pset, executor=None):
 
 
 def plain_prediction(cyc, veh, m):
-    """Baseline: the CE total by cevm.vehicle.predict, the lowest SoC by a cumulative sum
+    """Baseline: the CE total by cevm.core.vehicle.predict, the lowest SoC by a cumulative sum
     over every step of the route."""
     vec = cyc["vector"]
     pred = predict(vec, veh, m)

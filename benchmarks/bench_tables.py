@@ -2,7 +2,7 @@
 
     python benchmarks/bench_tables.py [--quick] [--reps N] [--seed S]
 
-"Measured" is the consumption of cevm's detailed model (:mod:`cevm.detailed`), the
+"Measured" is the consumption of cevm's detailed model (:mod:`cevm.core.detailed`), the
 stand-in for the measurements as the paper's Simulink baseline stands in for its own.
 The detailed model's error against itself is 0 by construction: its column in the
 tables holds the paper's figures only.
@@ -15,7 +15,7 @@ Protocol (both vehicles, configs/vehicles/electric-bus.toml and diesel-hgv.toml)
   WVU city/suburban/interstate cycles (:data:`TRUCK_ADVISOR`) and the VECTO regional
   delivery and long haul missions of the 18 t and 40 t trucks, with their gradients
   (:data:`TRUCK_VECTO`). The 10 Hz cycle is thinned to 1 Hz once, at loading, with
-  the detailed model's own :func:`cevm.detailed.decimate_indices`, so that both models
+  the detailed model's own :func:`cevm.core.detailed.decimate_indices`, so that both models
   see the same samples. VECTO columns end in zero padding: cut after the last moving
   sample (+ one standstill sample).
 - Payloads: bus 0, 15, 30, 45, 60 passengers x 75 kg on 9,000 kg kerb; truck 0, 6.5,
@@ -24,7 +24,7 @@ Protocol (both vehicles, configs/vehicles/electric-bus.toml and diesel-hgv.toml)
   deficit above 2 % of the positive wheel energy (:data:`MAX_DEFICIT_FRACTION`), as
   the base detailed model reports it; the same trips are used for every variant below
   (paired comparisons). Cycles left with no usable trip take no part in the draws.
-- Calibration: the CE parameters are fitted with :func:`cevm.calibration.fit` on every
+- Calibration: the CE parameters are fitted with :func:`cevm.core.calibration.fit` on every
   usable payload of three cycles (equal weights: each trip's uncertainty is set to 1 %
   of its value, cross-validation off) and judged on every usable trip of the other
   cycles, error e = (CE - detailed) / detailed. Repeated over ``--reps`` draws of three
@@ -52,7 +52,7 @@ Protocol (both vehicles, configs/vehicles/electric-bus.toml and diesel-hgv.toml)
   machine is shared, so the minimum is the least disturbed figure; the mean of the N
   calls is printed too): (i) ``simulate()``; (ii) CE from raw samples:
   ``drive_cycle_vector`` + ``predict``; (iii) CE from the cached vector: ``predict``
-  only; (iv) the same through cevm.model's scalar path (``ev_energy_j`` /
+  only; (iv) the same through cevm.core.model's scalar path (``ev_energy_j`` /
   ``ice_fuel_l`` with floats); (v) per prediction in one ``predict`` call for 1,000
   masses. Mean and std over cycles; ratios detailed / CE.
 """
@@ -80,9 +80,9 @@ import pandas as pd  # noqa: E402
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
-from cevm.calibration import CalibrationError, TripData, fit  # noqa: E402
-from cevm.cycle import G_MPS2, RHO_AIR_KG_M3, CycleVector, drive_cycle_vector  # noqa: E402
-from cevm.detailed import (  # noqa: E402
+from cevm.core.calibration import CalibrationError, TripData, fit  # noqa: E402
+from cevm.core.cycle import G_MPS2, RHO_AIR_KG_M3, CycleVector, drive_cycle_vector  # noqa: E402
+from cevm.core.detailed import (
     DieselParams,
     EvParams,
     decimate_indices,
@@ -91,14 +91,14 @@ from cevm.detailed import (  # noqa: E402
     simulate,
 )
 from cevm.io import load_vehicle, read_cycle_csv  # noqa: E402
-from cevm.model import (  # noqa: E402
+from cevm.core.model import (
     battery_energy_from_wheel_j,
     ev_energy_j,
     fuel_from_wheel_energy_l,
     ice_fuel_l,
     wheel_energy_j,
 )
-from cevm.vehicle import Vehicle, predict  # noqa: E402
+from cevm.core.vehicle import Vehicle, predict  # noqa: E402
 
 #: The shared public cycles, beside the checkout.
 SHARED_CYCLES = ROOT.parent / "shared" / "cycles"
@@ -470,7 +470,7 @@ def ce_inputs(vehicle: Vehicle, traces: list[list[Cycle]], masses_kg) -> CeInput
 def predict_all(vehicle: Vehicle, ce: CeInputs) -> np.ndarray:
     """CE prediction of every (cycle, mass) for a (calibrated) vehicle: E = pos + w neg,
     w = eta^2 (EV) or the braking weight (1 paper, 0 no-credit), then eq. (31) / (26)
-    with the auxiliary / idle terms (cevm.model's functions)."""
+    with the auxiliary / idle terms (cevm.core.model's functions)."""
     if vehicle.is_ev:
         e = ce.pos + vehicle.eta**2 * ce.neg
         return battery_energy_from_wheel_j(e, vehicle.eta, vehicle.aux_power_w, ce.duration_s)
@@ -644,7 +644,7 @@ TIMED = ("detailed", "ce_raw", "ce_cached", "ce_scalar", "ce_batch")
 
 
 def scalar_prediction(vector: CycleVector, vehicle: Vehicle) -> float:
-    """One prediction through cevm.model's functions with plain floats (the scalar path
+    """One prediction through cevm.core.model's functions with plain floats (the scalar path
     of wheel_energy_j), the vehicle's ICE braking mode: what predict() costs without its
     array handling."""
     if vehicle.is_ev:

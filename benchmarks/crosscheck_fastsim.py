@@ -58,7 +58,7 @@ cevm's first gear turns the engine at its lowest shift speed, below which cevm o
 clutch and idles).
 
 Cycles: ../shared/cycles/advisor (time_s, speed_kmh; CYC_HHDDT65 at 10 Hz is thinned to
-1 Hz with :func:`cevm.detailed.decimate_indices` once, so both models see the same
+1 Hz with :func:`cevm.core.detailed.decimate_indices` once, so both models see the same
 samples). FASTSim runs with ``trace_miss_opts = "Allow"``; where it does not follow the
 trace (engine power ramp, solver tolerance) cevm is run on FASTSim's achieved speed, so
 both simulate the same speed trace; the tables mark those cycles.
@@ -93,9 +93,9 @@ from scipy.optimize import nnls  # noqa: E402
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
-from cevm.cycle import Physics  # noqa: E402
-from cevm.detailed import RPM, DieselParams, EvParams, SimulationResult, decimate_indices, simulate  # noqa: E402
-from cevm.vehicle import Vehicle  # noqa: E402
+from cevm.core.cycle import Physics  # noqa: E402
+from cevm.core.detailed import RPM, DieselParams, EvParams, SimulationResult, decimate_indices, simulate  # noqa: E402
+from cevm.core.vehicle import Vehicle  # noqa: E402
 
 try:
     import fastsim as fs
@@ -197,7 +197,7 @@ def _curve(node) -> list[float]:
 
 @functools.lru_cache(maxsize=1)
 def _bus_dict_cached() -> dict:
-    from cevm.detailed import ev_params_from_vehicle
+    from cevm.core.detailed import ev_params_from_vehicle
     from cevm.io import load_vehicle
 
     fsm = require_fastsim()
@@ -433,7 +433,7 @@ def training_traces() -> list[tuple[np.ndarray, np.ndarray]]:
 
 
 def cevm_vehicle(fv: FsVehicle) -> Vehicle:
-    """cevm's :class:`~cevm.vehicle.Vehicle` with FASTSim's road load. ``eta`` belongs to
+    """cevm's :class:`~cevm.core.vehicle.Vehicle` with FASTSim's road load. ``eta`` belongs to
     the CE model and is not used by the detailed model (set to the transmission's)."""
     common = dict(name=f"{fv.name} (matched to FASTSim)", mass_kg=fv.mass_kg, cda_m2=fv.cda_m2, cr=fv.cr,
                   eta=fv.transmission_efficiency)
@@ -453,7 +453,7 @@ def base_ev_params(fv: FsVehicle) -> EvParams:
     ...) or, for :data:`BUS_KEY`, the bus's [detailed] table.
     """
     if fv.resource == BUS_KEY:
-        from cevm.detailed import ev_params_from_vehicle
+        from cevm.core.detailed import ev_params_from_vehicle
         from cevm.io import load_vehicle
 
         own = ev_params_from_vehicle(load_vehicle(BUS_TOML))

@@ -8,11 +8,11 @@ import pytest
 from typer.testing import CliRunner
 
 from cevm.cli import app
-from cevm.cycle import drive_cycle_vector
+from cevm.core.cycle import drive_cycle_vector
 from cevm.io import load_vehicle
 from cevm.store import TripStore
 from cevm_samplegen.cycles import MicroTripSpec, micro_trip_cycle
-from cevm.trip import Measurement, Trip
+from cevm.core.trip import Measurement, Trip
 from reference import reference_wheel_energy_j
 
 runner = CliRunner()

@@ -11,11 +11,11 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from cevm.calibration import CalibrationError, TripData, fit, predict_trips
-from cevm.cycle import cycle_vector, drive_cycle_vector
+from cevm.core.calibration import CalibrationError, TripData, fit, predict_trips
+from cevm.core.cycle import cycle_vector, drive_cycle_vector
 from cevm_samplegen.cycles import MicroTripSpec, micro_trip_cycle
-from cevm.trip import Measurement
-from cevm.vehicle import Vehicle
+from cevm.core.trip import Measurement
+from cevm.core.vehicle import Vehicle
 from reference import reference_wheel_energy_j
 
 URBAN = MicroTripSpec(n_trips=8)

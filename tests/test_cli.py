@@ -10,7 +10,7 @@ import pytest
 from typer.testing import CliRunner
 
 from cevm.cli import app
-from cevm.cycle import drive_cycle_vector
+from cevm.core.cycle import drive_cycle_vector
 from cevm.io import load_vehicle, read_cycle_csv
 from reference import reference_wheel_energy_j
 

@@ -10,8 +10,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from cevm.cycle import drive_cycle_vector
-from cevm.detailed import (
+from cevm.core.cycle import drive_cycle_vector
+from cevm.core.detailed import (
     DieselParams,
     EvParams,
     decimate_indices,
@@ -21,8 +21,8 @@ from cevm.detailed import (
 )
 from cevm.errors import InputError
 from cevm.io import load_vehicle, read_cycle_csv
-from cevm.model import wheel_energy_j
-from cevm.vehicle import vehicle_from_mapping
+from cevm.core.model import wheel_energy_j
+from cevm.core.vehicle import vehicle_from_mapping
 
 RHO, G = 1.225, 9.81
 RPM = 2 * math.pi / 60

@@ -1,4 +1,4 @@
-"""Tests of cevm.fleet: hand-computed routes, exactness against plain enumeration, limits,
+"""Tests of cevm.core.assignment: hand-computed routes, exactness against plain enumeration, limits,
 scenario files and the stand-in cycles."""
 
 from __future__ import annotations
@@ -13,27 +13,25 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cevm.cycle import drive_cycle_vector
+from cevm.core.cycle import drive_cycle_vector
 from cevm.errors import InputError
-from cevm.fleet import (
+from cevm.core.assignment import (
     BUDGET_RTOL,
     FleetVehicle,
     Leg,
     LegSource,
     Route,
     Scenario,
-    default_resolver,
     evaluate,
-    fleet_report,
     leg_curve,
-    load_scenario,
     plan,
     table4_rows,
 )
+from cevm.io.scenario import default_resolver, fleet_report, load_scenario
 from cevm_samplegen.standin import STANDIN_CYCLES, standin_cycle, write_standin_cycles
 from cevm.io import read_cycle_csv
 from cevm_samplegen.cycles import MicroTripSpec, micro_trip_cycle
-from cevm.vehicle import Vehicle, predict
+from cevm.core.vehicle import Vehicle, predict
 
 ROOT = Path(__file__).resolve().parents[1]
 G, RHO = 9.81, 1.225
@@ -198,7 +196,7 @@ def test_cost_objective_trades_fuel_against_electricity():
     km = cruise_vector(10.0, 100)
     fleet = [FleetVehicle("D", hgv(kerb_mass_kg=9000.0, mass_kg=9000.0), None), FleetVehicle("E", ebus(), None)]
     routes = [route("RD", "D", ["S"], [km, km]), route("RE", "E", ["S"], [km, km])]
-    from cevm.fleet import Prices
+    from cevm.core.assignment import Prices
 
     def case(per_l, per_kwh):
         return scenario(fleet, routes, {"S": 2000.0}, objective="cost", prices=Prices(per_l, per_kwh, "GBP"))
@@ -521,7 +519,7 @@ def test_standin_cycles_are_deterministic_and_the_papers_lengths(tmp_path):
     for p in paths:
         shipped = ROOT / "configs" / "cycles" / p.name
         cyc, fresh = read_cycle_csv(shipped), read_cycle_csv(p)
-        # what cevm.fleet generates, to the files' printed precision
+        # what cevm.core.assignment generates, to the files' printed precision
         np.testing.assert_array_equal(cyc.time_s, fresh.time_s)
         np.testing.assert_allclose(cyc.speed_mps * 3.6, fresh.speed_mps * 3.6, atol=1.01e-3)
         np.testing.assert_allclose(cyc.elevation_m, fresh.elevation_m, atol=1.01e-2)

@@ -17,23 +17,23 @@ from hypothesis import strategies as st
 from typer.testing import CliRunner
 
 from cevm.cli import app
-from cevm.cycle import DriveCycle
+from cevm.core.cycle import DriveCycle
 from cevm.errors import InputError
-from cevm.fleetpredict import (
+from cevm.core.sweep import (
     LegProfile,
     PredictionSet,
     Source,
     energy_trajectory,
-    feasibility,
     parse_values,
     peak_energy_j,
     predict_source,
     sweep,
 )
+from cevm.core.feasibility import feasibility
 from cevm.io import read_cycle_csv
-from cevm.model import ev_energy_j, ice_fuel_l
+from cevm.core.model import ev_energy_j, ice_fuel_l
 from cevm_samplegen.cycles import MicroTripSpec, micro_trip_cycle
-from cevm.vehicle import Vehicle
+from cevm.core.vehicle import Vehicle
 
 RHO, G, CR0 = 1.225, 9.81, 0.004
 runner = CliRunner()
@@ -205,7 +205,7 @@ def test_both_searches_for_the_sign_change_give_the_plain_loop(hilly, monkeypatc
     # many vehicles with distinct CdA/Cr and payloads: a step's sign differs between the
     # masses of a vehicle, found by a table of prefix counts or (large sweeps) by a binary
     # search on complex keys; both must give the plain loop's totals and lowest SoC
-    import cevm.fleetpredict as fp
+    import cevm.core.sweep as fp
 
     rng = np.random.default_rng(3)
     vehicles = [ev(f"ev{i}", kerb=float(rng.uniform(2000, 16000)), cda=float(rng.uniform(2, 7)),

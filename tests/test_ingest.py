@@ -11,7 +11,7 @@ from pyproj import Transformer
 from typer.testing import CliRunner
 
 from cevm.cli import app
-from cevm.cycle import CycleVector, drive_cycle_vector
+from cevm.core.cycle import CycleVector, drive_cycle_vector
 from cevm.store import TripStore
 
 runner = CliRunner()

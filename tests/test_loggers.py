@@ -32,7 +32,7 @@ from cevm.loggers import (
     load_profiles,
     read_log,
 )
-from cevm.trip import CANONICAL_COLUMNS
+from cevm.core.trip import CANONICAL_COLUMNS
 
 DATA = Path(__file__).parent / "data"
 REAL_TWIZY = Path("/work/shared/real-logs/twizy")

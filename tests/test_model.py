@@ -6,8 +6,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
-from cevm.cycle import CR0_DEFAULT, CycleVector, drive_cycle_vector
-from cevm.model import (
+from cevm.core.cycle import CR0_DEFAULT, CycleVector, drive_cycle_vector
+from cevm.core.model import (
     battery_energy_from_wheel_j,
     ev_energy_j,
     ice_fuel_l,
@@ -121,7 +121,7 @@ def test_table_and_direct_paths_agree():
     vec = drive_cycle_vector(t, v, h)
     m = rng.uniform(2000, 40000, 500)
     cda = rng.uniform(0.5, 8, 500)
-    from cevm.model import _positive_direct
+    from cevm.core.model import _positive_direct
 
     fast = nonsimplified_positive_j(vec, m, cda, 0.0066)  # one Cr, many: sorted table
     slow = _positive_direct(vec, m, cda, 0.0066)

@@ -18,7 +18,7 @@ from pyproj import Transformer
 from typer.testing import CliRunner
 
 from cevm.cli import app
-from cevm.parallel import (
+from cevm.executors import (
     CRASH_ENV_VAR,
     DaskExecutor,
     ProcessExecutor,
@@ -218,7 +218,7 @@ def ingest_json(*args, env=None):
 @pytest.fixture(scope="module")
 def dask_cluster():
     pytest.importorskip("distributed")
-    from cevm.parallel import local_dask_cluster
+    from cevm.executors import local_dask_cluster
 
     cluster = local_dask_cluster(2, 1, processes=True)  # processes: a task may kill its worker
     try:
@@ -256,7 +256,7 @@ def test_process_pool_results_come_in_input_order_whatever_the_completion_order(
 
 
 def test_pool_workers_run_single_threaded_blas():
-    from cevm.parallel import WORKER_ENV
+    from cevm.executors import WORKER_ENV
 
     keys = sorted(WORKER_ENV)
     before = {k: os.environ.get(k) for k in keys}
@@ -287,7 +287,7 @@ def test_worker_cache_makes_each_object_once_per_thread():
         def close(self):
             self.closed = True
 
-    from cevm.parallel import WORKER_CACHE_SIZE
+    from cevm.executors import WORKER_CACHE_SIZE
 
     objs = [worker_cache(("lru", k), Res) for k in range(WORKER_CACHE_SIZE)]
     assert worker_cache(("lru", 0), Res) is objs[0]  # used again: now the most recent
@@ -387,7 +387,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def _sweep_case():
-    from cevm.fleetpredict import PredictionSet, Source, parse_values
+    from cevm.core.sweep import PredictionSet, Source, parse_values
     from cevm.io import load_vehicles
     from cevm_samplegen.cycles import MicroTripSpec, micro_trip_cycle
 
@@ -398,13 +398,13 @@ def _sweep_case():
 
 
 def _sweep_arrays(blocks):
-    from cevm.fleetpredict import _BLOCK_ARRAYS
+    from cevm.core.sweep import _BLOCK_ARRAYS
 
     return [(b.source_index, b.source.name, *(getattr(b, f).tobytes() for f in _BLOCK_ARRAYS)) for b in blocks]
 
 
 def _check_sweep_on(executor, monkeypatch):
-    import cevm.fleetpredict as fp
+    import cevm.core.sweep as fp
 
     monkeypatch.setattr(fp, "SWEEP_BATCH_CELLS", 12)  # several batches of a few sources
     pset, sources = _sweep_case()
@@ -428,7 +428,7 @@ def test_sweep_on_a_dask_cluster_equals_the_serial_sweep_bit_for_bit(monkeypatch
 
 
 def test_predict_cli_with_workers_writes_what_a_serial_run_writes(monkeypatch):
-    import cevm.fleetpredict as fp
+    import cevm.core.sweep as fp
 
     monkeypatch.setattr(fp, "SWEEP_BATCH_CELLS", 1)
     args = ["predict", "-v", ROOT / "configs/vehicles/electric-bus.toml", "-v", ROOT / "configs/vehicles/diesel-hgv.toml",

@@ -9,7 +9,7 @@ import pytest
 from typer.testing import CliRunner
 
 from cevm.cli import app
-from cevm.cycle import CycleVector, drive_cycle_vector
+from cevm.core.cycle import CycleVector, drive_cycle_vector
 from cevm.errors import CevmError, InputError
 from cevm.io import read_cycle_csv
 from cevm.routes import (
@@ -26,7 +26,7 @@ from cevm.routes import (
 )
 from cevm.store import TripStore
 from cevm_samplegen.cycles import MicroTripSpec, micro_trip_cycle
-from cevm.trip import Trip
+from cevm.core.trip import Trip
 
 runner = CliRunner()
 

@@ -347,7 +347,7 @@ def test_injected_consumption_function_is_used(tmp_path):
 
 
 def test_generator_does_not_import_the_ce_model():
-    code = "import sys, cevm_samplegen; print('cevm.model' in sys.modules)"
+    code = "import sys, cevm_samplegen; print('cevm.core.model' in sys.modules)"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "False"
 

@@ -32,7 +32,7 @@ from cevm.store import (
     resolve_store_path,
     trip_profile_blob,
 )
-from cevm.trip import Measurement, Trip
+from cevm.core.trip import Measurement, Trip
 
 TESTS_DIR = Path(__file__).resolve().parent
 SRC_DIR = TESTS_DIR.parent / "src"

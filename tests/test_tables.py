@@ -75,7 +75,7 @@ def test_bus_table_structure_and_lossless_limit(bt):
 
 
 def test_truck_variants_and_adapted_traces(bt):
-    from cevm.detailed import diesel_params_from_vehicle, simulate
+    from cevm.core.detailed import diesel_params_from_vehicle, simulate
     from cevm.io import load_vehicle
 
     hgv = load_vehicle(bt.TRUCK_TOML)

@@ -1,6 +1,6 @@
 """The edges of calibration: stored trips in, a calibrated vehicle file and a plot out.
 
-The fitting itself is pure (:mod:`cevm.calibration`); this module reads the store,
+The fitting itself is pure (:mod:`cevm.core.calibration`); this module reads the store,
 decides each trip's mass, quality factor and group, writes the calibrated vehicle file
 (never over its input silently) and draws the paper's figures 5 and 7.
 """
@@ -14,12 +14,13 @@ from pathlib import Path
 
 import numpy as np
 
-from cevm.calibration import CalibrationResult, TripData
-from cevm.cycle import CycleVector
+from cevm.core.calibration import CalibrationResult, TripData
+from cevm.core.cycle import CycleVector
 from cevm.errors import CevmError
 from cevm.store import TripStore
-from cevm.trip import Measurement
-from cevm.vehicle import J_PER_KWH, S_PER_H, Vehicle
+from cevm.core.trip import Measurement
+from cevm.units import J_PER_KWH, S_PER_H
+from cevm.core.vehicle import Vehicle
 
 
 @dataclass(frozen=True)

@@ -1,6 +1,6 @@
 """Cleaning stage of ``cevm ingest``: the canonical log frame of ONE vehicle -> clean trips.
 
-Input: a DataFrame with columns of :data:`cevm.trip.CANONICAL_COLUMNS` (``time_s``, UTC
+Input: a DataFrame with columns of :data:`cevm.core.trip.CANONICAL_COLUMNS` (``time_s``, UTC
 epoch seconds, and ``source_line`` required; asynchronous fields NaN where a tick carried
 no value), rows in file order. Output: :class:`CleanTrip` segments with time from 0 on a
 regular grid, speed, distance, position and the measured consumption
@@ -96,7 +96,7 @@ from cevm.consumption import (
     measure_trip,
 )
 from cevm.errors import InputError
-from cevm.trip import CANONICAL_COLUMNS, Measurement
+from cevm.core.trip import CANONICAL_COLUMNS, Measurement
 
 _GEOD = Geod(ellps="WGS84")
 _WGS84_A_M = 6378137.0

@@ -18,9 +18,9 @@ import typer
 from cevm import __version__
 from cevm.errors import CevmError
 from cevm.io import read_cycle_csv
-from cevm.model import ICE_BRAKING_MODES
+from cevm.core.model import ICE_BRAKING_MODES
 from cevm.report import OutputFormat, write_rows
-from cevm.vehicle import J_PER_KWH
+from cevm.units import J_PER_KWH
 
 EXIT_OK = 0
 EXIT_PARTIAL = 1
@@ -102,7 +102,7 @@ def ingest(
 
     from cevm.ingest import IngestOptions
     from cevm.ingest import ingest as run_ingest
-    from cevm.parallel import make_executor
+    from cevm.executors import make_executor
     from cevm.store import TripStore, resolve_store_path
 
     if workers is not None and scheduler is not None:
@@ -233,7 +233,7 @@ def calibrate(
     from cevm.calibrate_io import (
         dumps, plot_calibration, result_json, trips_for_calibration, write_calibrated_vehicle,
     )
-    from cevm.calibration import fit as fit_vehicle
+    from cevm.core.calibration import fit as fit_vehicle
     from cevm.io import load_vehicle
     from cevm.store import TripStore
 
@@ -323,7 +323,7 @@ def simulate(
     """Detailed time-step simulation of one vehicle over a trace (the baseline model).
 
     Motor map, regeneration limits and battery for an EV; gearbox and fuel map for a diesel."""
-    from cevm.detailed import simulate as run_simulation
+    from cevm.core.detailed import simulate as run_simulation
     from cevm.io import load_vehicle
 
     if (cycle is None) == (trip is None):
@@ -413,7 +413,7 @@ def fleet_plan(
     within gross-weight limits and EV reserves: proven optimal (enumeration or MILP)."""
     import json
 
-    from cevm.fleet import default_resolver, fleet_report, store_resolver
+    from cevm.io.scenario import default_resolver, fleet_report, store_resolver
     from cevm.store import TripStore, resolve_store_path
 
     if method not in ("auto", "enumerate", "milp"):

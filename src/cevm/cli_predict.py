@@ -1,5 +1,5 @@
 """``cevm predict``, ``cevm feasibility`` and ``cevm route``: fleet decisions on the command
-line, a thin layer over :mod:`cevm.fleetpredict` and :mod:`cevm.routes`.
+line, a thin layer over :mod:`cevm.core.sweep` and :mod:`cevm.routes`.
 
 Registered on :data:`cevm.cli.app` when :mod:`cevm.cli` imports this module.
 
@@ -35,26 +35,24 @@ import numpy as np
 import typer
 
 from cevm.cli import StoreOption, _existing_store, _fail, app
-from cevm.cycle import CR0_DEFAULT
+from cevm.core.cycle import CR0_DEFAULT
 from cevm.errors import CevmError
-from cevm.fleetpredict import (
+from cevm.core.sweep import (
     DEFAULT_RESERVE_PCT,
     DEFAULT_SOC_START_PCT,
-    Feasibility,
     LegProfile,
     PredictionSet,
     Source,
     SweepBlock,
     energy_trajectory,
-    feasibility,
     parse_values,
     sweep,
 )
-from cevm.model import ICE_BRAKING_MODES
-from cevm.parallel import make_executor
+from cevm.core.feasibility import Feasibility, feasibility
+from cevm.core.model import ICE_BRAKING_MODES
+from cevm.executors import make_executor
 from cevm.report import OutputFormat, write_rows
-
-J_PER_KWH = 3.6e6
+from cevm.units import J_PER_KWH
 
 #: Rows printed by ``--format table``; beyond that, use csv or json.
 TABLE_MAX_ROWS = 200
@@ -140,7 +138,7 @@ def _load_sources(stack: ExitStack, store: Optional[Path], cycles: Sequence[Path
     sources = [Source.from_cycle(read_cycle_csv(p), cr0=cr0) for p in cycles]
     if not (trips or vehicle_ids or routes):
         return sources
-    from cevm.cycle import CycleVector
+    from cevm.core.cycle import CycleVector
     from cevm.routes import load_route_legs, load_route_profiles, resolve_route_patterns
     from cevm.store import TripStore, existing_store_path
 

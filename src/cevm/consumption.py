@@ -71,7 +71,7 @@ from typing import Protocol
 
 import numpy as np
 
-from cevm.trip import Measurement
+from cevm.core.trip import Measurement
 
 #: Virtual column: battery power [W] = battery_voltage_v * battery_current_a.
 BATTERY_POWER_COLUMN = "battery_power_w"
@@ -472,7 +472,7 @@ def measure_trip(
 ) -> tuple[Measurement | None, dict]:
     """A trip's measured consumption over ``[t0, t1]`` [s] from the best valid source.
 
-    Returns the :class:`~cevm.trip.Measurement` of the most trusted valid source (lowest
+    Returns the :class:`~cevm.core.trip.Measurement` of the most trusted valid source (lowest
     ``priority``, then the order given) or None, and a JSON-serialisable quality dict:
     ``sources`` (every source's estimate and validity), ``cross_checks`` (other valid
     sources of the chosen quantity, signed percentage against the chosen one) and, for

@@ -4,14 +4,14 @@ Stages, per file (:func:`process_file`, a pure-enough task: it reads the file an
 DSM, and returns everything to store; it never writes): read with a logger profile
 (:mod:`cevm.loggers`), clean and split into trips with measured consumption
 (:mod:`cevm.clean`, :mod:`cevm.consumption`), road elevation from the DSM
-(:mod:`cevm.elevation`), and the trip's drive-cycle vector (:mod:`cevm.cycle`).
+(:mod:`cevm.elevation`), and the trip's drive-cycle vector (:mod:`cevm.core.cycle`).
 
 :func:`ingest` runs the task over many files and is the store's single writer: one
 transaction per file, so a crash mid-file leaves the store as it was, an unchanged file
 is skipped, a changed file replaces its trips, and a bad file is reported and skipped
 while the batch goes on (its previously stored trips are kept).
 
-Parallel runs (:mod:`cevm.parallel`): the same :func:`process_file` runs in worker
+Parallel runs (:mod:`cevm.executors`): the same :func:`process_file` runs in worker
 processes or on a Dask cluster; the outcomes come back to :func:`ingest`, which writes
 them in input order, so the store ends up exactly as after a serial run. A worker opens
 the DSM once (:func:`worker_sampler`), not once per file.
@@ -32,13 +32,13 @@ from pathlib import Path
 import numpy as np
 
 from cevm.clean import CleanParams, CleanTrip, clean_log
-from cevm.cycle import CR0_DEFAULT, drive_cycle_vector
+from cevm.core.cycle import CR0_DEFAULT, drive_cycle_vector
 from cevm.elevation import DsmHeaders, DsmSampler, ElevationParams, trip_elevation
 from cevm.errors import CevmError, InputError
 from cevm.loggers import Profile, load_profiles, read_log
-from cevm.parallel import Executor, SerialExecutor, Task, TaskResult, worker_cache
+from cevm.executors import Executor, SerialExecutor, Task, TaskResult, worker_cache
 from cevm.store import TripStore, trip_profile_blob
-from cevm.trip import Trip, TripRecord
+from cevm.core.trip import Trip, TripRecord
 
 #: File names taken from a directory (recursively).
 LOG_PATTERNS = ("*.csv", "*.csv.gz", "*.CSV", "*.CSV.GZ")
@@ -278,7 +278,7 @@ def open_sampler(dsm: str | None) -> DsmSampler | None:
 
 def worker_sampler(dsm: str, headers: DsmHeaders | None = None) -> DsmSampler:
     """This worker's (process and thread) sampler of ``dsm``, opened on first use and
-    kept for the next files (:func:`cevm.parallel.worker_cache`). ``headers``: the
+    kept for the next files (:func:`cevm.executors.worker_cache`). ``headers``: the
     rasters' headers as the writer read them (:attr:`DsmSampler.headers`), so that a
     new worker does not read every tile's header again (~1.5 ms a tile); rasters
     are then opened when a window of them is needed. A long-lived worker given other
@@ -303,7 +303,7 @@ def ingest(
     after each file, in input order (for progress bars and JSON logs).
 
     ``executor`` runs :func:`process_file` on each file to (re-)ingest (default None:
-    serially in this thread; see :func:`cevm.parallel.make_executor`); it stays open
+    serially in this thread; see :func:`cevm.executors.make_executor`); it stays open
     for the caller to reuse and close. The hashing of files and the store writes stay
     here, and results are written in input order, so the store holds the same after a
     serial or a parallel run. A file whose worker died twice is failed, as a bad file.

@@ -4,7 +4,7 @@ A *profile* (a small TOML file, see ``configs/loggers/*.toml``) says how one log
 writes its CSV: how to recognise it from the header, text encoding, separator, decimal
 mark, leading comment/metadata lines, where the time is and in which zone, where the
 vehicle id comes from, which column feeds each canonical column (``CANONICAL_COLUMNS``
-in :mod:`cevm.trip`) in which unit, and which columns measure energy. Supporting a new
+in :mod:`cevm.core.trip`) in which unit, and which columns measure energy. Supporting a new
 logger means writing a profile, not code.
 
 :func:`read_log` turns one file into one :class:`ParsedLog` per vehicle: a DataFrame

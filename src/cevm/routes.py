@@ -35,7 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
-from cevm.cycle import CR0_DEFAULT, CycleVector, DriveCycle, cycle_vector
+from cevm.core.cycle import CR0_DEFAULT, CycleVector, DriveCycle, cycle_vector
 from cevm.errors import CevmError, InputError
 from cevm.store import TripStore
 

@@ -69,7 +69,8 @@ import pandas as pd
 
 from cevm import __version__
 from cevm.errors import CevmError
-from cevm.trip import Measurement, Trip, TripRecord
+from cevm.core.trip import Measurement, Trip, TripRecord
+from cevm.units import J_PER_KWH
 
 SCHEMA_VERSION = 1
 """Version of the table layout written by this code. A store with a higher version was
@@ -80,8 +81,6 @@ BUSY_TIMEOUT_S = 60.0
 transaction lasts milliseconds to a second, so 60 s only runs out if a process hangs."""
 
 STORE_ENV_VAR = "CEVM_STORE"
-
-J_PER_KWH = 3.6e6
 
 # Profile arrays and the dtype each is stored with. Degrees need float64 (float32 steps
 # are ~1e-6 deg = 0.1 m at 45 deg, and worse in the sums of a cumulated track), time and
@@ -584,7 +583,7 @@ class TripStore:
         ----------
         path : the source file; keyed on its resolved absolute path (:func:`file_key`),
             which is also stored as each trip's ``source_file``.
-        trips : the file's trips (or their :class:`~cevm.trip.TripRecord`, with
+        trips : the file's trips (or their :class:`~cevm.core.trip.TripRecord`, with
             ``profile_blobs``); every ``trip.source_sha256`` must equal ``sha256``.
         vectors : the drive-cycle vector bytes of each trip, same order (opaque here).
         sha256 : hex sha256 of the file's content.
@@ -908,7 +907,7 @@ class TripStore:
         return {tid: bytes(vec) for tid, vec in rows}
 
     def load_trip(self, trip_id: str) -> Trip:
-        """Rebuild a stored :class:`~cevm.trip.Trip` with its profile arrays (float64;
+        """Rebuild a stored :class:`~cevm.core.trip.Trip` with its profile arrays (float64;
         speed and elevation rounded to float32 by storage; NaN scalars come back as NaN,
         a NaN gross weight as None). ``source_file`` is the stored resolved path."""
         cols = ", ".join(f"t.{c}" for c in _TRIP_COLUMNS)

@@ -24,7 +24,7 @@ trip's constant gross mass; the result has one value per sample, starting at 0. 
 default, :func:`standin_consumption`, is a STAND-IN (a longitudinal-dynamics formula with
 load-dependent efficiency, written here) for tests and trial runs; the project's sample
 logs are meant to be generated with the detailed simulator. The CE model
-(:mod:`cevm.model`) is never used for measured values.
+(:mod:`cevm.core.model`) is never used for measured values.
 
 Sensors are then derived from the truth:
 
@@ -114,7 +114,6 @@ import hashlib
 import importlib
 import json
 import math
-import sys
 import zlib
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -266,7 +265,7 @@ def power_limited_trace(v_target: np.ndarray, h_of_s: Callable[[np.ndarray], np.
     return np.asarray(v)
 
 
-#: What a vehicle type's consumption is measured in (cevm.trip.MeasurementKind).
+#: What a vehicle type's consumption is measured in (cevm.core.trip.MeasurementKind).
 MEASUREMENT_KIND = {"electric-bus": "energy_j", "diesel-hgv": "fuel_l"}
 
 
@@ -332,7 +331,7 @@ def _project_vehicle(kind: str):
 
 def logged_consumption(kind: str, time_s, speed_mps, elevation_m, mass_kg: float) -> np.ndarray:
     """Cumulative consumption per sample, as a logger would measure it: the detailed
-    model (:func:`cevm.detailed.simulate`) of the project's vehicle
+    model (:func:`cevm.core.detailed.simulate`) of the project's vehicle
     ``configs/vehicles/<kind>.toml`` over a true trace.
 
     Joules at the battery (EV, net of regeneration, auxiliaries included) or litres of
@@ -342,7 +341,7 @@ def logged_consumption(kind: str, time_s, speed_mps, elevation_m, mass_kg: float
     :data:`MAX_DEFICIT_SHARE` of the wheel work). It lives here, not in the detailed
     model's module, because it reads the project's vehicle files.
     """
-    from cevm.detailed import simulate
+    from cevm.core.detailed import simulate
 
     vehicle = _project_vehicle(kind)
     res = simulate(vehicle, time_s, speed_mps, elevation_m, mass_kg=mass_kg, time_step_s=None)

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from cevm.cycle import DriveCycle
+from cevm.core.cycle import DriveCycle
 
 
 @dataclass(frozen=True)

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from cevm.cycle import DriveCycle
+from cevm.core.cycle import DriveCycle
 from cevm_samplegen.cycles import MicroTripSpec, micro_trip_cycle, write_cycle_csv
 
 

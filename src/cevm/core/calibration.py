@@ -8,7 +8,7 @@ not flatter.
 
 Model, per trip i with cached vector, gross mass m_i, duration D_i and idle time I_i::
 
-    E_i(CdA, Cr; w) = P_i + w N_i        wheel energy [J] (cevm.model.wheel_energy_j):
+    E_i(CdA, Cr; w) = P_i + w N_i        wheel energy [J] (cevm.core.model.wheel_energy_j):
                                          P_i = E_DC1 + positive non-simplified steps,
                                          N_i <= 0 the negative non-simplified steps
     ICE fuel [l]    = E_i(w_ice) / (LHV eta) + idle_fuel_lps * I_i      (eq. 26 + idle)
@@ -67,11 +67,11 @@ from typing import Sequence
 import numpy as np
 from scipy.optimize import brentq, least_squares
 
-from cevm.cycle import CycleVector
+from cevm.core.cycle import CycleVector
 from cevm.errors import CevmError
-from cevm.model import braking_weight, wheel_energy_j
-from cevm.trip import Measurement
-from cevm.vehicle import Vehicle, predict
+from cevm.core.model import braking_weight, wheel_energy_j
+from cevm.core.trip import Measurement
+from cevm.core.vehicle import Vehicle, predict
 
 #: Parameters that can be fitted, per powertrain, in the order of their priority.
 PARAMS_EV: tuple[str, ...] = ("eta", "aux_power_w", "cda_m2", "cr")
@@ -100,8 +100,8 @@ class CalibrationError(CevmError):
 class TripData:
     """One trip as the fit sees it.
 
-    trip_id : unique id (e.g. :attr:`cevm.trip.Trip.trip_id`)
-    vector : the trip's cached :class:`~cevm.cycle.CycleVector`
+    trip_id : unique id (e.g. :attr:`cevm.core.trip.Trip.trip_id`)
+    vector : the trip's cached :class:`~cevm.core.cycle.CycleVector`
     mass_kg : gross mass of the trip [kg]; None: the vehicle's ``mass_kg``
     measured : measured consumption: litres of fuel (ICE) or joules at the battery (EV);
         None or NaN when the trip has no measurement
@@ -124,7 +124,7 @@ class TripData:
     def from_measurement(cls, trip_id: str, vector: CycleVector, measurement: Measurement | None, *,
                          mass_kg: float | None = None, quality: float = 1.0,
                          group: str | None = None) -> TripData:
-        """A :class:`TripData` from a :class:`cevm.trip.Measurement` (None: unmeasured)."""
+        """A :class:`TripData` from a :class:`cevm.core.trip.Measurement` (None: unmeasured)."""
         if measurement is None:
             return cls(trip_id, vector, mass_kg, None, None, quality, group)
         return cls(trip_id, vector, mass_kg, measurement.value, measurement.uncertainty, quality, group,
@@ -574,7 +574,7 @@ def _folds(data: _Data, cv_folds: int, loo_below: int, seed: int) -> tuple[np.nd
 
 def predict_trips(vehicle: Vehicle, trips: Sequence[TripData]) -> np.ndarray:
     """Predicted consumption of each trip [l for an ICE, J for an EV] with
-    :func:`cevm.vehicle.predict` (the trip's mass, or the vehicle's when None)."""
+    :func:`cevm.core.vehicle.predict` (the trip's mass, or the vehicle's when None)."""
     out = np.empty(len(trips))
     for i, t in enumerate(trips):
         out[i] = _predict_one(vehicle, t.vector, vehicle.mass_kg if t.mass_kg is None else t.mass_kg)

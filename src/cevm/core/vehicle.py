@@ -32,9 +32,10 @@ from typing import Any, Literal
 
 import numpy as np
 
-from cevm.cycle import CycleVector
+from cevm.core.cycle import CycleVector
 from cevm.errors import InputError
-from cevm.model import (
+from cevm.units import J_PER_KWH, J_PER_MJ, S_PER_H
+from cevm.core.model import (
     ICE_BRAKING_DEFAULT,
     ICE_BRAKING_MODES,
     Prediction,
@@ -45,10 +46,6 @@ from cevm.model import (
 )
 
 Powertrain = Literal["ev", "ice"]
-
-J_PER_KWH = 3.6e6
-J_PER_MJ = 1.0e6
-S_PER_H = 3600.0
 
 
 @dataclass(frozen=True)

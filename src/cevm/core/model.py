@@ -30,7 +30,7 @@ from typing import Literal
 
 import numpy as np
 
-from cevm.cycle import CycleVector
+from cevm.core.cycle import CycleVector
 
 IceBraking = Literal["paper", "no-credit"]
 ICE_BRAKING_MODES: tuple[str, ...] = ("paper", "no-credit")
@@ -138,7 +138,7 @@ def wheel_energy_j(
 
     Parameters (broadcast together)
     ----------
-    vector : the cycle's :class:`~cevm.cycle.CycleVector`
+    vector : the cycle's :class:`~cevm.core.cycle.CycleVector`
     mass_kg : vehicle mass m [kg], > 0
     cda_m2 : drag area CdA [m^2], >= 0
     cr : rolling-resistance coefficient [-], >= vector.cr0

@@ -12,7 +12,7 @@ need for the measured speed change, and what the powertrain must do to supply it
 limit binds (motor or engine torque), the unmet part is reported (``traction_deficit_j``)
 instead of slowing the vehicle down.
 
-Step convention (as in :mod:`cevm.cycle` and PAPER-NOTES.md): step i joins sample i to
+Step convention (as in :mod:`cevm.core.cycle` and PAPER-NOTES.md): step i joins sample i to
 i+1, dt_i = T_{i+1} - T_i, mean speed v_i = (v_i + v_{i+1}) / 2, acceleration
 (v_{i+1} - v_i) / dt_i. The road load of a step is the paper's eq. (28),
 
@@ -91,11 +91,11 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from cevm.cycle import PAPER_PHYSICS, Physics, step_terms, trapezoid_distance_m, validate_cycle
+from cevm.core.cycle import PAPER_PHYSICS, Physics, step_terms, trapezoid_distance_m, validate_cycle
 from cevm.errors import InputError
+from cevm.units import J_PER_KWH
 
 RPM = 2.0 * math.pi / 60.0  # rad/s per rpm
-J_PER_KWH = 3.6e6
 
 
 # --------------------------------------------------------------------------------------
@@ -955,7 +955,7 @@ def _result(powertrain: str, mass_kg, t, speed_mps, elevation_m, steps: dict, sa
 def simulate(vehicle, time_s, speed_mps, elevation_m=None, mass_kg: float | None = None,
              soc_start: float = 1.0, *, params: EvParams | DieselParams | None = None,
              time_step_s: float | None = 1.0, physics: Physics = PAPER_PHYSICS) -> SimulationResult:
-    """Simulate ``vehicle`` (a :class:`~cevm.vehicle.Vehicle`) over a trace.
+    """Simulate ``vehicle`` (a :class:`~cevm.core.vehicle.Vehicle`) over a trace.
 
     Parameters
     ----------
@@ -979,7 +979,7 @@ def simulate(vehicle, time_s, speed_mps, elevation_m=None, mass_kg: float | None
         simulated samples.
     physics : air density and gravity (the paper's by default)
 
-    Raises ValueError for an invalid trace (see :func:`cevm.cycle.validate_cycle`).
+    Raises ValueError for an invalid trace (see :func:`cevm.core.cycle.validate_cycle`).
     """
     validate_cycle(time_s, speed_mps, elevation_m)
     if time_step_s is not None:

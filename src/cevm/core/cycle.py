@@ -20,7 +20,7 @@ wheel energy, so their sum collapses into three numbers, the drive-cycle vector
 
 The other steps (braking, descending) are kept in compact form: their sign depends on
 the vehicle. :class:`CycleVector` holds both, so any vehicle and payload can be predicted
-afterwards, exactly, without the original samples (see :mod:`cevm.model`).
+afterwards, exactly, without the original samples (see :mod:`cevm.core.model`).
 """
 
 from __future__ import annotations
@@ -92,7 +92,7 @@ def validate_cycle(time_s, speed_mps, elevation_m=None) -> None:
     """Raise ValueError unless the arrays form a valid cycle.
 
     Valid: 1-D, equal lengths, at least 2 samples, finite, time strictly increasing,
-    speed >= 0. (File readers check the same with line numbers, see cevm.cycles_io.)
+    speed >= 0. (File readers check the same with line numbers, see cevm.io.cycles.)
     """
     t = np.asarray(time_s)
     v = np.asarray(speed_mps)

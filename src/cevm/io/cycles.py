@@ -1,60 +1,15 @@
-"""Reading vehicle files and cycle files, with errors that name file, line and column."""
+"""Reading cycle files (CSV), with errors that name file, line and column."""
 
 from __future__ import annotations
 
-import re
-import tomllib
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
-from cevm.cycle import DriveCycle
+from cevm.core.cycle import DriveCycle
 from cevm.errors import InputError
-from cevm.vehicle import Vehicle, vehicle_from_mapping
-
-KMH_TO_MPS = 1.0 / 3.6
-
-
-def read_toml(path: str | Path, what: str = "file") -> dict:
-    """Parse a TOML file; errors name the file, the line and what the file should be."""
-    path = Path(path)
-    try:
-        text = path.read_bytes().decode("utf-8")
-    except FileNotFoundError:
-        raise InputError(path, f"{what} not found") from None
-    except IsADirectoryError:
-        raise InputError(path, f"is a directory, not a {what}") from None
-    except UnicodeDecodeError as exc:
-        raise InputError(path, f"not UTF-8 text ({exc.reason} at byte {exc.start})") from None
-    try:
-        return tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        # Python 3.11's message ends "(at line L, column C)"; newer ones also set lineno.
-        found = re.search(r"\(at line (\d+), column \d+\)", str(exc))
-        line = getattr(exc, "lineno", None) or (int(found.group(1)) if found else None)
-        msg = getattr(exc, "msg", None) or str(exc)
-        raise InputError(path, f"not valid TOML: {msg}", line=line) from None
-
-
-def load_vehicle(path: str | Path) -> Vehicle:
-    """Read and validate a vehicle TOML file (keys: see :mod:`cevm.vehicle`)."""
-    return vehicle_from_mapping(read_toml(path, "vehicle file"), str(path))
-
-
-def load_vehicles(paths: list[str | Path]) -> list[Vehicle]:
-    """Load vehicle files; a directory contributes its ``*.toml`` files, sorted."""
-    out: list[Vehicle] = []
-    for p in paths:
-        p = Path(p)
-        if p.is_dir():
-            files = sorted(p.glob("*.toml"))
-            if not files:
-                raise InputError(p, "directory holds no vehicle files (*.toml)")
-            out.extend(load_vehicle(f) for f in files)
-        else:
-            out.append(load_vehicle(p))
-    return out
+from cevm.units import KMH_TO_MPS
 
 
 def _first_bad_row(mask: np.ndarray) -> int:

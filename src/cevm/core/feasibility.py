@@ -1,0 +1,287 @@
+"""Feasibility (pure): can each vehicle run a source, with what margin, and the largest
+payload that keeps the reserve (EV) or fits the tank (ICE).
+
+Built on the fleet predictions of :mod:`cevm.core.sweep` (sources, the CE totals and the
+exact peak of the energy drawn along the way).
+
+Feasibility and the largest payload
+-----------------------------------
+For a fixed vehicle, every E_j is convex in the mass m: W(D) = eta^2 D + (1 - eta^2)
+max(D, 0) with D affine in m, and eta^2 <= 1 (the same holds for ICE fuel, w = 1 or 0).
+The maximum over j of convex functions is convex. So the payloads that keep the reserve
+form one interval, even on routes where energy *falls* with mass (a long descent: a
+heavier vehicle regenerates more). :func:`feasibility` does not assume monotonicity: it
+tests the empty payload, and if that fails it finds the minimum of the convex function
+(binary search on the sign of its discrete slope) before bisecting each side, all on
+whole kilograms with the exact model: the answer is the largest whole-kg payload that
+keeps the reserve (EV) or fits the tank (ICE) and respects ``max_gross_kg``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from cevm.core.model import battery_energy_from_wheel_j, fuel_from_wheel_energy_l
+from cevm.core.sweep import (
+    DEFAULT_RESERVE_PCT,
+    DEFAULT_SOC_START_PCT,
+    PredictionSet,
+    Source,
+    ce_wheel_energy_j,
+    check_cr,
+    peak_energy_j,
+)
+from cevm.core.vehicle import Vehicle
+from cevm.errors import CevmError
+
+
+@dataclass(frozen=True, eq=False)
+class Feasibility:
+    """Can each vehicle run one source, with what margin, and with what payload.
+
+    Arrays (V,), one per vehicle, at the evaluated load (``mass_kg``, ``payload_kg``):
+    ``over_max_gross``; EV: ``soc_end_pct``, ``soc_min_pct``, ``reserve_margin_pct``
+    (SoC_min - reserve, percentage points); ICE: ``fuel_l``, ``tank_margin_l`` (tank -
+    fuel, NaN without ``tank_l``); ``feasible`` 1.0 / 0.0 (NaN: ICE without tank_l).
+    Payload search: ``max_payload_kg`` (largest whole-kg payload keeping the reserve /
+    fitting the tank, within max_gross_kg or the search cap; NaN when none does),
+    ``min_payload_kg`` (0 unless the empty vehicle fails and a heavier one passes,
+    which convexity allows on descents), ``limited_by``: ``"reserve"``, ``"tank"``,
+    ``"max_gross_kg"``, ``"payload_cap"`` or ``"infeasible"``. Payloads count from
+    ``kerb_mass_kg`` (from ``mass_kg`` for a vehicle without one).
+    """
+
+    source: Source
+    vehicles: tuple[Vehicle, ...]
+    mass_kg: np.ndarray
+    payload_kg: np.ndarray
+    over_max_gross: np.ndarray
+    energy_j: np.ndarray
+    fuel_l: np.ndarray
+    soc_end_pct: np.ndarray
+    soc_min_pct: np.ndarray
+    reserve_margin_pct: np.ndarray
+    tank_margin_l: np.ndarray
+    feasible: np.ndarray
+    max_payload_kg: np.ndarray
+    min_payload_kg: np.ndarray
+    limited_by: tuple[str, ...]
+
+
+class _LoadFunction:
+    """f(vehicle, payload): peak battery energy [J] (EV) or fuel [l] (ICE), vectorised
+    over (vehicle index, payload) pairs, and each vehicle's budget (usable energy above
+    the reserve, or the tank)."""
+
+    def __init__(self, source: Source, vehicles: Sequence[Vehicle], base_kg: np.ndarray, soc_start_pct: float,
+                 reserve_pct: float, ice_braking: str | None):
+        self.source = source
+        self.pset = PredictionSet.build(vehicles, ice_braking=ice_braking)  # one row per vehicle
+        check_cr(source, self.pset)
+        self.base_kg = base_kg
+        ps = self.pset
+        self.budget = np.where(ps.is_ev, (soc_start_pct - reserve_pct) / 100.0 * ps.battery_j, ps.tank_l)
+
+    def __call__(self, vi: np.ndarray, payload_kg: np.ndarray) -> np.ndarray:
+        ps = self.pset
+        vec = self.source.vector
+        m = self.base_kg[vi] + payload_kg
+        wheel = ce_wheel_energy_j(vec, m, ps.cda_m2[vi], ps.cr[vi], ps.negative_weight[vi], group=vi)
+        out = np.empty(vi.size)
+        ev = ps.is_ev[vi]
+        if ev.any():
+            v = vi[ev]
+            e = battery_energy_from_wheel_j(wheel[ev], ps.eta[v], ps.aux_power_w[v], vec.duration_s)
+            out[ev] = peak_energy_j(self.source.steps, m[ev], ps.cda_m2[v], ps.cr[v], ps.eta[v],
+                                    ps.negative_weight[v], ps.aux_power_w[v], group=v, end_energy_j=e)
+        if (~ev).any():
+            v = vi[~ev]
+            out[~ev] = fuel_from_wheel_energy_l(wheel[~ev], ps.eta[v], ps.lhv_j_per_l[v], ps.idle_fuel_lps[v],
+                                                vec.idle_s)
+        return out
+
+    def ok(self, vi: np.ndarray, payload_kg: np.ndarray) -> np.ndarray:
+        return self(vi, payload_kg) <= self.budget[vi]
+
+
+def _last_true(pred, vi: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """Largest integer p in [lo, hi] with pred True, given pred(lo) True and pred(hi)
+    False and pred True-then-False on [lo, hi] (vectorised bisection)."""
+    lo = lo.copy()
+    hi = hi.copy()
+    while True:
+        act = np.flatnonzero(hi - lo > 1)
+        if act.size == 0:
+            return lo
+        mid = (lo[act] + hi[act]) // 2
+        ok = pred(vi[act], mid.astype(np.float64))
+        lo[act] = np.where(ok, mid, lo[act])
+        hi[act] = np.where(ok, hi[act], mid)
+
+
+def _first_true(pred, vi: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """Smallest integer p in [lo, hi] with pred True, given pred(hi) True and pred
+    False-then-True on [lo, hi]."""
+    lo = lo.copy()
+    hi = hi.copy()
+    first = pred(vi, lo.astype(np.float64))
+    res = hi.copy()
+    res[first] = lo[first]
+    act0 = ~first  # pred(lo) False, pred(hi) True
+    while True:
+        act = np.flatnonzero(act0 & (hi - lo > 1))
+        if act.size == 0:
+            res[act0] = hi[act0]
+            return res
+        mid = (lo[act] + hi[act]) // 2
+        ok = pred(vi[act], mid.astype(np.float64))
+        hi[act] = np.where(ok, mid, hi[act])
+        lo[act] = np.where(ok, lo[act], mid)
+
+
+def feasibility(
+    source: Source,
+    vehicles: Sequence[Vehicle],
+    *,
+    soc_start_pct: float = DEFAULT_SOC_START_PCT,
+    reserve_pct: float = DEFAULT_RESERVE_PCT,
+    payload_kg: float | None = None,
+    mass_kg: float | None = None,
+    payload_cap_kg: float | None = None,
+    ice_braking: str | None = None,
+) -> Feasibility:
+    """Feasibility of ``source`` for each vehicle, and the largest payload.
+
+    Parameters
+    ----------
+    source : the route (or cycle, trip)
+    vehicles : the vehicles
+    soc_start_pct : SoC at the start [%], default 100
+    reserve_pct : the SoC that must be kept all along [%], default 15 (the paper's
+        warning level)
+    payload_kg, mass_kg : the load at which margins are reported (at most one): a payload
+        [kg] on each vehicle's kerb mass, or a gross mass [kg]; default each vehicle's
+        default ``mass_kg``
+    payload_cap_kg : where the payload search stops for a vehicle without
+        ``max_gross_kg`` [kg]; default None: its kerb (or base) mass, i.e. at most
+        doubling the vehicle's mass (``limited_by`` says ``"payload_cap"`` then)
+    ice_braking : override of the ICE braking mode
+
+    The payload search is exact on whole kilograms: see the module notes (convexity).
+    An ICE vehicle without ``tank_l`` has no fuel limit: its payload is limited by
+    ``max_gross_kg`` (or the cap) only and ``feasible`` is NaN (unknown).
+    """
+    vehicles = tuple(vehicles)
+    nv = len(vehicles)
+    base = np.array([v.kerb_mass_kg if v.kerb_mass_kg is not None else v.mass_kg for v in vehicles])
+    if payload_kg is not None and mass_kg is not None:
+        raise CevmError("give a payload or a gross mass, not both")
+    if payload_kg is not None:
+        if not (math.isfinite(payload_kg) and payload_kg >= 0):
+            raise CevmError("the payload must be finite and >= 0 kg")
+        mass = base + payload_kg
+    elif mass_kg is not None:
+        if not (math.isfinite(mass_kg) and mass_kg > 0):
+            raise CevmError("the gross mass must be finite and > 0 kg")
+        mass = np.full(nv, float(mass_kg))
+    else:
+        mass = np.array([v.mass_kg for v in vehicles], dtype=np.float64)
+    f = _LoadFunction(source, vehicles, base, soc_start_pct, reserve_pct, ice_braking)
+    ps = f.pset
+    vi = np.arange(nv)
+    at = f(vi, mass - base)
+    max_gross = np.array([np.inf if v.max_gross_kg is None else v.max_gross_kg for v in vehicles])
+    over = mass > max_gross
+    vec = source.vector
+    # totals at the evaluated load
+    wheel = ce_wheel_energy_j(vec, mass, ps.cda_m2, ps.cr, ps.negative_weight, group=vi)
+    energy = np.full(nv, np.nan)
+    fuel = np.full(nv, np.nan)
+    soc_end = np.full(nv, np.nan)
+    soc_min = np.full(nv, np.nan)
+    ev = ps.is_ev
+    if ev.any():
+        energy[ev] = battery_energy_from_wheel_j(wheel[ev], ps.eta[ev], ps.aux_power_w[ev], vec.duration_s)
+        soc_end[ev] = soc_start_pct - 100.0 * energy[ev] / ps.battery_j[ev]
+        soc_min[ev] = soc_start_pct - 100.0 * at[ev] / ps.battery_j[ev]
+    fuel[~ev] = at[~ev]
+    with np.errstate(invalid="ignore"):
+        tank_margin = ps.tank_l - fuel
+        ok_load = np.where(ev, soc_min >= reserve_pct, tank_margin >= 0)
+    known = ev | np.isfinite(ps.tank_l)
+    feasible = np.where(known, (ok_load & ~over).astype(float), np.nan)
+
+    # payload search on whole kg in [0, plim]
+    if payload_cap_kg is not None and not (math.isfinite(payload_cap_kg) and payload_cap_kg >= 0):
+        raise CevmError("the payload cap must be finite and >= 0 kg")
+    cap = np.where(np.isfinite(max_gross), max_gross - base, base if payload_cap_kg is None else payload_cap_kg)
+    plim = np.floor(np.maximum(cap, 0.0) + 1e-9).astype(np.int64)
+    capped_by = np.where(np.isfinite(max_gross), "max_gross_kg", "payload_cap")
+    max_p = np.full(nv, np.nan)
+    min_p = np.full(nv, np.nan)
+    limited = np.array(["infeasible"] * nv, dtype=object)
+    unlimited = ~known  # ICE without tank: only the gross limit / cap
+    max_p[unlimited] = plim[unlimited]
+    min_p[unlimited] = 0.0
+    limited[unlimited] = capped_by[unlimited]
+    idx = np.flatnonzero(known)
+    if idx.size:
+        zero = np.zeros(idx.size, dtype=np.int64)
+        ok0 = f.ok(idx, zero.astype(np.float64))
+        oklim = f.ok(idx, plim[idx].astype(np.float64))
+        kind = np.where(ps.is_ev[idx], "reserve", "tank")
+        # (a) the empty vehicle passes: feasible payloads are [0, p_max] (convexity)
+        a = ok0 & oklim
+        max_p[idx[a]] = plim[idx[a]]
+        limited[idx[a]] = capped_by[idx[a]]
+        b = np.flatnonzero(ok0 & ~oklim)
+        if b.size:
+            max_p[idx[b]] = _last_true(f.ok, idx[b], zero[b], plim[idx[b]])
+            limited[idx[b]] = kind[b]
+        min_p[idx[ok0]] = 0.0
+        # (b) the empty vehicle fails: find the minimum of the convex load function
+        c = np.flatnonzero(~ok0)
+        if c.size:
+            vc = idx[c]
+
+            def rising(v, p):  # f(p + 1) >= f(p): False then True for a convex f
+                return f(v, p + 1.0) >= f(v, p)
+
+            pl = plim[vc]
+            pstar = _first_true(lambda v, p: np.where(p >= plim[v], True, rising(v, np.minimum(p, plim[v]))),
+                                vc, np.zeros(c.size, dtype=np.int64), pl)
+            okstar = f.ok(vc, pstar.astype(np.float64))
+            d = np.flatnonzero(okstar)
+            if d.size:
+                vd = vc[d]
+                min_p[vd] = _first_true(f.ok, vd, np.zeros(d.size, dtype=np.int64), pstar[d])
+                okl = f.ok(vd, plim[vd].astype(np.float64))
+                hi_ok = np.flatnonzero(okl)
+                max_p[vd[hi_ok]] = plim[vd[hi_ok]]
+                limited[vd[hi_ok]] = capped_by[vd[hi_ok]]
+                lo_ok = np.flatnonzero(~okl)
+                if lo_ok.size:
+                    vl = vd[lo_ok]
+                    max_p[vl] = _last_true(f.ok, vl, pstar[d][lo_ok], plim[vl])
+                    limited[vl] = kind[c][d][lo_ok]
+    return Feasibility(
+        source=source,
+        vehicles=vehicles,
+        mass_kg=mass,
+        payload_kg=mass - base,
+        over_max_gross=over,
+        energy_j=energy,
+        fuel_l=fuel,
+        soc_end_pct=soc_end,
+        soc_min_pct=soc_min,
+        reserve_margin_pct=soc_min - reserve_pct,
+        tank_margin_l=tank_margin,
+        feasible=feasible,
+        max_payload_kg=max_p,
+        min_payload_kg=min_p,
+        limited_by=tuple(str(s) for s in limited),
+    )

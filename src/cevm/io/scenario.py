@@ -1,0 +1,375 @@
+"""Fleet scenario files (TOML) for the assignment of :mod:`cevm.core.assignment`.
+
+:func:`load_scenario` reads and checks every key of a scenario file, loads its vehicle
+files and resolves each leg's source to a CE vector with a *leg resolver*:
+:func:`default_resolver` reads cycle files; :func:`cevm.store.sources.store_resolver`
+also reads stored trips and routes. :func:`fleet_report` is everything
+``cevm fleet plan`` shows.
+"""
+
+from __future__ import annotations
+
+import difflib
+import math
+import time
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+from cevm.core.assignment import (
+    EV_RESERVE_FRACTION_DEFAULT,
+    LEG_KINDS,
+    MASS_MODELS,
+    OBJECTIVES,
+    SOC_START_DEFAULT,
+    FleetVehicle,
+    Leg,
+    LegSource,
+    Prices,
+    Route,
+    Scenario,
+    plan,
+    quote_key,
+    table4_rows,
+)
+from cevm.core.cycle import CycleVector, drive_cycle_vector
+from cevm.core.vehicle import Vehicle
+from cevm.errors import InputError
+from cevm.io.cycles import read_cycle_csv
+from cevm.io.toml import read_toml
+from cevm.io.vehicles import load_vehicle
+
+
+#: A leg resolver: (one copy of a leg source, directory of the scenario file) -> vector.
+LegResolver = Callable[[LegSource, Path], CycleVector]
+
+
+def default_resolver(source: LegSource, base_dir: Path) -> CycleVector:
+    """Resolve one copy of a leg source to its CE vector: cycle files only.
+
+    ``cycle`` sources are read with :func:`cevm.io.read_cycle_csv` (path relative to
+    ``base_dir``) and turned into a vector with the default Cr0. ``trip`` and ``route``
+    sources need the trip store: this resolver raises :class:`InputError` for them; pass
+    a resolver that knows the store to :func:`load_scenario`.
+    """
+    if source.kind == "cycle":
+        path = Path(source.ref)
+        if not path.is_absolute():
+            path = base_dir / path
+        cyc = read_cycle_csv(path)
+        return drive_cycle_vector(cyc.time_s, cyc.speed_mps, cyc.elevation_m, validate=False)
+    raise InputError(
+        None, f"leg source {source.kind} = {source.ref!r} needs the trip store; this resolver reads cycle files only"
+    )
+
+
+def store_resolver(store) -> LegResolver:
+    """A resolver that also reads ``trip`` (a stored trip id) and ``route`` (a stored
+    route name) leg sources from an open :class:`cevm.store.TripStore`."""
+    from cevm.routes import load_route_vector
+
+    def resolve(source: LegSource, base_dir: Path) -> CycleVector:
+        if source.kind == "trip":
+            return CycleVector.from_bytes(store.load_vector_bytes(source.ref))
+        if source.kind == "route":
+            return load_route_vector(store, source.ref)
+        return default_resolver(source, base_dir)
+
+    return resolve
+
+
+def _read_toml(path: Path) -> dict:
+    return read_toml(path, "scenario file")
+
+
+_TOP_KEYS = {
+    "name", "description", "objective", "mass_model", "return_to_depot", "ev_reserve_fraction",
+    "days", "prices", "depot", "vehicle", "route", "stop", "payload_kg", "notes",
+}
+_VEHICLE_KEYS = {"id", "file", "max_gross_kg", "ev_reserve_fraction", "soc_start", "notes"}
+_ROUTE_KEYS = {"id", "vehicle", "depot", "stops", "leg", "legs", "return_to_depot", "notes"}
+_STOP_KEYS = {"vehicles", "default", "notes"}
+_PRICE_KEYS = {"fuel_per_l", "electricity_per_kwh", "currency"}
+_LEG_KEYS = set(LEG_KINDS) | {"repeat"}
+
+
+def _check_keys(src: Path, where: str, table: Any, allowed: set[str]) -> dict:
+    if not isinstance(table, dict):
+        raise InputError(src, f"{where} must be a table")
+    for key in table:
+        if key not in allowed:
+            close = difflib.get_close_matches(key, sorted(allowed), n=1)
+            hint = f" (did you mean '{close[0]}'?)" if close else ""
+            raise InputError(src, f"{where}: unknown key '{key}'{hint}")
+    return table
+
+
+def _str(src: Path, where: str, value: Any) -> str:
+    if not isinstance(value, str) or not value.strip():
+        raise InputError(src, f"{where} must be a non-empty string, got {value!r}")
+    return value
+
+
+def _num(src: Path, where: str, value: Any, lo: float | None = None, hi: float | None = None) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise InputError(src, f"{where} must be a finite number, got {value!r}")
+    if (lo is not None and value < lo) or (hi is not None and value > hi):
+        rng = f"[{lo if lo is not None else '-inf'}, {hi if hi is not None else 'inf'}]"
+        raise InputError(src, f"{where} = {value:g} must be in {rng}")
+    return float(value)
+
+
+def _leg_source(src: Path, where: str, table: Any) -> LegSource:
+    table = _check_keys(src, where, table, _LEG_KEYS)
+    kinds = [k for k in LEG_KINDS if k in table]
+    if len(kinds) != 1:
+        raise InputError(src, f"{where} needs exactly one of {', '.join(LEG_KINDS)}; got {kinds or 'none'}")
+    repeat = table.get("repeat", 1)
+    if isinstance(repeat, bool) or not isinstance(repeat, int) or repeat < 1:
+        raise InputError(src, f"{where}.repeat must be an integer >= 1, got {repeat!r}")
+    return LegSource(kinds[0], _str(src, f"{where}.{kinds[0]}", table[kinds[0]]), repeat)
+
+
+def load_scenario(path: str | Path, resolve_leg: LegResolver = default_resolver) -> Scenario:
+    """Read and validate a fleet scenario file (TOML) and compute its leg vectors.
+
+    Format (paths relative to the scenario file; masses in kg)::
+
+        name = "..."
+        objective = "fuel"         # "fuel" [l] (ICE fleet), "energy" [J] (EV fleet) or
+                                   # "cost" (needs [prices]); default by fleet
+        mass_model = "carried"     # or "paper-eq32" (module docstring)
+        return_to_depot = true     # default for every route (figure 8: depot -> back)
+        ev_reserve_fraction = 0.15 # default for every EV
+        days = ["day 1", "day 2"]
+
+        [prices]                   # only for objective = "cost"
+        fuel_per_l = 1.50
+        electricity_per_kwh = 0.25
+        currency = "GBP"
+
+        [[depot]]                  # optional; routes name theirs with depot = "..."
+        id = "depot"
+
+        [[vehicle]]
+        id = "HGV1"
+        file = "../vehicles/diesel-hgv.toml"   # needs kerb_mass_kg
+        max_gross_kg = 44000       # optional, overrides the vehicle file's
+        ev_reserve_fraction = 0.15 # EV, optional; soc_start = 1.0 likewise
+
+        [[route]]
+        id = "LH1"
+        vehicle = "HGV1"
+        stops = ["LH1S1/R1S2", "LH1S2"]        # in driving order
+        leg = { cycle = "../cycles/long-haul-standin.csv" }   # every leg; or
+        # legs = [{ cycle = "a.csv" }, { cycle = "b.csv", repeat = 3 }, ...]
+        #   one per hop, n_stops + 1 with the return to the depot
+        # a leg source is one of cycle = "file", trip = "ID", route = "NAME"
+        # (trip and route need a resolver that knows the store)
+
+        [stop."LH1S1/R1S2"]        # optional, per stop
+        vehicles = ["HGV1", "HGV3"] # who may serve it (default: every route through it)
+        default = "HGV1"            # the default assignment's vehicle
+
+        [payload_kg]               # per stop: one value per day (or one for all days)
+        "LH1S1/R1S2" = [5000, 3000, 8000]
+
+    A stop listed on several routes is shared. Every key is checked; a mistake raises
+    :class:`~cevm.errors.InputError` naming the file and the key.
+    """
+    t0 = time.perf_counter()
+    path = Path(path)
+    data = _read_toml(path)
+    base = path.parent
+    _check_keys(path, "scenario", data, _TOP_KEYS)
+    name = _str(path, "name", data.get("name", path.stem))
+    objective = data.get("objective")
+    if objective is not None and objective not in OBJECTIVES:
+        raise InputError(path, f"objective must be one of {', '.join(OBJECTIVES)}; got {objective!r}")
+    mass_model = data.get("mass_model", "carried")
+    if mass_model not in MASS_MODELS:
+        raise InputError(path, f"mass_model must be one of {', '.join(MASS_MODELS)}; got {mass_model!r}")
+    ret_default = data.get("return_to_depot", True)
+    if not isinstance(ret_default, bool):
+        raise InputError(path, f"return_to_depot must be true or false, got {ret_default!r}")
+    reserve_default = _num(path, "ev_reserve_fraction", data.get("ev_reserve_fraction", EV_RESERVE_FRACTION_DEFAULT), 0.0, 1.0)
+    days = data.get("days")
+    if not isinstance(days, list) or not days or not all(isinstance(d, str) and d for d in days):
+        raise InputError(path, "days must be a non-empty list of day names, e.g. days = [\"day 1\"]")
+    if len(set(days)) != len(days):
+        raise InputError(path, "days: duplicate day name")
+
+    prices = None
+    if "prices" in data:
+        p = _check_keys(path, "prices", data["prices"], _PRICE_KEYS)
+        prices = Prices(
+            fuel_per_l=_num(path, "prices.fuel_per_l", p["fuel_per_l"], 0.0) if "fuel_per_l" in p else None,
+            electricity_per_kwh=(
+                _num(path, "prices.electricity_per_kwh", p["electricity_per_kwh"], 0.0)
+                if "electricity_per_kwh" in p
+                else None
+            ),
+            currency=_str(path, "prices.currency", p.get("currency", "cost")),
+        )
+
+    depots = []
+    for i, d in enumerate(_array_of_tables(path, data, "depot")):
+        d = _check_keys(path, f"depot[{i}]", d, {"id", "name", "notes"})
+        depots.append(_str(path, f"depot[{i}].id", d.get("id", d.get("name"))))
+    vehicles = []
+    vehicle_cache: dict[Path, Vehicle] = {}
+    for i, v in enumerate(_array_of_tables(path, data, "vehicle")):
+        where = f"vehicle[{i}]"
+        v = _check_keys(path, where, v, _VEHICLE_KEYS)
+        vid = _str(path, f"{where}.id", v.get("id"))
+        vfile = base / _str(path, f"{where}.file", v.get("file"))
+        if vfile not in vehicle_cache:
+            vehicle_cache[vfile] = load_vehicle(vfile)
+        veh = vehicle_cache[vfile]
+        maxg = v.get("max_gross_kg", veh.max_gross_kg)
+        vehicles.append(
+            FleetVehicle(
+                id=vid,
+                vehicle=veh,
+                max_gross_kg=None if maxg is None else _num(path, f"{where}.max_gross_kg", maxg, 0.0),
+                ev_reserve_fraction=_num(path, f"{where}.ev_reserve_fraction", v.get("ev_reserve_fraction", reserve_default), 0.0, 1.0),
+                soc_start=_num(path, f"{where}.soc_start", v.get("soc_start", SOC_START_DEFAULT), 0.0, 1.0),
+            )
+        )
+
+    vector_cache: dict[tuple[str, str], CycleVector] = {}
+    repeat_cache: dict[LegSource, CycleVector] = {}
+
+    def resolve(source: LegSource, where: str) -> Leg:
+        key = (source.kind, source.ref)
+        if key not in vector_cache:
+            try:
+                vector_cache[key] = resolve_leg(LegSource(source.kind, source.ref, 1), base)
+            except InputError as exc:
+                if exc.path is None:
+                    raise InputError(path, f"{where}: {exc.message}") from None
+                raise
+        if source not in repeat_cache:
+            vec = vector_cache[key]
+            total = vec
+            for _ in range(source.repeat - 1):
+                total = total + vec
+            repeat_cache[source] = total
+        return Leg(vector=repeat_cache[source], source=source)
+
+    routes = []
+    for i, r in enumerate(_array_of_tables(path, data, "route")):
+        where = f"route[{i}]"
+        r = _check_keys(path, where, r, _ROUTE_KEYS)
+        rid = _str(path, f"{where}.id", r.get("id"))
+        where = f"route {rid!r}"
+        stops = r.get("stops")
+        if not isinstance(stops, list) or not stops or not all(isinstance(s, str) and s for s in stops):
+            raise InputError(path, f"{where}.stops must be a non-empty list of stop names")
+        ret = r.get("return_to_depot", ret_default)
+        if not isinstance(ret, bool):
+            raise InputError(path, f"{where}.return_to_depot must be true or false")
+        depot = r.get("depot", depots[0] if depots else "depot")
+        if depots and depot not in depots:
+            raise InputError(path, f"{where}.depot: unknown depot {depot!r}; depots: {', '.join(depots)}")
+        n_legs = len(stops) + (1 if ret else 0)
+        if ("leg" in r) == ("legs" in r):
+            raise InputError(path, f"{where} needs either leg = {{...}} (every leg) or legs = [...] ({n_legs} legs)")
+        if "leg" in r:
+            leg = resolve(_leg_source(path, f"{where}.leg", r["leg"]), f"{where}.leg")
+            legs = (leg,) * n_legs
+        else:
+            if not isinstance(r["legs"], list) or len(r["legs"]) != n_legs:
+                raise InputError(
+                    path,
+                    f"{where}.legs must list {n_legs} legs ({len(stops)} stops"
+                    f"{' + the return to the depot' if ret else ''})",
+                )
+            legs = tuple(
+                resolve(_leg_source(path, f"{where}.legs[{j}]", t), f"{where}.legs[{j}]") for j, t in enumerate(r["legs"])
+            )
+        routes.append(
+            Route(id=rid, vehicle_id=_str(path, f"{where}.vehicle", r.get("vehicle")), stops=tuple(stops), legs=legs,
+                  depot=depot, return_to_depot=ret)
+        )
+
+    allowed: dict[str, tuple[str, ...]] = {}
+    default_vehicle: dict[str, str] = {}
+    stop_tables = data.get("stop", {})
+    if not isinstance(stop_tables, dict):
+        raise InputError(path, "stop must be a table of tables: [stop.\"NAME\"]")
+    for s, t in stop_tables.items():
+        where = f"stop.{quote_key(s)}"
+        t = _check_keys(path, where, t, _STOP_KEYS)
+        if "vehicles" in t:
+            vs = t["vehicles"]
+            if not isinstance(vs, list) or not vs or not all(isinstance(x, str) for x in vs):
+                raise InputError(path, f"{where}.vehicles must be a non-empty list of vehicle ids")
+            allowed[s] = tuple(vs)
+        if "default" in t:
+            default_vehicle[s] = _str(path, f"{where}.default", t["default"])
+
+    payload_tab = data.get("payload_kg")
+    if not isinstance(payload_tab, dict):
+        raise InputError(path, "missing table [payload_kg] (payload per stop, one value per day)")
+    payload: dict[str, tuple[float, ...]] = {}
+    for s, vals in payload_tab.items():
+        where = f"payload_kg.{quote_key(s)}"
+        if isinstance(vals, list):
+            payload[s] = tuple(_num(path, f"{where}[{j}]", x, 0.0) for j, x in enumerate(vals))
+        else:
+            payload[s] = (_num(path, where, vals, 0.0),) * len(days)
+
+    return Scenario(
+        name=name,
+        vehicles=tuple(vehicles),
+        routes=tuple(routes),
+        days=tuple(days),
+        payload_kg=payload,
+        allowed=allowed,
+        default_vehicle=default_vehicle,
+        objective=objective,
+        prices=prices,
+        mass_model=mass_model,
+        path=str(path),
+        load_time_s=time.perf_counter() - t0,
+    )
+
+
+def _array_of_tables(src: Path, data: dict, key: str) -> list:
+    val = data.get(key, [])
+    if not isinstance(val, list):
+        raise InputError(src, f"{key} must be an array of tables: [[{key}]]")
+    return val
+
+
+def fleet_report(path: str | Path, days: Sequence[str | int] | None = None, *, method: str = "auto",
+                 resolve_leg: LegResolver = default_resolver) -> dict:
+    """Everything ``cevm fleet SCENARIO`` shows, JSON-ready: the scenario, one plan per
+    day (all days by default), the table-4 rows and a summary row per day
+    (total, default, saving, method, status, time)."""
+    sc = load_scenario(path, resolve_leg)
+    plans = [plan(sc, d, method=method) for d in (days if days is not None else sc.days)]
+    return {
+        "scenario": sc.name,
+        "path": str(path),
+        "objective": sc.objective_kind,
+        "unit": sc.unit,
+        "mass_model": sc.mass_model,
+        "load_time_s": sc.load_time_s,
+        "table": table4_rows(plans),
+        "summary": [
+            {
+                "day": p.day,
+                "total": p.total,
+                "default_total": p.default_total,
+                "saving": p.saving,
+                "saving_pct": p.saving_pct,
+                "method": p.method,
+                "status": p.status,
+                "solve_time_s": p.solve_time_s,
+            }
+            for p in plans
+        ],
+        "plans": [p.to_dict() for p in plans],
+    }
