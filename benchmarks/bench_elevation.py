@@ -35,7 +35,8 @@ from rasterio.transform import from_origin  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "src"))
 
-from cevm.elevation import DsmSampler, combine_elevation  # noqa: E402
+from cevm.ingest.dsm import DsmSampler  # noqa: E402
+from cevm.ingest.elevation import combine_elevation  # noqa: E402
 
 X0, Y0, TILE = 430000.0, 290000.0, 2000  # top-left corner of the mosaic [m], tile side [px]
 

@@ -1,7 +1,7 @@
-"""Tests of cevm.clean: each cleaning rule on small synthetic frames with known answers.
+"""Tests of cevm.ingest.cleaning: each cleaning rule on small synthetic frames with known answers.
 
 Reference positions and lengths come from pyproj's geodesic (Geod.fwd / line_length),
-independent of the fast formula used inside cevm.clean.
+independent of the fast formula used inside cevm.ingest.cleaning.
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from pyproj import Geod
 
-from cevm.clean import (
+from cevm.ingest.cleaning import (
     CleanParams,
     CleanTrip,
     clean_log,
@@ -34,7 +34,7 @@ LAT0, LON0 = 52.0, -1.5
 
 @dataclass(frozen=True)
 class Src:
-    """Stand-in for cevm.loggers.EnergySource."""
+    """Stand-in for cevm.ingest.reading.EnergySource."""
 
     column: str
     kind: str
@@ -522,7 +522,7 @@ def _dedupe_reference(t, line, cols):
 @settings(max_examples=60, deadline=None)
 @given(n=st.integers(1, 40), n_cols=st.integers(0, 3), seed=st.integers(0, 2**32 - 1))
 def test_tick_merging_matches_a_pandas_statement_of_the_rules(n, n_cols, seed):
-    from cevm.clean import _dedupe, _Events
+    from cevm.ingest.cleaning import _dedupe, _Events
 
     rng = np.random.default_rng(seed)
     t = np.sort(rng.integers(0, max(2, n // 2), n)).astype(float)  # many shared times
@@ -549,8 +549,8 @@ def test_tick_merging_matches_a_pandas_statement_of_the_rules(n, n_cols, seed):
 @settings(max_examples=60, deadline=None)
 @given(n=st.integers(1, 60), seed=st.integers(0, 2**32 - 1), share=st.floats(0.0, 1.0))
 def test_row_interpolation_shortcut_equals_general_interpolation(n, seed, share):
-    from cevm.clean import _interp_rows
-    from cevm.consumption import _interp_limited
+    from cevm.ingest.cleaning import _interp_rows
+    from cevm.ingest.consumption import _interp_limited
 
     rng = np.random.default_rng(seed)
     t = np.cumsum(rng.choice([0.5, 1.0, 3.0, 20.0], n))  # strictly increasing, some gaps

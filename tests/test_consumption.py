@@ -1,4 +1,4 @@
-"""Tests of cevm.consumption: rates, counters, SoC, uncertainty and source choice.
+"""Tests of cevm.ingest.consumption: rates, counters, SoC, uncertainty and source choice.
 
 Expected values are hand computations written out in each test.
 """
@@ -13,7 +13,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from cevm.consumption import (
+from cevm.ingest.consumption import (
     ConsumptionParams,
     counter_increase,
     estimate_source,
@@ -25,7 +25,7 @@ from cevm.consumption import (
 
 @dataclass(frozen=True)
 class Src:
-    """Stand-in for cevm.loggers.EnergySource (same attributes)."""
+    """Stand-in for cevm.ingest.reading.EnergySource (same attributes)."""
 
     column: str
     kind: str
@@ -300,7 +300,7 @@ def test_params_are_used():
 def test_battery_power_samples_equal_a_plain_loop(n, seed, share_v, share_i):
     """Power = V * I at every time where either is logged, each factor interpolated
     over at most max_gap_s between its own samples (plain-loop reference)."""
-    from cevm.consumption import source_samples
+    from cevm.ingest.consumption import source_samples
 
     rng = np.random.default_rng(seed)
     t = np.cumsum(rng.choice([1.0, 2.0, 30.0], n))

@@ -1,4 +1,4 @@
-"""Tests of cevm.elevation: DSM sampling on synthetic rasters, and the road profile.
+"""Tests of cevm.ingest.dsm and cevm.ingest.elevation: DSM sampling on synthetic rasters, and the road profile.
 
 Rasters are written in tmp_path with rasterio. Expected values come from planes
 (reproduced exactly by bilinear interpolation), hand computations, a plain-loop reference
@@ -18,8 +18,8 @@ from pyproj import Transformer
 from rasterio.io import MemoryFile
 from rasterio.transform import from_origin
 
-from cevm.elevation import (
-    DsmSampler,
+from cevm.ingest.dsm import DsmSampler
+from cevm.ingest.elevation import (
     ElevationParams,
     bound_grade,
     combine_elevation,
@@ -625,7 +625,7 @@ def test_degenerate_trips():
 def test_tile_index_finds_the_first_tile_holding_each_point(seed, n_tiles):
     """The bucket index (more than 8 tiles) against a loop over the tiles in order:
     x in [xmin, xmax), y in (ymin, ymax], overlapping tiles of mixed sizes."""
-    from cevm.elevation import _CrsGroup, _Tile
+    from cevm.ingest.dsm import _CrsGroup, _Tile
 
     rng = np.random.default_rng(seed)
     tiles = []
@@ -679,7 +679,7 @@ def test_tiles_of_mixed_shapes_and_dtypes_equal_the_mosaic(tmp_path):
 def test_lowpass_equals_the_direct_gaussian_filter(sigma, n):
     from scipy import ndimage
 
-    from cevm.elevation import _gaussian_valid, _odd_pad
+    from cevm.ingest.elevation import _gaussian_valid, _odd_pad
 
     x = np.cumsum(np.random.default_rng(n).normal(0, 1, n))
     r = int(4.0 * sigma + 0.5)
@@ -691,7 +691,7 @@ def test_lowpass_equals_the_direct_gaussian_filter(sigma, n):
 @settings(max_examples=80, deadline=None)
 @given(n=st.integers(1, 30), r=st.integers(0, 40), seed=st.integers(0, 2**32 - 1))
 def test_odd_pad_is_point_reflection(n, r, seed):
-    from cevm.elevation import _odd_pad
+    from cevm.ingest.elevation import _odd_pad
 
     x = np.random.default_rng(seed).normal(size=n)
     got = _odd_pad(x, r)
@@ -707,7 +707,7 @@ def test_odd_pad_is_point_reflection(n, r, seed):
 @settings(max_examples=60, deadline=None)
 @given(keys=st.lists(st.integers(0, 2**50), min_size=1, max_size=300), runs=st.integers(1, 5))
 def test_unique_inverse_equals_numpy_unique(keys, runs):
-    from cevm.elevation import _unique_inverse
+    from cevm.ingest.dsm import _unique_inverse
 
     k = np.repeat(np.array(keys, dtype=np.int64), runs)  # runs of equal keys, and not
     uniq, inv = _unique_inverse(k)
@@ -717,7 +717,7 @@ def test_unique_inverse_equals_numpy_unique(keys, runs):
 
 
 def test_fft_size_is_the_next_5_smooth_number():
-    from cevm.elevation import _fft_size
+    from cevm.ingest.elevation import _fft_size
 
     def smooth(m):
         for p in (2, 3, 5):

@@ -218,7 +218,7 @@ from hypothesis import HealthCheck, given, settings  # noqa: E402
 from hypothesis import strategies as st  # noqa: E402
 
 from cevm.ingest import IngestOptions, process_file  # noqa: E402
-from cevm.loggers import load_profiles  # noqa: E402
+from cevm.ingest.profiles import load_profiles  # noqa: E402
 
 SRF_HEAD = "timestamp_utc,gps_lat_deg,gps_lon_deg,fms_wheel_speed_kmh\n"
 

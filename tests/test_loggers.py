@@ -1,4 +1,4 @@
-"""Tests of the reading stage (cevm.loggers): profiles, detection, the three dialects,
+"""Tests of the reading stage (cevm.ingest.profiles, cevm.ingest.reading): profiles, detection, the three dialects,
 gzip, time zones and DST, date repair, and every kind of bad input.
 
 Expected values are hand computations (unit factors, UTC times of local times worked
@@ -21,17 +21,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from cevm.errors import InputError
-from cevm.loggers import (
-    CANONICAL_DIMENSIONS,
-    PLAUSIBLE_RANGE_SI,
-    UNITS,
-    EnergySource,
-    _parse_datetimes,
-    detect_profile,
-    load_profile,
-    load_profiles,
-    read_log,
-)
+from cevm.ingest.profiles import CANONICAL_DIMENSIONS, UNITS, load_profile, load_profiles
+from cevm.ingest.reading import PLAUSIBLE_RANGE_SI, EnergySource, detect_profile, read_log
+from cevm.ingest.timestamps import parse_datetimes
 from cevm.core.trip import CANONICAL_COLUMNS
 
 DATA = Path(__file__).parent / "data"
@@ -687,7 +679,7 @@ def test_missing_file(tmp_path, profiles):
        st.sampled_from(["%d/%m/%Y %H:%M:%S", "%Y-%m-%d %H:%M:%S", "%m/%d/%Y", "%H:%M:%S"]))
 def test_parse_datetimes_matches_strptime(dts, fmt):
     texts = np.array([d.strftime(fmt) for d in dts], dtype=object)
-    got = _parse_datetimes(texts, fmt)
+    got = parse_datetimes(texts, fmt)
     epoch = datetime(1970, 1, 1)
     want = [int((datetime.strptime(s, fmt) - epoch) / timedelta(microseconds=1)) * 1000 for s in texts]
     assert got.tolist() == want
@@ -697,7 +689,7 @@ def test_parse_datetimes_matches_strptime(dts, fmt):
 @given(st.lists(st.text(alphabet="0123456789/: -Tx", min_size=0, max_size=21), min_size=1, max_size=20))
 def test_parse_datetimes_rejects_what_strptime_rejects(texts):
     fmt = "%d/%m/%Y %H:%M:%S"
-    got = _parse_datetimes(np.array(texts, dtype=object), fmt)
+    got = parse_datetimes(np.array(texts, dtype=object), fmt)
     for s, g in zip(texts, got):
         try:
             datetime.strptime(s, fmt)
@@ -722,7 +714,7 @@ def test_iso_offsets_converted_to_utc(tmp_path):
 @settings(max_examples=80, deadline=None)
 @given(st.text(alphabet="ab,\n\r", max_size=60), st.integers(1, 7))
 def test_line_stats_match_plain_python(text, chunk):
-    import cevm.loggers as loggers
+    import cevm.ingest.reading as loggers
 
     data = text.encode()
     old = loggers._CHUNK_BYTES
@@ -743,7 +735,7 @@ def test_line_stats_match_plain_python(text, chunk):
 def test_ascii_heads_skip_re_encoding_only_for_ascii_compatible_codecs(tmp_path, profiles):
     import pandas as pd
 
-    from cevm.loggers import _ascii_transparent
+    from cevm.ingest.reading import _ascii_transparent
 
     assert all(_ascii_transparent(e) for e in ("utf-8", "utf-8-sig", "cp1252", "latin-1", "ascii"))
     assert not any(_ascii_transparent(e) for e in ("utf-16", "utf-32", "utf-7", "cp500", "no-such-codec"))

@@ -26,7 +26,7 @@ def test_wheel_ships_every_config_file_where_the_code_looks(tmp_path):
 
 def test_checkout_finds_its_configs():
     from cevm.configs_dir import shipped_configs_dir
-    from cevm.loggers import builtin_profile_dirs, load_profiles
+    from cevm.ingest.profiles import builtin_profile_dirs, load_profiles
 
     assert shipped_configs_dir().resolve() == (ROOT / "configs").resolve()
     assert builtin_profile_dirs() == [shipped_configs_dir() / "loggers"]

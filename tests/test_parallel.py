@@ -297,7 +297,7 @@ def test_worker_cache_makes_each_object_once_per_thread():
 
 
 def test_process_file_opens_the_workers_dsm_once_not_per_file(tmp_path, cog_dir, monkeypatch):
-    import cevm.ingest as ing
+    import cevm.ingest.task as ing
 
     opened = []
     real = ing.open_sampler
@@ -535,7 +535,7 @@ def test_dask_reschedules_a_killed_workers_file_without_duplicates(logs, tmp_pat
 
 
 def test_dsm_over_http_range_requests_gives_the_local_elevations(cog_dir, http_root, logs, tmp_path):
-    from cevm.elevation import DsmSampler
+    from cevm.ingest.dsm import DsmSampler
 
     base, log = http_root
     rng = np.random.default_rng(3)

@@ -107,7 +107,7 @@ WORKER_ENV = {"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "OPENBLAS_NUM_THRE
 """Environment of the local worker processes (where the user has not set these): one
 thread per BLAS/OpenMP library, as Dask's nanny sets for its workers. The processes are
 the parallelism; BLAS threads of their own oversubscribe the cores, and OpenBLAS's
-spin after each call (a matrix product in the timestamp parser of cevm.loggers made
+spin after each call (a matrix product in the timestamp parser of cevm.ingest.timestamps made
 two workers slower than one)."""
 
 WORKER_CACHE_SIZE = 4
@@ -175,7 +175,7 @@ def worker_cache(key: Any, factory: Callable[[], Any]) -> Any:
     first use and kept for the next tasks.
 
     For resources that are costly to open and not thread-safe (a
-    :class:`~cevm.elevation.DsmSampler`: headers over HTTP, a block cache), so that a
+    :class:`~cevm.ingest.dsm.DsmSampler`: headers over HTTP, a block cache), so that a
     worker opens them once and not once per task. Per thread because Dask workers run
     tasks in threads. ``key`` must be hashable and name everything the object depends
     on (e.g. the DSM path). A long-lived worker keeps the :data:`WORKER_CACHE_SIZE`
@@ -434,7 +434,7 @@ class ProcessExecutor(Executor):
         (a progress bar, a Dask client) can deadlock a child. ``spawn`` works too and
         pays the imports in every worker. With ``forkserver`` the workers run with
         :data:`WORKER_ENV` (single-threaded BLAS).
-    preload : tuple of str, default ``("cevm.ingest", "rasterio", "pyproj", "scipy.ndimage")``
+    preload : tuple of str, default ``("cevm.ingest.task", "rasterio", "pyproj", "scipy.ndimage")``
         Modules the forkserver imports before forking workers (the ingest task's, some
         imported lazily), so that a new worker does not import them again.
     """
@@ -442,7 +442,7 @@ class ProcessExecutor(Executor):
     name = "processes"
 
     def __init__(self, workers: int, *, max_attempts: int = MAX_ATTEMPTS, start_method: str = "forkserver",
-                 preload: tuple[str, ...] = ("cevm.ingest", "rasterio", "pyproj", "scipy.ndimage")):
+                 preload: tuple[str, ...] = ("cevm.ingest.task", "rasterio", "pyproj", "scipy.ndimage")):
         if workers < 1:
             raise ValueError("workers must be >= 1")
         if max_attempts < 1:

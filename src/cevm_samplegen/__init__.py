@@ -538,7 +538,7 @@ class World:
 
 def _cell_of(x, y, tile_m: float) -> tuple[np.ndarray, np.ndarray]:
     """SW corner of the tile cell holding each point, with the raster convention of
-    :class:`cevm.elevation.DsmSampler`: x in [x0, x0 + t), y in (y0, y0 + t]."""
+    :class:`cevm.ingest.dsm.DsmSampler`: x in [x0, x0 + t), y in (y0, y0 + t]."""
     cx = np.floor(np.asarray(x, dtype=float) / tile_m) * tile_m
     cy = (np.ceil(np.asarray(y, dtype=float) / tile_m) - 1.0) * tile_m
     return cx, cy

@@ -79,7 +79,7 @@ _BATTERY_POWER_FACTORS = ("battery_voltage_v", "battery_current_a")
 
 
 class EnergySourceLike(Protocol):
-    """What :mod:`cevm.consumption` needs of an energy source (``cevm.loggers``).
+    """What :mod:`cevm.ingest.consumption` needs of an energy source (``cevm.ingest.reading``).
 
     ``column``: canonical column, ``"a*b"`` product of two columns, or
     ``"battery_power_w"``; ``kind``: ``"rate"``, ``"counter"`` or ``"soc"``;

@@ -4,7 +4,7 @@ Input: a DataFrame with columns of :data:`cevm.core.trip.CANONICAL_COLUMNS` (``t
 epoch seconds, and ``source_line`` required; asynchronous fields NaN where a tick carried
 no value), rows in file order. Output: :class:`CleanTrip` segments with time from 0 on a
 regular grid, speed, distance, position and the measured consumption
-(:mod:`cevm.consumption`), each with a JSON-serialisable ``quality`` dict counting every
+(:mod:`cevm.ingest.consumption`), each with a JSON-serialisable ``quality`` dict counting every
 repair. Everything is vectorised; the only Python loops run over trips or over a handful
 of passes.
 
@@ -71,7 +71,7 @@ The steps, in order (parameters in :class:`CleanParams`):
    ``gps_max_fill_s`` (dropouts filled), NaN beyond; at standstill each stop holds one
    position, the median of its samples (jitter frozen: GPS noise creates no distance
    or elevation wiggle). Longitude interpolation does not handle the antimeridian.
-9. **Measured consumption** over the grid's span: :func:`cevm.consumption.measure_trip`.
+9. **Measured consumption** over the grid's span: :func:`cevm.ingest.consumption.measure_trip`.
 
 Fast distances inside (jump tests, speed from positions) use a local ellipsoidal
 approximation (meridian and prime-vertical radii of curvature of WGS84 at the mid
@@ -89,12 +89,7 @@ import numpy as np
 import pandas as pd
 from pyproj import Geod
 
-from cevm.consumption import (
-    ConsumptionParams,
-    EnergySourceLike,
-    _interp_limited,
-    measure_trip,
-)
+from cevm.ingest.consumption import ConsumptionParams, EnergySourceLike, _interp_limited, measure_trip
 from cevm.errors import InputError
 from cevm.core.trip import CANONICAL_COLUMNS, Measurement
 
@@ -140,7 +135,7 @@ class CleanParams:
       as a clock step (positions must then have moved by about one tick).
     - ``unordered_share = 0.05``: more than 5 % backward steps = unordered file.
     - ``time_outlier_max_rows = 3``: longest junk-timestamp block dropped.
-    - ``consumption``: :class:`cevm.consumption.ConsumptionParams`.
+    - ``consumption``: :class:`cevm.ingest.consumption.ConsumptionParams`.
     """
 
     gap_s: float = 300.0

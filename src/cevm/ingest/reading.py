@@ -1,12 +1,6 @@
 """Reading stage of ``cevm ingest``: logger CSV exports -> canonical log frames.
 
-A *profile* (a small TOML file, see ``configs/loggers/*.toml``) says how one logger
-writes its CSV: how to recognise it from the header, text encoding, separator, decimal
-mark, leading comment/metadata lines, where the time is and in which zone, where the
-vehicle id comes from, which column feeds each canonical column (``CANONICAL_COLUMNS``
-in :mod:`cevm.core.trip`) in which unit, and which columns measure energy. Supporting a new
-logger means writing a profile, not code.
-
+A logger is described by a *profile* (:mod:`cevm.ingest.profiles`).
 :func:`read_log` turns one file into one :class:`ParsedLog` per vehicle: a DataFrame
 with canonical columns in SI units (rows in file order; cleaning, sorting and trip
 splitting are later stages), the file's metadata, the energy sources available, and a
@@ -14,63 +8,6 @@ human-readable list of every repair made while reading. Bad input raises
 :class:`cevm.errors.InputError` naming file, line and column.
 
 Everything is vectorised (pandas C parser, numpy); nothing loops over rows in Python.
-
-Profile format (all keys; ``[columns]`` entries and ``[[energy]]`` tables repeat)::
-
-    name = "srf"                         # unique profile name
-    description = "..."                  # free text
-    [detect]
-    required_columns = ["timestamp_utc"] # header must hold all of these
-    [csv]
-    encoding = "utf-8"                   # any Python codec name (utf-8, cp1252, utf-16, ...)
-    separator = ","
-    decimal = "."
-    comment_prefix = "#"                 # leading lines starting with it are comments ("" = none)
-    metadata = "key=value"               # parse comments as key=value, or "none"
-    truncated_last_line = "drop"         # "drop" (and report) or "error"
-    [time]
-    columns = ["timestamp_utc"]          # one datetime column, or [date, time-of-day]
-    format = "ISO8601"                   # one column: "ISO8601" or a strptime format
-    date_format = "%m/%d/%Y"             # two columns: strptime formats of each
-    time_format = "%H:%M:%S"
-    timezone = "UTC"                     # IANA zone of naive times
-    date_repair = "none"                 # two columns only: "none" or "dominant"
-    date_repair_max_days = 1             # a date further from the dominant one is corrupt
-    [vehicle]
-    source = "metadata"                  # metadata | column | file_stem | parent_dir | fixed
-    key = "vehicle_id"                   # metadata key or column name
-    value = "..."                        # for source = "fixed"
-    fallback = "file_stem"               # when the metadata key is absent: file_stem | parent_dir | error
-    [quality]
-    zero_position_is_no_fix = true       # latitude or longitude exactly 0 -> no fix
-    absurd_error_share = 0.5             # more absurd values than this share -> error
-    [columns]
-    wheel_speed_mps = { source = "fms_wheel_speed_kmh", unit = "km/h" }
-    ignition = { source = "Ignition", map = { On = 1, Off = 0 } }
-    gps_alt_m = { source = "ALT", unit = "m", missing_values = [-111] }
-    # per column also: required = true (error if absent from the header), negate = true
-    [[energy]]
-    column = "total_energy_j"            # canonical column carrying the measurement
-    kind = "counter"                     # rate | counter | soc
-    resolution = 0.1                     # quantisation step ...
-    resolution_unit = "kWh"              # ... in this unit (converted to SI)
-    priority = 1                         # 1 = most trusted
-    capacity = 6.1                       # soc only: usable capacity ...
-    capacity_unit = "kWh"                # ... in this unit
-    modulus = 2147483648                 # counter only: wraps to 0 at this value ...
-    modulus_unit = "l"                   # ... in this unit
-    # column may also be "battery_power_w" (rate, W): battery_voltage_v * battery_current_a
-
-Defaults and why: encoding utf-8, separator ',', decimal '.' (the CSV norm); no comment
-prefix and no metadata (most exports have none); ``truncated_last_line = "drop"`` (a
-logger losing power mid-write leaves a cut last line; the rest of the file is good, and
-the drop is reported); timezone UTC; ``date_repair = "none"`` (repairing is opt-in);
-``date_repair_max_days = 1`` (a session lasts under a day, and a drive across midnight
-keeps the next day's date); vehicle id from the file name stem; zero latitude or
-longitude means no fix (GPS modules write 0 without one; a real fix exactly on the
-equator or the Greenwich meridian, to the logged precision, is rare and losing it is
-harmless); ``absurd_error_share = 0.5`` (see :func:`_check_absurd`). Energy ``priority``
-has no default: trust is the profile author's statement.
 
 Not handled: quoted fields holding line breaks (line numbers would shift).
 """
@@ -81,104 +18,27 @@ import csv
 import gzip
 import hashlib
 import io
-import os
 import re
-import tomllib
 import zlib
 from dataclasses import dataclass, field
 from functools import cached_property, lru_cache
 from pathlib import Path
-from typing import Any, Literal
+from typing import Literal
 
 import numpy as np
 import pandas as pd
 
-from cevm.configs_dir import shipped_configs_dir
 from cevm.errors import InputError
+from cevm.ingest.profiles import VIRTUAL_COLUMNS, ColumnMap, EnergySpec, Profile, load_profiles
+from cevm.ingest.timestamps import NAT, NS_PER_DAY, FastTimes, fast_first_column, has_offset, parse_datetimes
 
 __all__ = [
-    "UNITS",
-    "CANONICAL_DIMENSIONS",
     "PLAUSIBLE_RANGE_SI",
-    "ColumnMap",
-    "EnergySpec",
     "EnergySource",
-    "TimeSpec",
-    "Profile",
     "ParsedLog",
-    "builtin_profile_dirs",
-    "load_profile",
-    "load_profiles",
     "detect_profile",
     "read_log",
 ]
-
-# --------------------------------------------------------------------------------------
-# Units: the only place where conversion factors live. Profiles name units; code looks
-# them up here. unit name -> (dimension, factor to the SI unit of that dimension).
-# SI units per dimension: angle deg, length m, speed m/s, volume l (litres by project
-# convention), volume_rate l/s, energy J, power W, mass kg, voltage V, current A,
-# percent %, rotational_speed rpm, dimensionless -.
-# --------------------------------------------------------------------------------------
-UNITS: dict[str, tuple[str, float]] = {
-    "deg": ("angle", 1.0),
-    "m": ("length", 1.0),
-    "km": ("length", 1000.0),
-    "mi": ("length", 1609.344),
-    "ft": ("length", 0.3048),
-    "m/s": ("speed", 1.0),
-    "km/h": ("speed", 1.0 / 3.6),
-    "mph": ("speed", 0.44704),
-    "kn": ("speed", 1852.0 / 3600.0),
-    "l": ("volume", 1.0),
-    "ml": ("volume", 1e-3),
-    "gal_us": ("volume", 3.785411784),
-    "gal_imp": ("volume", 4.54609),
-    "l/s": ("volume_rate", 1.0),
-    "l/h": ("volume_rate", 1.0 / 3600.0),
-    "ml/s": ("volume_rate", 1e-3),
-    "gal_us/h": ("volume_rate", 3.785411784 / 3600.0),
-    "J": ("energy", 1.0),
-    "kJ": ("energy", 1e3),
-    "MJ": ("energy", 1e6),
-    "Wh": ("energy", 3600.0),
-    "kWh": ("energy", 3.6e6),
-    "W": ("power", 1.0),
-    "kW": ("power", 1e3),
-    "kg": ("mass", 1.0),
-    "t": ("mass", 1000.0),
-    "lb": ("mass", 0.45359237),
-    "V": ("voltage", 1.0),
-    "A": ("current", 1.0),
-    "%": ("percent", 1.0),
-    "rpm": ("rotational_speed", 1.0),
-    "-": ("dimensionless", 1.0),
-}
-
-# Dimension of every mappable canonical column (time_s, source_line and vehicle_id are
-# produced by the reader itself).
-CANONICAL_DIMENSIONS: dict[str, str] = {
-    "lat_deg": "angle",
-    "lon_deg": "angle",
-    "gps_alt_m": "length",
-    "gps_speed_mps": "speed",
-    "gps_hdop": "dimensionless",
-    "wheel_speed_mps": "speed",
-    "ignition": "dimensionless",
-    "odometer_m": "length",
-    "gross_weight_kg": "mass",
-    "fuel_rate_lps": "volume_rate",
-    "flowmeter_fuel_lps": "volume_rate",
-    "total_fuel_l": "volume",
-    "total_energy_j": "energy",
-    "battery_voltage_v": "voltage",
-    "battery_current_a": "current",
-    "soc_pct": "percent",
-    "accel_pedal_pct": "percent",
-    "brake_switch": "dimensionless",
-    "engine_speed_rpm": "rotational_speed",
-    "engine_torque_pct": "percent",
-}
 
 # Physically possible values (SI, inclusive). A value outside is *absurd*: a logger error
 # or a wrong unit/column in the profile, never a real measurement. Chosen wide so that
@@ -209,67 +69,15 @@ PLAUSIBLE_RANGE_SI: dict[str, tuple[float, float]] = {
 # Times outside this window are absurd (unset clocks read 1970 or 2000; corrupt dates).
 _TIME_MIN = np.datetime64("1990-01-01T00:00:00", "ns").astype(np.int64)
 _TIME_MAX = np.datetime64("2100-01-01T00:00:00", "ns").astype(np.int64)
-_NAT = np.iinfo(np.int64).min
-_NS_PER_S = 1_000_000_000
-_NS_PER_DAY = 86_400 * _NS_PER_S
 
-# Energy source kinds and the canonical columns they may use.
-_ENERGY_COLUMNS: dict[str, dict[str, str]] = {
-    # kind -> {canonical column: quantity}
-    "rate": {"fuel_rate_lps": "fuel_l", "flowmeter_fuel_lps": "fuel_l", "battery_power_w": "energy_j"},
-    "counter": {"total_fuel_l": "fuel_l", "total_energy_j": "energy_j"},
-    "soc": {"soc_pct": "energy_j"},
-}
-
-# Virtual energy columns: products of two canonical columns, formed by the consumption
-# stage (cevm.consumption.BATTERY_POWER_COLUMN), not stored in the frame.
-_VIRTUAL_COLUMNS: dict[str, tuple[tuple[str, str], str]] = {
-    "battery_power_w": (("battery_voltage_v", "battery_current_a"), "power"),  # W = V * A, + = discharge
-}
 
 # Text that means "no value" in a numeric column (besides an empty field).
 _NUMERIC_NA = ["", "NA", "N/A", "n/a", "NaN", "nan", "null", "NULL", "None", "-", "--"]
 
-# The profiles shipped with cevm: configs/loggers (a checkout's, or an installed wheel's).
-_SHIPPED_PROFILES = shipped_configs_dir() / "loggers"
-# Environment variable: extra profile directories (os.pathsep separated).
-PROFILES_ENV = "CEVM_PROFILES"
-
 
 # ======================================================================================
-# Profile data types
+# Parsed logs
 # ======================================================================================
-@dataclass(frozen=True)
-class ColumnMap:
-    """How one canonical column is read: ``canonical = source * factor`` (SI), or through
-    ``value_map`` for categorical text (e.g. ``On`` -> 1.0).
-
-    ``missing_values`` are numbers (in the source unit) that mean "no value" for this
-    logger (e.g. the Twizy's altitude -111); they become NaN and are reported.
-    """
-
-    canonical: str
-    source: str
-    unit: str | None
-    factor: float
-    value_map: tuple[tuple[str, float], ...] | None = None
-    missing_values: tuple[float, ...] = ()
-    required: bool = False
-    negate: bool = False
-
-
-@dataclass(frozen=True)
-class EnergySpec:
-    """An energy measurement the profile's logger can provide (see :class:`EnergySource`)."""
-
-    column: str
-    kind: Literal["rate", "counter", "soc"]
-    quantity: Literal["fuel_l", "energy_j"]
-    resolution: float
-    priority: int
-    capacity_j: float | None = None
-    modulus: float | None = None
-    note: str = ""
 
 
 @dataclass(frozen=True)
@@ -280,7 +88,7 @@ class EnergySource:
     ----------
     column : canonical column of ``ParsedLog.frame`` holding the measurement, or the
         virtual ``"battery_power_w"`` (= battery_voltage_v * battery_current_a, both in
-        the frame; formed by :mod:`cevm.consumption`).
+        the frame; formed by :mod:`cevm.ingest.consumption`).
     kind : ``"rate"`` (fuel rate [l/s] or battery power [W], integrate over time),
         ``"counter"`` (cumulative total [l] or [J], take differences; may wrap or reset)
         or ``"soc"`` (state of charge [%]; energy = -delta SoC / 100 * ``capacity_j``).
@@ -306,44 +114,6 @@ class EnergySource:
     capacity_j: float | None = None
     source_column: str = ""
     modulus: float | None = None
-
-
-@dataclass(frozen=True)
-class TimeSpec:
-    """Where the time is and how to read it (see the module docstring for keys)."""
-
-    columns: tuple[str, ...]
-    format: str | None  # single column
-    date_format: str | None  # two columns
-    time_format: str | None
-    timezone: str
-    date_repair: Literal["none", "dominant"] = "none"
-    date_repair_max_days: float = 1.0
-
-
-@dataclass(frozen=True)
-class Profile:
-    """A parsed, validated logger profile. Build with :func:`load_profile`."""
-
-    name: str
-    path: Path | None
-    description: str
-    required_columns: tuple[str, ...]
-    encoding: str
-    separator: str
-    decimal: str
-    comment_prefix: str
-    metadata: Literal["key=value", "none"]
-    truncated_last_line: Literal["drop", "error"]
-    time: TimeSpec
-    vehicle_source: Literal["metadata", "column", "file_stem", "parent_dir", "fixed"]
-    vehicle_key: str | None
-    vehicle_value: str | None
-    vehicle_fallback: Literal["file_stem", "parent_dir", "error"]
-    columns: tuple[ColumnMap, ...]
-    energy: tuple[EnergySpec, ...]
-    zero_position_is_no_fix: bool = True
-    absurd_error_share: float = 0.5
 
 
 @dataclass(frozen=True, eq=False)
@@ -373,321 +143,6 @@ class ParsedLog:
     def sha256(self) -> str:
         """Hex SHA-256 of ``raw_bytes``."""
         return hashlib.sha256(self.raw_bytes).hexdigest()
-
-
-# ======================================================================================
-# Loading profiles
-# ======================================================================================
-_TOP_KEYS = {"name", "description", "detect", "csv", "time", "vehicle", "quality", "columns", "energy"}
-_SECTION_KEYS = {
-    "detect": {"required_columns"},
-    "csv": {"encoding", "separator", "decimal", "comment_prefix", "metadata", "truncated_last_line"},
-    "time": {"columns", "format", "date_format", "time_format", "timezone", "date_repair", "date_repair_max_days"},
-    "vehicle": {"source", "key", "value", "fallback"},
-    "quality": {"zero_position_is_no_fix", "absurd_error_share"},
-}
-_COLUMN_KEYS = {"source", "unit", "map", "missing_values", "required", "negate"}
-_ENERGY_KEYS = {"column", "kind", "quantity", "resolution", "resolution_unit", "priority", "capacity",
-                "capacity_unit", "modulus", "modulus_unit", "note"}
-
-
-def _convert_unit(value: float, unit: str, want_dim: str, path: Path | None, key: str) -> float:
-    """``value`` in ``unit`` converted to the SI unit of dimension ``want_dim``."""
-    if unit not in UNITS:
-        raise InputError(path, f"unknown unit {unit!r}; known units: {', '.join(UNITS)}", column=key)
-    dim, factor = UNITS[unit]
-    if dim != want_dim:
-        raise InputError(path, f"unit {unit!r} is a {dim}, expected a {want_dim}", column=key)
-    return float(value) * factor
-
-
-def load_profile(source: str | Path | dict, path: Path | None = None) -> Profile:
-    """Parse and validate one profile from a TOML file path or an already-parsed dict.
-
-    Unknown or ill-typed keys raise :class:`InputError` naming the file and the key, so
-    a typo in a user's profile is caught at load time, not silently ignored.
-    """
-    if isinstance(source, dict):
-        doc = source
-    else:
-        path = Path(source)
-        try:
-            doc = tomllib.loads(path.read_text(encoding="utf-8"))
-        except OSError as exc:
-            raise InputError(path, f"cannot read profile: {exc.strerror or exc}") from None
-        except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-            raise InputError(path, f"not a valid TOML profile: {exc}") from None
-
-    def fail(msg: str, key: str) -> InputError:
-        return InputError(path, msg, column=key)
-
-    def check_keys(table: Any, allowed: set[str], where: str) -> dict:
-        if not isinstance(table, dict):
-            raise fail("must be a table", where)
-        for k in table:
-            if k not in allowed:
-                raise fail(f"unknown key (allowed: {', '.join(sorted(allowed))})", f"{where}.{k}" if where else k)
-        return table
-
-    def get(table: dict, key: str, typ: type | tuple, default: Any, where: str) -> Any:
-        if key not in table:
-            if default is _REQUIRED:
-                raise fail("missing required key", f"{where}.{key}" if where else key)
-            return default
-        val = table[key]
-        if typ is float and isinstance(val, int) and not isinstance(val, bool):
-            val = float(val)
-        if not isinstance(val, typ) or (typ is not bool and isinstance(val, bool)):
-            tname = typ.__name__ if isinstance(typ, type) else "/".join(t.__name__ for t in typ)
-            raise fail(f"must be a {tname}, got {val!r}", f"{where}.{key}" if where else key)
-        return val
-
-    def choice(val: str, options: tuple[str, ...], key: str) -> str:
-        if val not in options:
-            raise fail(f"{val!r} is not one of {', '.join(options)}", key)
-        return val
-
-    check_keys(doc, _TOP_KEYS, "")
-    name = get(doc, "name", str, _REQUIRED, "")
-    if not re.fullmatch(r"[A-Za-z0-9_.-]+", name):
-        raise fail("profile name may hold only letters, digits, '_', '.', '-'", "name")
-    description = get(doc, "description", str, "", "")
-    detect = check_keys(doc.get("detect", {}), _SECTION_KEYS["detect"], "detect")
-    csv_t = check_keys(doc.get("csv", {}), _SECTION_KEYS["csv"], "csv")
-    time_t = check_keys(doc.get("time", None) if "time" in doc else {}, _SECTION_KEYS["time"], "time")
-    veh_t = check_keys(doc.get("vehicle", {}), _SECTION_KEYS["vehicle"], "vehicle")
-    qual_t = check_keys(doc.get("quality", {}), _SECTION_KEYS["quality"], "quality")
-
-    # csv
-    encoding = get(csv_t, "encoding", str, "utf-8", "csv")
-    try:
-        "x".encode(encoding)
-    except LookupError:
-        raise fail(f"unknown text encoding {encoding!r}", "csv.encoding") from None
-    separator = get(csv_t, "separator", str, ",", "csv")
-    decimal = get(csv_t, "decimal", str, ".", "csv")
-    if len(separator) != 1 or len(decimal) != 1 or separator == decimal:
-        raise fail("separator and decimal must be single, different characters", "csv.separator")
-    comment_prefix = get(csv_t, "comment_prefix", str, "", "csv")
-    metadata = choice(get(csv_t, "metadata", str, "none", "csv"), ("key=value", "none"), "csv.metadata")
-    if metadata != "none" and not comment_prefix:
-        raise fail("metadata needs a comment_prefix", "csv.metadata")
-    truncated = choice(get(csv_t, "truncated_last_line", str, "drop", "csv"), ("drop", "error"), "csv.truncated_last_line")
-
-    # time
-    tcols = get(time_t, "columns", list, _REQUIRED, "time")
-    if not (1 <= len(tcols) <= 2) or not all(isinstance(c, str) and c for c in tcols):
-        raise fail("must list one datetime column or [date column, time column]", "time.columns")
-    fmt = get(time_t, "format", str, None, "time")
-    dfmt = get(time_t, "date_format", str, None, "time")
-    tfmt = get(time_t, "time_format", str, None, "time")
-    if len(tcols) == 1 and (fmt is None or dfmt or tfmt):
-        raise fail("one time column needs 'format' (and no date_format/time_format)", "time.format")
-    if len(tcols) == 2 and (fmt is not None or not dfmt or not tfmt):
-        raise fail("two time columns need 'date_format' and 'time_format' (and no 'format')", "time.date_format")
-    tz = get(time_t, "timezone", str, "UTC", "time")
-    try:
-        pd.Timestamp("2020-01-01").tz_localize(tz)
-    except Exception:  # noqa: BLE001 - any failure means an unknown zone
-        raise fail(f"unknown time zone {tz!r} (use an IANA name such as 'Europe/London')", "time.timezone") from None
-    date_repair = choice(get(time_t, "date_repair", str, "none", "time"), ("none", "dominant"), "time.date_repair")
-    if date_repair != "none" and len(tcols) != 2:
-        raise fail("date_repair needs separate date and time columns", "time.date_repair")
-    max_days = get(time_t, "date_repair_max_days", float, 1.0, "time")
-    if not max_days >= 0:
-        raise fail("must be >= 0", "time.date_repair_max_days")
-    time_spec = TimeSpec(tuple(tcols), fmt, dfmt, tfmt, tz, date_repair, max_days)
-
-    # vehicle
-    vsrc = choice(
-        get(veh_t, "source", str, "file_stem", "vehicle"),
-        ("metadata", "column", "file_stem", "parent_dir", "fixed"),
-        "vehicle.source",
-    )
-    vkey = get(veh_t, "key", str, None, "vehicle")
-    vval = get(veh_t, "value", str, None, "vehicle")
-    vfb = choice(get(veh_t, "fallback", str, "file_stem", "vehicle"), ("file_stem", "parent_dir", "error"), "vehicle.fallback")
-    if vsrc in ("metadata", "column") and not vkey:
-        raise fail(f"vehicle source {vsrc!r} needs 'key'", "vehicle.key")
-    if vsrc == "metadata" and metadata == "none":
-        raise fail("vehicle source 'metadata' needs csv.metadata = 'key=value'", "vehicle.source")
-    if vsrc == "fixed" and not vval:
-        raise fail("vehicle source 'fixed' needs 'value'", "vehicle.value")
-
-    # quality
-    zero_nofix = get(qual_t, "zero_position_is_no_fix", bool, True, "quality")
-    share = get(qual_t, "absurd_error_share", float, 0.5, "quality")
-    if not 0.0 <= share <= 1.0:
-        raise fail("must be within 0..1", "quality.absurd_error_share")
-
-    # columns
-    cols_t = doc.get("columns", {})
-    if not isinstance(cols_t, dict):
-        raise fail("must be a table", "columns")
-    maps: list[ColumnMap] = []
-    for canon, spec in cols_t.items():
-        key = f"columns.{canon}"
-        if canon not in CANONICAL_DIMENSIONS:
-            raise fail(f"not a mappable canonical column (known: {', '.join(CANONICAL_DIMENSIONS)})", key)
-        if isinstance(spec, str):
-            raise fail("must be a table such as { source = \"...\", unit = \"...\" }", key)
-        check_keys(spec, _COLUMN_KEYS, key)
-        src = get(spec, "source", str, _REQUIRED, key)
-        unit = get(spec, "unit", str, None, key)
-        vmap = get(spec, "map", dict, None, key)
-        if (unit is None) == (vmap is None):
-            raise fail("give exactly one of 'unit' or 'map'", key)
-        factor = 1.0
-        map_t = None
-        if unit is not None:
-            factor = _convert_unit(1.0, unit, CANONICAL_DIMENSIONS[canon], path, f"{key}.unit")
-        else:
-            items = []
-            for k, v in vmap.items():
-                if isinstance(v, bool) or not isinstance(v, (int, float)):
-                    raise fail(f"map value for {k!r} must be a number", f"{key}.map")
-                items.append((str(k), float(v)))
-            if not items:
-                raise fail("map is empty", f"{key}.map")
-            map_t = tuple(items)
-        miss = get(spec, "missing_values", list, [], key)
-        if not all(isinstance(m, (int, float)) and not isinstance(m, bool) for m in miss):
-            raise fail("missing_values must be numbers", f"{key}.missing_values")
-        maps.append(
-            ColumnMap(
-                canonical=canon,
-                source=src,
-                unit=unit,
-                factor=factor,
-                value_map=map_t,
-                missing_values=tuple(float(m) for m in miss),
-                required=get(spec, "required", bool, False, key),
-                negate=get(spec, "negate", bool, False, key),
-            )
-        )
-    mapped = {m.canonical for m in maps}
-    if ("lat_deg" in mapped) != ("lon_deg" in mapped):
-        raise fail("map both lat_deg and lon_deg, or neither", "columns")
-    dup = {s for s in [m.source for m in maps] if [m.source for m in maps].count(s) > 1}
-    if dup:
-        raise fail(f"source column(s) {sorted(dup)} mapped twice", "columns")
-
-    # energy
-    energy_t = doc.get("energy", [])
-    if not isinstance(energy_t, list):
-        raise fail("must be an array of tables ([[energy]])", "energy")
-    specs: list[EnergySpec] = []
-    for i, e in enumerate(energy_t):
-        key = f"energy[{i}]"
-        check_keys(e, _ENERGY_KEYS, key)
-        col = get(e, "column", str, _REQUIRED, key)
-        kind = choice(get(e, "kind", str, _REQUIRED, key), ("rate", "counter", "soc"), f"{key}.kind")
-        allowed = _ENERGY_COLUMNS[kind]
-        if col not in allowed:
-            raise fail(f"a {kind} source must use one of {', '.join(allowed)}", f"{key}.column")
-        needs = _VIRTUAL_COLUMNS[col][0] if col in _VIRTUAL_COLUMNS else (col,)
-        for c in needs:
-            if c not in mapped:
-                raise fail(f"column {c!r} is not mapped in [columns]", f"{key}.column")
-        dim = _VIRTUAL_COLUMNS[col][1] if col in _VIRTUAL_COLUMNS else CANONICAL_DIMENSIONS[col]
-        quantity = allowed[col]
-        if "quantity" in e and get(e, "quantity", str, None, key) != quantity:
-            raise fail(f"column {col!r} measures {quantity}", f"{key}.quantity")
-        res = get(e, "resolution", float, 0.0, key)
-        if not res >= 0:
-            raise fail("must be >= 0", f"{key}.resolution")
-        res_unit = get(e, "resolution_unit", str, None, key)
-        if res_unit is not None:
-            res = _convert_unit(res, res_unit, dim, path, f"{key}.resolution_unit")
-        elif res:
-            raise fail("resolution needs resolution_unit", f"{key}.resolution_unit")
-        prio = get(e, "priority", int, _REQUIRED, key)
-        if prio < 1:
-            raise fail("must be >= 1 (1 = most trusted)", f"{key}.priority")
-        cap = get(e, "capacity", float, None, key)
-        cap_j = None
-        if cap is not None:
-            if kind != "soc":
-                raise fail("capacity applies to soc sources only", f"{key}.capacity")
-            if not cap > 0:
-                raise fail("must be > 0", f"{key}.capacity")
-            cap_j = _convert_unit(cap, get(e, "capacity_unit", str, _REQUIRED, key), "energy", path, f"{key}.capacity_unit")
-        modulus = get(e, "modulus", float, None, key)
-        if modulus is not None:
-            if kind != "counter" or not modulus > 0:
-                raise fail("modulus (> 0) applies to counter sources only", f"{key}.modulus")
-            modulus = _convert_unit(modulus, get(e, "modulus_unit", str, _REQUIRED, key), dim, path,
-                                    f"{key}.modulus_unit")
-        specs.append(EnergySpec(col, kind, quantity, res, prio, cap_j, modulus,  # type: ignore[arg-type]
-                                get(e, "note", str, "", key)))
-
-    req = get(detect, "required_columns", list, _REQUIRED, "detect")
-    if not req or not all(isinstance(c, str) and c for c in req):
-        raise fail("must be a non-empty list of header column names", "detect.required_columns")
-
-    return Profile(
-        name=name,
-        path=path,
-        description=description,
-        required_columns=tuple(req),
-        encoding=encoding,
-        separator=separator,
-        decimal=decimal,
-        comment_prefix=comment_prefix,
-        metadata=metadata,  # type: ignore[arg-type]
-        truncated_last_line=truncated,  # type: ignore[arg-type]
-        time=time_spec,
-        vehicle_source=vsrc,  # type: ignore[arg-type]
-        vehicle_key=vkey,
-        vehicle_value=vval,
-        vehicle_fallback=vfb,  # type: ignore[arg-type]
-        columns=tuple(maps),
-        energy=tuple(specs),
-        zero_position_is_no_fix=zero_nofix,
-        absurd_error_share=share,
-    )
-
-
-class _Required:
-    pass
-
-
-_REQUIRED = _Required()
-
-
-def builtin_profile_dirs() -> list[Path]:
-    """Directories of the profiles shipped with cevm that exist: ``configs/loggers`` of
-    the source checkout or of the installed package (:mod:`cevm.configs_dir`)."""
-    return [_SHIPPED_PROFILES] if _SHIPPED_PROFILES.is_dir() else []
-
-
-def load_profiles(directory: str | Path | None = None, *, include_env: bool = True) -> dict[str, Profile]:
-    """Load every ``*.toml`` profile, keyed by profile name.
-
-    Parameters
-    ----------
-    directory : directory to read instead of the built-in ones (default ``None``: the
-        profiles shipped with cevm, see :func:`builtin_profile_dirs`).
-    include_env : also read the directories listed in the ``CEVM_PROFILES`` environment
-        variable (``os.pathsep`` separated) after the others (default ``True``), so that
-        a user adds loggers without touching the installation. A later directory's
-        profile replaces an earlier one of the same name.
-    """
-    dirs = [Path(directory)] if directory is not None else builtin_profile_dirs()
-    if include_env and os.environ.get(PROFILES_ENV):
-        dirs += [Path(p) for p in os.environ[PROFILES_ENV].split(os.pathsep) if p]
-    profiles: dict[str, Profile] = {}
-    for d in dirs:
-        if not d.is_dir():
-            raise InputError(d, "profile directory does not exist")
-        seen: dict[str, Path] = {}
-        for f in sorted(d.glob("*.toml")):
-            p = load_profile(f)
-            if p.name in seen:
-                raise InputError(f, f"profile name {p.name!r} already used by {seen[p.name]}", column="name")
-            seen[p.name] = f
-            profiles[p.name] = p
-    return profiles
 
 
 # ======================================================================================
@@ -886,168 +341,8 @@ def _detect_in_head(path: Path, head: bytes, profiles: dict[str, Profile]) -> Pr
 
 
 # ======================================================================================
-# Time parsing (vectorised)
+# Lines, date repair and time zones
 # ======================================================================================
-_FIXED_FIELDS = {"%Y": 4, "%m": 2, "%d": 2, "%H": 2, "%M": 2, "%S": 2}
-_ISO_RE = re.compile(r"^\d{4}-\d\d-\d\d([T ])\d\d:\d\d:\d\d(\.\d{1,9})?(Z?)$")
-
-
-@dataclass(frozen=True)
-class _Layout:
-    """A datetime text layout of fixed width: numeric fields (directive -> (start,
-    width)) and literal characters (start, code point)."""
-
-    fields: dict[str, tuple[int, int]]
-    literals: tuple[tuple[int, int], ...]
-    width: int
-
-
-def _fixed_layout(fmt: str, frac_digits: int = 0) -> _Layout | None:
-    """Layout of a strptime format made only of %Y %m %d %H %M %S (and %f with
-    ``frac_digits`` digits) and literal characters; ``None`` otherwise."""
-    fields: dict[str, tuple[int, int]] = {}
-    lits: list[tuple[int, int]] = []
-    i = pos = 0
-    while i < len(fmt):
-        if fmt[i] == "%":
-            d = fmt[i:i + 2]
-            w = frac_digits if d == "%f" else _FIXED_FIELDS.get(d, 0)
-            if w == 0 or d in fields:
-                return None
-            fields[d] = (pos, w)
-            pos += w
-            i += 2
-        else:
-            lits.append((pos, ord(fmt[i])))
-            pos += 1
-            i += 1
-    return _Layout(fields, tuple(lits), pos)
-
-
-def _iso_layout(sample: str) -> tuple[_Layout, bool] | None:
-    """Fixed layout of an ISO 8601 sample such as '2019-05-14T07:00:01.250Z' and whether
-    it is UTC ('Z'); ``None`` for other shapes (offsets, week dates, ...)."""
-    m = _ISO_RE.match(sample)
-    if not m:
-        return None
-    frac = len(m.group(2)) - 1 if m.group(2) else 0
-    fmt = "%Y-%m-%d" + m.group(1) + "%H:%M:%S" + (".%f" if frac else "") + m.group(3)
-    return _fixed_layout(fmt, frac), m.group(3) == "Z"  # type: ignore[return-value]
-
-
-def _parse_codes(cp: np.ndarray, layout: _Layout) -> tuple[np.ndarray, np.ndarray]:
-    """Parse a matrix of character codes (rows = strings, at least ``layout.width``
-    columns; uint8 bytes or uint32 code points) with numpy only.
-
-    Returns (ns since epoch as int64, ok mask). Rows that do not match the layout
-    (non-digits, wrong literals, impossible dates such as 31/02) have ``ok == False``.
-    Missing date fields default to 1900-01-01, as in strptime.
-    """
-    n = cp.shape[0]
-    ok = np.ones(n, bool)
-    if layout.literals:
-        lit_pos = np.array([p for p, _ in layout.literals], np.intp)
-        lit_chr = np.array([ch for _, ch in layout.literals], cp.dtype)
-        ok &= (cp[:, lit_pos] == lit_chr).all(axis=1)
-    values: dict[str, np.ndarray] = {}
-    if layout.fields:
-        spans = list(layout.fields.values())
-        pos = np.concatenate([np.arange(p, p + w) for p, w in spans])
-        # unsigned (uint8 / uint32) so that non-digits wrap to large values
-        dig = cp[:, pos] - cp.dtype.type(48)
-        ok &= (dig <= 9).all(axis=1)
-        # every field's number from its digits' place values, in integer arithmetic (a
-        # float matrix product would start a BLAS thread pool for a handful of columns)
-        dig = dig.astype(np.int64)
-        nums = np.empty((dig.shape[0], len(spans)), dtype=np.int64)
-        k = 0
-        for j, (_, w) in enumerate(spans):  # a few fields, not rows
-            nums[:, j] = dig[:, k:k + w] @ (10 ** np.arange(w - 1, -1, -1, dtype=np.int64))
-            k += w
-        values = {d: nums[:, j] for j, d in enumerate(layout.fields)}
-
-    def num(d: str, default: int) -> np.ndarray:
-        got = values.get(d)
-        return np.full(n, default, np.int64) if got is None else got
-
-    year, month, day = num("%Y", 1900), num("%m", 1), num("%d", 1)
-    hour, minute, sec = num("%H", 0), num("%M", 0), num("%S", 0)
-    ok &= (hour <= 23) & (minute <= 59) & (sec <= 59)
-    # The date's checks and day number once per run of rows with one date (a log holds
-    # few dates). Rows rejected so far share key -1; the others hold digits only, so
-    # their fields are below 2**14 and the key is exact.
-    key = np.where(ok, (year << 28) | (month << 14) | day, -1)
-    first = np.flatnonzero(np.concatenate(([True], key[1:] != key[:-1]))) if n else np.zeros(0, np.intp)
-    y, m, d = year[first], month[first], day[first]
-    date_ok = (m >= 1) & (m <= 12) & (d >= 1) & (y >= 1678) & (y <= 2261)  # int64 ns range
-    m = np.where(date_ok, m, 1)
-    leap = (y % 4 == 0) & ((y % 100 != 0) | (y % 400 == 0))
-    date_ok &= d <= _DAYS_IN_MONTH[m - 1] + (leap & (m == 2))  # e.g. 31/02 fails
-    run_length = np.diff(np.append(first, n))
-    ok &= np.repeat(date_ok, run_length)
-    days = np.repeat(_days_from_civil(y, m, d), run_length)
-    ns = (days * 86_400 + (hour * 60 + minute) * 60 + sec) * _NS_PER_S
-    if "%f" in layout.fields:
-        ns += num("%f", 0) * 10 ** (9 - layout.fields["%f"][1])
-    return np.where(ok, ns, _NAT), ok
-
-
-_DAYS_IN_MONTH = np.array([31, 28, 31, 30, 31, 30, 31, 31, 30, 31, 30, 31], np.int64)
-
-
-def _days_from_civil(y: np.ndarray, m: np.ndarray, d: np.ndarray) -> np.ndarray:
-    """Days since 1970-01-01 of proleptic Gregorian dates (H. Hinnant's algorithm),
-    vectorised integer arithmetic; valid for any year."""
-    y = y - (m <= 2)
-    era = np.floor_divide(y, 400)
-    yoe = y - era * 400
-    doy = (153 * (m + np.where(m > 2, -3, 9)) + 2) // 5 + d - 1
-    doe = yoe * 365 + yoe // 4 - yoe // 100 + doy
-    return era * 146_097 + doe - 719_468
-
-
-def _parse_datetimes(values: np.ndarray, fmt: str) -> np.ndarray:
-    """Naive datetimes [ns since epoch, int64; ``_NAT`` where unparseable] of strings
-    (object array, NaN for empty fields) in ``fmt`` ("ISO8601" or strptime).
-
-    Fixed-width numeric formats are parsed with numpy (:func:`_parse_codes`); other rows
-    and formats go through ``pandas.to_datetime`` with the explicit format. ISO 8601
-    strings with a zone designator ('Z', '+01:00') are converted to UTC; the caller must
-    then not localise them again (see :func:`_has_offset`).
-    """
-    n = len(values)
-    out = np.full(n, _NAT, np.int64)
-    rest = np.ones(n, bool)
-    layout = _fixed_layout(fmt) if fmt != "ISO8601" else None
-    if layout is not None and n:
-        u = values.astype("U")
-        cols = u.dtype.itemsize // 4
-        if cols >= layout.width:
-            cp32 = u.view(np.uint32).reshape(n, cols)
-            ok_len = cp32[:, layout.width - 1] != 0
-            if cols > layout.width:
-                ok_len &= cp32[:, layout.width] == 0
-            # to bytes (faster below); non-Latin code points become 255, never a digit
-            cp = np.minimum(cp32[:, :layout.width], 255).astype(np.uint8)
-            ns, ok = _parse_codes(cp, layout)
-            ok &= ok_len
-            out[ok] = ns[ok]
-            rest = ~ok
-    if rest.any():
-        sub = pd.Series(values[rest], dtype=object)
-        kw = {"utc": True} if fmt == "ISO8601" and _has_offset(values) else {}
-        parsed = pd.to_datetime(sub, format=fmt, errors="coerce", **kw)
-        if getattr(parsed.dt, "tz", None) is not None:
-            parsed = parsed.dt.tz_convert("UTC").dt.tz_localize(None)
-        out[rest] = parsed.to_numpy(dtype="datetime64[ns]").astype(np.int64)  # NaT -> _NAT
-    return out
-
-
-@dataclass(frozen=True)
-class _FastTimes:
-    ns: np.ndarray  # int64 ns, naive or UTC (see is_utc)
-    is_utc: bool
-    blank: np.ndarray  # bool, blank lines
 
 
 _CHUNK_BYTES = 1 << 22  # 4 MiB: keeps temporaries in cache and avoids huge allocations
@@ -1093,51 +388,6 @@ def _only_trailing_separators(b: np.ndarray, starts: np.ndarray, surplus: np.nda
     return ok
 
 
-def _fast_first_column(body: bytes, b: np.ndarray, starts: np.ndarray, sep: str, fmt: str) -> _FastTimes | None:
-    """Parse the first field of every line straight from the bytes (``b``: uint8 view
-    of ``body`` without quote characters, ``starts``: line starts) when it is a
-    fixed-width datetime (ISO 8601 or a fixed strptime layout).
-
-    This avoids one Python string per row (half the reading time of an srf file). Returns
-    ``None`` when the fast path does not apply or any non-blank line fails to parse;
-    the caller then reads the column as text and reports errors with lines.
-    """
-    if not body:
-        return None
-    first_line = body[: body.find(b"\n") if b"\n" in body else len(body)].decode("utf-8", "replace").strip()
-    sample = first_line.split(sep)[0].strip()
-    if fmt == "ISO8601":
-        got = _iso_layout(sample)
-        if got is None:
-            return None
-        layout, is_utc = got
-    else:
-        layout, is_utc = _fixed_layout(fmt), False
-        if layout is None:
-            return None
-    w = layout.width
-    if len(b) < w + 1:
-        return None
-    windows = np.lib.stride_tricks.sliding_window_view(b, w + 1)  # no copy
-    last = len(b) - (w + 1)
-    cp = windows[np.minimum(starts, last)]  # (rows, w + 1) bytes, one gather
-    ns, ok = _parse_codes(cp, layout)
-    ok &= (cp[:, w] == ord(sep)) & (starts <= last)
-    first = b[starts]
-    blank = (first == 10) | (first == 13)
-    if not (ok | blank).all():
-        return None
-    return _FastTimes(ns, is_utc, blank)
-
-
-def _has_offset(values: np.ndarray) -> bool:
-    """Whether the first non-empty ISO 8601 string carries a zone ('Z' or +-HH:MM)."""
-    for v in values[:100]:
-        if isinstance(v, str) and v.strip():
-            return bool(re.search(r"(Z|[+-]\d\d:?\d\d)\s*$", v.strip()))
-    return False
-
-
 def _lines_summary(lines: np.ndarray, limit: int = 6) -> str:
     """'lines 3-7, 12, 20-21' for sorted line numbers, at most ``limit`` runs shown."""
     lines = np.asarray(lines, np.int64)
@@ -1162,12 +412,12 @@ def _repair_dates(date_ns: np.ndarray, tod_ns: np.ndarray, raw_dates: np.ndarray
     a corrupt run at the start), plus or minus one day where the time of day wrapped
     past midnight between that row and this one (a jump of more than 12 h)."""
     n = len(date_ns)
-    valid = date_ns != _NAT
+    valid = date_ns != NAT
     if not valid.any():
         raise InputError(path, "no row has a readable date", line=int(lines[0]), column=col)
     uniq, counts = np.unique(date_ns[valid], return_counts=True)
     dominant = uniq[np.argmax(counts)]
-    bad = ~valid | (np.abs(date_ns - dominant) > max_days * _NS_PER_DAY)
+    bad = ~valid | (np.abs(date_ns - dominant) > max_days * NS_PER_DAY)
     if not bad.any():
         return date_ns
     idx = np.arange(n)
@@ -1176,11 +426,11 @@ def _repair_dates(date_ns: np.ndarray, tod_ns: np.ndarray, raw_dates: np.ndarray
     donor = np.where(prev >= 0, prev, nxt)
     b = np.flatnonzero(bad)
     d = donor[b]
-    half_day = _NS_PER_DAY // 2
+    half_day = NS_PER_DAY // 2
     shift = np.zeros(len(b), np.int64)
     from_prev = prev[b] >= 0
-    shift[from_prev & (tod_ns[b] < tod_ns[d] - half_day)] = _NS_PER_DAY
-    shift[~from_prev & (tod_ns[b] > tod_ns[d] + half_day)] = -_NS_PER_DAY
+    shift[from_prev & (tod_ns[b] < tod_ns[d] - half_day)] = NS_PER_DAY
+    shift[~from_prev & (tod_ns[b] > tod_ns[d] + half_day)] = -NS_PER_DAY
     fixed = date_ns.copy()
     fixed[b] = date_ns[d] + shift
     examples = pd.unique(pd.Series(raw_dates[b]).astype(str))[:4]
@@ -1206,7 +456,7 @@ def _localize(naive: np.ndarray, tz: str, groups: np.ndarray | None, lines: np.n
         return naive
     idx = pd.DatetimeIndex(naive.view("datetime64[ns]"))
     loc = idx.tz_localize(tz, ambiguous="NaT", nonexistent="NaT")
-    odd = np.asarray(loc.isna()) & (naive != _NAT)
+    odd = np.asarray(loc.isna()) & (naive != NAT)
     if not odd.any():
         return loc.tz_convert("UTC").as_unit("ns").asi8
     sub = idx[odd]
@@ -1218,7 +468,7 @@ def _localize(naive: np.ndarray, tz: str, groups: np.ndarray | None, lines: np.n
     dst_flags = np.ones(len(naive), bool)
     if len(amb_rows):
         g = groups[amb_rows] if groups is not None else np.zeros(len(amb_rows), np.int64)
-        day = naive[amb_rows] // _NS_PER_DAY
+        day = naive[amb_rows] // NS_PER_DAY
         frame = pd.DataFrame({"g": g, "day": day, "t": naive[amb_rows]})
         back = frame.groupby(["g", "day"], sort=False)["t"].diff() < 0
         second = back.groupby([frame["g"], frame["day"]], sort=False).cumsum() > 0
@@ -1231,7 +481,7 @@ def _localize(naive: np.ndarray, tz: str, groups: np.ndarray | None, lines: np.n
         )
     out = idx.tz_localize(tz, ambiguous=dst_flags, nonexistent="NaT").tz_convert("UTC").as_unit("ns").asi8.copy()
     if len(gap_rows):
-        before = pd.DatetimeIndex((naive[gap_rows] - _NS_PER_DAY).view("datetime64[ns]"))
+        before = pd.DatetimeIndex((naive[gap_rows] - NS_PER_DAY).view("datetime64[ns]"))
         before_loc = before.tz_localize(tz, ambiguous=True, nonexistent="shift_forward")
         offset = (before_loc.tz_localize(None).as_unit("ns").asi8
                   - before_loc.tz_convert("UTC").tz_localize(None).as_unit("ns").asi8)
@@ -1383,7 +633,7 @@ def read_log(path: str | Path, profile: Profile | str | None = None,
         # the time column straight from the bytes when it is first and fixed-width
         if len(tspec.columns) == 1 and names[0] == tspec.columns[0] and len(used) > 1 \
                 and tspec.columns[0] not in used[1:]:
-            fast = _fast_first_column(body, bview, starts, prof.separator, tspec.format)  # type: ignore[arg-type]
+            fast = fast_first_column(body, bview, starts, prof.separator, tspec.format)  # type: ignore[arg-type]
     table_cols = used[1:] if fast is not None else used
     df = _read_table(body, path, prof, unique_names, table_cols, num_cols, text_cols, hdr.line, all_cols=quoted)
     if fast is not None and len(fast.ns) != len(df):  # alignment lost (should not happen): slow path
@@ -1404,7 +654,7 @@ def read_log(path: str | Path, profile: Profile | str | None = None,
         df = df.loc[~empty].reset_index(drop=True)
         lines = lines[~empty]
         if fast is not None:
-            fast = _FastTimes(fast.ns[~empty], fast.is_utc, fast.blank[~empty])
+            fast = FastTimes(fast.ns[~empty], fast.is_utc, fast.blank[~empty])
     if len(df) == 0:
         raise InputError(path, "no data rows with values", line=first_line)
 
@@ -1434,8 +684,8 @@ def read_log(path: str | Path, profile: Profile | str | None = None,
     elif len(tspec.columns) == 1:
         col = tspec.columns[0]
         vals = df[col].to_numpy(dtype=object)
-        naive = _parse_datetimes(vals, tspec.format)  # type: ignore[arg-type]
-        aware = tspec.format == "ISO8601" and _has_offset(vals)
+        naive = parse_datetimes(vals, tspec.format)  # type: ignore[arg-type]
+        aware = tspec.format == "ISO8601" and has_offset(vals)
         _check_times(path, naive, lines, col, vals)
         utc = naive if aware else _localize(naive, tspec.timezone, codes, lines, repairs)
     else:
@@ -1443,19 +693,19 @@ def read_log(path: str | Path, profile: Profile | str | None = None,
         dvals = df[dcol].to_numpy(dtype=object)
         tvals = df[tcol].to_numpy(dtype=object)
         dcodes, duniq = pd.factorize(pd.Series(dvals), sort=False)
-        uniq_ns = _parse_datetimes(np.asarray(duniq, dtype=object), tspec.date_format)  # type: ignore[arg-type]
-        uniq_ns = np.where((uniq_ns >= _TIME_MIN) & (uniq_ns < _TIME_MAX), uniq_ns, _NAT)
-        date_ns = np.where(dcodes >= 0, uniq_ns[np.maximum(dcodes, 0)] if len(uniq_ns) else _NAT, _NAT)
-        tod = _parse_datetimes(tvals, tspec.time_format)  # type: ignore[arg-type]
-        ok_t = tod != _NAT
-        day0 = (tod[ok_t] // _NS_PER_DAY) * _NS_PER_DAY
+        uniq_ns = parse_datetimes(np.asarray(duniq, dtype=object), tspec.date_format)  # type: ignore[arg-type]
+        uniq_ns = np.where((uniq_ns >= _TIME_MIN) & (uniq_ns < _TIME_MAX), uniq_ns, NAT)
+        date_ns = np.where(dcodes >= 0, uniq_ns[np.maximum(dcodes, 0)] if len(uniq_ns) else NAT, NAT)
+        tod = parse_datetimes(tvals, tspec.time_format)  # type: ignore[arg-type]
+        ok_t = tod != NAT
+        day0 = (tod[ok_t] // NS_PER_DAY) * NS_PER_DAY
         tod[ok_t] = tod[ok_t] - day0  # time of day [ns]
         badt = ~ok_t
         if badt.any():
             raise _line_col_error(path, "unreadable time of day", lines, badt, tcol, tvals)
         if tspec.date_repair == "dominant":
             date_ns = _repair_dates(date_ns, tod, dvals, lines, tspec.date_repair_max_days, path, dcol, repairs)
-        badd = date_ns == _NAT
+        badd = date_ns == NAT
         if badd.any():
             raise _line_col_error(path, f"unreadable date (format {tspec.date_format!r}):", lines, badd, dcol, dvals)
         naive = date_ns + tod
@@ -1548,15 +798,15 @@ def _read_table(body: bytes, path: Path, prof: Profile, names: list[str], usecol
 def _has_energy_data(e: EnergySpec, arrays: dict[str, np.ndarray]) -> bool:
     """Whether the canonical columns ``arrays`` hold any value of the source (both
     factors for a virtual one)."""
-    if e.column in _VIRTUAL_COLUMNS:
-        a, b = _VIRTUAL_COLUMNS[e.column][0]
+    if e.column in VIRTUAL_COLUMNS:
+        a, b = VIRTUAL_COLUMNS[e.column][0]
         return a in arrays and b in arrays and bool(
             (np.isfinite(arrays[a]).any() and np.isfinite(arrays[b]).any()))
     return e.column in arrays and bool(np.isfinite(arrays[e.column]).any())
 
 
 def _energy_source(e: EnergySpec, fr: pd.DataFrame, maps: list[ColumnMap]) -> EnergySource:
-    cols = _VIRTUAL_COLUMNS[e.column][0] if e.column in _VIRTUAL_COLUMNS else (e.column,)
+    cols = VIRTUAL_COLUMNS[e.column][0] if e.column in VIRTUAL_COLUMNS else (e.column,)
     src = "*".join(next(m.source for m in maps if m.canonical == c) for c in cols)
     return EnergySource(e.column, e.kind, e.quantity, e.resolution, e.priority, e.capacity_j, src, e.modulus)
 
@@ -1582,7 +832,7 @@ def _vehicle_from_profile(prof: Profile, path: Path, metadata: dict[str, str], r
 
 def _check_times(path: Path, naive: np.ndarray, lines: np.ndarray, col: str, vals: np.ndarray | None) -> None:
     """Unparseable or absurd (before 1990 or from 2100) times are errors with their line."""
-    bad = (naive == _NAT) | (naive < _TIME_MIN) | (naive >= _TIME_MAX)
+    bad = (naive == NAT) | (naive < _TIME_MIN) | (naive >= _TIME_MAX)
     if bad.any():
         raise _line_col_error(path, "unreadable or impossible time", lines, bad, col, vals)
 

@@ -1,0 +1,631 @@
+"""Road elevation for a trip: road-profile smoothing of DSM samples (pure), with GPS
+altitude or a flat road where the DSM has long gaps.
+
+:func:`road_profile_m`, :func:`combine_elevation` turn raw, spiky DSM samples (roofs,
+trees, bridges, vehicles) into a plausible road profile along distance, with a fallback
+to GPS altitude or a flat profile where the DSM has long gaps; :func:`trip_elevation`
+samples the DSM (:class:`cevm.ingest.dsm.DsmSampler`, the raster access) at a trip's
+fixes and does both.
+
+All elevations are metres, distances metres, grades dimensionless (rise / run).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+from functools import lru_cache
+
+import numpy as np
+from scipy import ndimage
+
+from cevm.ingest.dsm import DsmSampler
+
+__all__ = [
+    "ElevationParams",
+    "ElevationResult",
+    "bound_grade",
+    "combine_elevation",
+    "road_profile_m",
+    "trip_elevation",
+]
+
+# --------------------------------------------------------------------------------------
+# Parameters and results
+# --------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class ElevationParams:
+    """Parameters of the road-profile smoothing and fallbacks.
+
+    Attributes
+    ----------
+    grid_step_m : float, default 5.0
+        Spacing of the uniform distance grid the profile is built on [m]. 5 m is finer
+        than any road feature that matters for energy, and coarse enough to keep the
+        filters cheap (a 1 Hz trip at 10 m/s gives two grid points per sample).
+    max_gap_m : float, default 200.0
+        Longest stretch of road [m] without a valid DSM sample that is bridged by linear
+        interpolation along distance. Measured between the valid samples on either side
+        of a run of invalid ones (or from the trip's end). Longer gaps fall back to GPS
+        altitude or to a flat/linear fill. 200 m keeps bridges, tunnels' mouths and
+        small DSM holes in the DSM profile, where a straight line is a good road.
+    median_window_m : float, default 100.0
+        Length [m] of the running median that serves as reference ground to detect
+        surface objects. A median ignores an object shorter than about half its window
+        whatever its height; 100 m covers roofs, trees, vehicles and bridge decks up to
+        about 40 m long as seen by the fixes (a single 1 Hz fix on an object at 20 m/s
+        spans 2 x 20 m after resampling), and a median follows ramps exactly.
+    spike_threshold_m : float, default 1.0
+        Grid cells more than this above or below the running median are surface objects
+        (or DSM voids) and are replaced by straight lines between their neighbours. DSM
+        noise on tarmac is about 0.1-0.3 m and a median's error on vertical curves of
+        roads a few tenths of a metre, while vehicles, hedges, roofs and trees stand
+        metres high. Lower objects are left to the low-pass.
+    lowpass_sigma_m : float, default 15.0
+        Standard deviation [m] of the Gaussian low-pass applied after the median, to
+        remove the DSM's roughness (about 0.1-0.3 m on tarmac) and the staircase of the
+        median. Linear ramps pass unchanged (ends are padded by odd reflection).
+    max_grade : float, default 0.15
+        Largest road grade magnitude allowed (0.15 = 15 %), see :func:`bound_grade`.
+        Public roads rarely exceed 10-12 % over more than 100 m; 15 % leaves room for
+        the steep urban streets that do exist while rejecting DSM cliffs.
+    gps_lowpass_sigma_m : float, default 300.0
+        Gaussian low-pass [m] for GPS altitude (the fallback where the DSM has nothing).
+        A phone's vertical error is 10-30 m and correlated over minutes, so the DSM's
+        15 m filter would keep it as false hills: their climbs cost energy the vehicle
+        never spent (a model without braking credit counts every one). 300 m keeps the
+        hills that matter for energy over a trip and removes most of the noise.
+    gps_median_window_m : float, default 500.0
+        Running-median window [m] of the GPS-altitude profile, whose spike threshold is
+        ``gps_spike_threshold_m``.
+    gps_spike_threshold_m : float, default 30.0
+        GPS altitudes further than this from their running median are dropped as
+        outliers (a lost fix, a multipath jump) before the low-pass.
+    gps_min_valid_pct : float, default 50.0
+        GPS altitude is used only when at least this share of samples carries a finite
+        value inside ``gps_alt_range_m``.
+    gps_alt_range_m : tuple[float, float], default (-500.0, 9000.0)
+        Plausible GPS altitudes [m]; values outside are treated as missing (loggers write
+        0, -1000 or 99999 as "no fix"). A trip whose GPS altitude is constant is rejected
+        too (a placeholder, not a measurement).
+    """
+
+    grid_step_m: float = 5.0
+    max_gap_m: float = 200.0
+    median_window_m: float = 100.0
+    spike_threshold_m: float = 1.0
+    lowpass_sigma_m: float = 15.0
+    max_grade: float = 0.15
+    gps_lowpass_sigma_m: float = 300.0
+    gps_median_window_m: float = 500.0
+    gps_spike_threshold_m: float = 30.0
+    gps_min_valid_pct: float = 50.0
+    gps_alt_range_m: tuple[float, float] = (-500.0, 9000.0)
+
+    def for_gps(self) -> ElevationParams:
+        """These parameters with the GPS-altitude smoothing in place of the DSM's."""
+        return replace(self, lowpass_sigma_m=self.gps_lowpass_sigma_m, median_window_m=self.gps_median_window_m,
+                       spike_threshold_m=self.gps_spike_threshold_m)
+
+    def __post_init__(self) -> None:
+        checks = {
+            "grid_step_m": self.grid_step_m > 0,
+            "max_gap_m": self.max_gap_m >= 0,
+            "median_window_m": self.median_window_m >= 0,
+            "spike_threshold_m": self.spike_threshold_m >= 0,
+            "lowpass_sigma_m": self.lowpass_sigma_m >= 0,
+            "max_grade": self.max_grade > 0,
+            "gps_min_valid_pct": 0 <= self.gps_min_valid_pct <= 100,
+            "gps_lowpass_sigma_m": self.gps_lowpass_sigma_m >= 0,
+            "gps_median_window_m": self.gps_median_window_m >= 0,
+            "gps_spike_threshold_m": self.gps_spike_threshold_m >= 0,
+        }
+        for name, ok in checks.items():
+            value = getattr(self, name)
+            if not ok or (isinstance(value, float) and math.isnan(value)):
+                raise ValueError(f"ElevationParams.{name} = {value!r} is out of range")
+        lo, hi = self.gps_alt_range_m
+        if not lo < hi:
+            raise ValueError(f"ElevationParams.gps_alt_range_m = {self.gps_alt_range_m!r}: need low < high")
+
+
+@dataclass(frozen=True, eq=False)
+class ElevationResult:
+    """Elevation of a trip's samples and how it was obtained.
+
+    Attributes
+    ----------
+    elevation_m : ndarray of float64
+        Road elevation per sample [m]; finite everywhere. Samples that share a distance
+        (standstill) share an elevation.
+    source : str
+        ``"dsm"`` (DSM everywhere, short gaps interpolated), ``"dsm+gps"`` (long DSM gaps
+        filled from GPS altitude offset to join the DSM), ``"dsm+flat"`` (long DSM gaps
+        bridged linearly / held level, no usable GPS), ``"dsm+gps+flat"`` (both kinds
+        of fill: GPS altitude missing in some long DSM gaps), ``"gps"`` (no DSM value at
+        all, smoothed GPS altitude) or ``"flat"`` (nothing usable: 0 m everywhere).
+    dsm_coverage_pct : float
+        Share of samples with a valid raw DSM value [%] (0 without a DSM).
+    filled_short_m : float
+        Road length [m] of DSM gaps up to ``max_gap_m`` bridged by interpolation.
+    filled_gps_m : float
+        Road length [m] filled from GPS altitude.
+    filled_flat_m : float
+        Road length [m] filled by a straight line between DSM ends or held level.
+    notes : tuple of str
+        Human-readable remarks (why a fallback was taken, ...).
+    """
+
+    elevation_m: np.ndarray
+    source: str
+    dsm_coverage_pct: float
+    filled_short_m: float = 0.0
+    filled_gps_m: float = 0.0
+    filled_flat_m: float = 0.0
+    notes: tuple[str, ...] = ()
+
+    def quality(self) -> dict:
+        """JSON-serialisable summary for ``Trip.quality``."""
+        return {
+            "elevation_source": self.source,
+            "dsm_coverage_pct": round(float(self.dsm_coverage_pct), 3),
+            "elevation_filled_short_m": round(float(self.filled_short_m), 1),
+            "elevation_filled_gps_m": round(float(self.filled_gps_m), 1),
+            "elevation_filled_flat_m": round(float(self.filled_flat_m), 1),
+            "elevation_notes": list(self.notes),
+        }
+
+
+# --------------------------------------------------------------------------------------
+# Road profile (pure)
+# --------------------------------------------------------------------------------------
+
+
+def _grid(d0: float, d1: float, step: float) -> np.ndarray:
+    """Uniform grid from d0 to d1 inclusive with spacing <= step."""
+    if not d1 > d0:
+        return np.array([d0], dtype=np.float64)
+    n = int(math.ceil((d1 - d0) / step - 1e-9)) + 1
+    return np.linspace(d0, d1, max(n, 2))
+
+
+def _check_distance(distance_m: np.ndarray) -> None:
+    if not np.all(np.isfinite(distance_m)):
+        raise ValueError("distance_m must be finite")
+    if distance_m.size > 1 and np.any(np.diff(distance_m) < 0):
+        raise ValueError("distance_m must be non-decreasing")
+
+
+@dataclass(frozen=True)
+class _Gaps:
+    """Runs of invalid samples, classified by the road length they span: from the last
+    valid sample before to the first valid one after (or the trip's end)."""
+
+    short_m: float  # total span of the runs bridged by interpolation [m]
+    long: list[tuple[float, float, str]] = field(default_factory=list)  # (a, b, "lead"|"inner"|"trail")
+
+
+def _find_gaps(d: np.ndarray, valid: np.ndarray, max_gap_m: float) -> _Gaps:
+    """Classify runs of invalid samples by the road length they span."""
+    n = d.size
+    vi = np.flatnonzero(valid)
+    if vi.size == 0:
+        return _Gaps(0.0, [(float(d[0]), float(d[-1]), "all")] if n else [])
+    spans: list[tuple[float, float, str]] = []
+    if vi[0] > 0:
+        spans.append((float(d[0]), float(d[vi[0]]), "lead"))
+    inner = np.flatnonzero(np.diff(vi) > 1)
+    spans.extend(zip(d[vi[inner]].tolist(), d[vi[inner + 1]].tolist(), ["inner"] * inner.size))
+    if vi[-1] < n - 1:
+        spans.append((float(d[vi[-1]]), float(d[-1]), "trail"))
+    short = sum(b - a for a, b, _ in spans if b - a <= max_gap_m)
+    return _Gaps(float(short), [s for s in spans if s[1] - s[0] > max_gap_m])
+
+
+def _resample(d: np.ndarray, z: np.ndarray, valid: np.ndarray, grid: np.ndarray) -> np.ndarray:
+    """Valid samples onto the grid: samples are averaged per grid cell (standstill
+    repeats and dense logging), then cells are joined by linear interpolation along
+    distance; held level beyond the first/last valid sample."""
+    dv, zv = d[valid], z[valid]
+    if grid.size == 1:
+        return np.array([zv.mean()])
+    step = grid[1] - grid[0]
+    cell = np.rint((dv - grid[0]) / step).astype(np.int64)
+    before, after = cell < 0, cell >= grid.size  # samples beyond a partial grid: anchors only
+    if before.any() or after.any():
+        keep = ~(before | after)
+        d_lo, z_lo, d_hi, z_hi = dv[before], zv[before], dv[after], zv[after]
+        dv, zv, cell = dv[keep], zv[keep], cell[keep]
+    else:
+        d_lo = z_lo = d_hi = z_hi = dv[:0]
+    cnt = np.bincount(cell, minlength=grid.size)
+    has = cnt > 0
+    zc = np.bincount(cell, weights=zv, minlength=grid.size)[has] / cnt[has]
+    dc = np.bincount(cell, weights=dv, minlength=grid.size)[has] / cnt[has]
+    if d_lo.size or d_hi.size:
+        dc = np.concatenate((d_lo, dc, d_hi))
+        zc = np.concatenate((z_lo, zc, z_hi))
+    out = np.interp(grid, dc, zc)
+    if dc.size > 1:
+        # A cell mean sits up to half a step inside its cell: continue the line of the
+        # first (last) two cells over that half step, not level (keeps ramps exact).
+        for k, (i, j) in ((0, (0, 1)), (-1, (-2, -1))):
+            if 0 < abs(grid[k] - dc[k]) <= 0.5 * step * (1 + 1e-9) and dc[j] > dc[i]:
+                out[k] = zc[i] + (grid[k] - dc[i]) * (zc[j] - zc[i]) / (dc[j] - dc[i])
+    return out
+
+
+def _odd_pad(x: np.ndarray, r: int) -> np.ndarray:
+    """Pad by point reflection about each end value (x[0] - (x[k] - x[0])), which
+    continues a straight line: symmetric filters then keep ramps up to the ends."""
+    if r <= 0:
+        return x
+    if x.size == 1:
+        return np.full(2 * r + 1, x[0])
+    if r >= x.size:  # reflected more than once
+        return np.pad(x, r, mode="reflect", reflect_type="odd")
+    out = np.empty(x.size + 2 * r)
+    out[r : r + x.size] = x
+    out[:r] = 2 * x[0] - x[r:0:-1]  # as np.pad(x, r, mode="reflect", reflect_type="odd")
+    out[r + x.size :] = 2 * x[-1] - x[-2 : -r - 2 : -1]
+    return out
+
+
+def _smooth(h: np.ndarray, step: float, params: ElevationParams) -> np.ndarray:
+    """Robust smoothing of a gap-free uniform profile with spacing ``step`` [m].
+
+    A running median of ``median_window_m`` is the reference ground; cells further than
+    ``spike_threshold_m`` from it are surface objects: they are dropped and bridged by
+    straight lines between the remaining cells (a Hampel filter). Then a Gaussian
+    low-pass of ``lowpass_sigma_m``. Ends are padded by odd reflection, so a straight
+    ramp comes out unchanged, ends included. (Taking the median itself as the profile
+    would shift a ramp near an object by half the object's length times the grade.)
+    """
+    k = 2 * int(params.median_window_m / (2 * step)) + 1
+    if k > 1 and h.size > 2:
+        r = k // 2
+        ground = ndimage.median_filter(_odd_pad(h, r), size=k, mode="nearest")[r:-r]
+        spike = np.abs(h - ground) > params.spike_threshold_m
+        if spike.all():
+            h = ground
+        elif spike.any():
+            idx = np.arange(h.size, dtype=np.float64)
+            h = h.copy()
+            h[spike] = np.interp(idx[spike], idx[~spike], h[~spike])
+    sigma = params.lowpass_sigma_m / step
+    if sigma > 0 and h.size > 1:
+        r = int(4.0 * sigma + 0.5)
+        h = _gaussian_valid(_odd_pad(h, r), sigma, r)
+    return h
+
+
+#: Kernels longer than this [taps] are applied by FFT (same result within rounding).
+_FFT_MIN_TAPS = 96
+
+
+def _gaussian_valid(x: np.ndarray, sigma: float, r: int) -> np.ndarray:
+    """Gaussian low-pass (standard deviation ``sigma`` cells, radius ``r`` cells) of
+    ``x`` at the cells ``r .. len(x) - r - 1``, whose windows lie inside ``x``: what
+    ``ndimage.gaussian_filter1d(x, sigma, truncate=4.0)[r:-r]`` gives for
+    ``r = int(4 * sigma + 0.5)``, whatever its boundary mode. Long kernels (the GPS
+    profile's, 481 taps) go through an FFT, O(n log n) instead of O(n r); the result
+    differs only by floating-point rounding (about 1e-12 m)."""
+    if 2 * r + 1 < _FFT_MIN_TAPS:
+        return ndimage.gaussian_filter1d(x, sigma, mode="nearest", truncate=4.0)[r:-r]
+    k = np.exp(-0.5 / (sigma * sigma) * np.arange(-r, r + 1, dtype=np.float64) ** 2)
+    k /= k.sum()
+    nfft = _fft_size(x.size + k.size - 1)
+    y = np.fft.irfft(np.fft.rfft(x, nfft) * np.fft.rfft(k, nfft), nfft)
+    return y[2 * r : x.size]
+
+
+@lru_cache(maxsize=1)
+def _smooth_sizes() -> np.ndarray:
+    """Sorted numbers 2^a 3^b 5^c up to 2**26: lengths the FFT handles fastest."""
+    limit, out, a = 1 << 26, [], 1
+    while a <= limit:
+        b = a
+        while b <= limit:
+            c = b
+            while c <= limit:
+                out.append(c)
+                c *= 5
+            b *= 3
+        a *= 2
+    return np.array(sorted(out), dtype=np.int64)
+
+
+def _fft_size(n: int) -> int:
+    """The smallest 5-smooth length >= n (n itself beyond 2**26)."""
+    sizes = _smooth_sizes()
+    i = int(np.searchsorted(sizes, n))
+    return int(sizes[i]) if i < sizes.size else n
+
+
+def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
+    """[start, stop) index ranges of True runs."""
+    m = np.concatenate(([False], mask, [False]))
+    edges = np.flatnonzero(m[1:] != m[:-1])
+    return list(zip(edges[::2].tolist(), edges[1::2].tolist()))
+
+
+def bound_grade(h: np.ndarray, step: float, max_grade: float) -> np.ndarray:
+    """Bound the grade of a uniform profile (spacing ``step`` [m]) to ``max_grade``.
+
+    Returns the mean of the two Lipschitz envelopes of ``h``: the largest profile below
+    ``h`` and the smallest profile above ``h`` whose grade never exceeds ``max_grade``
+    (``min_j h_j + G |i - j| step`` and ``max_j h_j - G |i - j| step``, computed with
+    running minima/maxima, O(n)). Both envelopes obey the bound, so their mean does.
+    Where ``h`` already obeys it both equal ``h``: the profile changes only around a
+    violation, which becomes a ramp centred on it, and total rise and fall far from it
+    are kept. So there is no drift, unlike clipping the grade and integrating.
+    """
+    if h.size < 2 or np.all(np.abs(np.diff(h)) <= max_grade * step):
+        return h.copy()
+    s = max_grade * step * np.arange(h.size)
+    up_fwd = s + np.minimum.accumulate(h - s)  # min over j <= i of h_j + G (i - j) step
+    up_bwd = (np.minimum.accumulate((h + s)[::-1]))[::-1] - s  # j >= i
+    lo_fwd = np.maximum.accumulate(h + s) - s
+    lo_bwd = (np.maximum.accumulate((h - s)[::-1]))[::-1] + s
+    lower_env = np.minimum(up_fwd, up_bwd)
+    upper_env = np.maximum(lo_fwd, lo_bwd)
+    return 0.5 * (lower_env + upper_env)
+
+
+def _profile_grid(d: np.ndarray, z: np.ndarray, params: ElevationParams, grid: np.ndarray, max_gap_m: float) -> tuple[np.ndarray, _Gaps]:
+    """Smoothed (not yet grade-bounded) profile on ``grid``, NaN inside long gaps."""
+    valid = np.isfinite(z)
+    gaps = _find_gaps(d, valid, max_gap_m)
+    if not valid.any():
+        return np.full(grid.size, np.nan), gaps
+    h = _resample(d, z, valid, grid)
+    # Blank long gaps, keeping the first grid point past the valid sample on each side
+    # so that the samples next to the gap still interpolate between finite points.
+    for a, b, kind in gaps.long:
+        lo = 0 if kind == "lead" else np.searchsorted(grid, a, side="right") + 1
+        hi = grid.size if kind == "trail" else np.searchsorted(grid, b, side="left") - 1
+        if hi > lo:
+            h[lo:hi] = np.nan
+    step = grid[1] - grid[0] if grid.size > 1 else params.grid_step_m
+    for lo, hi in _runs(np.isfinite(h)):
+        h[lo:hi] = _smooth(h[lo:hi], step, params)
+    return h, gaps
+
+
+def road_profile_m(distance_m, raw_elevation_m, params: ElevationParams = ElevationParams()) -> np.ndarray:
+    """Road elevation profile [m] from raw (spiky, gappy) elevation samples.
+
+    Steps: (1) resample onto a uniform grid of ``grid_step_m`` along distance (means
+    per cell, linear between cells); (2) bridge runs of NaN samples spanning up to
+    ``max_gap_m`` by linear interpolation along distance, leave longer gaps NaN;
+    (3) running median of ``median_window_m`` (removes roofs, trees, vehicles, bridge
+    decks), repeated on its residuals to cancel the median's bias on slopes, then Gaussian low-pass of ``lowpass_sigma_m``, each covered stretch apart;
+    (4) bound the grade to ``max_grade`` with :func:`bound_grade` (no drift);
+    (5) interpolate back to the samples by distance, so samples that share a distance
+    (standstill) get the same elevation.
+
+    Parameters
+    ----------
+    distance_m : array_like
+        Cumulative distance of the samples [m], finite and non-decreasing.
+    raw_elevation_m : array_like
+        Raw elevation per sample [m], NaN where unknown.
+    params : ElevationParams
+
+    Returns
+    -------
+    ndarray of float64
+        Elevation per sample [m]; NaN only inside gaps longer than ``max_gap_m`` (and
+        everywhere if no sample is valid).
+    """
+    d = np.asarray(distance_m, dtype=np.float64)
+    z = np.asarray(raw_elevation_m, dtype=np.float64)
+    if d.shape != z.shape or d.ndim != 1:
+        raise ValueError("distance_m and raw_elevation_m must be 1-D arrays of one length")
+    if d.size == 0:
+        return np.empty(0)
+    _check_distance(d)
+    grid = _grid(d[0], d[-1], params.grid_step_m)
+    h, _ = _profile_grid(d, z, params, grid, params.max_gap_m)
+    step = grid[1] - grid[0] if grid.size > 1 else params.grid_step_m
+    for lo, hi in _runs(np.isfinite(h)):
+        h[lo:hi] = bound_grade(h[lo:hi], step, params.max_grade)
+    return _to_samples(d, grid, h)
+
+
+def _to_samples(d: np.ndarray, grid: np.ndarray, h: np.ndarray) -> np.ndarray:
+    """Profile on the grid back to the samples, linear along distance; a sample with a
+    NaN grid neighbour of non-zero weight is NaN."""
+    if grid.size == 1:
+        return np.full(d.size, h[0])
+    out = np.interp(d, grid, h)
+    if np.isnan(h).any():
+        k = np.clip(np.searchsorted(grid, d, side="right") - 1, 0, grid.size - 2)
+        w = (d - grid[k]) / (grid[k + 1] - grid[k])
+        bad = (np.isnan(h[k]) & (w < 1)) | (np.isnan(h[k + 1]) & (w > 0))
+        out[bad] = np.nan
+    return out
+
+
+def _mean_finite(x: np.ndarray) -> float | None:
+    x = x[np.isfinite(x)]
+    return float(x.mean()) if x.size else None
+
+
+def _gps_usable(gps: np.ndarray | None, params: ElevationParams) -> tuple[np.ndarray | None, str]:
+    """Plausible GPS altitudes (implausible ones as NaN), or None with the reason."""
+    if gps is None:
+        return None, "no GPS altitude"
+    g = np.asarray(gps, dtype=np.float64).copy()
+    lo, hi = params.gps_alt_range_m
+    g[~((g >= lo) & (g <= hi))] = np.nan
+    n_ok = int(np.isfinite(g).sum())
+    if g.size == 0 or 100.0 * n_ok / g.size < params.gps_min_valid_pct:
+        return None, f"GPS altitude valid on {100.0 * n_ok / max(g.size, 1):.0f}% of samples only"
+    if np.nanmax(g) == np.nanmin(g) and n_ok > 1:
+        return None, "GPS altitude is constant (a placeholder)"
+    return g, ""
+
+
+def combine_elevation(distance_m, raw_dsm_m, gps_alt_m=None, params: ElevationParams = ElevationParams(), *, have_dsm: bool = True) -> ElevationResult:
+    """Road elevation of a trip from raw DSM samples, with GPS altitude or a flat fill
+    as fallback (pure).
+
+    The DSM profile is built as in :func:`road_profile_m`. Gaps longer than
+    ``max_gap_m`` are filled from GPS altitude, smoothed the same way (its own gaps
+    bridged whatever their length), plus an offset that varies linearly across the gap
+    from the mean (DSM - GPS) over up to ``median_window_m`` of DSM profile before it
+    to the same mean after it, so the fill joins the DSM profile on both sides (a
+    constant offset at the trip's ends; the grade bound absorbs the small residual
+    step). Without usable GPS (over the whole trip, or in that gap), a long gap is
+    bridged by a straight line between the DSM values at its ends, or held level at the
+    trip's ends. Without any DSM value the profile is the smoothed GPS
+    altitude, or 0 m everywhere ("flat"). The grade bound is applied last, to the whole
+    profile.
+
+    Parameters
+    ----------
+    distance_m : array_like
+        Cumulative distance [m], finite, non-decreasing.
+    raw_dsm_m : array_like or None
+        Raw DSM elevation per sample [m], NaN where invalid; None if there is no DSM.
+    gps_alt_m : array_like or None
+        GPS altitude per sample [m], NaN where missing.
+    params : ElevationParams
+    have_dsm : bool
+        False when no DSM was given at all (changes only the notes).
+    """
+    d = np.asarray(distance_m, dtype=np.float64)
+    n = d.size
+    if raw_dsm_m is None:
+        have_dsm = False
+        z = np.full(n, np.nan)
+    else:
+        z = np.asarray(raw_dsm_m, dtype=np.float64)
+    if z.shape != d.shape or d.ndim != 1:
+        raise ValueError("distance_m and raw_dsm_m must be 1-D arrays of one length")
+    if gps_alt_m is not None and np.shape(gps_alt_m) != d.shape:
+        raise ValueError("gps_alt_m must have the length of distance_m")
+    if n == 0:
+        return ElevationResult(np.empty(0), "flat", 0.0, notes=("empty trip",))
+    _check_distance(d)
+    valid = np.isfinite(z)
+    coverage = 100.0 * valid.sum() / n if have_dsm else 0.0
+    notes: list[str] = []
+    grid = _grid(d[0], d[-1], params.grid_step_m)
+    step = grid[1] - grid[0] if grid.size > 1 else params.grid_step_m
+    h, gaps = _profile_grid(d, z, params, grid, params.max_gap_m)
+    gps, why_not_gps = _gps_usable(gps_alt_m, params)
+    filled_gps = filled_flat = 0.0
+
+    if not valid.any():
+        notes.append("no DSM given" if not have_dsm else "no valid DSM value on this trip")
+        if gps is not None:
+            g, _ = _profile_grid(d, gps, _gps_params(params), grid, math.inf)
+            h, source, filled_gps = g, "gps", float(d[-1] - d[0])
+            notes.append("smoothed GPS altitude used")
+        else:
+            h, source, filled_flat = np.zeros(grid.size), "flat", float(d[-1] - d[0])
+            notes.append(f"{why_not_gps}: flat profile at 0 m")
+        short = 0.0
+    else:
+        short = gaps.short_m
+        source = "dsm"
+        holes = np.isnan(h)
+        if holes.any():
+            gap_a = np.array([g[0] for g in gaps.long])
+            gap_m = np.array([g[1] - g[0] for g in gaps.long])
+            by_gps = np.zeros(gap_m.size, dtype=bool)
+            if gps is not None:
+                span = max(1, int(round(params.median_window_m / step)))
+                for lo, hi in _runs(holes):
+                    g = _gps_around(d, gps, params, grid, lo, hi, span)
+                    # DSM - GPS offset at each side, averaged over the DSM stretch (up to
+                    # median_window_m) next to the gap, to average out GPS noise.
+                    off_l = _mean_finite(h[max(0, lo - span) : lo] - g[max(0, lo - span) : lo])
+                    off_r = _mean_finite(h[hi : hi + span] - g[hi : hi + span])
+                    inside = (d >= grid[lo]) & (d <= grid[hi - 1])
+                    gps_inside = np.isfinite(gps[inside]).mean() if inside.any() else 0.0
+                    if gps_inside < 0.5 or not np.isfinite(g[lo:hi]).all() or (off_l is None and off_r is None):
+                        continue  # no GPS here (fixes in under half the gap): left to the straight line below
+                    if off_l is None or off_r is None:
+                        off = np.full(hi - lo, off_r if off_l is None else off_l)
+                    else:
+                        w = (grid[lo:hi] - grid[lo - 1]) / (grid[hi] - grid[lo - 1])
+                        off = off_l + w * (off_r - off_l)
+                    h[lo:hi] = g[lo:hi] + off
+                    by_gps[max(0, np.searchsorted(gap_a, grid[lo], side="right") - 1)] = True
+            filled_gps = float(gap_m[by_gps].sum())
+            filled_flat = float(gap_m[~by_gps].sum())
+            holes = np.isnan(h)
+            if holes.any():
+                ok = ~holes
+                h[holes] = np.interp(grid[holes], grid[ok], h[ok])
+            if filled_gps > 0:
+                source = "dsm+gps"
+                notes.append(f"{int(by_gps.sum())} DSM gap(s) over {_gap_str(params)} ({filled_gps:.0f} m) filled from GPS altitude joined to the DSM")
+            if filled_flat > 0:
+                source = "dsm+gps+flat" if filled_gps > 0 else "dsm+flat"
+                why = why_not_gps if gps is None else "no GPS altitude there"
+                notes.append(f"{int((~by_gps).sum())} DSM gap(s) over {_gap_str(params)} ({filled_flat:.0f} m) bridged by straight lines ({why})")
+        if short > 0:
+            notes.append(f"DSM gaps up to {_gap_str(params)} ({short:.0f} m) interpolated along distance")
+    h = bound_grade(h, step, params.max_grade)
+    return ElevationResult(
+        elevation_m=_to_samples(d, grid, h),
+        source=source,
+        dsm_coverage_pct=float(coverage),
+        filled_short_m=float(short),
+        filled_gps_m=float(filled_gps),
+        filled_flat_m=float(filled_flat),
+        notes=tuple(notes),
+    )
+
+
+def _gps_around(d, gps, params: ElevationParams, grid, lo: int, hi: int, span: int) -> np.ndarray:
+    """Smoothed GPS profile on ``grid``, computed only over grid[lo:hi] widened by
+    ``span`` cells (for the offsets) and the filters' reach (so that the values there
+    are practically those of a whole-trip computation); NaN elsewhere."""
+    step = grid[1] - grid[0]
+    params = _gps_params(params)
+    reach = span + int(params.median_window_m / step) + int(4 * params.lowpass_sigma_m / step) + 2
+    a, b = max(0, lo - reach), min(grid.size, hi + reach)
+    i, j = np.searchsorted(d, grid[a], side="left"), np.searchsorted(d, grid[b - 1], side="right")
+    i, j = max(0, i - 1), min(d.size, j + 1)  # one sample beyond, for the interpolation
+    g = np.full(grid.size, np.nan)
+    g[a:b], _ = _profile_grid(d[i:j], gps[i:j], params, grid[a:b], math.inf)
+    return g
+
+
+@lru_cache(maxsize=16)
+def _gps_params(params: ElevationParams) -> ElevationParams:
+    """``params.for_gps()``, made once per parameter set."""
+    return params.for_gps()
+
+
+def _gap_str(params: ElevationParams) -> str:
+    return f"{params.max_gap_m:g} m"
+
+
+def trip_elevation(distance_m, lon_deg, lat_deg, gps_alt_m=None, sampler: DsmSampler | None = None, params: ElevationParams = ElevationParams()) -> ElevationResult:
+    """Road elevation of a trip: DSM lookup at the fixes (if ``sampler``), then
+    :func:`combine_elevation`.
+
+    Parameters
+    ----------
+    distance_m : array_like
+        Cumulative distance [m], finite, non-decreasing.
+    lon_deg, lat_deg : array_like
+        WGS84 fixes [deg], NaN where there is no fix.
+    gps_alt_m : array_like or None
+        GPS altitude [m], NaN where missing; None if the logger has none.
+    sampler : DsmSampler or None
+        The DSM; None gives GPS altitude (if plausible) or a flat profile.
+    params : ElevationParams
+    """
+    if sampler is None:
+        return combine_elevation(distance_m, None, gps_alt_m, params, have_dsm=False)
+    raw = sampler.sample(lon_deg, lat_deg)
+    return combine_elevation(distance_m, raw, gps_alt_m, params)

@@ -1,0 +1,220 @@
+""":func:`ingest`: log files -> the per-file task on an executor -> the trip store.
+
+Discovery expands files, directories and globs (:func:`discover`); each file to
+(re-)ingest becomes one task (:func:`cevm.ingest.task.process_file`) on an executor
+(:mod:`cevm.executors`: serial, a process pool or a Dask cluster).
+
+:func:`ingest` is the store's single writer: one transaction per file, so a crash
+mid-file leaves the store as it was, an unchanged file is skipped, a changed file
+replaces its trips, and a bad file is reported and skipped while the batch goes on (its
+previously stored trips are kept). The outcomes of parallel runs come back in input
+order and are written in that order, so the store ends up exactly as after a serial
+run.
+"""
+
+from __future__ import annotations
+
+import glob
+import time
+from collections.abc import Callable, Iterable
+from contextlib import closing
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from cevm.errors import InputError
+from cevm.executors import Executor, SerialExecutor, Task, TaskResult
+from cevm.ingest.task import FileOutcome, IngestOptions, file_sha256, open_sampler, process_file
+from cevm.ingest.profiles import load_profiles
+from cevm.store import TripStore
+
+
+#: File names taken from a directory (recursively).
+LOG_PATTERNS = ("*.csv", "*.csv.gz", "*.CSV", "*.CSV.GZ")
+
+
+@dataclass
+class FileReport:
+    """One line of the run's report."""
+
+    path: str
+    status: str  # "ingested", "unchanged", "failed"
+    trips: int = 0
+    samples: int = 0
+    km: float = 0.0
+    seconds: float = 0.0
+    profile: str | None = None
+    error: str | None = None
+    duplicates: int = 0
+    repairs: tuple[str, ...] = ()
+
+
+@dataclass
+class IngestReport:
+    files: list[FileReport] = field(default_factory=list)
+    seconds: float = 0.0
+    stage_s: dict = field(default_factory=dict)
+    rows: int = 0
+
+    def count(self, status: str) -> int:
+        return sum(1 for f in self.files if f.status == status)
+
+    @property
+    def failed(self) -> int:
+        return self.count("failed")
+
+    def summary(self) -> dict:
+        return {
+            "files": len(self.files),
+            "ingested": self.count("ingested"),
+            "unchanged": self.count("unchanged"),
+            "failed": self.failed,
+            "trips": sum(f.trips for f in self.files),
+            "samples": sum(f.samples for f in self.files),
+            "rows": self.rows,
+            "km": round(sum(f.km for f in self.files), 3),
+            "seconds": round(self.seconds, 3),
+            "stage_s": {k: round(v, 3) for k, v in self.stage_s.items()},
+        }
+
+
+def discover(inputs: Iterable[str | Path]) -> tuple[list[Path], list[str]]:
+    """Expand files, directories (recursive) and glob patterns into a sorted, unique
+    list of files; return it with a message for each input that matched nothing."""
+    found: dict[str, Path] = {}
+    missing: list[str] = []
+    for item in inputs:
+        s = str(item)
+        p = Path(s)
+        if p.is_dir():
+            hits = [q for pat in LOG_PATTERNS for q in p.rglob(pat) if q.is_file()]
+        elif p.is_file():
+            hits = [p]
+        elif glob.has_magic(s):
+            hits = [Path(q) for q in glob.glob(s, recursive=True) if Path(q).is_file()]
+        else:
+            hits = []
+        if not hits:
+            missing.append(f"{s}: no such file, directory or matching log files")
+        for q in hits:
+            found.setdefault(str(q.resolve()), q)
+    return [found[k] for k in sorted(found)], missing
+
+
+def ingest(
+    inputs: Iterable[str | Path],
+    store: TripStore,
+    options: IngestOptions = IngestOptions(),
+    *,
+    on_file: Callable[[FileReport], None] | None = None,
+    on_start: Callable[[int], None] | None = None,
+    executor: Executor | None = None,
+) -> IngestReport:
+    """Ingest files into ``store`` (the single writer); return the run's report.
+
+    ``on_start(n_files)`` is called once the inputs are expanded, ``on_file(report)``
+    after each file, in input order (for progress bars and JSON logs).
+
+    ``executor`` runs :func:`process_file` on each file to (re-)ingest (default None:
+    serially in this thread; see :func:`cevm.executors.make_executor`); it stays open
+    for the caller to reuse and close. The hashing of files and the store writes stay
+    here, and results are written in input order, so the store holds the same after a
+    serial or a parallel run. A file whose worker died twice is failed, as a bad file.
+    """
+    t_start = time.perf_counter()
+    files, missing = discover(inputs)
+    report = IngestReport()
+    for m in missing:
+        fr = FileReport(path=m.split(":")[0], status="failed", error=m)
+        report.files.append(fr)
+        if on_file:
+            on_file(fr)
+    if on_start:
+        on_start(len(files))
+    profiles = load_profiles(options.profiles_dir) if options.profiles_dir else load_profiles()
+    if options.profile is not None and options.profile not in profiles:
+        raise InputError(options.profile, f"unknown logger profile; available: {', '.join(sorted(profiles))}")
+    sampler = open_sampler(options.dsm)  # here too: a bad DSM stops the run before any work
+    if executor is None or len(files) < 2:  # one file cannot run in parallel
+        executor = SerialExecutor()
+    headers = None
+    if not executor.inline and sampler is not None:
+        headers = sampler.headers  # workers open their own, from these headers
+        sampler.close()
+        sampler = None
+    run_id = store.start_run()
+    try:
+        jobs = (_prepare(path, store, options, profiles, sampler, headers) for path in files)
+        with closing(executor.run(process_file, jobs)) as results:  # closing: cancels what is left on errors
+            for res in results:
+                t0 = time.perf_counter()
+                fr = _write_result(res, store, options, report)
+                fr.seconds += time.perf_counter() - t0
+                report.files.append(fr)
+                if on_file:
+                    on_file(fr)
+    finally:
+        if sampler is not None:
+            sampler.close()
+        report.seconds = time.perf_counter() - t_start
+        store.finish_run(run_id, {k: v for k, v in report.summary().items() if not isinstance(v, dict)})
+    return report
+
+
+def _prepare(path: Path, store: TripStore, options: IngestOptions, profiles, sampler, headers) -> FileReport | Task:
+    """In the writer, before the task: hash the file and skip it if unchanged; else the
+    task's arguments (``sampler`` is None for workers: they open their own)."""
+    t0 = time.perf_counter()
+    try:
+        sha = file_sha256(path)
+    except OSError as exc:
+        return FileReport(str(path), "failed", error=f"{path}: cannot read: {exc.strerror}",
+                          seconds=time.perf_counter() - t0)
+    if not options.force and not store.needs_ingest(path, sha):
+        return FileReport(str(path), "unchanged", seconds=time.perf_counter() - t0)
+    return Task(str(path), (path, options, profiles, sampler, sha, headers))
+
+
+def _write_result(res: TaskResult, store: TripStore, options: IngestOptions, report: IngestReport) -> FileReport:
+    """Write one task's outcome to the store (or report the file that needed no task);
+    ``seconds`` is the worker's time, the writer's is added by the caller."""
+    if res.task is None:
+        return res.value
+    path, sha = Path(res.task.key), res.task.args[4]
+    if not res.ok:  # the task itself failed: its worker died max_attempts times, or it raised
+        error = f"{path}: {res.error}"
+        try:
+            st = path.stat()
+            size, mtime = st.st_size, st.st_mtime
+        except OSError:
+            size = mtime = None
+        store.record_failure(path, error, sha256=sha, size_bytes=size, mtime_s=mtime)
+        return FileReport(str(path), "failed", error=error)
+    fr = _store_outcome(path, res.value, store, options, report)
+    fr.seconds = res.seconds
+    return fr
+
+
+def _store_outcome(path: Path, out: FileOutcome, store: TripStore, options: IngestOptions,
+                   report: IngestReport) -> FileReport:
+    for k, v in out.stage_s.items():
+        report.stage_s[k] = report.stage_s.get(k, 0.0) + v
+    report.rows += out.n_rows
+    if not out.ok:
+        if out.sha256 is None:  # could not even be read: nothing to record against
+            return FileReport(str(path), "failed", error=out.error)
+        store.record_failure(path, out.error, sha256=out.sha256, size_bytes=out.size_bytes,
+                             mtime_s=out.mtime_s, profile=out.profile)
+        return FileReport(str(path), "failed", error=out.error, profile=out.profile)
+    t0 = time.perf_counter()
+    res = store.replace_file_trips(
+        path, list(out.trips), list(out.vectors), sha256=out.sha256, size_bytes=out.size_bytes,
+        mtime_s=out.mtime_s, profile=out.profile, force=options.force, profile_blobs=list(out.profile_blobs),
+    )
+    report.stage_s["store"] = report.stage_s.get("store", 0.0) + time.perf_counter() - t0
+    if res.unchanged:
+        return FileReport(str(path), "unchanged", profile=out.profile)
+    return FileReport(
+        str(path), "ingested", trips=len(out.trips), samples=out.n_samples,
+        km=sum(t.length_m for t in out.trips) / 1000.0, profile=out.profile,
+        duplicates=res.skipped_duplicates, repairs=out.repairs,
+    )

@@ -1,0 +1,579 @@
+"""Logger profiles: how each logger writes its CSV, loaded and validated.
+
+A *profile* (a small TOML file, see ``configs/loggers/*.toml``) says how one logger
+writes its CSV: how to recognise it from the header, text encoding, separator, decimal
+mark, leading comment/metadata lines, where the time is and in which zone, where the
+vehicle id comes from, which column feeds each canonical column (``CANONICAL_COLUMNS``
+in :mod:`cevm.core.trip`) in which unit, and which columns measure energy. Supporting a new
+logger means writing a profile, not code.
+
+:func:`load_profile` reads and checks one profile (every key; a mistake names the file
+and the key), :func:`load_profiles` the shipped ones (``configs/loggers``), a user's
+directory and ``$CEVM_PROFILES``. Reading a file with a profile is
+:mod:`cevm.ingest.reading`.
+
+Profile format (all keys; ``[columns]`` entries and ``[[energy]]`` tables repeat)::
+
+    name = "srf"                         # unique profile name
+    description = "..."                  # free text
+    [detect]
+    required_columns = ["timestamp_utc"] # header must hold all of these
+    [csv]
+    encoding = "utf-8"                   # any Python codec name (utf-8, cp1252, utf-16, ...)
+    separator = ","
+    decimal = "."
+    comment_prefix = "#"                 # leading lines starting with it are comments ("" = none)
+    metadata = "key=value"               # parse comments as key=value, or "none"
+    truncated_last_line = "drop"         # "drop" (and report) or "error"
+    [time]
+    columns = ["timestamp_utc"]          # one datetime column, or [date, time-of-day]
+    format = "ISO8601"                   # one column: "ISO8601" or a strptime format
+    date_format = "%m/%d/%Y"             # two columns: strptime formats of each
+    time_format = "%H:%M:%S"
+    timezone = "UTC"                     # IANA zone of naive times
+    date_repair = "none"                 # two columns only: "none" or "dominant"
+    date_repair_max_days = 1             # a date further from the dominant one is corrupt
+    [vehicle]
+    source = "metadata"                  # metadata | column | file_stem | parent_dir | fixed
+    key = "vehicle_id"                   # metadata key or column name
+    value = "..."                        # for source = "fixed"
+    fallback = "file_stem"               # when the metadata key is absent: file_stem | parent_dir | error
+    [quality]
+    zero_position_is_no_fix = true       # latitude or longitude exactly 0 -> no fix
+    absurd_error_share = 0.5             # more absurd values than this share -> error
+    [columns]
+    wheel_speed_mps = { source = "fms_wheel_speed_kmh", unit = "km/h" }
+    ignition = { source = "Ignition", map = { On = 1, Off = 0 } }
+    gps_alt_m = { source = "ALT", unit = "m", missing_values = [-111] }
+    # per column also: required = true (error if absent from the header), negate = true
+    [[energy]]
+    column = "total_energy_j"            # canonical column carrying the measurement
+    kind = "counter"                     # rate | counter | soc
+    resolution = 0.1                     # quantisation step ...
+    resolution_unit = "kWh"              # ... in this unit (converted to SI)
+    priority = 1                         # 1 = most trusted
+    capacity = 6.1                       # soc only: usable capacity ...
+    capacity_unit = "kWh"                # ... in this unit
+    modulus = 2147483648                 # counter only: wraps to 0 at this value ...
+    modulus_unit = "l"                   # ... in this unit
+    # column may also be "battery_power_w" (rate, W): battery_voltage_v * battery_current_a
+
+Defaults and why: encoding utf-8, separator ',', decimal '.' (the CSV norm); no comment
+prefix and no metadata (most exports have none); ``truncated_last_line = "drop"`` (a
+logger losing power mid-write leaves a cut last line; the rest of the file is good, and
+the drop is reported); timezone UTC; ``date_repair = "none"`` (repairing is opt-in);
+``date_repair_max_days = 1`` (a session lasts under a day, and a drive across midnight
+keeps the next day's date); vehicle id from the file name stem; zero latitude or
+longitude means no fix (GPS modules write 0 without one; a real fix exactly on the
+equator or the Greenwich meridian, to the logged precision, is rare and losing it is
+harmless); ``absurd_error_share = 0.5`` (see :func:`cevm.ingest.reading._check_absurd`). Energy ``priority``
+has no default: trust is the profile author's statement.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Literal
+
+import pandas as pd
+
+from cevm.configs_dir import shipped_configs_dir
+from cevm.errors import InputError
+
+__all__ = [
+    "UNITS",
+    "CANONICAL_DIMENSIONS",
+    "VIRTUAL_COLUMNS",
+    "ColumnMap",
+    "EnergySpec",
+    "TimeSpec",
+    "Profile",
+    "builtin_profile_dirs",
+    "load_profile",
+    "load_profiles",
+]
+
+# --------------------------------------------------------------------------------------
+# Units: the only place where conversion factors live. Profiles name units; code looks
+# them up here. unit name -> (dimension, factor to the SI unit of that dimension).
+# SI units per dimension: angle deg, length m, speed m/s, volume l (litres by project
+# convention), volume_rate l/s, energy J, power W, mass kg, voltage V, current A,
+# percent %, rotational_speed rpm, dimensionless -.
+# --------------------------------------------------------------------------------------
+UNITS: dict[str, tuple[str, float]] = {
+    "deg": ("angle", 1.0),
+    "m": ("length", 1.0),
+    "km": ("length", 1000.0),
+    "mi": ("length", 1609.344),
+    "ft": ("length", 0.3048),
+    "m/s": ("speed", 1.0),
+    "km/h": ("speed", 1.0 / 3.6),
+    "mph": ("speed", 0.44704),
+    "kn": ("speed", 1852.0 / 3600.0),
+    "l": ("volume", 1.0),
+    "ml": ("volume", 1e-3),
+    "gal_us": ("volume", 3.785411784),
+    "gal_imp": ("volume", 4.54609),
+    "l/s": ("volume_rate", 1.0),
+    "l/h": ("volume_rate", 1.0 / 3600.0),
+    "ml/s": ("volume_rate", 1e-3),
+    "gal_us/h": ("volume_rate", 3.785411784 / 3600.0),
+    "J": ("energy", 1.0),
+    "kJ": ("energy", 1e3),
+    "MJ": ("energy", 1e6),
+    "Wh": ("energy", 3600.0),
+    "kWh": ("energy", 3.6e6),
+    "W": ("power", 1.0),
+    "kW": ("power", 1e3),
+    "kg": ("mass", 1.0),
+    "t": ("mass", 1000.0),
+    "lb": ("mass", 0.45359237),
+    "V": ("voltage", 1.0),
+    "A": ("current", 1.0),
+    "%": ("percent", 1.0),
+    "rpm": ("rotational_speed", 1.0),
+    "-": ("dimensionless", 1.0),
+}
+
+
+# Dimension of every mappable canonical column (time_s, source_line and vehicle_id are
+# produced by the reader itself).
+CANONICAL_DIMENSIONS: dict[str, str] = {
+    "lat_deg": "angle",
+    "lon_deg": "angle",
+    "gps_alt_m": "length",
+    "gps_speed_mps": "speed",
+    "gps_hdop": "dimensionless",
+    "wheel_speed_mps": "speed",
+    "ignition": "dimensionless",
+    "odometer_m": "length",
+    "gross_weight_kg": "mass",
+    "fuel_rate_lps": "volume_rate",
+    "flowmeter_fuel_lps": "volume_rate",
+    "total_fuel_l": "volume",
+    "total_energy_j": "energy",
+    "battery_voltage_v": "voltage",
+    "battery_current_a": "current",
+    "soc_pct": "percent",
+    "accel_pedal_pct": "percent",
+    "brake_switch": "dimensionless",
+    "engine_speed_rpm": "rotational_speed",
+    "engine_torque_pct": "percent",
+}
+
+
+# Energy source kinds and the canonical columns they may use.
+_ENERGY_COLUMNS: dict[str, dict[str, str]] = {
+    # kind -> {canonical column: quantity}
+    "rate": {"fuel_rate_lps": "fuel_l", "flowmeter_fuel_lps": "fuel_l", "battery_power_w": "energy_j"},
+    "counter": {"total_fuel_l": "fuel_l", "total_energy_j": "energy_j"},
+    "soc": {"soc_pct": "energy_j"},
+}
+
+
+# Virtual energy columns: products of two canonical columns, formed by the consumption
+# stage (cevm.ingest.consumption.BATTERY_POWER_COLUMN), not stored in the frame.
+VIRTUAL_COLUMNS: dict[str, tuple[tuple[str, str], str]] = {
+    "battery_power_w": (("battery_voltage_v", "battery_current_a"), "power"),  # W = V * A, + = discharge
+}
+
+
+# The profiles shipped with cevm: configs/loggers (a checkout's, or an installed wheel's).
+_SHIPPED_PROFILES = shipped_configs_dir() / "loggers"
+
+
+# Environment variable: extra profile directories (os.pathsep separated).
+PROFILES_ENV = "CEVM_PROFILES"
+
+
+@dataclass(frozen=True)
+class ColumnMap:
+    """How one canonical column is read: ``canonical = source * factor`` (SI), or through
+    ``value_map`` for categorical text (e.g. ``On`` -> 1.0).
+
+    ``missing_values`` are numbers (in the source unit) that mean "no value" for this
+    logger (e.g. the Twizy's altitude -111); they become NaN and are reported.
+    """
+
+    canonical: str
+    source: str
+    unit: str | None
+    factor: float
+    value_map: tuple[tuple[str, float], ...] | None = None
+    missing_values: tuple[float, ...] = ()
+    required: bool = False
+    negate: bool = False
+
+
+@dataclass(frozen=True)
+class EnergySpec:
+    """An energy measurement the profile's logger can provide (see :class:`EnergySource`)."""
+
+    column: str
+    kind: Literal["rate", "counter", "soc"]
+    quantity: Literal["fuel_l", "energy_j"]
+    resolution: float
+    priority: int
+    capacity_j: float | None = None
+    modulus: float | None = None
+    note: str = ""
+
+
+@dataclass(frozen=True)
+class TimeSpec:
+    """Where the time is and how to read it (see the module docstring for keys)."""
+
+    columns: tuple[str, ...]
+    format: str | None  # single column
+    date_format: str | None  # two columns
+    time_format: str | None
+    timezone: str
+    date_repair: Literal["none", "dominant"] = "none"
+    date_repair_max_days: float = 1.0
+
+
+@dataclass(frozen=True)
+class Profile:
+    """A parsed, validated logger profile. Build with :func:`load_profile`."""
+
+    name: str
+    path: Path | None
+    description: str
+    required_columns: tuple[str, ...]
+    encoding: str
+    separator: str
+    decimal: str
+    comment_prefix: str
+    metadata: Literal["key=value", "none"]
+    truncated_last_line: Literal["drop", "error"]
+    time: TimeSpec
+    vehicle_source: Literal["metadata", "column", "file_stem", "parent_dir", "fixed"]
+    vehicle_key: str | None
+    vehicle_value: str | None
+    vehicle_fallback: Literal["file_stem", "parent_dir", "error"]
+    columns: tuple[ColumnMap, ...]
+    energy: tuple[EnergySpec, ...]
+    zero_position_is_no_fix: bool = True
+    absurd_error_share: float = 0.5
+
+
+_TOP_KEYS = {"name", "description", "detect", "csv", "time", "vehicle", "quality", "columns", "energy"}
+
+
+_SECTION_KEYS = {
+    "detect": {"required_columns"},
+    "csv": {"encoding", "separator", "decimal", "comment_prefix", "metadata", "truncated_last_line"},
+    "time": {"columns", "format", "date_format", "time_format", "timezone", "date_repair", "date_repair_max_days"},
+    "vehicle": {"source", "key", "value", "fallback"},
+    "quality": {"zero_position_is_no_fix", "absurd_error_share"},
+}
+
+
+_COLUMN_KEYS = {"source", "unit", "map", "missing_values", "required", "negate"}
+
+
+_ENERGY_KEYS = {"column", "kind", "quantity", "resolution", "resolution_unit", "priority", "capacity",
+                "capacity_unit", "modulus", "modulus_unit", "note"}
+
+
+def _convert_unit(value: float, unit: str, want_dim: str, path: Path | None, key: str) -> float:
+    """``value`` in ``unit`` converted to the SI unit of dimension ``want_dim``."""
+    if unit not in UNITS:
+        raise InputError(path, f"unknown unit {unit!r}; known units: {', '.join(UNITS)}", column=key)
+    dim, factor = UNITS[unit]
+    if dim != want_dim:
+        raise InputError(path, f"unit {unit!r} is a {dim}, expected a {want_dim}", column=key)
+    return float(value) * factor
+
+
+def load_profile(source: str | Path | dict, path: Path | None = None) -> Profile:
+    """Parse and validate one profile from a TOML file path or an already-parsed dict.
+
+    Unknown or ill-typed keys raise :class:`InputError` naming the file and the key, so
+    a typo in a user's profile is caught at load time, not silently ignored.
+    """
+    if isinstance(source, dict):
+        doc = source
+    else:
+        path = Path(source)
+        try:
+            doc = tomllib.loads(path.read_text(encoding="utf-8"))
+        except OSError as exc:
+            raise InputError(path, f"cannot read profile: {exc.strerror or exc}") from None
+        except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+            raise InputError(path, f"not a valid TOML profile: {exc}") from None
+
+    def fail(msg: str, key: str) -> InputError:
+        return InputError(path, msg, column=key)
+
+    def check_keys(table: Any, allowed: set[str], where: str) -> dict:
+        if not isinstance(table, dict):
+            raise fail("must be a table", where)
+        for k in table:
+            if k not in allowed:
+                raise fail(f"unknown key (allowed: {', '.join(sorted(allowed))})", f"{where}.{k}" if where else k)
+        return table
+
+    def get(table: dict, key: str, typ: type | tuple, default: Any, where: str) -> Any:
+        if key not in table:
+            if default is _REQUIRED:
+                raise fail("missing required key", f"{where}.{key}" if where else key)
+            return default
+        val = table[key]
+        if typ is float and isinstance(val, int) and not isinstance(val, bool):
+            val = float(val)
+        if not isinstance(val, typ) or (typ is not bool and isinstance(val, bool)):
+            tname = typ.__name__ if isinstance(typ, type) else "/".join(t.__name__ for t in typ)
+            raise fail(f"must be a {tname}, got {val!r}", f"{where}.{key}" if where else key)
+        return val
+
+    def choice(val: str, options: tuple[str, ...], key: str) -> str:
+        if val not in options:
+            raise fail(f"{val!r} is not one of {', '.join(options)}", key)
+        return val
+
+    check_keys(doc, _TOP_KEYS, "")
+    name = get(doc, "name", str, _REQUIRED, "")
+    if not re.fullmatch(r"[A-Za-z0-9_.-]+", name):
+        raise fail("profile name may hold only letters, digits, '_', '.', '-'", "name")
+    description = get(doc, "description", str, "", "")
+    detect = check_keys(doc.get("detect", {}), _SECTION_KEYS["detect"], "detect")
+    csv_t = check_keys(doc.get("csv", {}), _SECTION_KEYS["csv"], "csv")
+    time_t = check_keys(doc.get("time", None) if "time" in doc else {}, _SECTION_KEYS["time"], "time")
+    veh_t = check_keys(doc.get("vehicle", {}), _SECTION_KEYS["vehicle"], "vehicle")
+    qual_t = check_keys(doc.get("quality", {}), _SECTION_KEYS["quality"], "quality")
+
+    # csv
+    encoding = get(csv_t, "encoding", str, "utf-8", "csv")
+    try:
+        "x".encode(encoding)
+    except LookupError:
+        raise fail(f"unknown text encoding {encoding!r}", "csv.encoding") from None
+    separator = get(csv_t, "separator", str, ",", "csv")
+    decimal = get(csv_t, "decimal", str, ".", "csv")
+    if len(separator) != 1 or len(decimal) != 1 or separator == decimal:
+        raise fail("separator and decimal must be single, different characters", "csv.separator")
+    comment_prefix = get(csv_t, "comment_prefix", str, "", "csv")
+    metadata = choice(get(csv_t, "metadata", str, "none", "csv"), ("key=value", "none"), "csv.metadata")
+    if metadata != "none" and not comment_prefix:
+        raise fail("metadata needs a comment_prefix", "csv.metadata")
+    truncated = choice(get(csv_t, "truncated_last_line", str, "drop", "csv"), ("drop", "error"), "csv.truncated_last_line")
+
+    # time
+    tcols = get(time_t, "columns", list, _REQUIRED, "time")
+    if not (1 <= len(tcols) <= 2) or not all(isinstance(c, str) and c for c in tcols):
+        raise fail("must list one datetime column or [date column, time column]", "time.columns")
+    fmt = get(time_t, "format", str, None, "time")
+    dfmt = get(time_t, "date_format", str, None, "time")
+    tfmt = get(time_t, "time_format", str, None, "time")
+    if len(tcols) == 1 and (fmt is None or dfmt or tfmt):
+        raise fail("one time column needs 'format' (and no date_format/time_format)", "time.format")
+    if len(tcols) == 2 and (fmt is not None or not dfmt or not tfmt):
+        raise fail("two time columns need 'date_format' and 'time_format' (and no 'format')", "time.date_format")
+    tz = get(time_t, "timezone", str, "UTC", "time")
+    try:
+        pd.Timestamp("2020-01-01").tz_localize(tz)
+    except Exception:  # noqa: BLE001 - any failure means an unknown zone
+        raise fail(f"unknown time zone {tz!r} (use an IANA name such as 'Europe/London')", "time.timezone") from None
+    date_repair = choice(get(time_t, "date_repair", str, "none", "time"), ("none", "dominant"), "time.date_repair")
+    if date_repair != "none" and len(tcols) != 2:
+        raise fail("date_repair needs separate date and time columns", "time.date_repair")
+    max_days = get(time_t, "date_repair_max_days", float, 1.0, "time")
+    if not max_days >= 0:
+        raise fail("must be >= 0", "time.date_repair_max_days")
+    time_spec = TimeSpec(tuple(tcols), fmt, dfmt, tfmt, tz, date_repair, max_days)
+
+    # vehicle
+    vsrc = choice(
+        get(veh_t, "source", str, "file_stem", "vehicle"),
+        ("metadata", "column", "file_stem", "parent_dir", "fixed"),
+        "vehicle.source",
+    )
+    vkey = get(veh_t, "key", str, None, "vehicle")
+    vval = get(veh_t, "value", str, None, "vehicle")
+    vfb = choice(get(veh_t, "fallback", str, "file_stem", "vehicle"), ("file_stem", "parent_dir", "error"), "vehicle.fallback")
+    if vsrc in ("metadata", "column") and not vkey:
+        raise fail(f"vehicle source {vsrc!r} needs 'key'", "vehicle.key")
+    if vsrc == "metadata" and metadata == "none":
+        raise fail("vehicle source 'metadata' needs csv.metadata = 'key=value'", "vehicle.source")
+    if vsrc == "fixed" and not vval:
+        raise fail("vehicle source 'fixed' needs 'value'", "vehicle.value")
+
+    # quality
+    zero_nofix = get(qual_t, "zero_position_is_no_fix", bool, True, "quality")
+    share = get(qual_t, "absurd_error_share", float, 0.5, "quality")
+    if not 0.0 <= share <= 1.0:
+        raise fail("must be within 0..1", "quality.absurd_error_share")
+
+    # columns
+    cols_t = doc.get("columns", {})
+    if not isinstance(cols_t, dict):
+        raise fail("must be a table", "columns")
+    maps: list[ColumnMap] = []
+    for canon, spec in cols_t.items():
+        key = f"columns.{canon}"
+        if canon not in CANONICAL_DIMENSIONS:
+            raise fail(f"not a mappable canonical column (known: {', '.join(CANONICAL_DIMENSIONS)})", key)
+        if isinstance(spec, str):
+            raise fail("must be a table such as { source = \"...\", unit = \"...\" }", key)
+        check_keys(spec, _COLUMN_KEYS, key)
+        src = get(spec, "source", str, _REQUIRED, key)
+        unit = get(spec, "unit", str, None, key)
+        vmap = get(spec, "map", dict, None, key)
+        if (unit is None) == (vmap is None):
+            raise fail("give exactly one of 'unit' or 'map'", key)
+        factor = 1.0
+        map_t = None
+        if unit is not None:
+            factor = _convert_unit(1.0, unit, CANONICAL_DIMENSIONS[canon], path, f"{key}.unit")
+        else:
+            items = []
+            for k, v in vmap.items():
+                if isinstance(v, bool) or not isinstance(v, (int, float)):
+                    raise fail(f"map value for {k!r} must be a number", f"{key}.map")
+                items.append((str(k), float(v)))
+            if not items:
+                raise fail("map is empty", f"{key}.map")
+            map_t = tuple(items)
+        miss = get(spec, "missing_values", list, [], key)
+        if not all(isinstance(m, (int, float)) and not isinstance(m, bool) for m in miss):
+            raise fail("missing_values must be numbers", f"{key}.missing_values")
+        maps.append(
+            ColumnMap(
+                canonical=canon,
+                source=src,
+                unit=unit,
+                factor=factor,
+                value_map=map_t,
+                missing_values=tuple(float(m) for m in miss),
+                required=get(spec, "required", bool, False, key),
+                negate=get(spec, "negate", bool, False, key),
+            )
+        )
+    mapped = {m.canonical for m in maps}
+    if ("lat_deg" in mapped) != ("lon_deg" in mapped):
+        raise fail("map both lat_deg and lon_deg, or neither", "columns")
+    dup = {s for s in [m.source for m in maps] if [m.source for m in maps].count(s) > 1}
+    if dup:
+        raise fail(f"source column(s) {sorted(dup)} mapped twice", "columns")
+
+    # energy
+    energy_t = doc.get("energy", [])
+    if not isinstance(energy_t, list):
+        raise fail("must be an array of tables ([[energy]])", "energy")
+    specs: list[EnergySpec] = []
+    for i, e in enumerate(energy_t):
+        key = f"energy[{i}]"
+        check_keys(e, _ENERGY_KEYS, key)
+        col = get(e, "column", str, _REQUIRED, key)
+        kind = choice(get(e, "kind", str, _REQUIRED, key), ("rate", "counter", "soc"), f"{key}.kind")
+        allowed = _ENERGY_COLUMNS[kind]
+        if col not in allowed:
+            raise fail(f"a {kind} source must use one of {', '.join(allowed)}", f"{key}.column")
+        needs = VIRTUAL_COLUMNS[col][0] if col in VIRTUAL_COLUMNS else (col,)
+        for c in needs:
+            if c not in mapped:
+                raise fail(f"column {c!r} is not mapped in [columns]", f"{key}.column")
+        dim = VIRTUAL_COLUMNS[col][1] if col in VIRTUAL_COLUMNS else CANONICAL_DIMENSIONS[col]
+        quantity = allowed[col]
+        if "quantity" in e and get(e, "quantity", str, None, key) != quantity:
+            raise fail(f"column {col!r} measures {quantity}", f"{key}.quantity")
+        res = get(e, "resolution", float, 0.0, key)
+        if not res >= 0:
+            raise fail("must be >= 0", f"{key}.resolution")
+        res_unit = get(e, "resolution_unit", str, None, key)
+        if res_unit is not None:
+            res = _convert_unit(res, res_unit, dim, path, f"{key}.resolution_unit")
+        elif res:
+            raise fail("resolution needs resolution_unit", f"{key}.resolution_unit")
+        prio = get(e, "priority", int, _REQUIRED, key)
+        if prio < 1:
+            raise fail("must be >= 1 (1 = most trusted)", f"{key}.priority")
+        cap = get(e, "capacity", float, None, key)
+        cap_j = None
+        if cap is not None:
+            if kind != "soc":
+                raise fail("capacity applies to soc sources only", f"{key}.capacity")
+            if not cap > 0:
+                raise fail("must be > 0", f"{key}.capacity")
+            cap_j = _convert_unit(cap, get(e, "capacity_unit", str, _REQUIRED, key), "energy", path, f"{key}.capacity_unit")
+        modulus = get(e, "modulus", float, None, key)
+        if modulus is not None:
+            if kind != "counter" or not modulus > 0:
+                raise fail("modulus (> 0) applies to counter sources only", f"{key}.modulus")
+            modulus = _convert_unit(modulus, get(e, "modulus_unit", str, _REQUIRED, key), dim, path,
+                                    f"{key}.modulus_unit")
+        specs.append(EnergySpec(col, kind, quantity, res, prio, cap_j, modulus,  # type: ignore[arg-type]
+                                get(e, "note", str, "", key)))
+
+    req = get(detect, "required_columns", list, _REQUIRED, "detect")
+    if not req or not all(isinstance(c, str) and c for c in req):
+        raise fail("must be a non-empty list of header column names", "detect.required_columns")
+
+    return Profile(
+        name=name,
+        path=path,
+        description=description,
+        required_columns=tuple(req),
+        encoding=encoding,
+        separator=separator,
+        decimal=decimal,
+        comment_prefix=comment_prefix,
+        metadata=metadata,  # type: ignore[arg-type]
+        truncated_last_line=truncated,  # type: ignore[arg-type]
+        time=time_spec,
+        vehicle_source=vsrc,  # type: ignore[arg-type]
+        vehicle_key=vkey,
+        vehicle_value=vval,
+        vehicle_fallback=vfb,  # type: ignore[arg-type]
+        columns=tuple(maps),
+        energy=tuple(specs),
+        zero_position_is_no_fix=zero_nofix,
+        absurd_error_share=share,
+    )
+
+
+class _Required:
+    pass
+
+
+_REQUIRED = _Required()
+
+
+def builtin_profile_dirs() -> list[Path]:
+    """Directories of the profiles shipped with cevm that exist: ``configs/loggers`` of
+    the source checkout or of the installed package (:mod:`cevm.configs_dir`)."""
+    return [_SHIPPED_PROFILES] if _SHIPPED_PROFILES.is_dir() else []
+
+
+def load_profiles(directory: str | Path | None = None, *, include_env: bool = True) -> dict[str, Profile]:
+    """Load every ``*.toml`` profile, keyed by profile name.
+
+    Parameters
+    ----------
+    directory : directory to read instead of the built-in ones (default ``None``: the
+        profiles shipped with cevm, see :func:`builtin_profile_dirs`).
+    include_env : also read the directories listed in the ``CEVM_PROFILES`` environment
+        variable (``os.pathsep`` separated) after the others (default ``True``), so that
+        a user adds loggers without touching the installation. A later directory's
+        profile replaces an earlier one of the same name.
+    """
+    dirs = [Path(directory)] if directory is not None else builtin_profile_dirs()
+    if include_env and os.environ.get(PROFILES_ENV):
+        dirs += [Path(p) for p in os.environ[PROFILES_ENV].split(os.pathsep) if p]
+    profiles: dict[str, Profile] = {}
+    for d in dirs:
+        if not d.is_dir():
+            raise InputError(d, "profile directory does not exist")
+        seen: dict[str, Path] = {}
+        for f in sorted(d.glob("*.toml")):
+            p = load_profile(f)
+            if p.name in seen:
+                raise InputError(f, f"profile name {p.name!r} already used by {seen[p.name]}", column="name")
+            seen[p.name] = f
+            profiles[p.name] = p
+    return profiles

@@ -1,0 +1,213 @@
+"""The per-file task of ``cevm ingest``: one logger file -> what to store of its trips.
+
+:func:`process_file` (a pure-enough task: it reads the file and the DSM, and returns
+everything to store; it never writes) runs the stages in the order the data flows
+through them: read with a logger profile (:mod:`cevm.ingest.reading`), clean and split
+into trips with measured consumption (:mod:`cevm.ingest.cleaning`,
+:mod:`cevm.ingest.consumption`), road elevation from the DSM
+(:mod:`cevm.ingest.elevation`), the trip's drive-cycle vector (:mod:`cevm.core.cycle`)
+and its stored profile (:func:`cevm.store.trip_profile_blob`).
+
+It is the one task of every ingest, serial, in a process pool or on a Dask cluster
+(:mod:`cevm.executors`); a worker opens the DSM once (:func:`worker_sampler`), not once
+per file. :func:`cevm.ingest.pipeline.ingest` dispatches it and writes the outcomes.
+"""
+
+from __future__ import annotations
+
+import csv
+import hashlib
+import time
+import traceback
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from cevm.ingest.cleaning import CleanParams, CleanTrip, clean_log
+from cevm.core.cycle import CR0_DEFAULT, drive_cycle_vector
+from cevm.ingest.dsm import DsmHeaders, DsmSampler
+from cevm.ingest.elevation import ElevationParams, trip_elevation
+from cevm.errors import CevmError, InputError
+from cevm.ingest.profiles import Profile
+from cevm.ingest.reading import read_log
+from cevm.executors import worker_cache
+from cevm.store import trip_profile_blob
+from cevm.core.trip import Trip, TripRecord
+
+
+@dataclass(frozen=True)
+class IngestOptions:
+    """What an ingest run does to each file (the per-file task's parameters)."""
+
+    dsm: str | None = None  # GeoTIFF, directory of tiles, VRT, or GDAL/HTTP name
+    profile: str | None = None  # force a logger profile by name; None: detect
+    profiles_dir: str | None = None  # extra profiles directory (besides configs/loggers)
+    clean: CleanParams = field(default_factory=CleanParams)
+    elevation: ElevationParams = field(default_factory=ElevationParams)
+    cr0: float = CR0_DEFAULT
+    force: bool = False  # re-ingest files even when unchanged
+
+
+@dataclass(frozen=True, eq=False)
+class FileOutcome:
+    """What :func:`process_file` made of one file (picklable: crosses processes)."""
+
+    path: str
+    sha256: str | None
+    size_bytes: int | None
+    mtime_s: float | None
+    profile: str | None = None
+    trips: tuple[TripRecord, ...] = ()  # the arrays are in vectors and profile_blobs
+    vectors: tuple[bytes, ...] = ()
+    profile_blobs: tuple[bytes, ...] = ()  # each trip's stored profile (trip_profile_blob)
+    n_rows: int = 0
+    n_samples: int = 0
+    dropped: tuple[dict, ...] = ()
+    repairs: tuple[str, ...] = ()
+    error: str | None = None
+    stage_s: dict = field(default_factory=dict)
+
+    @property
+    def ok(self) -> bool:
+        return self.error is None
+
+
+def file_sha256(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for chunk in iter(lambda: f.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+def _trip_from_clean(ct: CleanTrip, *, vehicle_id: str, path: Path, sha256: str, index: int,
+                     sampler: DsmSampler | None, params: ElevationParams, repairs: list[str]) -> Trip:
+    gps_alt = ct.gps_alt_m if np.isfinite(ct.gps_alt_m).any() else None
+    elev = trip_elevation(ct.distance_m, ct.lon_deg, ct.lat_deg, gps_alt, sampler, params)
+    quality = dict(ct.quality)
+    quality["elevation"] = elev.quality()
+    quality["source_lines"] = [ct.first_source_line, ct.last_source_line]
+    if repairs:
+        quality["read_repairs"] = list(repairs)
+    return Trip(
+        vehicle_id=vehicle_id,
+        source_file=str(path),
+        source_sha256=sha256,
+        trip_index=index,
+        start_utc_s=ct.start_utc_s,
+        time_s=ct.time_s,
+        speed_mps=ct.speed_mps,
+        distance_m=ct.distance_m,
+        lat_deg=ct.lat_deg,
+        lon_deg=ct.lon_deg,
+        elevation_m=elev.elevation_m,
+        elevation_source=elev.source,
+        dsm_coverage_pct=elev.dsm_coverage_pct,
+        measured=ct.measured,
+        gross_weight_kg=ct.gross_weight_kg,
+        quality=quality,
+    )
+
+
+def process_file(
+    path: str | Path,
+    options: IngestOptions,
+    profiles: dict[str, Profile] | None = None,
+    sampler: DsmSampler | None = None,
+    sha256: str | None = None,
+    dsm_headers: DsmHeaders | None = None,
+) -> FileOutcome:
+    """Read, clean, add elevation and compute vectors for one file; never raises for
+    bad input: the outcome carries the error (file, line, column, why).
+
+    The one task of every ingest, serial, in a process pool or on a Dask cluster.
+    ``profiles``: the logger profiles (None: :func:`~cevm.ingest.profiles.load_profiles`).
+    ``sampler``: an open sampler of ``options.dsm``; None with ``options.dsm`` set: this
+    worker's own, opened on first use and kept (:func:`worker_sampler`).
+    ``sha256`` is the file's hash if the caller has it already; ``dsm_headers`` the
+    DSM's headers if the caller read them (:func:`worker_sampler`)."""
+    path = Path(path)
+    stage: dict[str, float] = {}
+    try:
+        st = path.stat()
+        size, mtime = st.st_size, st.st_mtime
+        sha = sha256 or file_sha256(path)
+    except OSError as exc:
+        return FileOutcome(str(path), None, None, None, error=f"{path}: cannot read: {exc.strerror}")
+    try:
+        if sampler is None and options.dsm is not None:
+            sampler = worker_sampler(options.dsm, dsm_headers)
+        t0 = time.perf_counter()
+        logs = read_log(path, options.profile, profiles)
+        stage["read"] = time.perf_counter() - t0
+        trips: list[TripRecord] = []
+        vectors: list[bytes] = []
+        blobs: list[bytes] = []
+        dropped: list[dict] = []
+        n_rows = 0
+        for log in logs:
+            n_rows += len(log.frame)
+            t0 = time.perf_counter()
+            result = clean_log(log.frame, log.energy_sources, options.clean, path=path)
+            stage["clean"] = stage.get("clean", 0.0) + time.perf_counter() - t0
+            dropped.extend({"vehicle_id": log.vehicle_id, **d} for d in result.dropped)
+            for ct in result.trips:
+                t0 = time.perf_counter()
+                trip = _trip_from_clean(
+                    ct, vehicle_id=log.vehicle_id, path=path, sha256=sha, index=len(trips),
+                    sampler=sampler, params=options.elevation, repairs=log.repairs,
+                )
+                t1 = time.perf_counter()
+                vec = drive_cycle_vector(trip.time_s, trip.speed_mps, trip.elevation_m, cr0=options.cr0)
+                vectors.append(vec.to_bytes())
+                t2 = time.perf_counter()
+                blobs.append(trip_profile_blob(trip))
+                stage["elevation"] = stage.get("elevation", 0.0) + t1 - t0
+                stage["vector"] = stage.get("vector", 0.0) + t2 - t1
+                stage["profile"] = stage.get("profile", 0.0) + time.perf_counter() - t2
+                trips.append(trip.record())
+        return FileOutcome(
+            str(path), sha, size, mtime,
+            profile=logs[0].profile if logs else None,
+            trips=tuple(trips), vectors=tuple(vectors), profile_blobs=tuple(blobs), n_rows=n_rows,
+            n_samples=sum(t.n_samples for t in trips),
+            dropped=tuple(dropped), repairs=tuple(logs[0].repairs) if logs else (),
+            stage_s=stage,
+        )
+    except CevmError as exc:
+        return FileOutcome(str(path), sha, size, mtime, error=str(exc), stage_s=stage)
+    except (ValueError, OSError, csv.Error, UnicodeError) as exc:  # a file we could not make sense of
+        return FileOutcome(str(path), sha, size, mtime, error=f"{path}: {type(exc).__name__}: {exc}", stage_s=stage)
+    except Exception as exc:  # a bug in cevm: still only this file fails, and it says so
+        where = traceback.extract_tb(exc.__traceback__)[-1]
+        return FileOutcome(
+            str(path), sha, size, mtime, stage_s=stage,
+            error=f"{path}: internal error (a cevm bug, please report): {type(exc).__name__}: {exc} "
+                  f"at {Path(where.filename).name}:{where.lineno}",
+        )
+
+
+def open_sampler(dsm: str | None) -> DsmSampler | None:
+    """Open the DSM, or None. A DSM that cannot be opened is the user's error."""
+    if dsm is None:
+        return None
+    try:
+        return DsmSampler.open(dsm)
+    except CevmError:
+        raise
+    except Exception as exc:  # rasterio errors have many types
+        raise InputError(dsm, f"cannot open the DSM: {exc}") from None
+
+
+def worker_sampler(dsm: str, headers: DsmHeaders | None = None) -> DsmSampler:
+    """This worker's (process and thread) sampler of ``dsm``, opened on first use and
+    kept for the next files (:func:`cevm.executors.worker_cache`). ``headers``: the
+    rasters' headers as the writer read them (:attr:`DsmSampler.headers`), so that a
+    new worker does not read every tile's header again (~1.5 ms a tile); rasters
+    are then opened when a window of them is needed. A long-lived worker given other
+    headers (a DSM changed between runs) opens a new sampler."""
+    if headers is None:
+        return worker_cache(("cevm.ingest.DsmSampler", dsm), lambda: open_sampler(dsm))
+    return worker_cache(("cevm.ingest.DsmSampler", dsm, headers), lambda: DsmSampler.from_headers(headers))
+
