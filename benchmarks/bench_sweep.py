@@ -259,7 +259,7 @@ def main() -> None:
 
     if args.no_cli:
         return
-    from cevm.routes import CycleLeg, add_route
+    from cevm.store.routes import CycleLeg, add_route
     from cevm.store import TripStore
 
     with tempfile.TemporaryDirectory() as tmp:

@@ -93,7 +93,7 @@ def test_calibrate_unknown_vehicle_id_is_a_clear_error(store, root):
 
 
 def test_calibrated_toml_replaces_values_keeps_the_rest_and_says_so():
-    from cevm.calibrate_io import calibrated_toml
+    from cevm.io.calibrated import calibrated_toml
 
     text = 'name = "x"  # a name\neta = 0.45   # from the paper\ncr = 0.0066\n\n[sources]\neta = "paper"\n'
     out = calibrated_toml(text, {"eta": 0.3712345678, "ice_braking": "no-credit"}, "calibrated\nfitted: eta")

@@ -12,7 +12,7 @@ from cevm.cli import app
 from cevm.core.cycle import CycleVector, drive_cycle_vector
 from cevm.errors import CevmError, InputError
 from cevm.io import read_cycle_csv
-from cevm.routes import (
+from cevm.store.routes import (
     CycleLeg,
     TripLeg,
     add_route,

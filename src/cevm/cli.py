@@ -8,9 +8,10 @@ line on stderr, without a traceback.
 from __future__ import annotations
 
 import dataclasses
+import json
 import sys
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import TYPE_CHECKING, Annotated, Optional
 
 import numpy as np
 import typer
@@ -21,6 +22,9 @@ from cevm.io import read_cycle_csv
 from cevm.core.model import ICE_BRAKING_MODES
 from cevm.report import OutputFormat, write_rows
 from cevm.units import J_PER_KWH
+
+if TYPE_CHECKING:
+    from cevm.core.calibration import CalibrationResult
 
 EXIT_OK = 0
 EXIT_PARTIAL = 1
@@ -230,9 +234,9 @@ def calibrate(
     """Fit eta (and what the data supports) to a vehicle's measured trips.
 
     With in-sample and cross-validated errors: the paper's tables 1 and 2 for your fleet."""
-    from cevm.calibrate_io import (
-        dumps, plot_calibration, result_json, trips_for_calibration, write_calibrated_vehicle,
-    )
+    from cevm.io.calibrated import write_calibrated_vehicle
+    from cevm.io.plots import plot_calibration
+    from cevm.store.calibration import trips_for_calibration
     from cevm.core.calibration import fit as fit_vehicle
     from cevm.io import load_vehicle
     from cevm.store import TripStore
@@ -413,7 +417,8 @@ def fleet_plan(
     within gross-weight limits and EV reserves: proven optimal (enumeration or MILP)."""
     import json
 
-    from cevm.io.scenario import default_resolver, fleet_report, store_resolver
+    from cevm.io.scenario import default_resolver, fleet_report
+    from cevm.store.sources import store_resolver
     from cevm.store import TripStore, resolve_store_path
 
     if method not in ("auto", "enumerate", "milp"):
@@ -450,6 +455,56 @@ def fleet_plan(
                 "solve ms": s["solve_time_s"] * 1e3} for s in report["summary"]]
     write_rows(summary, OutputFormat.table, title="optimum against the default assignment",
                digits={f"total {unit}": 2, f"default {unit}": 2, "saving %": 2, "solve ms": 2})
+
+
+def result_json(result: CalibrationResult, vehicle_id: str, notes: tuple[str, ...]) -> dict:
+    """The machine-readable form: figures of the table, fitted values, per-trip rows
+    (each trip twice: its in-sample prediction, held_out false, and its cross-validated
+    one, held_out true)."""
+    from cevm.core.calibration import display_value
+    from cevm.io.calibrated import fitted_keys
+
+    unit = "kWh" if result.unit == "J" else "l"
+
+    def stats(s):
+        return None if s is None else {"n": s.n, "mean_pct": _f(s.mean_pct), "std_pct": _f(s.std_pct),
+                                       "rms_pct": _f(s.rms_pct), "max_abs_pct": _f(s.max_abs_pct)}
+
+    trips = []
+    for r in result.rows:
+        for held_out, pred, err in ((False, r.predicted_in_sample, r.error_pct_in_sample),
+                                    (True, r.predicted_cv, r.error_pct_cv)):
+            trips.append({"trip_id": r.trip_id, "measured": display_value(result, r.measured),
+                          "predicted": _f(display_value(result, pred)), "error_pct": _f(err),
+                          "held_out": held_out, "fold": r.fold if held_out else None, "unit": unit,
+                          "distance_km": r.distance_m / 1e3, "mass_kg": r.mass_kg, "weight": r.weight,
+                          "rel_uncertainty": r.rel_uncertainty})
+    t = result.time_per_prediction_s
+    return {
+        "vehicle_id": vehicle_id,
+        "eta": result.vehicle.eta,
+        "fitted": {k: {"value": v, "std": s} for k, (v, s) in result.fitted.items()},
+        "fitted_file_keys": fitted_keys(result),
+        "refused": dict(result.refused),
+        "excluded": dict(result.excluded),
+        "n_trips": len(result.rows),
+        "in_sample": stats(result.in_sample),
+        "cross_validated": stats(result.cv),
+        "cv_scheme": result.cv_scheme,
+        "time_per_prediction_s": None if t is None else {"mean": t[0], "std": t[1]},
+        "model_rel_sigma": result.model_rel_sigma,
+        "unit": unit,
+        "notes": list(notes) + list(result.warnings),
+        "trips": trips,
+    }
+
+
+def _f(x: float) -> float | None:
+    return float(x) if x is not None and np.isfinite(x) else None
+
+
+def dumps(obj: dict) -> str:
+    return json.dumps(obj, indent=2)
 
 
 # predict, feasibility and route: defined in cevm.cli_predict on this app

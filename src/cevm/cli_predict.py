@@ -1,5 +1,5 @@
 """``cevm predict``, ``cevm feasibility`` and ``cevm route``: fleet decisions on the command
-line, a thin layer over :mod:`cevm.core.sweep` and :mod:`cevm.routes`.
+line, a thin layer over :mod:`cevm.core.sweep` and :mod:`cevm.store.routes`.
 
 Registered on :data:`cevm.cli.app` when :mod:`cevm.cli` imports this module.
 
@@ -37,10 +37,10 @@ import typer
 from cevm.cli import StoreOption, _existing_store, _fail, app
 from cevm.core.cycle import CR0_DEFAULT
 from cevm.errors import CevmError
+from cevm.store.sources import load_sources
 from cevm.core.sweep import (
     DEFAULT_RESERVE_PCT,
     DEFAULT_SOC_START_PCT,
-    LegProfile,
     PredictionSet,
     Source,
     SweepBlock,
@@ -123,52 +123,6 @@ Cr0Option = Annotated[
 ]
 OutOption = Annotated[Optional[Path], typer.Option("--out", "-o", help="Write the output to this file instead of stdout.")]
 FormatOption = Annotated[OutputFormat, typer.Option("--format", "-f", help="Output format.")]
-
-
-# ---------------------------------------------------------------------------- sources
-
-
-def _load_sources(stack: ExitStack, store: Optional[Path], cycles: Sequence[Path], trips: Sequence[str],
-                  vehicle_ids: Sequence[str], routes: Sequence[str], cr0: float) -> list[Source]:
-    """Sources in the order cycles, trips, trips of vehicle ids, routes. A store is opened
-    (and kept open on ``stack``) only when a stored source is asked for; profiles are
-    read from it when first needed."""
-    from cevm.io import read_cycle_csv
-
-    sources = [Source.from_cycle(read_cycle_csv(p), cr0=cr0) for p in cycles]
-    if not (trips or vehicle_ids or routes):
-        return sources
-    from cevm.core.cycle import CycleVector
-    from cevm.routes import load_route_legs, load_route_profiles, resolve_route_patterns
-    from cevm.store import TripStore, existing_store_path
-
-    path = existing_store_path(store)
-    st = stack.enter_context(TripStore.open(path))
-    vectors: dict[str, bytes] = {}
-    if trips:
-        vectors.update(st.load_vectors(trip_ids=list(trips)))
-    for vid in vehicle_ids:
-        got = st.load_vectors(vehicle_id=vid)
-        if not got:
-            raise CevmError(f"vehicle id {vid!r} has no stored trips; see 'cevm trips'")
-        vectors.update(got)
-
-    def trip_legs(tid: str):
-        return lambda: (LegProfile.from_profile(st.load_profile(tid)),)
-
-    for tid, blob in vectors.items():
-        sources.append(Source(name=tid, kind="trip", vector=CycleVector.from_bytes(blob), legs=trip_legs(tid)))
-
-    def route_legs(name: str):
-        return lambda: [LegProfile.from_profile(p) for p in load_route_profiles(st, name)]
-
-    for name in resolve_route_patterns(st, list(routes)) if routes else []:
-        legs = load_route_legs(st, name, profiles=False)
-        vec = legs[0].vector
-        for leg in legs[1:]:
-            vec = vec + leg.vector
-        sources.append(Source(name=name, kind="route", vector=vec, legs=route_legs(name)))
-    return sources
 
 
 def _values(specs: Optional[list[str]], option: str) -> np.ndarray | None:
@@ -605,7 +559,7 @@ def predict_cmd(
         vehicles = load_vehicles(vehicle)
         pset = PredictionSet.build(vehicles, mass_kg=masses, payload_kg=payloads, ice_braking=ice_braking)
         with ExitStack() as stack:
-            sources = _load_sources(stack, store, cycle or [], trip or [], vehicle_id or [], route or [], cr0)
+            sources = load_sources(stack, store, cycle or [], trip or [], vehicle_id or [], route or [], cr0)
             executor = stack.enter_context(make_executor(None if scheduler else (workers or 1), scheduler))
             stream = _open_out(stack, out)
             writer = _PredictWriter(fmt, stream)
@@ -701,7 +655,7 @@ def feasibility_cmd(
         vehicles = load_vehicles(vehicle)
         rows: list[dict] = []
         with ExitStack() as stack:
-            sources = _load_sources(stack, store, cycle or [], trip or [], vehicle_id or [], route or [], cr0)
+            sources = load_sources(stack, store, cycle or [], trip or [], vehicle_id or [], route or [], cr0)
             for src in sources:
                 res = feasibility(src, vehicles, soc_start_pct=soc_start, reserve_pct=reserve_pct,
                                   payload_kg=payload_kg, mass_kg=mass_kg, payload_cap_kg=payload_cap_kg,
@@ -769,7 +723,7 @@ def route_add(
     """Store a named route: stored trips (--trip) or cycle files (--cycle) in the order
     given, or a mix with --leg trip:ID --leg cycle:PATH. Cycle legs are copied into the
     store (vector and profile), so the route does not depend on the files afterwards."""
-    from cevm.routes import CycleLeg, TripLeg, add_route
+    from cevm.store.routes import CycleLeg, TripLeg, add_route
     from cevm.store import TripStore, resolve_store_path
 
     given = sum(bool(x) for x in (trip, cycle, leg))
@@ -807,7 +761,7 @@ def route_list(
     fmt: FormatOption = OutputFormat.table,
 ) -> None:
     """List the stored routes: legs, distance, duration."""
-    from cevm.routes import list_routes, load_route_legs
+    from cevm.store.routes import list_routes, load_route_legs
     from cevm.store import TripStore, format_utc
 
     path = _existing_store(store, "run 'cevm ingest' or 'cevm route add' first, or give --store")
@@ -858,7 +812,7 @@ def route_remove(
     store: StoreOption = None,
 ) -> None:
     """Delete a stored route (its trips stay in the store)."""
-    from cevm.routes import remove_route
+    from cevm.store.routes import remove_route
     from cevm.store import TripStore
 
     path = _existing_store(store, "give --store")

@@ -69,6 +69,7 @@ from scipy.optimize import brentq, least_squares
 
 from cevm.core.cycle import CycleVector
 from cevm.errors import CevmError
+from cevm.units import J_PER_KWH
 from cevm.core.model import braking_weight, wheel_energy_j
 from cevm.core.trip import Measurement
 from cevm.core.vehicle import Vehicle, predict
@@ -777,3 +778,8 @@ def _condition_number(jw: np.ndarray) -> float:
         return math.inf
     sv = np.linalg.svd(jw / norms, compute_uv=False)
     return float(sv[0] / sv[-1]) if sv[-1] > 0 else math.inf
+
+
+def display_value(result: CalibrationResult, value: float) -> float:
+    """Consumption in display units: litres, or kWh for joules."""
+    return value / J_PER_KWH if result.unit == "J" else value

@@ -63,21 +63,6 @@ def default_resolver(source: LegSource, base_dir: Path) -> CycleVector:
     )
 
 
-def store_resolver(store) -> LegResolver:
-    """A resolver that also reads ``trip`` (a stored trip id) and ``route`` (a stored
-    route name) leg sources from an open :class:`cevm.store.TripStore`."""
-    from cevm.routes import load_route_vector
-
-    def resolve(source: LegSource, base_dir: Path) -> CycleVector:
-        if source.kind == "trip":
-            return CycleVector.from_bytes(store.load_vector_bytes(source.ref))
-        if source.kind == "route":
-            return load_route_vector(store, source.ref)
-        return default_resolver(source, base_dir)
-
-    return resolve
-
-
 def _read_toml(path: Path) -> dict:
     return read_toml(path, "scenario file")
 

@@ -1,11 +1,5 @@
-"""The embedded trip store of ``cevm ingest``: one SQLite file, no server.
-
-Location
-    ``--store PATH`` if given, else the environment variable ``CEVM_STORE``, else
-    ``$XDG_DATA_HOME/cevm/cevm.sqlite`` (``~/.local/share/cevm/cevm.sqlite`` when
-    ``XDG_DATA_HOME`` is unset or not absolute, as the XDG spec says). A fixed per-user
-    location works the same from a shell and from cron, unlike the current directory.
-    See :func:`default_store_path` and :func:`resolve_store_path`.
+"""The trip store's :class:`TripStore`: one SQLite file, no server. Where the file is:
+:mod:`cevm.store.location`; how a trip's profile is packed: :mod:`cevm.store.codec`.
 
 Tables (schema version :data:`SCHEMA_VERSION`)
     ``meta``       key/value: ``schema_version``, ``created_utc_s``, ``cevm_version``.
@@ -19,7 +13,7 @@ Tables (schema version :data:`SCHEMA_VERSION`)
                    uncertainty; NULL when not measured), gross weight [kg],
                    elevation source, DSM coverage [%].
     ``trip_blobs`` per trip: the drive-cycle vector (opaque bytes from the caller) and
-                   the profile arrays (see :func:`encode_profile`). Kept apart from
+                   the profile arrays (see :func:`cevm.store.codec.encode_profile`). Kept apart from
                    ``trips`` so that listing trips never reads the blobs.
     ``runs``       one row per ``cevm ingest`` run: start, end, host, pid, counts (JSON).
 
@@ -57,9 +51,7 @@ import math
 import os
 import socket
 import sqlite3
-import struct
 import time
-import zlib
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -68,8 +60,10 @@ import numpy as np
 import pandas as pd
 
 from cevm import __version__
-from cevm.errors import CevmError
 from cevm.core.trip import Measurement, Trip, TripRecord
+from cevm.errors import CevmError
+from cevm.store.codec import decode_profile, trip_profile_blob
+from cevm.store.location import file_key, resolve_store_path
 from cevm.units import J_PER_KWH
 
 SCHEMA_VERSION = 1
@@ -80,28 +74,6 @@ BUSY_TIMEOUT_S = 60.0
 """How long a writer waits for another process's write transaction [s]. One file's
 transaction lasts milliseconds to a second, so 60 s only runs out if a process hangs."""
 
-STORE_ENV_VAR = "CEVM_STORE"
-
-# Profile arrays and the dtype each is stored with. Degrees need float64 (float32 steps
-# are ~1e-6 deg = 0.1 m at 45 deg, and worse in the sums of a cumulated track), time and
-# cumulative distance need float64 (float32 at 1e5 s or 1e6 m steps by 8 ms or 6 cm, a
-# large error on a 0.1 s or 1 m step); speed and elevation are fine as float32 (relative
-# step 6e-8: 1e-6 m/s at 20 m/s, 0.5 mm at 8848 m).
-PROFILE_DTYPES: dict[str, str] = {
-    "time_s": "<f8",
-    "speed_mps": "<f4",
-    "distance_m": "<f8",
-    "elevation_m": "<f4",
-    "lat_deg": "<f8",
-    "lon_deg": "<f8",
-}
-
-_PROFILE_MAGIC = b"CEVMPRF1"
-_PROFILE_CODEC = "shuffle+zlib"
-# zlib level 1: on 1 Hz trips the byte-shuffled arrays compress to ~0.3 of raw at every
-# level, and level 1 runs at ~4 million samples/s (level 6: ~3, np.savez_compressed:
-# ~0.6, too slow for the ingest's budget of 1 million samples/s for everything).
-_PROFILE_ZLIB_LEVEL = 1
 
 _TRIP_COLUMNS: tuple[str, ...] = (
     "trip_id",
@@ -209,115 +181,6 @@ def _checkpoint(stage: str) -> None:
 
     Tests replace it to raise or to stall (and be killed) in mid-transaction.
     """
-
-
-# --------------------------------------------------------------------------- location
-
-
-def default_store_path() -> Path:
-    """Where the store lives when ``--store`` is not given.
-
-    Returns ``$CEVM_STORE`` if set and non-empty (``~`` expanded), else
-    ``$XDG_DATA_HOME/cevm/cevm.sqlite`` if ``XDG_DATA_HOME`` is an absolute path, else
-    ``~/.local/share/cevm/cevm.sqlite`` (the XDG default). A per-user fixed location
-    works the same from an interactive shell and from cron.
-    """
-    env = os.environ.get(STORE_ENV_VAR, "").strip()
-    if env:
-        return Path(env).expanduser()
-    xdg = os.environ.get("XDG_DATA_HOME", "").strip()
-    base = Path(xdg) if xdg and Path(xdg).is_absolute() else Path.home() / ".local" / "share"
-    return base / "cevm" / "cevm.sqlite"
-
-
-def resolve_store_path(store: str | Path | None = None) -> Path:
-    """The store path for a ``--store`` option value: ``store`` (``~`` expanded) if
-    given, else :func:`default_store_path`."""
-    if store is not None and str(store).strip():
-        return Path(store).expanduser()
-    return default_store_path()
-
-
-NO_STORE_HINT = "run 'cevm ingest' first or give --store"
-
-
-def existing_store_path(store: str | Path | None = None, hint: str = NO_STORE_HINT) -> Path:
-    """:func:`resolve_store_path`, for commands that read: a missing store is the user's
-    error (:class:`CevmError` ending with ``hint``), not a new empty one."""
-    path = resolve_store_path(store)
-    if not path.exists():
-        raise CevmError(f"{path}: no trip store here; {hint}")
-    return path
-
-
-def file_key(path: str | Path) -> str:
-    """The key of a source file in the store: its absolute path with symlinks resolved
-    (the file need not exist)."""
-    return str(Path(path).expanduser().resolve())
-
-
-# ---------------------------------------------------------------------------- profile
-
-
-def encode_profile(arrays: Mapping[str, np.ndarray]) -> bytes:
-    """Pack a trip's profile arrays into one compact BLOB (lossless but for the
-    float32 rounding of speed and elevation).
-
-    ``arrays`` must hold every key of :data:`PROFILE_DTYPES` with one common length.
-    Each array is cast to its storage dtype (float64 for time, distance, latitude,
-    longitude; float32 for speed and elevation, where values beyond +-3.4e38 become
-    +-inf), its bytes are shuffled (all first
-    bytes, then all second bytes, ..., which groups the slowly varying exponent bytes)
-    and zlib-compressed at level 1. Layout: ``b"CEVMPRF1"``, a little-endian uint32
-    header length, a UTF-8 JSON header ``{"n", "codec", "arrays": [[name, dtype,
-    nbytes], ...]}``, then the compressed arrays in header order.
-    """
-    missing = [k for k in PROFILE_DTYPES if k not in arrays]
-    if missing:
-        raise ValueError(f"profile lacks arrays {missing}")
-    n = int(np.asarray(arrays["time_s"]).shape[0])
-    entries, payloads = [], []
-    for name, dtype in PROFILE_DTYPES.items():
-        with np.errstate(over="ignore"):  # beyond float32's range is +-inf, as it should
-            a = np.ascontiguousarray(arrays[name], dtype=dtype)
-        if a.shape != (n,):
-            raise ValueError(f"profile array {name} has shape {a.shape}, expected ({n},)")
-        shuffled = a.view(np.uint8).reshape(n, a.itemsize).T.tobytes()
-        payload = zlib.compress(shuffled, _PROFILE_ZLIB_LEVEL)
-        entries.append([name, dtype, len(payload)])
-        payloads.append(payload)
-    header = json.dumps({"n": n, "codec": _PROFILE_CODEC, "arrays": entries}).encode()
-    return b"".join([_PROFILE_MAGIC, struct.pack("<I", len(header)), header, *payloads])
-
-
-def trip_profile_blob(trip: Trip) -> bytes:
-    """A trip's profile BLOB as the store keeps it (:func:`encode_profile` of its
-    arrays); made by ingest's workers so that the single writer does not."""
-    return encode_profile({name: getattr(trip, name) for name in PROFILE_DTYPES})
-
-
-def decode_profile(blob: bytes) -> dict[str, np.ndarray]:
-    """Unpack :func:`encode_profile`'s BLOB into float64 arrays (speed and elevation
-    carry the float32 rounding of their storage)."""
-    blob = bytes(blob)
-    if blob[: len(_PROFILE_MAGIC)] != _PROFILE_MAGIC:
-        raise CevmError("corrupt profile in the store (bad magic); re-ingest the file")
-    pos = len(_PROFILE_MAGIC)
-    (hlen,) = struct.unpack_from("<I", blob, pos)
-    pos += 4
-    header = json.loads(blob[pos : pos + hlen])
-    pos += hlen
-    if header.get("codec") != _PROFILE_CODEC:
-        raise CevmError(f"profile codec {header.get('codec')!r} unknown to this cevm")
-    n = int(header["n"])
-    out: dict[str, np.ndarray] = {}
-    for name, dtype, nbytes in header["arrays"]:
-        dt = np.dtype(dtype)
-        raw = zlib.decompress(blob[pos : pos + nbytes])
-        pos += nbytes
-        a = np.frombuffer(raw, np.uint8).reshape(dt.itemsize, n).T.copy().view(dt).reshape(n)
-        out[name] = a.astype(np.float64)
-    return out
 
 
 # ------------------------------------------------------------------------- value types

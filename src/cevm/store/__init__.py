@@ -1,0 +1,43 @@
+"""The embedded trip store: one SQLite file, no server.
+
+- :mod:`~cevm.store.location`: where the store lives (``--store``, ``$CEVM_STORE``, the
+  XDG data directory) and how a source file is keyed;
+- :mod:`~cevm.store.codec`: the stored form of a trip's profile arrays;
+- :mod:`~cevm.store.trips`: :class:`TripStore`, the tables of files, trips and runs, its
+  writes (one transaction per file) and queries, and the display of listed trips;
+- :mod:`~cevm.store.routes`: named routes (sequences of stored trips and cycles);
+- :mod:`~cevm.store.calibration`: a vehicle's stored trips as the calibration's input;
+- :mod:`~cevm.store.sources`: stored trips and routes as sweep sources and fleet legs.
+
+Re-exported here: what callers use of the first three.
+"""
+
+from cevm.store.codec import PROFILE_DTYPES, decode_profile, encode_profile, trip_profile_blob
+from cevm.store.location import (
+    NO_STORE_HINT,
+    STORE_ENV_VAR,
+    default_store_path,
+    existing_store_path,
+    file_key,
+    resolve_store_path,
+)
+from cevm.store.trips import SCHEMA_VERSION, FileState, TripStore, WriteResult, format_trips, format_utc
+
+__all__ = [
+    "NO_STORE_HINT",
+    "PROFILE_DTYPES",
+    "SCHEMA_VERSION",
+    "STORE_ENV_VAR",
+    "FileState",
+    "TripStore",
+    "WriteResult",
+    "decode_profile",
+    "default_store_path",
+    "encode_profile",
+    "existing_store_path",
+    "file_key",
+    "format_trips",
+    "format_utc",
+    "resolve_store_path",
+    "trip_profile_blob",
+]
