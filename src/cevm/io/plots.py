@@ -3,11 +3,20 @@ matplotlib with the Agg backend, imported when a figure is drawn)."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
+from typing import TYPE_CHECKING, Optional
 
 import numpy as np
 
-from cevm.core.calibration import CalibrationResult, display_value
+from cevm.errors import CevmError
+
+if TYPE_CHECKING:
+    from cevm.core.calibration import CalibrationResult
+    from cevm.core.sweep import PredictionSet, Source
+
+#: Lines drawn at most by ``--plot`` (one per source and vehicle).
+PLOT_MAX_LINES = 12
 
 
 def plot_calibration(result: CalibrationResult, path: Path, title: str) -> None:
@@ -17,6 +26,8 @@ def plot_calibration(result: CalibrationResult, path: Path, title: str) -> None:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+
+    from cevm.core.calibration import display_value
 
     unit = "kWh" if result.unit == "J" else "l"
     meas = np.array([display_value(result, r.measured) for r in result.rows])
@@ -40,3 +51,104 @@ def plot_calibration(result: CalibrationResult, path: Path, title: str) -> None:
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
+
+
+def plot_simulation(frame, res, path: Path, title: str) -> None:
+    """State of charge (EV, the paper's figure 4) or fuel used (ICE, figure 6) against
+    time, with the elevation, from :meth:`SimulationResult.to_frame`."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(10, 4.5))
+    t_min = frame["time_s"] / 60.0
+    if res.powertrain == "ev":
+        ax.plot(t_min, frame["soc_pct"], label="state of charge")
+        ax.set_ylabel("state of charge [%]")
+    else:
+        ax.plot(t_min, frame["fuel_cum_l"], label="fuel used")
+        ax.set_ylabel("fuel used [l]")
+    ax.set_xlabel("time [min]")
+    ax.set_title(title)
+    if "elevation_m" in frame:
+        ax2 = ax.twinx()
+        ax2.plot(t_min, frame["elevation_m"], color="0.6", lw=0.8, label="elevation")
+        ax2.set_ylabel("elevation [m]")
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def plot_predictions(path: Path, sources: list[Source], pset: PredictionSet, sweep_data: list, soc_start: float,
+                     reserve_pct: float, ice_braking: Optional[str],
+                     warn: Callable[[str], None] | None = None) -> None:
+    """SoC (EV) or fuel (ICE) along each source for each vehicle (one mass each: the
+    paper's figure 4), or energy / fuel against payload when vehicles have several
+    masses. ``warn`` is called with a message when only the first
+    :data:`PLOT_MAX_LINES` (source, vehicle) pairs are drawn."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from cevm.core.sweep import energy_trajectory
+
+    counts = np.bincount(pset.vehicle_index)
+    pairs = [(s, v) for s in range(len(sources)) for v in range(len(pset.vehicles))]
+    if len(pairs) > PLOT_MAX_LINES:
+        if warn is not None:
+            warn(f"cevm: warning: --plot draws the first {PLOT_MAX_LINES} of {len(pairs)} (source, vehicle) pairs")
+        pairs = pairs[:PLOT_MAX_LINES]
+    has_ev = any(pset.vehicles[v].is_ev for _, v in pairs)
+    has_ice = any(not pset.vehicles[v].is_ev for _, v in pairs)
+    n_ax = int(has_ev) + int(has_ice)
+    fig, axes = plt.subplots(n_ax, 1, figsize=(9, 4.5 * n_ax), squeeze=False)
+    ax_ev = axes[0, 0] if has_ev else None
+    ax_ice = axes[-1, 0] if has_ice else None
+    if counts.max() > 1:  # a mass sweep: energy against payload (or mass)
+        use_payload = bool(np.all(np.isfinite(pset.payload_kg)))
+        xname = "payload [kg]" if use_payload else "gross mass [kg]"
+        for s, v in pairs:
+            sel = pset.vehicle_index == v
+            x = (pset.payload_kg if use_payload else pset.mass_kg)[sel]
+            veh = pset.vehicles[v]
+            ys = sweep_data[s]
+            label = f"{veh.name} on {sources[s].name}"
+            if veh.is_ev:
+                ax_ev.plot(x, ys["energy_kwh"][sel], marker="o", ms=3, label=label)
+            else:
+                ax_ice.plot(x, ys["fuel_l"][sel], marker="o", ms=3, label=label)
+            over = pset.over_max_gross[sel]
+            if over.any():
+                ax = ax_ev if veh.is_ev else ax_ice
+                ax.plot(x[over], (ys["energy_kwh"] if veh.is_ev else ys["fuel_l"])[sel][over], "x", color="red")
+        if ax_ev is not None:
+            ax_ev.set(xlabel=xname, ylabel="battery energy [kWh]", title="EV energy against load (x: over max_gross_kg)")
+        if ax_ice is not None:
+            ax_ice.set(xlabel=xname, ylabel="fuel [l]", title="ICE fuel against load (x: over max_gross_kg)")
+    else:  # state of charge along the route (the paper's figure 4)
+        for s, v in pairs:
+            veh = pset.vehicles[v]
+            m = float(pset.mass_kg[pset.vehicle_index == v][0])
+            _, dist, e = energy_trajectory(sources[s], veh, m, ice_braking=ice_braking)
+            label = f"{veh.name} on {sources[s].name} ({m:,.0f} kg)"
+            if veh.is_ev:
+                ax_ev.plot(dist / 1000.0, soc_start - 100.0 * e / veh.battery_j, label=label)
+            else:
+                ax_ice.plot(dist / 1000.0, e, label=label)
+        if ax_ev is not None:
+            ax_ev.axhline(reserve_pct, color="red", ls="--", lw=1, label=f"reserve {reserve_pct:g} %")
+            ax_ev.set(xlabel="distance [km]", ylabel="state of charge [%]", title="State of charge along the route")
+        if ax_ice is not None:
+            ax_ice.set(xlabel="distance [km]", ylabel="fuel burnt [l]", title="Fuel along the route")
+    for ax in axes[:, 0]:
+        ax.grid(True, alpha=0.3)
+        ax.legend(fontsize=7)
+    fig.tight_layout()
+    try:
+        fig.savefig(path, dpi=120)
+    except OSError as exc:
+        raise CevmError(f"{path}: cannot write the plot: {exc.strerror or exc}") from None
+    finally:
+        plt.close(fig)

@@ -1,0 +1,71 @@
+"""The ``cevm`` command line: a thin layer over the library.
+
+Exit codes: 0 success; 1 some inputs of a batch failed (the rest was done);
+2 bad usage or bad input (nothing was done). Errors caused by input are printed as one
+line on stderr, without a traceback.
+
+This module creates the app and registers the commands of one module per command (group):
+:mod:`~cevm.cli.ingest`, :mod:`~cevm.cli.trips`, :mod:`~cevm.cli.calibrate`,
+:mod:`~cevm.cli.simulate`, :mod:`~cevm.cli.fleet`, :mod:`~cevm.cli.predict`,
+:mod:`~cevm.cli.feasibility`, :mod:`~cevm.cli.route`; what they share is
+:mod:`~cevm.cli.common` and :mod:`~cevm.cli.output`. The command modules never import
+this package's app, nor each other; the library never imports the command line.
+"""
+
+from __future__ import annotations
+
+import sys
+from typing import Annotated
+
+import typer
+
+from cevm import __version__
+from cevm.cli import calibrate, feasibility, fleet, ingest, predict, route, simulate, trips
+from cevm.cli.common import EXIT_INPUT
+from cevm.errors import CevmError
+
+app = typer.Typer(
+    name="cevm",
+    help="Vehicle energy and fuel from drive cycles, fast: the computationally efficient (CE) model.",
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+)
+
+
+def _version(value: bool) -> None:
+    if value:
+        typer.echo(f"cevm {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _root(
+    version: Annotated[
+        bool, typer.Option("--version", callback=_version, is_eager=True, help="Print the version and exit.")
+    ] = False,
+) -> None:
+    """cevm: how much diesel or electricity a vehicle uses on a route."""
+
+
+# In the order of 'cevm --help'.
+app.command()(ingest.ingest)
+app.command()(trips.trips)
+app.command()(calibrate.calibrate)
+app.command()(simulate.simulate)
+app.add_typer(fleet.app, name="fleet")
+app.command("predict")(predict.predict_cmd)
+app.command("feasibility")(feasibility.feasibility_cmd)
+app.add_typer(route.app, name="route")
+
+
+def main() -> None:
+    """Console entry point."""
+    from cevm.runtime import tune_allocator
+
+    tune_allocator()
+    try:
+        app()
+    except CevmError as exc:  # a user's mistake that escaped a command: one line, no traceback
+        typer.echo(f"cevm: error: {exc}", err=True)
+        sys.exit(EXIT_INPUT)

@@ -1,0 +1,145 @@
+"""``cevm feasibility``: can each vehicle run each route, with what margin, and the
+largest payload (:mod:`cevm.core.feasibility`)."""
+
+from __future__ import annotations
+
+from contextlib import ExitStack
+from typing import IO, Annotated, Optional
+
+import typer
+
+from cevm.cli.common import (
+    TABLE_MAX_ROWS,
+    Cr0Option,
+    CycleOption,
+    FormatOption,
+    IceBrakingOption,
+    OutOption,
+    ReserveOption,
+    RouteOption,
+    SocStartOption,
+    StoreOption,
+    TripOption,
+    VehicleIdOption,
+    VehicleOption,
+    check_common,
+    fail,
+    open_out,
+)
+from cevm.cli.output import OutputFormat, write_rows
+from cevm.core.cycle import CR0_DEFAULT
+from cevm.core.feasibility import Feasibility, feasibility
+from cevm.core.sweep import DEFAULT_RESERVE_PCT, DEFAULT_SOC_START_PCT
+from cevm.errors import CevmError
+from cevm.units import J_PER_KWH
+
+
+def _feasibility_rows(res: Feasibility) -> list[dict]:
+    src = res.source
+    rows = []
+
+    def num(x):
+        x = float(x)
+        return None if x != x else x
+
+    for i, veh in enumerate(res.vehicles):
+        f = res.feasible[i]
+        row = {
+            "source": src.name, "source_kind": src.kind, "vehicle": veh.name, "powertrain": veh.powertrain,
+            "distance_km": src.distance_m / 1000.0, "mass_kg": float(res.mass_kg[i]),
+            "payload_kg": float(res.payload_kg[i]), "over_max_gross": bool(res.over_max_gross[i]),
+            "feasible": None if f != f else bool(f > 0.5),
+        }
+        if veh.is_ev:
+            row.update(energy_kwh=num(res.energy_j[i] / J_PER_KWH), soc_end_pct=num(res.soc_end_pct[i]),
+                       soc_min_pct=num(res.soc_min_pct[i]), reserve_margin_pct=num(res.reserve_margin_pct[i]))
+        else:
+            row.update(fuel_l=num(res.fuel_l[i]), tank_l=veh.tank_l, tank_margin_l=num(res.tank_margin_l[i]))
+        row.update(max_payload_kg=num(res.max_payload_kg[i]), min_payload_kg=num(res.min_payload_kg[i]),
+                   limited_by=res.limited_by[i])
+        rows.append(row)
+    return rows
+
+
+def feasibility_cmd(
+    vehicle: VehicleOption,
+    route: RouteOption = None,
+    cycle: CycleOption = None,
+    trip: TripOption = None,
+    vehicle_id: VehicleIdOption = None,
+    store: StoreOption = None,
+    payload_kg: Annotated[
+        Optional[float], typer.Option("--payload-kg", "-p", help="Payload in kg at which margins are given. Default: each vehicle's default mass.")
+    ] = None,
+    mass_kg: Annotated[
+        Optional[float], typer.Option("--mass-kg", "-m", help="Gross mass in kg at which margins are given (instead of --payload-kg).")
+    ] = None,
+    payload_cap_kg: Annotated[
+        Optional[float],
+        typer.Option(help="Where the payload search stops for vehicles without max_gross_kg, in kg. Default: their kerb mass."),
+    ] = None,
+    soc_start: SocStartOption = DEFAULT_SOC_START_PCT,
+    reserve_pct: ReserveOption = DEFAULT_RESERVE_PCT,
+    fmt: FormatOption = OutputFormat.table,
+    out: OutOption = None,
+    ice_braking: IceBrakingOption = None,
+    cr0: Cr0Option = CR0_DEFAULT,
+) -> None:
+    """Can each vehicle run each route, with what margin, and the largest payload?
+
+    Margins (EV: lowest state of charge above the reserve; ICE: fuel against tank_l) and
+    the largest payload that keeps the reserve (or fits the tank) within max_gross_kg,
+    exact to the kilogram."""
+    if not (cycle or trip or vehicle_id or route):
+        raise fail("give at least one route: --route (or --cycle, --trip, --vehicle-id)")
+    if payload_kg is not None and mass_kg is not None:
+        raise fail("give --mass-kg or --payload-kg, not both")
+    check_common(ice_braking, soc_start, reserve_pct)
+    try:
+        from cevm.io import load_vehicles
+        from cevm.store.sources import load_sources
+
+        vehicles = load_vehicles(vehicle)
+        rows: list[dict] = []
+        with ExitStack() as stack:
+            sources = load_sources(stack, store, cycle or [], trip or [], vehicle_id or [], route or [], cr0)
+            for src in sources:
+                res = feasibility(src, vehicles, soc_start_pct=soc_start, reserve_pct=reserve_pct,
+                                  payload_kg=payload_kg, mass_kg=mass_kg, payload_cap_kg=payload_cap_kg,
+                                  ice_braking=ice_braking)
+                rows.extend(_feasibility_rows(res))
+                src.release()
+            stream = open_out(stack, out)
+            if fmt == OutputFormat.table:
+                _print_feasibility(rows, stream)
+            else:
+                write_rows(rows, fmt, stream=stream)
+    except CevmError as exc:
+        raise fail(str(exc)) from None
+
+
+def _print_feasibility(rows: list[dict], stream: IO[str]) -> None:
+    def mark(f):
+        return "?" if f is None else ("yes" if f else "NO")
+
+    table = []
+    for r in rows[:TABLE_MAX_ROWS]:
+        if r["powertrain"] == "ev":
+            state = f"{r['soc_min_pct']:.1f}/{r['soc_end_pct']:.1f} %"
+            margin = f"{r['reserve_margin_pct']:+.1f} pp"
+        else:
+            state = f"{r['fuel_l']:.1f}/" + (f"{r['tank_l']:g} l" if r.get("tank_l") else "? l")
+            margin = "-" if r.get("tank_margin_l") is None else f"{r['tank_margin_l']:+.1f} l"
+        if r["over_max_gross"]:
+            margin += " (over max gross)"
+        mp = r["max_payload_kg"]
+        payload = "none" if mp is None else f"{mp:,.0f}"
+        if r["min_payload_kg"]:
+            payload = f"{r['min_payload_kg']:,.0f} to {payload}"
+        table.append({"route": r["source"], "vehicle": r["vehicle"], "payload kg": r["payload_kg"],
+                      "feasible": mark(r["feasible"]), "state": state, "margin": margin,
+                      "max payload kg": payload, "limited by": r["limited_by"]})
+    title = "cevm feasibility" + (f" (first {len(table)} of {len(rows)})" if len(rows) > len(table) else "")
+    write_rows(table, OutputFormat.table, title=title, digits={"payload kg": 0}, stream=stream,
+               columns=["route", "vehicle", "payload kg", "feasible", "state", "margin", "max payload kg", "limited by"],
+               headers={"state": "SoC min/end, fuel/tank"})

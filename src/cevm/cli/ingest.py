@@ -1,0 +1,118 @@
+"""``cevm ingest``: logger CSV exports into the trip store (:mod:`cevm.ingest`)."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+from typing import Annotated, Optional
+
+import typer
+
+from cevm.cli.common import EXIT_OK, EXIT_PARTIAL, StoreOption, fail
+from cevm.cli.output import OutputFormat, write_rows
+from cevm.errors import CevmError
+
+
+def ingest(
+    paths: Annotated[list[str], typer.Argument(help="Log files, directories (recursive) or glob patterns; .csv and .csv.gz.")],
+    store: StoreOption = None,
+    dsm: Annotated[
+        Optional[str], typer.Option(help="DSM for road elevation: a GeoTIFF, a directory of tiles, a VRT, or a GDAL URL.")
+    ] = None,
+    profile: Annotated[Optional[str], typer.Option(help="Force a logger profile by name (default: detect from the header).")] = None,
+    profiles_dir: Annotated[Optional[Path], typer.Option(help="A directory of extra logger profiles (TOML).")] = None,
+    force: Annotated[bool, typer.Option(help="Re-ingest files even when unchanged.")] = False,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar and no table: failures and one summary line only.")] = False,
+    log_json: Annotated[bool, typer.Option(help="One JSON object per file on stdout, then a summary object (for cron and scripts).")] = False,
+    workers: Annotated[
+        Optional[int], typer.Option("--workers", "-w", min=1, help="Worker processes, one file per task (default: the machine's cores; 1: serial, in this process).")
+    ] = None,
+    scheduler: Annotated[
+        Optional[str], typer.Option(help="Dask scheduler address (tcp://HOST:8786): run the per-file work on that cluster (pip install 'cevm[dask]'); the workers must read the log files at the same paths, and the DSM.")
+    ] = None,
+) -> None:
+    """Read logger CSV exports into the trip store (clean trips, DSM elevation, vectors).
+
+    Clean trips, DSM elevation, measured consumption and drive-cycle vectors.
+
+    Files are processed in parallel (--workers, or a Dask cluster with --scheduler); this
+    process alone writes the store, in input order, so the result is that of a serial run.
+    Each failed file is reported on stderr (file, line, column, why) as it happens and
+    skipped; the rest is stored. Exit 0 if every file was ingested or unchanged, 1 if any
+    failed, 2 for bad options (unknown profile, unreadable DSM, unreachable scheduler)."""
+    import json
+
+    from cevm.ingest import IngestOptions
+    from cevm.ingest import ingest as run_ingest
+    from cevm.executors import make_executor
+    from cevm.store import TripStore, resolve_store_path
+
+    if workers is not None and scheduler is not None:
+        raise fail("give --workers (local processes) or --scheduler (a Dask cluster), not both")
+
+    options = IngestOptions(dsm=dsm, profile=profile, profiles_dir=str(profiles_dir) if profiles_dir else None, force=force)
+    store_path = resolve_store_path(store)
+    progress = None
+    if not quiet and not log_json and sys.stderr.isatty():
+        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+        progress = Progress(TextColumn("ingest"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+                            TextColumn("{task.description}"), transient=True)
+    task = None
+
+    def on_start(n: int) -> None:
+        nonlocal task
+        if progress is not None:
+            progress.start()
+            task = progress.add_task("", total=n)
+
+    def on_file(fr) -> None:
+        if log_json:
+            typer.echo(json.dumps({"event": "file", **_file_dict(fr)}))
+        elif fr.status == "failed":
+            (progress.console.print if progress is not None else lambda m: typer.echo(m, err=True))(
+                f"cevm: failed: {fr.error}"
+            )
+        if progress is not None and task is not None:  # inputs that matched nothing come before the bar
+            progress.update(task, advance=1, description=Path(fr.path).name)
+
+    try:
+        with make_executor(workers, scheduler) as executor, TripStore.open(store_path) as st:
+            report = run_ingest(paths, st, options, on_file=on_file, on_start=on_start, executor=executor)
+    except CevmError as exc:
+        raise fail(str(exc)) from None
+    finally:
+        if progress is not None:
+            progress.stop()
+    summary = report.summary()
+    if log_json:
+        typer.echo(json.dumps({"event": "summary", "store": str(store_path), **summary}))
+    elif quiet:
+        typer.echo(_summary_line(summary, store_path))
+    else:
+        _print_ingest_table(report, summary, store_path)
+    raise typer.Exit(EXIT_PARTIAL if report.failed else EXIT_OK)
+
+
+def _file_dict(fr) -> dict:
+    return {"path": fr.path, "status": fr.status, "trips": fr.trips, "samples": fr.samples,
+            "km": round(fr.km, 3), "seconds": round(fr.seconds, 4), "profile": fr.profile,
+            "error": fr.error, "duplicates": fr.duplicates, "repairs": list(fr.repairs)}
+
+
+def _summary_line(s: dict, store_path: Path) -> str:
+    return (f"cevm ingest: {s['files']} files ({s['ingested']} ingested, {s['unchanged']} unchanged, "
+            f"{s['failed']} failed), {s['trips']} trips, {s['samples']} samples, {s['km']:.1f} km "
+            f"in {s['seconds']:.2f} s -> {store_path}")
+
+
+def _print_ingest_table(report, summary: dict, store_path: Path) -> None:
+    rows = [
+        {"file": Path(f.path).name, "status": f.status, "profile": f.profile or "-", "trips": f.trips,
+         "samples": f.samples, "km": f.km, "s": f.seconds, "repairs": len(f.repairs)}
+        for f in report.files
+    ]
+    if len(rows) <= 40:
+        write_rows(rows, OutputFormat.table, title="cevm ingest", digits={"km": 1, "s": 2},
+                   columns=["file", "status", "profile", "trips", "samples", "km", "s", "repairs"])
+    typer.echo(_summary_line(summary, store_path))
