@@ -1,0 +1,309 @@
+"""The layout stays true to the architecture (README, "Layout"), checked on the source.
+
+- cevm.core is pure: no module of it imports the I/O packages (cevm.io, cevm.ingest,
+  cevm.store, cevm.cli), the sample generator, sqlite3, rasterio, matplotlib or typer,
+  not even inside a function, and none calls what reads or writes files.
+- Only the command line imports the command line; nothing in cevm imports
+  cevm_samplegen.
+- The import graph of cevm (module-level imports) has no cycle.
+- ``import cevm`` is cheap: it imports neither pandas, rasterio, matplotlib nor typer.
+"""
+
+from __future__ import annotations
+
+import ast
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+SRC = Path(__file__).resolve().parents[1] / "src"
+CEVM = SRC / "cevm"
+
+#: What no core module may import (a module or any of its submodules).
+CORE_FORBIDDEN_IMPORTS = ("cevm.ingest", "cevm.store", "cevm.io", "cevm.cli", "cevm_samplegen",
+                          "sqlite3", "rasterio", "matplotlib", "typer")
+#: Calls that read or write files: ``name(...)`` of a builtin, ``x.attr(...)`` of any object,
+#: and ``module.attr(...)`` of a module imported under its usual name.
+FORBIDDEN_BUILTINS = {"open"}
+FORBIDDEN_METHODS = {"open", "read_text", "read_bytes", "write_text", "write_bytes", "to_csv", "tofile"}
+FORBIDDEN_MODULE_CALLS = {
+    "np": {"load", "save", "savez", "savez_compressed", "savetxt", "loadtxt", "genfromtxt", "fromfile", "memmap"},
+    "numpy": {"load", "save", "savez", "savez_compressed", "savetxt", "loadtxt", "genfromtxt", "fromfile", "memmap"},
+    "pd": {"read_*", "to_pickle"},
+    "pandas": {"read_*", "to_pickle"},
+    "sqlite3": {"*"},
+    "rasterio": {"*"},
+}
+
+
+def module_name(path: Path) -> str:
+    parts = list(path.relative_to(SRC).with_suffix("").parts)
+    if parts[-1] == "__init__":
+        parts.pop()
+    return ".".join(parts)
+
+
+def is_package(path: Path) -> bool:
+    return path.name == "__init__.py"
+
+
+def modules(package: Path) -> list[Path]:
+    return sorted(package.rglob("*.py"))
+
+
+def _resolve(node: ast.ImportFrom, importer: str, package: bool) -> str:
+    """The absolute module name of a ``from ... import`` (relative imports resolved)."""
+    if node.level == 0:
+        return node.module or ""
+    base = importer.split(".") if package else importer.split(".")[:-1]
+    base = base[: len(base) - (node.level - 1)]
+    return ".".join(base + ([node.module] if node.module else []))
+
+
+def imported_names(tree: ast.AST, importer: str, package: bool) -> list[tuple[int, str]]:
+    """Every (line, module) an import statement anywhere in ``tree`` names; ``from m import
+    x`` counts as both ``m`` and ``m.x`` (x may be a submodule)."""
+    out = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            out += [(node.lineno, a.name) for a in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            mod = _resolve(node, importer, package)
+            out.append((node.lineno, mod))
+            out += [(node.lineno, f"{mod}.{a.name}") for a in node.names if a.name != "*"]
+    return out
+
+
+def _within(name: str, prefixes) -> bool:
+    return any(name == p or name.startswith(p + ".") for p in prefixes)
+
+
+def forbidden_imports(source: str, importer: str, package: bool = False) -> list[str]:
+    tree = ast.parse(source)
+    return sorted({f"line {line}: imports {name}" for line, name in imported_names(tree, importer, package)
+                   if _within(name, CORE_FORBIDDEN_IMPORTS)})
+
+
+def _in_memory(call: ast.Call) -> bool:
+    """``np.load(io.BytesIO(data))``: bytes in memory, not a file."""
+    if not call.args or not isinstance(call.args[0], ast.Call):
+        return False
+    f = call.args[0].func
+    return isinstance(f, ast.Attribute) and f.attr == "BytesIO" and isinstance(f.value, ast.Name) and f.value.id == "io"
+
+
+def forbidden_calls(source: str) -> list[str]:
+    """File I/O calls in ``source``, by the AST (not by text: a docstring may say open)."""
+    found = []
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.Name) and node.id in FORBIDDEN_BUILTINS and isinstance(node.ctx, ast.Load):
+            found.append(f"line {node.lineno}: {node.id}")
+        elif isinstance(node, ast.Attribute):
+            owner = node.value.id if isinstance(node.value, ast.Name) else None
+            banned = FORBIDDEN_MODULE_CALLS.get(owner, set())
+            if "*" in banned or node.attr in banned or any(b.endswith("*") and node.attr.startswith(b[:-1]) for b in banned):
+                found.append(f"line {node.lineno}: {owner}.{node.attr}")
+            elif node.attr in FORBIDDEN_METHODS and owner not in FORBIDDEN_MODULE_CALLS:
+                found.append(f"line {node.lineno}: .{node.attr}")
+    allowed = {f"line {n.lineno}: {n.func.value.id}.{n.func.attr}" for n in ast.walk(ast.parse(source))
+               if isinstance(n, ast.Call) and isinstance(n.func, ast.Attribute) and isinstance(n.func.value, ast.Name)
+               and n.func.attr == "load" and _in_memory(n)}
+    return sorted(set(found) - allowed)
+
+
+# ------------------------------------------------------------------------- the checkers
+
+
+def test_the_checkers_find_what_they_look_for():
+    """The checks below can fail: each kind of offence is found in a snippet."""
+    assert forbidden_calls("def f(p):\n    with open(p) as fh:\n        return fh.read()\n") == ["line 2: open"]
+    assert forbidden_calls("from pathlib import Path\nx = Path('a').read_text()\n") == ["line 2: .read_text"]
+    assert forbidden_calls("import numpy as np\nnp.save('a.npy', 1)\nnp.load('a.npy')\n") == [
+        "line 2: np.save", "line 3: np.load"]
+    assert forbidden_calls("import pandas as pd\npd.read_csv('a.csv')\ndf.to_csv('b.csv')\n") == [
+        "line 2: pd.read_csv", "line 3: .to_csv"]
+    assert forbidden_calls("import io\nimport numpy as np\nnp.load(io.BytesIO(b''))\n") == []  # bytes in memory
+    assert forbidden_calls('"""open the file"""\nx = 1  # open(\n') == []  # words, not calls
+    assert forbidden_imports("def f():\n    from cevm.store import TripStore\n", "cevm.core.x") == [
+        "line 2: imports cevm.store", "line 2: imports cevm.store.TripStore"]
+    assert forbidden_imports("from ..io import read_toml\n", "cevm.core.x") == [
+        "line 1: imports cevm.io", "line 1: imports cevm.io.read_toml"]
+    assert forbidden_imports("from cevm import cli\n", "cevm.core.x") == ["line 1: imports cevm.cli"]
+    assert forbidden_imports("import io\nimport struct\nfrom cevm.core.cycle import CycleVector\n", "cevm.core.x") == []
+
+
+# ------------------------------------------------------------------------------ the core
+
+
+CORE_MODULES = modules(CEVM / "core")
+
+
+def test_the_core_package_exists():
+    names = {p.stem for p in CORE_MODULES}
+    assert {"cycle", "model", "vehicle", "trip", "calibration", "sweep", "feasibility", "assignment",
+            "detailed"} <= names
+
+
+@pytest.mark.parametrize("path", CORE_MODULES, ids=lambda p: p.name)
+def test_core_imports_no_io_package(path):
+    assert forbidden_imports(path.read_text(), module_name(path), is_package(path)) == []
+
+
+@pytest.mark.parametrize("path", CORE_MODULES, ids=lambda p: p.name)
+def test_core_does_no_file_io(path):
+    assert forbidden_calls(path.read_text()) == []
+
+
+def test_importing_the_core_loads_no_io_library():
+    code = ("import sys\n" + "".join(f"import {module_name(p)}\n" for p in CORE_MODULES)
+            + "print(sorted(m for m in ('sqlite3', 'rasterio', 'matplotlib', 'typer') if m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]"
+
+
+# ------------------------------------------------------------------- who imports whom
+
+
+ALL_MODULES = modules(CEVM)
+
+
+def _all_imports(path: Path) -> list[tuple[int, str]]:
+    return imported_names(ast.parse(path.read_text()), module_name(path), is_package(path))
+
+
+def test_only_the_command_line_imports_the_command_line():
+    cli = CEVM / "cli"
+    entry = CEVM / "__main__.py"  # python -m cevm: the command line's entry point, imported by nothing
+    offenders = [f"{p.relative_to(SRC)}:{line} imports {name}" for p in ALL_MODULES
+                 if cli not in p.parents and p != entry
+                 for line, name in _all_imports(p) if _within(name, ("cevm.cli",))]
+    assert offenders == []
+
+
+def test_nothing_in_cevm_imports_the_sample_generator():
+    offenders = [f"{p.relative_to(SRC)}:{line} imports {name}" for p in ALL_MODULES
+                 for line, name in _all_imports(p) if _within(name, ("cevm_samplegen",))]
+    assert offenders == []
+
+
+def _module_level_imports(tree: ast.Module):
+    """Import statements executed when the module is imported: at module level, also
+    inside module-level if/try blocks, but not under ``if TYPE_CHECKING:``."""
+    todo = list(tree.body)
+    while todo:
+        node = todo.pop(0)
+        if isinstance(node, (ast.Import, ast.ImportFrom)):
+            yield node
+        elif isinstance(node, ast.If):
+            if not (isinstance(node.test, ast.Name) and node.test.id == "TYPE_CHECKING"):
+                todo += node.body + node.orelse
+        elif isinstance(node, ast.Try):
+            todo += node.body + node.orelse + node.finalbody + [s for h in node.handlers for s in h.body]
+
+
+def import_graph() -> dict[str, set[str]]:
+    """cevm's modules -> the cevm modules their module-level imports run.
+
+    ``from a.b import x`` runs a.b.x if that is a module, else a.b (x is a name of its
+    __init__). Importing a.b.c also runs the __init__ of a and a.b, except where the
+    importer is inside that package (a package's __init__ that imports its submodules is
+    not in a cycle with them unless one of them imports the package's own names)."""
+    paths = {module_name(p): p for p in ALL_MODULES}
+    graph: dict[str, set[str]] = {m: set() for m in paths}
+    for mod, path in paths.items():
+        pkg = is_package(path)
+        for node in _module_level_imports(ast.parse(path.read_text())):
+            if isinstance(node, ast.Import):
+                targets = [a.name for a in node.names]
+            else:
+                base = _resolve(node, mod, pkg)
+                targets = [f"{base}.{a.name}" if f"{base}.{a.name}" in paths else base for a in node.names]
+            for target in targets:
+                if target not in paths:
+                    continue  # outside cevm
+                graph[mod].add(target)
+                parts = target.split(".")
+                for k in range(1, len(parts)):
+                    parent = ".".join(parts[:k])
+                    if parent in paths and not (mod == parent or mod.startswith(parent + ".")):
+                        graph[mod].add(parent)
+        graph[mod].discard(mod)
+    return graph
+
+
+def strongly_connected(graph: dict[str, set[str]]) -> list[list[str]]:
+    """Tarjan's strongly connected components (iterative)."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    on_stack: set[str] = set()
+    stack: list[str] = []
+    out: list[list[str]] = []
+    counter = 0
+    for root in sorted(graph):
+        if root in index:
+            continue
+        work = [(root, iter(sorted(graph[root])))]
+        index[root] = low[root] = counter
+        counter += 1
+        stack.append(root)
+        on_stack.add(root)
+        while work:
+            node, children = work[-1]
+            for child in children:
+                if child not in index:
+                    index[child] = low[child] = counter
+                    counter += 1
+                    stack.append(child)
+                    on_stack.add(child)
+                    work.append((child, iter(sorted(graph[child]))))
+                    break
+                if child in on_stack:
+                    low[node] = min(low[node], index[child])
+            else:
+                work.pop()
+                if work:
+                    low[work[-1][0]] = min(low[work[-1][0]], low[node])
+                if low[node] == index[node]:
+                    comp = []
+                    while True:
+                        m = stack.pop()
+                        on_stack.discard(m)
+                        comp.append(m)
+                        if m == node:
+                            break
+                    out.append(sorted(comp))
+    return out
+
+
+def test_strongly_connected_finds_a_cycle():
+    graph = {"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}
+    assert sorted(c for c in strongly_connected(graph) if len(c) > 1) == [["a", "b", "c"]]
+
+
+def test_the_import_graph_has_no_cycle():
+    graph = import_graph()
+    assert "cevm.cli.predict" in graph and "cevm.core.cycle" in graph["cevm.core.sweep"]
+    cycles = [c for c in strongly_connected(graph) if len(c) > 1]
+    assert cycles == []
+
+
+# ------------------------------------------------------------------------- import cevm
+
+
+def test_import_cevm_is_cheap():
+    code = ("import sys, cevm\n"
+            "print(sorted(m for m in ('pandas', 'rasterio', 'matplotlib', 'typer') if m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]"
+
+
+def test_the_public_api_resolves():
+    import cevm
+
+    for name in cevm.__all__:
+        assert getattr(cevm, name) is not None, name
+    assert cevm.drive_cycle_vector.__module__ == "cevm.core.cycle"
+    with pytest.raises(AttributeError):
+        cevm.no_such_name  # noqa: B018
