@@ -9,10 +9,10 @@ from typer.testing import CliRunner
 
 from cevm.cli import app
 from cevm.core.cycle import drive_cycle_vector
+from cevm.core.trip import Measurement, Trip
 from cevm.io import load_vehicle
 from cevm.store import TripStore
 from cevm_samplegen.cycles import MicroTripSpec, micro_trip_cycle
-from cevm.core.trip import Measurement, Trip
 from reference import reference_wheel_energy_j
 
 runner = CliRunner()

@@ -13,9 +13,9 @@ import pytest
 
 from cevm.core.calibration import CalibrationError, TripData, fit, predict_trips
 from cevm.core.cycle import cycle_vector, drive_cycle_vector
-from cevm_samplegen.cycles import MicroTripSpec, micro_trip_cycle
 from cevm.core.trip import Measurement
 from cevm.core.vehicle import Vehicle
+from cevm_samplegen.cycles import MicroTripSpec, micro_trip_cycle
 from reference import reference_wheel_energy_j
 
 URBAN = MicroTripSpec(n_trips=8)

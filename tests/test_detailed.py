@@ -19,10 +19,10 @@ from cevm.core.detailed import (
     ev_params_from_vehicle,
     simulate,
 )
-from cevm.errors import InputError
-from cevm.io import load_vehicle, read_cycle_csv
 from cevm.core.model import wheel_energy_j
 from cevm.core.vehicle import vehicle_from_mapping
+from cevm.errors import InputError
+from cevm.io import load_vehicle, read_cycle_csv
 
 RHO, G = 1.225, 9.81
 RPM = 2 * math.pi / 60

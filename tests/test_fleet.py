@@ -27,11 +27,11 @@ from cevm.core.assignment import (
     plan,
     table4_rows,
 )
-from cevm.io.scenario import default_resolver, fleet_report, load_scenario
-from cevm_samplegen.standin import STANDIN_CYCLES, standin_cycle, write_standin_cycles
-from cevm.io import read_cycle_csv
-from cevm_samplegen.cycles import MicroTripSpec, micro_trip_cycle
 from cevm.core.vehicle import Vehicle, predict
+from cevm.io import read_cycle_csv
+from cevm.io.scenario import default_resolver, fleet_report, load_scenario
+from cevm_samplegen.cycles import MicroTripSpec, micro_trip_cycle
+from cevm_samplegen.standin import STANDIN_CYCLES, standin_cycle, write_standin_cycles
 
 ROOT = Path(__file__).resolve().parents[1]
 G, RHO = 9.81, 1.225

@@ -30,10 +30,10 @@ from cevm.core.sweep import (
     sweep,
 )
 from cevm.core.feasibility import feasibility
-from cevm.io import read_cycle_csv
 from cevm.core.model import ev_energy_j, ice_fuel_l
-from cevm_samplegen.cycles import MicroTripSpec, micro_trip_cycle
 from cevm.core.vehicle import Vehicle
+from cevm.io import read_cycle_csv
+from cevm_samplegen.cycles import MicroTripSpec, micro_trip_cycle
 
 RHO, G, CR0 = 1.225, 9.81, 0.004
 runner = CliRunner()

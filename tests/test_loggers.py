@@ -20,11 +20,11 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from cevm.core.trip import CANONICAL_COLUMNS
 from cevm.errors import InputError
 from cevm.ingest.profiles import CANONICAL_DIMENSIONS, UNITS, load_profile, load_profiles
 from cevm.ingest.reading import PLAUSIBLE_RANGE_SI, EnergySource, detect_profile, read_log
 from cevm.ingest.timestamps import parse_datetimes
-from cevm.core.trip import CANONICAL_COLUMNS
 
 DATA = Path(__file__).parent / "data"
 REAL_TWIZY = Path("/work/shared/real-logs/twizy")

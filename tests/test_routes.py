@@ -24,9 +24,9 @@ from cevm.store.routes import (
     remove_route,
     route_names,
 )
+from cevm.core.trip import Trip
 from cevm.store import TripStore
 from cevm_samplegen.cycles import MicroTripSpec, micro_trip_cycle
-from cevm.core.trip import Trip
 
 runner = CliRunner()
 

@@ -20,8 +20,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
-import cevm.store as store_mod
 from cevm.errors import CevmError
+import cevm.store as store_mod
 from cevm.store import (
     SCHEMA_VERSION,
     TripStore,

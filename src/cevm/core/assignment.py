@@ -64,10 +64,10 @@ from typing import Any
 import numpy as np
 
 from cevm.core.cycle import CycleVector
-from cevm.errors import InputError
 from cevm.core.model import battery_energy_from_wheel_j, braking_weight, fuel_from_wheel_energy_l
-from cevm.units import J_PER_KWH
 from cevm.core.vehicle import Vehicle, predict
+from cevm.errors import InputError
+from cevm.units import J_PER_KWH
 
 #: Relative tolerance of the EV energy-budget checks: an assignment whose energy exceeds
 #: the budget by less than this share is feasible. Far above floating-point rounding

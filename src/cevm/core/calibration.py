@@ -68,11 +68,11 @@ import numpy as np
 from scipy.optimize import brentq, least_squares
 
 from cevm.core.cycle import CycleVector
-from cevm.errors import CevmError
-from cevm.units import J_PER_KWH
 from cevm.core.model import braking_weight, wheel_energy_j
 from cevm.core.trip import Measurement
 from cevm.core.vehicle import Vehicle, predict
+from cevm.errors import CevmError
+from cevm.units import J_PER_KWH
 
 #: Parameters that can be fitted, per powertrain, in the order of their priority.
 PARAMS_EV: tuple[str, ...] = ("eta", "aux_power_w", "cda_m2", "cr")

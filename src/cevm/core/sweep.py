@@ -66,10 +66,10 @@ from cevm.core.cycle import (
     cycle_vector,
     step_terms,
 )
-from cevm.errors import CevmError, InputError
 from cevm.core.model import braking_weight
-from cevm.executors import Executor, Task
 from cevm.core.vehicle import Vehicle
+from cevm.errors import CevmError, InputError
+from cevm.executors import Executor, Task
 
 #: Default state of charge at the start [%]: a vehicle leaving the depot fully charged.
 DEFAULT_SOC_START_PCT = 100.0

@@ -89,9 +89,9 @@ import numpy as np
 import pandas as pd
 from pyproj import Geod
 
-from cevm.ingest.consumption import ConsumptionParams, EnergySourceLike, _interp_limited, measure_trip
-from cevm.errors import InputError
 from cevm.core.trip import CANONICAL_COLUMNS, Measurement
+from cevm.errors import InputError
+from cevm.ingest.consumption import ConsumptionParams, EnergySourceLike, _interp_limited, measure_trip
 
 _GEOD = Geod(ellps="WGS84")
 _WGS84_A_M = 6378137.0

@@ -23,8 +23,8 @@ from pathlib import Path
 
 from cevm.errors import InputError
 from cevm.executors import Executor, SerialExecutor, Task, TaskResult
-from cevm.ingest.task import FileOutcome, IngestOptions, file_sha256, open_sampler, process_file
 from cevm.ingest.profiles import load_profiles
+from cevm.ingest.task import FileOutcome, IngestOptions, file_sha256, open_sampler, process_file
 from cevm.store import TripStore
 
 

@@ -24,16 +24,16 @@ from pathlib import Path
 
 import numpy as np
 
-from cevm.ingest.cleaning import CleanParams, CleanTrip, clean_log
 from cevm.core.cycle import CR0_DEFAULT, drive_cycle_vector
+from cevm.core.trip import Trip, TripRecord
+from cevm.errors import CevmError, InputError
+from cevm.executors import worker_cache
+from cevm.ingest.cleaning import CleanParams, CleanTrip, clean_log
 from cevm.ingest.dsm import DsmHeaders, DsmSampler
 from cevm.ingest.elevation import ElevationParams, trip_elevation
-from cevm.errors import CevmError, InputError
 from cevm.ingest.profiles import Profile
 from cevm.ingest.reading import read_log
-from cevm.executors import worker_cache
 from cevm.store import trip_profile_blob
-from cevm.core.trip import Trip, TripRecord
 
 
 @dataclass(frozen=True)
