@@ -26,6 +26,7 @@ afterwards, exactly, without the original samples (see :mod:`cevm.core.model`).
 from __future__ import annotations
 
 import io
+import math
 import struct
 from dataclasses import dataclass, field
 from functools import cached_property
@@ -191,6 +192,12 @@ class CycleVector:
     - ``cr0``: the criterion's Cr0; predictions need Cr >= cr0.
     - ``duration_s``, ``distance_m``, ``idle_s`` (time of steps at standstill),
       ``n_samples``, and the ``physics`` the terms were computed with.
+    - ``k_pos``: the positive kinetic energy per kg, sum of max(k_i, 0) over every step
+      [J/kg] (the kinetic term of an ICE, :mod:`cevm.core.energy`); NaN for a vector
+      stored before it existed (format version 2).
+    - ``traction_s``: the time of the simplified steps [s], those that need positive
+      wheel work for every vehicle with Cr >= Cr0 (an engine's running fuel is burnt
+      then, not while it coasts or brakes with its fuel cut off); NaN in version 2.
 
     Vectors of consecutive pieces add (``a + b``): a route is the sum of its cycles.
     """
@@ -208,6 +215,8 @@ class CycleVector:
     idle_s: float
     n_samples: int
     physics: Physics = PAPER_PHYSICS
+    k_pos: float = math.nan
+    traction_s: float = math.nan
     _tables: dict = field(default_factory=dict, repr=False, compare=False)
     _direct_uses: dict = field(default_factory=dict, repr=False, compare=False)
 
@@ -271,20 +280,25 @@ class CycleVector:
             idle_s=self.idle_s + other.idle_s,
             n_samples=self.n_samples + other.n_samples,
             physics=self.physics,
+            k_pos=self.k_pos + other.k_pos,
+            traction_s=self.traction_s + other.traction_s,
         )
 
     # --- serialisation (for the store) -------------------------------------------------
     def to_bytes(self) -> bytes:
         """Serialise to bytes; inverse of :meth:`from_bytes`.
 
-        Layout (little-endian): the 8-byte magic ``b"CEVMVEC2"``, a uint32 n (the
-        non-simplified steps), 11 float64 scalars (s_me, s_a, s_r, stand_x, cr0,
-        duration_s, distance_m, idle_s, n_samples, rho_air, g), then ns_x, ns_a, ns_r as
-        n float64 each. (Version 1 was an npz archive, 30x slower to read; still read.)
+        Layout (little-endian): the 8-byte magic ``b"CEVMVEC3"``, a uint32 n (the
+        non-simplified steps), 13 float64 scalars (s_me, s_a, s_r, stand_x, cr0,
+        duration_s, distance_m, idle_s, n_samples, rho_air, g, k_pos, traction_s), then
+        ns_x, ns_a, ns_r as n float64 each. Version 2 (``b"CEVMVEC2"``, 11 scalars) and
+        version 1 (an npz archive, 30x slower to read) are still read, with k_pos and
+        traction_s NaN.
         """
         scalars = np.array(
             [self.s_me, self.s_a, self.s_r, self.stand_x, self.cr0, self.duration_s, self.distance_m,
-             self.idle_s, float(self.n_samples), self.physics.rho_air_kg_m3, self.physics.g_mps2],
+             self.idle_s, float(self.n_samples), self.physics.rho_air_kg_m3, self.physics.g_mps2, self.k_pos,
+             self.traction_s],
             dtype="<f8",
         )
         n = int(self.ns_x.size)
@@ -297,14 +311,18 @@ class CycleVector:
         data = bytes(data)
         if data[:2] == b"PK":
             return cls._from_npz(data)
-        if data[: len(_VECTOR_MAGIC)] != _VECTOR_MAGIC:
+        magic = data[: len(_VECTOR_MAGIC)]
+        n_scalars = {_VECTOR_MAGIC: _N_SCALARS, _VECTOR_MAGIC_V2: _N_SCALARS - 2}.get(magic)
+        if n_scalars is None:
             raise ValueError("not a cycle vector (bad magic)")
         head = len(_VECTOR_MAGIC)
+        if len(data) < head + 4:
+            raise ValueError(f"truncated cycle vector: {len(data)} bytes")
         (n,) = struct.unpack_from("<I", data, head)
-        if len(data) != head + 4 + 8 * (_N_SCALARS + 3 * n):
+        if len(data) != head + 4 + 8 * (n_scalars + 3 * n):
             raise ValueError(f"truncated cycle vector: {len(data)} bytes for {n} steps")
         values = np.frombuffer(data, dtype="<f8", offset=head + 4).astype(np.float64)
-        return cls._from_arrays(values[:_N_SCALARS], values[_N_SCALARS:].reshape(3, n))
+        return cls._from_arrays(values[:n_scalars], values[n_scalars:].reshape(3, n))
 
     @classmethod
     def _from_npz(cls, data: bytes) -> CycleVector:
@@ -329,11 +347,14 @@ class CycleVector:
             idle_s=float(s[7]),
             n_samples=int(s[8]),
             physics=Physics(rho_air_kg_m3=float(s[9]), g_mps2=float(s[10])),
+            k_pos=float(s[11]) if s.size > 11 else math.nan,
+            traction_s=float(s[12]) if s.size > 12 else math.nan,
         )
 
 
-_VECTOR_MAGIC = b"CEVMVEC2"
-_N_SCALARS = 11
+_VECTOR_MAGIC = b"CEVMVEC3"
+_VECTOR_MAGIC_V2 = b"CEVMVEC2"
+_N_SCALARS = 13
 
 
 def drive_cycle_vector(
@@ -386,6 +407,8 @@ def drive_cycle_vector(
         idle_s=float(st.dt[~moving].sum()),
         n_samples=int(np.size(time_s)),
         physics=physics,
+        k_pos=float(np.maximum(st.k, 0.0).sum()),
+        traction_s=float(st.dt[simplified].sum()),
     )
 
 

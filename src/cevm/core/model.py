@@ -256,3 +256,4 @@ class Prediction:
     wheel_energy_j: np.ndarray
     energy_j: np.ndarray | None  # EV: at the battery
     fuel_l: np.ndarray | None  # ICE
+    ambient_c: np.ndarray | None = None  # the ambient temperature used [degC]

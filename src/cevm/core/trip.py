@@ -86,6 +86,13 @@ class Trip:
     measured: Measurement | None
     gross_weight_kg: float | None
     quality: dict = field(default_factory=dict)  # repairs and warnings, JSON-serialisable
+    # weather and evidence (None where the log has no such column)
+    ambient_temp_c: float | None = None  # time-weighted mean ambient temperature [degC]
+    ambient_temp_min_c: float | None = None
+    ambient_temp_max_c: float | None = None
+    standstill_s: float | None = None  # time at standstill with the ignition on [s]
+    standstill_power_w: float | None = None  # EV: mean measured battery power at standstill [W]
+    standstill_fuel_lps: float | None = None  # ICE: mean measured fuel rate at standstill [l/s]
 
     @property
     def trip_id(self) -> str:
@@ -109,7 +116,7 @@ class Trip:
         return TripRecord(
             self.vehicle_id, self.source_file, self.source_sha256, int(self.trip_index), float(self.start_utc_s),
             self.duration_s, self.length_m, self.n_samples, self.elevation_source, self.dsm_coverage_pct,
-            self.measured, self.gross_weight_kg, self.quality,
+            self.measured, self.gross_weight_kg, self.quality, **{k: getattr(self, k) for k in TRIP_EVIDENCE_FIELDS},
         )
 
 
@@ -132,11 +139,29 @@ class TripRecord:
     measured: Measurement | None
     gross_weight_kg: float | None
     quality: dict = field(default_factory=dict, hash=False)
+    ambient_temp_c: float | None = None
+    ambient_temp_min_c: float | None = None
+    ambient_temp_max_c: float | None = None
+    standstill_s: float | None = None
+    standstill_power_w: float | None = None
+    standstill_fuel_lps: float | None = None
 
     @property
     def trip_id(self) -> str:
         """Stable id: vehicle, start time and source content hash (as :attr:`Trip.trip_id`)."""
         return trip_id_of(self.vehicle_id, self.start_utc_s, self.source_sha256)
+
+
+#: The optional per-trip scalars of weather and evidence that :class:`Trip` and
+#: :class:`TripRecord` carry (and the store keeps), all float or None: the time-weighted
+#: mean, minimum and maximum ambient temperature [degC], the time at standstill with the
+#: ignition on [s], and the measured mean battery power [W] (EV) or fuel rate [l/s] (ICE)
+#: while standing still (evidence that a calibration's auxiliary and idle terms are
+#: checked against, never a model input).
+TRIP_EVIDENCE_FIELDS: tuple[str, ...] = (
+    "ambient_temp_c", "ambient_temp_min_c", "ambient_temp_max_c", "standstill_s", "standstill_power_w",
+    "standstill_fuel_lps",
+)
 
 
 def trip_id_of(vehicle_id: str, start_utc_s: float, source_sha256: str) -> str:
