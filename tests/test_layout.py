@@ -141,8 +141,8 @@ CORE_MODULES = modules(CEVM / "core")
 
 
 def test_the_core_package_exists():
-    names = {p.stem for p in CORE_MODULES}
-    assert {"cycle", "model", "vehicle", "trip", "calibration", "sweep", "feasibility", "assignment",
+    names = {module_name(p).removeprefix("cevm.core.") for p in CORE_MODULES}
+    assert {"cycle", "model", "energy", "vehicle", "trip", "calibration", "sweep", "feasibility", "assignment",
             "detailed"} <= names
 
 

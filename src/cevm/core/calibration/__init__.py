@@ -1,0 +1,39 @@
+"""Calibration of a vehicle's CE-model terms against measured trip consumption (pure).
+
+The paper fits one number, the average efficiency eta, "using data from a few drive
+cycles" (section 2.3) and judges the model by the per-cycle relative error
+e = (modelled - measured) / measured (tables 1 and 2). On real fleets one eta misses by
+20-45 %: auxiliary loads that follow the weather, regeneration that is not eta^2, and a
+diesel's fuel per wheel kWh that depends on the duty. This package fits those terms
+(:mod:`cevm.core.energy`) where the data identify them, chooses among them by grouped
+cross-validation, and refuses what physics refuses.
+
+Modules, in the order a calibration uses them:
+
+- :mod:`.data`       the trips (:class:`TripData`) and their screening into arrays
+- :mod:`.terms`      the fittable terms and the consumption model linear in them
+- :mod:`.solve`      the weighted fit (relative residuals, Paule-Mandel model error)
+- :mod:`.checks`     identifiability and physical plausibility
+- :mod:`.validation` grouped folds, error statistics, predictions, timing
+- :mod:`.fitting`    :func:`fit`: one term set, pruned of what the data cannot support
+- :mod:`.selection`  :func:`select`: every candidate set, the one-standard-error choice,
+                     nested cross-validation of the procedure
+"""
+
+from cevm.core.calibration.data import CalibrationError, TripData, TripSet
+from cevm.core.calibration.fitting import CalibrationResult, fit, fit_domain, predict_trips
+from cevm.core.calibration.selection import Candidate, Selection, candidate_sets, select
+from cevm.core.calibration.terms import ALIASES, EXTRA_TERMS, TERMS_BY_POWERTRAIN, Term, term
+from cevm.core.calibration.validation import ErrorStats, TripRow
+from cevm.units import J_PER_KWH
+
+__all__ = [
+    "ALIASES", "Candidate", "CalibrationError", "CalibrationResult", "EXTRA_TERMS", "ErrorStats", "Selection",
+    "TERMS_BY_POWERTRAIN", "Term", "TripData", "TripRow", "TripSet", "candidate_sets", "display_value", "fit",
+    "fit_domain", "predict_trips", "select", "term",
+]
+
+
+def display_value(result: CalibrationResult, value: float) -> float:
+    """Consumption in display units: litres, or kWh for joules."""
+    return value / J_PER_KWH if result.unit == "J" else value

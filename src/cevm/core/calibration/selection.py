@@ -1,0 +1,225 @@
+"""Model selection by grouped cross-validation (pure).
+
+The candidates are eta with every subset of the powertrain's extra terms
+(:data:`~.terms.EXTRA_TERMS`) that the trips can support. Each candidate is fitted to all
+usable trips and cross-validated on the same grouped folds. A candidate is *refused*,
+with the reason, when a term is not identifiable (:func:`.checks.unsupported`, confounded,
+imprecise) or its value is physically implausible (:func:`.checks.implausible`): such a
+candidate is shown, never chosen.
+
+Choice (the one-standard-error rule, on paired errors): let b be the candidate with the
+lowest cross-validated mean squared relative error (MSE). A candidate c is as good as b
+when MSE_c - MSE_b <= SE, the standard error of that difference estimated from the
+per-group sums of the paired squared-error differences (the folds' unit of
+independence). The chosen model is the simplest candidate as good as b (fewest terms;
+then the lower MSE): a term must buy more than noise to be kept.
+
+Honesty: choosing among candidates by their cross-validated error makes the winner's
+error optimistic. :func:`select` therefore also runs the whole selection inside each
+outer fold (nested cross-validation): the trips of a fold are predicted by the model the
+selection picks on the other folds alone. Its error is the one to quote for "cevm
+calibrate, as a procedure" on unseen trips.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from dataclasses import dataclass, replace
+from typing import Sequence
+
+import numpy as np
+
+from cevm.core.calibration import checks
+from cevm.core.calibration.data import CalibrationError, TripData, select_trips
+from cevm.core.calibration.fitting import CalibrationResult, fit_model
+from cevm.core.calibration.solve import fit_terms, value_covariance
+from cevm.core.calibration.terms import EXTRA_TERMS, TERMS_BY_POWERTRAIN, TermModel, neutral
+from cevm.core.calibration.validation import ErrorStats, folds
+from cevm.core.vehicle import Vehicle
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """One candidate term set: its cross-validated errors, fitted values (field ->
+    (value, standard error), SI) and status: "ok", "chosen", or "refused: why"."""
+
+    terms: tuple[str, ...]
+    status: str
+    cv: ErrorStats | None
+    in_sample: ErrorStats | None
+    fitted: dict
+    mse: float
+    se_vs_best: float = math.nan
+
+    @property
+    def ok(self) -> bool:
+        return not self.status.startswith("refused")
+
+
+@dataclass(frozen=True)
+class Selection:
+    """Outcome of :func:`select`: every candidate, the chosen model's full
+    :class:`~.fitting.CalibrationResult`, and the nested cross-validated error of the
+    selection as a procedure (None when it could not be run)."""
+
+    candidates: tuple[Candidate, ...]
+    chosen: tuple[str, ...]
+    best: tuple[str, ...]
+    result: CalibrationResult
+    nested_cv: ErrorStats | None
+    cv_scheme: str
+    rule: str
+
+
+def candidate_sets(vehicle: Vehicle, terms: Sequence[str] | None = None) -> list[tuple[str, ...]]:
+    """("eta", ...) for every subset of the extra terms (all of the powertrain's by
+    default), fewest terms first."""
+    extras = EXTRA_TERMS[vehicle.powertrain] if terms is None else tuple(terms)
+    out = []
+    for k in range(len(extras) + 1):
+        for comb in itertools.combinations(extras, k):
+            out.append(("eta", *comb))
+    return out
+
+
+def _cv_errors(model: TermModel, names, fold_of, idx, tau) -> np.ndarray:
+    """Cross-validated relative errors [%] of the trips ``idx`` with folds ``fold_of``
+    (NaN where a fold could not be fitted); the model's own vectorised predictions."""
+    err = np.full(len(idx), math.nan)
+    y = model.data.y[idx]
+    for f in np.unique(fold_of[fold_of >= 0]):
+        tr = idx[fold_of != f]
+        te_pos = np.flatnonzero(fold_of == f)
+        if tr.size < len(names) + 1:
+            continue
+        ff = fit_terms(model, names, tr, tau)
+        p = model.predict(names, ff.theta, idx[te_pos])
+        err[te_pos] = (p - y[te_pos]) / y[te_pos] * 100.0
+    return err
+
+
+def _status(model: TermModel, names, idx, tau, max_correlation, max_rel_se):
+    """(fit or None, refusal reason or None) of a candidate on the trips ``idx``."""
+    bad = checks.unsupported(model, names, idx)
+    if bad is not None:
+        return None, bad
+    f = fit_terms(model, names, idx, tau)
+    bad = (checks.confounded(f.jw, names, max_correlation, model) or checks.imprecise(model, f, idx, max_rel_se)
+           or checks.implausible(model, f, idx))
+    return f, bad
+
+
+def _choose(errs: dict, groups: np.ndarray) -> tuple[tuple, tuple, dict]:
+    """(best, chosen, se_vs_best) by the paired one-standard-error rule over groups."""
+    mse = {c: float(np.nanmean(e * e)) for c, e in errs.items()}
+    best = min(mse, key=lambda c: (mse[c], len(c)))
+    se = {}
+    ug = np.unique(groups)
+    for c, e in errs.items():
+        d = e * e - errs[best] * errs[best]
+        per_group = np.array([np.nansum(d[groups == g]) for g in ug])
+        n = np.sum(np.isfinite(d))
+        se[c] = float(math.sqrt(len(ug)) * per_group.std(ddof=1) / n) if len(ug) > 1 and n else math.inf
+    ok = [c for c in errs if mse[c] - mse[best] <= se[c]]
+    chosen = min(ok, key=lambda c: (len(c), mse[c]))
+    return best, chosen, se
+
+
+def _select_on(model: TermModel, sets, idx, inner_folds: int, loo_below: int, seed: int, tau, max_correlation,
+               max_rel_se) -> tuple[tuple, tuple, dict, dict, dict, dict]:
+    """The selection on the trips ``idx``: (best, chosen, errors, fits, reasons, se)."""
+    data = model.data
+    sub = data.subset(idx)
+    fold_of, _ = folds(sub, inner_folds, loo_below, seed)
+    groups = np.array([g if g is not None else f"\0{t}" for g, t in zip(sub.groups, sub.ids)], dtype=object)
+    errs, fits, reasons = {}, {}, {}
+    for names in sets:
+        f, bad = _status(model, list(names), idx, tau, max_correlation, max_rel_se)
+        if bad is not None:
+            reasons[names] = bad
+            continue
+        fits[names] = f
+        errs[names] = _cv_errors(model, list(names), fold_of, idx, tau) if np.any(fold_of >= 0) else \
+            (f.pred - data.y[idx]) / data.y[idx] * 100.0
+    if not errs:
+        raise CalibrationError("no candidate model could be fitted: "
+                               + "; ".join(f"{'+'.join(c)}: {r[1]}" for c, r in list(reasons.items())[:3]))
+    best, chosen, se = _choose(errs, groups)
+    return best, chosen, errs, fits, reasons, se
+
+
+def select(
+    vehicle: Vehicle,
+    trips: Sequence[TripData],
+    *,
+    terms: Sequence[str] | None = None,
+    cv_folds: int = 5,
+    loo_below: int = 10,
+    max_rel_uncertainty: float = 0.10,
+    min_distance_m: float = 1000.0,
+    rel_uncertainty_floor: float = 0.001,
+    model_rel_sigma: float | None = None,
+    max_correlation: float = 0.98,
+    max_rel_se: float = 0.5,
+    time_repeats: int = 20,
+    seed: int = 0,
+    nested: bool = True,
+    vehicle_id: str | None = None,
+) -> Selection:
+    """Choose the vehicle's terms by grouped cross-validation (module docstring) and fit
+    the chosen model (:func:`~.fitting.fit`'s parameters; ``terms`` restricts the extra
+    terms tried; ``nested`` runs the nested cross-validation of the procedure).
+
+    Every candidate starts from ``vehicle`` with the terms it does not hold taken out of
+    the model (no auxiliary power, regeneration at eta, ...); CdA and Cr stay as given.
+    """
+    base = neutral(vehicle)
+    data, excluded = select_trips(base, trips, max_rel_uncertainty, min_distance_m, rel_uncertainty_floor)
+    if data.n < 3:
+        why = "; ".join(f"{k}: {v}" for k, v in list(excluded.items())[:5])
+        raise CalibrationError(f"eta needs at least 3 usable trips, {data.n} of {len(trips)} are usable"
+                               + (f" (excluded: {why}{' ...' if len(excluded) > 5 else ''})" if excluded else ""))
+    model = TermModel(base, data)
+    sets = candidate_sets(base, terms)
+    idx = np.arange(data.n)
+    fold_of, scheme = folds(data, cv_folds, loo_below, seed)
+    best, chosen, errs, fits, reasons, se = _select_on(model, sets, idx, cv_folds, loo_below, seed, model_rel_sigma,
+                                                       max_correlation, max_rel_se)
+    cands = []
+    for names in sets:
+        if names in reasons:
+            term, why = reasons[names]
+            cands.append(Candidate(names, f"refused: {term}: {why}", None, None, {}, math.nan))
+            continue
+        f = fits[names]
+        vals, vcov = value_covariance(model, f)
+        sd = np.sqrt(np.maximum(np.diag(vcov), 0.0))
+        fitted = {TERMS_BY_POWERTRAIN[(base.powertrain, n)].field: (float(vals[n]), float(sd[j]))
+                  for j, n in enumerate(names)}
+        e = errs[names]
+        ins = ErrorStats.of((f.pred - data.y) / data.y * 100.0)
+        cands.append(Candidate(names, "chosen" if names == chosen else "ok", ErrorStats.of(e), ins, fitted,
+                               float(np.nanmean(e * e)), se[names]))
+    result = fit_model(model, chosen, excluded, cv_folds=cv_folds, loo_below=loo_below, tau=model_rel_sigma,
+                       max_correlation=max_correlation, max_rel_se=max_rel_se, time_repeats=time_repeats, seed=seed,
+                       vehicle_id=vehicle_id)
+    nested_cv = None
+    if nested and np.any(fold_of >= 0):
+        err = np.full(data.n, math.nan)
+        for f in np.unique(fold_of[fold_of >= 0]):
+            train = np.flatnonzero(fold_of != f)
+            test = np.flatnonzero(fold_of == f)
+            try:
+                _, ch, *_ = _select_on(model, sets, train, cv_folds, loo_below, seed, model_rel_sigma,
+                                       max_correlation, max_rel_se)
+            except CalibrationError:
+                continue
+            ff = fit_terms(model, list(ch), train, model_rel_sigma)
+            p = model.predict(list(ch), ff.theta, test)
+            err[test] = (p - data.y[test]) / data.y[test] * 100.0
+        nested_cv = ErrorStats.of(err)
+        result = replace(result, warnings=result.warnings)
+    rule = ("the simplest candidate whose cross-validated mean squared error is within one standard error "
+            "(paired, over groups) of the best")
+    return Selection(tuple(cands), tuple(chosen), tuple(best), result, nested_cv, scheme, rule)

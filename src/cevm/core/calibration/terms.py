@@ -1,0 +1,351 @@
+"""The terms a calibration can fit, and the model of a trip's consumption in them (pure).
+
+Every term of :mod:`cevm.core.energy` is, for fixed CdA and Cr, linear in a
+*coefficient* that multiplies a per-trip *feature*:
+
+==========  =====================  =========================  ====================
+term        vehicle field          coefficient                feature
+==========  =====================  =========================  ====================
+EV
+eta         eta                    1 / eta                    P  [J]
+regen       regen_eta              eta_r                      N  [J] (<= 0)
+aux         aux_power_w            p0 [W]                     D  [s]
+heat        aux_heating_w_per_k    p_heat [W/K]               D h(T)  [K s]
+cool        aux_cooling_w_per_k    p_cool [W/K]               D c(T)  [K s]
+warm        warmup_j_per_k         e_warm [J/K]               h(T)  [K]
+ICE
+eta         eta                    1 / eta                    (P + w N) / U  [l]
+kin         kinetic_eta            1 / eta_k - 1 / eta        m k_pos / U  [l]
+idle        idle_fuel_lps          r_idle [l/s]               I  [s]
+run         running_fuel_lps       r_run [l/s]                D_t  [s] (traction)
+heat        heating_fuel_lps_per_k r_heat [l/s/K]             D h(T)  [K s]
+cool        cooling_fuel_lps_per_k r_cool [l/s/K]             D c(T)  [K s]
+warm        warmup_fuel_l_per_k    l_warm [l/K]               h(T)  [K]
+both
+cda         cda_m2                 CdA (nonlinear: P and N depend on it)
+cr          cr                     Cr  (nonlinear)
+==========  =====================  =========================  ====================
+
+An EV whose ``regen`` is neither fitted nor set regenerates with eta (the paper): its
+N term is N / c_eta, not linear in c_eta; the fit linearises it (Gauss-Newton).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+from typing import Sequence
+
+import numpy as np
+
+from cevm.core import energy
+from cevm.core.calibration.data import CalibrationError, TripSet
+from cevm.core.model import braking_weight, wheel_energy_j
+from cevm.core.vehicle import Vehicle
+from cevm.units import J_PER_KWH, S_PER_H
+
+
+@dataclass(frozen=True)
+class Term:
+    """One fittable term: its names, units, bounds, and what the data need for it.
+
+    ``bounds`` bound the coefficient in the fit; ``plausible`` is the range of the
+    vehicle field's value (SI) outside which a fitted value is refused as physically
+    implausible. ``display`` = (unit, factor from SI); ``file`` = (vehicle-file key,
+    factor from SI).
+    """
+
+    name: str
+    field: str
+    powertrains: tuple[str, ...]
+    label: str
+    display: tuple[str, float]
+    file: tuple[str, float]
+    bounds: tuple[float, float]
+    plausible: tuple[float, float]
+    hint: str
+    temperature: bool = False
+    linear: bool = True
+
+
+_INF = math.inf
+
+
+def _terms() -> dict[tuple[str, str], Term]:
+    out: dict[tuple[str, str], Term] = {}
+    for t in _TERM_LIST:
+        for pt in t.powertrains:
+            out[(pt, t.name)] = t
+    return out
+
+
+_TERM_LIST: tuple[Term, ...] = (
+    Term("eta", "eta", ("ev",), "drive efficiency", ("", 1.0), ("eta", 1.0), (1.0, 20.0),
+         (0.3, 1.0), "every trip informs it"),
+    Term("eta", "eta", ("ice",), "drive efficiency", ("", 1.0), ("eta", 1.0), (1.0, 20.0),
+         (0.1, 0.6), "every trip informs it"),
+    Term("regen", "regen_eta", ("ev",), "regeneration efficiency", ("", 1.0), ("regen_eta", 1.0), (0.0, 1.0),
+         (0.0, 1.0), "trips must differ in the share of braking and descent"),
+    Term("aux", "aux_power_w", ("ev",), "auxiliary power", ("kW", 1e-3), ("aux_power_kw", 1e-3), (0.0, _INF),
+         (0.0, _INF), "trips must differ in average speed or mass (aux energy grows with duration)"),
+    Term("heat", "aux_heating_w_per_k", ("ev",), "heating power per K", ("kW/K", 1e-3),
+         ("aux_heating_kw_per_k", 1e-3), (0.0, _INF), (0.0, _INF),
+         "needs trips colder than the heating balance temperature, at several temperatures", temperature=True),
+    Term("cool", "aux_cooling_w_per_k", ("ev",), "A/C power per K", ("kW/K", 1e-3), ("aux_cooling_kw_per_k", 1e-3),
+         (0.0, _INF), (0.0, _INF), "needs trips warmer than the cooling balance temperature, at several temperatures",
+         temperature=True),
+    Term("warm", "warmup_j_per_k", ("ev",), "warm-up energy per start per K", ("kWh/K", 1 / J_PER_KWH),
+         ("warmup_kwh_per_k", 1 / J_PER_KWH), (0.0, _INF), (0.0, _INF),
+         "needs cold trips of different lengths", temperature=True),
+    Term("kin", "kinetic_eta", ("ice",), "efficiency on kinetic energy", ("", 1.0), ("kinetic_eta", 1.0),
+         (-_INF, _INF), (0.05, 1.0), "trips must differ in the kinetic share of their wheel energy (duty)"),
+    Term("idle", "idle_fuel_lps", ("ice",), "idle fuel rate", ("l/h", S_PER_H), ("idle_fuel_lph", S_PER_H),
+         (0.0, _INF), (0.0, 20.0 / S_PER_H), "trips must differ in their share of time at standstill"),
+    Term("run", "running_fuel_lps", ("ice",), "running fuel rate", ("l/h", S_PER_H), ("running_fuel_lph", S_PER_H),
+         (0.0, _INF), (0.0, 60.0 / S_PER_H), "trips must differ in average speed (engine time per wheel work)"),
+    Term("heat", "heating_fuel_lps_per_k", ("ice",), "heating fuel per K", ("l/h/K", S_PER_H),
+         ("heating_fuel_lph_per_k", S_PER_H), (0.0, _INF), (0.0, _INF),
+         "needs trips colder than the heating balance temperature, at several temperatures", temperature=True),
+    Term("cool", "cooling_fuel_lps_per_k", ("ice",), "A/C fuel per K", ("l/h/K", S_PER_H),
+         ("cooling_fuel_lph_per_k", S_PER_H), (0.0, _INF), (0.0, _INF),
+         "needs trips warmer than the cooling balance temperature, at several temperatures", temperature=True),
+    Term("warm", "warmup_fuel_l_per_k", ("ice",), "cold-start fuel per K", ("l/K", 1.0), ("warmup_fuel_l_per_k", 1.0),
+         (0.0, _INF), (0.0, _INF), "needs cold trips of different lengths", temperature=True),
+    Term("cda", "cda_m2", ("ev", "ice"), "drag area", ("m2", 1.0), ("cda_m2", 1.0), (1e-6, _INF), (0.05, 30.0),
+         "trips must differ in speed (drag energy grows with v^2 per metre)", linear=False),
+    Term("cr", "cr", ("ev", "ice"), "rolling coefficient", ("", 1.0), ("cr", 1.0), (0.0, 0.1), (0.001, 0.05),
+         "trips must differ in mass and speed mix (rolling energy grows with m per metre)", linear=False),
+)
+#: (powertrain, term name) -> :class:`Term`.
+TERMS_BY_POWERTRAIN = _terms()
+#: The energy terms (not cda, cr) a calibration chooses among, per powertrain, in the
+#: order of their physical priority; "eta" is always fitted.
+EXTRA_TERMS = {"ev": ("regen", "aux", "heat", "cool", "warm"), "ice": ("idle", "run", "kin", "heat", "cool", "warm")}
+
+#: Names a user may type for a term (old parameter names and vehicle fields included).
+ALIASES = {
+    "aux_power": "aux", "aux_power_w": "aux", "idle_fuel": "idle", "idle_fuel_lps": "idle", "cda_m2": "cda",
+    "regen_eta": "regen", "regeneration": "regen", "heating": "heat", "cooling": "cool", "warmup": "warm",
+    "running": "run", "running_fuel": "run", "running_fuel_lps": "run", "kinetic": "kin", "kinetic_eta": "kin",
+    "aux_heating_w_per_k": "heat", "aux_cooling_w_per_k": "cool", "warmup_j_per_k": "warm",
+    "heating_fuel_lps_per_k": "heat", "cooling_fuel_lps_per_k": "cool", "warmup_fuel_l_per_k": "warm",
+}
+
+
+def term(vehicle: Vehicle, name: str) -> Term:
+    """The :class:`Term` ``name`` (or an alias) of the vehicle's powertrain."""
+    key = ALIASES.get(name, name)
+    t = TERMS_BY_POWERTRAIN.get((vehicle.powertrain, key))
+    if t is None:
+        allowed = ", ".join(n for (pt, n) in TERMS_BY_POWERTRAIN if pt == vehicle.powertrain)
+        raise CalibrationError(f"cannot fit {name!r} for an {'EV' if vehicle.is_ev else 'ICE'} vehicle; "
+                               f"choose from {allowed}")
+    return t
+
+
+def normalise(vehicle: Vehicle, names: Sequence[str]) -> list[str]:
+    """Term names (aliases resolved, duplicates dropped), "eta" first; "eta" must be given."""
+    out: list[str] = []
+    for n in names:
+        t = term(vehicle, n).name
+        if t not in out:
+            out.append(t)
+    if "eta" not in out:
+        raise CalibrationError("'eta' must be among the fitted parameters")
+    out.remove("eta")
+    return ["eta", *out]
+
+
+def neutral(vehicle: Vehicle, keep: Sequence[str] = ()) -> Vehicle:
+    """``vehicle`` without the energy terms not in ``keep`` (zero, or None: the paper's
+    model); road-load parameters (CdA, Cr) and eta stay."""
+    changes: dict = {}
+    for name in EXTRA_TERMS[vehicle.powertrain]:
+        if name in keep:
+            continue
+        t = TERMS_BY_POWERTRAIN[(vehicle.powertrain, name)]
+        changes[t.field] = None if t.field in ("regen_eta", "kinetic_eta") else 0.0
+    return replace(vehicle, **changes)
+
+
+def with_values(vehicle: Vehicle, values: dict[str, float]) -> Vehicle:
+    """``vehicle`` with fitted field values (keys: vehicle fields)."""
+    return replace(vehicle, **values)
+
+
+# ------------------------------------------------------------------------- the model
+
+
+class TermModel:
+    """Predictions and Jacobians of the trips' consumption as a function of the fitted
+    terms' coefficients (see the module docstring); the other terms at the vehicle's
+    values."""
+
+    def __init__(self, vehicle: Vehicle, data: TripSet):
+        self.vehicle = vehicle
+        self.data = data
+        self.ev = vehicle.is_ev
+        if not self.ev:
+            if vehicle.fuel_lhv_j_per_l is None:
+                raise CalibrationError(f"ICE vehicle {vehicle.name!r} has no fuel lower heating value")
+            self.w_ice = braking_weight(vehicle.ice_braking)
+            self.lhv = float(vehicle.fuel_lhv_j_per_l)
+        self._cache: dict = {}
+        t = data.ambient_c
+        with np.errstate(invalid="ignore"):
+            self.h = np.where(np.isfinite(t), energy.heating_k(np.nan_to_num(t), vehicle.heating_below_c), np.nan)
+            self.c = np.where(np.isfinite(t), energy.cooling_k(np.nan_to_num(t), vehicle.cooling_above_c), np.nan)
+
+    def components(self, cda: float, cr: float) -> tuple[np.ndarray, np.ndarray]:
+        """P_i (E_DC1 + positive non-simplified) and N_i (negative non-simplified) [J]."""
+        key = (float(cda), float(cr))
+        hit = self._cache.get(key)
+        if hit is None:
+            w01 = np.array([0.0, 1.0])
+            e = np.array([wheel_energy_j(v, np.float64(m), key[0], key[1], w01)
+                          for v, m in zip(self.data.vectors, self.data.mass)])
+            e = e.reshape(self.data.n, 2)
+            hit = (e[:, 0], e[:, 1] - e[:, 0])
+            if len(self._cache) > 256:
+                self._cache.clear()
+            self._cache[key] = hit
+        return hit
+
+    def feature(self, name: str, cda: float, cr: float) -> np.ndarray:
+        """The feature multiplying term ``name``'s coefficient, per trip."""
+        d = self.data
+        if name == "eta":
+            P, N = self.components(cda, cr)
+            return P if self.ev else (P + self.w_ice * N) / self.lhv
+        if name == "regen":
+            return self.components(cda, cr)[1]
+        if name == "kin":
+            return d.mass * d.k_pos / self.lhv
+        if name == "aux":
+            return d.duration
+        if name == "idle":
+            return d.idle
+        if name == "run":
+            return d.traction
+        if name == "heat":
+            return d.duration * self.h
+        if name == "cool":
+            return d.duration * self.c
+        if name == "warm":
+            return self.h
+        raise KeyError(name)
+
+    # values <-> coefficients ---------------------------------------------------------
+
+    def vehicle_values(self) -> dict[str, float]:
+        """The current value of every term's field (SI), None-valued fields as NaN."""
+        v = self.vehicle
+        out = {}
+        for (pt, name), t in TERMS_BY_POWERTRAIN.items():
+            if pt == v.powertrain:
+                x = getattr(v, t.field)
+                out[name] = math.nan if x is None else float(x)
+        return out
+
+    def coefficients(self, values: dict[str, float]) -> dict[str, float]:
+        """Term coefficients from term values (``values`` keyed by term name)."""
+        c = {}
+        for name, x in values.items():
+            if name == "eta":
+                c[name] = 1.0 / x
+            elif name == "kin":
+                c[name] = 0.0 if not math.isfinite(x) else 1.0 / x - 1.0 / values["eta"]
+            elif name in ("cda", "cr"):
+                c[name] = x
+            elif name == "regen":
+                c[name] = x  # NaN: tied to eta
+            else:
+                c[name] = x
+        return c
+
+    def values_of(self, names: Sequence[str], theta: np.ndarray) -> dict[str, float]:
+        """Term values (SI, vehicle-field meaning) with ``names`` set from coefficients
+        ``theta`` and the others at the vehicle's values."""
+        vals = self.vehicle_values()
+        coef = dict(zip(names, (float(x) for x in theta)))
+        if "eta" in coef:
+            vals["eta"] = 1.0 / coef["eta"]
+        for name, x in coef.items():
+            if name == "eta":
+                continue
+            if name == "kin":
+                vals["kin"] = 1.0 / (x + 1.0 / vals["eta"])
+            else:
+                vals[name] = x
+        return vals
+
+    def fields_of(self, names: Sequence[str], theta: np.ndarray) -> dict[str, float]:
+        """Vehicle field -> value for the fitted ``names``."""
+        vals = self.values_of(names, theta)
+        return {TERMS_BY_POWERTRAIN[(self.vehicle.powertrain, n)].field: vals[n] for n in names}
+
+    # prediction ----------------------------------------------------------------------
+
+    def predict(self, names: Sequence[str], theta: np.ndarray, idx=slice(None)) -> np.ndarray:
+        """Consumption of the trips ``idx`` [J or l] with the coefficients ``theta`` of
+        ``names`` (the other terms at the vehicle's values)."""
+        vals = self.values_of(names, theta)
+        cda, cr = vals["cda"], vals["cr"]
+        coef = self.coefficients({k: v for k, v in vals.items() if k not in ("cda", "cr")})
+        out = np.zeros(self.data.n)[idx]
+        for name, c in coef.items():
+            if name == "regen" and not math.isfinite(c):
+                out = out + self.feature("regen", cda, cr)[idx] / coef["eta"]  # tied: eta N
+                continue
+            if c == 0.0 or not math.isfinite(c):
+                continue
+            out = out + c * self.feature(name, cda, cr)[idx]
+        return out
+
+    def jacobian(self, names: Sequence[str], theta: np.ndarray, idx=slice(None)) -> np.ndarray:
+        """d predict / d theta (coefficients; CdA and Cr by a forward difference, exact
+        within a linear piece of the wheel energy)."""
+        vals = self.values_of(names, theta)
+        cda, cr = vals["cda"], vals["cr"]
+        n = self.data.n if isinstance(idx, slice) else len(np.atleast_1d(np.arange(self.data.n)[idx]))
+        J = np.empty((n, len(names)))
+        tied = self.ev and not math.isfinite(vals.get("regen", math.nan)) and "regen" not in names
+        base = None
+        for j, name in enumerate(names):
+            if name in ("cda", "cr"):
+                if base is None:
+                    base = self.predict(names, theta, idx)
+                h = 1e-7 * max(abs(vals[name]), 1e-3)
+                th = np.array(theta, dtype=np.float64)
+                th[j] += h
+                J[:, j] = (self.predict(names, th, idx) - base) / h
+                continue
+            col = self.feature(name, cda, cr)[idx]
+            if name == "eta" and tied:
+                col = col - self.feature("regen", cda, cr)[idx] / (1.0 / vals["eta"]) ** 2
+            if name == "eta" and not self.ev and "kin" not in names and math.isfinite(vals.get("kin", math.nan)):
+                # a fixed kinetic_eta: its coefficient 1/eta_k - 1/eta moves with eta
+                col = col - self.feature("kin", cda, cr)[idx]
+            J[:, j] = col
+        return J
+
+    def nontraction(self, names: Sequence[str], theta: np.ndarray) -> np.ndarray:
+        """Per trip, the consumption of the terms that do not scale with wheel energy
+        (aux, heating, cooling, warm-up, idle, running) [J or l]."""
+        vals = self.values_of(names, theta)
+        out = np.zeros(self.data.n)
+        for name in ("aux", "heat", "cool", "warm", "idle", "run"):
+            x = vals.get(name, 0.0)
+            if math.isfinite(x) and x:
+                out = out + x * self.feature(name, vals["cda"], vals["cr"])
+        return out
+
+    def standstill_rate(self, names: Sequence[str], theta: np.ndarray) -> np.ndarray:
+        """Per trip, the modelled rate while standing still [W or l/s]: EV P_aux(T); ICE
+        r_idle + r_heat h(T) + r_cool c(T)."""
+        vals = self.values_of(names, theta)
+        g = {k: (0.0 if not math.isfinite(vals.get(k, 0.0)) else vals.get(k, 0.0)) for k in ("aux", "heat", "cool", "idle")}
+        h = np.nan_to_num(self.h)
+        c = np.nan_to_num(self.c)
+        base = g["aux"] if self.ev else g["idle"]
+        return base + g["heat"] * h + g["cool"] * c
