@@ -33,3 +33,58 @@ def reference_wheel_energy_j(t, v, h, m, cda, cr, mode, eta=1.0, cr0=0.004):
         else:
             raise ValueError(mode)
     return total
+
+
+def reference_consumption(t, v, h, m, veh, ambient_c, cr0=0.004):
+    """Battery energy [J] (EV) or fuel [l] (ICE) of one trip, step by step, with every
+    term of cevm.core.energy written out from its equation (not from cevm's code).
+
+    ``veh`` is a mapping with the vehicle's fields (SI): eta, cda_m2, cr, powertrain, and
+    for an EV regen_eta (None: eta), aux_power_w, aux_heating_w_per_k,
+    aux_cooling_w_per_k, warmup_j_per_k; for an ICE fuel_lhv_j_per_l, ice_braking,
+    kinetic_eta (None: eta), running_fuel_lps, idle_fuel_lps, heating_fuel_lps_per_k,
+    cooling_fuel_lps_per_k, warmup_fuel_l_per_k; both heating_below_c, cooling_above_c.
+
+    EV per step: Delta / eta if Delta > 0 or the step is simplified, else regen_eta Delta;
+    plus P_aux(T) dt; once at the start warmup h(T). ICE per step: Delta / (U eta)
+    counted as eq. (24) ("paper") or only when positive ("no-credit"), plus
+    max(k, 0) m (1/eta_k - 1/eta) / U, running fuel x dt on simplified steps, idle fuel x
+    dt at standstill (v = 0 at both ends), the temperature rate x dt; once the cold start.
+    """
+    heat = max(0.0, veh["heating_below_c"] - ambient_c)
+    cool = max(0.0, ambient_c - veh["cooling_above_c"])
+    eta = veh["eta"]
+    ev = veh["powertrain"] == "ev"
+    if ev:
+        regen = eta if veh["regen_eta"] is None else veh["regen_eta"]
+        p_aux = veh["aux_power_w"] + veh["aux_heating_w_per_k"] * heat + veh["aux_cooling_w_per_k"] * cool
+        total = veh["warmup_j_per_k"] * heat
+    else:
+        lhv = veh["fuel_lhv_j_per_l"]
+        eta_k = eta if veh["kinetic_eta"] is None else veh["kinetic_eta"]
+        rate_t = veh["heating_fuel_lps_per_k"] * heat + veh["cooling_fuel_lps_per_k"] * cool
+        total = veh["warmup_fuel_l_per_k"] * heat
+    for i in range(len(t) - 1):
+        dt = t[i + 1] - t[i]
+        k = 0.5 * (v[i + 1] ** 2 - v[i] ** 2)
+        a = 0.25 * RHO * (v[i] ** 3 + v[i + 1] ** 3) * dt
+        r = 0.5 * G * (v[i] + v[i + 1]) * dt
+        e = G * (h[i + 1] - h[i]) if h is not None else 0.0
+        delta = m * (k + e) + veh["cda_m2"] * a + veh["cr"] * m * r
+        simplified = k + e + cr0 * r > 0
+        if ev:
+            if simplified or delta > 0:
+                total += delta / eta
+            else:
+                total += regen * delta
+            total += p_aux * dt
+        else:
+            if simplified or delta > 0 or veh["ice_braking"] == "paper":
+                total += delta / (lhv * eta)
+            total += max(k, 0.0) * m * (1.0 / eta_k - 1.0 / eta) / lhv
+            if simplified:
+                total += veh["running_fuel_lps"] * dt
+            if v[i] == 0 and v[i + 1] == 0:
+                total += veh["idle_fuel_lps"] * dt
+            total += rate_t * dt
+    return total

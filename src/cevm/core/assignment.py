@@ -63,9 +63,10 @@ from typing import Any
 
 import numpy as np
 
+from cevm.core import energy
 from cevm.core.cycle import CycleVector
-from cevm.core.model import battery_energy_from_wheel_j, braking_weight, fuel_from_wheel_energy_l
-from cevm.core.vehicle import Vehicle, predict
+from cevm.core.model import braking_weight
+from cevm.core.vehicle import Vehicle, default_ambient_c, predict
 from cevm.errors import InputError
 from cevm.units import J_PER_KWH
 
@@ -369,30 +370,35 @@ class LegCurve:
 
 
 def _negative_weight(vehicle: Vehicle) -> float:
-    return float(vehicle.eta) ** 2 if vehicle.is_ev else braking_weight(vehicle.ice_braking)
+    return energy.ev_negative_weight(vehicle) if vehicle.is_ev else braking_weight(vehicle.ice_braking)
 
 
-def _to_quantity(vehicle: Vehicle, vector: CycleVector) -> tuple[float, float]:
-    """Gain and offset of the affine map wheel energy [J] -> litres or battery joules,
-    read from cevm.core.model's own conversion functions."""
+def _to_quantity(vehicle: Vehicle, vector: CycleVector, ambient_c: float) -> tuple[float, float, float]:
+    """Gain and offset of the map wheel energy [J] -> litres or battery joules, and the
+    slope in mass [per kg] of the terms beyond the wheel (an ICE's kinetic term), read
+    from cevm.core.energy's own functions at ``ambient_c``."""
     if vehicle.is_ev:
-        conv = lambda e: float(battery_energy_from_wheel_j(e, vehicle.eta, vehicle.aux_power_w, vector.duration_s))  # noqa: E731
+        def conv(e, m):
+            return float(energy.ev_battery_energy_j(vehicle, e, duration_s=vector.duration_s, ambient_c=ambient_c))
     else:
-        conv = lambda e: float(  # noqa: E731
-            fuel_from_wheel_energy_l(e, vehicle.eta, vehicle.fuel_lhv_j_per_l, vehicle.idle_fuel_lps, vector.idle_s)
-        )
-    q0 = conv(0.0)
-    return conv(1.0) - q0, q0
+        def conv(e, m):
+            return float(energy.ice_fuel_l(vehicle, e, mass_kg=m, k_pos=vector.k_pos, traction_s=vector.traction_s,
+                                           duration_s=vector.duration_s, idle_s=vector.idle_s, ambient_c=ambient_c))
+    q0 = conv(0.0, 0.0)
+    return conv(1.0, 0.0) - q0, q0, conv(0.0, 1.0) - q0
 
 
-def leg_curve(vector: CycleVector, vehicle: Vehicle, m_lo_kg: float, m_hi_kg: float, *, check: bool = True) -> LegCurve:
+def leg_curve(vector: CycleVector, vehicle: Vehicle, m_lo_kg: float, m_hi_kg: float, *, check: bool = True,
+              ambient_c: float | None = None) -> LegCurve:
     """The exact pieces of ``predict(vector, vehicle, m)`` for m in [m_lo_kg, m_hi_kg].
 
     Wheel energy is ``m B0 + A0 + (1 - w) P(m)`` with P the sum of the positive
     non-simplified Delta_i; on the c = CdA/m interval where the first i steps of the
     cycle's sorted threshold table are positive, P(m) = m (X_i + Cr R_i) + CdA A_i with
     the table's prefix sums. One piece per threshold inside the range, duplicates
-    removed (w = 1 leaves one: affine). With ``check`` (default), the pieces are compared
+    removed (w = 1 leaves one: affine). The terms beyond the wheel (:mod:`cevm.core.energy`,
+    at ``ambient_c``, default the vehicle's) add a constant and, an ICE's kinetic term,
+    a slope in m. With ``check`` (default), the pieces are compared
     with :func:`cevm.core.vehicle.predict` at every breakpoint in the range, every midpoint and
     both ends; a mismatch beyond 1e-9 relative raises RuntimeError (a bug, not input).
     """
@@ -415,9 +421,10 @@ def leg_curve(vector: CycleVector, vehicle: Vehicle, m_lo_kg: float, m_hi_kg: fl
         B = b0 + (1.0 - w) * (table.x_cum[idx] + cr * table.r_cum[idx])
         A = a0 + (1.0 - w) * cda * table.a_cum[idx]
         thr = table.threshold[i_lo:i_hi]
-    gain, offset = _to_quantity(vehicle, vector)
+    t_c = default_ambient_c(vehicle)[0] if ambient_c is None else float(ambient_c)
+    gain, offset, slope = _to_quantity(vehicle, vector, t_c)
     alpha = gain * A + offset
-    beta = gain * B
+    beta = gain * B + slope
     if alpha.size > 1:
         keep = np.ones(alpha.size, dtype=bool)
         keep[1:] = (alpha[1:] != alpha[:-1]) | (beta[1:] != beta[:-1])
@@ -428,7 +435,7 @@ def leg_curve(vector: CycleVector, vehicle: Vehicle, m_lo_kg: float, m_hi_kg: fl
         pts = np.concatenate([[m_lo_kg], bps, [m_hi_kg]])
         grid = np.concatenate([pts, 0.5 * (pts[1:] + pts[:-1])])
         grid = grid[(grid >= m_lo_kg) & (grid <= m_hi_kg)]
-        truth = _quantity(predict(vector, vehicle, grid), vehicle)
+        truth = _quantity(predict(vector, vehicle, grid, ambient_c=t_c), vehicle)
         err = np.max(np.abs(curve(grid) - truth))
         scale = float(np.max(np.abs(truth))) + abs(offset) + 1e-300
         if err > _CURVE_RTOL * scale:

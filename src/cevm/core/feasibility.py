@@ -6,8 +6,10 @@ exact peak of the energy drawn along the way).
 
 Feasibility and the largest payload
 -----------------------------------
-For a fixed vehicle, every E_j is convex in the mass m: W(D) = eta^2 D + (1 - eta^2)
-max(D, 0) with D affine in m, and eta^2 <= 1 (the same holds for ICE fuel, w = 1 or 0).
+For a fixed vehicle, every E_j is convex in the mass m: W(D) = w D + (1 - w)
+max(D, 0) with D affine in m, and w = eta eta_r <= 1 (the same holds for ICE fuel, w = 1
+or 0); the terms beyond the wheel (:mod:`cevm.core.energy`) are constant or, the ICE's
+kinetic term, linear in m, so convexity is kept.
 The maximum over j of convex functions is convex. So the payloads that keep the reserve
 form one interval, even on routes where energy *falls* with mass (a long descent: a
 heavier vehicle regenerates more). :func:`feasibility` does not assume monotonicity: it
@@ -25,15 +27,17 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from cevm.core.model import battery_energy_from_wheel_j, fuel_from_wheel_energy_l
 from cevm.core.sweep import (
     DEFAULT_RESERVE_PCT,
     DEFAULT_SOC_START_PCT,
     PredictionSet,
+    AMBIENT_ORIGINS,
+    RowTerms,
     Source,
     ce_wheel_energy_j,
     check_cr,
     peak_energy_j,
+    row_terms,
 )
 from cevm.core.vehicle import Vehicle
 from cevm.errors import CevmError
@@ -52,7 +56,8 @@ class Feasibility:
     ``min_payload_kg`` (0 unless the empty vehicle fails and a heavier one passes,
     which convexity allows on descents), ``limited_by``: ``"reserve"``, ``"tank"``,
     ``"max_gross_kg"``, ``"payload_cap"`` or ``"infeasible"``. Payloads count from
-    ``kerb_mass_kg`` (from ``mass_kg`` for a vehicle without one).
+    ``kerb_mass_kg`` (from ``mass_kg`` for a vehicle without one). ``ambient_c`` the
+    temperature each vehicle was evaluated at [degC], ``ambient_from`` its origin.
     """
 
     source: Source
@@ -70,6 +75,8 @@ class Feasibility:
     max_payload_kg: np.ndarray
     min_payload_kg: np.ndarray
     limited_by: tuple[str, ...]
+    ambient_c: np.ndarray | None = None
+    ambient_from: tuple[str, ...] = ()
 
 
 class _LoadFunction:
@@ -78,31 +85,40 @@ class _LoadFunction:
     the reserve, or the tank)."""
 
     def __init__(self, source: Source, vehicles: Sequence[Vehicle], base_kg: np.ndarray, soc_start_pct: float,
-                 reserve_pct: float, ice_braking: str | None):
+                 reserve_pct: float, ice_braking: str | None, ambient_c: float | None = None):
         self.source = source
-        self.pset = PredictionSet.build(vehicles, ice_braking=ice_braking)  # one row per vehicle
+        self.pset = PredictionSet.build(vehicles, ice_braking=ice_braking, ambient_c=ambient_c)  # one row per vehicle
         check_cr(source, self.pset)
         self.base_kg = base_kg
         ps = self.pset
         self.budget = np.where(ps.is_ev, (soc_start_pct - reserve_pct) / 100.0 * ps.battery_j, ps.tank_l)
 
     def __call__(self, vi: np.ndarray, payload_kg: np.ndarray) -> np.ndarray:
+        return self.evaluate(vi, payload_kg)[0]
+
+    def evaluate(self, vi: np.ndarray, payload_kg: np.ndarray) -> tuple[np.ndarray, np.ndarray, RowTerms]:
+        """(peak battery energy [J] (EV) or fuel [l] (ICE), total battery energy [J] (NaN
+        for ICE), the row terms) of (vehicle index, payload) pairs."""
         ps = self.pset
         vec = self.source.vector
         m = self.base_kg[vi] + payload_kg
+        terms = row_terms(ps, [self.source], rows=vi, mass_kg=m)
         wheel = ce_wheel_energy_j(vec, m, ps.cda_m2[vi], ps.cr[vi], ps.negative_weight[vi], group=vi)
         out = np.empty(vi.size)
+        total = np.full(vi.size, np.nan)
         ev = ps.is_ev[vi]
         if ev.any():
             v = vi[ev]
-            e = battery_energy_from_wheel_j(wheel[ev], ps.eta[v], ps.aux_power_w[v], vec.duration_s)
-            out[ev] = peak_energy_j(self.source.steps, m[ev], ps.cda_m2[v], ps.cr[v], ps.eta[v],
-                                    ps.negative_weight[v], ps.aux_power_w[v], group=v, end_energy_j=e)
+            aux = terms.aux_w[ev, 0]
+            start = terms.start_j[ev, 0]
+            e = wheel[ev] / ps.eta[v] + aux * vec.duration_s
+            out[ev] = start + peak_energy_j(self.source.steps, m[ev], ps.cda_m2[v], ps.cr[v], ps.eta[v],
+                                            ps.negative_weight[v], aux, group=v, end_energy_j=e)
+            total[ev] = e + start
         if (~ev).any():
             v = vi[~ev]
-            out[~ev] = fuel_from_wheel_energy_l(wheel[~ev], ps.eta[v], ps.lhv_j_per_l[v], ps.idle_fuel_lps[v],
-                                                vec.idle_s)
-        return out
+            out[~ev] = wheel[~ev] / (ps.lhv_j_per_l[v] * ps.eta[v]) + terms.fuel_extra_l[~ev, 0]
+        return out, total, terms
 
     def ok(self, vi: np.ndarray, payload_kg: np.ndarray) -> np.ndarray:
         return self(vi, payload_kg) <= self.budget[vi]
@@ -153,6 +169,7 @@ def feasibility(
     mass_kg: float | None = None,
     payload_cap_kg: float | None = None,
     ice_braking: str | None = None,
+    ambient_c: float | None = None,
 ) -> Feasibility:
     """Feasibility of ``source`` for each vehicle, and the largest payload.
 
@@ -170,6 +187,8 @@ def feasibility(
         ``max_gross_kg`` [kg]; default None: its kerb (or base) mass, i.e. at most
         doubling the vehicle's mass (``limited_by`` says ``"payload_cap"`` then)
     ice_braking : override of the ICE braking mode
+    ambient_c : the ambient temperature [degC]; default the source's own, else each
+        vehicle's default (:data:`cevm.core.sweep.AMBIENT_ORIGINS`)
 
     The payload search is exact on whole kilograms: see the module notes (convexity).
     An ICE vehicle without ``tank_l`` has no fuel limit: its payload is limited by
@@ -190,22 +209,19 @@ def feasibility(
         mass = np.full(nv, float(mass_kg))
     else:
         mass = np.array([v.mass_kg for v in vehicles], dtype=np.float64)
-    f = _LoadFunction(source, vehicles, base, soc_start_pct, reserve_pct, ice_braking)
+    f = _LoadFunction(source, vehicles, base, soc_start_pct, reserve_pct, ice_braking, ambient_c)
     ps = f.pset
     vi = np.arange(nv)
-    at = f(vi, mass - base)
+    at, total, terms = f.evaluate(vi, mass - base)
     max_gross = np.array([np.inf if v.max_gross_kg is None else v.max_gross_kg for v in vehicles])
     over = mass > max_gross
-    vec = source.vector
     # totals at the evaluated load
-    wheel = ce_wheel_energy_j(vec, mass, ps.cda_m2, ps.cr, ps.negative_weight, group=vi)
-    energy = np.full(nv, np.nan)
+    energy = total
     fuel = np.full(nv, np.nan)
     soc_end = np.full(nv, np.nan)
     soc_min = np.full(nv, np.nan)
     ev = ps.is_ev
     if ev.any():
-        energy[ev] = battery_energy_from_wheel_j(wheel[ev], ps.eta[ev], ps.aux_power_w[ev], vec.duration_s)
         soc_end[ev] = soc_start_pct - 100.0 * energy[ev] / ps.battery_j[ev]
         soc_min[ev] = soc_start_pct - 100.0 * at[ev] / ps.battery_j[ev]
     fuel[~ev] = at[~ev]
@@ -284,4 +300,6 @@ def feasibility(
         max_payload_kg=max_p,
         min_payload_kg=min_p,
         limited_by=tuple(str(s) for s in limited),
+        ambient_c=terms.ambient_c[:, 0],
+        ambient_from=tuple(AMBIENT_ORIGINS[int(c)] for c in terms.ambient_from[:, 0]),
     )

@@ -57,6 +57,7 @@ from functools import cached_property
 
 import numpy as np
 
+from cevm.core import energy
 from cevm.core.cycle import (
     CR0_DEFAULT,
     PAPER_PHYSICS,
@@ -294,13 +295,16 @@ def build_steps(
 class Source:
     """Something to drive: its name, kind (``"cycle"``, ``"trip"`` or ``"route"``), CE
     vector, and its legs' profiles (a sequence, or a callable returning one, called at
-    most once and only when the state of charge along the way is needed)."""
+    most once and only when the state of charge along the way is needed).
+    ``ambient_c``: the source's own ambient temperature [degC] (a stored trip's logged
+    mean), or None (see :data:`AMBIENT_ORIGINS` for what a prediction uses then)."""
 
     name: str
     kind: str
     vector: CycleVector
     legs: Sequence[LegProfile] | Callable[[], Sequence[LegProfile]]
     block_elements: int = BLOCK_ELEMENTS
+    ambient_c: float | None = None
 
     @classmethod
     def from_cycle(cls, cycle: DriveCycle, name: str | None = None, *, cr0: float = CR0_DEFAULT,
@@ -344,10 +348,14 @@ class PredictionSet:
 
     Arrays (P,): ``vehicle_index``, ``mass_kg``, ``payload_kg`` (mass minus kerb mass;
     NaN without ``kerb_mass_kg``), ``over_max_gross``, and each vehicle's parameters
-    broadcast to its rows: ``cda_m2``, ``cr``, ``eta``, ``negative_weight`` (eta^2 for
-    an EV, 1 or 0 for an ICE by braking mode), ``aux_power_w``, ``battery_j`` (NaN for
+    broadcast to its rows: ``cda_m2``, ``cr``, ``eta``, ``negative_weight`` (eta eta_r
+    for an EV, :func:`cevm.core.energy.ev_negative_weight`; 1 or 0 for an ICE by braking
+    mode), ``aux_power_w`` (an EV's base auxiliary power p0 only: the terms that depend
+    on the temperature and the trip are in :func:`row_terms`), ``battery_j`` (NaN for
     ICE), ``lhv_j_per_l`` (NaN for EV), ``idle_fuel_lps``, ``tank_l`` (NaN if unknown),
     ``is_ev``. ``braking`` holds each vehicle's ICE braking mode in force ("" for EV).
+    ``ambient_c``: the ambient temperature of every prediction [degC], or None: each
+    source's own, else each vehicle's default (:data:`AMBIENT_ORIGINS`).
     """
 
     vehicles: tuple[Vehicle, ...]
@@ -366,6 +374,7 @@ class PredictionSet:
     tank_l: np.ndarray
     is_ev: np.ndarray
     braking: tuple[str, ...]
+    ambient_c: float | None = None
 
     @property
     def n(self) -> int:
@@ -379,11 +388,18 @@ class PredictionSet:
         mass_kg: Sequence[float] | np.ndarray | None = None,
         payload_kg: Sequence[float] | np.ndarray | None = None,
         ice_braking: str | None = None,
+        ambient_c: float | None = None,
     ) -> PredictionSet:
         """Every vehicle at every mass: ``mass_kg`` (gross masses [kg], the same for all
         vehicles), or ``payload_kg`` (each vehicle's kerb mass + payload [kg]; needs
         ``kerb_mass_kg``), or neither (each vehicle's default ``mass_kg``).
-        ``ice_braking`` overrides the ICE braking mode of every ICE vehicle."""
+        ``ice_braking`` overrides the ICE braking mode of every ICE vehicle; ``ambient_c``
+        [degC] is the temperature of every prediction (None: see :data:`AMBIENT_ORIGINS`)."""
+        if ambient_c is not None:
+            try:
+                ambient_c = float(energy.check_ambient_c(ambient_c))
+            except ValueError as exc:
+                raise CevmError(str(exc)) from None
         if mass_kg is not None and payload_kg is not None:
             raise CevmError("give gross masses or payloads, not both")
         vehicles = tuple(vehicles)
@@ -435,7 +451,8 @@ class PredictionSet:
             cda_m2=per_vehicle(lambda v: v.cda_m2),
             cr=per_vehicle(lambda v: v.cr),
             eta=eta,
-            negative_weight=np.where(is_ev, eta * eta, w_ice),
+            negative_weight=np.where(is_ev, per_vehicle(lambda v: energy.ev_negative_weight(v) if v.is_ev else 0.0),
+                                     w_ice),
             aux_power_w=per_vehicle(lambda v: v.aux_power_w if v.is_ev else 0.0),
             battery_j=per_vehicle(lambda v: v.battery_j if v.is_ev and v.battery_j else np.nan),
             lhv_j_per_l=per_vehicle(lambda v: np.nan if v.is_ev else v.fuel_lhv_j_per_l),
@@ -443,7 +460,78 @@ class PredictionSet:
             tank_l=per_vehicle(lambda v: np.nan if v.is_ev or v.tank_l is None else v.tank_l),
             is_ev=is_ev,
             braking=tuple(braking),
+            ambient_c=ambient_c,
         )
+
+
+# ------------------------------------------------------- terms beyond the wheel energy
+
+#: Where a prediction's ambient temperature comes from, in order: the run's (given for
+#: every prediction), the source's own (a stored trip's logged mean), the vehicle file's
+#: ``reference_temp_c``, or :data:`cevm.core.energy.AMBIENT_DEFAULT_C`.
+AMBIENT_ORIGINS = ("given", "source", "vehicle reference_temp_c", f"default {energy.AMBIENT_DEFAULT_C:g} degC")
+
+
+@dataclass(frozen=True, eq=False)
+class RowTerms:
+    """The terms of :mod:`cevm.core.energy` that do not depend on the sign of a step, per
+    (prediction, source): arrays (n, R).
+
+    ``ambient_c`` the temperature used [degC] and ``ambient_from`` its origin (index into
+    :data:`AMBIENT_ORIGINS`); EV rows: ``aux_w`` the auxiliary power P_aux(T) [W] and
+    ``start_j`` the warm-up energy of the start [J]; ICE rows: ``fuel_extra_l`` the fuel
+    beyond W / (U eta) (kinetic, running, idle, temperature and cold-start terms) [l].
+    Zero where a row's powertrain has no such term.
+    """
+
+    ambient_c: np.ndarray
+    ambient_from: np.ndarray
+    aux_w: np.ndarray
+    start_j: np.ndarray
+    fuel_extra_l: np.ndarray
+
+
+def row_terms(pset: PredictionSet, sources: Sequence[Source], rows: np.ndarray | None = None,
+              mass_kg: np.ndarray | None = None) -> RowTerms:
+    """:class:`RowTerms` of the predictions ``rows`` of ``pset`` (all by default; their
+    masses ``mass_kg``, default the set's) on ``sources``."""
+    rows = np.arange(pset.n) if rows is None else np.asarray(rows)
+    mass = pset.mass_kg[rows] if mass_kg is None else np.asarray(mass_kg, dtype=np.float64)
+    n, r = rows.size, len(sources)
+    vecs = [src.vector for src in sources]
+    dur = np.array([v.duration_s for v in vecs])
+    idle = np.array([v.idle_s for v in vecs])
+    kpos = np.array([v.k_pos for v in vecs])
+    trac = np.array([v.traction_s for v in vecs])
+    own = np.array([np.nan if src.ambient_c is None else float(src.ambient_c) for src in sources])
+    t_all = np.empty((n, r))
+    origin = np.empty((n, r), dtype=np.int8)
+    aux = np.zeros((n, r))
+    start = np.zeros((n, r))
+    extra = np.zeros((n, r))
+    vi = pset.vehicle_index[rows]
+    for v in np.unique(vi):
+        sel = vi == v
+        veh = pset.vehicles[int(v)]
+        if pset.ambient_c is not None:
+            t, code = np.full(r, pset.ambient_c), np.zeros(r, dtype=np.int8)
+        else:
+            default = veh.reference_temp_c if veh.reference_temp_c is not None else energy.AMBIENT_DEFAULT_C
+            code_default = 2 if veh.reference_temp_c is not None else 3
+            t = np.where(np.isfinite(own), own, default)
+            code = np.where(np.isfinite(own), 1, code_default).astype(np.int8)
+        t_all[sel] = t
+        origin[sel] = code
+        if veh.is_ev:
+            aux[sel] = energy.ev_aux_power_w(veh, t)
+            start[sel] = energy.ev_start_energy_j(veh, t)
+        else:
+            try:
+                extra[sel] = energy.ice_fuel_l(veh, 0.0, mass_kg=mass[sel][:, None], k_pos=kpos, traction_s=trac,
+                                               duration_s=dur, idle_s=idle, ambient_c=t)
+            except ValueError as exc:
+                raise CevmError(f"vehicle {veh.name!r}: {exc}") from None
+    return RowTerms(t_all, origin, aux, start, extra)
 
 
 # -------------------------------------------------------------- lowest state of charge
@@ -696,8 +784,11 @@ def _peak_batch(bt: _StepsBatch, m, cda, cr, eta, w, aux, group, end) -> tuple[n
     tmp += up
     wheel = np.add.reduceat(tmp, bt.kstart[:-1], axis=1)
     up *= (1.0 / eta)[:, None]
-    if np.any(aux != 0):
-        up += np.multiply(aux[:, None], bt.t_s, out=tmp)  # >= sum of the positive g_i of the block
+    any_aux = bool(np.any(aux != 0))
+    # auxiliary power per prediction (P,) or per prediction and source (P, R)
+    aux_b = aux[:, bt.source_of_block] if aux.ndim == 2 else aux[:, None]
+    if any_aux:
+        up += np.multiply(aux_b, bt.t_s, out=tmp)  # >= sum of the positive g_i of the block
     regen = neg
     regen *= (w / eta)[:, None]  # <= sum of the negative g_i of the block (<= 0)
     s = np.add(up, regen, out=pos)  # battery energy of each block
@@ -727,7 +818,6 @@ def _peak_batch(bt: _StepsBatch, m, cda, cr, eta, w, aux, group, end) -> tuple[n
         # (m Cr / eta) r_i + (CdA / eta) a_i, and W(D) = D + (w - 1) min(D, 0): merged
         # elements have Delta > 0, so only single non-simplified steps are weighted
         k_x, k_r, k_a, k_w = m / eta, m * cr / eta, cda / eta, w - 1.0
-        any_aux = bool(np.any(aux != 0))
         for lo in range(0, pi.size, step):
             pp = pi[lo : lo + step]
             bb = bi[lo : lo + step]
@@ -739,7 +829,7 @@ def _peak_batch(bt: _StepsBatch, m, cda, cr, eta, w, aux, group, end) -> tuple[n
             neg *= k_w[pp][:, None]
             g += neg
             if any_aux:
-                dt *= aux[pp][:, None]
+                dt *= (aux[pp, bt.source_of_block[bb]] if aux.ndim == 2 else aux[pp])[:, None]
                 g += dt
             np.cumsum(g, axis=1, out=g)
             np.maximum.at(flat, pp * n_src + bt.source_of_block[bb], g.max(axis=1) + c_start[pp, bb])
@@ -805,32 +895,51 @@ def _peak_many(bt: _StepsBatch, m, cda, cr, eta, w, aux, group, end) -> tuple[np
 
 
 def energy_trajectory(
-    source: Source, vehicle: Vehicle, mass_kg: float, *, ice_braking: str | None = None
+    source: Source, vehicle: Vehicle, mass_kg: float, *, ice_braking: str | None = None,
+    ambient_c: float | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Cumulative energy along a source for one vehicle and mass, sample by sample.
 
     Returns ``(time_s, distance_m, energy)``: time [s] and distance [m] from the start of
     the first leg (legs follow each other), and the battery energy drawn [J] for an EV,
-    the fuel burnt [l] for an ICE (idle fuel on standstill steps). Plain per-step
-    arithmetic (no compression): for plots and tests.
+    the fuel burnt [l] for an ICE, with every term of :mod:`cevm.core.energy` (the
+    start's warm-up at the first sample; an ICE's running fuel on simplified steps, idle
+    fuel on standstill steps, its kinetic term on the steps that gain speed).
+    ``ambient_c`` [degC]: default the source's own, else the vehicle's default. Plain
+    per-step arithmetic (no compression): for plots and tests.
     """
-    ts, ds, es = [np.zeros(1)], [np.zeros(1)], [np.zeros(1)]
-    t0 = d0 = e0 = 0.0
+    if ambient_c is None:
+        ambient_c = source.ambient_c if source.ambient_c is not None else (
+            vehicle.reference_temp_c if vehicle.reference_temp_c is not None else energy.AMBIENT_DEFAULT_C)
+    t_c = float(ambient_c)
     phys = source.vector.physics
-    w = vehicle.eta**2 if vehicle.is_ev else braking_weight(ice_braking or vehicle.ice_braking)
+    if vehicle.is_ev:
+        w = energy.ev_negative_weight(vehicle)
+        e0 = float(energy.ev_start_energy_j(vehicle, t_c))
+        aux = float(energy.ev_aux_power_w(vehicle, t_c))
+    else:
+        w = braking_weight(ice_braking or vehicle.ice_braking)
+        e0 = float(energy.ice_start_fuel_l(vehicle, t_c))
+        rate_t = float(energy.ice_time_fuel_lps(vehicle, t_c))
+        c_kin = energy.ice_kinetic_coefficient(vehicle)
+    ts, ds, es = [np.zeros(1)], [np.zeros(1)], [np.full(1, e0)]
+    t0 = d0 = 0.0
     for leg in source.leg_profiles:
         st = step_terms(leg.time_s, leg.speed_mps, leg.elevation_m, phys)
         d = mass_kg * (st.k + st.e + vehicle.cr * st.r) + vehicle.cda_m2 * st.a
-        ns = (st.k + st.e + source.vector.cr0 * st.r) <= 0
-        d = np.where(ns & (d <= 0), w * d, d)
+        simplified = (st.k + st.e + source.vector.cr0 * st.r) > 0
+        d = np.where(~simplified & (d <= 0), w * d, d)
         if vehicle.is_ev:
-            g = d / vehicle.eta + vehicle.aux_power_w * st.dt
+            g = d / vehicle.eta + aux * st.dt
         else:
-            g = d / (vehicle.fuel_lhv_j_per_l * vehicle.eta) + vehicle.idle_fuel_lps * st.dt * (st.a <= 0)
+            lhv = vehicle.fuel_lhv_j_per_l
+            g = (d / (lhv * vehicle.eta) + c_kin * mass_kg * np.maximum(st.k, 0.0) / lhv
+                 + vehicle.running_fuel_lps * st.dt * simplified + vehicle.idle_fuel_lps * st.dt * (st.a <= 0)
+                 + rate_t * st.dt)
         ts.append(t0 + np.cumsum(st.dt))
         ds.append(d0 + np.cumsum(st.r) / phys.g_mps2)
-        es.append(e0 + np.cumsum(g))
-        t0, d0, e0 = float(ts[-1][-1]), float(ds[-1][-1]), float(es[-1][-1])
+        es.append(es[-1][-1] + np.cumsum(g))
+        t0, d0 = float(ts[-1][-1]), float(ds[-1][-1])
     return np.concatenate(ts), np.concatenate(ds), np.concatenate(es)
 
 
@@ -844,7 +953,9 @@ class SweepBlock:
     ``wheel_energy_j`` [J]; ``energy_j`` battery energy [J] (NaN for ICE rows);
     ``fuel_l`` [l] (NaN for EV rows); ``soc_end_pct``, ``soc_min_pct`` [%] (NaN for ICE
     rows, and for EVs when not computed); ``reserve_ok`` (EV rows: lowest SoC >=
-    reserve); ``tank_ok`` 1.0 / 0.0 for ICE rows with a known tank, else NaN.
+    reserve); ``tank_ok`` 1.0 / 0.0 for ICE rows with a known tank, else NaN;
+    ``ambient_c`` the ambient temperature each row assumed [degC] and ``ambient_from``
+    where it came from (index into :data:`AMBIENT_ORIGINS`, as float).
     """
 
     source: Source
@@ -857,6 +968,8 @@ class SweepBlock:
     soc_min_pct: np.ndarray
     reserve_ok: np.ndarray
     tank_ok: np.ndarray
+    ambient_c: np.ndarray
+    ambient_from: np.ndarray
 
     @property
     def n(self) -> int:
@@ -920,14 +1033,14 @@ def _predict_arrays(sources: Sequence[Source], pset: PredictionSet, soc_start_pc
     vecs = [src.vector for src in sources]
     n_src = len(sources)
     duration = np.array([v.duration_s for v in vecs])
-    idle = np.array([v.idle_s for v in vecs])
     ev = pset.is_ev
     shape = (pset.n, n_src)
     wheel = np.empty(shape)
-    energy = np.full(shape, np.nan)
+    energy_j = np.full(shape, np.nan)
     fuel = np.full(shape, np.nan)
     soc_end = np.full(shape, np.nan)
     soc_min = np.full(shape, np.nan)
+    terms = row_terms(pset, sources)
     # EV rows with the lowest SoC: the step terms give the total and the peak in one
     # pass; every other row: the CE vector
     by_steps = ev if lowest_soc else np.zeros_like(ev)
@@ -940,31 +1053,37 @@ def _predict_arrays(sources: Sequence[Source], pset: PredictionSet, soc_start_pc
     peak = None
     if by_steps.any():
         bt = _StepsBatch.of([src.steps for src in sources])
+        aux = terms.aux_w[ev]
+        if np.all(aux == aux[:, :1]):
+            aux = aux[:, 0].copy()  # the same for every source: the cheaper per-row form
         wheel[ev], peak = _peak_many(bt, pset.mass_kg[ev], pset.cda_m2[ev], pset.cr[ev], pset.eta[ev],
-                                     pset.negative_weight[ev], pset.aux_power_w[ev], pset.vehicle_index[ev], None)
+                                     pset.negative_weight[ev], aux, pset.vehicle_index[ev], None)
     if ev.any():
-        # battery energy E_e = E_DC / eta + P_aux T (eq. 31, cevm.core.model)
-        e = wheel[ev] / pset.eta[ev][:, None] + pset.aux_power_w[ev][:, None] * duration
-        energy[ev] = e
+        # battery energy E_e = W / eta + P_aux(T) D + warm-up (eq. 31, cevm.core.energy)
+        start = terms.start_j[ev]
+        e = wheel[ev] / pset.eta[ev][:, None] + terms.aux_w[ev] * duration + start
+        energy_j[ev] = e
         cap = pset.battery_j[ev][:, None]
         soc_end[ev] = soc_start_pct - 100.0 * e / cap
         if peak is not None:
+            peak += start  # drawn at the start, before the first step: every E_j includes it
             np.maximum(peak, e, out=peak)  # E_n is one of the E_j: SoC_min <= SoC_end exactly
             soc_min[ev] = soc_start_pct - 100.0 * peak / cap
     ice = ~ev
     if ice.any():
-        # fuel L_f = E_DC / (U_f eta) (eq. 26) + idle rate x time at standstill
-        fuel[ice] = (wheel[ice] / (pset.lhv_j_per_l[ice] * pset.eta[ice])[:, None]
-                     + pset.idle_fuel_lps[ice][:, None] * idle)
+        # fuel L_f = W / (U_f eta) (eq. 26) + the terms of cevm.core.energy.ice_fuel_l
+        fuel[ice] = wheel[ice] / (pset.lhv_j_per_l[ice] * pset.eta[ice])[:, None] + terms.fuel_extra_l[ice]
     tank = pset.tank_l[:, None]
     with np.errstate(invalid="ignore"):
         tank_ok = np.where(ice[:, None] & np.isfinite(tank), (fuel <= tank).astype(float), np.nan)
         reserve_ok = ev[:, None] & (soc_min >= reserve_pct)
-    return wheel, energy, fuel, soc_end, soc_min, reserve_ok, tank_ok
+    return (wheel, energy_j, fuel, soc_end, soc_min, reserve_ok, tank_ok, terms.ambient_c,
+            terms.ambient_from.astype(np.float64))
 
 
 #: The arrays of a :class:`SweepBlock`, in the order :func:`_predict_arrays` returns them.
-_BLOCK_ARRAYS = ("wheel_energy_j", "energy_j", "fuel_l", "soc_end_pct", "soc_min_pct", "reserve_ok", "tank_ok")
+_BLOCK_ARRAYS = ("wheel_energy_j", "energy_j", "fuel_l", "soc_end_pct", "soc_min_pct", "reserve_ok", "tank_ok",
+                 "ambient_c", "ambient_from")
 
 
 def _as_blocks(sources: Sequence[Source], pset: PredictionSet, arrays: tuple[np.ndarray, ...],
@@ -979,7 +1098,8 @@ def _portable(source: Source, lowest_soc: bool) -> Source:
     """What a worker needs of ``source``: its vector, and its step terms when the lowest
     state of charge is asked for (the legs' profiles, and any store access behind them,
     stay here)."""
-    out = Source(source.name, source.kind, source.vector, legs=(), block_elements=source.block_elements)
+    out = Source(source.name, source.kind, source.vector, legs=(), block_elements=source.block_elements,
+                 ambient_c=source.ambient_c)
     if lowest_soc:
         out.__dict__["steps"] = source.steps  # the cached_property's slot: set, not recomputed
     return out
