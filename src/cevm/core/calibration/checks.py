@@ -164,19 +164,27 @@ def implausible(model: TermModel, fit: Fit, idx: np.ndarray) -> tuple[str, str] 
         v = float(values[name])
         lo, hi = t.plausible
         if not math.isfinite(v) or v < lo or v > hi:
-            why = ("above 1: the trips measured less than their wheel energy (masses too high, an energy "
-                   "column in the wrong unit, or elevation wrong)") if name in ("eta", "regen", "kin") and v > 1 else \
-                f"outside the plausible {lo:g}..{hi:g}" if math.isfinite(hi) else f"below {lo:g}"
-            if name in ("eta", "kin"):
-                why = f"outside the plausible {lo:g}..{hi:g} for this powertrain" if not v > 1 else why
+            if name in ("eta", "regen", "kin") and v > 1:
+                why = ("above 1: the trips measured less energy than their wheels needed (masses too high, "
+                       "elevation wrong, or a consumption column in the wrong unit?)")
+            else:
+                why = f"outside the plausible {lo:g} to {_fmt(model, name, hi) if math.isfinite(hi) else 'infinity'}"
+                if name == "eta":
+                    why += f" for {'an EV' if model.ev else 'a combustion engine'}"
             return name, f"implausible: {t.label} {_fmt(model, name, v)} is {why}"
         # a bound that binds where the free estimate is clearly beyond it: the data want
-        # a negative power, rate or efficiency
+        # a negative power or rate, or an efficiency above 1
         free = float(fit.free[j])
-        if fit.theta[j] <= lb[j] + 1e-12 and free < lb[j] and math.isfinite(sd[j]) and free < lb[j] - 2 * max(sd[j], 1e-300):
-            shown = free if name not in ("eta",) else 1.0 / free if free else math.inf
-            return name, (f"implausible: the data want {t.label} = {_fmt(model, name, shown)} (below its bound "
-                          f"{_fmt(model, name, lb[j] if name != 'eta' else 1 / lb[j])} by more than 2 standard errors)")
+        if fit.theta[j] <= lb[j] + 1e-12 and free < lb[j] and math.isfinite(sd[j]) and free < lb[j] - 2 * sd[j] * (
+                fit.theta[j] ** 2 if name == "eta" else 1.0):
+            if name == "eta":
+                want = 1.0 / free if free > 0 else math.inf
+                return name, (f"implausible: the data want a drive efficiency of {want:.3g}, above 1: the trips "
+                              "measured less energy than their wheels needed (masses too high, elevation wrong, "
+                              "or a consumption column in the wrong unit?)")
+            return name, (f"implausible: the data want {t.label} = {_fmt(model, name, free)}, below "
+                          f"{_fmt(model, name, lb[j])} by more than 2 standard errors: the term does not describe "
+                          "these trips")
     share = model.nontraction(fit.names, fit.theta)[idx] / model.data.y[idx]
     if share.size and float(share.max()) > MAX_NONTRACTION_SHARE:
         i = int(np.argmax(share))

@@ -148,6 +148,18 @@ def fit_terms(model: TermModel, names: Sequence[str], idx: np.ndarray, tau_fixed
         tau = new_tau
     W = q / (u * u + tau * tau)
     sw = np.sqrt(W) / y
+    if not nonlinear and (np.any(x <= lb) or np.any(x >= ub)):
+        # a bound binds: the unbounded optimum (for messages), by Gauss-Newton to convergence
+        free = x
+        inf = np.full(k, np.inf)
+        for _gn in range(50):
+            new, _, _ = _linear_step(model, names, idx, sw, y, free, -inf, inf)
+            if not np.all(np.isfinite(new)) or np.any(new[names.index("eta")] <= 0 if "eta" in names else False):
+                break
+            step = np.max(np.abs(new - free) / np.maximum(np.abs(new), 1e-12))
+            free = new
+            if not tied or step < 1e-12:
+                break
     pred = model.predict(names, x, idx)
     f = sw * (pred - y)
     jw = sw[:, None] * model.jacobian(names, x, idx)
