@@ -27,8 +27,17 @@ def calibrate(
     store: StoreOption = None,
     fit: Annotated[
         Optional[list[str]],
-        typer.Option("--fit", help="Parameters to fit: eta (always), aux_power (EV), idle_fuel (ICE), cda, cr. Repeatable or comma-separated."),
+        typer.Option("--fit", help="Force a term set instead of choosing one: eta (always) plus any of regen, aux, "
+                                   "heat, cool, warm (EV); idle, run, kin, heat, cool, warm (ICE); cda, cr. "
+                                   "Repeatable or comma-separated."),
     ] = None,
+    terms: Annotated[
+        Optional[list[str]],
+        typer.Option("--terms", help="Choose only among these extra terms (default: all of the powertrain's). "
+                                     "Repeatable or comma-separated."),
+    ] = None,
+    nested: Annotated[bool, typer.Option("--nested/--no-nested", help="Also cross-validate the choice itself "
+                                                                        "(nested cross-validation).")] = True,
     out: Annotated[Optional[Path], typer.Option("--out", "-o", help="Write the calibrated vehicle file here.")] = None,
     force: Annotated[bool, typer.Option(help="Allow --out to overwrite an existing file.")] = False,
     cv_folds: Annotated[int, typer.Option(help="Cross-validation folds over days (leave-one-day-out below 10 days).")] = 5,
@@ -40,22 +49,32 @@ def calibrate(
     ] = None,
     fmt: Annotated[OutputFormat, typer.Option("--format", "-f", help="table, or json (figures plus per-trip rows).")] = OutputFormat.table,
 ) -> None:
-    """Fit eta (and what the data supports) to a vehicle's measured trips.
+    """Fit the vehicle's model to its measured trips, choosing the terms by cross-validation.
 
-    With in-sample and cross-validated errors: the paper's tables 1 and 2 for your fleet."""
-    from cevm.io.calibrated import write_calibrated_vehicle
-    from cevm.io.plots import plot_calibration
-    from cevm.store.calibration import trips_for_calibration
+    Tries eta alone and with every supported set of extra terms (regeneration,
+    temperature-dependent auxiliaries, warm-up; for a diesel idle and running fuel and a
+    kinetic efficiency), refuses what the data cannot identify or physics refuses, and
+    keeps the simplest set within one standard error of the best cross-validated one.
+    --fit forces a set. In-sample and cross-validated errors: the paper's tables 1 and 2
+    for your fleet."""
     from cevm.core.calibration import fit as fit_vehicle
+    from cevm.core.calibration import select
     from cevm.io import load_vehicle
+    from cevm.io.calibrated import calibration_table, write_calibrated_vehicle
+    from cevm.io.plots import plot_calibration
     from cevm.store import TripStore
+    from cevm.store.calibration import trips_for_calibration
 
-    params = ["eta"] + [p.strip() for f in (fit or []) for p in f.split(",") if p.strip() and p.strip() != "eta"]
+    forced = [p.strip() for f in (fit or []) for p in f.split(",") if p.strip()]
+    allowed = [p.strip() for f in (terms or []) for p in f.split(",") if p.strip() and p.strip() != "eta"]
+    if forced and allowed:
+        raise fail("give --fit (a forced term set) or --terms (the terms to choose among), not both")
     if cv_folds < 2:
         raise fail("--cv-folds must be at least 2")
     path = existing_store(store)
     if ice_braking is not None and ice_braking not in ICE_BRAKING_MODES:
         raise fail(f"--ice-braking must be one of: {', '.join(ICE_BRAKING_MODES)}")
+    selection = None
     try:
         veh = load_vehicle(vehicle)
         if ice_braking is not None:
@@ -64,16 +83,28 @@ def calibrate(
             veh = dataclasses.replace(veh, ice_braking=ice_braking)
         with TripStore.open(path) as st:
             sel = trips_for_calibration(st, vehicle_id, veh)
-        result = fit_vehicle(veh, sel.trips, params, cv_folds=cv_folds, max_rel_uncertainty=max_rel_uncertainty)
+        if forced:
+            result = fit_vehicle(veh, sel.trips, ["eta", *forced], cv_folds=cv_folds,
+                                 max_rel_uncertainty=max_rel_uncertainty, vehicle_id=vehicle_id)
+        else:
+            from cevm.core.calibration import term
+
+            names = [term(veh, t).name for t in allowed] if allowed else None
+            selection = select(veh, sel.trips, terms=names, cv_folds=cv_folds,
+                               max_rel_uncertainty=max_rel_uncertainty, nested=nested, vehicle_id=vehicle_id)
+            result = selection.result
         if out is not None:
-            write_calibrated_vehicle(vehicle, out, result, force=force,
+            table = calibration_table(
+                result, store=str(path), selected_from=None if selection is None else len(selection.candidates),
+                nested_std_pct=None if selection is None or selection.nested_cv is None else selection.nested_cv.std_pct)
+            write_calibrated_vehicle(vehicle, out, result, force=force, calibration=table,
                                      note=f"calibrated by cevm calibrate on {len(result.rows)} trips of {vehicle_id} "
                                           f"(store {path})")
         if plot is not None:
-            plot_calibration(result, plot, f"{veh.name} ({vehicle_id})")
+            plot_calibration(result, plot, f"{veh.name} ({vehicle_id}): {'+'.join(result.terms)}")
     except CevmError as exc:
         raise fail(str(exc)) from None
-    report = result_json(result, vehicle_id, sel.notes)
+    report = result_json(result, vehicle_id, sel.notes + (() if selection is None else selection.notes), selection)
     if fmt == OutputFormat.json:
         typer.echo(dumps(report))
     elif fmt == OutputFormat.csv:
@@ -88,29 +119,57 @@ def calibrate(
 PAPER_CE = {True: ("electric bus, table 1", 0.4, 4.0, 19e-3, 2.6e-3), False: ("diesel HGV, table 2", 1.3, 3.7, 16.5e-3, 2.5e-3)}
 
 
+def _pct(x, sign=True) -> str:
+    if x is None:
+        return "-"
+    return f"{x:+.2f} %" if sign else f"{x:.2f} %"
+
+
 def _print_calibration(r: dict, is_ev: bool) -> None:
     name, mu, sd, tmu, tsd = PAPER_CE[is_ev]
-    ins, cv, t = r["in_sample"], r["cross_validated"], r["time_per_prediction_s"]
-
-    def pct(x):
-        return "-" if x is None else f"{x:+.2f} %" if x else "0.00 %"
-
+    ins, cv, t, nested = r["in_sample"], r["cross_validated"], r["time_per_prediction_s"], r["nested_cross_validated"]
     rows = [
-        {"item": "mu(e)", "in-sample": pct(ins["mean_pct"]), "cross-validated": pct(cv and cv["mean_pct"]), f"paper ({name})": f"{mu:+.1f} %"},
-        {"item": "sigma(e)", "in-sample": pct(ins["std_pct"]).lstrip("+"), "cross-validated": pct(cv and cv["std_pct"]).lstrip("+"), f"paper ({name})": f"{sd:.1f} %"},
-        {"item": "mu(t_exe)", "in-sample": "-" if t is None else f"{t['mean'] * 1e6:.1f} us", "cross-validated": "", f"paper ({name})": f"{tmu * 1e3:.1f} ms"},
-        {"item": "sigma(t_exe)", "in-sample": "-" if t is None else f"{t['std'] * 1e6:.1f} us", "cross-validated": "", f"paper ({name})": f"{tsd * 1e3:.1f} ms"},
+        {"item": "mu(e)", "in-sample": _pct(ins["mean_pct"]), "cross-validated": _pct(cv and cv["mean_pct"]),
+         f"paper ({name})": f"{mu:+.1f} %"},
+        {"item": "sigma(e)", "in-sample": _pct(ins["std_pct"], False),
+         "cross-validated": _pct(cv and cv["std_pct"], False), f"paper ({name})": f"{sd:.1f} %"},
+    ]
+    if nested is not None:
+        rows.append({"item": "sigma(e), choice included", "in-sample": "",
+                     "cross-validated": _pct(nested["std_pct"], False) + " (nested)", f"paper ({name})": "-"})
+    rows += [
+        {"item": "mu(t_exe)", "in-sample": "-" if t is None else f"{t['mean'] * 1e6:.1f} us", "cross-validated": "",
+         f"paper ({name})": f"{tmu * 1e3:.1f} ms"},
+        {"item": "sigma(t_exe)", "in-sample": "-" if t is None else f"{t['std'] * 1e6:.1f} us", "cross-validated": "",
+         f"paper ({name})": f"{tsd * 1e3:.1f} ms"},
         {"item": "trips", "in-sample": str(r["n_trips"]), "cross-validated": r["cv_scheme"], f"paper ({name})": "-"},
     ]
-    write_rows(rows, OutputFormat.table, title=f"cevm calibrate: {r['vehicle_id']}, error e = (modelled - measured) / measured")
-    fitted = []
-    for k, v in r["fitted"].items():
-        scale, unit = {"aux_power_w": (1e-3, "kW"), "idle_fuel_lps": (3600.0, "l/h")}.get(k, (1.0, ""))
-        fitted.append({"parameter": k.replace("_w", "").replace("_lps", ""), "value": f"{v['value'] * scale:.4g} {unit}".strip(),
-                       "std": f"{v['std'] * scale:.2g} {unit}".strip()})
+    write_rows(rows, OutputFormat.table, title=f"cevm calibrate: {r['vehicle_id']}, model {'+'.join(r['terms'])}, "
+                                               "error e = (modelled - measured) / measured")
+    if r["candidates"]:
+        _print_candidates(r["candidates"])
+    fitted = [{"parameter": p["label"], "value": p["value_text"], "std": p["std_text"]} for p in r["parameters"]]
     for k, why in r["refused"].items():
         fitted.append({"parameter": k, "value": "refused", "std": why})
-    write_rows(fitted, OutputFormat.table, title="fitted parameters")
+    write_rows(fitted, OutputFormat.table, title="fitted parameters (1-sigma)")
+    if r["evidence"]:
+        e = r["evidence"]
+        typer.echo(f"standing still: the model draws {e['fitted_text']}, the logs measured {e['measured_text']} "
+                   f"({e['seconds'] / 60:.0f} min over {e['trips']} trips)")
+    d = r["domain"]
+    if d:
+        parts = [f"{d['n_trips']} trips"]
+        if d.get("first_trip_utc"):
+            parts.append(f"{d['first_trip_utc'][:10]} to {d['last_trip_utc'][:10]}")
+        if d.get("ambient_c"):
+            parts.append("{:.1f} to {:.1f} degC".format(*d["ambient_c"]))
+        else:
+            parts.append("no temperature logged")
+        if d.get("mean_speed_kmh"):
+            parts.append("{:.0f} to {:.0f} km/h mean".format(*d["mean_speed_kmh"]))
+        if d.get("mass_kg"):
+            parts.append("{:,.0f} to {:,.0f} kg".format(*d["mass_kg"]))
+        typer.echo("fitted on: " + ", ".join(parts) + " (predictions outside are warned about)")
     for note in r["notes"]:
         typer.echo(f"note: {note}")
     if r["excluded"]:
@@ -121,14 +180,55 @@ def _print_calibration(r: dict, is_ev: bool) -> None:
             typer.echo(f"  ... and {len(r['excluded']) - 20} more (see --format json)")
 
 
-def result_json(result: CalibrationResult, vehicle_id: str, notes: tuple[str, ...]) -> dict:
-    """The machine-readable form: figures of the table, fitted values, per-trip rows
-    (each trip twice: its in-sample prediction, held_out false, and its cross-validated
-    one, held_out true)."""
+#: Candidates listed in the table at most (the rest: --format json).
+CANDIDATE_ROWS = 12
+
+
+def _print_candidates(cands: list[dict]) -> None:
+    ok = [c for c in cands if c["status"] != "refused"]
+    refused = [c for c in cands if c["status"] == "refused"]
+    ok.sort(key=lambda c: (c["cv"]["rms_pct"] if c["cv"] else 1e9))
+    shown = ok[:CANDIDATE_ROWS]
+    if not any(c["terms"] == ["eta"] for c in shown):
+        shown += [c for c in ok if c["terms"] == ["eta"]]
+    rows = [{"terms": "+".join(c["terms"]), "CV mu": _pct(c["cv"]["mean_pct"]), "CV sigma": _pct(c["cv"]["std_pct"], False),
+             "CV rms": _pct(c["cv"]["rms_pct"], False), "": "<- chosen" if c["status"] == "chosen" else "",
+             "parameters": ", ".join(p["short"] for p in c["parameters"])} for c in shown]
+    write_rows(rows, OutputFormat.table, title=f"model selection: {len(ok)} candidates compared by grouped "
+                                               "cross-validation, the simplest within 1 SE of the best chosen")
+    if refused:
+        reasons: dict[str, int] = {}
+        for c in refused:
+            reasons[c["reason"]] = reasons.get(c["reason"], 0) + 1
+        typer.echo(f"refused: {len(refused)} candidates (a term the data cannot identify, or an implausible value):")
+        for why, n in sorted(reasons.items(), key=lambda kv: -kv[1])[:8]:
+            typer.echo(f"  {n} x {why}")
+
+
+def _parameters(fitted: dict, powertrain: str) -> list[dict]:
+    """Display forms of fitted values (field -> (value, std), SI)."""
+    from cevm.core.calibration import TERMS_BY_POWERTRAIN
+
+    by_field = {t.field: t for (pt, _), t in TERMS_BY_POWERTRAIN.items() if pt == powertrain}
+    out = []
+    for field, (value, std) in fitted.items():
+        t = by_field[field]
+        unit, scale = t.display
+        out.append({"term": t.name, "field": field, "label": f"{t.label} ({t.name})", "value": value, "std": std,
+                    "value_text": f"{value * scale:.4g} {unit}".strip(), "std_text": f"{std * scale:.2g} {unit}".strip(),
+                    "short": f"{t.name} {value * scale:.3g}{(' ' + unit) if unit else ''}"})
+    return out
+
+
+def result_json(result: CalibrationResult, vehicle_id: str, notes: tuple[str, ...], selection=None) -> dict:
+    """The machine-readable form: figures of the table, fitted values, the compared
+    candidates (with ``selection``), per-trip rows (each trip twice: its in-sample
+    prediction, held_out false, and its cross-validated one, held_out true)."""
     from cevm.core.calibration import display_value
-    from cevm.io.calibrated import fitted_keys
+    from cevm.io.calibrated import calibration_table, fitted_keys
 
     unit = "kWh" if result.unit == "J" else "l"
+    pt = result.vehicle.powertrain
 
     def stats(s):
         return None if s is None else {"n": s.n, "mean_pct": _f(s.mean_pct), "std_pct": _f(s.std_pct),
@@ -141,20 +241,36 @@ def result_json(result: CalibrationResult, vehicle_id: str, notes: tuple[str, ..
             trips.append({"trip_id": r.trip_id, "measured": display_value(result, r.measured),
                           "predicted": _f(display_value(result, pred)), "error_pct": _f(err),
                           "held_out": held_out, "fold": r.fold if held_out else None, "unit": unit,
-                          "distance_km": r.distance_m / 1e3, "mass_kg": r.mass_kg, "weight": r.weight,
-                          "rel_uncertainty": r.rel_uncertainty})
+                          "distance_km": r.distance_m / 1e3, "mass_kg": r.mass_kg, "mass_source": r.mass_source,
+                          "ambient_c": _f(r.ambient_c), "weight": r.weight, "rel_uncertainty": r.rel_uncertainty})
+    candidates = []
+    if selection is not None:
+        for c in selection.candidates:
+            refused = not c.ok
+            candidates.append({
+                "terms": list(c.terms), "status": "refused" if refused else c.status,
+                "reason": c.status.removeprefix("refused: ") if refused else None,
+                "cv": stats(c.cv), "in_sample": stats(c.in_sample), "parameters": _parameters(c.fitted, pt),
+            })
     t = result.time_per_prediction_s
     return {
         "vehicle_id": vehicle_id,
+        "terms": list(result.terms),
         "eta": result.vehicle.eta,
         "fitted": {k: {"value": v, "std": s} for k, (v, s) in result.fitted.items()},
+        "parameters": _parameters(result.fitted, pt),
         "fitted_file_keys": fitted_keys(result),
         "refused": dict(result.refused),
         "excluded": dict(result.excluded),
         "n_trips": len(result.rows),
         "in_sample": stats(result.in_sample),
         "cross_validated": stats(result.cv),
+        "nested_cross_validated": None if selection is None else stats(selection.nested_cv),
         "cv_scheme": result.cv_scheme,
+        "selection_rule": None if selection is None else selection.rule,
+        "candidates": candidates,
+        "evidence": result.evidence,
+        "domain": calibration_table(result),
         "time_per_prediction_s": None if t is None else {"mean": t[0], "std": t[1]},
         "model_rel_sigma": result.model_rel_sigma,
         "unit": unit,

@@ -18,7 +18,7 @@ class OutputFormat(str, Enum):
 
 
 #: Columns printed left-aligned and allowed to wrap in tables.
-TEXT_COLUMNS = {"cycle", "vehicle", "trip_id", "vehicle_id", "source", "route", "file", "status", "profile", "start_utc", "elevation_source", "day", "day 1", "day 2", "day 3", "method", "stops", "item", "parameter", "std", "in-sample", "cross-validated", "quantity"}
+TEXT_COLUMNS = {"cycle", "vehicle", "trip_id", "vehicle_id", "source", "route", "file", "status", "profile", "start_utc", "elevation_source", "day", "day 1", "day 2", "day 3", "method", "stops", "item", "parameter", "std", "in-sample", "cross-validated", "quantity", "terms", "parameters"}
 
 
 def _clean(value: Any) -> Any:

@@ -70,6 +70,7 @@ class Selection:
     nested_cv: ErrorStats | None
     cv_scheme: str
     rule: str
+    notes: tuple[str, ...] = ()
 
 
 def candidate_sets(vehicle: Vehicle, terms: Sequence[str] | None = None) -> list[tuple[str, ...]]:
@@ -181,7 +182,8 @@ def select(
         raise CalibrationError(f"eta needs at least 3 usable trips, {data.n} of {len(trips)} are usable"
                                + (f" (excluded: {why}{' ...' if len(excluded) > 5 else ''})" if excluded else ""))
     model = TermModel(base, data)
-    sets = candidate_sets(base, terms)
+    extras, notes = _possible_terms(model, EXTRA_TERMS[base.powertrain] if terms is None else tuple(terms))
+    sets = candidate_sets(base, extras)
     idx = np.arange(data.n)
     fold_of, scheme = folds(data, cv_folds, loo_below, seed)
     best, chosen, errs, fits, reasons, se = _select_on(model, sets, idx, cv_folds, loo_below, seed, model_rel_sigma,
@@ -222,4 +224,26 @@ def select(
         result = replace(result, warnings=result.warnings)
     rule = ("the simplest candidate whose cross-validated mean squared error is within one standard error "
             "(paired, over groups) of the best")
-    return Selection(tuple(cands), tuple(chosen), tuple(best), result, nested_cv, scheme, rule)
+    return Selection(tuple(cands), tuple(chosen), tuple(best), result, nested_cv, scheme, rule, tuple(notes))
+
+
+def _possible_terms(model: TermModel, extras: Sequence[str]) -> tuple[tuple[str, ...], list[str]]:
+    """The extra terms worth trying at all, and a note for each left out: temperature
+    terms when no trip logged a temperature, a term whose feature is zero on every trip."""
+    data = model.data
+    keep, notes = [], []
+    vals = model.vehicle_values()
+    no_temp = [n for n in extras if TERMS_BY_POWERTRAIN[(model.vehicle.powertrain, n)].temperature]
+    if no_temp and not np.any(np.isfinite(data.ambient_c)):
+        notes.append(f"{', '.join(no_temp)} not tried: no trip has a logged ambient temperature (map the logger's "
+                     "temperature column in its profile, then re-ingest)")
+        extras = [n for n in extras if n not in no_temp]
+    for n in extras:
+        t = TERMS_BY_POWERTRAIN[(model.vehicle.powertrain, n)]
+        if t.linear and not t.temperature:
+            col = model.feature(n, vals["cda"], vals["cr"])
+            if not np.any(np.abs(np.nan_to_num(col)) > 0):
+                notes.append(f"{n} not tried: it has no effect on any trip ({t.hint})")
+                continue
+        keep.append(n)
+    return tuple(keep), notes

@@ -104,9 +104,9 @@ _TERM_LIST: tuple[Term, ...] = (
     Term("kin", "kinetic_eta", ("ice",), "efficiency on kinetic energy", ("", 1.0), ("kinetic_eta", 1.0),
          (-_INF, _INF), (0.05, 0.8), "trips must differ in the kinetic share of their wheel energy (duty)"),
     Term("idle", "idle_fuel_lps", ("ice",), "idle fuel rate", ("l/h", S_PER_H), ("idle_fuel_lph", S_PER_H),
-         (0.0, _INF), (0.0, 20.0 / S_PER_H), "trips must differ in their share of time at standstill"),
+         (0.0, _INF), (0.0, 8.0 / S_PER_H), "trips must differ in their share of time at standstill"),
     Term("run", "running_fuel_lps", ("ice",), "running fuel rate", ("l/h", S_PER_H), ("running_fuel_lph", S_PER_H),
-         (0.0, _INF), (0.0, 60.0 / S_PER_H), "trips must differ in average speed (engine time per wheel work)"),
+         (0.0, _INF), (0.0, 30.0 / S_PER_H), "trips must differ in average speed (engine time per wheel work)"),
     Term("heat", "heating_fuel_lps_per_k", ("ice",), "heating fuel per K", ("l/h/K", S_PER_H),
          ("heating_fuel_lph_per_k", S_PER_H), (0.0, _INF), (0.0, _INF),
          "needs trips colder than the heating balance temperature, at several temperatures", temperature=True),
@@ -125,6 +125,10 @@ TERMS_BY_POWERTRAIN = _terms()
 #: The energy terms (not cda, cr) a calibration chooses among, per powertrain, in the
 #: order of their physical priority; "eta" is always fitted.
 EXTRA_TERMS = {"ev": ("regen", "aux", "heat", "cool", "warm"), "ice": ("idle", "run", "kin", "heat", "cool", "warm")}
+
+# Plausible rates: a heavy truck's diesel idles at 1.5-4 l/h (up to about 6 with the cab
+# heated or cooled at idle), so 8 l/h is several times any idle; its engine friction and
+# engine-driven auxiliaries at driving speeds burn a few l/h, 30 l/h is beyond any.
 
 #: Names a user may type for a term (old parameter names and vehicle fields included).
 ALIASES = {
