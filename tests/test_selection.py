@@ -140,10 +140,16 @@ def test_an_idle_rate_several_times_the_measured_standstill_flow_is_refused():
 
 def test_temperature_terms_need_logged_temperatures():
     truth = dataclasses.replace(BUS, aux_power_w=3000.0, aux_heating_w_per_k=300.0)
-    trips = [dataclasses.replace(t, ambient_c=None) for t in _trips(truth)]
-    sel = select(BUS, trips, time_repeats=0)
+    trips = _trips(truth)
+    # none logged: the temperature terms are not tried, and the notes say why
+    sel = select(BUS, [dataclasses.replace(t, ambient_c=None) for t in trips], time_repeats=0)
+    assert not any("heat" in c.terms for c in sel.candidates)
+    assert any("no trip has a logged ambient temperature" in n for n in sel.notes)
+    # some logged: a candidate with them is refused, naming how many trips lack one
+    some = [dataclasses.replace(t, ambient_c=None) if i % 4 == 0 else t for i, t in enumerate(trips)]
+    sel = select(BUS, some, time_repeats=0)
     heat = next(c for c in sel.candidates if c.terms == ("eta", "heat"))
-    assert not heat.ok and "no ambient temperature" in heat.status
+    assert not heat.ok and "15 of 60 trips have no ambient temperature" in heat.status
     assert "heat" not in sel.chosen
 
 
