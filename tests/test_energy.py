@@ -298,3 +298,55 @@ def test_vectors_of_pieces_add_their_new_sums():
     b = drive_cycle_vector(t[150:], v[150:], h[150:])
     s = a + b
     assert s.k_pos == pytest.approx(a.k_pos + b.k_pos) and s.traction_s == pytest.approx(a.traction_s + b.traction_s)
+
+
+# --- temperature through the commands ----------------------------------------------------
+
+
+def test_fleet_days_take_their_temperature(tmp_path):
+    """A scenario day's ambient temperature reaches every leg: an EV with heating uses
+    more on a cold day, by exactly the heating power over the legs' duration."""
+    from cevm.core.assignment import FleetVehicle, Leg, Route, Scenario, evaluate
+
+    t = np.arange(0.0, 901.0)
+    vec = drive_cycle_vector(t, np.full(t.size, 8.0))
+    veh = dataclasses.replace(EV, max_gross_kg=18000.0)
+    fv = FleetVehicle(id="B1", vehicle=veh, max_gross_kg=18000.0)
+    leg = Leg(vector=vec)
+    route = Route(id="R", vehicle_id="B1", stops=("S1",), legs=(leg, leg))
+    sc = Scenario(name="x", vehicles=(fv,), routes=(route,), days=("cold", "mild"), payload_kg={"S1": (0.0, 0.0)},
+                  ambient_c=(-4.0, 19.0))
+    cold = evaluate(sc, "cold", {})
+    mild = evaluate(sc, "mild", {})
+    extra = (250.0 * 20 * 900 + 2.0e5 * 20) * 2  # heating 20 K over two 900 s legs, plus two warm-ups
+    assert cold.total - mild.total == pytest.approx(extra, rel=1e-9)
+
+
+def test_predict_cli_says_the_temperature_and_warns_outside_the_calibration(tmp_path):
+    import json
+
+    from typer.testing import CliRunner
+
+    from cevm.cli import app
+
+    cyc = tmp_path / "c.csv"
+    cyc.write_text("time_s,speed_kmh\n" + "".join(f"{i},{30 if 5 < i < 590 else 0}\n" for i in range(600)))
+    veh = tmp_path / "bus.toml"
+    veh.write_text('name = "bus"\npowertrain = "ev"\nkerb_mass_kg = 9000\npayload_kg = 1000\ncda_m2 = 4.0\n'
+                   'cr = 0.007\neta = 0.8\nbattery_kwh = 120\naux_power_kw = 3\naux_heating_kw_per_k = 0.25\n'
+                   'reference_temp_c = 12.0\n\n[calibration]\nterms = ["eta", "aux", "heat"]\nn_trips = 30\n'
+                   'ambient_c = [8.0, 25.0]\nmass_kg = [9500, 12000]\n')
+    runner = CliRunner()
+    res = runner.invoke(app, ["predict", "-v", str(veh), "--cycle", str(cyc), "-f", "json"])
+    assert res.exit_code == 0, res.output
+    (row,) = json.loads(res.stdout)
+    assert row["ambient_c"] == 12.0 and row["ambient_from"] == "vehicle reference_temp_c"
+    assert "ambient 12.0 degC (vehicle reference_temp_c)" in res.stderr and "warning" not in res.stderr
+    res = runner.invoke(app, ["predict", "-v", str(veh), "--cycle", str(cyc), "--ambient-c", "-10", "-f", "json"])
+    (cold,) = json.loads(res.stdout)
+    assert cold["ambient_from"] == "given"
+    # 12 degC is 4 K, -10 degC 26 K below the 16 degC heating balance: 22 K x 0.25 kW/K x 599 s
+    assert cold["energy_kwh"] - row["energy_kwh"] == pytest.approx(0.25 * 22 * 599 / 3600, rel=1e-9)
+    assert "calibrated on 30 trips at 8.0 to 25.0 degC" in res.stderr and "extrapolation" in res.stderr
+    res = runner.invoke(app, ["predict", "-v", str(veh), "--cycle", str(cyc), "--ambient-c", "400"])
+    assert res.exit_code == 2 and "degC" in res.stderr

@@ -76,6 +76,12 @@ IceBrakingOption = Annotated[
     Optional[str],
     typer.Option(help=f"Override ICE braking mode: {' or '.join(ICE_BRAKING_MODES)}. Default: the vehicle file's."),
 ]
+AmbientOption = Annotated[
+    Optional[float],
+    typer.Option("--ambient-c", help="Ambient temperature [degC] of every prediction (heating and A/C terms). "
+                                     "Default: a stored trip's own logged mean, else the vehicle file's "
+                                     "reference_temp_c, else 20 degC."),
+]
 Cr0Option = Annotated[
     float, typer.Option(help="Cr0 of the simplification criterion, for --cycle files (stored trips and routes keep theirs).")
 ]

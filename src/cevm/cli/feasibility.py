@@ -10,6 +10,7 @@ import typer
 
 from cevm.cli.common import (
     TABLE_MAX_ROWS,
+    AmbientOption,
     Cr0Option,
     CycleOption,
     FormatOption,
@@ -56,7 +57,7 @@ def _feasibility_rows(res: Feasibility) -> list[dict]:
         else:
             row.update(fuel_l=num(res.fuel_l[i]), tank_l=veh.tank_l, tank_margin_l=num(res.tank_margin_l[i]))
         row.update(max_payload_kg=num(res.max_payload_kg[i]), min_payload_kg=num(res.min_payload_kg[i]),
-                   limited_by=res.limited_by[i])
+                   limited_by=res.limited_by[i], ambient_c=num(res.ambient_c[i]), ambient_from=res.ambient_from[i])
         rows.append(row)
     return rows
 
@@ -83,6 +84,7 @@ def feasibility_cmd(
     fmt: FormatOption = OutputFormat.table,
     out: OutOption = None,
     ice_braking: IceBrakingOption = None,
+    ambient_c: AmbientOption = None,
     cr0: Cr0Option = CR0_DEFAULT,
 ) -> None:
     """Can each vehicle run each route, with what margin, and the largest payload?
@@ -103,11 +105,14 @@ def feasibility_cmd(
         rows: list[dict] = []
         with ExitStack() as stack:
             sources = load_sources(stack, store, cycle or [], trip or [], vehicle_id or [], route or [], cr0)
+            seen: list[tuple] = []
             for src in sources:
                 res = feasibility(src, vehicles, soc_start_pct=soc_start, reserve_pct=reserve_pct,
                                   payload_kg=payload_kg, mass_kg=mass_kg, payload_cap_kg=payload_cap_kg,
-                                  ice_braking=ice_braking)
+                                  ice_braking=ice_braking, ambient_c=ambient_c)
                 rows.extend(_feasibility_rows(res))
+                speed = src.distance_m / src.duration_s if src.duration_s > 0 else float("nan")
+                seen += [(i, res.mass_kg[i], res.ambient_c[i], speed) for i in range(len(vehicles))]
                 src.release()
             stream = open_out(stack, out)
             if fmt == OutputFormat.table:
@@ -116,6 +121,23 @@ def feasibility_cmd(
                 write_rows(rows, fmt, stream=stream)
     except CevmError as exc:
         raise fail(str(exc)) from None
+    _warn_outside_calibration(vehicles, seen)
+
+
+def _warn_outside_calibration(vehicles, seen: list[tuple]) -> None:
+    """One warning per vehicle asked outside what its calibration saw."""
+    import numpy as np
+
+    from cevm.core.vehicle import domain_warnings
+
+    for i, veh in enumerate(vehicles):
+        pts = np.array([(m, t, v) for j, m, t, v in seen if j == i], dtype=float).reshape(-1, 3)
+        if pts.size == 0:
+            continue
+        speeds = pts[:, 2][np.isfinite(pts[:, 2])]
+        for w in domain_warnings(veh, mass_kg=pts[:, 0], ambient_c=pts[:, 1],
+                                 mean_speed_mps=speeds if speeds.size else None):
+            typer.echo(f"cevm: warning: {w}", err=True)
 
 
 def _print_feasibility(rows: list[dict], stream: IO[str]) -> None:

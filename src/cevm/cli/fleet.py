@@ -8,7 +8,7 @@ from typing import Annotated, Optional
 
 import typer
 
-from cevm.cli.common import StoreOption, fail
+from cevm.cli.common import AmbientOption, StoreOption, fail
 from cevm.cli.output import OutputFormat, write_rows
 from cevm.errors import CevmError
 
@@ -23,10 +23,14 @@ def fleet_plan(
     day: Annotated[Optional[list[str]], typer.Option("--day", "-d", help="Day name or 0-based index. Repeatable. Default: every day.")] = None,
     method: Annotated[str, typer.Option(help="auto (enumerate when small, else MILP), enumerate, or milp.")] = "auto",
     store: StoreOption = None,
+    ambient_c: AmbientOption = None,
     fmt: Annotated[OutputFormat, typer.Option("--format", "-f", help="Output format.")] = OutputFormat.table,
 ) -> None:
     """The assignment of shared stops that minimises total fuel (or energy, or cost),
-    within gross-weight limits and EV reserves: proven optimal (enumeration or MILP)."""
+    within gross-weight limits and EV reserves: proven optimal (enumeration or MILP).
+
+    Each day's ambient temperature: --ambient-c for every day, else the scenario's
+    ambient_c per day, else each vehicle's reference."""
     import json
 
     from cevm.io.scenario import default_resolver, fleet_report
@@ -40,9 +44,10 @@ def fleet_plan(
         store_path = resolve_store_path(store)
         if store_path.exists():  # legs may be stored trips or routes
             with TripStore.open(store_path) as st:
-                report = fleet_report(scenario, days, method=method, resolve_leg=store_resolver(st))
+                report = fleet_report(scenario, days, method=method, resolve_leg=store_resolver(st),
+                                      ambient_c=ambient_c)
         else:
-            report = fleet_report(scenario, days, method=method, resolve_leg=default_resolver)
+            report = fleet_report(scenario, days, method=method, resolve_leg=default_resolver, ambient_c=ambient_c)
     except CevmError as exc:
         raise fail(str(exc)) from None
     if fmt == OutputFormat.json:
@@ -57,6 +62,9 @@ def fleet_plan(
     day_cols = [k for k in report["table"][0] if k != "vehicle"] if report["table"] else []
     write_rows(report["table"], OutputFormat.table, columns=["vehicle", *day_cols],
                title=f"{report['scenario']}: stops per vehicle (the paper's table 4)")
+    temps = {d: t for d, t in report.get("ambient_c", {}).items() if t is not None}
+    if temps:
+        typer.echo("ambient: " + ", ".join(f"{d} {t:g} degC" for d, t in temps.items()))
     rows = []
     for p in report["plans"]:
         for v in p["vehicles"]:

@@ -32,6 +32,7 @@ import typer
 
 from cevm.cli.common import (
     TABLE_MAX_ROWS,
+    AmbientOption,
     Cr0Option,
     CycleOption,
     FormatOption,
@@ -51,6 +52,7 @@ from cevm.cli.common import (
 from cevm.cli.output import OutputFormat, write_rows
 from cevm.core.cycle import CR0_DEFAULT
 from cevm.core.sweep import (
+    AMBIENT_ORIGINS,
     DEFAULT_RESERVE_PCT,
     DEFAULT_SOC_START_PCT,
     PredictionSet,
@@ -69,20 +71,21 @@ WRITE_BATCH_ROWS = 32768
 #: Decimals of the numeric CSV columns of ``predict``.
 CSV_DECIMALS = {
     "mass_kg": 3, "payload_kg": 3, "distance_km": 6, "duration_s": 3, "wheel_energy_kwh": 6, "energy_kwh": 6,
-    "energy_kwh_per_km": 6, "fuel_l": 6, "fuel_l_per_100km": 6, "soc_end_pct": 6, "soc_min_pct": 6,
+    "energy_kwh_per_km": 6, "fuel_l": 6, "fuel_l_per_100km": 6, "soc_end_pct": 6, "soc_min_pct": 6, "ambient_c": 3,
 }
 #: Columns of ``predict`` in CSV order: the first contract's, then the new ones.
 PREDICT_COLUMNS = (
     "cycle", "vehicle", "mass_kg", "distance_km", "duration_s", "wheel_energy_kwh", "energy_kwh", "energy_kwh_per_km",
     "fuel_l", "fuel_l_per_100km", "source_kind", "powertrain", "payload_kg", "over_max_gross", "soc_end_pct",
-    "soc_min_pct", "reserve_ok", "tank_ok", "ice_braking",
+    "soc_min_pct", "reserve_ok", "tank_ok", "ice_braking", "ambient_c", "ambient_from",
 )
 _EV_KEYS = ("cycle", "vehicle", "powertrain", "mass_kg", "distance_km", "duration_s", "wheel_energy_kwh",
             "energy_kwh", "energy_kwh_per_km", "source_kind", "payload_kg", "over_max_gross", "soc_end_pct",
-            "soc_min_pct", "reserve_ok")
+            "soc_min_pct", "reserve_ok", "ambient_c", "ambient_from")
 _ICE_KEYS = ("cycle", "vehicle", "powertrain", "mass_kg", "distance_km", "duration_s", "wheel_energy_kwh",
-             "fuel_l", "fuel_l_per_100km", "ice_braking", "source_kind", "payload_kg", "over_max_gross", "tank_ok")
-_TEXT = {"cycle", "vehicle", "source_kind", "powertrain", "ice_braking"}
+             "fuel_l", "fuel_l_per_100km", "ice_braking", "source_kind", "payload_kg", "over_max_gross", "tank_ok",
+             "ambient_c", "ambient_from")
+_TEXT = {"cycle", "vehicle", "source_kind", "powertrain", "ice_braking", "ambient_from"}
 _BOOL = {"over_max_gross", "reserve_ok", "tank_ok"}
 
 PREDICT_HEADERS = {
@@ -90,11 +93,11 @@ PREDICT_HEADERS = {
     "wheel_energy_kwh": "wheel kWh", "energy_kwh": "battery kWh", "energy_kwh_per_km": "kWh/km", "fuel_l": "fuel l",
     "fuel_l_per_100km": "l/100km", "soc_end_pct": "SoC end %", "soc_min_pct": "SoC min %",
     "reserve_ok": "reserve ok", "tank_ok": "tank ok", "over_max_gross": "over max gross",
-    "status": "reserve / tank ok",
+    "status": "reserve / tank ok", "ambient_c": "ambient degC",
 }
 PREDICT_DIGITS = {"mass_kg": 0, "payload_kg": 0, "duration_s": 0, "distance_km": 2, "wheel_energy_kwh": 2,
                   "energy_kwh": 2, "energy_kwh_per_km": 3, "fuel_l": 2, "fuel_l_per_100km": 1, "soc_end_pct": 1,
-                  "soc_min_pct": 1}
+                  "soc_min_pct": 1, "ambient_c": 1}
 
 
 def _values(specs: Optional[list[str]], option: str) -> np.ndarray | None:
@@ -138,6 +141,8 @@ def _block_columns(block: SweepBlock) -> dict[str, object]:
         "soc_end_pct": block.soc_end_pct,
         "soc_min_pct": block.soc_min_pct,
         "reserve_ok": np.where(ps.is_ev, block.reserve_ok.astype(float), np.nan),
+        "ambient_c": block.ambient_c,
+        "ambient_from": (block.ambient_from.astype(np.int64), list(AMBIENT_ORIGINS)),
         "tank_ok": block.tank_ok,
         "ice_braking": (vi, list(ps.braking)),
     }
@@ -277,9 +282,10 @@ def _json_rows(cols: dict[str, object], is_ev: np.ndarray) -> list[str]:
 class _PredictWriter:
     """Streams predict blocks as CSV, JSON or a (bounded) table."""
 
-    def __init__(self, fmt: OutputFormat, stream: IO[str]):
+    def __init__(self, fmt: OutputFormat, stream: IO[str], temperature_used: bool = False):
         self.fmt = fmt
         self.stream = stream
+        self.temperature_used = temperature_used
         self.pending: list[SweepBlock] = []
         self.pending_rows = 0
         self.rows = 0
@@ -337,6 +343,8 @@ class _PredictWriter:
             columns = ["cycle", "vehicle", "mass_kg", "distance_km", "energy_kwh", "energy_kwh_per_km", "soc_min_pct",
                        "fuel_l", "fuel_l_per_100km", "status"]
             columns = [c for c in columns if any(r.get(c) is not None for r in rows)]
+            if self.temperature_used:
+                columns.insert(3, "ambient_c")
             title = "cevm predict" + (f" (first {len(rows)} of {self.rows} rows)" if self.rows > len(rows) else "")
             write_rows(rows, OutputFormat.table, columns=columns, title=title, digits=PREDICT_DIGITS,
                        headers=PREDICT_HEADERS, stream=self.stream)
@@ -352,6 +360,54 @@ class _PredictWriter:
         else:
             self.stream.write("\n]\n" if self.started else "[]\n")
         self.stream.flush()
+
+
+# -------------------------------------------------------------------- assumptions
+
+
+class Assumptions:
+    """What the predictions of a sweep assumed, per vehicle, gathered block by block:
+    the ambient temperatures (and where they came from) and the sources' mean speeds;
+    :meth:`lines` says them, with a warning for each vehicle asked outside what its
+    calibration saw (:func:`cevm.core.vehicle.domain_warnings`)."""
+
+    def __init__(self, pset: PredictionSet):
+        self.pset = pset
+        nv = len(pset.vehicles)
+        self.t_lo = np.full(nv, np.inf)
+        self.t_hi = np.full(nv, -np.inf)
+        self.v_lo = np.inf
+        self.v_hi = -np.inf
+        self.origins: list[set] = [set() for _ in range(nv)]
+
+    def add(self, block: SweepBlock) -> None:
+        vi = self.pset.vehicle_index
+        np.minimum.at(self.t_lo, vi, block.ambient_c)
+        np.maximum.at(self.t_hi, vi, block.ambient_c)
+        for v, code in set(zip(vi.tolist(), block.ambient_from.astype(int).tolist())):
+            self.origins[v].add(AMBIENT_ORIGINS[code])
+        src = block.source
+        if src.duration_s > 0:
+            speed = src.distance_m / src.duration_s
+            self.v_lo, self.v_hi = min(self.v_lo, speed), max(self.v_hi, speed)
+
+    def lines(self) -> list[str]:
+        from cevm.core.energy import uses_temperature
+        from cevm.core.vehicle import domain_warnings
+
+        out = []
+        for v, veh in enumerate(self.pset.vehicles):
+            if not np.isfinite(self.t_lo[v]):
+                continue
+            lo, hi = self.t_lo[v], self.t_hi[v]
+            if uses_temperature(veh):
+                span = f"{lo:.1f}" if lo == hi else f"{lo:.1f} to {hi:.1f}"
+                out.append(f"cevm: note: {veh.name}: ambient {span} degC ({', '.join(sorted(self.origins[v]))})")
+            masses = self.pset.mass_kg[self.pset.vehicle_index == v]
+            speeds = np.array([self.v_lo, self.v_hi]) if np.isfinite(self.v_lo) else None
+            for w in domain_warnings(veh, mass_kg=masses, ambient_c=np.array([lo, hi]), mean_speed_mps=speeds):
+                out.append(f"cevm: warning: {w}")
+        return out
 
 
 # ---------------------------------------------------------------------------- predict
@@ -384,6 +440,7 @@ def predict_cmd(
                           "against payload (a mass sweep)."),
     ] = None,
     ice_braking: IceBrakingOption = None,
+    ambient_c: AmbientOption = None,
     cr0: Cr0Option = CR0_DEFAULT,
     workers: Annotated[
         Optional[int], typer.Option("--workers", "-w", min=1, help="Worker processes, a batch of sources per task "
@@ -401,7 +458,9 @@ def predict_cmd(
     routes (--route); the 'cycle' column names each. EV rows give the state of charge at
     the end and at its lowest along the way, from --soc-start and the battery, and
     whether it stays above --reserve-pct; ICE rows whether the fuel fits tank_l. Masses
-    above max_gross_kg are kept and flagged (over_max_gross)."""
+    above max_gross_kg are kept and flagged (over_max_gross). Every row says the ambient
+    temperature it assumed (ambient_c, ambient_from); a prediction outside what a
+    calibrated vehicle was fitted on (temperature, mass, duty) is warned about."""
     if not (cycle or trip or vehicle_id or route):
         raise fail("give at least one source: --cycle, --trip, --vehicle-id or --route")
     if mass_kg and payload_kg:
@@ -420,16 +479,21 @@ def predict_cmd(
         from cevm.store.sources import load_sources
 
         vehicles = load_vehicles(vehicle)
-        pset = PredictionSet.build(vehicles, mass_kg=masses, payload_kg=payloads, ice_braking=ice_braking)
+        from cevm.core.energy import uses_temperature
+
+        pset = PredictionSet.build(vehicles, mass_kg=masses, payload_kg=payloads, ice_braking=ice_braking,
+                                   ambient_c=ambient_c)
+        assumed = Assumptions(pset)
         with ExitStack() as stack:
             sources = load_sources(stack, store, cycle or [], trip or [], vehicle_id or [], route or [], cr0)
             executor = stack.enter_context(make_executor(None if scheduler else (workers or 1), scheduler))
             stream = open_out(stack, out)
-            writer = _PredictWriter(fmt, stream)
+            writer = _PredictWriter(fmt, stream, temperature_used=any(uses_temperature(v) for v in vehicles))
             keep_for_plot = plot is not None and np.bincount(pset.vehicle_index).max() > 1
             plot_data = []
             for block in sweep(sources, pset, soc_start_pct=soc_start, reserve_pct=reserve_pct, executor=executor):
                 writer.add(block)
+                assumed.add(block)
                 if keep_for_plot and block.source_index < PLOT_MAX_LINES:
                     plot_data.append({"energy_kwh": block.energy_j / J_PER_KWH, "fuel_l": block.fuel_l})
                 if plot is None:
@@ -440,6 +504,8 @@ def predict_cmd(
                                  warn=lambda message: typer.echo(message, err=True))
     except CevmError as exc:
         raise fail(str(exc)) from None
+    for line in assumed.lines():
+        typer.echo(line, err=True)
     over = int(pset.over_max_gross.sum()) * len(sources)
     if over:
         typer.echo(f"cevm: warning: {over} predictions exceed their vehicle's max_gross_kg (column over_max_gross)",

@@ -205,6 +205,11 @@ class Scenario:
     mass_model: str = "carried"
     path: str | None = None
     load_time_s: float = 0.0
+    ambient_c: tuple[float | None, ...] = ()
+
+    def ambient_of(self, d: int) -> float | None:
+        """Day ``d``'s ambient temperature [degC], or None (each vehicle's default)."""
+        return self.ambient_c[d] if d < len(self.ambient_c) else None
 
     def __post_init__(self) -> None:
         _validate(self)
@@ -573,7 +578,7 @@ def evaluate(sc: Scenario, day: str | int, assignment: Mapping[str, int | str]) 
         use = np.zeros(len(r.legs))
         for vec, cols in _vector_groups(r.legs):
             cols = np.array(cols)
-            use[cols] = _quantity(predict(vec, v.vehicle, mass[cols]), v.vehicle)
+            use[cols] = _quantity(predict(vec, v.vehicle, mass[cols], ambient_c=sc.ambient_of(d)), v.vehicle)
         per_vehicle[v.id].append(
             RouteUse(
                 route_id=r.id,
@@ -847,7 +852,7 @@ def _solve_enumerate(sc: Scenario, prob: _Day) -> tuple[dict[str, int] | None, d
         for vec, cols in _vector_groups(r.legs):
             m = mass[:, cols]
             uniq, inv = np.unique(m, return_inverse=True)
-            use = _quantity(predict(vec, v.vehicle, uniq), v.vehicle)[inv].reshape(m.shape)
+            use = _quantity(predict(vec, v.vehicle, uniq, ambient_c=sc.ambient_of(prob.d)), v.vehicle)[inv].reshape(m.shape)
             q += np.sum(use * driven[:, cols], axis=1)
         vehicle_q[v.id] += q
     for v in sc.vehicles:
@@ -890,6 +895,7 @@ def _solve_milp(sc: Scenario, prob: _Day, time_limit_s: float | None) -> tuple[d
     from scipy.optimize import Bounds, LinearConstraint, milp
     from scipy.sparse import csr_matrix
 
+    t_day = sc.ambient_of(prob.d)
     weights = _weights(sc)
     fv = sc.vehicle_by_id
     # binaries: one per (free stop, option)
@@ -920,7 +926,7 @@ def _solve_milp(sc: Scenario, prob: _Day, time_limit_s: float | None) -> tuple[d
                 if stop_x[k] is None and prob.fixed.get(s) != ri:
                     continue
                 m = kerb + prob.payload[s]
-                q = float(_quantity(predict(r.legs[k].vector, v.vehicle, np.array([m])), v.vehicle)[0])
+                q = float(_quantity(predict(r.legs[k].vector, v.vehicle, np.array([m]), ambient_c=t_day), v.vehicle)[0])
                 if stop_x[k] is None:
                     if v.max_gross_kg is not None and m > v.max_gross_kg:
                         return None, {"method": "milp (HiGHS)", "status": "infeasible",
@@ -944,16 +950,18 @@ def _solve_milp(sc: Scenario, prob: _Day, time_limit_s: float | None) -> tuple[d
         n_stop_legs = len(r.stops)
         for l, leg in enumerate(r.legs):
             if l >= n_stop_legs:  # the return leg, empty
-                const[v.id] += float(_quantity(predict(leg.vector, v.vehicle, np.array([kerb])), v.vehicle)[0])
+                const[v.id] += float(_quantity(predict(leg.vector, v.vehicle, np.array([kerb]), ambient_c=t_day),
+                                               v.vehicle)[0])
                 continue
             sel = xs[l:][xs[l:] >= 0]
             if sel.size == 0:
-                const[v.id] += float(_quantity(predict(leg.vector, v.vehicle, np.array([m0[l]])), v.vehicle)[0])
+                const[v.id] += float(_quantity(predict(leg.vector, v.vehicle, np.array([m0[l]]), ambient_c=t_day),
+                                               v.vehicle)[0])
                 continue
             m_hi = m0[l] + pay_x[sel].sum()
             if v.max_gross_kg is not None:
                 m_hi = min(m_hi, v.max_gross_kg)
-            curve = leg_curve(leg.vector, v.vehicle, m0[l], max(m_hi, m0[l]))
+            curve = leg_curve(leg.vector, v.vehicle, m0[l], max(m_hi, m0[l]), ambient_c=t_day)
             if curve.affine:
                 const[v.id] += float(curve.alpha[0] + curve.beta[0] * m0[l])
                 lin_x[v.id][sel] += curve.beta[0] * pay_x[sel]

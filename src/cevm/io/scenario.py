@@ -69,7 +69,7 @@ def _read_toml(path: Path) -> dict:
 
 _TOP_KEYS = {
     "name", "description", "objective", "mass_model", "return_to_depot", "ev_reserve_fraction",
-    "days", "prices", "depot", "vehicle", "route", "stop", "payload_kg", "notes",
+    "days", "ambient_c", "prices", "depot", "vehicle", "route", "stop", "payload_kg", "notes",
 }
 _VEHICLE_KEYS = {"id", "file", "max_gross_kg", "ev_reserve_fraction", "soc_start", "notes"}
 _ROUTE_KEYS = {"id", "vehicle", "depot", "stops", "leg", "legs", "return_to_depot", "notes"}
@@ -127,6 +127,8 @@ def load_scenario(path: str | Path, resolve_leg: LegResolver = default_resolver)
         return_to_depot = true     # default for every route (figure 8: depot -> back)
         ev_reserve_fraction = 0.15 # default for every EV
         days = ["day 1", "day 2"]
+        ambient_c = [4.0, 18.5]    # optional: each day's ambient temperature [degC] (or one
+                                   # value for all days); default each vehicle's reference
 
         [prices]                   # only for objective = "cost"
         fuel_per_l = 1.50
@@ -183,6 +185,7 @@ def load_scenario(path: str | Path, resolve_leg: LegResolver = default_resolver)
         raise InputError(path, "days must be a non-empty list of day names, e.g. days = [\"day 1\"]")
     if len(set(days)) != len(days):
         raise InputError(path, "days: duplicate day name")
+    ambient = _day_temperatures(path, data.get("ambient_c"), len(days))
 
     prices = None
     if "prices" in data:
@@ -318,7 +321,21 @@ def load_scenario(path: str | Path, resolve_leg: LegResolver = default_resolver)
         mass_model=mass_model,
         path=str(path),
         load_time_s=time.perf_counter() - t0,
+        ambient_c=ambient,
     )
+
+
+def _day_temperatures(path: Path, value, n_days: int) -> tuple[float | None, ...]:
+    """``ambient_c`` of a scenario: one temperature [degC] per day, or one for all."""
+    from cevm.core.energy import AMBIENT_RANGE_C
+
+    if value is None:
+        return ()
+    lo, hi = AMBIENT_RANGE_C
+    vals = value if isinstance(value, list) else [value] * n_days
+    if len(vals) != n_days:
+        raise InputError(path, f"ambient_c has {len(vals)} values for {n_days} days")
+    return tuple(_num(path, f"ambient_c[{j}]", x, lo, hi) for j, x in enumerate(vals))
 
 
 def _array_of_tables(src: Path, data: dict, key: str) -> list:
@@ -329,15 +346,21 @@ def _array_of_tables(src: Path, data: dict, key: str) -> list:
 
 
 def fleet_report(path: str | Path, days: Sequence[str | int] | None = None, *, method: str = "auto",
-                 resolve_leg: LegResolver = default_resolver) -> dict:
+                 resolve_leg: LegResolver = default_resolver, ambient_c: float | None = None) -> dict:
     """Everything ``cevm fleet SCENARIO`` shows, JSON-ready: the scenario, one plan per
     day (all days by default), the table-4 rows and a summary row per day
-    (total, default, saving, method, status, time)."""
+    (total, default, saving, method, status, time). ``ambient_c`` [degC] overrides every
+    day's temperature."""
     sc = load_scenario(path, resolve_leg)
+    if ambient_c is not None:
+        import dataclasses
+
+        sc = dataclasses.replace(sc, ambient_c=_day_temperatures(Path(path), float(ambient_c), len(sc.days)))
     plans = [plan(sc, d, method=method) for d in (days if days is not None else sc.days)]
     return {
         "scenario": sc.name,
         "path": str(path),
+        "ambient_c": {day: sc.ambient_of(j) for j, day in enumerate(sc.days)},
         "objective": sc.objective_kind,
         "unit": sc.unit,
         "mass_model": sc.mass_model,
