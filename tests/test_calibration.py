@@ -81,7 +81,9 @@ def test_noise_free_ice_recovers_eta_idle(pool, braking):
 
 def test_ice_eta_equals_closed_form_weighted_least_squares(pool):
     """Paper-mode ICE, eta alone, tau fixed at 0: fuel = c_i x + d_i with x = 1/eta, so
-    the relative-error WLS has a closed form; its standard error too."""
+    the relative-error WLS has a closed form; its standard error too (the least-squares
+    estimator: robust=False; the default Huber estimate differs where trips lie beyond
+    2.5 sigma)."""
     cycles, vecs = pool
     rng = np.random.default_rng(3)
     prior = replace(TRUCK, idle_fuel_lps=1.8 / 3600)
@@ -92,7 +94,7 @@ def test_ice_eta_equals_closed_form_weighted_least_squares(pool):
     u = rng.uniform(0.01, 0.05, 8)
     trips = [TripData(str(i), v, m, float(yy), float(uu * yy)) for i, (v, m, yy, uu)
              in enumerate(zip(vecs[:8], masses, y, u))]
-    r = fit(prior, trips, cv_folds=0, model_rel_sigma=0.0, time_repeats=0)
+    r = fit(prior, trips, cv_folds=0, model_rel_sigma=0.0, time_repeats=0, robust=False)  # least squares
     c = np.empty(8)
     d = np.empty(8)
     for i, (cyc, m) in enumerate(zip(cycles[:8], masses)):

@@ -10,7 +10,7 @@ import numpy as np
 
 from cevm.core.calibration import checks
 from cevm.core.calibration.data import CalibrationError, TripData, TripSet, select_trips
-from cevm.core.calibration.solve import Fit, bounds, condition_number, fit_terms, start, value_covariance
+from cevm.core.calibration.solve import HUBER_C, Fit, bounds, condition_number, fit_terms, start, value_covariance
 from cevm.core.calibration.terms import TERMS_BY_POWERTRAIN, TermModel, neutral, normalise
 from cevm.core.calibration.validation import ErrorStats, TripRow, folds, predict_set, time_predictions
 from cevm.core.vehicle import FitDomain, Vehicle
@@ -92,7 +92,7 @@ def fit_domain(data: TripSet, terms: Sequence[str], vehicle_id: str | None = Non
 
 
 def _prune(model: TermModel, names: list[str], idx: np.ndarray, tau: float | None, max_correlation: float,
-           max_rel_se: float, *, refuse_implausible: bool) -> tuple[Fit, list[str], dict, list[str]]:
+           max_rel_se: float, *, refuse_implausible: bool, huber_c: float | None) -> tuple[Fit, list[str], dict, list[str]]:
     """Fit ``names``, refusing (and dropping) terms the data cannot support, one at a
     time. Returns the fit, the terms kept, the refused ones with reasons, warnings."""
     data = model.data
@@ -108,7 +108,7 @@ def _prune(model: TermModel, names: list[str], idx: np.ndarray, tau: float | Non
             jw0 = (np.sqrt(w0) / data.y[idx])[:, None] * model.jacobian(active, x0, idx)
             bad = checks.confounded(jw0, active, max_correlation, model)
         if bad is None:
-            result = fit_terms(model, active, idx, tau)
+            result = fit_terms(model, active, idx, tau, huber_c=huber_c)
             bad = (checks.confounded(result.jw, active, max_correlation, model)
                    or checks.imprecise(model, result, idx, max_rel_se))
             if bad is None:
@@ -142,6 +142,7 @@ def fit(
     seed: int = 0,
     neutral_others: bool = False,
     vehicle_id: str | None = None,
+    robust: bool = True,
 ) -> CalibrationResult:
     """Fit a vehicle's terms to measured trip consumption and validate the fit.
 
@@ -180,6 +181,9 @@ def fit(
     neutral_others : the terms not in ``params`` are taken out of the model (zero, or
         regeneration at eta) instead of kept at the vehicle's values (model selection)
     vehicle_id : recorded in the result's :attr:`~CalibrationResult.domain`
+    robust : default True, a Huber M-estimate (:func:`.solve.fit_terms`): a trip whose
+        measurement is far off cannot pull the fit more than one 2.5 sigma away; False:
+        weighted least squares
 
     Extra terms the data cannot identify or whose value physics refuses
     (:mod:`.checks`) are refused with the reason, and the rest are fitted.
@@ -205,18 +209,19 @@ def fit(
     model = TermModel(vehicle, data)
     return fit_model(model, names, excluded, cv_folds=cv_folds, loo_below=loo_below, tau=model_rel_sigma,
                      max_correlation=max_correlation, max_rel_se=max_rel_se, time_repeats=time_repeats, seed=seed,
-                     vehicle_id=vehicle_id)
+                     vehicle_id=vehicle_id, huber_c=HUBER_C if robust else None)
 
 
 def fit_model(model: TermModel, names: Sequence[str], excluded: dict, *, cv_folds: int, loo_below: int,
               tau: float | None, max_correlation: float, max_rel_se: float, time_repeats: int, seed: int,
-              vehicle_id: str | None, refuse_implausible: bool = True) -> CalibrationResult:
+              vehicle_id: str | None, refuse_implausible: bool = True,
+              huber_c: float | None = HUBER_C) -> CalibrationResult:
     """:func:`fit` on a prepared :class:`~.terms.TermModel` (shared by model selection)."""
     data = model.data
     vehicle = model.vehicle
     idx_all = np.arange(data.n)
     result, active, refused_terms, warnings = _prune(model, list(names), idx_all, tau, max_correlation, max_rel_se,
-                                                     refuse_implausible=refuse_implausible)
+                                                     refuse_implausible=refuse_implausible, huber_c=huber_c)
     values, vcov = value_covariance(model, result)
     fields = {_field(model, n): values[n] for n in active}
     calibrated = replace(vehicle, **fields)
@@ -245,7 +250,7 @@ def fit_model(model: TermModel, names: Sequence[str], excluded: dict, *, cv_fold
         if train.size < len(active):
             warnings.append(f"fold {f}: {train.size} training trips cannot fit {len(active)} parameters")
             continue
-        ff = fit_terms(model, active, train, tau)
+        ff = fit_terms(model, active, train, tau, huber_c=huber_c)
         if not ff.converged:
             warnings.append(f"fold {f}: the fit did not converge to the requested tolerance")
         vf = replace(vehicle, **model.fields_of(active, ff.theta))

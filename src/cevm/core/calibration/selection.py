@@ -8,7 +8,8 @@ imprecise) or its value is physically implausible (:func:`.checks.implausible`):
 candidate is shown, never chosen.
 
 Choice (the one-standard-error rule, on paired errors): let b be the candidate with the
-lowest cross-validated mean squared relative error (MSE). A candidate c is as good as b
+lowest cross-validated mean loss of its relative errors (MSE; with ``robust``, Huber's
+loss: squared up to 3 scales, linear beyond, :data:`SELECTION_HUBER_K`). A candidate c is as good as b
 when MSE_c - MSE_b <= SE, the standard error of that difference estimated from the
 per-group sums of the paired squared-error differences (the folds' unit of
 independence). The chosen model is the simplest candidate as good as b (fewest terms;
@@ -33,7 +34,7 @@ import numpy as np
 from cevm.core.calibration import checks
 from cevm.core.calibration.data import CalibrationError, TripData, select_trips
 from cevm.core.calibration.fitting import CalibrationResult, fit_model
-from cevm.core.calibration.solve import fit_terms, value_covariance
+from cevm.core.calibration.solve import HUBER_C, fit_terms, value_covariance
 from cevm.core.calibration.terms import EXTRA_TERMS, TERMS_BY_POWERTRAIN, TermModel, neutral
 from cevm.core.calibration.validation import ErrorStats, folds
 from cevm.core.vehicle import Vehicle
@@ -42,7 +43,8 @@ from cevm.core.vehicle import Vehicle
 @dataclass(frozen=True)
 class Candidate:
     """One candidate term set: its cross-validated errors, fitted values (field ->
-    (value, standard error), SI) and status: "ok", "chosen", or "refused: why"."""
+    (value, standard error), SI) and status: "ok", "chosen", or "refused: why"; ``mse``
+    the mean selection loss of its cross-validated errors (:data:`SELECTION_HUBER_K`)."""
 
     terms: tuple[str, ...]
     status: str
@@ -84,7 +86,18 @@ def candidate_sets(vehicle: Vehicle, terms: Sequence[str] | None = None) -> list
     return out
 
 
-def _cv_errors(model: TermModel, names, fold_of, idx, tau) -> np.ndarray:
+@dataclass(frozen=True)
+class _Options:
+    tau: float | None
+    max_correlation: float
+    max_rel_se: float
+    huber_c: float | None
+    folds: int
+    loo_below: int
+    seed: int
+
+
+def _cv_errors(model: TermModel, names, fold_of, idx, opt: _Options) -> np.ndarray:
     """Cross-validated relative errors [%] of the trips ``idx`` with folds ``fold_of``
     (NaN where a fold could not be fitted); the model's own vectorised predictions."""
     err = np.full(len(idx), math.nan)
@@ -94,60 +107,80 @@ def _cv_errors(model: TermModel, names, fold_of, idx, tau) -> np.ndarray:
         te_pos = np.flatnonzero(fold_of == f)
         if tr.size < len(names) + 1:
             continue
-        ff = fit_terms(model, names, tr, tau)
+        ff = fit_terms(model, names, tr, opt.tau, huber_c=opt.huber_c)
         p = model.predict(names, ff.theta, idx[te_pos])
         err[te_pos] = (p - y[te_pos]) / y[te_pos] * 100.0
     return err
 
 
-def _status(model: TermModel, names, idx, tau, max_correlation, max_rel_se):
+def _status(model: TermModel, names, idx, opt: _Options):
     """(fit or None, refusal reason or None) of a candidate on the trips ``idx``."""
     bad = checks.unsupported(model, names, idx)
     if bad is not None:
         return None, bad
-    f = fit_terms(model, names, idx, tau)
-    bad = (checks.confounded(f.jw, names, max_correlation, model) or checks.imprecise(model, f, idx, max_rel_se)
-           or checks.implausible(model, f, idx))
+    f = fit_terms(model, names, idx, opt.tau, huber_c=opt.huber_c)
+    bad = (checks.confounded(f.jw, names, opt.max_correlation, model)
+           or checks.imprecise(model, f, idx, opt.max_rel_se) or checks.implausible(model, f, idx))
     return f, bad
 
 
-def _choose(errs: dict, groups: np.ndarray) -> tuple[tuple, tuple, dict]:
-    """(best, chosen, se_vs_best) by the paired one-standard-error rule over groups."""
-    mse = {c: float(np.nanmean(e * e)) for c, e in errs.items()}
-    best = min(mse, key=lambda c: (mse[c], len(c)))
+#: The selection's loss on a cross-validated error e [%]: e^2 up to K scales, linear
+#: beyond (Huber's), the scale being the smallest median absolute error among the
+#: candidates (x 1.4826: the standard deviation for normal errors). A trip no candidate
+#: can predict (a broken measurement) then weighs like a trip K scales off, not like its
+#: square: it cannot decide which terms are kept.
+SELECTION_HUBER_K = 3.0
+
+
+def _losses(errs: dict, robust: bool) -> dict:
+    if not robust:
+        return {c: e * e for c, e in errs.items()}
+    scale = min(1.4826 * float(np.nanmedian(np.abs(e))) for e in errs.values())
+    k = SELECTION_HUBER_K * max(scale, 1e-9)
+    out = {}
+    for c, e in errs.items():
+        a = np.abs(e)
+        out[c] = np.where(a <= k, e * e, 2.0 * k * a - k * k)
+    return out
+
+
+def _choose(errs: dict, groups: np.ndarray, robust: bool) -> tuple[tuple, tuple, dict, dict]:
+    """(best, chosen, loss, se_vs_best) by the paired one-standard-error rule over groups."""
+    losses = _losses(errs, robust)
+    mean = {c: float(np.nanmean(v)) for c, v in losses.items()}
+    best = min(mean, key=lambda c: (mean[c], len(c)))
     se = {}
     ug = np.unique(groups)
-    for c, e in errs.items():
-        d = e * e - errs[best] * errs[best]
+    for c, v in losses.items():
+        d = v - losses[best]
         per_group = np.array([np.nansum(d[groups == g]) for g in ug])
         n = np.sum(np.isfinite(d))
         se[c] = float(math.sqrt(len(ug)) * per_group.std(ddof=1) / n) if len(ug) > 1 and n else math.inf
-    ok = [c for c in errs if mse[c] - mse[best] <= se[c]]
-    chosen = min(ok, key=lambda c: (len(c), mse[c]))
-    return best, chosen, se
+    ok = [c for c in errs if mean[c] - mean[best] <= se[c]]
+    chosen = min(ok, key=lambda c: (len(c), mean[c]))
+    return best, chosen, mean, se
 
 
-def _select_on(model: TermModel, sets, idx, inner_folds: int, loo_below: int, seed: int, tau, max_correlation,
-               max_rel_se) -> tuple[tuple, tuple, dict, dict, dict, dict]:
-    """The selection on the trips ``idx``: (best, chosen, errors, fits, reasons, se)."""
+def _select_on(model: TermModel, sets, idx, opt: _Options) -> tuple[tuple, tuple, dict, dict, dict, dict, dict]:
+    """The selection on the trips ``idx``: (best, chosen, errors, fits, reasons, loss, se)."""
     data = model.data
     sub = data.subset(idx)
-    fold_of, _ = folds(sub, inner_folds, loo_below, seed)
+    fold_of, _ = folds(sub, opt.folds, opt.loo_below, opt.seed)
     groups = np.array([g if g is not None else f"\0{t}" for g, t in zip(sub.groups, sub.ids)], dtype=object)
     errs, fits, reasons = {}, {}, {}
     for names in sets:
-        f, bad = _status(model, list(names), idx, tau, max_correlation, max_rel_se)
+        f, bad = _status(model, list(names), idx, opt)
         if bad is not None:
             reasons[names] = bad
             continue
         fits[names] = f
-        errs[names] = _cv_errors(model, list(names), fold_of, idx, tau) if np.any(fold_of >= 0) else \
+        errs[names] = _cv_errors(model, list(names), fold_of, idx, opt) if np.any(fold_of >= 0) else \
             (f.pred - data.y[idx]) / data.y[idx] * 100.0
     if not errs:
         raise CalibrationError("no candidate model could be fitted: "
                                + "; ".join(f"{'+'.join(c)}: {r[1]}" for c, r in list(reasons.items())[:3]))
-    best, chosen, se = _choose(errs, groups)
-    return best, chosen, errs, fits, reasons, se
+    best, chosen, loss, se = _choose(errs, groups, opt.huber_c is not None)
+    return best, chosen, errs, fits, reasons, loss, se
 
 
 def select(
@@ -167,10 +200,13 @@ def select(
     seed: int = 0,
     nested: bool = True,
     vehicle_id: str | None = None,
+    robust: bool = True,
 ) -> Selection:
     """Choose the vehicle's terms by grouped cross-validation (module docstring) and fit
     the chosen model (:func:`~.fitting.fit`'s parameters; ``terms`` restricts the extra
-    terms tried; ``nested`` runs the nested cross-validation of the procedure).
+    terms tried; ``nested`` runs the nested cross-validation of the procedure; ``robust``
+    (default) fits Huber M-estimates and compares candidates with a Huber loss on their
+    cross-validated errors, so a few broken measurements decide nothing).
 
     Every candidate starts from ``vehicle`` with the terms it does not hold taken out of
     the model (no auxiliary power, regeneration at eta, ...); CdA and Cr stay as given.
@@ -186,8 +222,9 @@ def select(
     sets = candidate_sets(base, extras)
     idx = np.arange(data.n)
     fold_of, scheme = folds(data, cv_folds, loo_below, seed)
-    best, chosen, errs, fits, reasons, se = _select_on(model, sets, idx, cv_folds, loo_below, seed, model_rel_sigma,
-                                                       max_correlation, max_rel_se)
+    opt = _Options(model_rel_sigma, max_correlation, max_rel_se, HUBER_C if robust else None, cv_folds, loo_below,
+                   seed)
+    best, chosen, errs, fits, reasons, loss, se = _select_on(model, sets, idx, opt)
     cands = []
     for names in sets:
         if names in reasons:
@@ -202,10 +239,10 @@ def select(
         e = errs[names]
         ins = ErrorStats.of((f.pred - data.y) / data.y * 100.0)
         cands.append(Candidate(names, "chosen" if names == chosen else "ok", ErrorStats.of(e), ins, fitted,
-                               float(np.nanmean(e * e)), se[names]))
+                               loss[names], se[names]))
     result = fit_model(model, chosen, excluded, cv_folds=cv_folds, loo_below=loo_below, tau=model_rel_sigma,
                        max_correlation=max_correlation, max_rel_se=max_rel_se, time_repeats=time_repeats, seed=seed,
-                       vehicle_id=vehicle_id)
+                       vehicle_id=vehicle_id, huber_c=opt.huber_c)
     nested_cv = None
     if nested and np.any(fold_of >= 0):
         err = np.full(data.n, math.nan)
@@ -213,11 +250,10 @@ def select(
             train = np.flatnonzero(fold_of != f)
             test = np.flatnonzero(fold_of == f)
             try:
-                _, ch, *_ = _select_on(model, sets, train, cv_folds, loo_below, seed, model_rel_sigma,
-                                       max_correlation, max_rel_se)
+                _, ch, *_ = _select_on(model, sets, train, opt)
             except CalibrationError:
                 continue
-            ff = fit_terms(model, list(ch), train, model_rel_sigma)
+            ff = fit_terms(model, list(ch), train, model_rel_sigma, huber_c=opt.huber_c)
             p = model.predict(list(ch), ff.theta, test)
             err[test] = (p - data.y[test]) / data.y[test] * 100.0
         nested_cv = ErrorStats.of(err)

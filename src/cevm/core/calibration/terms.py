@@ -294,9 +294,52 @@ class TermModel:
 
     # prediction ----------------------------------------------------------------------
 
+    def _linear_parts(self, names: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray, np.ndarray | None,
+                                                              np.ndarray | None]:
+        """For linear ``names`` at the vehicle's CdA and Cr (cached): the features F (n, k)
+        of the fitted terms, the fixed terms' consumption (all but those that move with
+        eta), and the features that move with eta: the tied regeneration N (EV, divided
+        by c_eta) and a fixed kinetic_eta's K (ICE, times 1/eta_k - c_eta), or None."""
+        key = ("lin", names)
+        hit = self._cache.get(key)
+        if hit is not None:
+            return hit
+        vals = self.vehicle_values()
+        cda, cr = vals["cda"], vals["cr"]
+        F = np.column_stack([self.feature(n, cda, cr) for n in names]) if names else np.zeros((self.data.n, 0))
+        fixed = np.zeros(self.data.n)
+        tied_n = fixed_k = None
+        for name in EXTRA_TERMS[self.vehicle.powertrain]:
+            if name in names:
+                continue
+            x = vals.get(name, math.nan)
+            if name == "regen":
+                if not math.isfinite(x):
+                    tied_n = self.feature("regen", cda, cr)
+                    continue
+            elif name == "kin":
+                if math.isfinite(x):
+                    fixed_k = (1.0 / x, self.feature("kin", cda, cr))
+                continue
+            if math.isfinite(x) and x != 0.0:
+                fixed = fixed + x * self.feature(name, cda, cr)
+        hit = (F, fixed, tied_n, fixed_k)
+        self._cache[key] = hit
+        return hit
+
     def predict(self, names: Sequence[str], theta: np.ndarray, idx=slice(None)) -> np.ndarray:
         """Consumption of the trips ``idx`` [J or l] with the coefficients ``theta`` of
         ``names`` (the other terms at the vehicle's values)."""
+        names = tuple(names)
+        if "cda" not in names and "cr" not in names and "eta" in names:
+            F, fixed, tied_n, fixed_k = self._linear_parts(names)
+            out = F[idx] @ np.asarray(theta, dtype=np.float64) + fixed[idx]
+            c_eta = float(theta[names.index("eta")])
+            if tied_n is not None:
+                out = out + tied_n[idx] / c_eta
+            if fixed_k is not None:
+                out = out + (fixed_k[0] - c_eta) * fixed_k[1][idx]
+            return out
         vals = self.values_of(names, theta)
         cda, cr = vals["cda"], vals["cr"]
         coef = self.coefficients({k: v for k, v in vals.items() if k not in ("cda", "cr")})
@@ -313,6 +356,17 @@ class TermModel:
     def jacobian(self, names: Sequence[str], theta: np.ndarray, idx=slice(None)) -> np.ndarray:
         """d predict / d theta (coefficients; CdA and Cr by a forward difference, exact
         within a linear piece of the wheel energy)."""
+        names = tuple(names)
+        if "cda" not in names and "cr" not in names and "eta" in names:
+            F, fixed, tied_n, fixed_k = self._linear_parts(names)
+            J = F[idx].copy()
+            j = names.index("eta")
+            c_eta = float(theta[j])
+            if tied_n is not None:
+                J[:, j] -= tied_n[idx] / (c_eta * c_eta)
+            if fixed_k is not None:
+                J[:, j] -= fixed_k[1][idx]
+            return J
         vals = self.values_of(names, theta)
         cda, cr = vals["cda"], vals["cr"]
         n = self.data.n if isinstance(idx, slice) else len(np.atleast_1d(np.arange(self.data.n)[idx]))
