@@ -350,3 +350,15 @@ def test_predict_cli_says_the_temperature_and_warns_outside_the_calibration(tmp_
     assert "calibrated on 30 trips at 8.0 to 25.0 degC" in res.stderr and "extrapolation" in res.stderr
     res = runner.invoke(app, ["predict", "-v", str(veh), "--cycle", str(cyc), "--ambient-c", "400"])
     assert res.exit_code == 2 and "degC" in res.stderr
+
+
+def test_a_version_2_vector_gets_its_trip_sums_from_its_samples():
+    rng = np.random.default_rng(8)
+    t, v, h = _random_cycle(rng)
+    vec = drive_cycle_vector(t, v, h)
+    raw = vec.to_bytes()
+    v2 = CycleVector.from_bytes(b"CEVMVEC2" + raw[8:12] + raw[12 : 12 + 8 * 11] + raw[12 + 8 * 13 :])
+    assert not v2.has_trip_sums and vec.has_trip_sums
+    up = v2.with_trip_sums(t, v, h)
+    assert up.has_trip_sums and up.k_pos == vec.k_pos and up.traction_s == vec.traction_s
+    assert float(predict(up, ICE, 2e4).fuel_l) == pytest.approx(float(predict(vec, ICE, 2e4).fuel_l), rel=1e-15)

@@ -28,7 +28,7 @@ from __future__ import annotations
 import io
 import math
 import struct
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import cached_property
 
 import numpy as np
@@ -283,6 +283,24 @@ class CycleVector:
             k_pos=self.k_pos + other.k_pos,
             traction_s=self.traction_s + other.traction_s,
         )
+
+    @property
+    def has_trip_sums(self) -> bool:
+        """Whether the vector carries k_pos and traction_s (format 3; not a version-2
+        vector read from an older store)."""
+        return math.isfinite(self.k_pos) and math.isfinite(self.traction_s)
+
+    def with_trip_sums(self, time_s: np.ndarray, speed_mps: np.ndarray,
+                       elevation_m: np.ndarray | None = None) -> CycleVector:
+        """This vector with k_pos and traction_s computed from its cycle's samples (for a
+        version-2 vector, from the profile stored beside it); the rest unchanged. The
+        samples must be those the vector was made from (a stored profile's float32
+        rounding of speed and elevation can move a step across the criterion: the sums
+        then differ by that step)."""
+        st = step_terms(time_s, speed_mps, elevation_m, self.physics)
+        simplified = (st.k + st.e + self.cr0 * st.r) > 0
+        return replace(self, k_pos=float(np.maximum(st.k, 0.0).sum()), traction_s=float(st.dt[simplified].sum()),
+                       _tables={}, _direct_uses={})
 
     # --- serialisation (for the store) -------------------------------------------------
     def to_bytes(self) -> bytes:
