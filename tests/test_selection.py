@@ -162,3 +162,34 @@ def test_selected_table_agrees_with_the_result():
     assert chosen.cv.mean_pct == pytest.approx(sel.result.cv.mean_pct, abs=1e-9)
     assert chosen.cv.std_pct == pytest.approx(sel.result.cv.std_pct, abs=1e-9)
     assert sel.nested_cv is None
+
+
+def test_the_calibrated_vehicle_file_holds_the_model_and_what_it_saw(tmp_path):
+    """select() -> the vehicle file: fitted keys in file units, the left-out terms zeroed,
+    a reference temperature, and a [calibration] table that loads back as the domain."""
+    from cevm.io import load_vehicle
+    from cevm.io.calibrated import calibration_table, write_calibrated_vehicle
+
+    truth = dataclasses.replace(BUS, aux_power_w=4000.0, aux_heating_w_per_k=300.0, aux_cooling_w_per_k=200.0)
+    trips = [dataclasses.replace(t, start_utc_s=1.55e9 + 86400.0 * i) for i, t in enumerate(_trips(truth))]
+    src = tmp_path / "bus.toml"
+    src.write_text('name = "bus"\npowertrain = "ev"\nkerb_mass_kg = 9000\npayload_kg = 2000\ncda_m2 = 4.0\n'
+                   'cr = 0.007\neta = 0.8\nbattery_kwh = 120\nregen_eta = 0.5  # a guess\nwarmup_kwh_per_k = 0.1\n'
+                   '\n[sources]\ncda_m2 = "somewhere"\n')
+    sel = select(load_vehicle(src), trips, time_repeats=0, vehicle_id="B-1")
+    out = tmp_path / "cal.toml"
+    write_calibrated_vehicle(src, out, sel.result, force=False, note="test",
+                             calibration=calibration_table(sel.result, selected_from=len(sel.candidates)))
+    back = load_vehicle(out)
+    r = sel.result
+    assert back.eta == pytest.approx(r.vehicle.eta, rel=1e-5)
+    assert back.aux_heating_w_per_k == pytest.approx(r.fitted["aux_heating_w_per_k"][0], rel=1e-5)
+    assert back.regen_eta is None and back.warmup_j_per_k == 0.0  # not in the chosen model
+    temps = [t.ambient_c for t in trips]
+    assert back.reference_temp_c == pytest.approx(float(np.median(temps)), abs=0.05)
+    d = back.calibration
+    assert d.terms == sel.chosen and d.n_trips == 60 and d.vehicle_id == "B-1"
+    assert d.ambient_c == pytest.approx((min(temps), max(temps)), abs=0.05)
+    assert d.cv_std_pct == pytest.approx(r.cv.std_pct, abs=1e-3)
+    assert d.first_utc.startswith("2019-02-") and d.mass_kg[0] > 8000
+    assert 'cda_m2 = "somewhere"' in out.read_text()  # the rest of the file is kept
