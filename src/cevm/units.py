@@ -9,3 +9,7 @@ J_PER_MJ = 1.0e6
 S_PER_H = 3600.0
 #: Metres per second per km/h.
 KMH_TO_MPS = 1.0 / 3.6
+#: Metres per second per mile per hour (international mile, 1609.344 m).
+MPH_TO_MPS = 0.44704
+#: Metres per foot (international foot).
+FT_TO_M = 0.3048

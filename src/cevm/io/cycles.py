@@ -1,90 +1,532 @@
-"""Reading cycle files (CSV), with errors that name file, line and column."""
+"""Reading cycle files (CSV, or gzip-compressed CSV) as users have them, fast, with
+plausibility bounds and errors that name file, line and column.
+
+A cycle file has a header line and one sample per line: a time column (or a fixed time
+step, :attr:`CycleFormat.time_step_s`), one or more speed columns (each selected column
+is one cycle: the VECTO files hold one mission per column), and optionally an elevation
+or a road-grade column, in the same file or, for the grade, in a second file with the
+same rows (VECTO's ``gradient_*.csv``). The old layout ``time_s``, ``speed_kmh`` or
+``speed_mps``, ``elevation_m`` reads as before.
+
+What is not given in a :class:`CycleFormat` is detected:
+
+- separator, decimal mark, gzip, encoding: :func:`cevm.io.numeric_csv.sniff_csv`;
+- columns by name, ignoring case, spaces and underscores, with the unit in the name
+  (``speed_kmh``, ``Speed [km/h]``, ``v (m/s)``, ``speed_mph``, ``time_s``,
+  ``elevation_m``, ``altitude (ft)``, ``grade_pct``, ``Gradient [%]``): time is
+  ``time`` or ``t``; speed ``speed``, ``v``, ``velocity`` or ``vehicle speed``; elevation
+  ``elevation``, ``altitude``, ``height`` or ``alt``; grade ``grade``, ``gradient``,
+  ``slope`` or ``road grade``. A time column without a unit is in seconds and an
+  elevation column without one in metres; a speed or grade column without a unit needs
+  it given (km/h, m/s, mph; % or fraction): no guess. A file with an elevation and a
+  grade column uses the elevation.
+
+In a file of several missions (speed columns selected), a column may end before the
+others (trailing empty cells: missions of different lengths); its cycle ends with its
+last value. In a file of one cycle every line with a time needs a speed. Blank lines at
+the end are ignored; an empty cell followed by a value is an error.
+
+**Grade to elevation.** A grade g (rise over run: % / 100, or a fraction) is integrated
+along the distance travelled, as the CE model's rolling term measures it::
+
+    h_0 = 0,   h_{i+1} = h_i + d_i s_i / sqrt(1 + s_i^2)
+    d_i = (v_i + v_{i+1}) / 2 (t_{i+1} - t_i),   s_i = (g_i + g_{i+1}) / 2
+
+(d_i along the road, so the rise is d_i sin(atan s_i)).
+
+**Plausibility bounds** (refused with file, line and column; README "Cycle files"):
+speed at most :data:`MAX_SPEED_KMH`, acceleration and deceleration at most
+:data:`MAX_ACCEL_MPS2` between samples, grade at most :data:`MAX_GRADE` (given, or of
+an elevation profile: each step's rise at most MAX_GRADE times its distance plus
+:data:`ELEVATION_ROUNDING_M`), elevation within +-:data:`MAX_ABS_ELEVATION_M`, at most
+:data:`MAX_CYCLE_SAMPLES` samples.
+"""
 
 from __future__ import annotations
 
+import dataclasses
+import difflib
+import fnmatch
+import math
+import re
+from collections.abc import Mapping
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
-import pandas as pd
 
 from cevm.core.cycle import DriveCycle
 from cevm.errors import InputError
-from cevm.units import KMH_TO_MPS
+from cevm.io.numeric_csv import SEPARATORS, CsvLayout, describe_missing, read_numeric_columns, separator_name, sniff_csv
+from cevm.units import FT_TO_M, KMH_TO_MPS, MPH_TO_MPS
+
+#: Highest speed of a cycle [km/h]: above every road vehicle a fleet runs (production
+#: cars are mostly limited to 250 km/h; EU speed limiters hold trucks to 90 and buses to
+#: 100 km/h). The cycle at 99,999 km/h of issue 17 is refused here.
+MAX_SPEED_KMH = 300.0
+#: Largest acceleration or deceleration between two samples [m/s^2], about 1.5 g: more
+#: than tyre grip on a dry road allows any road vehicle (friction coefficient about
+#: 1.0-1.3), so a step beyond it is a recording or unit error.
+MAX_ACCEL_MPS2 = 15.0
+#: Steepest road grade [-] (40 %): the steepest public streets are about 35-37 %.
+MAX_GRADE = 0.40
+#: Allowance on an elevation step [m] beyond MAX_GRADE x its distance: a profile given
+#: in whole metres changes by 1 m at once, even at walking pace.
+ELEVATION_ROUNDING_M = 1.0
+#: Largest elevation, absolute or relative to the start [m]: no road lies above
+#: 5,800 m or below -430 m.
+MAX_ABS_ELEVATION_M = 10_000.0
+#: Most samples in one cycle file (116 days at 1 Hz), which bounds the memory a file can
+#: take (about 200 bytes per sample while its vector is computed).
+MAX_CYCLE_SAMPLES = 10_000_000
+
+#: Speed units: accepted spellings -> (canonical name, factor to m/s).
+SPEED_UNITS = {"km/h": ("km/h", KMH_TO_MPS), "kmh": ("km/h", KMH_TO_MPS), "kph": ("km/h", KMH_TO_MPS),
+               "m/s": ("m/s", 1.0), "mps": ("m/s", 1.0), "mph": ("mph", MPH_TO_MPS)}
+#: Grade units: accepted spellings -> (canonical name, factor to a fraction).
+GRADE_UNITS = {"%": ("%", 0.01), "pct": ("%", 0.01), "percent": ("%", 0.01),
+               "fraction": ("fraction", 1.0), "frac": ("fraction", 1.0), "-": ("fraction", 1.0)}
+_TIME_UNITS = {"s": 1.0, "sec": 1.0, "secs": 1.0, "seconds": 1.0, "ms": 1e-3, "min": 60.0, "h": 3600.0}
+_ELEVATION_UNITS = {"m": 1.0, "ft": FT_TO_M}
+_BASES = {
+    "time": {"time", "t"},
+    "speed": {"speed", "v", "velocity", "vehiclespeed"},
+    "elevation": {"elevation", "altitude", "height", "alt"},
+    "grade": {"grade", "gradient", "slope", "roadgrade"},
+}
+_UNIT_SUFFIX = re.compile(r"^(?P<base>[a-z][a-z ]*?)_(?P<unit>kmh|kph|mps|mph|s|ms|min|h|m|ft|pct|percent|fraction)$")
+_UNIT_BRACKET = re.compile(r"^(?P<base>.+?)\s*[\[(]\s*(?P<unit>[^\])]*?)\s*[\])]$")
 
 
-def _first_bad_row(mask: np.ndarray) -> int:
-    return int(np.flatnonzero(mask)[0])
+def _name_parts(name: str) -> tuple[str, str | None]:
+    """(base, unit) of a column name: 'Speed [km/h]' -> ('speed', 'km/h');
+    'speed_kmh' -> ('speed', 'kmh'); 'Long haul, 26t' -> ('longhaul,26t', None)."""
+    low = name.strip().lower()
+    m = _UNIT_BRACKET.match(low) or _UNIT_SUFFIX.match(low)
+    base, unit = (m.group("base"), m.group("unit")) if m else (low, None)
+    return re.sub(r"[\s_\-]+", "", base), unit
 
 
-def read_cycle_csv(path: str | Path) -> DriveCycle:
-    """Read a cycle CSV: header with ``time_s`` and ``speed_kmh`` or ``speed_mps``, and
-    optionally ``elevation_m``; other columns are ignored.
+def _norm_unit(text: str | None, table: dict, what: str, where: str) -> tuple[str, float] | None:
+    if text is None:
+        return None
+    key = text.strip().lower().replace(" ", "")
+    if key not in table:
+        names = sorted({v[0] if isinstance(v, tuple) else k for k, v in table.items()})
+        raise InputError(where, f"unknown {what} unit {text!r}; use one of {', '.join(names)}")
+    return table[key]
 
-    Errors (missing column, non-numeric or empty cell, non-increasing time, negative
-    speed) raise :class:`~cevm.errors.InputError` with the file, the line (1-based, the
-    header is line 1) and the column.
+
+@dataclass(frozen=True)
+class CycleFormat:
+    """How to read a cycle file; every field None (or empty) is detected.
+
+    - ``sep``, ``decimal``: separator (``,`` ``;`` tab ``|``) and decimal mark (``.`` or ``,``)
+    - ``time_column``; or ``time_step_s``: samples evenly spaced, from t = 0 (any time column ignored)
+    - ``speed_columns``: names or glob patterns (``Long haul*``); each column is one cycle
+    - ``speed_unit``: ``km/h``, ``m/s`` or ``mph`` (else from the column name)
+    - ``elevation_column`` [m, or ft by name]; or ``grade_column`` with ``grade_unit``
+      (``%`` or ``fraction``, else from the name) and optionally ``grade_file``, a second
+      file with the same rows (its grade column for a speed column is the one of the
+      same name unless ``grade_column`` is given)
     """
+
+    sep: str | None = None
+    decimal: str | None = None
+    time_column: str | None = None
+    time_step_s: float | None = None
+    speed_columns: tuple[str, ...] = ()
+    speed_unit: str | None = None
+    elevation_column: str | None = None
+    grade_column: str | None = None
+    grade_unit: str | None = None
+    grade_file: Path | None = None
+
+    def __post_init__(self) -> None:
+        if isinstance(self.speed_columns, str):
+            object.__setattr__(self, "speed_columns", (self.speed_columns,))
+        else:
+            object.__setattr__(self, "speed_columns", tuple(self.speed_columns))
+        if self.grade_file is not None:
+            object.__setattr__(self, "grade_file", Path(self.grade_file))
+
+    def check(self, where: str | Path | None = None) -> CycleFormat:
+        """Refuse contradictory or impossible options (InputError naming ``where``)."""
+        where = where if where is not None else "cycle options"
+        if self.sep is not None and self.sep not in SEPARATORS:
+            raise InputError(where, f"separator {self.sep!r} not supported; use one of "
+                                    f"{', '.join(map(separator_name, SEPARATORS))}")
+        if self.decimal is not None and self.decimal not in (".", ","):
+            raise InputError(where, f"decimal mark {self.decimal!r} not supported; use '.' or ','")
+        if self.sep is not None and self.sep == self.decimal:
+            raise InputError(where, f"the separator and the decimal mark cannot both be {self.sep!r}")
+        if self.time_step_s is not None:
+            if not (isinstance(self.time_step_s, (int, float)) and math.isfinite(self.time_step_s)
+                    and self.time_step_s > 0):
+                raise InputError(where, f"time step must be a positive number of seconds, got {self.time_step_s!r}")
+            if self.time_column is not None:
+                raise InputError(where, "give a time column or a time step, not both")
+        if self.elevation_column is not None and (self.grade_column is not None or self.grade_file is not None):
+            raise InputError(where, "give an elevation column or a grade (column, file), not both")
+        _norm_unit(self.speed_unit, SPEED_UNITS, "speed", where)
+        _norm_unit(self.grade_unit, GRADE_UNITS, "grade", where)
+        return self
+
+    def is_default(self) -> bool:
+        return self == CycleFormat()
+
+    #: Keys of a leg table (fleet scenarios) and of :meth:`from_mapping`.
+    KEYS = ("sep", "decimal", "time_column", "time_step_s", "speed_column", "speed_unit", "elevation_column",
+            "grade_column", "grade_unit", "grade_file")
+
+    @classmethod
+    def from_mapping(cls, table: Mapping[str, Any], where: str | Path, base_dir: Path | None = None) -> CycleFormat:
+        """From keys of :data:`KEYS` (a fleet scenario's leg table): strings, except
+        ``time_step_s`` (a number) and ``speed_column`` (a string or a list); a
+        relative ``grade_file`` is taken relative to ``base_dir``."""
+        kw: dict[str, Any] = {}
+        for key, value in table.items():
+            if key not in cls.KEYS:
+                continue
+            if key == "time_step_s":
+                if isinstance(value, bool) or not isinstance(value, (int, float)):
+                    raise InputError(where, f"{key} must be a number, got {value!r}")
+                kw[key] = float(value)
+            elif key == "speed_column":
+                vals = [value] if isinstance(value, str) else value
+                if not isinstance(vals, (list, tuple)) or not vals or not all(isinstance(v, str) and v for v in vals):
+                    raise InputError(where, f"{key} must be a column name or a list of them, got {value!r}")
+                kw["speed_columns"] = tuple(vals)
+            else:
+                if not isinstance(value, str) or not value:
+                    raise InputError(where, f"{key} must be a non-empty string, got {value!r}")
+                if key == "grade_file":
+                    p = Path(value)
+                    kw[key] = p if p.is_absolute() or base_dir is None else base_dir / p
+                else:
+                    kw[key] = value
+        return cls(**kw).check(where)
+
+    def to_items(self) -> tuple[tuple[str, Any], ...]:
+        """The options that differ from the default, as (key, value) pairs (hashable)."""
+        out = []
+        for f in dataclasses.fields(self):
+            v = getattr(self, f.name)
+            if v != f.default and v != ():
+                out.append((f.name, str(v) if isinstance(v, Path) else v))
+        return tuple(out)
+
+    @classmethod
+    def from_items(cls, items) -> CycleFormat:
+        return cls(**dict(items))
+
+
+# ----------------------------------------------------------------------------- columns
+
+
+def _find_named(layout: CsvLayout, name: str, option: str) -> int:
+    """Position of the column the user named (exactly, else ignoring case and spaces)."""
+    if name in layout.header:
+        return layout.index(name)
+    folded = [re.sub(r"\s+", "", h.lower()) for h in layout.header]
+    key = re.sub(r"\s+", "", name.lower())
+    if key in folded:
+        return folded.index(key)
+    close = difflib.get_close_matches(name, layout.header, n=1)
+    hint = f" (did you mean {close[0]!r}?)" if close else ""
+    raise InputError(layout.path, f"no column {name!r} ({option}){hint}; the header has: {_header_list(layout)}",
+                     line=1)
+
+
+def _header_list(layout: CsvLayout, limit: int = 12) -> str:
+    names = [repr(h) for h in layout.header[:limit]]
+    more = f", ... ({len(layout.header)} columns)" if len(layout.header) > limit else ""
+    return ", ".join(names) + more
+
+
+def _detect(layout: CsvLayout, kind: str) -> list[int]:
+    return [i for i, h in enumerate(layout.header) if _name_parts(h)[0] in _BASES[kind]]
+
+
+def _pick_one(layout: CsvLayout, kind: str, option: str) -> int | None:
+    found = _detect(layout, kind)
+    if len(found) > 1:
+        if kind == "speed":  # the old layout: speed_mps wins over speed_kmh
+            legacy = [i for i in found if layout.header[i] in ("speed_mps", "speed_kmh")]
+            if len(legacy) == len(found):
+                return layout.index("speed_mps") if "speed_mps" in layout.header else legacy[0]
+        names = ", ".join(repr(layout.header[i]) for i in found)
+        raise InputError(layout.path, f"several {kind} columns ({names}); choose one ({option})", line=1)
+    return found[0] if found else None
+
+
+def _speed_columns(layout: CsvLayout, fmt: CycleFormat, exclude: set[int]) -> list[int]:
+    """The selected speed columns; patterns do not match the ``exclude``d (time) column."""
+    if not fmt.speed_columns:
+        i = _pick_one(layout, "speed", "--speed-col")
+        if i is None:
+            raise InputError(layout.path, "no speed column found (speed_kmh, speed_mps, 'Speed [km/h]', ...); name it "
+                                          f"(--speed-col); the header has: {_header_list(layout)}", line=1)
+        return [i]
+    out: list[int] = []
+    for spec in fmt.speed_columns:
+        if any(ch in spec for ch in "*?["):
+            hits = [i for i, h in enumerate(layout.header) if fnmatch.fnmatchcase(h, spec) and i not in exclude]
+            if not hits:
+                raise InputError(layout.path, f"no column matches {spec!r} (--speed-col); the header has: "
+                                              f"{_header_list(layout)}", line=1)
+        else:
+            hits = [_find_named(layout, spec, "--speed-col")]
+        out += [i for i in hits if i not in out]
+    return out
+
+
+def _unit_of(layout: CsvLayout, col: int, given: str | None, table: dict, what: str, option: str,
+             default: tuple[str, float] | None = None) -> tuple[str, float]:
+    """The (unit, factor) of a column: the given unit, else its name's, else ``default``,
+    else an error asking for it; a name that says otherwise than the option is refused."""
+    name = layout.header[col]
+    from_name = None
+    unit = _name_parts(name)[1]
+    if unit is not None:
+        from_name = table.get(unit.replace(" ", ""))
+    chosen = _norm_unit(given, table, what, layout.path)
+    if chosen is not None:
+        if from_name is not None and from_name[0] != chosen[0]:
+            raise InputError(layout.path, f"the column name says {from_name[0]} but the {what} unit given is "
+                                          f"{chosen[0]}", line=1, column=name)
+        return chosen
+    if from_name is not None:
+        return from_name
+    if default is not None:
+        return default
+    names = sorted({v[0] for v in table.values()})
+    raise InputError(layout.path, f"the {what} unit is not in the column name; give it ({option} "
+                                  f"{' or '.join(names)})", line=1, column=name)
+
+
+# ----------------------------------------------------------------------------- reading
+
+
+def _extent(values: np.ndarray) -> int:
+    """Number of rows up to the column's last value (trailing empty cells end it)."""
+    finite = np.flatnonzero(~np.isnan(values))
+    return int(finite[-1]) + 1 if finite.size else 0
+
+
+def _require(layout: CsvLayout, values: np.ndarray, n: int, col: int) -> np.ndarray:
+    """The first ``n`` values of a column, all present (else the error for the first
+    missing one)."""
+    part = values[:n]
+    bad = np.isnan(part)
+    if bad.any():
+        raise describe_missing(layout, int(np.flatnonzero(bad)[0]), col)
+    return part
+
+
+def read_cycles(path: str | Path, fmt: CycleFormat | None = None) -> list[DriveCycle]:
+    """Every cycle of a cycle file: one per selected speed column (see the module
+    docstring). Names: the file's stem, or ``stem[column]`` when the speed columns were
+    chosen by :attr:`CycleFormat.speed_columns`.
+
+    Raises :class:`~cevm.errors.InputError` naming file, line (1-based, the header is
+    line 1) and column: missing or unreadable file, an undetectable layout or column, a
+    cell that is not a number, a gap in a column, time not increasing, fewer than 2
+    samples, and every plausibility bound of the module docstring.
+    """
+    fmt = (fmt or CycleFormat()).check()
     path = Path(path)
-    if not path.exists():
-        raise InputError(path, "cycle file not found")
-    if path.is_dir():
-        raise InputError(path, "is a directory, not a cycle file")
-    raw = path.read_bytes()
-    if b"\x00" in raw[:4096]:
-        raise InputError(path, "binary data, not a CSV text file")
-    try:
-        text = raw.decode("utf-8-sig")
-    except UnicodeDecodeError as exc:
-        raise InputError(path, f"not UTF-8 text ({exc.reason} at byte {exc.start})") from None
-    lines = text.splitlines()
-    if not lines or not lines[0].strip():
-        raise InputError(path, "empty file: expected a header with time_s and speed_kmh or speed_mps", line=1)
-    header = [c.strip() for c in lines[0].split(",")]
-    speed_col = "speed_mps" if "speed_mps" in header else "speed_kmh" if "speed_kmh" in header else None
-    for need, ok in (("time_s", "time_s" in header), ("speed_kmh or speed_mps", speed_col is not None)):
-        if not ok:
-            raise InputError(path, f"missing column {need}; header has: {', '.join(header)}", line=1)
-    cols = ["time_s", speed_col] + (["elevation_m"] if "elevation_m" in header else [])
-    try:
-        df = pd.read_csv(
-            path,
-            usecols=lambda c: c.strip() in cols,
-            dtype=str,
-            skip_blank_lines=False,
-            keep_default_na=False,
-            encoding="utf-8-sig",
-        )
-    except pd.errors.ParserError as exc:
-        raise InputError(path, f"malformed CSV: {exc}") from None
-    df.columns = [c.strip() for c in df.columns]
-    if len(df) < 2:
-        raise InputError(path, "a cycle needs at least 2 rows of samples", line=len(df) + 2)
-    values: dict[str, np.ndarray] = {}
-    for col in cols:
-        s = df[col].fillna("").str.strip()
-        num = pd.to_numeric(s, errors="coerce").to_numpy(dtype=np.float64)
-        bad = ~np.isfinite(num)
-        if bad.any():
-            i = _first_bad_row(bad)
-            cell = s.iloc[i]
-            why = "empty cell" if cell == "" else f"not a finite number: {cell!r}"
-            raise InputError(path, why, line=i + 2, column=col)
-        values[col] = num
-    t = values["time_s"]
+    layout = sniff_csv(path, sep=fmt.sep, decimal=fmt.decimal, what="cycle file")
+    time_col = None
+    time_factor = 1.0
+    if fmt.time_step_s is None:
+        time_col = (_find_named(layout, fmt.time_column, "--time-col") if fmt.time_column is not None
+                    else _pick_one(layout, "time", "--time-col"))
+        if time_col is None:
+            raise InputError(layout.path, "no time column found (time_s, 'Time', ...); name it (--time-col), or give "
+                                          f"a time step (--time-step-s); the header has: {_header_list(layout)}",
+                             line=1)
+        time_factor = _unit_of(layout, time_col, None, {k: (k, f) for k, f in _TIME_UNITS.items()}, "time", "",
+                               default=("s", 1.0))[1]
+    speed_cols = _speed_columns(layout, fmt, {time_col})
+    units = [_unit_of(layout, c, fmt.speed_unit, SPEED_UNITS, "speed", "--speed-unit") for c in speed_cols]
+    if time_col in speed_cols:
+        raise InputError(layout.path, "the time column cannot also be a speed column", line=1,
+                         column=layout.header[time_col])
+
+    # the road: elevation, or grade in this file or another
+    elev_col = grade_col = None
+    if fmt.elevation_column is not None:
+        elev_col = _find_named(layout, fmt.elevation_column, "--elevation-col")
+    elif fmt.grade_file is None and fmt.grade_column is not None:
+        grade_col = _find_named(layout, fmt.grade_column, "--grade-col")
+    elif fmt.grade_file is None:
+        elev_col = _pick_one(layout, "elevation", "--elevation-col")
+        if elev_col is None:
+            grade_col = _pick_one(layout, "grade", "--grade-col")
+
+    wanted = [c for c in [time_col, *speed_cols, elev_col, grade_col] if c is not None]
+    wanted = list(dict.fromkeys(wanted))
+    arrays = dict(zip(wanted, read_numeric_columns(layout, wanted, what="cycle file", max_rows=MAX_CYCLE_SAMPLES)))
+
+    grade_layout, grade_cols = None, {}
+    if fmt.grade_file is not None:
+        grade_layout = sniff_csv(fmt.grade_file, sep=fmt.sep, decimal=fmt.decimal, what="grade file")
+        for c in speed_cols:
+            name = fmt.grade_column if fmt.grade_column is not None else layout.header[c]
+            grade_cols[c] = _find_named(grade_layout, name, "--grade-col" if fmt.grade_column else
+                                        "the speed column's name in the grade file; else give --grade-col")
+        gcols = list(dict.fromkeys(grade_cols.values()))
+        grade_arrays = dict(zip(gcols, read_numeric_columns(grade_layout, gcols, what="grade file",
+                                                            max_rows=MAX_CYCLE_SAMPLES)))
+    elif grade_col is not None:
+        grade_layout, grade_arrays = layout, arrays
+        grade_cols = {c: grade_col for c in speed_cols}
+    grade_factor = None
+    if grade_cols:
+        gunits = {_unit_of(grade_layout, g, fmt.grade_unit, GRADE_UNITS, "grade", "--grade-unit")
+                  for g in set(grade_cols.values())}
+        if len(gunits) > 1:
+            raise InputError(grade_layout.path, "the grade columns have different units; give --grade-unit", line=1)
+        grade_factor = gunits.pop()[1]
+    elev_factor = (_unit_of(layout, elev_col, None, {k: (k, f) for k, f in _ELEVATION_UNITS.items()}, "elevation",
+                            "", default=("m", 1.0))[1] if elev_col is not None else None)
+
+    stem = Path(path.name.removesuffix(".gz")).stem
+    cycles = []
+    for c, (unit, factor) in zip(speed_cols, units):
+        speed_raw = arrays[c]
+        n = _extent(speed_raw)
+        if time_col is not None and not fmt.speed_columns:
+            # one cycle in the file: every line with a time has a speed (a short or
+            # truncated last line is an error, not the end of the cycle)
+            n = max(n, _extent(arrays[time_col]))
+        if time_col is not None:
+            n_time = _extent(arrays[time_col])
+            if n_time < n:
+                raise InputError(layout.path, f"column {layout.header[time_col]!r} ends at line {n_time + 1} but "
+                                              f"{layout.header[c]!r} goes on to line {n + 1}; if the samples are "
+                                              "evenly spaced, give the time step (--time-step-s)",
+                                 line=n_time + 2, column=layout.header[time_col])
+        if n < 2:
+            raise InputError(layout.path, "a cycle needs at least 2 samples", line=n + 2)
+        v_raw = _require(layout, speed_raw, n, c)
+        if time_col is not None:
+            t = _require(layout, arrays[time_col], n, time_col) * time_factor
+        else:
+            t = np.arange(n, dtype=np.float64) * fmt.time_step_s
+        _check_time(layout, t, time_col)
+        v = v_raw * factor
+        _check_speed(layout, c, v, v_raw, t, unit)
+        elevation = None
+        if elev_col is not None:
+            h = _require(layout, arrays[elev_col], n, elev_col) * elev_factor
+            _check_elevation(layout, elev_col, t, v, h)
+            elevation = h
+        elif c in grade_cols:
+            g_raw = _require(grade_layout, grade_arrays[grade_cols[c]], n, grade_cols[c])
+            g = g_raw * grade_factor
+            _check_grade(grade_layout, grade_cols[c], g, g_raw)
+            elevation = elevation_from_grade(t, v, g)
+        name = f"{stem}[{layout.header[c]}]" if fmt.speed_columns else stem
+        cycles.append(DriveCycle(time_s=t, speed_mps=v, elevation_m=elevation, name=name))
+    return cycles
+
+
+def read_cycle_csv(path: str | Path, fmt: CycleFormat | None = None) -> DriveCycle:
+    """The one cycle of a cycle file (see :func:`read_cycles`; a selection of several
+    speed columns is refused here).
+
+    The old layout needs no options: a header with ``time_s`` and ``speed_kmh`` or
+    ``speed_mps``, and optionally ``elevation_m``; other columns are ignored. Errors raise
+    :class:`~cevm.errors.InputError` with the file, the line (1-based, the header is
+    line 1) and the column.
+    """
+    cycles = read_cycles(path, fmt)
+    if len(cycles) != 1:
+        names = ", ".join(repr(c.name) for c in cycles[:5])
+        raise InputError(path, f"{len(cycles)} speed columns selected ({names}); one is needed here")
+    return cycles[0]
+
+
+def read_cycle_files(paths, fmt: CycleFormat | None = None) -> list[DriveCycle]:
+    """:func:`read_cycles` of each path, in order, concatenated."""
+    return [c for p in paths for c in read_cycles(p, fmt)]
+
+
+# ------------------------------------------------------------------------------ checks
+
+
+def _line(i: int) -> int:
+    return i + 2  # data row i (0-based) -> file line (the header is line 1)
+
+
+def _check_time(layout: CsvLayout, t: np.ndarray, col: int | None) -> None:
     steps = np.diff(t)
-    if np.any(steps <= 0):
-        i = _first_bad_row(steps <= 0) + 1
-        raise InputError(
-            path, f"time does not increase ({t[i - 1]:g} then {t[i]:g})", line=i + 2, column="time_s"
-        )
-    v = values[speed_col]
-    if np.any(v < 0):
-        i = _first_bad_row(v < 0)
-        raise InputError(path, f"negative speed {v[i]:g}", line=i + 2, column=speed_col)
-    speed_mps = v * KMH_TO_MPS if speed_col == "speed_kmh" else v
-    return DriveCycle(
-        time_s=t,
-        speed_mps=speed_mps,
-        elevation_m=values.get("elevation_m"),
-        name=path.stem,
-    )
+    bad = ~(steps > 0)
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0]) + 1
+        raise InputError(layout.path, f"time does not increase ({t[i - 1]:g} then {t[i]:g})", line=_line(i),
+                         column=layout.header[col] if col is not None else None)
+
+
+def _check_speed(layout: CsvLayout, col: int, v: np.ndarray, v_raw: np.ndarray, t: np.ndarray, unit: str) -> None:
+    name = layout.header[col]
+    if (v < 0).any():
+        i = int(np.flatnonzero(v < 0)[0])
+        raise InputError(layout.path, f"negative speed {v_raw[i]:g}", line=_line(i), column=name)
+    vmax = MAX_SPEED_KMH * KMH_TO_MPS
+    if (v > vmax).any():
+        i = int(np.flatnonzero(v > vmax)[0])
+        raise InputError(layout.path, f"speed {v_raw[i]:g} {unit} ({v[i] / KMH_TO_MPS:.0f} km/h) is beyond "
+                                      f"{MAX_SPEED_KMH:g} km/h, the bound for road vehicles (wrong unit?)",
+                         line=_line(i), column=name)
+    acc = np.diff(v) / np.diff(t)
+    big = np.abs(acc) > MAX_ACCEL_MPS2
+    if big.any():
+        i = int(np.flatnonzero(big)[0])
+        raise InputError(layout.path, f"{'acceleration' if acc[i] > 0 else 'deceleration'} "
+                                      f"{abs(acc[i]):.3g} m/s^2 ({v_raw[i]:g} to {v_raw[i + 1]:g} {unit} in "
+                                      f"{t[i + 1] - t[i]:g} s) is beyond {MAX_ACCEL_MPS2:g} m/s^2, more than "
+                                      "tyres allow any road vehicle", line=_line(i + 1), column=name)
+
+
+def _check_elevation(layout: CsvLayout, col: int, t: np.ndarray, v: np.ndarray, h: np.ndarray) -> None:
+    name = layout.header[col]
+    far = np.abs(h) > MAX_ABS_ELEVATION_M
+    if far.any():
+        i = int(np.flatnonzero(far)[0])
+        raise InputError(layout.path, f"elevation {h[i]:g} m is beyond +-{MAX_ABS_ELEVATION_M:g} m (no road is "
+                                      "higher than 5,800 m; wrong unit or scale?)", line=_line(i), column=name)
+    d = 0.5 * (v[1:] + v[:-1]) * np.diff(t)
+    dh = np.diff(h)
+    steep = np.abs(dh) > MAX_GRADE * d + ELEVATION_ROUNDING_M
+    if steep.any():
+        i = int(np.flatnonzero(steep)[0])
+        raise InputError(layout.path, f"elevation changes by {dh[i]:+.3g} m over {d[i]:.3g} m of road: steeper than "
+                                      f"{MAX_GRADE:.0%} (plus {ELEVATION_ROUNDING_M:g} m for rounding)",
+                         line=_line(i + 1), column=name)
+
+
+def _check_grade(layout: CsvLayout, col: int, g: np.ndarray, g_raw: np.ndarray) -> None:
+    steep = np.abs(g) > MAX_GRADE
+    if steep.any():
+        i = int(np.flatnonzero(steep)[0])
+        raise InputError(layout.path, f"grade {g_raw[i]:g} ({g[i]:.1%}) is steeper than {MAX_GRADE:.0%}, the "
+                                      "bound for roads (wrong unit? give the grade unit)", line=_line(i),
+                         column=layout.header[col])
+
+
+def elevation_from_grade(time_s: np.ndarray, speed_mps: np.ndarray, grade: np.ndarray) -> np.ndarray:
+    """Elevation [m], 0 at the start, from a per-sample road grade [-] (rise over run)
+    integrated along the trapezoidal distance of each step: h_{i+1} = h_i + d_i s_i /
+    sqrt(1 + s_i^2), s_i the mean grade of the step's two samples."""
+    v = np.asarray(speed_mps, dtype=np.float64)
+    g = np.asarray(grade, dtype=np.float64)
+    d = 0.5 * (v[1:] + v[:-1]) * np.diff(np.asarray(time_s, dtype=np.float64))
+    s = 0.5 * (g[1:] + g[:-1])
+    h = np.empty(v.size)
+    h[0] = 0.0
+    np.cumsum(d * s / np.sqrt(1.0 + s * s), out=h[1:])
+    return h

@@ -1,0 +1,306 @@
+"""A fast reader of numeric CSV columns, with errors that name file, line and column.
+
+Two steps, for any CSV of numbers a user gives (cycle files, and other numeric tables):
+
+1. :func:`sniff_csv` reads the first MiB (decompressed, for ``.gz`` or gzip magic bytes)
+   and finds the layout: compression, encoding (UTF-8, a BOM dropped; the header may be
+   cp1252), separator (``,`` ``;`` tab ``|``: the one that splits the header and the
+   first lines into the same number of fields, more than one) and decimal mark (``,``
+   when the separator is not a comma and the data show a digit, comma, digit; else
+   ``.``), unless given. It refuses binary data and a file without line breaks.
+2. :func:`read_numeric_columns` parses the columns asked for straight into float64
+   arrays in C (pandas' C parser, float dtypes; every row's field count checked by the
+   parser). Empty cells are NaN; what they mean is the caller's to say, and
+   :func:`describe_missing` names an empty cell or a short line for its message. A cell
+   that is not a finite number, or a line with more fields than the header, raises
+   :class:`~cevm.errors.InputError` with the line (1-based, the header is line 1) and
+   the column.
+
+Only to explain an error is the file read again the careful way, line by line with the
+``csv`` module (:func:`first_bad_cell`), which costs about 1 µs per cell; a file without
+errors is never read so.
+
+Reuse: ``layout = sniff_csv(path)``, then ``layout.index(name)`` for a column's position
+and ``read_numeric_columns(layout, [i, j])``; ``layout.pandas_kwargs()`` reads other
+(text) columns with the same separator, encoding and compression.
+"""
+
+from __future__ import annotations
+
+import codecs
+import csv
+import gzip
+import io
+import re
+import warnings
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from cevm.errors import InputError
+
+#: Separators tried, in the order preferred when several split the lines alike (a
+#: semicolon or a tab is rarely anything but a separator; a comma is also a decimal mark
+#: and appears in column names).
+SEPARATORS = ("\t", ";", ",", "|")
+#: Bytes read to find the layout [bytes].
+SNIFF_BYTES = 1 << 20
+#: Lines after the header that the separator must split like the header.
+SNIFF_LINES = 50
+
+_GZIP_MAGIC = b"\x1f\x8b"
+_DECIMAL_COMMA = re.compile(rb"\d,\d")
+_NUMBER = re.compile(r"\s*[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?\s*")
+_SEP_NAMES = {"\t": "tab", ";": "';'", ",": "','", "|": "'|'"}
+
+
+def separator_name(sep: str) -> str:
+    return _SEP_NAMES.get(sep, repr(sep))
+
+
+@dataclass(frozen=True)
+class CsvLayout:
+    """How a CSV file is written: what :func:`sniff_csv` found (or was told)."""
+
+    path: Path
+    sep: str
+    decimal: str
+    encoding: str  # of the data; "utf-8-sig" unless the header needed cp1252
+    compression: str | None  # "gzip" or None
+    header: tuple[str, ...]  # column names, stripped
+
+    def index(self, name: str) -> int:
+        """Position of column ``name`` (its first occurrence); ValueError if absent."""
+        return self.header.index(name)
+
+    def pandas_kwargs(self) -> dict:
+        """Keyword arguments of ``pandas.read_csv`` for this layout (header line skipped,
+        columns named by position 0..n-1)."""
+        return dict(sep=self.sep, decimal=self.decimal, encoding=self.encoding, compression=self.compression,
+                    header=None, skiprows=1, names=list(range(len(self.header))), index_col=False,
+                    skip_blank_lines=False, engine="c")
+
+    def describe(self) -> str:
+        return (f"separator {separator_name(self.sep)}, decimal mark {self.decimal!r}"
+                + (", gzip" if self.compression else ""))
+
+
+def _open_binary(path: Path, compression: str | None):
+    return gzip.open(path, "rb") if compression == "gzip" else open(path, "rb")
+
+
+def _head(path: Path) -> tuple[bytes, str | None, bool]:
+    """(first SNIFF_BYTES of the content, compression, whether that is all of it)."""
+    try:
+        with open(path, "rb") as fh:
+            magic = fh.read(2)
+        compression = "gzip" if magic == _GZIP_MAGIC else None
+        with _open_binary(path, compression) as fh:
+            head = fh.read(SNIFF_BYTES + 1)
+    except (OSError, EOFError, gzip.BadGzipFile) as exc:
+        what = "not a readable gzip file" if path.suffix == ".gz" or magic == _GZIP_MAGIC else "cannot read"
+        raise InputError(path, f"{what}: {getattr(exc, 'strerror', None) or exc}") from None
+    return head[:SNIFF_BYTES], compression, len(head) <= SNIFF_BYTES
+
+
+def _split(line: str, sep: str) -> list[str]:
+    return next(csv.reader([line], delimiter=sep), [])
+
+
+def sniff_csv(path: str | Path, *, sep: str | None = None, decimal: str | None = None,
+              what: str = "CSV file") -> CsvLayout:
+    """The layout of a CSV file with a header line: compression, encoding, separator,
+    decimal mark (each detected unless given) and the column names.
+
+    Raises :class:`InputError` for a missing or unreadable file, binary data, a file
+    without line breaks or header, or a separator that cannot be told (give ``sep``).
+    """
+    path = Path(path)
+    if not path.exists():
+        raise InputError(path, f"{what} not found")
+    if path.is_dir():
+        raise InputError(path, f"is a directory, not a {what}")
+    if sep is not None and sep not in SEPARATORS:
+        raise InputError(path, f"separator {sep!r} not supported; use one of {', '.join(map(separator_name, SEPARATORS))}")
+    if decimal is not None and decimal not in (".", ","):
+        raise InputError(path, f"decimal mark {decimal!r} not supported; use '.' or ','")
+    if sep is not None and sep == decimal:
+        raise InputError(path, f"the separator and the decimal mark cannot both be {sep!r}")
+    head, compression, whole = _head(path)
+    if b"\x00" in head[:4096]:
+        raise InputError(path, f"binary data, not a {what} (CSV text)")
+    lines = head.split(b"\n")
+    if not whole:
+        lines = lines[:-1]  # the last one may be cut
+        if not lines:
+            raise InputError(path, f"no line break in the first {SNIFF_BYTES >> 20} MiB: not a {what} (CSV text)",
+                             line=1)
+    if not head.strip():
+        raise InputError(path, f"empty file: a {what} starts with a header of column names", line=1)
+    first = lines[0].rstrip(b"\r")
+    if first.startswith(codecs.BOM_UTF8):
+        first = first[len(codecs.BOM_UTF8):]
+    encoding = "utf-8-sig"
+    try:
+        header_line = first.decode("utf-8")
+    except UnicodeDecodeError:
+        header_line, encoding = first.decode("cp1252", errors="replace"), "cp1252"
+    if not header_line.strip():
+        raise InputError(path, f"empty first line: a {what} starts with a header of column names", line=1)
+    body = [ln.rstrip(b"\r").decode(encoding, errors="replace") for ln in lines[1:SNIFF_LINES + 1]]
+    body = [ln for ln in body if ln.strip()]
+    if sep is None:
+        sep = _detect_separator(path, header_line, body, decimal, what)
+    header = tuple(c.strip() for c in _split(header_line, sep))
+    if decimal is None:
+        data = head[len(lines[0]) + 1:]
+        decimal = "," if sep != "," and _DECIMAL_COMMA.search(data) else "."
+    if sep == decimal:
+        raise InputError(path, f"the separator and the decimal mark cannot both be {sep!r}")
+    return CsvLayout(path=path, sep=sep, decimal=decimal, encoding=encoding, compression=compression, header=header)
+
+
+def _detect_separator(path: Path, header: str, body: list[str], decimal: str | None, what: str) -> str:
+    counts = {s: (len(_split(header, s)), [len(_split(b, s)) for b in body]) for s in SEPARATORS if s != decimal}
+    for s, (nh, nb) in counts.items():  # every line split alike, into more than one field
+        if nh > 1 and all(n == nh for n in nb):
+            return s
+    for s, (nh, nb) in counts.items():  # a header of one column: a one-column file
+        if nh == 1 and all(n == 1 for n in nb):
+            return ","
+    best = max(counts, key=lambda s: (counts[s][0] > 1, sum(n == counts[s][0] for n in counts[s][1])))
+    nh, nb = counts[best]
+    bad = next((i for i, n in enumerate(nb) if n != nh), None)
+    detail = (f"with {separator_name(best)} the header has {nh} fields but a line below it has {nb[bad]}"
+              if bad is not None else "")
+    raise InputError(path, f"cannot tell the separator of this {what} ({detail}); give it "
+                           f"(one of {', '.join(map(separator_name, SEPARATORS))})", line=1)
+
+
+def _text_lines(layout: CsvLayout) -> Iterator[str]:
+    """The file's lines as text (decompressed, decoded; undecodable bytes replaced)."""
+    with _open_binary(layout.path, layout.compression) as raw:
+        with io.TextIOWrapper(raw, encoding=layout.encoding, errors="replace", newline="") as fh:
+            yield from fh
+
+
+def _number_ok(cell: str, decimal: str) -> bool:
+    if decimal == ",":
+        if "." in cell:
+            return False
+        cell = cell.replace(",", ".")
+    return _NUMBER.fullmatch(cell) is not None
+
+
+def first_bad_cell(layout: CsvLayout, columns: Sequence[int], what: str = "CSV file") -> InputError | None:
+    """The careful path: the first line with more fields than the header, or the first
+    cell of ``columns`` that is neither empty nor a finite number, as an InputError to
+    raise (None if there is none). Reads the file line by line."""
+    n = len(layout.header)
+    for line_no, row in enumerate(csv.reader(_text_lines(layout), delimiter=layout.sep), start=1):
+        if line_no == 1:
+            continue
+        if len(row) > n:
+            return _too_many_fields(layout, line_no, len(row))
+        for j in columns:
+            cell = row[j].strip() if j < len(row) else ""
+            if cell and not _number_ok(cell, layout.decimal):
+                return InputError(layout.path, _not_a_number(layout, cell), line=line_no, column=layout.header[j])
+            if cell and not np.isfinite(float(cell.replace(",", "."))):
+                return InputError(layout.path, f"not a finite number: {cell!r}", line=line_no,
+                                  column=layout.header[j])
+    return None
+
+
+def _not_a_number(layout: CsvLayout, cell: str) -> str:
+    msg = f"not a number: {cell!r}"
+    if layout.decimal == "." and re.fullmatch(r"\s*[+-]?\d*,\d+\s*", cell):
+        msg += " (a decimal comma? give the decimal mark ',')"
+    elif layout.decimal == "," and re.fullmatch(r"\s*[+-]?\d*\.\d+\s*", cell):
+        msg += " (the decimal mark is ',' here; give '.' if the file uses points)"
+    return msg
+
+
+def _too_many_fields(layout: CsvLayout, line_no: int, got: int) -> InputError:
+    msg = f"{got} fields, but the header has {len(layout.header)} (with separator {separator_name(layout.sep)})"
+    if layout.sep == ",":
+        msg += "; a decimal comma in a comma-separated file must be quoted"
+    return InputError(layout.path, msg, line=line_no)
+
+
+def describe_missing(layout: CsvLayout, row: int, column: int) -> InputError:
+    """An InputError for the NaN of data row ``row`` (0-based) in ``column``: an empty
+    cell, a blank line or a line with too few fields. Reads the file up to that line."""
+    line_no = row + 2
+    for i, text in enumerate(_text_lines(layout), start=1):
+        if i == line_no:
+            text = text.rstrip("\r\n")
+            if not text.strip():
+                return InputError(layout.path, "blank line", line=line_no)
+            fields = _split(text, layout.sep)
+            if len(fields) <= column:
+                return InputError(layout.path, f"only {len(fields)} field{'s' if len(fields) != 1 else ''}, the header has {len(layout.header)}",
+                                  line=line_no, column=layout.header[column])
+            break
+    return InputError(layout.path, "empty cell", line=line_no, column=layout.header[column])
+
+
+def _undecodable(layout: CsvLayout, exc: UnicodeDecodeError) -> InputError:
+    """The error for bytes that are not text in the layout's encoding, with their line."""
+    name = layout.encoding.removesuffix("-sig").upper()
+    with _open_binary(layout.path, layout.compression) as fh:
+        for line_no, raw in enumerate(fh, start=1):
+            try:
+                raw.decode(layout.encoding)
+            except UnicodeDecodeError as e:
+                return InputError(layout.path, f"not {name} text ({e.reason} at byte {e.start} of the line)",
+                                  line=line_no)
+    return InputError(layout.path, f"not {name} text ({exc.reason})")
+
+
+_PARSER_LINE = re.compile(r"Expected (\d+) fields in line (\d+), saw (\d+)")
+
+
+def read_numeric_columns(layout: CsvLayout, columns: Sequence[int], *, what: str = "CSV file",
+                         max_rows: int | None = None) -> list[np.ndarray]:
+    """Float64 arrays of ``columns`` (positions in ``layout.header``), one value per data
+    line; empty cells (and the cells missing from a short line) are NaN.
+
+    Raises :class:`InputError` naming line and column for a cell that is not a finite
+    number and a line with more fields than the header; and for more than ``max_rows``
+    data lines, when given (memory stays bounded).
+    """
+    import pandas as pd
+
+    kw = layout.pandas_kwargs()
+    columns = list(columns)
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", pd.errors.ParserWarning)
+            df = pd.read_csv(layout.path, dtype={j: np.float64 for j in columns}, keep_default_na=False,
+                             na_values=[""], nrows=None if max_rows is None else max_rows + 1, **kw)
+    except pd.errors.ParserError as exc:
+        m = _PARSER_LINE.search(str(exc))
+        if m:
+            raise _too_many_fields(layout, int(m.group(2)), int(m.group(3))) from None
+        raise first_bad_cell(layout, columns, what) or InputError(layout.path, f"malformed CSV: {exc}") from None
+    except pd.errors.ParserWarning:  # the first data line is longer than the header
+        raise first_bad_cell(layout, columns, what) or InputError(layout.path, "more fields than the header",
+                                                                  line=2) from None
+    except UnicodeDecodeError as exc:
+        raise _undecodable(layout, exc) from None
+    except (ValueError, TypeError) as exc:  # a cell that is not a number
+        raise first_bad_cell(layout, columns, what) or InputError(layout.path, f"malformed CSV: {exc}") from None
+    except (OSError, EOFError, gzip.BadGzipFile) as exc:
+        raise InputError(layout.path, f"cannot read: {getattr(exc, 'strerror', None) or exc}") from None
+    if max_rows is not None and len(df) > max_rows:
+        raise InputError(layout.path, f"more than {max_rows:,} data lines; the limit for a {what}",
+                         line=max_rows + 2)
+    out = [df[j].to_numpy(dtype=np.float64) for j in columns]
+    for j, arr in zip(columns, out):
+        if np.isinf(arr).any():  # what the C parser reads as infinite ("inf", 1e999)
+            i = int(np.flatnonzero(np.isinf(arr))[0])
+            raise InputError(layout.path, f"not a finite number: {arr[i]:g}", line=i + 2, column=layout.header[j])
+    return out
