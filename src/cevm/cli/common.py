@@ -6,6 +6,8 @@ or bad input (nothing was done).
 
 from __future__ import annotations
 
+import functools
+import inspect
 import math
 import os
 import sys
@@ -86,6 +88,92 @@ Cr0Option = Annotated[
     float, typer.Option(help="Cr0 of the simplification criterion, for --cycle files (stored trips and routes keep theirs).")
 ]
 OutOption = Annotated[Optional[Path], typer.Option("--out", "-o", help="Write the output to this file instead of stdout.")]
+
+# How cycle files (--cycle) are read: every option is detected when not given
+# (cevm.io.cycles). One set applies to every --cycle file of the command.
+_CYCLE_PANEL = "Reading cycle files (detected unless given)"
+CycleSepOption = Annotated[
+    Optional[str], typer.Option("--cycle-sep", help="Separator: ',', ';', 'tab' or '|'.", rich_help_panel=_CYCLE_PANEL)
+]
+CycleDecimalOption = Annotated[
+    Optional[str], typer.Option("--cycle-decimal", help="Decimal mark: '.' or ','.", rich_help_panel=_CYCLE_PANEL)
+]
+TimeColOption = Annotated[
+    Optional[str], typer.Option("--time-col", help="Time column, in seconds. Default: time_s, Time, t, ...", rich_help_panel=_CYCLE_PANEL)
+]
+TimeStepOption = Annotated[
+    Optional[float],
+    typer.Option("--time-step-s", help="Samples evenly spaced by this many seconds, from 0 (no time column).",
+                 rich_help_panel=_CYCLE_PANEL),
+]
+SpeedColOption = Annotated[
+    Optional[list[str]],
+    typer.Option("--speed-col", help="Speed column, or a glob such as 'Long haul*': each column is one cycle "
+                                     "(files with one mission per column). Repeatable.", rich_help_panel=_CYCLE_PANEL),
+]
+SpeedUnitOption = Annotated[
+    Optional[str], typer.Option("--speed-unit", help="km/h, m/s or mph. Default: from the column name (speed_kmh, "
+                                                     "'Speed (m/s)').", rich_help_panel=_CYCLE_PANEL)
+]
+ElevationColOption = Annotated[
+    Optional[str], typer.Option("--elevation-col", help="Elevation column, in metres.", rich_help_panel=_CYCLE_PANEL)
+]
+GradeColOption = Annotated[
+    Optional[str], typer.Option("--grade-col", help="Road grade column, integrated along distance into elevation.",
+                                rich_help_panel=_CYCLE_PANEL)
+]
+GradeUnitOption = Annotated[
+    Optional[str], typer.Option("--grade-unit", help="'%' or 'fraction'. Default: from the column name (grade_pct).",
+                                rich_help_panel=_CYCLE_PANEL)
+]
+GradeFileOption = Annotated[
+    Optional[Path], typer.Option("--grade-file", help="A second file with the same rows holding the grade: the column "
+                                                      "named like the speed column, or --grade-col (VECTO's "
+                                                      "gradient_*.csv).", rich_help_panel=_CYCLE_PANEL)
+]
+
+
+_CYCLE_OPTIONS = {
+    "cycle_sep": CycleSepOption, "cycle_decimal": CycleDecimalOption, "time_col": TimeColOption,
+    "time_step_s": TimeStepOption, "speed_col": SpeedColOption, "speed_unit": SpeedUnitOption,
+    "elevation_col": ElevationColOption, "grade_col": GradeColOption, "grade_unit": GradeUnitOption,
+    "grade_file": GradeFileOption,
+}
+
+
+def cycle_format(cycle_sep: Optional[str] = None, cycle_decimal: Optional[str] = None, time_col: Optional[str] = None,
+                 time_step_s: Optional[float] = None, speed_col: Optional[list[str]] = None,
+                 speed_unit: Optional[str] = None, elevation_col: Optional[str] = None, grade_col: Optional[str] = None,
+                 grade_unit: Optional[str] = None, grade_file: Optional[Path] = None):
+    """The :class:`cevm.io.cycles.CycleFormat` of the cycle options (bad ones: exit 2)."""
+    from cevm.io.cycles import CycleFormat
+
+    sep = {"tab": "\t", "\\t": "\t"}.get(cycle_sep, cycle_sep) if cycle_sep is not None else None
+    try:
+        return CycleFormat(sep=sep, decimal=cycle_decimal, time_column=time_col, time_step_s=time_step_s,
+                           speed_columns=tuple(speed_col or ()), speed_unit=speed_unit, elevation_column=elevation_col,
+                           grade_column=grade_col, grade_unit=grade_unit, grade_file=grade_file).check("cycle options")
+    except CevmError as exc:
+        raise fail(str(exc)) from None
+
+
+def with_cycle_options(command):
+    """Give a command the cycle-reading options (:data:`_CYCLE_OPTIONS`, shown in their
+    own help panel): the command takes one keyword ``cycle_fmt``, a
+    :class:`cevm.io.cycles.CycleFormat`, instead of the ten options."""
+    sig = inspect.signature(command, eval_str=True)
+    params = [p for p in sig.parameters.values() if p.name != "cycle_fmt"]
+    extra = [inspect.Parameter(name, inspect.Parameter.KEYWORD_ONLY, default=None, annotation=ann)
+             for name, ann in _CYCLE_OPTIONS.items()]
+
+    @functools.wraps(command)
+    def run(*args, **kwargs):
+        opts = {name: kwargs.pop(name, None) for name in _CYCLE_OPTIONS}
+        return command(*args, cycle_fmt=cycle_format(**opts), **kwargs)
+
+    run.__signature__ = sig.replace(parameters=[p.replace(kind=inspect.Parameter.KEYWORD_ONLY) for p in params] + extra)
+    run.__annotations__ = {p.name: p.annotation for p in run.__signature__.parameters.values()}
+    return run
 FormatOption = Annotated[OutputFormat, typer.Option("--format", "-f", help="Output format.")]
 
 

@@ -26,6 +26,7 @@ from cevm.cli.common import (
     check_common,
     fail,
     open_out,
+    with_cycle_options,
 )
 from cevm.cli.output import OutputFormat, write_rows
 from cevm.core.cycle import CR0_DEFAULT
@@ -62,6 +63,7 @@ def _feasibility_rows(res: Feasibility) -> list[dict]:
     return rows
 
 
+@with_cycle_options
 def feasibility_cmd(
     vehicle: VehicleOption,
     route: RouteOption = None,
@@ -86,6 +88,7 @@ def feasibility_cmd(
     ice_braking: IceBrakingOption = None,
     ambient_c: AmbientOption = None,
     cr0: Cr0Option = CR0_DEFAULT,
+    cycle_fmt=None,
 ) -> None:
     """Can each vehicle run each route, with what margin, and the largest payload?
 
@@ -104,7 +107,8 @@ def feasibility_cmd(
         vehicles = load_vehicles(vehicle)
         rows: list[dict] = []
         with ExitStack() as stack:
-            sources = load_sources(stack, store, cycle or [], trip or [], vehicle_id or [], route or [], cr0)
+            sources = load_sources(stack, store, cycle or [], trip or [], vehicle_id or [], route or [], cr0,
+                                   cycle_fmt)
             seen: list[tuple] = []
             for src in sources:
                 res = feasibility(src, vehicles, soc_start_pct=soc_start, reserve_pct=reserve_pct,

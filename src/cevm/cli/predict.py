@@ -48,6 +48,7 @@ from cevm.cli.common import (
     check_common,
     fail,
     open_out,
+    with_cycle_options,
 )
 from cevm.cli.output import OutputFormat, write_rows
 from cevm.core.cycle import CR0_DEFAULT
@@ -413,6 +414,7 @@ class Assumptions:
 # ---------------------------------------------------------------------------- predict
 
 
+@with_cycle_options
 def predict_cmd(
     vehicle: VehicleOption,
     cycle: CycleOption = None,
@@ -451,11 +453,13 @@ def predict_cmd(
         Optional[str], typer.Option(help="Dask scheduler address (tcp://HOST:8786): evaluate the batches on that "
                                          "cluster (pip install 'cevm[dask]'). Sources are read here and sent.")
     ] = None,
+    cycle_fmt=None,
 ) -> None:
     """Predict energy (EV) or fuel (ICE) for every source x vehicle x mass.
 
     Sources are cycle files (--cycle), stored trips (--trip, --vehicle-id) and stored
-    routes (--route); the 'cycle' column names each. EV rows give the state of charge at
+    routes (--route); the 'cycle' column names each (a cycle file's stem, and with
+    --speed-col its column: 'trucks[Long haul, 26t]'). EV rows give the state of charge at
     the end and at its lowest along the way, from --soc-start and the battery, and
     whether it stays above --reserve-pct; ICE rows whether the fuel fits tank_l. Masses
     above max_gross_kg are kept and flagged (over_max_gross). Every row says the ambient
@@ -485,7 +489,8 @@ def predict_cmd(
                                    ambient_c=ambient_c)
         assumed = Assumptions(pset)
         with ExitStack() as stack:
-            sources = load_sources(stack, store, cycle or [], trip or [], vehicle_id or [], route or [], cr0)
+            sources = load_sources(stack, store, cycle or [], trip or [], vehicle_id or [], route or [], cr0,
+                                   cycle_fmt)
             executor = stack.enter_context(make_executor(None if scheduler else (workers or 1), scheduler))
             stream = open_out(stack, out)
             writer = _PredictWriter(fmt, stream, temperature_used=any(uses_temperature(v) for v in vehicles))

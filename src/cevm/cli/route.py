@@ -6,7 +6,15 @@ from typing import Annotated, Optional
 
 import typer
 
-from cevm.cli.common import CycleOption, FormatOption, StoreOption, TripOption, existing_store, fail
+from cevm.cli.common import (
+    CycleOption,
+    FormatOption,
+    StoreOption,
+    TripOption,
+    existing_store,
+    fail,
+    with_cycle_options,
+)
 from cevm.cli.output import OutputFormat, write_rows
 from cevm.core.cycle import CR0_DEFAULT
 from cevm.errors import CevmError
@@ -17,6 +25,7 @@ app = typer.Typer(help="Named routes (a bus block, a delivery round): sequences 
 
 
 @app.command("add")
+@with_cycle_options
 def route_add(
     name: Annotated[str, typer.Argument(help="Route name: letters, digits, '.', '_', '-'.")],
     trip: TripOption = None,
@@ -29,10 +38,12 @@ def route_add(
     replace: Annotated[bool, typer.Option(help="Overwrite an existing route of this name.")] = False,
     note: Annotated[Optional[str], typer.Option(help="A note kept with the route.")] = None,
     cr0: Annotated[float, typer.Option(help="Cr0 for the cycle legs' vectors (trips keep theirs).")] = CR0_DEFAULT,
+    cycle_fmt=None,
 ) -> None:
     """Store a named route: stored trips (--trip) or cycle files (--cycle) in the order
     given, or a mix with --leg trip:ID --leg cycle:PATH. Cycle legs are copied into the
-    store (vector and profile), so the route does not depend on the files afterwards."""
+    store (vector and profile), so the route does not depend on the files afterwards; a
+    file with several selected speed columns (--speed-col) gives one leg per column."""
     from cevm.store.routes import CycleLeg, TripLeg, add_route
     from cevm.store import TripStore, resolve_store_path
 
@@ -52,7 +63,8 @@ def route_add(
     if any(k == "trip" for k, _ in specs) and not path.exists():
         raise fail(f"{path}: no trip store here; run 'cevm ingest' first or give --store")
     try:
-        legs = [TripLeg(ref) if kind == "trip" else CycleLeg.from_file(ref) for kind, ref in specs]
+        legs = [leg for kind, ref in specs
+                for leg in ([TripLeg(ref)] if kind == "trip" else CycleLeg.all_from_file(ref, cycle_fmt))]
         with TripStore.open(path) as st:
             info = add_route(st, name, legs, replace=replace, cr0=cr0, note=note)
     except CevmError as exc:

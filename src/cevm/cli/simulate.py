@@ -9,13 +9,13 @@ from typing import Annotated, Optional
 import numpy as np
 import typer
 
-from cevm.cli.common import StoreOption, fail
+from cevm.cli.common import StoreOption, fail, with_cycle_options
 from cevm.cli.output import OutputFormat, write_rows
 from cevm.errors import CevmError
-from cevm.io import read_cycle_csv
 from cevm.units import J_PER_KWH
 
 
+@with_cycle_options
 def simulate(
     vehicle: Annotated[Path, typer.Option("--vehicle", "-v", help="Vehicle file (with a [detailed] table).")],
     cycle: Annotated[Optional[Path], typer.Option("--cycle", "-c", help="Cycle CSV.")] = None,
@@ -26,13 +26,14 @@ def simulate(
     out: Annotated[Optional[Path], typer.Option("--out", "-o", help="Per-second output CSV.")] = None,
     plot: Annotated[Optional[Path], typer.Option(help="PNG: state of charge (EV, the paper's figure 4) or fuel and elevation (ICE, figure 6).")] = None,
     fmt: Annotated[OutputFormat, typer.Option("--format", "-f", help="Format of the summary.")] = OutputFormat.table,
+    cycle_fmt=None,
 ) -> None:
     """Detailed time-step simulation of one vehicle over a trace (the baseline model).
 
     Motor map, regeneration limits and battery for an EV; gearbox and fuel map for a diesel."""
     from cevm.core.detailed import simulate as run_simulation
     from cevm.io.plots import plot_simulation
-    from cevm.io import load_vehicle
+    from cevm.io import load_vehicle, read_cycle_csv
 
     if (cycle is None) == (trip is None):
         raise fail("give exactly one of --cycle or --trip")
@@ -41,7 +42,7 @@ def simulate(
     try:
         veh = load_vehicle(vehicle)
         if cycle is not None:
-            c = read_cycle_csv(cycle)
+            c = read_cycle_csv(cycle, cycle_fmt)
             name, t, v, h = c.name, c.time_s, c.speed_mps, c.elevation_m
         else:
             from cevm.store import TripStore, resolve_store_path

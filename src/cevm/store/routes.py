@@ -86,13 +86,22 @@ class CycleLeg:
     sha256: str | None = None
 
     @classmethod
-    def from_file(cls, path: str | Path) -> CycleLeg:
-        """Read a cycle CSV (:func:`cevm.io.read_cycle_csv`) and hash its bytes."""
-        from cevm.io import read_cycle_csv
+    def from_file(cls, path: str | Path, fmt=None) -> CycleLeg:
+        """Read a cycle file's one cycle (:func:`cevm.io.read_cycle_csv`) and hash its bytes."""
+        (leg,) = cls.all_from_file(path, fmt, one=True)
+        return leg
 
-        cyc = read_cycle_csv(path)
+    @classmethod
+    def all_from_file(cls, path: str | Path, fmt=None, *, one: bool = False) -> list[CycleLeg]:
+        """The legs of a cycle file, one per cycle it holds (:func:`cevm.io.cycles.read_cycles`
+        with the :class:`~cevm.io.cycles.CycleFormat` ``fmt``; ``one``: exactly one), each
+        with the file's hash."""
+        from cevm.io.cycles import read_cycle_csv, read_cycles
+
+        cycles = [read_cycle_csv(path, fmt)] if one else read_cycles(path, fmt)
         p = Path(path)
-        return cls(cycle=cyc, ref=str(p.expanduser().resolve()), sha256=hashlib.sha256(p.read_bytes()).hexdigest())
+        ref, sha = str(p.expanduser().resolve()), hashlib.sha256(p.read_bytes()).hexdigest()
+        return [cls(cycle=cyc, ref=ref, sha256=sha) for cyc in cycles]
 
 
 LegInput = TripLeg | CycleLeg

@@ -14,7 +14,7 @@ from cevm.core.assignment import LegSource
 from cevm.core.cycle import CycleVector
 from cevm.core.sweep import LegProfile, Source
 from cevm.errors import CevmError
-from cevm.io.cycles import read_cycle_csv
+from cevm.io.cycles import CycleFormat, read_cycle_files
 from cevm.io.scenario import LegResolver, default_resolver
 from cevm.store.location import existing_store_path
 from cevm.store.routes import load_route_legs, load_route_profiles, load_route_vector, resolve_route_patterns
@@ -22,11 +22,12 @@ from cevm.store.trips import TripStore
 
 
 def load_sources(stack: ExitStack, store: Optional[Path], cycles: Sequence[Path], trips: Sequence[str],
-                  vehicle_ids: Sequence[str], routes: Sequence[str], cr0: float) -> list[Source]:
-    """Sources in the order cycles, trips, trips of vehicle ids, routes. A store is opened
-    (and kept open on ``stack``) only when a stored source is asked for; profiles are
-    read from it when first needed."""
-    sources = [Source.from_cycle(read_cycle_csv(p), cr0=cr0) for p in cycles]
+                  vehicle_ids: Sequence[str], routes: Sequence[str], cr0: float,
+                  cycle_format: CycleFormat | None = None) -> list[Source]:
+    """Sources in the order cycles (every cycle of each file, read with ``cycle_format``),
+    trips, trips of vehicle ids, routes. A store is opened (and kept open on ``stack``)
+    only when a stored source is asked for; profiles are read from it when first needed."""
+    sources = [Source.from_cycle(c, cr0=cr0) for c in read_cycle_files(cycles, cycle_format)]
     if not (trips or vehicle_ids or routes):
         return sources
     path = existing_store_path(store)
