@@ -465,7 +465,7 @@ def test_scenario_file_round_trip(tmp_path):
          "did you mean 'return_to_depot'"),
         (lambda s: s.replace('leg = { cycle = "c.csv" }', 'leg = { trip = "T42" }'), "needs the trip store"),
         (lambda s: s.replace('leg = { cycle = "c.csv" }', 'leg = { cycle = "c.csv", route = "M1" }'), "exactly one of"),
-        (lambda s: s.replace("repeat = 2", "repeat = 0"), "repeat must be an integer >= 1"),
+        (lambda s: s.replace("repeat = 2", "repeat = 0"), "repeat must be an integer from 1 to 1,000"),
         (lambda s: s.replace('legs = [{ cycle = "c.csv", repeat = 2 }, ', "legs = ["), "must list 2 legs"),
         (lambda s: s.replace("x = 1000\n", ""), "no payload for stop 'x'"),
         (lambda s: s.replace("y = [2000]", "y = [2000, 1]"), "2 values for 1 days"),

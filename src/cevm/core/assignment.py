@@ -109,15 +109,19 @@ class LegSource:
     ``kind`` is ``"cycle"`` (a cycle CSV file, ``ref`` is its path relative to the
     scenario file), ``"trip"`` (a stored trip ID) or ``"route"`` (a named route); the
     leg is ``repeat`` consecutive copies of it (the paper: three regional cycles).
+    ``options`` say how a cycle file is read (column, units, grade file).
     """
 
     kind: str
     ref: str
     repeat: int = 1
+    #: How a cycle file is read, as (key, value) pairs (cevm.io.cycles.CycleFormat).
+    options: tuple = ()
 
     def describe(self) -> str:
         rep = f" x{self.repeat}" if self.repeat != 1 else ""
-        return f"{self.kind} = {self.ref!r}{rep}"
+        opts = "".join(f", {k} = {v!r}" for k, v in self.options)
+        return f"{self.kind} = {self.ref!r}{opts}{rep}"
 
 
 

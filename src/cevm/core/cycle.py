@@ -302,6 +302,27 @@ class CycleVector:
         return replace(self, k_pos=float(np.maximum(st.k, 0.0).sum()), traction_s=float(st.dt[simplified].sum()),
                        _tables={}, _direct_uses={})
 
+    def repeated(self, n: int) -> CycleVector:
+        """The vector of ``n`` consecutive copies of this cycle, in O(1) in ``n``.
+
+        Equal (to rounding) to ``self + self + ... + self``: every sum is n times as
+        large, and each kept step stands once with n times its weight (x, a and r scale
+        together, so the steps' thresholds, and with them every prediction's split, are
+        the same as for n copies of the step).
+        """
+        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
+            raise ValueError(f"repeat must be an integer >= 1, got {n!r}")
+        if n == 1:
+            return self
+        k = float(n)
+        return CycleVector(
+            s_me=self.s_me * k, s_a=self.s_a * k, s_r=self.s_r * k,
+            ns_x=self.ns_x * k, ns_a=self.ns_a * k, ns_r=self.ns_r * k,
+            stand_x=self.stand_x * k, cr0=self.cr0, duration_s=self.duration_s * k,
+            distance_m=self.distance_m * k, idle_s=self.idle_s * k, n_samples=self.n_samples * int(n),
+            physics=self.physics, k_pos=self.k_pos * k, traction_s=self.traction_s * k,
+        )
+
     # --- serialisation (for the store) -------------------------------------------------
     def to_bytes(self) -> bytes:
         """Serialise to bytes; inverse of :meth:`from_bytes`.

@@ -9,6 +9,7 @@ also reads stored trips and routes. :func:`fleet_report` is everything
 
 from __future__ import annotations
 
+import dataclasses
 import difflib
 import math
 import time
@@ -35,7 +36,7 @@ from cevm.core.assignment import (
 from cevm.core.cycle import CycleVector, drive_cycle_vector
 from cevm.core.vehicle import Vehicle
 from cevm.errors import InputError
-from cevm.io.cycles import read_cycle_csv
+from cevm.io.cycles import CycleFormat, read_cycle_csv
 from cevm.io.toml import read_toml
 from cevm.io.vehicles import load_vehicle
 
@@ -43,12 +44,18 @@ from cevm.io.vehicles import load_vehicle
 #: A leg resolver: (one copy of a leg source, directory of the scenario file) -> vector.
 LegResolver = Callable[[LegSource, Path], CycleVector]
 
+#: Most copies of one leg (``repeat``): a day's work of a one-minute shuttle hop. The
+#: cost of a repeat does not grow with it (the vector is scaled, not concatenated).
+MAX_LEG_REPEAT = 1000
+
 
 def default_resolver(source: LegSource, base_dir: Path) -> CycleVector:
     """Resolve one copy of a leg source to its CE vector: cycle files only.
 
     ``cycle`` sources are read with :func:`cevm.io.read_cycle_csv` (path relative to
-    ``base_dir``) and turned into a vector with the default Cr0. ``trip`` and ``route``
+    ``base_dir``, with the source's reading options: :class:`cevm.io.cycles.CycleFormat`
+    keys, a relative ``grade_file`` also relative to ``base_dir``) and turned into a
+    vector with the default Cr0. ``trip`` and ``route``
     sources need the trip store: this resolver raises :class:`InputError` for them; pass
     a resolver that knows the store to :func:`load_scenario`.
     """
@@ -56,7 +63,8 @@ def default_resolver(source: LegSource, base_dir: Path) -> CycleVector:
         path = Path(source.ref)
         if not path.is_absolute():
             path = base_dir / path
-        cyc = read_cycle_csv(path)
+        fmt = CycleFormat.from_mapping(dict(source.options), path, base_dir) if source.options else None
+        cyc = read_cycle_csv(path, fmt)
         return drive_cycle_vector(cyc.time_s, cyc.speed_mps, cyc.elevation_m, validate=False)
     raise InputError(
         None, f"leg source {source.kind} = {source.ref!r} needs the trip store; this resolver reads cycle files only"
@@ -75,7 +83,7 @@ _VEHICLE_KEYS = {"id", "file", "max_gross_kg", "ev_reserve_fraction", "soc_start
 _ROUTE_KEYS = {"id", "vehicle", "depot", "stops", "leg", "legs", "return_to_depot", "notes"}
 _STOP_KEYS = {"vehicles", "default", "notes"}
 _PRICE_KEYS = {"fuel_per_l", "electricity_per_kwh", "currency"}
-_LEG_KEYS = set(LEG_KINDS) | {"repeat"}
+_LEG_KEYS = set(LEG_KINDS) | {"repeat"} | set(CycleFormat.KEYS)
 
 
 def _check_keys(src: Path, where: str, table: Any, allowed: set[str]) -> dict:
@@ -110,9 +118,15 @@ def _leg_source(src: Path, where: str, table: Any) -> LegSource:
     if len(kinds) != 1:
         raise InputError(src, f"{where} needs exactly one of {', '.join(LEG_KINDS)}; got {kinds or 'none'}")
     repeat = table.get("repeat", 1)
-    if isinstance(repeat, bool) or not isinstance(repeat, int) or repeat < 1:
-        raise InputError(src, f"{where}.repeat must be an integer >= 1, got {repeat!r}")
-    return LegSource(kinds[0], _str(src, f"{where}.{kinds[0]}", table[kinds[0]]), repeat)
+    if isinstance(repeat, bool) or not isinstance(repeat, int) or not 1 <= repeat <= MAX_LEG_REPEAT:
+        raise InputError(src, f"{where}.repeat must be an integer from 1 to {MAX_LEG_REPEAT:,}, got {repeat!r}")
+    options = tuple(sorted((k, tuple(v) if isinstance(v, list) else v) for k, v in table.items()
+                           if k in CycleFormat.KEYS))
+    if options and kinds[0] != "cycle":
+        raise InputError(src, f"{where}: {', '.join(k for k, _ in options)} only apply to cycle files")
+    if options:  # checked now, so that a mistake names the leg
+        CycleFormat.from_mapping(dict(options), f"{src}: {where}", src.parent)
+    return LegSource(kinds[0], _str(src, f"{where}.{kinds[0]}", table[kinds[0]]), repeat, options)
 
 
 def load_scenario(path: str | Path, resolve_leg: LegResolver = default_resolver) -> Scenario:
@@ -152,7 +166,12 @@ def load_scenario(path: str | Path, resolve_leg: LegResolver = default_resolver)
         # legs = [{ cycle = "a.csv" }, { cycle = "b.csv", repeat = 3 }, ...]
         #   one per hop, n_stops + 1 with the return to the depot
         # a leg source is one of cycle = "file", trip = "ID", route = "NAME"
-        # (trip and route need a resolver that knows the store)
+        # (trip and route need a resolver that knows the store); repeat: 1 to 1,000
+        # a cycle leg may say how its file is read (cevm.io.cycles.CycleFormat), e.g.
+        # { cycle = "vecto/driving_cycles_truck.csv", speed_column = "Long haul, 26t",
+        #   speed_unit = "km/h", grade_file = "vecto/gradient_truck.csv",
+        #   grade_unit = "fraction" }; keys: sep, decimal, time_column, time_step_s,
+        #   speed_column, speed_unit, elevation_column, grade_column, grade_unit, grade_file
 
         [stop."LH1S1/R1S2"]        # optional, per stop
         vehicles = ["HGV1", "HGV3"] # who may serve it (default: every route through it)
@@ -229,20 +248,16 @@ def load_scenario(path: str | Path, resolve_leg: LegResolver = default_resolver)
     repeat_cache: dict[LegSource, CycleVector] = {}
 
     def resolve(source: LegSource, where: str) -> Leg:
-        key = (source.kind, source.ref)
+        key = (source.kind, source.ref, source.options)
         if key not in vector_cache:
             try:
-                vector_cache[key] = resolve_leg(LegSource(source.kind, source.ref, 1), base)
+                vector_cache[key] = resolve_leg(dataclasses.replace(source, repeat=1), base)
             except InputError as exc:
                 if exc.path is None:
                     raise InputError(path, f"{where}: {exc.message}") from None
                 raise
         if source not in repeat_cache:
-            vec = vector_cache[key]
-            total = vec
-            for _ in range(source.repeat - 1):
-                total = total + vec
-            repeat_cache[source] = total
+            repeat_cache[source] = vector_cache[key].repeated(source.repeat)
         return Leg(vector=repeat_cache[source], source=source)
 
     routes = []
