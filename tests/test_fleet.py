@@ -489,6 +489,61 @@ def test_scenario_file_errors_are_one_clear_line(tmp_path, edit, message):
     assert text.startswith(str(tmp_path))
 
 
+@pytest.mark.parametrize("mode", ["paper", "no-credit", "ev"])
+def test_a_repeated_vector_predicts_like_the_repeated_samples(mode):
+    """n copies of a cycle (joined at a shared sample: same speed and elevation at both
+    ends) against the plain per-step reference over the concatenated samples."""
+    from reference import reference_wheel_energy_j
+
+    cyc = micro_trip_cycle(MicroTripSpec(n_trips=4, hill_amplitude_m=25.0), seed=3)
+    t, v, h = cyc.time_s, cyc.speed_mps, cyc.elevation_m
+    h = h - (h[-1] - h[0]) * (t - t[0]) / (t[-1] - t[0])  # same elevation at both ends
+    assert v[0] == v[-1] == 0.0
+    n = 7
+    T = t[-1] - t[0]
+    tt = np.concatenate([t] + [t[1:] + k * T for k in range(1, n)])
+    vv = np.concatenate([v] + [v[1:]] * (n - 1))
+    hh = np.concatenate([h] + [h[1:]] * (n - 1))
+    rep = drive_cycle_vector(t, v, h).repeated(n)
+    assert rep.distance_m == pytest.approx(n * drive_cycle_vector(t, v, h).distance_m, rel=1e-12)
+    for m in (2000.0, 18000.0, 44000.0):
+        veh = ebus(mass_kg=m, eta=0.8) if mode == "ev" else hgv(mass_kg=m, ice_braking=mode)
+        want = reference_wheel_energy_j(tt, vv, hh, m, veh.cda_m2, veh.cr, mode, eta=0.8)
+        assert predict(rep, veh, m).wheel_energy_j == pytest.approx(want, rel=1e-9)
+
+
+def test_a_leg_repeat_is_bounded_and_costs_nothing_extra(tmp_path):
+    sc = load_scenario(write(tmp_path, BASE.replace("repeat = 2", "repeat = 1000")))
+    one = sc.routes[0].legs[0].vector
+    big = sc.routes[1].legs[0].vector
+    assert big.distance_m == pytest.approx(1000 * one.distance_m, rel=1e-12)
+    assert big.n_nonsimplified == one.n_nonsimplified  # scaled, not concatenated
+    with pytest.raises(InputError, match="repeat must be an integer from 1 to 1,000, got 100000000"):
+        load_scenario(write(tmp_path, BASE.replace("repeat = 2", "repeat = 100000000")))
+
+
+def test_cycle_legs_give_their_reading_options(tmp_path):
+    """Two legs of one two-mission file, each its own column (a grade for one of them
+    from a second file with the same rows)."""
+    (tmp_path / "m.csv").write_text("Time;slow;fast\n" + "".join(f"{i};18;36\n" for i in range(101)))
+    (tmp_path / "g.csv").write_text("Time;slow;fast\n" + "".join(f"{i};0;0.02\n" for i in range(101)))
+    text = BASE.replace('leg = { cycle = "c.csv" }', 'leg = { cycle = "m.csv", speed_column = "slow", '
+                        'speed_unit = "km/h" }').replace(
+        '{ cycle = "c.csv" }]', '{ cycle = "m.csv", speed_column = "fast", speed_unit = "km/h", '
+        'grade_file = "g.csv", grade_unit = "fraction" }]')
+    sc = load_scenario(write(tmp_path, text))
+    slow, fast = sc.routes[0].legs[0], sc.routes[1].legs[1]
+    assert slow.vector.distance_m == pytest.approx(500.0) and fast.vector.distance_m == pytest.approx(1000.0)
+    # 1000 m at 2 %: the climb's potential energy per kg, g * 1000 * 0.02 / sqrt(1.0004)
+    assert fast.vector.s_me == pytest.approx(G * 1000 * 0.02 / math.sqrt(1.0004), rel=1e-9)
+    assert "speed_column = 'fast'" in fast.source.describe()
+    bad = text.replace('speed_unit = "km/h" }', 'speed_unit = "furlong" }', 1)
+    with pytest.raises(InputError, match=r"route 'RA'.leg: unknown speed unit 'furlong'"):
+        load_scenario(write(tmp_path, bad))
+    with pytest.raises(InputError, match="only apply to cycle files"):
+        load_scenario(write(tmp_path, BASE.replace('leg = { cycle = "c.csv" }', 'leg = { trip = "T1", sep = ";" }')))
+
+
 def test_resolver_can_be_extended_for_stored_trips(tmp_path):
     p = write(tmp_path, BASE.replace('leg = { cycle = "c.csv" }', 'leg = { trip = "T42" }'))
     seen = []
