@@ -247,13 +247,17 @@ def test_fast_path_reads_the_numbers_python_reads(tmp_path_factory, values, sep,
     cells = [[f"{a:.{digits}f}", f"{b:.{digits}e}", str(c)] for a, b, c in values]
     text = sep.join(["x", "y", "z"]) + "\n" + "".join(sep.join(c.replace(".", decimal) for c in r) + "\n"
                                                       for r in cells)
-    p = tmp_path_factory.mktemp("t") / "n.csv"
-    p.write_text(text)
-    layout = sniff_csv(p, decimal=decimal)
-    got = read_numeric_columns(layout, [0, 1, 2])
-    for j in range(3):
-        want = np.array([float(r[j]) for r in cells])
-        np.testing.assert_array_max_ulp(got[j], want, maxulp=1)
+    d = tmp_path_factory.mktemp("t")
+    (d / "n.csv").write_text(text)
+    # a text column: read by the other fast path (pandas instead of numpy), the same numbers
+    (d / "s.csv").write_text("".join(line + sep + ("name" if i == 0 else f"r{i}") + "\n"
+                                     for i, line in enumerate(text.splitlines())))
+    for name in ("n.csv", "s.csv"):
+        layout = sniff_csv(d / name, decimal=decimal)
+        got = read_numeric_columns(layout, [0, 1, 2])
+        for j in range(3):
+            want = np.array([float(r[j]) for r in cells])
+            np.testing.assert_array_max_ulp(got[j], want, maxulp=1)
 
 
 # --------------------------------------------------------------------------- errors

@@ -92,7 +92,8 @@ def test_cycle_csv_mps_without_elevation_is_flat(tmp_path):
         ("time_s,speed_kmh\n0,1\n3,2\n1,3\n", 4, "time_s", "does not increase"),
         ("time_s,speed_kmh\n0,1\n1,-2\n", 3, "speed_kmh", "negative speed"),
         ("time_s,speed_kmh,elevation_m\n0,1,3\n1,2,x\n", 3, "elevation_m", "not a number: 'x'"),
-        ("time_s,speed_kmh\n0,1\n\n2,3\n", 3, None, "blank line"),
+        ("time_s,speed_kmh\n0,1\n\n2,x\n", 4, "speed_kmh", "not a number: 'x'"),  # blank lines are no rows
+        ("time_s,speed_kmh\n0,1\n\n0,3\n", 4, "time_s", "does not increase"),
         ("time_s,speed_kmh\n0,1\n1\n", 3, "speed_kmh", "only 1 field,"),
         ("time_s,speed_kmh\n0,1\n1,\n", 3, "speed_kmh", "empty cell"),
         ("", 1, None, "empty file"),

@@ -157,6 +157,21 @@ def cycle_format(cycle_sep: Optional[str] = None, cycle_decimal: Optional[str] =
         raise fail(str(exc)) from None
 
 
+def load_sources(stack: ExitStack, store: Optional[Path], cycles, trips, vehicle_ids, routes, cr0: float, cycle_fmt):
+    """:func:`cevm.store.sources.load_sources`, but cycle files are read without the
+    store package, which is imported only for stored sources: a command on cycle files
+    alone then imports neither it nor pandas (a third of a short command's time)."""
+    from cevm.core.sweep import Source
+    from cevm.io.cycles import read_cycle_files
+
+    sources = [Source.from_cycle(c, cr0=cr0) for c in read_cycle_files(cycles or [], cycle_fmt)]
+    if trips or vehicle_ids or routes:
+        from cevm.store.sources import load_sources as load_stored
+
+        sources += load_stored(stack, store, [], trips or [], vehicle_ids or [], routes or [], cr0)
+    return sources
+
+
 def with_cycle_options(command):
     """Give a command the cycle-reading options (:data:`_CYCLE_OPTIONS`, shown in their
     own help panel): the command takes one keyword ``cycle_fmt``, a

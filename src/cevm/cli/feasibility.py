@@ -25,6 +25,7 @@ from cevm.cli.common import (
     VehicleOption,
     check_common,
     fail,
+    load_sources,
     open_out,
     with_cycle_options,
 )
@@ -102,7 +103,6 @@ def feasibility_cmd(
     check_common(ice_braking, soc_start, reserve_pct)
     try:
         from cevm.io import load_vehicles
-        from cevm.store.sources import load_sources
 
         vehicles = load_vehicles(vehicle)
         rows: list[dict] = []

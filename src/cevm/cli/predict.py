@@ -47,6 +47,7 @@ from cevm.cli.common import (
     VehicleOption,
     check_common,
     fail,
+    load_sources,
     open_out,
     with_cycle_options,
 )
@@ -480,7 +481,6 @@ def predict_cmd(
         if payloads is not None and np.any(payloads < 0):
             raise fail("--payload-kg values must be >= 0")
         from cevm.io import load_vehicles
-        from cevm.store.sources import load_sources
 
         vehicles = load_vehicles(vehicle)
         from cevm.core.energy import uses_temperature

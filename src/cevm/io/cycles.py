@@ -58,7 +58,15 @@ import numpy as np
 
 from cevm.core.cycle import DriveCycle
 from cevm.errors import InputError
-from cevm.io.numeric_csv import SEPARATORS, CsvLayout, describe_missing, read_numeric_columns, separator_name, sniff_csv
+from cevm.io.numeric_csv import (
+    SEPARATORS,
+    CsvLayout,
+    data_line,
+    describe_missing,
+    read_numeric_columns,
+    separator_name,
+    sniff_csv,
+)
 from cevm.units import FT_TO_M, KMH_TO_MPS, MPH_TO_MPS
 
 #: Highest speed of a cycle [km/h]: above every road vehicle a fleet runs (production
@@ -311,6 +319,8 @@ def _unit_of(layout: CsvLayout, col: int, given: str | None, table: dict, what: 
 
 def _extent(values: np.ndarray) -> int:
     """Number of rows up to the column's last value (trailing empty cells end it)."""
+    if values.size and not np.isnan(values[-1]):
+        return int(values.size)
     finite = np.flatnonzero(~np.isnan(values))
     return int(finite[-1]) + 1 if finite.size else 0
 
@@ -319,9 +329,8 @@ def _require(layout: CsvLayout, values: np.ndarray, n: int, col: int) -> np.ndar
     """The first ``n`` values of a column, all present (else the error for the first
     missing one)."""
     part = values[:n]
-    bad = np.isnan(part)
-    if bad.any():
-        raise describe_missing(layout, int(np.flatnonzero(bad)[0]), col)
+    if math.isnan(part.sum()):  # no infinities here (refused when read): NaN iff a cell is missing
+        raise describe_missing(layout, int(np.flatnonzero(np.isnan(part))[0]), col)
     return part
 
 
@@ -405,24 +414,28 @@ def read_cycles(path: str | Path, fmt: CycleFormat | None = None) -> list[DriveC
         if time_col is not None:
             n_time = _extent(arrays[time_col])
             if n_time < n:
-                raise InputError(layout.path, f"column {layout.header[time_col]!r} ends at line {n_time + 1} but "
-                                              f"{layout.header[c]!r} goes on to line {n + 1}; if the samples are "
+                raise InputError(layout.path, f"column {layout.header[time_col]!r} ends at line "
+                                              f"{data_line(layout, n_time - 1)} but {layout.header[c]!r} goes on to "
+                                              f"line {data_line(layout, n - 1)}; if the samples are "
                                               "evenly spaced, give the time step (--time-step-s)",
-                                 line=n_time + 2, column=layout.header[time_col])
+                                 line=data_line(layout, n_time), column=layout.header[time_col])
         if n < 2:
-            raise InputError(layout.path, "a cycle needs at least 2 samples", line=n + 2)
+            raise InputError(layout.path, "a cycle needs at least 2 samples", line=data_line(layout, n))
         v_raw = _require(layout, speed_raw, n, c)
         if time_col is not None:
-            t = _require(layout, arrays[time_col], n, time_col) * time_factor
+            t = _require(layout, arrays[time_col], n, time_col)
+            t = t * time_factor if time_factor != 1.0 else t
         else:
             t = np.arange(n, dtype=np.float64) * fmt.time_step_s
-        _check_time(layout, t, time_col)
-        v = v_raw * factor
-        _check_speed(layout, c, v, v_raw, t, unit)
+        dt = np.diff(t)
+        _check_time(layout, t, dt, time_col)
+        v = v_raw * factor if factor != 1.0 else v_raw
+        _check_speed(layout, c, v, v_raw, t, dt, unit)
         elevation = None
         if elev_col is not None:
-            h = _require(layout, arrays[elev_col], n, elev_col) * elev_factor
-            _check_elevation(layout, elev_col, t, v, h)
+            h = _require(layout, arrays[elev_col], n, elev_col)
+            h = h * elev_factor if elev_factor != 1.0 else h
+            _check_elevation(layout, elev_col, v, dt, h)
             elevation = h
         elif c in grade_cols:
             g_raw = _require(grade_layout, grade_arrays[grade_cols[c]], n, grade_cols[c])
@@ -458,55 +471,58 @@ def read_cycle_files(paths, fmt: CycleFormat | None = None) -> list[DriveCycle]:
 # ------------------------------------------------------------------------------ checks
 
 
-def _line(i: int) -> int:
-    return i + 2  # data row i (0-based) -> file line (the header is line 1)
-
-
-def _check_time(layout: CsvLayout, t: np.ndarray, col: int | None) -> None:
-    steps = np.diff(t)
-    bad = ~(steps > 0)
-    if bad.any():
-        i = int(np.flatnonzero(bad)[0]) + 1
-        raise InputError(layout.path, f"time does not increase ({t[i - 1]:g} then {t[i]:g})", line=_line(i),
+def _check_time(layout: CsvLayout, t: np.ndarray, dt: np.ndarray, col: int | None) -> None:
+    if not dt.min() > 0:
+        i = int(np.flatnonzero(~(dt > 0))[0]) + 1
+        raise InputError(layout.path, f"time does not increase ({t[i - 1]:g} then {t[i]:g})", line=data_line(layout, i),
                          column=layout.header[col] if col is not None else None)
 
 
-def _check_speed(layout: CsvLayout, col: int, v: np.ndarray, v_raw: np.ndarray, t: np.ndarray, unit: str) -> None:
+def _check_speed(layout: CsvLayout, col: int, v: np.ndarray, v_raw: np.ndarray, t: np.ndarray, dt: np.ndarray,
+                 unit: str) -> None:
+    """Speeds within [0, MAX_SPEED_KMH] and accelerations within +-MAX_ACCEL_MPS2
+    (reductions first; the first offender is looked for only when there is one)."""
     name = layout.header[col]
-    if (v < 0).any():
+    if v.min() < 0:
         i = int(np.flatnonzero(v < 0)[0])
-        raise InputError(layout.path, f"negative speed {v_raw[i]:g}", line=_line(i), column=name)
+        raise InputError(layout.path, f"negative speed {v_raw[i]:g}", line=data_line(layout, i), column=name)
     vmax = MAX_SPEED_KMH * KMH_TO_MPS
-    if (v > vmax).any():
+    if v.max() > vmax:
         i = int(np.flatnonzero(v > vmax)[0])
         raise InputError(layout.path, f"speed {v_raw[i]:g} {unit} ({v[i] / KMH_TO_MPS:.0f} km/h) is beyond "
                                       f"{MAX_SPEED_KMH:g} km/h, the bound for road vehicles (wrong unit?)",
-                         line=_line(i), column=name)
-    acc = np.diff(v) / np.diff(t)
-    big = np.abs(acc) > MAX_ACCEL_MPS2
-    if big.any():
-        i = int(np.flatnonzero(big)[0])
+                         line=data_line(layout, i), column=name)
+    acc = np.diff(v)
+    acc /= dt
+    if acc.max() > MAX_ACCEL_MPS2 or acc.min() < -MAX_ACCEL_MPS2:
+        i = int(np.flatnonzero(np.abs(acc) > MAX_ACCEL_MPS2)[0])
         raise InputError(layout.path, f"{'acceleration' if acc[i] > 0 else 'deceleration'} "
                                       f"{abs(acc[i]):.3g} m/s^2 ({v_raw[i]:g} to {v_raw[i + 1]:g} {unit} in "
                                       f"{t[i + 1] - t[i]:g} s) is beyond {MAX_ACCEL_MPS2:g} m/s^2, more than "
-                                      "tyres allow any road vehicle", line=_line(i + 1), column=name)
+                                      "tyres allow any road vehicle", line=data_line(layout, i + 1), column=name)
 
 
-def _check_elevation(layout: CsvLayout, col: int, t: np.ndarray, v: np.ndarray, h: np.ndarray) -> None:
+def _check_elevation(layout: CsvLayout, col: int, v: np.ndarray, dt: np.ndarray, h: np.ndarray) -> None:
+    """Elevations within +-MAX_ABS_ELEVATION_M, each step's rise at most MAX_GRADE times
+    its distance plus ELEVATION_ROUNDING_M."""
     name = layout.header[col]
-    far = np.abs(h) > MAX_ABS_ELEVATION_M
-    if far.any():
-        i = int(np.flatnonzero(far)[0])
+    if h.max() > MAX_ABS_ELEVATION_M or h.min() < -MAX_ABS_ELEVATION_M:
+        i = int(np.flatnonzero(np.abs(h) > MAX_ABS_ELEVATION_M)[0])
         raise InputError(layout.path, f"elevation {h[i]:g} m is beyond +-{MAX_ABS_ELEVATION_M:g} m (no road is "
-                                      "higher than 5,800 m; wrong unit or scale?)", line=_line(i), column=name)
-    d = 0.5 * (v[1:] + v[:-1]) * np.diff(t)
-    dh = np.diff(h)
-    steep = np.abs(dh) > MAX_GRADE * d + ELEVATION_ROUNDING_M
-    if steep.any():
-        i = int(np.flatnonzero(steep)[0])
-        raise InputError(layout.path, f"elevation changes by {dh[i]:+.3g} m over {d[i]:.3g} m of road: steeper than "
-                                      f"{MAX_GRADE:.0%} (plus {ELEVATION_ROUNDING_M:g} m for rounding)",
-                         line=_line(i + 1), column=name)
+                                      "higher than 5,800 m; wrong unit or scale?)", line=data_line(layout, i), column=name)
+    allowed = v[1:] + v[:-1]
+    allowed *= dt
+    allowed *= 0.5 * MAX_GRADE
+    allowed += ELEVATION_ROUNDING_M
+    excess = np.diff(h)
+    np.abs(excess, out=excess)
+    excess -= allowed
+    if excess.max() > 0:
+        i = int(np.flatnonzero(excess > 0)[0])
+        d = 0.5 * (v[i] + v[i + 1]) * dt[i]
+        raise InputError(layout.path, f"elevation changes by {h[i + 1] - h[i]:+.3g} m over {d:.3g} m of road: "
+                                      f"steeper than {MAX_GRADE:.0%} (plus {ELEVATION_ROUNDING_M:g} m for rounding)",
+                         line=data_line(layout, i + 1), column=name)
 
 
 def _check_grade(layout: CsvLayout, col: int, g: np.ndarray, g_raw: np.ndarray) -> None:
@@ -514,7 +530,7 @@ def _check_grade(layout: CsvLayout, col: int, g: np.ndarray, g_raw: np.ndarray) 
     if steep.any():
         i = int(np.flatnonzero(steep)[0])
         raise InputError(layout.path, f"grade {g_raw[i]:g} ({g[i]:.1%}) is steeper than {MAX_GRADE:.0%}, the "
-                                      "bound for roads (wrong unit? give the grade unit)", line=_line(i),
+                                      "bound for roads (wrong unit? give the grade unit)", line=data_line(layout, i),
                          column=layout.header[col])
 
 

@@ -79,8 +79,7 @@ class CsvLayout:
         """Keyword arguments of ``pandas.read_csv`` for this layout (header line skipped,
         columns named by position 0..n-1)."""
         return dict(sep=self.sep, decimal=self.decimal, encoding=self.encoding, compression=self.compression,
-                    header=None, skiprows=1, names=list(range(len(self.header))), index_col=False,
-                    skip_blank_lines=False, engine="c")
+                    header=None, skiprows=1, names=list(range(len(self.header))), index_col=False, engine="c")
 
     def describe(self) -> str:
         return (f"separator {separator_name(self.sep)}, decimal mark {self.decimal!r}"
@@ -230,21 +229,35 @@ def _too_many_fields(layout: CsvLayout, line_no: int, got: int) -> InputError:
     return InputError(layout.path, msg, line=line_no)
 
 
+def data_line(layout: CsvLayout, row: int) -> int:
+    """The file line (1-based) of data row ``row`` (0-based): row + 2, unless blank
+    lines stand before it (they are no rows). Reads the file up to it (error path)."""
+    seen = -1
+    for line_no, text in enumerate(_text_lines(layout), start=1):
+        if line_no > 1 and text.strip():
+            seen += 1
+            if seen == row:
+                return line_no
+    return row + 2
+
+
 def describe_missing(layout: CsvLayout, row: int, column: int) -> InputError:
     """An InputError for the NaN of data row ``row`` (0-based) in ``column``: an empty
-    cell, a blank line or a line with too few fields. Reads the file up to that line."""
-    line_no = row + 2
+    cell, or a line with too few fields. Reads the file up to that line."""
+    line_no = data_line(layout, row)
+    name = layout.header[column]
     for i, text in enumerate(_text_lines(layout), start=1):
         if i == line_no:
-            text = text.rstrip("\r\n")
-            if not text.strip():
-                return InputError(layout.path, "blank line", line=line_no)
-            fields = _split(text, layout.sep)
+            fields = _split(text.rstrip("\r\n"), layout.sep)
             if len(fields) <= column:
-                return InputError(layout.path, f"only {len(fields)} field{'s' if len(fields) != 1 else ''}, the header has {len(layout.header)}",
-                                  line=line_no, column=layout.header[column])
+                n = len(fields)
+                return InputError(layout.path, f"only {n} field{'s' if n != 1 else ''}, the header has "
+                                               f"{len(layout.header)}", line=line_no, column=name)
+            cell = fields[column].strip()
+            if cell:
+                return InputError(layout.path, _not_a_number(layout, cell), line=line_no, column=name)
             break
-    return InputError(layout.path, "empty cell", line=line_no, column=layout.header[column])
+    return InputError(layout.path, "empty cell", line=line_no, column=name)
 
 
 def _undecodable(layout: CsvLayout, exc: UnicodeDecodeError) -> InputError:
@@ -266,16 +279,56 @@ _PARSER_LINE = re.compile(r"Expected (\d+) fields in line (\d+), saw (\d+)")
 def read_numeric_columns(layout: CsvLayout, columns: Sequence[int], *, what: str = "CSV file",
                          max_rows: int | None = None) -> list[np.ndarray]:
     """Float64 arrays of ``columns`` (positions in ``layout.header``), one value per data
-    line; empty cells (and the cells missing from a short line) are NaN.
+    line (blank lines are no rows); empty cells (and the cells missing from a short line)
+    are NaN.
 
     Raises :class:`InputError` naming line and column for a cell that is not a finite
     number and a line with more fields than the header; and for more than ``max_rows``
     data lines, when given (memory stays bounded).
+
+    A file of numbers only, with a decimal point, is parsed by numpy's C reader
+    (``numpy.loadtxt``; pandas is then not even imported, which is a third of a short
+    command's time); any other (empty cells, a decimal comma, text columns) by pandas'
+    C parser; the careful path only explains an error.
     """
+    columns = list(columns)
+    out = _read_numpy(layout, columns, max_rows)
+    if out is None:
+        out = _read_pandas(layout, columns, what, max_rows)
+    n = out[0].size if out else 0
+    if max_rows is not None and n > max_rows:
+        raise InputError(layout.path, f"more than {max_rows:,} data lines; the limit for a {what}",
+                         line=data_line(layout, max_rows))
+    for j, arr in zip(columns, out):
+        if np.isinf(arr).any():  # what the C parsers read as infinite ("inf", 1e999)
+            i = int(np.flatnonzero(np.isinf(arr))[0])
+            raise InputError(layout.path, f"not a finite number: {arr[i]:g}", line=data_line(layout, i),
+                             column=layout.header[j])
+    return out
+
+
+def _read_numpy(layout: CsvLayout, columns: list[int], max_rows: int | None) -> list[np.ndarray] | None:
+    """Every column with numpy's C reader, or None where it cannot be used or fails
+    (pandas then reads the file and names what is wrong)."""
+    if layout.decimal != ".":
+        return None
+    try:
+        with _open_binary(layout.path, layout.compression) as raw, warnings.catch_warnings():
+            warnings.filterwarnings("ignore", message="Input line", category=UserWarning)  # blank lines: no rows
+            with io.TextIOWrapper(raw, encoding=layout.encoding, newline="") as fh:
+                table = np.loadtxt(fh, delimiter=layout.sep, skiprows=1, dtype=np.float64, comments=None,
+                                   quotechar='"', ndmin=2, max_rows=None if max_rows is None else max_rows + 1)
+    except (ValueError, TypeError, OSError, EOFError):
+        return None
+    if table.shape[1] != len(layout.header) or (table.size and np.isnan(table[:, columns]).any()):
+        return None  # a field count unlike the header's, or 'nan' written out: let pandas say
+    return [np.ascontiguousarray(table[:, j]) for j in columns]
+
+
+def _read_pandas(layout: CsvLayout, columns: list[int], what: str, max_rows: int | None) -> list[np.ndarray]:
     import pandas as pd
 
     kw = layout.pandas_kwargs()
-    columns = list(columns)
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("error", pd.errors.ParserWarning)
@@ -295,12 +348,4 @@ def read_numeric_columns(layout: CsvLayout, columns: Sequence[int], *, what: str
         raise first_bad_cell(layout, columns, what) or InputError(layout.path, f"malformed CSV: {exc}") from None
     except (OSError, EOFError, gzip.BadGzipFile) as exc:
         raise InputError(layout.path, f"cannot read: {getattr(exc, 'strerror', None) or exc}") from None
-    if max_rows is not None and len(df) > max_rows:
-        raise InputError(layout.path, f"more than {max_rows:,} data lines; the limit for a {what}",
-                         line=max_rows + 2)
-    out = [df[j].to_numpy(dtype=np.float64) for j in columns]
-    for j, arr in zip(columns, out):
-        if np.isinf(arr).any():  # what the C parser reads as infinite ("inf", 1e999)
-            i = int(np.flatnonzero(np.isinf(arr))[0])
-            raise InputError(layout.path, f"not a finite number: {arr[i]:g}", line=i + 2, column=layout.header[j])
-    return out
+    return [df[j].to_numpy(dtype=np.float64) for j in columns]
