@@ -91,6 +91,7 @@ from cevm.core.detailed import (
     simulate,
 )
 from cevm.io import load_vehicle, read_cycle_csv  # noqa: E402
+from cevm.io.cycles import elevation_from_grade  # noqa: E402
 from cevm.core.model import (
     battery_energy_from_wheel_j,
     ev_energy_j,
@@ -194,15 +195,10 @@ def read_advisor(path: Path, time_step_s: float = 1.0) -> Cycle:
 
 
 def elevation_from_gradient(time_s, speed_mps, gradient) -> np.ndarray:
-    """Elevation [m] (0 at the start) from a per-sample road gradient (rise over run) and
-    the trapezoidal distance of each step: dh_i = ds_i sin(atan(g_i)), g_i the mean of
-    the step's two samples."""
-    v = np.asarray(speed_mps, dtype=np.float64)
-    g = np.asarray(gradient, dtype=np.float64)
-    ds = 0.5 * (v[1:] + v[:-1]) * np.diff(np.asarray(time_s, dtype=np.float64))
-    gs = 0.5 * (g[1:] + g[:-1])
-    dh = ds * gs / np.sqrt(1.0 + gs * gs)
-    return np.concatenate([[0.0], np.cumsum(dh)])
+    """Elevation [m] (0 at the start) from a per-sample road gradient (rise over run):
+    :func:`cevm.io.cycles.elevation_from_grade` (dh_i = ds_i sin(atan(g_i)), g_i the
+    mean of the step's two samples, ds_i the trapezoidal distance)."""
+    return elevation_from_grade(time_s, speed_mps, gradient)
 
 
 def read_vecto(directory: Path, fleet: str, column: str) -> Cycle:
