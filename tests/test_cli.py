@@ -105,3 +105,13 @@ def test_simulate_writes_per_second_csv_and_plot(files, tmp_path):
     assert summary["soc_end_pct"] < 100.0 and png.stat().st_size > 10_000
     res = runner.invoke(app, ["simulate", "-v", str(files["bus"])])
     assert res.exit_code == 2 and "--cycle or --trip" in res.output
+
+
+def test_a_worker_count_beyond_the_machine_is_refused(root, tmp_path):
+    import os
+
+    limit = 4 * (os.cpu_count() or 1)
+    for cmd in (["predict", "-v", str(root / "configs/vehicles/electric-bus.toml"), "-c",
+                 str(root / "configs/cycles/urban-bus.csv")], ["ingest", str(tmp_path), "--store", str(tmp_path / "s")]):
+        res = runner.invoke(app, [*cmd, "--workers", str(limit + 1)])
+        assert res.exit_code == 2 and f"at most {limit} on this machine" in res.output, res.output

@@ -396,3 +396,4 @@ def test_every_command_that_reads_cycles_takes_the_options(vecto, root, tmp_path
     assert res.exit_code == 0 and "2 legs (0 trips, 2 cycles)" in res.output, res.output
     res = runner.invoke(app, ["predict", "-v", hgv, "-c", cyc_file, "--speed-unit", "parsec/s"])
     assert res.exit_code == 2 and "unknown speed unit 'parsec/s'" in res.output
+

@@ -192,6 +192,19 @@ def with_cycle_options(command):
 FormatOption = Annotated[OutputFormat, typer.Option("--format", "-f", help="Output format.")]
 
 
+#: Most local worker processes per core (--workers): beyond the cores a pool only adds
+#: processes' memory and start-up, never speed.
+MAX_WORKERS_PER_CORE = 4
+
+
+def check_workers(workers: Optional[int]) -> None:
+    """Refuse a --workers count beyond :data:`MAX_WORKERS_PER_CORE` per core (exit 2)."""
+    limit = MAX_WORKERS_PER_CORE * (os.cpu_count() or 1)
+    if workers is not None and workers > limit:
+        raise fail(f"--workers {workers}: at most {limit} on this machine ({MAX_WORKERS_PER_CORE} per core; more "
+                   "processes only add memory)")
+
+
 def check_common(ice_braking: Optional[str], soc_start: float, reserve_pct: float) -> None:
     if ice_braking is not None and ice_braking not in ICE_BRAKING_MODES:
         raise fail(f"--ice-braking must be one of: {', '.join(ICE_BRAKING_MODES)}")

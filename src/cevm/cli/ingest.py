@@ -8,7 +8,7 @@ from typing import Annotated, Optional
 
 import typer
 
-from cevm.cli.common import EXIT_OK, EXIT_PARTIAL, StoreOption, fail
+from cevm.cli.common import EXIT_OK, EXIT_PARTIAL, StoreOption, check_workers, fail
 from cevm.cli.output import OutputFormat, write_rows
 from cevm.errors import CevmError
 
@@ -49,6 +49,7 @@ def ingest(
 
     if workers is not None and scheduler is not None:
         raise fail("give --workers (local processes) or --scheduler (a Dask cluster), not both")
+    check_workers(workers)
 
     options = IngestOptions(dsm=dsm, profile=profile, profiles_dir=str(profiles_dir) if profiles_dir else None, force=force)
     store_path = resolve_store_path(store)

@@ -46,6 +46,7 @@ from cevm.cli.common import (
     VehicleIdOption,
     VehicleOption,
     check_common,
+    check_workers,
     fail,
     load_sources,
     open_out,
@@ -472,6 +473,7 @@ def predict_cmd(
         raise fail("give --mass-kg or --payload-kg, not both")
     if workers is not None and scheduler is not None:
         raise fail("give --workers (local processes) or --scheduler (a Dask cluster), not both")
+    check_workers(workers)
     check_common(ice_braking, soc_start, reserve_pct)
     try:
         masses = _values(mass_kg, "--mass-kg")
