@@ -124,6 +124,20 @@ def test_grade_column_of_another_name_and_a_fixed_time_step(vecto):
     assert cyc.time_s.size == 17918 and cyc.time_s[0] == 0.0 and cyc.time_s[-1] == 17917.0
 
 
+def test_a_grade_file_with_other_rows_is_refused(tmp_path):
+    (tmp_path / "s.csv").write_text("Time;m\n1;10\n2;10\n3;10\n")
+    (tmp_path / "g.csv").write_text("Time;m\n1;0.01\n3;0.01\n4;0.01\n")
+    fmt = CycleFormat(speed_columns=("m",), speed_unit="m/s", grade_file=tmp_path / "g.csv", grade_unit="fraction")
+    with pytest.raises(InputError) as err:
+        read_cycle_csv(tmp_path / "s.csv", fmt)
+    assert (err.value.line, err.value.column) == (3, "Time") and "g.csv" in str(err.value)
+    assert "the grade file's rows must be the cycle's" in str(err.value)
+    (tmp_path / "g.csv").write_text("Time;m\n1;0.01\n2;0.01\n")  # shorter than the cycle
+    with pytest.raises(InputError) as err:
+        read_cycle_csv(tmp_path / "s.csv", fmt)
+    assert err.value.line == 4 and "g.csv" in str(err.value) and "2 data lines, but the cycle has 3" in str(err.value)
+
+
 def test_a_unitless_speed_column_needs_its_unit(vecto):
     with pytest.raises(InputError) as err:
         read_cycle_csv(vecto / "driving_cycles_truck.csv", CycleFormat(speed_columns=("Long haul, 26t",)))

@@ -329,6 +329,9 @@ def _require(layout: CsvLayout, values: np.ndarray, n: int, col: int) -> np.ndar
     """The first ``n`` values of a column, all present (else the error for the first
     missing one)."""
     part = values[:n]
+    if part.size < n:  # another file (the grade file) with fewer rows
+        raise InputError(layout.path, f"{part.size} data lines, but the cycle has {n} samples; the rows must be "
+                                      "the cycle's", line=data_line(layout, part.size), column=layout.header[col])
     if math.isnan(part.sum()):  # no infinities here (refused when read): NaN iff a cell is missing
         raise describe_missing(layout, int(np.flatnonzero(np.isnan(part))[0]), col)
     return part
@@ -379,14 +382,18 @@ def read_cycles(path: str | Path, fmt: CycleFormat | None = None) -> list[DriveC
     wanted = list(dict.fromkeys(wanted))
     arrays = dict(zip(wanted, read_numeric_columns(layout, wanted, what="cycle file", max_rows=MAX_CYCLE_SAMPLES)))
 
-    grade_layout, grade_cols = None, {}
+    grade_layout, grade_cols, grade_time = None, {}, None
     if fmt.grade_file is not None:
         grade_layout = sniff_csv(fmt.grade_file, sep=fmt.sep, decimal=fmt.decimal, what="grade file")
         for c in speed_cols:
             name = fmt.grade_column if fmt.grade_column is not None else layout.header[c]
             grade_cols[c] = _find_named(grade_layout, name, "--grade-col" if fmt.grade_column else
                                         "the speed column's name in the grade file; else give --grade-col")
-        gcols = list(dict.fromkeys(grade_cols.values()))
+        # the grade file's own time column, when it has one of the same name: its rows
+        # must be the cycle's (checked below)
+        grade_time = (grade_layout.header.index(layout.header[time_col])
+                      if time_col is not None and layout.header[time_col] in grade_layout.header else None)
+        gcols = list(dict.fromkeys([*grade_cols.values(), *([grade_time] if grade_time is not None else [])]))
         grade_arrays = dict(zip(gcols, read_numeric_columns(grade_layout, gcols, what="grade file",
                                                             max_rows=MAX_CYCLE_SAMPLES)))
     elif grade_col is not None:
@@ -438,6 +445,8 @@ def read_cycles(path: str | Path, fmt: CycleFormat | None = None) -> list[DriveC
             _check_elevation(layout, elev_col, v, dt, h)
             elevation = h
         elif c in grade_cols:
+            if grade_time is not None:
+                _same_rows(grade_layout, grade_time, grade_arrays[grade_time], t / time_factor, layout)
             g_raw = _require(grade_layout, grade_arrays[grade_cols[c]], n, grade_cols[c])
             g = g_raw * grade_factor
             _check_grade(grade_layout, grade_cols[c], g, g_raw)
@@ -523,6 +532,18 @@ def _check_elevation(layout: CsvLayout, col: int, v: np.ndarray, dt: np.ndarray,
         raise InputError(layout.path, f"elevation changes by {h[i + 1] - h[i]:+.3g} m over {d:.3g} m of road: "
                                       f"steeper than {MAX_GRADE:.0%} (plus {ELEVATION_ROUNDING_M:g} m for rounding)",
                          line=data_line(layout, i + 1), column=name)
+
+
+def _same_rows(grade_layout: CsvLayout, col: int, grade_t: np.ndarray, t: np.ndarray, layout: CsvLayout) -> None:
+    """A grade file's time column must hold the cycle file's times, row for row."""
+    other = _require(grade_layout, grade_t, t.size, col)
+    diff = ~(other == t)
+    if diff.any():
+        i = int(np.flatnonzero(diff)[0])
+        raise InputError(grade_layout.path, f"time {other[i]:g} where the cycle file {layout.path.name} has "
+                                            f"{t[i]:g} (line {data_line(layout, i)}): the grade file's rows must be "
+                                            "the cycle's", line=data_line(grade_layout, i),
+                         column=grade_layout.header[col])
 
 
 def _check_grade(layout: CsvLayout, col: int, g: np.ndarray, g_raw: np.ndarray) -> None:
