@@ -56,7 +56,8 @@ VehicleOption = Annotated[
 ]
 CycleOption = Annotated[
     Optional[list[Path]],
-    typer.Option("--cycle", "-c", help="Cycle CSV (time_s, speed_kmh|speed_mps[, elevation_m]). Repeatable."),
+    typer.Option("--cycle", "-c", help="Cycle file, CSV or .csv.gz: time_s, speed_kmh or speed_mps, elevation_m "
+                                       "(optional), or the columns the cycle options name. Repeatable."),
 ]
 TripOption = Annotated[
     Optional[list[str]], typer.Option("--trip", "-t", help="A stored trip id (see 'cevm trips'). Repeatable.")
