@@ -7,8 +7,8 @@ are read by the ingest pipeline (:mod:`cevm.ingest`).
 The readers are re-exported here: ``from cevm.io import read_cycle_csv``.
 """
 
-from cevm.io.cycles import read_cycle_csv
+from cevm.io.cycles import CycleFormat, read_cycle_csv, read_cycles
 from cevm.io.toml import read_toml
 from cevm.io.vehicles import load_vehicle, load_vehicles
 
-__all__ = ["load_vehicle", "load_vehicles", "read_cycle_csv", "read_toml"]
+__all__ = ["CycleFormat", "load_vehicle", "load_vehicles", "read_cycle_csv", "read_cycles", "read_toml"]
