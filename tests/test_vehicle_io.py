@@ -121,3 +121,70 @@ def test_binary_and_missing_cycle_files(tmp_path):
     p2.write_bytes("time_s,speed_kmh\n0,1\n1,2\xe9\n".encode("latin-1"))
     with pytest.raises(InputError, match="not UTF-8"):
         read_cycle_csv(p2)
+
+
+# ------------------------------------------------------- plausibility bounds, identity
+
+GOOD_ICE = ('name = "t"\npowertrain = "ice"\nkerb_mass_kg = 15000\nmax_gross_kg = 40000\ncda_m2 = 6\ncr = 0.006\n'
+            'eta = 0.38\nfuel_lhv_mj_per_l = 35.8\ntank_l = 400\n')
+
+
+@pytest.mark.parametrize("key, value", [
+    ("kerb_mass_kg", "1e20"), ("kerb_mass_kg", "5"), ("max_gross_kg", "1e7"), ("cda_m2", "0.001"),
+    ("cda_m2", "600"), ("cr", "0.0001"), ("eta", "0.01"), ("fuel_lhv_mj_per_l", "358"), ("tank_l", "1e6"),
+    ("idle_fuel_lph", "300"),
+])
+def test_implausible_values_are_refused_naming_file_and_key(tmp_path, key, value):
+    p = tmp_path / "v.toml"
+    lines = [ln for ln in GOOD_ICE.splitlines() if not ln.startswith(f"{key} =")]
+    p.write_text("\n".join(lines) + f"\n{key} = {value}\n")
+    with pytest.raises(InputError) as err:
+        load_vehicle(p)
+    msg = str(err.value)
+    assert str(p) in msg and f"'{key}'" in msg and "plausible range" in msg
+
+
+@pytest.mark.parametrize("key, value", [("battery_kwh", "1e6"), ("aux_power_kw", "5000"), ("mass_kg", "1e9")])
+def test_implausible_ev_values_are_refused(tmp_path, key, value):
+    p = tmp_path / "v.toml"
+    lines = [ln for ln in GOOD_EV.splitlines() if not ln.startswith(f"{key} =")]
+    p.write_text("\n".join(lines) + f"\n{key} = {value}\n")
+    with pytest.raises(InputError, match=f"'{key}'.*plausible range"):
+        load_vehicle(p)
+
+
+def test_every_shipped_vehicle_is_within_the_bounds(root):
+    assert len(load_vehicles([root / "configs/vehicles"])) >= 3
+
+
+def test_vehicle_id_is_the_id_key_else_the_stem(tmp_path):
+    a = tmp_path / "bus-a.toml"
+    a.write_text(GOOD_EV)
+    assert load_vehicle(a).id == "bus-a" and load_vehicle(a).label == "bus-a"
+    b = tmp_path / "b.toml"
+    b.write_text('id = "bus-calibrated-2024"\n' + GOOD_EV)
+    assert load_vehicle(b).id == "bus-calibrated-2024"
+
+
+def test_two_vehicles_with_one_id_are_refused(tmp_path):
+    (tmp_path / "x").mkdir()
+    (tmp_path / "x" / "bus.toml").write_text(GOOD_EV)
+    (tmp_path / "bus.toml").write_text(GOOD_EV.replace('"x"', '"other"'))
+    with pytest.raises(InputError, match="vehicle id 'bus' is also the id of"):
+        load_vehicles([tmp_path / "x" / "bus.toml", tmp_path / "bus.toml"])
+    (tmp_path / "bus.toml").write_text('id = "bus-2"\n' + GOOD_EV)
+    assert [v.id for v in load_vehicles([tmp_path / "x" / "bus.toml", tmp_path / "bus.toml"])] == ["bus", "bus-2"]
+
+
+@pytest.mark.parametrize("value", ['"a\\rb"', '""', '" padded"', "12", '"' + "x" * 81 + '"'])
+def test_bad_vehicle_ids_are_refused(tmp_path, value):
+    p = tmp_path / "v.toml"
+    p.write_text(f"id = {value}\n" + GOOD_EV)
+    with pytest.raises(InputError, match="'id'"):
+        load_vehicle(p)
+
+
+def test_a_stem_with_a_control_character_is_escaped(tmp_path):
+    p = tmp_path / "bus\rA.toml"
+    p.write_text(GOOD_EV)
+    assert load_vehicle(p).id == "bus\\rA"

@@ -5,6 +5,8 @@ vehicle over a cycle vector.
 Vehicle files (TOML), units in the key names::
 
     name = "Optare Metrocity electric bus"   # required
+    id = "metrocity-paper"                    # optional: unique id in rows and legends
+                                              #   (default: the file's stem)
     powertrain = "ev"                         # required: "ev" or "ice"
     kerb_mass_kg = 9000                       # mass_kg, or kerb_mass_kg (+ payload_kg)
     payload_kg = 825                          # default payload [kg] (0 if absent)
@@ -34,6 +36,9 @@ Vehicle files (TOML), units in the key names::
     cooling_above_c = 22.0                    # optional: cooling balance temperature [degC]
     reference_temp_c = 12.0                   # optional: ambient temperature of predictions
                                               #   that give none (default 20 degC)
+    max_power_kw = 180                        # optional: rated power of the motor or engine
+    max_speed_kmh = 90                        # optional: top speed; predict flags a cycle
+                                              #   that needs more (see cevm.core.sweep)
 
     [sources]                                  # optional: where each number comes from
     cda_m2 = "paper, section 5.1"
@@ -42,6 +47,15 @@ Vehicle files (TOML), units in the key names::
     terms = ["eta", "aux", "heat"]             #   (see :class:`FitDomain`)
 
 The model these parameters feed is :mod:`cevm.core.energy`.
+
+Plausibility bounds
+-------------------
+Every number is also checked against :data:`PLAUSIBLE`, bounds no road vehicle leaves
+(a value outside is a unit mistake or a typo, such as ``kerb_mass_kg = 1e20``): masses
+20-200,000 kg, CdA 0.05-30 m^2, Cr 0.001-0.1, eta 0.05-1, battery 0.1-5,000 kWh, tank
+1-5,000 l, fuel heating value 3-50 MJ/l, auxiliary power up to 200 kW, fuel rates up to
+50-100 l/h, rated power 0.1-5,000 kW, top speed 5-400 km/h. The error names the file
+and the key.
 """
 
 from __future__ import annotations
@@ -155,6 +169,9 @@ class Vehicle:
     cda_m2: float
     cr: float
     eta: float
+    id: str | None = None  # unique id in rows and legends (vehicle file: ``id``, else its stem)
+    max_power_w: float | None = None  # rated power of the motor or engine [W]
+    max_speed_mps: float | None = None  # top speed [m/s]
     kerb_mass_kg: float | None = None
     max_gross_kg: float | None = None
     battery_j: float | None = None  # EV: usable capacity [J]
@@ -184,6 +201,11 @@ class Vehicle:
     def is_ev(self) -> bool:
         return self.powertrain == "ev"
 
+    @property
+    def label(self) -> str:
+        """The vehicle's id, else its name: what rows and legends call it."""
+        return self.id or self.name
+
     def with_payload(self, payload_kg: float) -> Vehicle:
         """This vehicle at kerb mass + ``payload_kg``."""
         if self.kerb_mass_kg is None:
@@ -193,6 +215,9 @@ class Vehicle:
 
 _COMMON_KEYS = {
     "name",
+    "id",
+    "max_power_kw",
+    "max_speed_kmh",
     "powertrain",
     "mass_kg",
     "kerb_mass_kg",
@@ -216,6 +241,52 @@ _ICE_KEYS = {"fuel_lhv_mj_per_l", "idle_fuel_lph", "ice_braking", "tank_l", "run
 EXTRA_TABLES = {"detailed"}
 
 
+#: Plausibility bounds of the vehicle-file keys, (low, high, unit): no road vehicle lies
+#: outside them, so a value beyond is a unit mistake or a typo (``kerb_mass_kg = 1e20``).
+#: From the lightest quadricycles and cargo bikes (tens of kg, CdA about 0.3 m^2) to road
+#: trains (about 200 t, CdA up to about 15 m^2); see the module notes.
+PLAUSIBLE: dict[str, tuple[float, float, str]] = {
+    "mass_kg": (20.0, 200_000.0, "kg"),
+    "kerb_mass_kg": (20.0, 200_000.0, "kg"),
+    "payload_kg": (0.0, 200_000.0, "kg"),
+    "max_gross_kg": (20.0, 200_000.0, "kg"),
+    "cda_m2": (0.05, 30.0, "m^2"),
+    "cr": (0.001, 0.1, ""),
+    "eta": (0.05, 1.0, ""),
+    "battery_kwh": (0.1, 5_000.0, "kWh"),
+    "aux_power_kw": (0.0, 200.0, "kW"),
+    "fuel_lhv_mj_per_l": (3.0, 50.0, "MJ/l"),
+    "idle_fuel_lph": (0.0, 50.0, "l/h"),
+    "running_fuel_lph": (0.0, 100.0, "l/h"),
+    "tank_l": (1.0, 5_000.0, "l"),
+    "aux_heating_kw_per_k": (0.0, 10.0, "kW/K"),
+    "aux_cooling_kw_per_k": (0.0, 10.0, "kW/K"),
+    "warmup_kwh_per_k": (0.0, 10.0, "kWh/K"),
+    "heating_fuel_lph_per_k": (0.0, 5.0, "l/h per K"),
+    "cooling_fuel_lph_per_k": (0.0, 5.0, "l/h per K"),
+    "warmup_fuel_l_per_k": (0.0, 5.0, "l/K"),
+    "max_power_kw": (0.1, 5_000.0, "kW"),
+    "max_speed_kmh": (5.0, 400.0, "km/h"),
+}
+
+#: Longest vehicle id [characters].
+ID_MAX_CHARS = 80
+
+
+def check_vehicle_id(value: Any, source: str, what: str = "key 'id'") -> str:
+    """A vehicle id: a non-empty string of at most :data:`ID_MAX_CHARS` printable
+    characters (no control characters, no surrounding blanks), or InputError."""
+    if not isinstance(value, str) or not value.strip():
+        raise InputError(source, f"{what} must be a non-empty string, got {value!r}")
+    if value != value.strip():
+        raise InputError(source, f"{what} {value!r} must not start or end with blanks")
+    if len(value) > ID_MAX_CHARS:
+        raise InputError(source, f"{what} is {len(value)} characters long, more than {ID_MAX_CHARS}")
+    if not value.isprintable():
+        raise InputError(source, f"{what} {value!r} holds a control character")
+    return value
+
+
 def _number(data: dict, key: str, source: str, *, required: bool, lo: float | None = None,
             hi: float | None = None, lo_open: bool = False) -> float | None:
     if key not in data:
@@ -230,14 +301,23 @@ def _number(data: dict, key: str, source: str, *, required: bool, lo: float | No
         raise InputError(source, f"key '{key}' = {value:g} must be {'>' if lo_open else '>='} {lo:g}")
     if hi is not None and value > hi:
         raise InputError(source, f"key '{key}' = {value:g} must be <= {hi:g}")
+    if key in PLAUSIBLE:
+        plo, phi, unit = PLAUSIBLE[key]
+        if not plo <= value <= phi:
+            unit = f" {unit}" if unit else ""
+            raise InputError(source, f"key '{key}' = {value:g}{unit} is outside the plausible range "
+                                     f"{plo:,g} to {phi:,g}{unit} of a road vehicle (a unit mistake?)")
     return value
 
 
-def vehicle_from_mapping(data: dict[str, Any], source: str = "<vehicle>") -> Vehicle:
+def vehicle_from_mapping(data: dict[str, Any], source: str = "<vehicle>", *,
+                         default_id: str | None = None) -> Vehicle:
     """Validate a parsed vehicle file and build a :class:`Vehicle`.
 
+    The vehicle's ``id`` is the file's ``id`` key, else ``default_id`` (the file's stem,
+    :func:`cevm.io.load_vehicle`), else None (rows then use the name).
     Raises :class:`~cevm.errors.InputError` naming ``source`` and the key for a missing,
-    unknown or out-of-range key.
+    unknown, out-of-range or implausible key (:data:`PLAUSIBLE`).
     """
     pt = data.get("powertrain")
     if pt not in ("ev", "ice"):
@@ -257,6 +337,8 @@ def vehicle_from_mapping(data: dict[str, Any], source: str = "<vehicle>") -> Veh
     name = data.get("name")
     if not isinstance(name, str) or not name.strip():
         raise InputError(source, "missing required key 'name' (a non-empty string)")
+    if not name.isprintable():
+        raise InputError(source, f"key 'name' {name!r} holds a control character")
 
     kerb = _number(data, "kerb_mass_kg", source, required=False, lo=0.0, lo_open=True)
     payload = _number(data, "payload_kg", source, required=False, lo=0.0)
@@ -270,9 +352,18 @@ def vehicle_from_mapping(data: dict[str, Any], source: str = "<vehicle>") -> Veh
     max_gross = _number(data, "max_gross_kg", source, required=False, lo=0.0, lo_open=True)
     if max_gross is not None and mass > max_gross:
         raise InputError(source, f"default mass {mass:g} kg exceeds key 'max_gross_kg' = {max_gross:g}")
+    if "id" in data:
+        vid = check_vehicle_id(data["id"], source)
+    else:
+        vid = default_id
+    max_power = _number(data, "max_power_kw", source, required=False, lo=0.0, lo_open=True)
+    max_speed = _number(data, "max_speed_kmh", source, required=False, lo=0.0, lo_open=True)
 
     common = dict(
         name=name.strip(),
+        id=vid,
+        max_power_w=None if max_power is None else max_power * 1e3,
+        max_speed_mps=None if max_speed is None else max_speed / 3.6,
         powertrain=pt,
         mass_kg=mass,
         kerb_mass_kg=kerb,

@@ -1,0 +1,34 @@
+"""Text that cannot forge output: control characters escaped (pure, no I/O).
+
+Ids and file names come from users' files (a logger's vehicle id, a file name holding a
+newline or a carriage return). Printed as they are, they can forge a second line of an
+error message, break a CSV record or a table. :func:`printable` escapes every character
+Python does not call printable (C0 and C1 controls, DEL, line and paragraph separators,
+bidirectional and other format characters) as ``\\n``, ``\\r``, ``\\t``, ``\\xNN``,
+``\\uNNNN`` or ``\\UNNNNNNNN``; a backslash itself is kept, so escaping twice changes
+nothing. Every table, CSV and plain line cevm prints goes through it; JSON output escapes
+control characters by its own rules (``\\u000d``), so a JSON reader gets the exact value.
+"""
+
+from __future__ import annotations
+
+_NAMED = {"\n": "\\n", "\r": "\\r", "\t": "\\t"}
+
+
+def _escape(ch: str) -> str:
+    named = _NAMED.get(ch)
+    if named is not None:
+        return named
+    code = ord(ch)
+    if code < 0x100:
+        return f"\\x{code:02x}"
+    if code < 0x10000:
+        return f"\\u{code:04x}"
+    return f"\\U{code:08x}"
+
+
+def printable(text: str) -> str:
+    """``text`` with every non-printable character escaped (see the module notes)."""
+    if text.isprintable():
+        return text
+    return "".join(ch if ch.isprintable() else _escape(ch) for ch in text)
