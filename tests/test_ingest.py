@@ -170,7 +170,10 @@ def test_missing_input_and_unknown_profile(tmp_path, fleet):
     logs, _ = fleet
     store = tmp_path / "s.sqlite"
     res = run("ingest", tmp_path / "nowhere", "--store", store)
-    assert res.exit_code == 1 and "nowhere" in res.output
+    assert res.exit_code == 2 and "nowhere" in res.output  # no input at all: bad usage
+    assert not store.exists()  # and no store for it
+    res = run("ingest", tmp_path / "nowhere", logs, "--store", store, "-q")
+    assert res.exit_code == 1 and "nowhere" in res.output  # part of a batch failed
     res = run("ingest", logs, "--store", store, "--profile", "nosuch")
     assert res.exit_code == 2 and "nosuch" in res.output
 

@@ -21,7 +21,7 @@ import typer
 
 from cevm import __version__
 from cevm.cli import calibrate, feasibility, fleet, ingest, predict, route, simulate, trips
-from cevm.cli.common import EXIT_INPUT
+from cevm.cli.common import EXIT_INPUT, fail
 from cevm.errors import CevmError
 
 app = typer.Typer(
@@ -30,6 +30,7 @@ app = typer.Typer(
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_enable=False,
+    rich_markup_mode=None,  # help texts are plain: "[detailed]", "[kg]", "cevm[dask]" are words, not markup
 )
 
 
@@ -67,5 +68,5 @@ def main() -> None:
     try:
         app()
     except CevmError as exc:  # a user's mistake that escaped a command: one line, no traceback
-        typer.echo(f"cevm: error: {exc}", err=True)
+        fail(str(exc))
         sys.exit(EXIT_INPUT)

@@ -27,13 +27,13 @@ def calibrate(
     store: StoreOption = None,
     fit: Annotated[
         Optional[list[str]],
-        typer.Option("--fit", help="Force a term set instead of choosing one: eta (always) plus any of regen, aux, "
+        typer.Option("--fit", metavar="NAMES", help="Force a term set instead of choosing one: eta (always) plus any of regen, aux, "
                                    "heat, cool, warm (EV); idle, run, kin, heat, cool, warm (ICE); cda, cr. "
                                    "Repeatable or comma-separated."),
     ] = None,
     terms: Annotated[
         Optional[list[str]],
-        typer.Option("--terms", help="Choose only among these extra terms (default: all of the powertrain's). "
+        typer.Option("--terms", metavar="NAMES", help="Choose only among these extra terms (default: all of the powertrain's). "
                                      "Repeatable or comma-separated."),
     ] = None,
     nested: Annotated[bool, typer.Option("--nested/--no-nested", help="Also cross-validate the choice itself "

@@ -20,6 +20,7 @@ import typer
 from cevm.cli.output import OutputFormat
 from cevm.core.model import ICE_BRAKING_MODES
 from cevm.errors import CevmError
+from cevm.text import printable
 
 EXIT_OK = 0
 EXIT_PARTIAL = 1
@@ -28,13 +29,20 @@ EXIT_INPUT = 2
 
 StoreOption = Annotated[
     Optional[Path],
-    typer.Option("--store", envvar="CEVM_STORE", help="Trip store (SQLite). Default: $CEVM_STORE, else ~/.local/share/cevm/cevm.sqlite."),
+    typer.Option("--store", envvar="CEVM_STORE", metavar="FILE", help="Trip store (SQLite). Default: $CEVM_STORE, else ~/.local/share/cevm/cevm.sqlite."),
 ]
 
 
 def fail(message: str, code: int = EXIT_INPUT) -> typer.Exit:
-    typer.echo(f"cevm: error: {message}", err=True)
+    """Print the one-line error (control characters escaped: a file name holding a
+    newline cannot forge a second line) and return the Exit to raise."""
+    typer.echo(f"cevm: error: {printable(message)}", err=True)
     return typer.Exit(code)
+
+
+def warn(message: str) -> None:
+    """A one-line warning on stderr (control characters escaped)."""
+    typer.echo(f"cevm: warning: {printable(message)}", err=True)
 
 
 def existing_store(store: Optional[Path], hint: Optional[str] = None) -> Path:
@@ -52,22 +60,22 @@ TABLE_MAX_ROWS = 200
 
 
 VehicleOption = Annotated[
-    list[Path], typer.Option("--vehicle", "-v", help="Vehicle TOML file, or a directory of them. Repeatable.")
+    list[Path], typer.Option("--vehicle", "-v", metavar="FILE|DIR", help="Vehicle TOML file, or a directory of them. Repeatable.")
 ]
 CycleOption = Annotated[
     Optional[list[Path]],
-    typer.Option("--cycle", "-c", help="Cycle file, CSV or .csv.gz: time_s, speed_kmh or speed_mps, elevation_m "
+    typer.Option("--cycle", "-c", metavar="FILE", help="Cycle file, CSV or .csv.gz: time_s, speed_kmh or speed_mps, elevation_m "
                                        "(optional), or the columns the cycle options name. Repeatable."),
 ]
 TripOption = Annotated[
-    Optional[list[str]], typer.Option("--trip", "-t", help="A stored trip id (see 'cevm trips'). Repeatable.")
+    Optional[list[str]], typer.Option("--trip", "-t", metavar="ID", help="A stored trip id (see 'cevm trips'). Repeatable.")
 ]
 VehicleIdOption = Annotated[
-    Optional[list[str]], typer.Option("--vehicle-id", help="All stored trips of this vehicle id. Repeatable.")
+    Optional[list[str]], typer.Option("--vehicle-id", metavar="ID", help="All stored trips of this vehicle id. Repeatable.")
 ]
 RouteOption = Annotated[
     Optional[list[str]],
-    typer.Option("--route", "-r", help="A stored route (see 'cevm route list'), or a glob such as 'block-*'. Repeatable."),
+    typer.Option("--route", "-r", metavar="NAME", help="A stored route (see 'cevm route list'), or a glob such as 'block-*'. Repeatable."),
 ]
 SocStartOption = Annotated[
     float, typer.Option("--soc-start", help="EV state of charge at the start [%] (default: full).")
@@ -88,7 +96,7 @@ AmbientOption = Annotated[
 Cr0Option = Annotated[
     float, typer.Option(help="Cr0 of the simplification criterion, for --cycle files (stored trips and routes keep theirs).")
 ]
-OutOption = Annotated[Optional[Path], typer.Option("--out", "-o", help="Write the output to this file instead of stdout.")]
+OutOption = Annotated[Optional[Path], typer.Option("--out", "-o", metavar="FILE", help="Write the output to this file instead of stdout.")]
 
 # How cycle files (--cycle) are read: every option is detected when not given
 # (cevm.io.cycles). One set applies to every --cycle file of the command.
@@ -209,10 +217,23 @@ def check_workers(workers: Optional[int]) -> None:
 def check_common(ice_braking: Optional[str], soc_start: float, reserve_pct: float) -> None:
     if ice_braking is not None and ice_braking not in ICE_BRAKING_MODES:
         raise fail(f"--ice-braking must be one of: {', '.join(ICE_BRAKING_MODES)}")
-    if not (math.isfinite(soc_start) and 0.0 < soc_start <= 100.0):
-        raise fail("--soc-start must be in (0, 100] %")
-    if not (math.isfinite(reserve_pct) and 0.0 <= reserve_pct < 100.0):
-        raise fail("--reserve-pct must be in [0, 100) %")
+    check_soc(soc_start, reserve_pct)
+
+
+def check_soc(soc_start: float, reserve_pct: float | None = None) -> None:
+    """--soc-start and --reserve-pct, with the words of :func:`cevm.core.checks.soc_pct`
+    (the same message from every command)."""
+    from cevm.core import checks
+
+    try:
+        checks.soc_pct(soc_start)
+    except CevmError as exc:
+        raise fail(f"--soc-start: {exc}") from None
+    if reserve_pct is not None:
+        try:
+            checks.soc_pct(100.0, reserve_pct)
+        except CevmError as exc:
+            raise fail(f"--reserve-pct: {exc}") from None
 
 
 class OutFile:

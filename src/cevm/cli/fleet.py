@@ -14,13 +14,13 @@ from cevm.errors import CevmError
 
 
 app = typer.Typer(help="Fleet assignment: which vehicle serves the shared stops (the paper's section 6).",
-                  no_args_is_help=True)
+                  no_args_is_help=True, rich_markup_mode=None)
 
 
 @app.command("plan")
 def fleet_plan(
-    scenario: Annotated[Path, typer.Argument(help="Scenario TOML (see configs/fleet/paper-case-study.toml).")],
-    day: Annotated[Optional[list[str]], typer.Option("--day", "-d", help="Day name or 0-based index. Repeatable. Default: every day.")] = None,
+    scenario: Annotated[Path, typer.Argument(metavar="SCENARIO", help="Scenario TOML (see configs/fleet/paper-case-study.toml).")],
+    day: Annotated[Optional[list[str]], typer.Option("--day", "-d", metavar="DAY", help="A day by name, or by its number counted from 1 as the paper numbers days (1 is the first day; 0 is refused). Repeatable. Default: every day.")] = None,
     method: Annotated[str, typer.Option(help="auto (enumerate when small, else MILP), enumerate, or milp.")] = "auto",
     store: StoreOption = None,
     ambient_c: AmbientOption = None,
@@ -39,7 +39,7 @@ def fleet_plan(
 
     if method not in ("auto", "enumerate", "milp"):
         raise fail("--method must be auto, enumerate or milp")
-    days = [int(d) if d.isdigit() else d for d in day] if day else None
+    days = list(day) if day else None  # names or 1-based numbers (cevm.io.scenario.resolve_day)
     try:
         store_path = resolve_store_path(store)
         if store_path.exists():  # legs may be stored trips or routes

@@ -11,10 +11,11 @@ import typer
 from cevm.cli.common import EXIT_OK, EXIT_PARTIAL, StoreOption, check_workers, fail
 from cevm.cli.output import OutputFormat, write_rows
 from cevm.errors import CevmError
+from cevm.text import printable
 
 
 def ingest(
-    paths: Annotated[list[str], typer.Argument(help="Log files, directories (recursive) or glob patterns; .csv and .csv.gz.")],
+    paths: Annotated[list[str], typer.Argument(metavar="PATH", help="Log files, directories (recursive) or glob patterns; .csv and .csv.gz.")],
     store: StoreOption = None,
     dsm: Annotated[
         Optional[str], typer.Option(help="DSM for road elevation: a GeoTIFF, a directory of tiles, a VRT, or a GDAL URL.")
@@ -39,10 +40,12 @@ def ingest(
     process alone writes the store, in input order, so the result is that of a serial run.
     Each failed file is reported on stderr (file, line, column, why) as it happens and
     skipped; the rest is stored. Exit 0 if every file was ingested or unchanged, 1 if any
-    failed, 2 for bad options (unknown profile, unreadable DSM, unreachable scheduler)."""
+    failed, 2 for bad options (no input holds a log file: then no store is created;
+    unknown profile, unreadable DSM, unreachable scheduler)."""
     import json
 
     from cevm.ingest import IngestOptions
+    from cevm.ingest.pipeline import discover
     from cevm.ingest import ingest as run_ingest
     from cevm.executors import make_executor
     from cevm.store import TripStore, resolve_store_path
@@ -53,6 +56,11 @@ def ingest(
 
     options = IngestOptions(dsm=dsm, profile=profile, profiles_dir=str(profiles_dir) if profiles_dir else None, force=force)
     store_path = resolve_store_path(store)
+    files, missing = discover(paths)
+    if not files:  # nothing to ingest: bad usage, and no store is created for it
+        for m in missing[:-1]:
+            typer.echo(f"cevm: error: {printable(m)}", err=True)
+        raise fail(missing[-1] + ("" if len(missing) == 1 else f" (none of the {len(missing)} inputs holds a log file)"))
     progress = None
     if not quiet and not log_json and sys.stderr.isatty():
         from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
@@ -71,9 +79,11 @@ def ingest(
         if log_json:
             typer.echo(json.dumps({"event": "file", **_file_dict(fr)}))
         elif fr.status == "failed":
-            (progress.console.print if progress is not None else lambda m: typer.echo(m, err=True))(
-                f"cevm: failed: {fr.error}"
-            )
+            message = f"cevm: failed: {printable(str(fr.error))}"
+            if progress is not None:
+                progress.console.print(message, markup=False, highlight=False)
+            else:
+                typer.echo(message, err=True)
         if progress is not None and task is not None:  # inputs that matched nothing come before the bar
             progress.update(task, advance=1, description=Path(fr.path).name)
 

@@ -1,4 +1,10 @@
-"""Printing result rows as a table (for people), CSV or JSON (for scripts)."""
+"""Printing result rows as a table (for people), CSV or JSON (for scripts).
+
+Text in tables and CSV goes through :func:`cevm.text.printable` (control characters in
+ids and file names escaped, so no cell can forge a line or break a record); CSV fields
+are quoted where they need it (a comma, a quote); JSON escapes by its own rules.
+Identifier columns (:data:`ID_COLUMNS`) never wrap: a trip id is read whole.
+"""
 
 from __future__ import annotations
 
@@ -10,6 +16,8 @@ from collections.abc import Sequence
 from enum import Enum
 from typing import IO, Any
 
+from cevm.text import printable
+
 
 class OutputFormat(str, Enum):
     table = "table"
@@ -17,6 +25,9 @@ class OutputFormat(str, Enum):
     json = "json"
 
 
+#: Columns of identifiers: left-aligned, never wrapped nor cut in tables.
+ID_COLUMNS = {"cycle", "vehicle", "vehicle_key", "trip_id", "vehicle_id", "source", "route", "file", "id", "day",
+              "vehicle id", "start_utc", "created_utc"}
 #: Columns printed left-aligned and allowed to wrap in tables.
 TEXT_COLUMNS = {"cycle", "vehicle", "trip_id", "vehicle_id", "source", "route", "file", "status", "profile", "start_utc", "elevation_source", "day", "day 1", "day 2", "day 3", "method", "stops", "item", "parameter", "std", "in-sample", "cross-validated", "quantity", "terms", "parameters"}
 
@@ -25,6 +36,21 @@ def _clean(value: Any) -> Any:
     if isinstance(value, float) and not math.isfinite(value):
         return None
     return value
+
+
+def _csv_cell(value: Any) -> Any:
+    value = _clean(value)
+    if value is None:
+        return ""
+    if isinstance(value, str):
+        return printable(value)
+    return value
+
+
+def csv_writer(stream: IO[str]):
+    """The CSV writer of every cevm CSV output: minimal quoting (a field with a comma,
+    a quote or a line break is quoted, quotes doubled), ``\n`` line ends."""
+    return csv.writer(stream, lineterminator="\n", quoting=csv.QUOTE_MINIMAL)
 
 
 def write_rows(
@@ -56,27 +82,35 @@ def write_rows(
         json.dump([{k: _clean(v) for k, v in r.items()} for r in rows], stream, indent=2)
         stream.write("\n")
     elif fmt == OutputFormat.csv:
-        w = csv.DictWriter(stream, fieldnames=list(columns), extrasaction="ignore", lineterminator="\n")
-        w.writeheader()
+        w = csv_writer(stream)
+        w.writerow([printable(str(c)) for c in columns])
         for r in rows:
-            w.writerow({k: ("" if _clean(r.get(k)) is None else r.get(k)) for k in columns})
+            w.writerow([_csv_cell(r.get(k)) for k in columns])
     else:
         from rich.console import Console
+        from rich.measure import Measurement
         from rich.table import Table
 
         digits = digits or {}
         headers = headers or {}
-        table = Table(title=title)
-        for c in columns:
-            if c in TEXT_COLUMNS:
-                table.add_column(headers.get(c, c), justify="left", overflow="fold")
+        cells = [[_fmt(r.get(c), digits.get(c, 3)) for c in columns] for r in rows]
+        table = Table(title=None if title is None else printable(title))
+        for j, c in enumerate(columns):
+            header = printable(headers.get(c, c))
+            if c in ID_COLUMNS:
+                longest = max([len(header)] + [len(row[j]) for row in cells])
+                table.add_column(header, justify="left", no_wrap=True, min_width=longest)
+            elif c in TEXT_COLUMNS:
+                table.add_column(header, justify="left", overflow="fold")
             else:
-                table.add_column(headers.get(c, c), justify="right", no_wrap=True)
-        for r in rows:
-            table.add_row(*(_fmt(r.get(c), digits.get(c, 3)) for c in columns))
-        console = Console(file=stream)
-        if not console.is_terminal:
-            console = Console(file=stream, width=max(console.width, 120))
+                table.add_column(header, justify="right", no_wrap=True)
+        for row in cells:
+            table.add_row(*row)
+        console = Console(file=stream, markup=False, highlight=False)
+        if not console.is_terminal:  # piped or logged: as wide as the table needs
+            wide = Console(file=stream, width=10_000, markup=False, highlight=False)
+            need = Measurement.get(wide, wide.options, table).maximum
+            console = Console(file=stream, width=max(console.width, 120, need), markup=False, highlight=False)
         console.print(table)
 
 
@@ -87,5 +121,5 @@ def _fmt(value: Any, digits: int) -> str:
         if not math.isfinite(value):
             return "-"
         return f"{value:,.{digits}f}"
-    return str(value)
+    return printable(str(value))
 

@@ -18,7 +18,6 @@ Output of ``predict`` (one row per source x vehicle x mass, source-major):
 
 from __future__ import annotations
 
-import csv
 import io
 import json
 import math
@@ -52,7 +51,7 @@ from cevm.cli.common import (
     open_out,
     with_cycle_options,
 )
-from cevm.cli.output import OutputFormat, write_rows
+from cevm.cli.output import OutputFormat, csv_writer, write_rows
 from cevm.core.cycle import CR0_DEFAULT
 from cevm.core.sweep import (
     AMBIENT_ORIGINS,
@@ -66,6 +65,7 @@ from cevm.core.sweep import (
 from cevm.errors import CevmError
 from cevm.executors import make_executor
 from cevm.io.plots import PLOT_MAX_LINES, plot_predictions
+from cevm.text import printable
 from cevm.units import J_PER_KWH
 
 #: Rows formatted at once when writing CSV or JSON.
@@ -217,11 +217,13 @@ def _text_chars(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _csv_quote(s: str) -> bytes:
+    """One text cell as CSV bytes: control characters escaped, quoted as
+    :func:`cevm.cli.output.csv_writer` quotes."""
     if not s:
         return b""
     buf = io.StringIO()
-    csv.writer(buf, lineterminator="").writerow([s])
-    return buf.getvalue().encode("utf-8")
+    csv_writer(buf).writerow([printable(s)])
+    return buf.getvalue().rstrip("\n").encode("utf-8")
 
 
 _BOOL_CSV = np.array([b"false", b"true", b""])
@@ -426,12 +428,12 @@ def predict_cmd(
     store: StoreOption = None,
     mass_kg: Annotated[
         Optional[list[str]],
-        typer.Option("--mass-kg", "-m", help="Gross mass in kg: a value, a list a,b or a range start:stop:step "
+        typer.Option("--mass-kg", "-m", metavar="KG", help="Gross mass in kg: a value, a list a,b or a range start:stop:step "
                                              "(stop included). Repeatable. Default: each vehicle's mass_kg."),
     ] = None,
     payload_kg: Annotated[
         Optional[list[str]],
-        typer.Option("--payload-kg", "-p", help="Payload in kg on each vehicle's kerb mass: a value, a list or a "
+        typer.Option("--payload-kg", "-p", metavar="KG", help="Payload in kg on each vehicle's kerb mass: a value, a list or a "
                                                 "range such as 0:26000:2000 (14 values, stop included). Repeatable."),
     ] = None,
     soc_start: SocStartOption = DEFAULT_SOC_START_PCT,
@@ -478,10 +480,6 @@ def predict_cmd(
     try:
         masses = _values(mass_kg, "--mass-kg")
         payloads = _values(payload_kg, "--payload-kg")
-        if masses is not None and np.any(masses <= 0):
-            raise fail("--mass-kg values must be positive")
-        if payloads is not None and np.any(payloads < 0):
-            raise fail("--payload-kg values must be >= 0")
         from cevm.io import load_vehicles
 
         vehicles = load_vehicles(vehicle)

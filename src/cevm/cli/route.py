@@ -21,7 +21,7 @@ from cevm.errors import CevmError
 
 
 app = typer.Typer(help="Named routes (a bus block, a delivery round): sequences of stored trips or cycle files.",
-                  no_args_is_help=True)
+                  no_args_is_help=True, rich_markup_mode=None)
 
 
 @app.command("add")
@@ -32,7 +32,7 @@ def route_add(
     cycle: CycleOption = None,
     leg: Annotated[
         Optional[list[str]],
-        typer.Option("--leg", help="A leg as trip:ID or cycle:PATH, in order (to mix trips and cycles). Repeatable."),
+        typer.Option("--leg", metavar="trip:ID|cycle:PATH", help="A leg as trip:ID or cycle:PATH, in order (to mix trips and cycles). Repeatable."),
     ] = None,
     store: StoreOption = None,
     replace: Annotated[bool, typer.Option(help="Overwrite an existing route of this name.")] = False,

@@ -9,7 +9,8 @@ from typing import Annotated, Optional
 import numpy as np
 import typer
 
-from cevm.cli.common import StoreOption, fail, with_cycle_options
+from cevm.cli.common import SocStartOption, StoreOption, check_soc, fail, with_cycle_options
+from cevm.core import checks
 from cevm.cli.output import OutputFormat, write_rows
 from cevm.errors import CevmError
 from cevm.units import J_PER_KWH
@@ -17,12 +18,13 @@ from cevm.units import J_PER_KWH
 
 @with_cycle_options
 def simulate(
-    vehicle: Annotated[Path, typer.Option("--vehicle", "-v", help="Vehicle file (with a [detailed] table).")],
-    cycle: Annotated[Optional[Path], typer.Option("--cycle", "-c", help="Cycle CSV.")] = None,
-    trip: Annotated[Optional[str], typer.Option("--trip", "-t", help="A stored trip id.")] = None,
+    vehicle: Annotated[Path, typer.Option("--vehicle", "-v", metavar="FILE", help="Vehicle file with a [detailed] table (the drivetrain; a file without one is refused).")],
+    cycle: Annotated[Optional[Path], typer.Option("--cycle", "-c", metavar="FILE", help="Cycle CSV.")] = None,
+    trip: Annotated[Optional[str], typer.Option("--trip", "-t", metavar="ID", help="A stored trip id.")] = None,
     store: StoreOption = None,
     mass_kg: Annotated[Optional[float], typer.Option("--mass-kg", "-m", help="Gross mass [kg]. Default: the vehicle's.")] = None,
-    soc_start_pct: Annotated[float, typer.Option("--soc-start", help="EV state of charge at the start [%].")] = 100.0,
+    payload_kg: Annotated[Optional[float], typer.Option("--payload-kg", "-p", help="Payload [kg] on the vehicle's kerb mass (instead of --mass-kg).")] = None,
+    soc_start_pct: SocStartOption = 100.0,
     out: Annotated[Optional[Path], typer.Option("--out", "-o", help="Per-second output CSV.")] = None,
     plot: Annotated[Optional[Path], typer.Option(help="PNG: state of charge (EV, the paper's figure 4) or fuel and elevation (ICE, figure 6).")] = None,
     fmt: Annotated[OutputFormat, typer.Option("--format", "-f", help="Format of the summary.")] = OutputFormat.table,
@@ -37,10 +39,25 @@ def simulate(
 
     if (cycle is None) == (trip is None):
         raise fail("give exactly one of --cycle or --trip")
-    if not 0.0 < soc_start_pct <= 100.0:
-        raise fail("--soc-start must be in (0, 100]")
+    if mass_kg is not None and payload_kg is not None:
+        raise fail("give --mass-kg or --payload-kg, not both")
+    check_soc(soc_start_pct)
     try:
         veh = load_vehicle(vehicle)
+        if "detailed" not in veh.extra:
+            raise CevmError(
+                f"{vehicle}: no [detailed] table: the detailed model needs the vehicle's drivetrain ("
+                + ("motor, regeneration limits, battery, auxiliaries" if veh.is_ev else "engine map, gearbox, "
+                   "auxiliaries") + "), and this file's CE figures (eta, " + ("aux_power_kw" if veh.is_ev else
+                   "idle_fuel_lph") + ") do not give them. Add a [detailed] table (an empty one takes the "
+                "defaults, which describe " + ("a 10 m electric bus with a 180 kW motor" if veh.is_ev else
+                                               "a 235 kW diesel tractor with a 12-speed gearbox")
+                + "; configs/vehicles/*.toml show every key), or use 'cevm predict' (the CE model)")
+        if payload_kg is not None:
+            mass_kg = (veh.kerb_mass_kg if veh.kerb_mass_kg is not None else veh.mass_kg) + float(
+                checks.payloads_kg(payload_kg))
+        elif mass_kg is not None:
+            mass_kg = float(checks.masses_for([veh], mass_kg))
         if cycle is not None:
             c = read_cycle_csv(cycle, cycle_fmt)
             name, t, v, h = c.name, c.time_s, c.speed_mps, c.elevation_m

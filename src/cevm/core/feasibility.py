@@ -27,6 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from cevm.core import checks
 from cevm.core.sweep import (
     DEFAULT_RESERVE_PCT,
     DEFAULT_SOC_START_PCT,
@@ -199,14 +200,11 @@ def feasibility(
     base = np.array([v.kerb_mass_kg if v.kerb_mass_kg is not None else v.mass_kg for v in vehicles])
     if payload_kg is not None and mass_kg is not None:
         raise CevmError("give a payload or a gross mass, not both")
+    checks.soc_pct(soc_start_pct, reserve_pct)
     if payload_kg is not None:
-        if not (math.isfinite(payload_kg) and payload_kg >= 0):
-            raise CevmError("the payload must be finite and >= 0 kg")
-        mass = base + payload_kg
+        mass = base + float(checks.payloads_kg(payload_kg))
     elif mass_kg is not None:
-        if not (math.isfinite(mass_kg) and mass_kg > 0):
-            raise CevmError("the gross mass must be finite and > 0 kg")
-        mass = np.full(nv, float(mass_kg))
+        mass = np.full(nv, float(checks.masses_for(vehicles, mass_kg)))
     else:
         mass = np.array([v.mass_kg for v in vehicles], dtype=np.float64)
     f = _LoadFunction(source, vehicles, base, soc_start_pct, reserve_pct, ice_braking, ambient_c)

@@ -360,18 +360,40 @@ def _array_of_tables(src: Path, data: dict, key: str) -> list:
     return val
 
 
+def resolve_day(sc: Scenario, spec: str) -> str:
+    """The day a user means by ``spec``: a day's name, else its number counted from 1
+    (the paper's "day 1" to "day 3" are 1, 2, 3). 0 and numbers past the last day are
+    refused with the list of days."""
+    if spec in sc.days:
+        return spec
+    listing = ", ".join(f"{i} = {d!r}" for i, d in enumerate(sc.days, start=1))
+    text = spec.strip()
+    if text.isdigit():
+        n = int(text)
+        if 1 <= n <= len(sc.days):
+            return sc.days[n - 1]
+        why = "days are numbered from 1, as the paper numbers them" if n == 0 else f"the scenario has {len(sc.days)} days"
+        raise InputError(sc.path, f"no day {n}: {why}; days: {listing}")
+    raise InputError(sc.path, f"unknown day {spec!r}: give a day's name or its number from 1; days: {listing}")
+
+
 def fleet_report(path: str | Path, days: Sequence[str | int] | None = None, *, method: str = "auto",
                  resolve_leg: LegResolver = default_resolver, ambient_c: float | None = None) -> dict:
     """Everything ``cevm fleet SCENARIO`` shows, JSON-ready: the scenario, one plan per
     day (all days by default), the table-4 rows and a summary row per day
     (total, default, saving, method, status, time). ``ambient_c`` [degC] overrides every
-    day's temperature."""
+    day's temperature.
+
+    ``days``: names, or strings holding a day's 1-based number as the paper numbers days
+    (``"3"`` is the third day; see :func:`resolve_day`), or ints (0-based indices, as
+    :func:`cevm.core.assignment.plan` takes them)."""
     sc = load_scenario(path, resolve_leg)
     if ambient_c is not None:
         import dataclasses
 
         sc = dataclasses.replace(sc, ambient_c=_day_temperatures(Path(path), float(ambient_c), len(sc.days)))
-    plans = [plan(sc, d, method=method) for d in (days if days is not None else sc.days)]
+    chosen = [resolve_day(sc, d) if isinstance(d, str) else d for d in days] if days is not None else sc.days
+    plans = [plan(sc, d, method=method) for d in chosen]
     return {
         "scenario": sc.name,
         "path": str(path),

@@ -1,0 +1,198 @@
+"""The command line reads right: help texts keep their bracketed words, flags show no
+metavar, exit codes as the README says, one message per mistake across commands, fleet
+days by name or 1-based number, tables that do not break ids, text that cannot forge
+output (control characters escaped in tables, CSV and error lines)."""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import re
+
+import pytest
+import typer.main
+from typer.testing import CliRunner
+
+from cevm.cli import app
+from cevm.cli.output import OutputFormat, write_rows
+from cevm.text import printable
+
+runner = CliRunner()
+
+
+def _commands():
+    """(path, click command) of every command and subcommand of the app."""
+    root = typer.main.get_command(app)
+    out = []
+
+    def walk(cmd, path):
+        out.append((path, cmd))
+        if getattr(cmd, "commands", None):
+            for name, sub in cmd.commands.items():
+                walk(sub, path + [name])
+
+    walk(root, [])
+    return out
+
+
+COMMANDS = _commands()
+
+
+def _bracketed(text: str) -> set[str]:
+    return set(re.findall(r"\[[^\]\s]+\]", text or ""))
+
+
+@pytest.mark.parametrize("path", [p for p, _ in COMMANDS], ids=lambda p: " ".join(p) or "cevm")
+def test_help_keeps_its_bracketed_words_and_shows_no_bool_metavar(path):
+    cmd = dict((tuple(p), c) for p, c in COMMANDS)[tuple(path)]
+    words = _bracketed(cmd.help)
+    for param in cmd.params:
+        words |= _bracketed(getattr(param, "help", None))
+    res = runner.invoke(app, [*path, "--help"])
+    assert res.exit_code == 0, res.output
+    flat = " ".join(res.output.split())
+    missing = {w for w in words if w not in flat}
+    assert not missing, f"{' '.join(path)} --help lost {missing}"
+    assert "<bool>" not in res.output
+
+
+def test_the_help_texts_the_issue_named():
+    sim = " ".join(runner.invoke(app, ["simulate", "--help"]).output.split())
+    assert "[detailed] table" in sim and "Gross mass [kg]" in sim
+    pred = " ".join(runner.invoke(app, ["predict", "--help"]).output.split())
+    assert "pip install 'cevm[dask]'" in pred
+
+
+def test_ingest_of_nothing_is_bad_usage_and_creates_no_store(tmp_path):
+    store = tmp_path / "s.sqlite"
+    res = runner.invoke(app, ["ingest", str(tmp_path / "no" / "such"), "--store", str(store)])
+    assert res.exit_code == 2
+    assert "no such file" in res.output
+    assert not store.exists() and not list(tmp_path.iterdir())
+
+
+@pytest.fixture()
+def paths(root):
+    return {"hgv": str(root / "configs/vehicles/diesel-hgv.toml"), "bus": str(root / "configs/vehicles/electric-bus.toml"),
+            "urban": str(root / "configs/cycles/urban-bus.csv")}
+
+
+def _error_line(res) -> str:
+    lines = [x for x in res.output.splitlines() if x.startswith("cevm: error:")]
+    assert res.exit_code == 2 and len(lines) == 1, res.output
+    return lines[0]
+
+
+def test_a_negative_payload_gets_one_message_from_every_command(paths):
+    got = {
+        "predict": _error_line(runner.invoke(app, ["predict", "-v", paths["hgv"], "-c", paths["urban"], "-p", "-100"])),
+        "feasibility": _error_line(runner.invoke(app, ["feasibility", "-v", paths["hgv"], "-c", paths["urban"],
+                                                       "-p", "-100"])),
+        "simulate": _error_line(runner.invoke(app, ["simulate", "-v", paths["hgv"], "-c", paths["urban"], "-p", "-100"])),
+    }
+    assert len(set(got.values())) == 1, got
+    assert "payload -100 kg is negative" in got["predict"]
+
+
+def test_a_gross_mass_below_the_kerb_mass_gets_one_message_from_every_command(paths):
+    got = {
+        "predict": _error_line(runner.invoke(app, ["predict", "-v", paths["hgv"], "-c", paths["urban"], "-m", "100"])),
+        "feasibility": _error_line(runner.invoke(app, ["feasibility", "-v", paths["hgv"], "-c", paths["urban"],
+                                                       "-m", "100"])),
+        "simulate": _error_line(runner.invoke(app, ["simulate", "-v", paths["hgv"], "-c", paths["urban"], "-m", "100"])),
+    }
+    assert len(set(got.values())) == 1, got
+    assert "gross mass 100 kg is below the kerb mass 18,000 kg" in got["predict"]
+
+
+def test_a_state_of_charge_out_of_range_gets_one_message_from_every_command(paths):
+    got = {cmd: _error_line(runner.invoke(app, [cmd, "-v", paths["bus"], "-c", paths["urban"], "--soc-start", "120"]))
+           for cmd in ("predict", "feasibility", "simulate")}
+    assert len(set(got.values())) == 1, got
+    assert "--soc-start" in got["predict"] and "(0, 100]" in got["predict"]
+
+
+def test_over_max_gross_stays_a_flag(paths):
+    res = runner.invoke(app, ["predict", "-v", paths["hgv"], "-c", paths["urban"], "-m", "50000", "-f", "json"])
+    assert res.exit_code == 0
+    assert json.loads(res.stdout)[0]["over_max_gross"] is True
+
+
+def test_simulate_refuses_a_file_without_a_detailed_table(root, paths):
+    res = runner.invoke(app, ["simulate", "-v", str(root / "configs/vehicles/renault-twizy.toml"), "-c", paths["urban"]])
+    line = _error_line(res)
+    assert "no [detailed] table" in line and "renault-twizy.toml" in line
+
+
+def test_fleet_days_by_name_or_1_based_number(root):
+    scenario = str(root / "configs/fleet/paper-case-study.toml")
+
+    def plan_days(day):
+        res = runner.invoke(app, ["fleet", "plan", scenario, "--day", day, "-f", "json"])
+        assert res.exit_code == 0, res.output
+        return [s["day"] for s in json.loads(res.stdout)["summary"]]
+
+    assert plan_days("3") == ["day 3"]
+    assert plan_days("1") == ["day 1"]
+    assert plan_days("day 2") == ["day 2"]
+    for bad, words in (("0", "numbered from 1"), ("4", "has 3 days"), ("monday", "unknown day")):
+        line = _error_line(runner.invoke(app, ["fleet", "plan", scenario, "--day", bad]))
+        assert words in line and "1 = 'day 1'" in line
+
+
+# ----------------------------------------------------------------- tables and text
+
+
+def test_table_never_breaks_an_id():
+    tid = "HGV-11:2019-05-14T06:12:33Z:0001-with-a-long-suffix"
+    rows = [{"trip_id": tid, "vehicle_id": "HGV-11", "status": "ok " * 30, "km": 1.0, "s": 2.0, "x": 3.0}]
+    buf = io.StringIO()
+    write_rows(rows, OutputFormat.table, stream=buf)
+    assert tid in buf.getvalue()
+
+
+HOSTILE = "EV\r01\nfake: line\x1b[31m\u202e[bold]x"
+
+
+def test_control_characters_are_escaped_in_tables_and_csv_and_exact_in_json():
+    rows = [{"vehicle_id": HOSTILE, "note": 'a "quoted", text', "km": 1.5}]
+    buf = io.StringIO()
+    write_rows(rows, OutputFormat.csv, stream=buf)
+    text = buf.getvalue()
+    assert text.count("\n") == 2 and "\r" not in text and "\x1b" not in text  # one line per record
+    got = list(csv.DictReader(io.StringIO(text)))
+    assert got[0]["vehicle_id"] == printable(HOSTILE) and got[0]["note"] == 'a "quoted", text'
+    buf = io.StringIO()
+    write_rows(rows, OutputFormat.table, stream=buf)
+    table = buf.getvalue()
+    assert "\r" not in table and "\x1b" not in table and "\u202e" not in table
+    assert "[bold]x" in table  # no console markup either
+    buf = io.StringIO()
+    write_rows(rows, OutputFormat.json, stream=buf)
+    assert json.loads(buf.getvalue())[0]["vehicle_id"] == HOSTILE
+
+
+def test_printable_escapes_and_is_idempotent():
+    assert printable("a\rb\nc\td\x00e\x85f\u2028g\u202eh") == "a\\rb\\nc\\td\\x00e\\x85f\\u2028g\\u202eh"
+    assert printable(printable(HOSTILE)) == printable(HOSTILE)
+    assert printable("Zürich 東京 ok") == "Zürich 東京 ok"
+
+
+def test_a_file_name_with_a_newline_cannot_forge_an_error_line(tmp_path):
+    bad = tmp_path / "a\ncevm: error: forged.toml"
+    res = runner.invoke(app, ["predict", "-v", str(bad), "-c", str(bad)])
+    assert res.exit_code == 2
+    assert len([x for x in res.output.splitlines() if x.startswith("cevm: error:")]) == 1
+    assert "\\n" in res.output
+
+
+def test_predict_fast_csv_writer_quotes_and_escapes(tmp_path, root):
+    cyc = tmp_path / "a,b\r\"c.csv"
+    cyc.write_text((root / "configs/cycles/urban-bus.csv").read_text())
+    res = runner.invoke(app, ["predict", "-v", str(root / "configs/vehicles/electric-bus.toml"), "-c", str(cyc),
+                              "-f", "csv"])
+    assert res.exit_code == 0, res.output
+    assert "\r" not in res.stdout and res.stdout.count("\n") == 2
+    rows = list(csv.DictReader(io.StringIO(res.stdout)))
+    assert rows[0]["cycle"] == printable('a,b\r"c')
