@@ -88,3 +88,50 @@ def reference_consumption(t, v, h, m, veh, ambient_c, cr0=0.004):
                 total += veh["idle_fuel_lps"] * dt
             total += rate_t * dt
     return total
+
+
+def reference_step_energy(t, v, h, i, m, cda, cr, *, eta, w, lhv=None, aux=0.0, ck=0.0, run=0.0, idle=0.0,
+                          cr0=0.004):
+    """The energy of step i, plainly: an EV's battery energy [J] (``lhv`` None) or an
+    ICE's fuel [l]. ``w`` weights a negative non-simplified step (eta * regen_eta for an
+    EV, 1 or 0 for an ICE by braking mode); ``aux`` [W for an EV, l/s for an ICE] all
+    the time, ``ck`` [l per J/kg] the fuel per unit of positive kinetic energy
+    (m (1/eta_k - 1/eta) / U), ``run`` [l/s] on simplified steps, ``idle`` [l/s] at
+    standstill."""
+    dt = t[i + 1] - t[i]
+    k = 0.5 * (v[i + 1] ** 2 - v[i] ** 2)
+    a = 0.25 * RHO * (v[i] ** 3 + v[i + 1] ** 3) * dt
+    r = 0.5 * G * (v[i] + v[i + 1]) * dt
+    e = G * (h[i + 1] - h[i]) if h is not None else 0.0
+    delta = m * (k + e) + cda * a + cr * m * r
+    simplified = k + e + cr0 * r > 0
+    wheel = delta if (simplified or delta > 0) else w * delta
+    if lhv is None:
+        return wheel / eta + aux * dt, dt, r / G
+    fuel = wheel / (lhv * eta) + ck * max(k, 0.0) + aux * dt
+    if simplified:
+        fuel += run * dt
+    if a <= 0:
+        fuel += idle * dt
+    return fuel, dt, r / G
+
+
+def reference_crossing(legs, level, *, lump=0.0, repeat=False, max_passes=100000, **step):
+    """(time [s], distance [m]) at which the running energy (``lump`` before the first
+    step, then :func:`reference_step_energy` of every step of every leg, in order,
+    again and again with ``repeat``) first reaches ``level``, linearly inside the step;
+    None if never. ``legs``: a list of (t, v, h)."""
+    energy, time, dist = lump, 0.0, 0.0
+    if energy >= level:
+        return 0.0, 0.0
+    for _ in range(max_passes if repeat else 1):
+        for t, v, h in legs:
+            for i in range(len(t) - 1):
+                g, dt, dd = reference_step_energy(t, v, h, i, **step)
+                if energy + g >= level:
+                    f = (level - energy) / g
+                    return time + f * dt, dist + f * dd
+                energy += g
+                time += dt
+                dist += dd
+    return None

@@ -57,7 +57,7 @@ from functools import cached_property
 
 import numpy as np
 
-from cevm.core import energy
+from cevm.core import checks, energy
 from cevm.core.cycle import (
     CR0_DEFAULT,
     PAPER_PHYSICS,
@@ -324,10 +324,18 @@ class Source:
         return build_steps(self.leg_profiles, cr0=self.vector.cr0, physics=self.vector.physics,
                            block_elements=self.block_elements)
 
+    @cached_property
+    def step_table(self) -> StepTable:
+        """The plain per-step terms in driving order (built on first use, then kept):
+        for the range (:func:`source_ranges`) and the power a cycle asks
+        (:func:`follow_flags`)."""
+        return build_step_table(self.leg_profiles, cr0=self.vector.cr0, physics=self.vector.physics)
+
     def release(self) -> None:
         """Forget the cached profiles and step terms (their memory): for a sweep that is
         done with this source. They are rebuilt if asked for again."""
         self.__dict__.pop("steps", None)
+        self.__dict__.pop("step_table", None)
         self.__dict__.pop("leg_profiles", None)
 
     @property
@@ -407,14 +415,14 @@ class PredictionSet:
             raise CevmError("no vehicles")
         masses: list[np.ndarray] = []
         if mass_kg is not None:
-            m = np.asarray(mass_kg, dtype=np.float64).ravel()
-            if m.size == 0 or not np.all(np.isfinite(m) & (m > 0)):
-                raise CevmError("gross masses must be finite and > 0 kg")
+            m = checks.masses_for(vehicles, np.asarray(mass_kg, dtype=np.float64).ravel())
+            if m.size == 0:
+                raise CevmError("no gross masses given")
             masses = [m] * len(vehicles)
         elif payload_kg is not None:
-            p = np.asarray(payload_kg, dtype=np.float64).ravel()
-            if p.size == 0 or not np.all(np.isfinite(p) & (p >= 0)):
-                raise CevmError("payloads must be finite and >= 0 kg")
+            p = checks.payloads_kg(np.asarray(payload_kg, dtype=np.float64).ravel())
+            if p.size == 0:
+                raise CevmError("no payloads given")
             for v in vehicles:
                 if v.kerb_mass_kg is None:
                     raise CevmError(f"vehicle {v.name!r} has no kerb_mass_kg, so a payload cannot be added; "
@@ -970,6 +978,17 @@ class SweepBlock:
     tank_ok: np.ndarray
     ambient_c: np.ndarray
     ambient_from: np.ndarray
+    # where the reserve / the battery or tank is first crossed, and the range
+    # (:func:`source_ranges`); None when not computed
+    reserve_at_m: np.ndarray | None = None
+    reserve_at_s: np.ndarray | None = None
+    empty_at_m: np.ndarray | None = None
+    empty_at_s: np.ndarray | None = None
+    range_m: np.ndarray | None = None
+    range_reserve_m: np.ndarray | None = None
+    # whether the vehicle can follow the source (:func:`follow_flags`); None: not known
+    over_power: np.ndarray | None = None
+    over_speed: np.ndarray | None = None
 
     @property
     def n(self) -> int:
@@ -992,6 +1011,7 @@ def predict_source(
     reserve_pct: float = DEFAULT_RESERVE_PCT,
     lowest_soc: bool = True,
     source_index: int = 0,
+    ranges: bool = False,
 ) -> SweepBlock:
     """Every prediction of ``pset`` on ``source``: totals by the CE model, and for EVs
     the state of charge at the end and at its lowest along the way (``lowest_soc``,
@@ -1000,10 +1020,14 @@ def predict_source(
     ``soc_start_pct`` [%] (default 100: leaving the depot charged) and ``reserve_pct``
     [%] (default 15, the paper's warning level) are percentages of ``battery_kwh``.
     The SoC is not capped at 100 %: a full battery cannot take regenerated energy, so on
-    a route that starts downhill from full the model's SoC is optimistic.
+    a route that starts downhill from full the model's SoC is optimistic. Nor does it go
+    below 0: where a row runs empty, and where it crosses the reserve, the block says
+    (:func:`source_ranges`); ``ranges`` (default False) adds each row's range, the source
+    driven again and again (one step-by-step sum per row). Vehicles with
+    ``max_power_kw`` or ``max_speed_kmh`` get :func:`follow_flags`.
     """
     return predict_sources([source], pset, soc_start_pct=soc_start_pct, reserve_pct=reserve_pct,
-                           lowest_soc=lowest_soc, first_index=source_index)[0]
+                           lowest_soc=lowest_soc, first_index=source_index, ranges=ranges)[0]
 
 
 def predict_sources(
@@ -1014,13 +1038,14 @@ def predict_sources(
     reserve_pct: float = DEFAULT_RESERVE_PCT,
     lowest_soc: bool = True,
     first_index: int = 0,
+    ranges: bool = False,
 ) -> list[SweepBlock]:
     """:func:`predict_source` for several sources at once (one vectorised evaluation,
     faster than one source at a time); one block per source, in order."""
     if not sources:
         return []
     arrays = _predict_arrays(sources, pset, soc_start_pct, reserve_pct, lowest_soc)
-    return _as_blocks(sources, pset, arrays, first_index)
+    return _finish(_as_blocks(sources, pset, arrays, first_index), soc_start_pct, reserve_pct, ranges)
 
 
 def _predict_arrays(sources: Sequence[Source], pset: PredictionSet, soc_start_pct: float, reserve_pct: float,
@@ -1094,6 +1119,13 @@ def _as_blocks(sources: Sequence[Source], pset: PredictionSet, arrays: tuple[np.
             for i, src in enumerate(sources)]
 
 
+def _finish(blocks: list[SweepBlock], soc_start_pct: float, reserve_pct: float, ranges: bool) -> list[SweepBlock]:
+    """The blocks with :func:`source_ranges` and :func:`follow_flags` (in this process:
+    the step tables stay with the sources)."""
+    return [follow_flags(source_ranges(b, soc_start_pct=soc_start_pct, reserve_pct=reserve_pct, repeat=ranges))
+            for b in blocks]
+
+
 def _portable(source: Source, lowest_soc: bool) -> Source:
     """What a worker needs of ``source``: its vector, and its step terms when the lowest
     state of charge is asked for (the legs' profiles, and any store access behind them,
@@ -1134,6 +1166,7 @@ def sweep(
     reserve_pct: float = DEFAULT_RESERVE_PCT,
     lowest_soc: bool = True,
     executor: Executor | None = None,
+    ranges: bool = False,
 ) -> Iterator[SweepBlock]:
     """Every prediction of ``pset`` on every source: one block of ``pset.n`` rows per
     source, source-major (then vehicle, then mass), computed when asked for, a few
@@ -1147,7 +1180,7 @@ def sweep(
     if executor is None or executor.inline:
         for i, j in _batches(sources, pset, lowest_soc):
             yield from predict_sources(sources[i:j], pset, soc_start_pct=soc_start_pct, reserve_pct=reserve_pct,
-                                       lowest_soc=lowest_soc, first_index=i)
+                                       lowest_soc=lowest_soc, first_index=i, ranges=ranges)
         return
     use_steps = lowest_soc and bool(pset.is_ev.any())
     ranges: list[tuple[int, int]] = []
@@ -1162,4 +1195,376 @@ def sweep(
         i, j = ranges[k]
         if not res.ok:
             raise CevmError(f"predictions for sources {i + 1}-{j} failed on a worker: {res.error}")
-        yield from _as_blocks(sources[i:j], pset, res.value, i)
+        yield from _finish(_as_blocks(sources[i:j], pset, res.value, i), soc_start_pct, reserve_pct, ranges)
+
+
+# ------------------------------------------------------------------ range and limits
+#
+# Where a vehicle first crosses its reserve or runs empty along a source, the range at
+# its load, and whether it can follow the source at all (power, top speed). Computed
+# from the plain per-step terms (:class:`StepTable`), for the rows that need them: the
+# energy drawn is summed step by step as the CE model's terms give it, so the total at
+# the end equals the model's.
+#
+# Energy along the way, per step i (EV, battery [J]; ICE, fuel [l]), from
+# :mod:`cevm.core.energy`:
+#
+#   EV:  g_i = W_i / eta + P_aux(T) dt_i,  W_i = Delta_i, or w Delta_i for a negative
+#        non-simplified step, w = eta eta_r (:func:`~cevm.core.energy.ev_negative_weight`),
+#        P_aux from :func:`~cevm.core.energy.ev_aux_power_w`; the warm-up energy of the
+#        start (:func:`~cevm.core.energy.ev_start_energy_j`) before the first step.
+#   ICE: g_i = W_i / (U eta) + c_kin m max(k_i, 0) / U + r_run dt_i (simplified steps)
+#        + r_idle dt_i (standstill) + r_T(T) dt_i, W_i with the braking mode's weight
+#        (1 for the paper's eq. 24, 0 for no-credit); the cold-start fuel first.
+#
+# A level L (the energy above the reserve, or the whole usable battery or tank) is first
+# crossed in the step where the running sum E_j reaches L; the point is interpolated
+# linearly inside that step (the step's energy spread evenly over its time and distance).
+#
+# Beyond the source's end, the range counts the source driven again and again, without a
+# stop to recharge or refuel and without another cold start: the repetition k and step j
+# of the first crossing of lump + k S + C_j >= L, S the energy of one pass (without the
+# start's), C_j the running sum inside a pass. A source that gives back at least what it
+# takes (S <= 0, a descent) has no range limit: infinite.
+
+
+@dataclass(frozen=True, eq=False)
+class StepTable:
+    """A source's per-step terms in driving order (legs one after another), SI: ``k``
+    (kinetic, J/kg), ``x`` = k + e (J/kg), ``a`` (J/m^2), ``r`` (J/kg per unit Cr),
+    ``dt`` [s], ``dd`` (distance of the step [m]), ``t0`` and ``d0`` (time [s] and
+    distance [m] at the step's start), ``simplified`` (criterion 8 with the source's
+    Cr0), ``moving`` (a > 0); ``v_max_mps`` the source's top speed."""
+
+    k: np.ndarray
+    x: np.ndarray
+    a: np.ndarray
+    r: np.ndarray
+    dt: np.ndarray
+    dd: np.ndarray
+    t0: np.ndarray
+    d0: np.ndarray
+    simplified: np.ndarray
+    moving: np.ndarray
+    v_max_mps: float
+
+    @property
+    def n(self) -> int:
+        return int(self.dt.size)
+
+    @property
+    def duration_s(self) -> float:
+        return float(self.t0[-1] + self.dt[-1]) if self.n else 0.0
+
+    @property
+    def distance_m(self) -> float:
+        return float(self.d0[-1] + self.dd[-1]) if self.n else 0.0
+
+
+def build_step_table(legs: Sequence[LegProfile], *, cr0: float = CR0_DEFAULT,
+                     physics: Physics = PAPER_PHYSICS) -> StepTable:
+    """The :class:`StepTable` of a source's legs."""
+    ks, xs, as_, rs, dts = [], [], [], [], []
+    vmax = 0.0
+    for leg in legs:
+        st = step_terms(leg.time_s, leg.speed_mps, leg.elevation_m, physics)
+        ks.append(st.k)
+        xs.append(st.k + st.e)
+        as_.append(st.a)
+        rs.append(st.r)
+        dts.append(st.dt)
+        if leg.speed_mps.size:
+            vmax = max(vmax, float(np.max(leg.speed_mps)))
+    z = np.zeros(0)
+    k, x, a, r, dt = (np.concatenate(v) if v else z for v in (ks, xs, as_, rs, dts))
+    dd = r / physics.g_mps2
+    t0 = np.concatenate([[0.0], np.cumsum(dt)[:-1]]) if dt.size else z
+    d0 = np.concatenate([[0.0], np.cumsum(dd)[:-1]]) if dd.size else z
+    return StepTable(k=k, x=x, a=a, r=r, dt=dt, dd=dd, t0=t0, d0=d0, simplified=(x + cr0 * r) > 0,
+                     moving=a > 0, v_max_mps=vmax)
+
+
+def _row_ambient_c(pset: PredictionSet) -> np.ndarray:
+    """The ambient temperature of each row [degC]: the set's own (``ambient_c``) if it
+    has one, else each vehicle's default (:func:`cevm.core.vehicle.default_ambient_c`)."""
+    from cevm.core.vehicle import default_ambient_c
+
+    t = getattr(pset, "ambient_c", None)
+    if t is not None:
+        return np.broadcast_to(np.asarray(t, dtype=np.float64), (pset.n,)).copy()
+    return np.array([default_ambient_c(v)[0] for v in pset.vehicles])[pset.vehicle_index]
+
+
+@dataclass(frozen=True, eq=False)
+class _StepCoefficients:
+    """Per row, the energy of step i as kx x_i + kr r_i + ka a_i (its negative part,
+    on non-simplified steps, weighted by w) + ck max(k_i, 0) + (aux + run [simplified]
+    + idle [standstill]) dt_i, and ``lump`` before the first step (units of the row:
+    J for an EV, l for an ICE)."""
+
+    kx: np.ndarray
+    kr: np.ndarray
+    ka: np.ndarray
+    w: np.ndarray
+    ck: np.ndarray
+    aux: np.ndarray
+    run: np.ndarray
+    idle: np.ndarray
+    lump: np.ndarray
+
+    def take(self, rows: np.ndarray) -> _StepCoefficients:
+        return _StepCoefficients(*(getattr(self, f)[rows] for f in self.__dataclass_fields__))
+
+
+def step_coefficients(pset: PredictionSet, ice_braking: Sequence[str] | None = None) -> _StepCoefficients:
+    """The per-step energy coefficients of every row of ``pset`` (see :class:`StepTable`
+    and the notes above), with every term of :mod:`cevm.core.energy`."""
+    from cevm.core import energy
+
+    n = pset.n
+    t = _row_ambient_c(pset)
+    m, cda, cr, eta = pset.mass_kg, pset.cda_m2, pset.cr, pset.eta
+    scale = np.where(pset.is_ev, 1.0 / eta, 1.0 / (eta * np.where(pset.is_ev, 1.0, pset.lhv_j_per_l)))
+    out = {f: np.zeros(n) for f in ("w", "ck", "aux", "run", "idle", "lump")}
+    for j, v in enumerate(pset.vehicles):
+        rows = np.flatnonzero(pset.vehicle_index == j)
+        if not rows.size:
+            continue
+        if v.is_ev:
+            out["w"][rows] = energy.ev_negative_weight(v)
+            out["aux"][rows] = energy.ev_aux_power_w(v, t[rows])
+            out["lump"][rows] = energy.ev_start_energy_j(v, t[rows])
+        else:
+            out["w"][rows] = braking_weight(pset.braking[j] or v.ice_braking)
+            out["ck"][rows] = energy.ice_kinetic_coefficient(v) * m[rows] / v.fuel_lhv_j_per_l
+            out["aux"][rows] = energy.ice_time_fuel_lps(v, t[rows])
+            out["run"][rows] = v.running_fuel_lps
+            out["idle"][rows] = v.idle_fuel_lps
+            out["lump"][rows] = energy.ice_start_fuel_l(v, t[rows])
+    return _StepCoefficients(kx=m * scale, kr=m * cr * scale, ka=cda * scale, **out)
+
+
+def step_energies(st: StepTable, c: _StepCoefficients) -> np.ndarray:
+    """(R, N) energy of each step for R rows of coefficients ``c`` (J or l)."""
+    g = c.kx[:, None] * st.x[None, :]
+    g += c.kr[:, None] * st.r[None, :]
+    g += c.ka[:, None] * st.a[None, :]
+    ns = ~st.simplified
+    if ns.any():
+        neg = np.minimum(g[:, ns], 0.0)
+        neg *= (c.w - 1.0)[:, None]
+        g[:, ns] += neg
+    if np.any(c.ck != 0):
+        g += c.ck[:, None] * np.maximum(st.k, 0.0)[None, :]
+    if np.any(c.aux != 0):
+        g += c.aux[:, None] * st.dt[None, :]
+    if np.any(c.run != 0):
+        g += c.run[:, None] * np.where(st.simplified, st.dt, 0.0)[None, :]
+    if np.any(c.idle != 0):
+        g += c.idle[:, None] * np.where(st.moving, 0.0, st.dt)[None, :]
+    return g
+
+
+def _crossing_point(st: StepTable, cum: np.ndarray, before: np.ndarray, target: np.ndarray,
+                    rows: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """For each row r of ``rows``: the first step j with ``cum[r, j] >= target[r]``
+    (``before[r]`` the sum before the first step), and the time [s] and distance [m]
+    at which it is reached, interpolated inside the step. Returns (found, t, d)."""
+    hit = cum[rows] >= target[:, None]
+    found = hit.any(axis=1)
+    j = np.argmax(hit, axis=1)
+    prev = np.where(j > 0, cum[rows, np.maximum(j - 1, 0)], before)
+    step = cum[rows, j] - prev
+    with np.errstate(invalid="ignore", divide="ignore"):
+        frac = np.clip(np.where(step > 0, (target - prev) / step, 1.0), 0.0, 1.0)
+    return found, st.t0[j] + frac * st.dt[j], st.d0[j] + frac * st.dd[j]
+
+
+#: Rows x steps of one chunk of :func:`crossings` (8 MB of float64).
+_RANGE_CHUNK_CELLS = 1 << 20
+
+
+def crossings(st: StepTable, c: _StepCoefficients, levels: np.ndarray, *, repeat: bool
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Where the running energy of each row first reaches each of its ``levels``
+    (R, J), along the source and, with ``repeat``, with the source driven again and
+    again after its end (see the notes above).
+
+    Returns ``(time_s, distance_m, within)``, each (R, J): NaN where never reached (a
+    level above what the source takes, without ``repeat``; infinite with ``repeat`` when
+    one pass gives back what it takes), ``within`` True where reached in the first pass.
+    """
+    levels = np.atleast_2d(np.asarray(levels, dtype=np.float64))
+    r_count, n_levels = levels.shape
+    t_out = np.full((r_count, n_levels), np.nan)
+    d_out = np.full((r_count, n_levels), np.nan)
+    within = np.zeros((r_count, n_levels), dtype=bool)
+    if r_count == 0:
+        return t_out, d_out, within
+    n = st.n
+    at_start = c.lump[:, None] >= levels
+    t_out[at_start] = 0.0
+    d_out[at_start] = 0.0
+    within |= at_start
+    if n == 0:
+        return t_out, d_out, within
+    step = max(1, _RANGE_CHUNK_CELLS // n)
+    for lo in range(0, r_count, step):
+        sl = slice(lo, lo + step)
+        cc = c.take(np.arange(r_count)[sl])
+        cum = np.cumsum(step_energies(st, cc), axis=1)  # C_j, one pass, without the lump
+        per_pass = cum[:, -1]
+        peak = cum.max(axis=1)
+        lump = cc.lump
+        for jl in range(n_levels):
+            todo = ~at_start[sl, jl]
+            if not todo.any():
+                continue
+            rows = np.flatnonzero(todo)
+            target = levels[sl, jl][rows] - lump[rows]  # C_j must reach this
+            found, t, d = _crossing_point(st, cum, np.zeros(rows.size), target, rows)
+            r_found = lo + rows[found]
+            t_out[r_found, jl], d_out[r_found, jl], within[r_found, jl] = t[found], d[found], True
+            if not repeat:
+                continue
+            rest = rows[~found]
+            target = target[~found]
+            gains = per_pass[rest] > 0
+            t_out[lo + rest[~gains], jl] = np.inf
+            d_out[lo + rest[~gains], jl] = np.inf
+            rest, target = rest[gains], target[gains]
+            if not rest.size:
+                continue
+            s = per_pass[rest]
+            k = np.maximum(1.0, np.ceil((target - peak[rest]) / s))
+            k = np.where(target - k * s > peak[rest], k + 1.0, k)  # rounding
+            found, t, d = _crossing_point(st, cum, np.zeros(rest.size), target - k * s, rest)
+            t_out[lo + rest, jl] = np.where(found, k * st.duration_s + t, np.nan)
+            d_out[lo + rest, jl] = np.where(found, k * st.distance_m + d, np.nan)
+    return t_out, d_out, within
+
+
+def source_ranges(block: SweepBlock, *, soc_start_pct: float = DEFAULT_SOC_START_PCT,
+                  reserve_pct: float = DEFAULT_RESERVE_PCT, repeat: bool = True) -> SweepBlock:
+    """``block`` with where each row first crosses its reserve (EV) and runs empty
+    (EV battery, ICE tank) along the source, its range (``repeat``: the source driven
+    again and again; see the notes above), and no state of charge below zero: a row
+    that runs empty on the way has ``soc_min_pct`` 0 and ``soc_end_pct`` NaN (it does
+    not reach the end).
+
+    Rows that cannot cross inside the source (EV: lowest SoC above the reserve; ICE:
+    fuel within the tank and never falling along the way) are not summed step by step
+    unless ``repeat`` asks for their range. EV rows without a lowest SoC (a sweep with
+    ``lowest_soc=False``) get NaN. SI fields: ``reserve_at_m``, ``reserve_at_s``,
+    ``empty_at_m``, ``empty_at_s``, ``range_m`` (to empty), ``range_reserve_m`` (to the
+    reserve; EV only).
+    """
+    from dataclasses import replace
+
+    ps = block.pset
+    n = ps.n
+    ev = ps.is_ev
+    cap = np.where(ev, ps.battery_j, np.nan)
+    l_empty = np.where(ev, soc_start_pct / 100.0 * cap, ps.tank_l)
+    l_res = np.where(ev, (soc_start_pct - reserve_pct) / 100.0 * cap, np.nan)
+    has_level = np.isfinite(l_empty)
+    if ev.any() and np.all(np.isnan(block.soc_min_pct[ev])):
+        has_level &= ~ev  # no lowest SoC: the EV rows are not evaluated
+    coef = step_coefficients(ps)
+    if repeat:
+        need = has_level
+    else:
+        with np.errstate(invalid="ignore"):
+            ev_may = ev & (block.soc_min_pct < reserve_pct)
+            ice_may = ~ev & ((block.fuel_l >= ps.tank_l) | (coef.w > 0) | (coef.ck < 0))
+        need = has_level & (ev_may | ice_may)
+    out = {f: np.full(n, np.nan) for f in ("reserve_at_m", "reserve_at_s", "empty_at_m", "empty_at_s",
+                                           "range_m", "range_reserve_m")}
+    rows = np.flatnonzero(need)
+    if rows.size:
+        levels = np.stack([l_res[rows], l_empty[rows]], axis=1)
+        t, d, inside = crossings(block.source.step_table, coef.take(rows), levels, repeat=repeat)
+        res = ev[rows]
+        out["reserve_at_s"][rows] = np.where(inside[:, 0] & res, t[:, 0], np.nan)
+        out["reserve_at_m"][rows] = np.where(inside[:, 0] & res, d[:, 0], np.nan)
+        out["empty_at_s"][rows] = np.where(inside[:, 1], t[:, 1], np.nan)
+        out["empty_at_m"][rows] = np.where(inside[:, 1], d[:, 1], np.nan)
+        if repeat:
+            out["range_m"][rows] = d[:, 1]
+            out["range_reserve_m"][rows] = np.where(res, d[:, 0], np.nan)
+    if not repeat:
+        out["range_m"] = out["range_reserve_m"] = None
+    soc_end = block.soc_end_pct.copy()
+    soc_min = block.soc_min_pct.copy()
+    empty = np.isfinite(out["empty_at_m"]) & ev
+    with np.errstate(invalid="ignore"):
+        soc_end[empty | (soc_end < 0)] = np.nan
+        soc_min[empty | (soc_min < 0)] = 0.0
+    return replace(block, soc_end_pct=soc_end, soc_min_pct=soc_min, **out)
+
+
+def peak_wheel_power_w(st: StepTable, mass_kg, cda_m2: float, cr: float) -> np.ndarray:
+    """The largest wheel power [W] a source asks of a vehicle at each mass: the maximum
+    over the moving steps of Delta_i / dt_i (eq. 28 over the step, no rotating inertia),
+    0 for a source that never moves."""
+    m = np.atleast_1d(np.asarray(mass_kg, dtype=np.float64))
+    mv = st.moving
+    if not mv.any():
+        return np.zeros(m.shape)
+    dt = st.dt[mv]
+    slope = (st.x[mv] + cr * st.r[mv]) / dt
+    icpt = cda_m2 * st.a[mv] / dt
+    out = np.empty(m.shape)
+    step = max(1, _RANGE_CHUNK_CELLS // slope.size)
+    for lo in range(0, m.size, step):
+        out[lo:lo + step] = (m[lo:lo + step, None] * slope[None, :] + icpt[None, :]).max(axis=1)
+    return out
+
+
+def power_mass_window(st: StepTable, max_power_w: float, cda_m2: float, cr: float) -> tuple[float, float]:
+    """The masses [kg] at which a vehicle of rated power ``max_power_w`` [W] can follow
+    the source: (low, high) with :func:`peak_wheel_power_w` <= ``max_power_w`` exactly
+    between them (every step's power is affine in the mass, so the set is an interval);
+    (nan, nan) when no mass can."""
+    mv = st.moving
+    if not mv.any():
+        return 0.0, math.inf
+    dt = st.dt[mv]
+    slope = (st.x[mv] + cr * st.r[mv]) / dt
+    icpt = cda_m2 * st.a[mv] / dt
+    if np.any((slope == 0) & (icpt > max_power_w)):
+        return math.nan, math.nan
+    with np.errstate(divide="ignore", invalid="ignore"):
+        bound = (max_power_w - icpt) / slope
+    hi = float(np.min(bound[slope > 0], initial=math.inf))
+    lo = float(np.max(bound[slope < 0], initial=0.0))
+    if lo > hi:
+        return math.nan, math.nan
+    return lo, hi
+
+
+def follow_flags(block: SweepBlock) -> SweepBlock:
+    """``block`` with ``over_power`` (the source asks more wheel power than the vehicle's
+    ``max_power_kw`` at the row's mass; see :func:`power_mass_window`) and
+    ``over_speed`` (the source is faster than its ``max_speed_kmh``): 1.0 / 0.0, NaN for
+    rows of vehicles without the key. Rated power is at the motor or engine shaft, so the
+    test is lenient: the drivetrain's losses and rotating parts ask more still."""
+    from dataclasses import replace
+
+    ps = block.pset
+    over_p = np.full(ps.n, np.nan)
+    over_v = np.full(ps.n, np.nan)
+    for j, v in enumerate(ps.vehicles):
+        if v.max_power_w is None and v.max_speed_mps is None:
+            continue
+        rows = np.flatnonzero(ps.vehicle_index == j)
+        st = block.source.step_table
+        if v.max_speed_mps is not None:
+            over_v[rows] = float(st.v_max_mps > v.max_speed_mps * (1.0 + 1e-9))
+        if v.max_power_w is not None:
+            lo, hi = power_mass_window(st, v.max_power_w, v.cda_m2, v.cr)
+            m = ps.mass_kg[rows]
+            over_p[rows] = np.where(np.isnan(lo), 1.0, ((m < lo) | (m > hi)).astype(float))
+    if np.all(np.isnan(over_p)) and np.all(np.isnan(over_v)):
+        return block
+    return replace(block, over_power=over_p, over_speed=over_v)
