@@ -147,3 +147,53 @@ def test_range_equals_the_reference_for_any_load(payload, battery_kwh, soc, seed
     b = predict_source(_source(legs), PredictionSet.build([v], payload_kg=[payload]), soc_start_pct=soc, ranges=True)
     want = reference_crossing(legs, soc / 100 * v.battery_j, repeat=True, **_ev_step(v, v.kerb_mass_kg + payload))
     _close(b.range_m[0], want[1])
+
+
+# --------------------------------------------------------------------- command line
+
+from typer.testing import CliRunner  # noqa: E402
+
+from cevm.cli import app  # noqa: E402
+
+runner = CliRunner()
+
+
+def _small_ev(tmp_path, root, battery_kwh=1.5):
+    text = (root / "configs/vehicles/electric-bus.toml").read_text()
+    p = tmp_path / "small-bus.toml"
+    p.write_text(text.replace("battery_kwh = 124.0", f"battery_kwh = {battery_kwh}"))
+    return p
+
+
+def test_predict_says_where_an_ev_runs_empty_never_a_negative_charge(tmp_path, root):
+    import json
+
+    ev = _small_ev(tmp_path, root)
+    urban = root / "configs/cycles/urban-bus.csv"
+    res = runner.invoke(app, ["predict", "-v", str(ev), "-c", str(urban), "-f", "json", "--range"])
+    assert res.exit_code == 0, res.output
+    row = json.loads(res.stdout)[0]
+    assert row["vehicle_key"] == "small-bus" and row["soc_end_pct"] is None and row["soc_min_pct"] == 0.0
+    assert 0 < row["empty_at_km"] < row["distance_km"] and row["range_km"] == pytest.approx(row["empty_at_km"])
+    assert 0 < row["reserve_at_km"] < row["empty_at_km"] and row["reserve_ok"] is False
+    assert "run empty on the way" in res.output
+    # the plain reference on the cycle file
+    from cevm.io import load_vehicle, read_cycle_csv
+
+    v, cyc = load_vehicle(ev), read_cycle_csv(urban)
+    want = reference_crossing([(cyc.time_s, cyc.speed_mps, cyc.elevation_m)], v.battery_j, **_ev_step(v, v.mass_kg))
+    assert row["empty_at_km"] == pytest.approx(want[1] / 1e3, rel=1e-9)
+    table = runner.invoke(app, ["predict", "-v", str(ev), "-c", str(urban)])
+    assert table.exit_code == 0 and "NO (empty at" in table.output
+
+
+def test_feasibility_gives_the_range_and_no_negative_charge(tmp_path, root):
+    import json
+
+    ev = _small_ev(tmp_path, root)
+    res = runner.invoke(app, ["feasibility", "-v", str(ev), "-c", str(root / "configs/cycles/urban-bus.csv"),
+                              "-f", "json"])
+    assert res.exit_code == 0, res.output
+    row = json.loads(res.stdout)[0]
+    assert row["soc_end_pct"] is None and row["soc_min_pct"] == 0.0 and row["feasible"] is False
+    assert row["range_km"] == pytest.approx(row["empty_at_km"]) and row["range_reserve_km"] < row["range_km"]

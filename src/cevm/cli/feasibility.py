@@ -3,6 +3,7 @@ largest payload (:mod:`cevm.core.feasibility`)."""
 
 from __future__ import annotations
 
+import math
 from contextlib import ExitStack
 from typing import IO, Annotated, Optional
 
@@ -34,6 +35,7 @@ from cevm.core.cycle import CR0_DEFAULT
 from cevm.core.feasibility import Feasibility, feasibility
 from cevm.core.sweep import DEFAULT_RESERVE_PCT, DEFAULT_SOC_START_PCT
 from cevm.errors import CevmError
+from cevm.text import printable
 from cevm.units import J_PER_KWH
 
 
@@ -48,7 +50,8 @@ def _feasibility_rows(res: Feasibility) -> list[dict]:
     for i, veh in enumerate(res.vehicles):
         f = res.feasible[i]
         row = {
-            "source": src.name, "source_kind": src.kind, "vehicle": veh.name, "powertrain": veh.powertrain,
+            "source": src.name, "source_kind": src.kind, "vehicle": veh.name, "vehicle_key": veh.label,
+            "powertrain": veh.powertrain,
             "distance_km": src.distance_m / 1000.0, "mass_kg": float(res.mass_kg[i]),
             "payload_kg": float(res.payload_kg[i]), "over_max_gross": bool(res.over_max_gross[i]),
             "feasible": None if f != f else bool(f > 0.5),
@@ -60,8 +63,21 @@ def _feasibility_rows(res: Feasibility) -> list[dict]:
             row.update(fuel_l=num(res.fuel_l[i]), tank_l=veh.tank_l, tank_margin_l=num(res.tank_margin_l[i]))
         row.update(max_payload_kg=num(res.max_payload_kg[i]), min_payload_kg=num(res.min_payload_kg[i]),
                    limited_by=res.limited_by[i], ambient_c=num(res.ambient_c[i]), ambient_from=res.ambient_from[i])
+        if veh.is_ev:
+            row.update(reserve_at_km=num(res.reserve_at_m[i] / 1e3), reserve_at_s=num(res.reserve_at_s[i]))
+        row.update(empty_at_km=num(res.empty_at_m[i] / 1e3), empty_at_s=num(res.empty_at_s[i]),
+                   range_km=_range(res.range_m[i]))
+        if veh.is_ev:
+            row["range_reserve_km"] = _range(res.range_reserve_m[i])
         rows.append(row)
     return rows
+
+
+def _range(range_m: float) -> float | None:
+    """A range in km; None where unknown, and where unlimited (a source that gives back
+    what it takes: JSON has no infinity)."""
+    x = float(range_m)
+    return None if not math.isfinite(x) else x / 1e3
 
 
 @with_cycle_options
@@ -95,7 +111,8 @@ def feasibility_cmd(
 
     Margins (EV: lowest state of charge above the reserve; ICE: fuel against tank_l) and
     the largest payload that keeps the reserve (or fits the tank) within max_gross_kg,
-    exact to the kilogram."""
+    exact to the kilogram; where the reserve is first crossed or the battery or tank
+    runs empty, and the range (the route driven again and again)."""
     if not (cycle or trip or vehicle_id or route):
         raise fail("give at least one route: --route (or --cycle, --trip, --vehicle-id)")
     if payload_kg is not None and mass_kg is not None:
@@ -149,23 +166,36 @@ def _print_feasibility(rows: list[dict], stream: IO[str]) -> None:
         return "?" if f is None else ("yes" if f else "NO")
 
     table = []
+    names: dict[str, str] = {}
     for r in rows[:TABLE_MAX_ROWS]:
         if r["powertrain"] == "ev":
-            state = f"{r['soc_min_pct']:.1f}/{r['soc_end_pct']:.1f} %"
+            end = "-" if r["soc_end_pct"] is None else f"{r['soc_end_pct']:.1f}"
+            state = f"{r['soc_min_pct']:.1f}/{end} %"
             margin = f"{r['reserve_margin_pct']:+.1f} pp"
+            if r.get("empty_at_km") is not None:
+                margin += f" (empty at {r['empty_at_km']:,.1f} km)"
+            elif r.get("reserve_at_km") is not None:
+                margin += f" (reserve at {r['reserve_at_km']:,.1f} km)"
         else:
             state = f"{r['fuel_l']:.1f}/" + (f"{r['tank_l']:g} l" if r.get("tank_l") else "? l")
             margin = "-" if r.get("tank_margin_l") is None else f"{r['tank_margin_l']:+.1f} l"
+            if r.get("empty_at_km") is not None:
+                margin += f" (empty at {r['empty_at_km']:,.1f} km)"
         if r["over_max_gross"]:
             margin += " (over max gross)"
         mp = r["max_payload_kg"]
         payload = "none" if mp is None else f"{mp:,.0f}"
         if r["min_payload_kg"]:
             payload = f"{r['min_payload_kg']:,.0f} to {payload}"
-        table.append({"route": r["source"], "vehicle": r["vehicle"], "payload kg": r["payload_kg"],
+        table.append({"route": r["source"], "vehicle": r["vehicle_key"], "payload kg": r["payload_kg"],
                       "feasible": mark(r["feasible"]), "state": state, "margin": margin,
-                      "max payload kg": payload, "limited by": r["limited_by"]})
+                      "range km": r["range_km"], "max payload kg": payload, "limited by": r["limited_by"]})
+        names[r["vehicle_key"]] = r["vehicle"]
     title = "cevm feasibility" + (f" (first {len(table)} of {len(rows)})" if len(rows) > len(table) else "")
-    write_rows(table, OutputFormat.table, title=title, digits={"payload kg": 0}, stream=stream,
-               columns=["route", "vehicle", "payload kg", "feasible", "state", "margin", "max payload kg", "limited by"],
+    write_rows(table, OutputFormat.table, title=title, digits={"payload kg": 0, "range km": 1}, stream=stream,
+               columns=["route", "vehicle", "payload kg", "feasible", "state", "margin", "range km", "max payload kg",
+                        "limited by"],
                headers={"state": "SoC min/end, fuel/tank"})
+    legend = "; ".join(f"{k} = {v}" for k, v in names.items() if k != v)
+    if legend:
+        stream.write(printable(f"vehicles: {legend}") + "\n")

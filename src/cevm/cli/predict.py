@@ -8,8 +8,16 @@ Output of ``predict`` (one row per source x vehicle x mass, source-major):
   ``distance_km``, ``duration_s``, ``wheel_energy_kwh``, then EV rows ``energy_kwh``,
   ``energy_kwh_per_km`` and ICE rows ``fuel_l``, ``fuel_l_per_100km``, ``ice_braking``
   (the contract of the first ``cevm predict``), and after them ``source_kind``,
-  ``payload_kg``, ``over_max_gross``, EV: ``soc_end_pct``, ``soc_min_pct``,
-  ``reserve_ok``; ICE: ``tank_ok`` (null without ``tank_l``). Numbers in full precision.
+  ``payload_kg``, ``over_max_gross``, EV: ``soc_end_pct`` (null when it runs empty on
+  the way), ``soc_min_pct`` (never below 0), ``reserve_ok``; ICE: ``tank_ok`` (null
+  without ``tank_l``); then ``vehicle_key`` (the vehicle's id: its file's ``id`` key or
+  stem), EV: ``reserve_at_km``, ``reserve_at_s`` (where it first crosses the reserve,
+  null if it keeps it); ``empty_at_km``, ``empty_at_s`` (where the battery or the tank
+  runs empty, null if it does not); ``range_km`` (EV also ``range_reserve_km``) with
+  ``--range``: the distance to empty (to the reserve) with the source driven again and
+  again; ``over_power``, ``over_speed`` (the source asks more wheel power than
+  ``max_power_kw`` at the row's mass, or more speed than ``max_speed_kmh``; null for a
+  vehicle without them). Numbers in full precision.
 - CSV: the same columns, the contract's first, written in blocks with fixed decimals
   (see :data:`CSV_DECIMALS`: 1 g, 1 mm, 1 ms, 3.6 J, 1 ul, 1e-6 %), trailing zeros
   dropped; empty cells where a column does not apply.
@@ -75,32 +83,36 @@ WRITE_BATCH_ROWS = 32768
 CSV_DECIMALS = {
     "mass_kg": 3, "payload_kg": 3, "distance_km": 6, "duration_s": 3, "wheel_energy_kwh": 6, "energy_kwh": 6,
     "energy_kwh_per_km": 6, "fuel_l": 6, "fuel_l_per_100km": 6, "soc_end_pct": 6, "soc_min_pct": 6, "ambient_c": 3,
+    "reserve_at_km": 6, "reserve_at_s": 3, "empty_at_km": 6, "empty_at_s": 3, "range_km": 6, "range_reserve_km": 6,
 }
 #: Columns of ``predict`` in CSV order: the first contract's, then the new ones.
 PREDICT_COLUMNS = (
     "cycle", "vehicle", "mass_kg", "distance_km", "duration_s", "wheel_energy_kwh", "energy_kwh", "energy_kwh_per_km",
     "fuel_l", "fuel_l_per_100km", "source_kind", "powertrain", "payload_kg", "over_max_gross", "soc_end_pct",
-    "soc_min_pct", "reserve_ok", "tank_ok", "ice_braking", "ambient_c", "ambient_from",
+    "soc_min_pct", "reserve_ok", "tank_ok", "ice_braking", "ambient_c", "ambient_from", "vehicle_key", "reserve_at_km",
+    "reserve_at_s", "empty_at_km", "empty_at_s", "range_km", "range_reserve_km", "over_power", "over_speed",
 )
 _EV_KEYS = ("cycle", "vehicle", "powertrain", "mass_kg", "distance_km", "duration_s", "wheel_energy_kwh",
             "energy_kwh", "energy_kwh_per_km", "source_kind", "payload_kg", "over_max_gross", "soc_end_pct",
-            "soc_min_pct", "reserve_ok", "ambient_c", "ambient_from")
+            "soc_min_pct", "reserve_ok", "ambient_c", "ambient_from", "vehicle_key", "reserve_at_km", "reserve_at_s",
+            "empty_at_km", "empty_at_s", "range_km", "range_reserve_km", "over_power", "over_speed")
 _ICE_KEYS = ("cycle", "vehicle", "powertrain", "mass_kg", "distance_km", "duration_s", "wheel_energy_kwh",
              "fuel_l", "fuel_l_per_100km", "ice_braking", "source_kind", "payload_kg", "over_max_gross", "tank_ok",
-             "ambient_c", "ambient_from")
-_TEXT = {"cycle", "vehicle", "source_kind", "powertrain", "ice_braking", "ambient_from"}
-_BOOL = {"over_max_gross", "reserve_ok", "tank_ok"}
+             "ambient_c", "ambient_from", "vehicle_key", "empty_at_km", "empty_at_s", "range_km", "over_power",
+             "over_speed")
+_TEXT = {"cycle", "vehicle", "source_kind", "powertrain", "ice_braking", "ambient_from", "vehicle_key"}
+_BOOL = {"over_max_gross", "reserve_ok", "tank_ok", "over_power", "over_speed"}
 
 PREDICT_HEADERS = {
     "mass_kg": "mass kg", "payload_kg": "payload kg", "distance_km": "km", "duration_s": "s",
     "wheel_energy_kwh": "wheel kWh", "energy_kwh": "battery kWh", "energy_kwh_per_km": "kWh/km", "fuel_l": "fuel l",
     "fuel_l_per_100km": "l/100km", "soc_end_pct": "SoC end %", "soc_min_pct": "SoC min %",
     "reserve_ok": "reserve ok", "tank_ok": "tank ok", "over_max_gross": "over max gross",
-    "status": "reserve / tank ok", "ambient_c": "ambient degC",
+    "status": "reserve / tank ok", "ambient_c": "ambient degC", "vehicle_key": "vehicle", "range_km": "range km",
 }
 PREDICT_DIGITS = {"mass_kg": 0, "payload_kg": 0, "duration_s": 0, "distance_km": 2, "wheel_energy_kwh": 2,
                   "energy_kwh": 2, "energy_kwh_per_km": 3, "fuel_l": 2, "fuel_l_per_100km": 1, "soc_end_pct": 1,
-                  "soc_min_pct": 1, "ambient_c": 1}
+                  "soc_min_pct": 1, "ambient_c": 1, "range_km": 1}
 
 
 def _values(specs: Optional[list[str]], option: str) -> np.ndarray | None:
@@ -148,7 +160,21 @@ def _block_columns(block: SweepBlock) -> dict[str, object]:
         "ambient_from": (block.ambient_from.astype(np.int64), list(AMBIENT_ORIGINS)),
         "tank_ok": block.tank_ok,
         "ice_braking": (vi, list(ps.braking)),
+        "vehicle_key": (vi, [v.label for v in ps.vehicles]),
+        "reserve_at_km": _optional(block.reserve_at_m, n, 1e-3),
+        "reserve_at_s": _optional(block.reserve_at_s, n),
+        "empty_at_km": _optional(block.empty_at_m, n, 1e-3),
+        "empty_at_s": _optional(block.empty_at_s, n),
+        "range_km": _optional(block.range_m, n, 1e-3),
+        "range_reserve_km": _optional(block.range_reserve_m, n, 1e-3),
+        "over_power": _optional(block.over_power, n),
+        "over_speed": _optional(block.over_speed, n),
     }
+
+
+def _optional(values: np.ndarray | None, n: int, scale: float = 1.0) -> np.ndarray:
+    """An optional block array in output units (NaN where the block has none)."""
+    return np.full(n, np.nan) if values is None else values * scale
 
 
 def _concat_columns(cols: list[dict[str, object]]) -> dict[str, object]:
@@ -295,6 +321,7 @@ class _PredictWriter:
         self.pending_rows = 0
         self.rows = 0
         self.table_rows: list[dict] = []
+        self.names: dict[str, str] = {}
         self.started = False
 
     def add(self, block: SweepBlock) -> None:
@@ -338,21 +365,23 @@ class _PredictWriter:
                 else:
                     x = float(c[i])
                     row[k] = None if x != x else (x > 0.5 if k in _BOOL else x)
-            ok = row["reserve_ok"] if row["powertrain"] == "ev" else row["tank_ok"]
-            row["status"] = ("?" if ok is None else "yes" if ok else "NO") + (" (over max gross)" if row["over_max_gross"] else "")
-            self.table_rows.append(row)
+            self.table_rows.append(_with_status(row))
+            self.names[row["vehicle_key"]] = row["vehicle"]
 
     def close(self) -> None:
         if self.fmt == OutputFormat.table:
             rows = self.table_rows
-            columns = ["cycle", "vehicle", "mass_kg", "distance_km", "energy_kwh", "energy_kwh_per_km", "soc_min_pct",
-                       "fuel_l", "fuel_l_per_100km", "status"]
+            columns = ["cycle", "vehicle_key", "mass_kg", "distance_km", "energy_kwh", "energy_kwh_per_km",
+                       "soc_min_pct", "fuel_l", "fuel_l_per_100km", "range_km", "status"]
             columns = [c for c in columns if any(r.get(c) is not None for r in rows)]
             if self.temperature_used:
                 columns.insert(3, "ambient_c")
             title = "cevm predict" + (f" (first {len(rows)} of {self.rows} rows)" if self.rows > len(rows) else "")
             write_rows(rows, OutputFormat.table, columns=columns, title=title, digits=PREDICT_DIGITS,
                        headers=PREDICT_HEADERS, stream=self.stream)
+            legend = "; ".join(f"{k} = {v}" for k, v in self.names.items() if k != v)
+            if legend:
+                self.stream.write(printable(f"vehicles: {legend}") + "\n")
             self.stream.flush()
             if self.rows > len(rows):
                 typer.echo(f"cevm: {self.rows - len(rows)} more rows not shown; use --format csv or json "
@@ -414,6 +443,35 @@ class Assumptions:
                 out.append(f"cevm: warning: {w}")
         return out
 
+def _count_flags(block: SweepBlock) -> np.ndarray:
+    """How many rows of a block run empty on the way, ask too much power, ask too much
+    speed."""
+    def flagged(a: np.ndarray | None) -> int:
+        return 0 if a is None else int(np.count_nonzero(a == 1.0))
+
+    empty = 0 if block.empty_at_m is None else int(np.count_nonzero(np.isfinite(block.empty_at_m)))
+    return np.array([empty, flagged(block.over_power), flagged(block.over_speed)])
+
+
+def _with_status(row: dict) -> dict:
+    """A table row with its 'status': reserve kept (EV) or tank enough (ICE), and where
+    it is not, the first kilometre that fails; over max gross; what the vehicle cannot
+    follow."""
+    ev = row["powertrain"] == "ev"
+    ok = row["reserve_ok"] if ev else row["tank_ok"]
+    status = "?" if ok is None else "yes" if ok else "NO"
+    if row.get("empty_at_km") is not None:
+        status += f" (empty at {row['empty_at_km']:,.1f} km)"
+    elif ev and row.get("reserve_at_km") is not None:
+        status += f" (reserve at {row['reserve_at_km']:,.1f} km)"
+    if row["over_max_gross"]:
+        status += " (over max gross)"
+    cannot = [what for what, key in (("power", "over_power"), ("speed", "over_speed")) if row.get(key)]
+    if cannot:
+        status += f" (cannot follow: {', '.join(cannot)})"
+    row["status"] = status
+    return row
+
 
 # ---------------------------------------------------------------------------- predict
 
@@ -448,6 +506,12 @@ def predict_cmd(
     ice_braking: IceBrakingOption = None,
     ambient_c: AmbientOption = None,
     cr0: Cr0Option = CR0_DEFAULT,
+    with_range: Annotated[
+        bool, typer.Option("--range", help="Add each row's range: the distance to empty (range_km) and to the "
+                                           "reserve (range_reserve_km, EV), with the source driven again and again "
+                                           "without recharging or refuelling. One step-by-step sum per row "
+                                           "(about 10x the time of a sweep without it).")
+    ] = False,
     workers: Annotated[
         Optional[int], typer.Option("--workers", "-w", min=1, help="Worker processes, a batch of sources per task "
                                     "(default 1: in this process; a large sweep of many routes runs ~1.3x faster "
@@ -465,8 +529,11 @@ def predict_cmd(
     routes (--route); the 'cycle' column names each (a cycle file's stem, and with
     --speed-col its column: 'trucks[Long haul, 26t]'). EV rows give the state of charge at
     the end and at its lowest along the way, from --soc-start and the battery, and
-    whether it stays above --reserve-pct; ICE rows whether the fuel fits tank_l. Masses
-    above max_gross_kg are kept and flagged (over_max_gross). Every row says the ambient
+    whether it stays above --reserve-pct, and where it first crosses the reserve or runs
+    empty (never a state of charge below 0); ICE rows whether the fuel fits tank_l, and
+    where the tank runs dry. --range adds the range. Masses above max_gross_kg are kept
+    and flagged (over_max_gross); a source that asks more than a vehicle's max_power_kw
+    or max_speed_kmh is flagged (over_power, over_speed). Every row says the ambient
     temperature it assumed (ambient_c, ambient_from); a prediction outside what a
     calibrated vehicle was fitted on (temperature, mass, duty) is warned about."""
     if not (cycle or trip or vehicle_id or route):
@@ -495,8 +562,11 @@ def predict_cmd(
             stream = open_out(stack, out)
             writer = _PredictWriter(fmt, stream, temperature_used=any(uses_temperature(v) for v in vehicles))
             keep_for_plot = plot is not None and np.bincount(pset.vehicle_index).max() > 1
+            flagged = np.zeros(3, dtype=np.int64)
             plot_data = []
-            for block in sweep(sources, pset, soc_start_pct=soc_start, reserve_pct=reserve_pct, executor=executor):
+            for block in sweep(sources, pset, soc_start_pct=soc_start, reserve_pct=reserve_pct, executor=executor,
+                               ranges=with_range):
+                flagged += _count_flags(block)
                 writer.add(block)
                 assumed.add(block)
                 if keep_for_plot and block.source_index < PLOT_MAX_LINES:
@@ -515,6 +585,12 @@ def predict_cmd(
     if over:
         typer.echo(f"cevm: warning: {over} predictions exceed their vehicle's max_gross_kg (column over_max_gross)",
                    err=True)
+    for n_rows, what in zip(flagged.tolist(), ("run empty on the way (columns empty_at_km, empty_at_s)",
+                                                "ask more wheel power than their vehicle's max_power_kw (column "
+                                                "over_power)", "ask more speed than their vehicle's max_speed_kmh "
+                                                "(column over_speed)")):
+        if n_rows:
+            typer.echo(f"cevm: warning: {n_rows} predictions {what}", err=True)
     if out is not None and fmt != OutputFormat.table:
         typer.echo(f"cevm predict: {writer.rows} rows -> {out}", err=True)
 

@@ -29,6 +29,7 @@ import numpy as np
 
 from cevm.core import checks
 from cevm.core.sweep import (
+    RANGE_FIELDS,
     DEFAULT_RESERVE_PCT,
     DEFAULT_SOC_START_PCT,
     PredictionSet,
@@ -38,6 +39,7 @@ from cevm.core.sweep import (
     ce_wheel_energy_j,
     check_cr,
     peak_energy_j,
+    predict_source,
     row_terms,
 )
 from cevm.core.vehicle import Vehicle
@@ -58,7 +60,10 @@ class Feasibility:
     which convexity allows on descents), ``limited_by``: ``"reserve"``, ``"tank"``,
     ``"max_gross_kg"``, ``"payload_cap"`` or ``"infeasible"``. Payloads count from
     ``kerb_mass_kg`` (from ``mass_kg`` for a vehicle without one). ``ambient_c`` the
-    temperature each vehicle was evaluated at [degC], ``ambient_from`` its origin.
+    temperature each vehicle was evaluated at [degC], ``ambient_from`` its origin. The
+    state of charge never goes below 0: an EV that runs empty on the way has
+    ``soc_end_pct`` NaN and ``soc_min_pct`` 0, and ``empty_at_m`` says where (see the
+    range fields below).
     """
 
     source: Source
@@ -78,6 +83,16 @@ class Feasibility:
     limited_by: tuple[str, ...]
     ambient_c: np.ndarray | None = None
     ambient_from: tuple[str, ...] = ()
+    # at the evaluated load (:func:`cevm.core.sweep.source_ranges`): where the reserve is
+    # first crossed (EV) and the battery or tank runs empty along the source [m], [s]
+    # (NaN if not), and the range [m] to empty and to the reserve with the source
+    # driven again and again (inf: a source that gives back what it takes)
+    reserve_at_m: np.ndarray | None = None
+    reserve_at_s: np.ndarray | None = None
+    empty_at_m: np.ndarray | None = None
+    empty_at_s: np.ndarray | None = None
+    range_m: np.ndarray | None = None
+    range_reserve_m: np.ndarray | None = None
 
 
 class _LoadFunction:
@@ -282,7 +297,14 @@ def feasibility(
                     vl = vd[lo_ok]
                     max_p[vl] = _last_true(f.ok, vl, pstar[d][lo_ok], plim[vl])
                     limited[vl] = kind[c][d][lo_ok]
+    at = load_ranges(source, vehicles, mass, soc_start_pct=soc_start_pct, reserve_pct=reserve_pct,
+                     ice_braking=ice_braking)
+    empty = np.isfinite(at["empty_at_m"]) & ev
+    with np.errstate(invalid="ignore"):
+        soc_end[empty | (soc_end < 0)] = np.nan  # it does not reach the end: no charge below 0
+        soc_min[empty | (soc_min < 0)] = 0.0
     return Feasibility(
+        **at,
         source=source,
         vehicles=vehicles,
         mass_kg=mass,
@@ -301,3 +323,18 @@ def feasibility(
         ambient_c=terms.ambient_c[:, 0],
         ambient_from=tuple(AMBIENT_ORIGINS[int(c)] for c in terms.ambient_from[:, 0]),
     )
+
+
+def load_ranges(source: Source, vehicles: Sequence[Vehicle], mass_kg: np.ndarray, *,
+                soc_start_pct: float = DEFAULT_SOC_START_PCT, reserve_pct: float = DEFAULT_RESERVE_PCT,
+                ice_braking: str | None = None) -> dict[str, np.ndarray]:
+    """Each vehicle at its own gross mass ``mass_kg`` (V,) on ``source``: where it first
+    crosses its reserve and runs empty, and its range (:func:`cevm.core.sweep.source_ranges`,
+    the source repeated), as the ``Feasibility`` fields of those names (arrays (V,), SI)."""
+    out = {k: np.full(len(vehicles), np.nan) for k in RANGE_FIELDS}
+    for i, v in enumerate(vehicles):
+        ps = PredictionSet.build([v], mass_kg=[float(mass_kg[i])], ice_braking=ice_braking)
+        b = predict_source(source, ps, soc_start_pct=soc_start_pct, reserve_pct=reserve_pct, ranges=True)
+        for k in RANGE_FIELDS:
+            out[k][i] = getattr(b, k)[0]
+    return out

@@ -1444,6 +1444,11 @@ def crossings(st: StepTable, c: _StepCoefficients, levels: np.ndarray, *, repeat
     return t_out, d_out, within
 
 
+#: The fields :func:`source_ranges` fills (of :class:`SweepBlock`, and of
+#: :class:`cevm.core.feasibility.Feasibility`).
+RANGE_FIELDS = ("reserve_at_m", "reserve_at_s", "empty_at_m", "empty_at_s", "range_m", "range_reserve_m")
+
+
 def source_ranges(block: SweepBlock, *, soc_start_pct: float = DEFAULT_SOC_START_PCT,
                   reserve_pct: float = DEFAULT_RESERVE_PCT, repeat: bool = True) -> SweepBlock:
     """``block`` with where each row first crosses its reserve (EV) and runs empty
@@ -1478,8 +1483,7 @@ def source_ranges(block: SweepBlock, *, soc_start_pct: float = DEFAULT_SOC_START
             ev_may = ev & (block.soc_min_pct < reserve_pct)
             ice_may = ~ev & ((block.fuel_l >= ps.tank_l) | (coef.w > 0) | (coef.ck < 0))
         need = has_level & (ev_may | ice_may)
-    out = {f: np.full(n, np.nan) for f in ("reserve_at_m", "reserve_at_s", "empty_at_m", "empty_at_s",
-                                           "range_m", "range_reserve_m")}
+    out = {f: np.full(n, np.nan) for f in RANGE_FIELDS}
     rows = np.flatnonzero(need)
     if rows.size:
         levels = np.stack([l_res[rows], l_empty[rows]], axis=1)

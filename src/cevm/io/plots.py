@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING, Optional
 import numpy as np
 
 from cevm.errors import CevmError
+from cevm.text import printable
 
 if TYPE_CHECKING:
     from cevm.core.calibration import CalibrationResult
@@ -80,6 +81,13 @@ def plot_simulation(frame, res, path: Path, title: str) -> None:
     plt.close(fig)
 
 
+def vehicle_label(vehicle) -> str:
+    """A vehicle in a legend: its name and its id (two calibrations of one vehicle share
+    a name, never an id)."""
+    name = printable(vehicle.name)
+    return name if not vehicle.id or vehicle.id == vehicle.name else f"{name} [{printable(vehicle.id)}]"
+
+
 def plot_predictions(path: Path, sources: list[Source], pset: PredictionSet, sweep_data: list, soc_start: float,
                      reserve_pct: float, ice_braking: Optional[str],
                      warn: Callable[[str], None] | None = None) -> None:
@@ -114,7 +122,7 @@ def plot_predictions(path: Path, sources: list[Source], pset: PredictionSet, swe
             x = (pset.payload_kg if use_payload else pset.mass_kg)[sel]
             veh = pset.vehicles[v]
             ys = sweep_data[s]
-            label = f"{veh.name} on {sources[s].name}"
+            label = f"{vehicle_label(veh)} on {printable(sources[s].name)}"
             if veh.is_ev:
                 ax_ev.plot(x, ys["energy_kwh"][sel], marker="o", ms=3, label=label)
             else:
@@ -132,9 +140,15 @@ def plot_predictions(path: Path, sources: list[Source], pset: PredictionSet, swe
             veh = pset.vehicles[v]
             m = float(pset.mass_kg[pset.vehicle_index == v][0])
             _, dist, e = energy_trajectory(sources[s], veh, m, ice_braking=ice_braking)
-            label = f"{veh.name} on {sources[s].name} ({m:,.0f} kg)"
+            label = f"{vehicle_label(veh)} on {printable(sources[s].name)} ({m:,.0f} kg)"
             if veh.is_ev:
-                ax_ev.plot(dist / 1000.0, soc_start - 100.0 * e / veh.battery_j, label=label)
+                soc = soc_start - 100.0 * e / veh.battery_j
+                empty = np.flatnonzero(soc < 0)
+                if empty.size:  # the line ends where the battery runs empty: no charge below 0
+                    soc = soc.copy()
+                    soc[empty[0]:] = np.nan
+                    label += f", empty at {dist[empty[0]] / 1000.0:,.1f} km"
+                ax_ev.plot(dist / 1000.0, soc, label=label)
             else:
                 ax_ice.plot(dist / 1000.0, e, label=label)
         if ax_ev is not None:
