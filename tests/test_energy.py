@@ -161,7 +161,7 @@ def test_sweep_totals_and_lowest_soc_equal_the_reference(seed, ambient):
     src = Source.from_cycle(_cycle(t, v, h))
     src_cold = dataclasses.replace(src, name="cold", ambient_c=ambient)
     vehicles = [EV, ICE]
-    pset = PredictionSet.build(vehicles, mass_kg=[15000.0, 30000.0])
+    pset = PredictionSet.build(vehicles, mass_kg=[18000.0, 30000.0])
     blocks = predict_sources([src, src_cold], pset)
     for block in blocks:
         for p in range(pset.n):

@@ -298,7 +298,7 @@ def feasibility(
                     max_p[vl] = _last_true(f.ok, vl, pstar[d][lo_ok], plim[vl])
                     limited[vl] = kind[c][d][lo_ok]
     at = load_ranges(source, vehicles, mass, soc_start_pct=soc_start_pct, reserve_pct=reserve_pct,
-                     ice_braking=ice_braking)
+                     ice_braking=ice_braking, ambient_c=ambient_c)
     empty = np.isfinite(at["empty_at_m"]) & ev
     with np.errstate(invalid="ignore"):
         soc_end[empty | (soc_end < 0)] = np.nan  # it does not reach the end: no charge below 0
@@ -327,13 +327,13 @@ def feasibility(
 
 def load_ranges(source: Source, vehicles: Sequence[Vehicle], mass_kg: np.ndarray, *,
                 soc_start_pct: float = DEFAULT_SOC_START_PCT, reserve_pct: float = DEFAULT_RESERVE_PCT,
-                ice_braking: str | None = None) -> dict[str, np.ndarray]:
+                ice_braking: str | None = None, ambient_c: float | None = None) -> dict[str, np.ndarray]:
     """Each vehicle at its own gross mass ``mass_kg`` (V,) on ``source``: where it first
     crosses its reserve and runs empty, and its range (:func:`cevm.core.sweep.source_ranges`,
     the source repeated), as the ``Feasibility`` fields of those names (arrays (V,), SI)."""
     out = {k: np.full(len(vehicles), np.nan) for k in RANGE_FIELDS}
     for i, v in enumerate(vehicles):
-        ps = PredictionSet.build([v], mass_kg=[float(mass_kg[i])], ice_braking=ice_braking)
+        ps = PredictionSet.build([v], mass_kg=[float(mass_kg[i])], ice_braking=ice_braking, ambient_c=ambient_c)
         b = predict_source(source, ps, soc_start_pct=soc_start_pct, reserve_pct=reserve_pct, ranges=True)
         for k in RANGE_FIELDS:
             out[k][i] = getattr(b, k)[0]

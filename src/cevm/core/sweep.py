@@ -1183,16 +1183,16 @@ def sweep(
                                        lowest_soc=lowest_soc, first_index=i, ranges=ranges)
         return
     use_steps = lowest_soc and bool(pset.is_ev.any())
-    ranges: list[tuple[int, int]] = []
+    spans: list[tuple[int, int]] = []
 
     def tasks() -> Iterator[Task]:
         for i, j in _batches(sources, pset, lowest_soc):
-            ranges.append((i, j))
+            spans.append((i, j))
             batch = tuple(_portable(src, use_steps) for src in sources[i:j])
             yield Task(f"sources {i + 1}-{j} ({sources[i].name})", (batch, pset, soc_start_pct, reserve_pct, lowest_soc))
 
     for k, res in enumerate(executor.run(_predict_arrays, tasks())):
-        i, j = ranges[k]
+        i, j = spans[k]
         if not res.ok:
             raise CevmError(f"predictions for sources {i + 1}-{j} failed on a worker: {res.error}")
         yield from _finish(_as_blocks(sources[i:j], pset, res.value, i), soc_start_pct, reserve_pct, ranges)
@@ -1284,17 +1284,6 @@ def build_step_table(legs: Sequence[LegProfile], *, cr0: float = CR0_DEFAULT,
                      moving=a > 0, v_max_mps=vmax)
 
 
-def _row_ambient_c(pset: PredictionSet) -> np.ndarray:
-    """The ambient temperature of each row [degC]: the set's own (``ambient_c``) if it
-    has one, else each vehicle's default (:func:`cevm.core.vehicle.default_ambient_c`)."""
-    from cevm.core.vehicle import default_ambient_c
-
-    t = getattr(pset, "ambient_c", None)
-    if t is not None:
-        return np.broadcast_to(np.asarray(t, dtype=np.float64), (pset.n,)).copy()
-    return np.array([default_ambient_c(v)[0] for v in pset.vehicles])[pset.vehicle_index]
-
-
 @dataclass(frozen=True, eq=False)
 class _StepCoefficients:
     """Per row, the energy of step i as kx x_i + kr r_i + ka a_i (its negative part,
@@ -1316,13 +1305,12 @@ class _StepCoefficients:
         return _StepCoefficients(*(getattr(self, f)[rows] for f in self.__dataclass_fields__))
 
 
-def step_coefficients(pset: PredictionSet, ice_braking: Sequence[str] | None = None) -> _StepCoefficients:
+def step_coefficients(pset: PredictionSet, ambient_c) -> _StepCoefficients:
     """The per-step energy coefficients of every row of ``pset`` (see :class:`StepTable`
-    and the notes above), with every term of :mod:`cevm.core.energy`."""
-    from cevm.core import energy
-
+    and the notes above), with every term of :mod:`cevm.core.energy` at each row's
+    ambient temperature ``ambient_c`` [degC] (P,) (a block's ``ambient_c``)."""
     n = pset.n
-    t = _row_ambient_c(pset)
+    t = np.broadcast_to(np.asarray(ambient_c, dtype=np.float64), (n,))
     m, cda, cr, eta = pset.mass_kg, pset.cda_m2, pset.cr, pset.eta
     scale = np.where(pset.is_ev, 1.0 / eta, 1.0 / (eta * np.where(pset.is_ev, 1.0, pset.lhv_j_per_l)))
     out = {f: np.zeros(n) for f in ("w", "ck", "aux", "run", "idle", "lump")}
@@ -1475,7 +1463,7 @@ def source_ranges(block: SweepBlock, *, soc_start_pct: float = DEFAULT_SOC_START
     has_level = np.isfinite(l_empty)
     if ev.any() and np.all(np.isnan(block.soc_min_pct[ev])):
         has_level &= ~ev  # no lowest SoC: the EV rows are not evaluated
-    coef = step_coefficients(ps)
+    coef = step_coefficients(ps, block.ambient_c)
     if repeat:
         need = has_level
     else:
@@ -1507,17 +1495,39 @@ def source_ranges(block: SweepBlock, *, soc_start_pct: float = DEFAULT_SOC_START
     return replace(block, soc_end_pct=soc_end, soc_min_pct=soc_min, **out)
 
 
-def peak_wheel_power_w(st: StepTable, mass_kg, cda_m2: float, cr: float) -> np.ndarray:
-    """The largest wheel power [W] a source asks of a vehicle at each mass: the maximum
-    over the moving steps of Delta_i / dt_i (eq. 28 over the step, no rotating inertia),
+#: The window over which the power a source asks is averaged [s] (:func:`follow_flags`):
+#: a drivetrain delivers its rated power for seconds, and one-second steps of a logged
+#: trace carry speed and elevation noise (1 m of elevation noise in 1 s is 430 kW at
+#: 44 t); over 5 s the kinetic and potential energy of the noise cancel.
+POWER_WINDOW_S = 5.0
+
+
+def _window_coefficients(st: StepTable, window_s: float = POWER_WINDOW_S):
+    """Per window of consecutive steps lasting at least ``window_s`` (one starting at
+    each moving step): the sums of x, r, a over its moving steps and its duration, so
+    that its mean wheel power at mass m is (m (sx + Cr sr) + CdA sa) / T."""
+    mv = st.moving
+    x = np.where(mv, st.x, 0.0)  # standstill: the brakes hold the vehicle, no wheel work
+    cx, cr_, ca = (np.concatenate([[0.0], np.cumsum(v)]) for v in (x, st.r, st.a))
+    ct = np.concatenate([[0.0], np.cumsum(st.dt)])
+    starts = np.flatnonzero(mv)
+    ends = np.searchsorted(ct, ct[starts] + window_s * (1.0 - 1e-12), side="left")
+    ends = np.minimum(np.maximum(ends, starts + 1), st.n)
+    dur = ct[ends] - ct[starts]
+    return cx[ends] - cx[starts], cr_[ends] - cr_[starts], ca[ends] - ca[starts], dur
+
+
+def peak_wheel_power_w(st: StepTable, mass_kg, cda_m2: float, cr: float, window_s: float = POWER_WINDOW_S
+                       ) -> np.ndarray:
+    """The largest mean wheel power [W] a source asks of a vehicle at each mass, over
+    any ``window_s`` of driving (eq. 28 summed over the window, no rotating inertia);
     0 for a source that never moves."""
     m = np.atleast_1d(np.asarray(mass_kg, dtype=np.float64))
-    mv = st.moving
-    if not mv.any():
+    if not st.moving.any():
         return np.zeros(m.shape)
-    dt = st.dt[mv]
-    slope = (st.x[mv] + cr * st.r[mv]) / dt
-    icpt = cda_m2 * st.a[mv] / dt
+    sx, sr, sa, dur = _window_coefficients(st, window_s)
+    slope = (sx + cr * sr) / dur
+    icpt = cda_m2 * sa / dur
     out = np.empty(m.shape)
     step = max(1, _RANGE_CHUNK_CELLS // slope.size)
     for lo in range(0, m.size, step):
@@ -1525,17 +1535,17 @@ def peak_wheel_power_w(st: StepTable, mass_kg, cda_m2: float, cr: float) -> np.n
     return out
 
 
-def power_mass_window(st: StepTable, max_power_w: float, cda_m2: float, cr: float) -> tuple[float, float]:
+def power_mass_window(st: StepTable, max_power_w: float, cda_m2: float, cr: float,
+                      window_s: float = POWER_WINDOW_S) -> tuple[float, float]:
     """The masses [kg] at which a vehicle of rated power ``max_power_w`` [W] can follow
     the source: (low, high) with :func:`peak_wheel_power_w` <= ``max_power_w`` exactly
-    between them (every step's power is affine in the mass, so the set is an interval);
-    (nan, nan) when no mass can."""
-    mv = st.moving
-    if not mv.any():
+    between them (each window's power is affine in the mass, so the set is an
+    interval); (nan, nan) when no mass can."""
+    if not st.moving.any():
         return 0.0, math.inf
-    dt = st.dt[mv]
-    slope = (st.x[mv] + cr * st.r[mv]) / dt
-    icpt = cda_m2 * st.a[mv] / dt
+    sx, sr, sa, dur = _window_coefficients(st, window_s)
+    slope = (sx + cr * sr) / dur
+    icpt = cda_m2 * sa / dur
     if np.any((slope == 0) & (icpt > max_power_w)):
         return math.nan, math.nan
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -1551,8 +1561,9 @@ def follow_flags(block: SweepBlock) -> SweepBlock:
     """``block`` with ``over_power`` (the source asks more wheel power than the vehicle's
     ``max_power_kw`` at the row's mass; see :func:`power_mass_window`) and
     ``over_speed`` (the source is faster than its ``max_speed_kmh``): 1.0 / 0.0, NaN for
-    rows of vehicles without the key. Rated power is at the motor or engine shaft, so the
-    test is lenient: the drivetrain's losses and rotating parts ask more still."""
+    rows of vehicles without the key. The power is the mean over any
+    :data:`POWER_WINDOW_S` of driving, and rated power is at the motor or engine shaft,
+    so the test is lenient: the drivetrain's losses and rotating parts ask more still."""
     from dataclasses import replace
 
     ps = block.pset
