@@ -20,8 +20,9 @@ runner = CliRunner()
 @pytest.fixture
 def files(root):
     return {
-        "bus": root / "configs/vehicles/electric-bus.toml",
-        "hgv": root / "configs/vehicles/diesel-hgv.toml",
+        # the paper's figures: the values below are the paper's formulas on them
+        "bus": root / "configs/vehicles/electric-bus-paper.toml",
+        "hgv": root / "configs/vehicles/diesel-hgv-paper.toml",
         "urban": root / "configs/cycles/urban-bus.csv",
         "regional": root / "configs/cycles/regional-delivery.csv",
     }
@@ -87,11 +88,11 @@ def test_bad_input_is_one_line_on_stderr_exit_2(tmp_path, files):
     assert f"{bad}:3: column 'speed_kmh'" in lines[0]
 
 
-def test_simulate_writes_per_second_csv_and_plot(files, tmp_path):
+def test_simulate_writes_per_second_csv_and_plot(files, tmp_path, root):
     import pandas as pd
 
     out, png = tmp_path / "sim.csv", tmp_path / "sim.png"
-    res = runner.invoke(app, ["simulate", "-v", str(files["bus"]), "-c", str(files["urban"]), "--out", str(out),
+    res = runner.invoke(app, ["simulate", "-v", str(root / "configs/vehicles/electric-bus.toml"), "-c", str(files["urban"]), "--out", str(out),
                               "--plot", str(png), "-f", "json"])
     assert res.exit_code == 0, res.output
     summary = json.loads(res.stdout)[0]

@@ -8,15 +8,19 @@ from cevm.io import load_vehicle, load_vehicles, read_cycle_csv
 
 
 def test_shipped_vehicles_hold_the_papers_values(root):
-    bus = load_vehicle(root / "configs/vehicles/electric-bus.toml")
+    bus = load_vehicle(root / "configs/vehicles/electric-bus-paper.toml")
     assert (bus.powertrain, bus.cda_m2, bus.cr, bus.mass_kg, bus.eta) == ("ev", 3.99, 0.0066, 9825.0, 0.78)
     assert bus.battery_j > 0
-    hgv = load_vehicle(root / "configs/vehicles/diesel-hgv.toml")
+    hgv = load_vehicle(root / "configs/vehicles/diesel-hgv-paper.toml")
     assert (hgv.powertrain, hgv.cda_m2, hgv.cr, hgv.eta) == ("ice", 6.62, 0.0066, 0.45)
     assert (hgv.kerb_mass_kg, hgv.max_gross_kg) == (18000.0, 44000.0)
     assert 35e6 <= hgv.fuel_lhv_j_per_l <= 36.5e6
     assert hgv.ice_braking == "paper"
     assert hgv.with_payload(26000).mass_kg == 44000.0
+    # the realistic files keep the paper's road loads
+    for stem, paper in (("electric-bus", bus), ("diesel-hgv", hgv)):
+        v = load_vehicle(root / f"configs/vehicles/{stem}.toml")
+        assert (v.cda_m2, v.cr, v.kerb_mass_kg) == (paper.cda_m2, paper.cr, paper.kerb_mass_kg)
     names = {v.name for v in load_vehicles([root / "configs/vehicles"])}
     assert {"Optare Metrocity EV", "Scania P320 diesel HGV", "Renault Twizy 80"} <= names
 

@@ -237,8 +237,10 @@ _EV_KEYS = {"battery_kwh", "aux_power_kw", "regen_eta", "aux_heating_kw_per_k", 
             "warmup_kwh_per_k"}
 _ICE_KEYS = {"fuel_lhv_mj_per_l", "idle_fuel_lph", "ice_braking", "tank_l", "running_fuel_lph", "kinetic_eta",
              "heating_fuel_lph_per_k", "cooling_fuel_lph_per_k", "warmup_fuel_l_per_k"}
-#: Tables other models may read (e.g. the detailed simulator); kept, not validated here.
-EXTRA_TABLES = {"detailed"}
+#: Tables other models may read (the detailed simulator's [detailed]; [[reference]],
+#: published consumption ranges: cevm vehicle show, tests/test_shipped_vehicles.py);
+#: kept, not validated here.
+EXTRA_TABLES = {"detailed", "reference"}
 
 
 #: Plausibility bounds of the vehicle-file keys, (low, high, unit): no road vehicle lies
