@@ -7,7 +7,7 @@ line on stderr, without a traceback.
 This module creates the app and registers the commands of one module per command (group):
 :mod:`~cevm.cli.ingest`, :mod:`~cevm.cli.trips`, :mod:`~cevm.cli.calibrate`,
 :mod:`~cevm.cli.simulate`, :mod:`~cevm.cli.fleet`, :mod:`~cevm.cli.predict`,
-:mod:`~cevm.cli.feasibility`, :mod:`~cevm.cli.route`; what they share is
+:mod:`~cevm.cli.feasibility`, :mod:`~cevm.cli.route`, :mod:`~cevm.cli.vehicle`; what they share is
 :mod:`~cevm.cli.common` and :mod:`~cevm.cli.output`. The command modules never import
 this package's app, nor each other; the library never imports the command line.
 """
@@ -20,7 +20,7 @@ from typing import Annotated
 import typer
 
 from cevm import __version__
-from cevm.cli import calibrate, feasibility, fleet, ingest, predict, route, simulate, trips
+from cevm.cli import calibrate, feasibility, fleet, ingest, predict, route, simulate, trips, vehicle
 from cevm.cli.common import EXIT_INPUT, fail
 from cevm.errors import CevmError
 
@@ -58,6 +58,7 @@ app.add_typer(fleet.app, name="fleet")
 app.command("predict")(predict.predict_cmd)
 app.command("feasibility")(feasibility.feasibility_cmd)
 app.add_typer(route.app, name="route")
+app.add_typer(vehicle.app, name="vehicle")
 
 
 def main() -> None:

@@ -29,7 +29,7 @@ class OutputFormat(str, Enum):
 ID_COLUMNS = {"cycle", "vehicle", "vehicle_key", "trip_id", "vehicle_id", "source", "route", "file", "id", "day",
               "vehicle id", "start_utc", "created_utc"}
 #: Columns printed left-aligned and allowed to wrap in tables.
-TEXT_COLUMNS = {"cycle", "vehicle", "trip_id", "vehicle_id", "source", "route", "file", "status", "profile", "start_utc", "elevation_source", "day", "day 1", "day 2", "day 3", "method", "stops", "item", "parameter", "std", "in-sample", "cross-validated", "quantity", "terms", "parameters"}
+TEXT_COLUMNS = {"basis", "what", "cycle", "vehicle", "trip_id", "vehicle_id", "source", "route", "file", "status", "profile", "start_utc", "elevation_source", "day", "day 1", "day 2", "day 3", "method", "stops", "item", "parameter", "std", "in-sample", "cross-validated", "quantity", "terms", "parameters"}
 
 
 def _clean(value: Any) -> Any:
@@ -69,7 +69,8 @@ def write_rows(
     CSV: a header of ``columns`` (default: the union of keys in first-seen order).
     Table: a rich table of ``columns`` titled by ``headers`` (default the column names),
     floats rounded to ``digits[column]`` (default 3), at least 120 characters wide when
-    the output is not a terminal (so piped or logged tables do not wrap).
+    the output is not a terminal, and as wide as its identifier and number columns need
+    (so piped or logged tables never cut them; free text wraps).
     """
     stream = stream or sys.stdout
     if columns is None:
@@ -107,9 +108,9 @@ def write_rows(
         for row in cells:
             table.add_row(*row)
         console = Console(file=stream, markup=False, highlight=False)
-        if not console.is_terminal:  # piped or logged: as wide as the table needs
+        if not console.is_terminal:  # piped or logged: wide enough for every unwrapped column
             wide = Console(file=stream, width=10_000, markup=False, highlight=False)
-            need = Measurement.get(wide, wide.options, table).maximum
+            need = Measurement.get(wide, wide.options, table).minimum
             console = Console(file=stream, width=max(console.width, 120, need), markup=False, highlight=False)
         console.print(table)
 

@@ -14,6 +14,7 @@ import numpy as np
 from cevm.core.calibration import TERMS_BY_POWERTRAIN, CalibrationResult
 from cevm.core.calibration.terms import EXTRA_TERMS
 from cevm.errors import CevmError
+from cevm.io.vehicles import stem_id
 
 
 _TOP_KEY = re.compile(r"^(?P<key>[A-Za-z0-9_]+)\s*=\s*(?P<value>[^#\n]*?)(?P<rest>\s*(#.*)?)$")
@@ -154,7 +155,10 @@ def write_calibrated_vehicle(source: Path, out: Path, result: CalibrationResult,
         what = "the input vehicle file" if out.resolve() == source.resolve() else "an existing file"
         raise CevmError(f"{out}: would overwrite {what}; give another --out or --force")
     fitted = ", ".join(f"{k} = {_toml_value(v)}" for k, v in fitted_keys(result).items())
-    text = calibrated_toml(source.read_text(encoding="utf-8"), fitted_keys(result), f"{note}\nfitted: {fitted}",
+    # the calibrated vehicle's id is its own file's stem: never the input file's 'id' key,
+    # so the two can be predicted side by side (cevm.io.vehicles)
+    values = {**fitted_keys(result), "id": stem_id(out)}
+    text = calibrated_toml(source.read_text(encoding="utf-8"), values, f"{note}\nfitted: {fitted}",
                            neutral=neutral_keys(result), calibration=calibration)
     tmp = out.with_name(out.name + ".tmp")
     tmp.write_text(text, encoding="utf-8")
