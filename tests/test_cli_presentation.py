@@ -196,3 +196,12 @@ def test_predict_fast_csv_writer_quotes_and_escapes(tmp_path, root):
     assert "\r" not in res.stdout and res.stdout.count("\n") == 2
     rows = list(csv.DictReader(io.StringIO(res.stdout)))
     assert rows[0]["cycle"] == printable('a,b\r"c')
+
+
+def test_a_leg_repeated_past_the_limit_is_refused_at_once(root, tmp_path):
+    text = (root / "configs/fleet/paper-case-study.toml").read_text()
+    text = text.replace("../cycles/", str(root / "configs/cycles") + "/").replace("../vehicles/", str(root / "configs/vehicles") + "/")
+    p = tmp_path / "s.toml"
+    p.write_text(text.replace("repeat = 3", "repeat = 100000000"))
+    line = _error_line(runner.invoke(app, ["fleet", "plan", str(p)]))  # before: never returned
+    assert "repeat = 100000000 is more than 1,000" in line
