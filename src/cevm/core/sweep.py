@@ -979,7 +979,7 @@ class SweepBlock:
     ambient_c: np.ndarray
     ambient_from: np.ndarray
     # where the reserve / the battery or tank is first crossed, and the range
-    # (:func:`source_ranges`); None when not computed
+    # (:func:`source_ranges`); None when not computed or when no row of the block crosses
     reserve_at_m: np.ndarray | None = None
     reserve_at_s: np.ndarray | None = None
     empty_at_m: np.ndarray | None = None
@@ -1463,17 +1463,27 @@ def source_ranges(block: SweepBlock, *, soc_start_pct: float = DEFAULT_SOC_START
     has_level = np.isfinite(l_empty)
     if ev.any() and np.all(np.isnan(block.soc_min_pct[ev])):
         has_level &= ~ev  # no lowest SoC: the EV rows are not evaluated
-    coef = step_coefficients(ps, block.ambient_c)
     if repeat:
         need = has_level
     else:
+        # an ICE's running fuel can fall along the way only with braking credited (w > 0)
+        # or a kinetic efficiency above eta (a negative kinetic term)
         with np.errstate(invalid="ignore"):
-            ev_may = ev & (block.soc_min_pct < reserve_pct)
-            ice_may = ~ev & ((block.fuel_l >= ps.tank_l) | (coef.w > 0) | (coef.ck < 0))
-        need = has_level & (ev_may | ice_may)
-    out = {f: np.full(n, np.nan) for f in RANGE_FIELDS}
+            need = ev & (block.soc_min_pct < reserve_pct)
+            if not ev.all():
+                falls = np.array([not v.is_ev and (braking_weight(ps.braking[j] or v.ice_braking) > 0
+                                                   or (v.kinetic_eta is not None and v.kinetic_eta > v.eta))
+                                  for j, v in enumerate(ps.vehicles)])[ps.vehicle_index]
+                need |= ~ev & ((block.fuel_l >= ps.tank_l) | falls)
+        need &= has_level
     rows = np.flatnonzero(need)
+    with np.errstate(invalid="ignore"):
+        clean = not (np.any(block.soc_end_pct < 0) or np.any(block.soc_min_pct < 0))
+    if not rows.size and not repeat and clean:
+        return block  # nothing crosses anything: the common case costs no copy
+    out = {f: np.full(n, np.nan) for f in RANGE_FIELDS}
     if rows.size:
+        coef = step_coefficients(ps, block.ambient_c)
         levels = np.stack([l_res[rows], l_empty[rows]], axis=1)
         t, d, inside = crossings(block.source.step_table, coef.take(rows), levels, repeat=repeat)
         res = ev[rows]
@@ -1567,6 +1577,8 @@ def follow_flags(block: SweepBlock) -> SweepBlock:
     from dataclasses import replace
 
     ps = block.pset
+    if all(v.max_power_w is None and v.max_speed_mps is None for v in ps.vehicles):
+        return block
     over_p = np.full(ps.n, np.nan)
     over_v = np.full(ps.n, np.nan)
     for j, v in enumerate(ps.vehicles):
@@ -1580,6 +1592,4 @@ def follow_flags(block: SweepBlock) -> SweepBlock:
             lo, hi = power_mass_window(st, v.max_power_w, v.cda_m2, v.cr)
             m = ps.mass_kg[rows]
             over_p[rows] = np.where(np.isnan(lo), 1.0, ((m < lo) | (m > hi)).astype(float))
-    if np.all(np.isnan(over_p)) and np.all(np.isnan(over_v)):
-        return block
     return replace(block, over_power=over_p, over_speed=over_v)
