@@ -41,11 +41,6 @@ from cevm.io.toml import read_toml
 from cevm.io.vehicles import load_vehicle
 
 
-#: Largest ``repeat`` of a leg: the repeated vector is built by adding copies (its
-#: non-simplified steps are concatenated), so the work grows with the square of the
-#: count (10,000 took a minute; 1,000 about half a second).
-MAX_LEG_REPEAT = 1000
-
 #: A leg resolver: (one copy of a leg source, directory of the scenario file) -> vector.
 LegResolver = Callable[[LegSource, Path], CycleVector]
 
