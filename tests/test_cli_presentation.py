@@ -204,4 +204,4 @@ def test_a_leg_repeated_past_the_limit_is_refused_at_once(root, tmp_path):
     p = tmp_path / "s.toml"
     p.write_text(text.replace("repeat = 3", "repeat = 100000000"))
     line = _error_line(runner.invoke(app, ["fleet", "plan", str(p)]))  # before: never returned
-    assert "repeat = 100000000 is more than 1,000" in line
+    assert "repeat must be an integer from 1 to 1,000, got 100000000" in line

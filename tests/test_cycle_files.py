@@ -397,7 +397,8 @@ def test_every_command_that_reads_cycles_takes_the_options(vecto, root, tmp_path
     from cevm.io import load_vehicle
 
     veh = load_vehicle(hgv)
-    e = reference_wheel_energy_j(cyc.time_s, cyc.speed_mps, cyc.elevation_m, 30000.0, veh.cda_m2, veh.cr, "paper")
+    e = reference_wheel_energy_j(cyc.time_s, cyc.speed_mps, cyc.elevation_m, 30000.0, veh.cda_m2, veh.cr,
+                                 veh.ice_braking)
     assert row["cycle"] == "driving_cycles_truck[Long haul, 26t]"
     assert row["wheel_energy_kwh"] == pytest.approx(e / 3.6e6, rel=1e-9)
     res = runner.invoke(app, ["feasibility", "-v", hgv, "-c", cyc_file, *opts, "-f", "json"])
