@@ -24,6 +24,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import cevm_samplegen as sg
+from cevm_samplegen import csvfmt
 
 SRF_BUS = {
     "timestamp_utc", "gps_lat_deg", "gps_lon_deg", "gps_alt_m", "gps_speed_kmh", "gps_hdop",
@@ -521,8 +522,8 @@ def test_dsm_has_buildings_beside_roads_and_holes(small, truth):
 def test_number_formatting_matches_python(values, decimals, strip):
     x = np.array(values)
     x = np.round(x, decimals)  # the formatter prints numbers already on their grid
-    chars, keep = sg._num_field(x, decimals, strip=strip)
-    got = sg._assemble([(chars, keep)], b",", b"\n").decode().split("\n")[:-1]
+    chars, keep = csvfmt.num_field(x, decimals, strip=strip)
+    got = csvfmt.assemble([(chars, keep)], b",", b"\n").decode().split("\n")[:-1]
     for g, v in zip(got, x):
         if not np.isfinite(v):
             assert g == ""
@@ -539,8 +540,8 @@ def test_uk_local_time_formatting():
     london = ZoneInfo("Europe/London")
     base = datetime(2019, 10, 27, 0, 30, tzinfo=timezone.utc)
     ts = [base + timedelta(minutes=20 * k) for k in range(6)] + [datetime(2019, 3, 31, 0, 59, 59, tzinfo=timezone.utc), datetime(2019, 3, 31, 1, 0, 0, tzinfo=timezone.utc)]
-    chars, keep = sg._uk_local(np.array([int(t.timestamp()) for t in ts]))
-    got = sg._assemble([(chars, keep)], b";", b"\n").decode().split("\n")[:-1]
+    chars, keep = csvfmt.uk_local(np.array([int(t.timestamp()) for t in ts]))
+    got = csvfmt.assemble([(chars, keep)], b";", b"\n").decode().split("\n")[:-1]
     assert got == [t.astimezone(london).strftime("%d/%m/%Y %H:%M:%S") for t in ts]
 
 
