@@ -326,12 +326,13 @@ class DieselParams:
         load = np.where(tmax > 0, np.clip(np.asarray(torque_nm, dtype=np.float64), 0.0, None) / np.where(tmax > 0, tmax, 1.0), 0.0)
         return e * (1.0 - self.indicated_efficiency_load_drop * np.minimum(load, 1.0) ** 2)
 
-    def fuel_power_w(self, speed_rad_s, brake_power_w) -> np.ndarray:
+    def fuel_power_w(self, speed_rad_s, brake_power_w, friction_scale=1.0) -> np.ndarray:
         """Fuel power [W] for brake power [W] (traction + auxiliaries) at engine speed
-        [rad/s]: (P + P_fric) / e_ind, zero when P + P_fric <= 0 (fuel cut)."""
+        [rad/s]: (P + s P_fric) / e_ind, zero when P + s P_fric <= 0 (fuel cut);
+        ``friction_scale`` s multiplies the friction (a cold engine: s > 1)."""
         w = np.asarray(speed_rad_s, dtype=np.float64)
         p = np.asarray(brake_power_w, dtype=np.float64)
-        ind = p + self.friction_power_w(w)
+        ind = p + self.friction_power_w(w) * friction_scale
         torque = np.divide(p, w, out=np.zeros(np.broadcast(p, w).shape), where=w > 0)
         return np.where(ind > 0, ind / self.indicated_efficiency(w, torque), 0.0)
 
@@ -724,7 +725,7 @@ def integrate_soc(power_w, dt_s, params: EvParams, capacity_c: float, soc_start:
 
 def simulate_ev(params: EvParams, time_s, speed_mps, elevation_m, *, mass_kg: float, cda_m2: float,
                 cr: float, battery_j: float, soc_start: float = 1.0,
-                physics: Physics = PAPER_PHYSICS) -> SimulationResult:
+                physics: Physics = PAPER_PHYSICS, aux_power_w=None) -> SimulationResult:
     """Backward simulation of an electric vehicle (see the module docstring).
 
     Parameters
@@ -734,6 +735,9 @@ def simulate_ev(params: EvParams, time_s, speed_mps, elevation_m, *, mass_kg: fl
     mass_kg, cda_m2, cr : road-load parameters (eq. 1-4)
     battery_j : usable battery capacity [J]; SoC 1 -> 0 spans it
     soc_start : state of charge at the first sample [0..1]
+    aux_power_w : (N,) auxiliary power beyond the parameters' [W] per sample (heating and
+        air conditioning that follow the weather, say), from the battery; a step draws
+        the mean of its two samples. None: none.
     """
     t = np.asarray(time_s, dtype=np.float64)
     road = _road(t, speed_mps, elevation_m, mass_kg, cda_m2, cr, params.rotating_mass_kg(), physics)
@@ -770,6 +774,8 @@ def simulate_ev(params: EvParams, time_s, speed_mps, elevation_m, *, mass_kg: fl
     brake = np.where(road.power < 0, np.maximum(p_wheel_motor - road.power, 0.0), 0.0)
     deficit = np.where(road.power > 0, np.maximum(road.power - p_wheel_motor, 0.0), 0.0)
     aux = np.full(road.dt.size, p.aux_base_power_w + p.hvac_power_w)
+    if aux_power_w is not None:
+        aux += _step_mean(aux_power_w)
     p_batt = p_el + aux
     capacity_c = battery_j / p.mean_pack_ocv_v()
     soc, current, ocv = integrate_soc(p_batt, road.dt, p, capacity_c, soc_start)
@@ -800,7 +806,7 @@ def simulate_ev(params: EvParams, time_s, speed_mps, elevation_m, *, mass_kg: fl
 _GEAR_CHUNK = 2048
 
 
-def _choose_gears(p: DieselParams, ratios, eta_gears, inertia_coef, w_wheel, power, k_per_dt, w_req):
+def _choose_gears(p: DieselParams, ratios, eta_gears, inertia_coef, w_wheel, power, k_per_dt, w_req, aux_w):
     """Gear choice for a chunk of steps, all gears at once.
 
     Returns (gear index, any gear satisfies the shift rule, any gear engageable): the
@@ -811,7 +817,7 @@ def _choose_gears(p: DieselParams, ratios, eta_gears, inertia_coef, w_wheel, pow
     p_eng = np.multiply.outer(1.0 / eta_gears, np.maximum(power, 0.0))
     p_eng += np.multiply.outer(eta_gears, np.minimum(power, 0.0))
     p_eng += np.multiply.outer(inertia_coef, k_per_dt)
-    p_eng += p.aux_power_w
+    p_eng += aux_w
     p_avail = p.full_load_torque(w_e)
     p_avail *= w_e
     below_max = w_e <= p.max_speed_rad_s
@@ -825,7 +831,8 @@ def _choose_gears(p: DieselParams, ratios, eta_gears, inertia_coef, w_wheel, pow
 
 
 def simulate_diesel(params: DieselParams, time_s, speed_mps, elevation_m, *, mass_kg: float, cda_m2: float,
-                    cr: float, fuel_lhv_j_per_l: float, physics: Physics = PAPER_PHYSICS) -> SimulationResult:
+                    cr: float, fuel_lhv_j_per_l: float, physics: Physics = PAPER_PHYSICS, aux_power_w=None,
+                    friction_scale=None) -> SimulationResult:
     """Backward simulation of a diesel vehicle (see the module docstring).
 
     Parameters
@@ -834,11 +841,18 @@ def simulate_diesel(params: DieselParams, time_s, speed_mps, elevation_m, *, mas
     time_s, speed_mps, elevation_m : (N,) trace [s], [m/s], [m] (elevation None = flat)
     mass_kg, cda_m2, cr : road-load parameters (eq. 1-4)
     fuel_lhv_j_per_l : fuel lower heating value [J/l]
+    aux_power_w : (N,) mechanical auxiliary power at the engine beyond the parameters' [W]
+        per sample (an air-conditioning compressor, say); a step takes the mean of its
+        two samples. None: none.
+    friction_scale : (N,) factor on the engine friction per sample (> 1 while a cold
+        engine warms up), the step's the mean of its two samples. None: 1.
     """
     t = np.asarray(time_s, dtype=np.float64)
     p = params
     road = _road(t, speed_mps, elevation_m, mass_kg, cda_m2, cr, p.rotating_mass_kg(), physics)
     n = road.dt.size
+    aux = p.aux_power_w if aux_power_w is None else p.aux_power_w + _step_mean(aux_power_w)
+    fscale = 1.0 if friction_scale is None else _step_mean(friction_scale)
     r = p.wheel_radius_m
     ratios = np.asarray(p.gear_ratios, dtype=np.float64) * p.axle_ratio  # (G,) engine/wheel
     eta_gears = p.gear_efficiency_array()  # (G,)
@@ -854,7 +868,8 @@ def simulate_diesel(params: DieselParams, time_s, speed_mps, elevation_m, *, mas
     for lo in range(0, n, _GEAR_CHUNK):
         sl = slice(lo, min(n, lo + _GEAR_CHUNK))
         gear_idx[sl], any_ok[sl], any_engageable[sl] = _choose_gears(
-            p, ratios, eta_gears, inertia_coef, w_wheel[sl], road.power[sl], road.k_per_dt[sl], w_req[sl]
+            p, ratios, eta_gears, inertia_coef, w_wheel[sl], road.power[sl], road.k_per_dt[sl], w_req[sl],
+            aux if np.ndim(aux) == 0 else aux[sl],
         )
     # No gear at the preferred speeds with enough torque. Driving slower than first gear
     # turns at the preferred speed: launch, clutch slipping, engine at that speed.
@@ -868,30 +883,30 @@ def simulate_diesel(params: DieselParams, time_s, speed_mps, elevation_m, *, mas
     eta_sel = eta_gears[gi]
     w_eng = ratios[gi] * w_wheel
     p_inertia_sel = np.where(engaged, inertia_coef[gi] * road.k_per_dt, 0.0)
-    pe = np.where(road.power > 0, road.power / eta_sel, road.power * eta_sel) + p_inertia_sel + p.aux_power_w
+    pe = np.where(road.power > 0, road.power / eta_sel, road.power * eta_sel) + p_inertia_sel + aux
     # Clutch slipping: the clutch passes the torque the wheels need.
     w_slip = np.maximum(w_req, p.idle_speed_rad_s)
-    t_slip = road.force * r / (ratios[0] * eta_gears[0]) + p.aux_power_w / w_slip
+    t_slip = road.force * r / (ratios[0] * eta_gears[0]) + aux / w_slip
     w_eng = np.where(slipping, w_slip, w_eng)
     pe = np.where(slipping, t_slip * w_slip, pe)
     idle = ~(engaged | slipping)
     w_eng = np.where(idle, p.idle_speed_rad_s, w_eng)
-    pe = np.where(idle, p.aux_power_w, pe)
+    pe = np.where(idle, aux, pe)
     avail = p.full_load_torque(w_eng) * w_eng
     pe_act = np.minimum(pe, avail)
     # Wheel power delivered while driving: engaged, through the gear (engine inertia and
     # auxiliaries served first); slipping, the clutch torque at the wheels' speed.
     delivered = np.where(
         slipping,
-        (pe_act - p.aux_power_w) / w_eng * (ratios[0] * eta_gears[0]) * w_wheel,
-        np.where(engaged, (pe_act - p.aux_power_w - p_inertia_sel) * eta_sel, 0.0),
+        (pe_act - aux) / w_eng * (ratios[0] * eta_gears[0]) * w_wheel,
+        np.where(engaged, (pe_act - aux - p_inertia_sel) * eta_sel, 0.0),
     )
     deficit = np.where(driving, np.maximum(road.power - delivered, 0.0), 0.0)
     torque = pe_act / w_eng
-    fuel_power = p.fuel_power_w(w_eng, pe_act)
+    fuel_power = p.fuel_power_w(w_eng, pe_act, fscale)
     fuel_rate = fuel_power / fuel_lhv_j_per_l
     # Braking: what neither the engine's friction (fuel cut) nor the driveline takes.
-    fric = p.friction_power_w(w_eng)
+    fric = p.friction_power_w(w_eng) * fscale
     brake_engaged = np.maximum(-(pe_act + fric), 0.0) / eta_sel
     brake = np.where(road.power < 0, np.where(idle, -road.power, np.minimum(brake_engaged, -road.power)), 0.0)
     gear = np.where(engaged | slipping, gi + 1, 0)
@@ -913,6 +928,25 @@ def simulate_diesel(params: DieselParams, time_s, speed_mps, elevation_m, *, mas
     }
     return _result("ice", mass_kg, t, speed_mps, elevation_m, steps, {"fuel_cum_l": fuel_cum},
                    fuel_l=float(fuel_cum[-1]))
+
+
+def _step_mean(per_sample) -> np.ndarray:
+    """Per-step values from a per-sample series: the mean of each step's two samples."""
+    x = np.asarray(per_sample, dtype=np.float64)
+    return 0.5 * (x[:-1] + x[1:])
+
+
+def _check_series(name: str, values, n: int, low: float, low_open: bool) -> np.ndarray:
+    """A per-sample series as a float array of ``n`` finite values above ``low``, or
+    ValueError naming it."""
+    x = np.asarray(values, dtype=np.float64)
+    if x.shape != (n,):
+        raise ValueError(f"{name} must have one value per sample ({n}), got shape {x.shape}")
+    bad = ~np.isfinite(x) | ((x <= low) if low_open else (x < low))
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        raise ValueError(f"{name} must be finite and {'>' if low_open else '>='} {low:g}; sample {i} is {x[i]!r}")
+    return x
 
 
 def decimate_indices(time_s, time_step_s: float) -> np.ndarray:
@@ -954,7 +988,8 @@ def _result(powertrain: str, mass_kg, t, speed_mps, elevation_m, steps: dict, sa
 
 def simulate(vehicle, time_s, speed_mps, elevation_m=None, mass_kg: float | None = None,
              soc_start: float = 1.0, *, params: EvParams | DieselParams | None = None,
-             time_step_s: float | None = 1.0, physics: Physics = PAPER_PHYSICS) -> SimulationResult:
+             time_step_s: float | None = 1.0, physics: Physics = PAPER_PHYSICS, aux_power_w=None,
+             friction_scale=None) -> SimulationResult:
     """Simulate ``vehicle`` (a :class:`~cevm.core.vehicle.Vehicle`) over a trace.
 
     Parameters
@@ -978,10 +1013,23 @@ def simulate(vehicle, time_s, speed_mps, elevation_m=None, mass_kg: float | None
         same net energy. None: simulate every sample. The result's arrays are on the
         simulated samples.
     physics : air density and gravity (the paper's by default)
+    aux_power_w : (N,) auxiliary power [W] per sample beyond the ``[detailed]`` table's
+        (>= 0): EV, from the battery (heating and air conditioning that follow the
+        weather); diesel, mechanical at the engine (an A/C compressor). None: none.
+    friction_scale : (N,) diesel only: factor (> 0) on the engine friction per sample,
+        e.g. above 1 while a cold engine warms up. None: 1.
 
-    Raises ValueError for an invalid trace (see :func:`cevm.core.cycle.validate_cycle`).
+    Raises ValueError for an invalid trace (see :func:`cevm.core.cycle.validate_cycle`)
+    or series.
     """
     validate_cycle(time_s, speed_mps, elevation_m)
+    n_samples = np.size(time_s)
+    if aux_power_w is not None:
+        aux_power_w = _check_series("aux_power_w", aux_power_w, n_samples, 0.0, False)
+    if friction_scale is not None:
+        if vehicle.is_ev:
+            raise ValueError("friction_scale applies to a diesel engine, not to an EV")
+        friction_scale = _check_series("friction_scale", friction_scale, n_samples, 0.0, True)
     if time_step_s is not None:
         if not time_step_s > 0:
             raise ValueError("time_step_s must be > 0")
@@ -991,6 +1039,8 @@ def simulate(vehicle, time_s, speed_mps, elevation_m=None, mass_kg: float | None
             speed_mps = np.asarray(speed_mps, dtype=np.float64)[idx]
             if elevation_m is not None:
                 elevation_m = np.asarray(elevation_m, dtype=np.float64)[idx]
+            aux_power_w = None if aux_power_w is None else aux_power_w[idx]
+            friction_scale = None if friction_scale is None else friction_scale[idx]
     m = float(vehicle.mass_kg if mass_kg is None else mass_kg)
     if not m > 0:
         raise ValueError("mass_kg must be > 0")
@@ -1002,9 +1052,10 @@ def simulate(vehicle, time_s, speed_mps, elevation_m=None, mass_kg: float | None
             raise TypeError("an EV needs EvParams")
         return simulate_ev(ev, time_s, speed_mps, elevation_m, mass_kg=m, cda_m2=vehicle.cda_m2, cr=vehicle.cr,
                            battery_j=vehicle.battery_j, soc_start=soc_start,
-                           physics=physics)
+                           physics=physics, aux_power_w=aux_power_w)
     ice = params if params is not None else diesel_params_from_vehicle(vehicle)
     if not isinstance(ice, DieselParams):
         raise TypeError("an ICE vehicle needs DieselParams")
     return simulate_diesel(ice, time_s, speed_mps, elevation_m, mass_kg=m, cda_m2=vehicle.cda_m2, cr=vehicle.cr,
-                           fuel_lhv_j_per_l=vehicle.fuel_lhv_j_per_l, physics=physics)
+                           fuel_lhv_j_per_l=vehicle.fuel_lhv_j_per_l, physics=physics,
+                           aux_power_w=aux_power_w, friction_scale=friction_scale)
