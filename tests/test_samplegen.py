@@ -11,6 +11,7 @@ import gzip
 import hashlib
 import io
 import json
+import math
 import subprocess
 import sys
 from datetime import datetime, timedelta, timezone
@@ -24,18 +25,20 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import cevm_samplegen as sg
+from cevm_samplegen import auxiliaries as aux
 from cevm_samplegen import csvfmt
 
 SRF_BUS = {
     "timestamp_utc", "gps_lat_deg", "gps_lon_deg", "gps_alt_m", "gps_speed_kmh", "gps_hdop",
     "fms_wheel_speed_kmh", "fms_accel_pedal_pct", "fms_brake_switch", "fms_engine_speed_rpm",
     "fms_engine_torque_pct", "fms_battery_soc_pct", "fms_battery_voltage_v",
-    "fms_battery_current_a", "fms_total_energy_used_kwh",
+    "fms_battery_current_a", "fms_total_energy_used_kwh", "fms_ambient_air_temp_c",
 }
 SRF_TRUCK_BASE = {
     "timestamp_utc", "gps_lat_deg", "gps_lon_deg", "gps_alt_m", "gps_speed_kmh", "gps_hdop",
     "fms_wheel_speed_kmh", "fms_accel_pedal_pct", "fms_brake_switch", "fms_engine_speed_rpm",
     "fms_engine_torque_pct", "fms_total_fuel_used_l", "fms_fuel_rate_lph", "fms_gross_weight_kg",
+    "fms_ambient_air_temp_c",
 }
 PORTAL = ["Registration", "Date/Time", "Latitude", "Longitude", "Speed (mph)", "Odometer (mi)",
           "Fuel Used (l)", "Ignition", "Event"]
@@ -123,6 +126,7 @@ def test_srf_columns_metadata_and_resolutions(small, truth):
             assert is_integral(steps_of(df.fms_gross_weight_kg, 10.0))
         assert df.timestamp_utc.str.match(r"^\d{4}-\d\d-\d\dT\d\d:\d\d:\d\d\.\d{3}Z$").all()
         assert is_integral(steps_of(df.fms_wheel_speed_kmh, 1 / 256))
+        assert is_integral(steps_of(df.fms_ambient_air_temp_c, 0.03125))  # J1939 SPN 171
         assert is_integral(steps_of(df.fms_accel_pedal_pct, 0.4))
         assert set(df.fms_brake_switch.dropna().unique()) <= {0.0, 1.0}
         tq = df.fms_engine_torque_pct.dropna()
@@ -138,8 +142,9 @@ def test_srf_asynchronous_fields_and_gps_gaps(small):
     for p in srf_files(small):
         df, _ = read_srf(p)
         counter = "fms_total_energy_used_kwh" if "fms_total_energy_used_kwh" in df else "fms_total_fuel_used_l"
-        share = df[counter].notna().mean()
-        assert 0.05 < share < 0.4, (p.name, counter, share)  # every 4-10 s: mostly empty
+        for c in (counter, "fms_ambient_air_temp_c"):
+            share = df[c].notna().mean()
+            assert 0.05 < share < 0.4, (p.name, c, share)  # every 4-10 s: mostly empty
         assert df.fms_wheel_speed_kmh.notna().mean() > 0.98
         # no fix at the start of the session (cold start), fixes later
         assert df.gps_lat_deg.iloc[:5].isna().all() and df.gps_lat_deg.notna().mean() > 0.8
@@ -150,11 +155,11 @@ def test_srf_asynchronous_fields_and_gps_gaps(small):
 
 
 def test_srf_missed_and_repeated_ticks(small, truth):
-    for f in truth["files"]:
-        if f["dialect"] != "srf":
-            continue
+    srf = [f for f in truth["files"] if f["dialect"] == "srf"]
+    assert sum(f["repeated_ticks"] for f in srf) > 0
+    for f in srf:
         lines = _raw(small / f["path"]).decode().split("\n")
-        assert sum(a == b for a, b in zip(lines, lines[1:])) == f["repeated_ticks"] > 0
+        assert sum(a == b for a, b in zip(lines, lines[1:])) == f["repeated_ticks"]
         df, _ = read_srf(small / f["path"])
         dt = np.diff(utc_s(df.timestamp_utc))
         assert ((dt > 1.5) & (dt < 60)).any()  # missed ticks inside trips
@@ -273,14 +278,15 @@ def trip_rows(small: Path, r: dict) -> pd.DataFrame:
 def test_truth_bus_energy_counter(small, truth):
     """Counter difference over a trip vs the truth: within one 0.1 kWh step, plus the
     consumption at standstill between the trip's ends and the first/last reading (at
-    most 6 s at the stand-in's 5 kW auxiliary load each side: 0.017 kWh)."""
+    most 6 s each side at the stand-in's 4 kW base auxiliaries and at most 45 kW of
+    HVAC, its heaters' full capacity: 0.15 kWh)."""
     bus = [r for r in truth["trips"] if r["vehicle_type"] == "electric-bus"]
     assert bus
     for r in bus:
         rows = trip_rows(small, r)
         e = rows.fms_total_energy_used_kwh.dropna().to_numpy()
         measured_kwh = e[-1] - e[0]
-        assert abs(measured_kwh - r["consumption"] / 3.6e6) <= 0.1 + 0.02
+        assert abs(measured_kwh - r["consumption"] / 3.6e6) <= 0.1 + 0.15
         # voltage x current integrates to the same energy (trapezoid over the ticks)
         t = utc_s(rows.timestamp_utc)
         p = (rows.fms_battery_voltage_v * rows.fms_battery_current_a).to_numpy()
@@ -320,7 +326,7 @@ def test_truth_trip_times_match_rows(small, truth):
             continue
         rows = trip_rows(small, r)
         assert len(rows) > 60
-        assert r["end_utc_s"] - r["start_utc_s"] == pytest.approx(r["duration_s"], abs=1e-3)
+        assert r["end_utc_s"] - r["start_utc_s"] == pytest.approx(r["duration_s"], abs=1.5e-3)  # each to 1 ms
         assert r["start_utc"] == datetime.fromtimestamp(round(r["start_utc_s"], 3), timezone.utc).strftime("%Y-%m-%dT%H:%M:%S.%f")[:-3] + "Z"
     # layovers: no rows for more than 5 minutes between the trips of a file
     by_file: dict[str, list[dict]] = {}
@@ -335,16 +341,46 @@ def test_truth_trip_times_match_rows(small, truth):
 def test_injected_consumption_function_is_used(tmp_path):
     calls = []
 
-    def fake(kind, time_s, speed_mps, elevation_m, mass_kg):
-        calls.append(kind)
+    def fake(kind, time_s, speed_mps, elevation_m, mass_kg, *, conditions):
+        calls.append((kind, float(np.mean(conditions.ambient_c)), conditions.soak_s, conditions.occupants, mass_kg))
         return 0.01 * time_s if kind == "diesel-hgv" else 2.0e4 * time_s
 
     doc = sg.generate_sample_logs(tmp_path, fake, small=True, write_dsm=False)
-    assert set(calls) == {"diesel-hgv", "electric-bus"}
+    assert {c[0] for c in calls} == {"diesel-hgv", "electric-bus"}
     assert doc["consumption_fn"].endswith("fake")
+    assert len(calls) == len(doc["trips"])
     for r in doc["trips"]:
         rate = 0.01 if r["vehicle_type"] == "diesel-hgv" else 2.0e4
-        assert r["consumption"] == pytest.approx(rate * r["duration_s"], rel=1e-6, abs=1e-4)
+        assert r["consumption"] == pytest.approx(rate * r["duration_s"], abs=rate * 1e-3)  # duration to 1 ms
+        assert not any(k.endswith(("_fuel_l", "_energy_j")) for k in r)  # a plain array has no parts
+    # the conditions passed are the truth's: its air temperature, soak time and occupants
+    by_mass = {}
+    for c in calls:
+        by_mass.setdefault(round(c[4], 3), []).append(c)
+    for r in doc["trips"]:
+        match = [c for c in by_mass[round(r["mass_kg"], 3)] if c[2] == pytest.approx(r["soak_s"], abs=0.1)]
+        assert any(abs(c[1] - r["ambient_c"]) < 0.05 for c in match)
+        bus = r["vehicle_type"] == "electric-bus"
+        assert r["occupants"] == (1 + r["load"] if bus else 1)
+    firsts = {}
+    for r in sorted(doc["trips"], key=lambda r: r["start_utc_s"]):
+        firsts.setdefault((r["vehicle_id"], r["day_index"]), r["start_utc_s"])
+    for r in doc["trips"]:
+        first = firsts[(r["vehicle_id"], r["day_index"])] == r["start_utc_s"]
+        assert r["soak_s"] == 43200.0 if first else 600 < r["soak_s"] < 1900  # overnight, or a layover
+
+
+def test_a_consumption_function_without_conditions_is_refused(tmp_path, capsys, monkeypatch):
+    def old(kind, time_s, speed_mps, elevation_m, mass_kg):
+        return time_s
+
+    with pytest.raises(TypeError, match="conditions"):
+        sg.generate_sample_logs(tmp_path, old, small=True, write_dsm=False)
+    assert not (tmp_path / "truth.json").exists()
+    monkeypatch.setattr(sys.modules[__name__], "old_style_fn", old, raising=False)
+    with pytest.raises(SystemExit) as e:
+        sg.main([str(tmp_path), "--small", "--consumption", f"{__name__}:old_style_fn"])
+    assert "conditions" in str(e.value) and "--consumption" in str(e.value)
 
 
 def test_generator_does_not_import_the_ce_model():
@@ -353,22 +389,73 @@ def test_generator_does_not_import_the_ce_model():
     assert out.stdout.strip() == "False"
 
 
+def _conditions(n, ambient_c=20.0, solar=0.0, soak_s=0.0, occupants=1.0):
+    return sg.TripConditions(np.full(n, float(ambient_c)), np.full(n, float(solar)), soak_s, occupants)
+
+
 def test_standin_consumption_by_hand():
-    """Bus at a constant 10 m/s on a flat road for 10 s: rolling + drag at the wheel,
-    through the drive efficiency, plus drive loss and auxiliaries."""
+    """Bus at a constant 10 m/s on a flat road for 10 s, at 20 degC without sun (the
+    cabin floats inside its 18-24 degC band: only the ventilation blower runs): rolling
+    + drag at the wheel, through the drive efficiency, plus drive loss and auxiliaries."""
     p = sg.STANDIN["electric-bus"]
     m, v = 12000.0, 10.0
     t = np.arange(11.0)
-    e = sg.standin_consumption("electric-bus", t, np.full(11, v), np.zeros(11), m)
+    e = sg.standin_consumption("electric-bus", t, np.full(11, v), np.zeros(11), m, conditions=_conditions(11))
     cr = p.cr + p.cr_speed_per_mps * v
     wheel_w = cr * m * 9.81 * v + 0.5 * 1.225 * p.cda_m2 * v**3
-    expect = (wheel_w / p.drive_eff + p.drive_loss_w + p.aux_w) * 10.0
-    assert e[0] == 0.0 and e[-1] == pytest.approx(expect, rel=1e-12)
-    # a truck coasting downhill at speed burns nothing (fuel cut-off)
-    f = sg.standin_consumption("diesel-hgv", t, np.full(11, 20.0), -2.0 * t, 40000.0)
-    assert f[-1] == 0.0
+    expect = (wheel_w / p.drive_eff + p.drive_loss_w + p.aux_w + aux.BUS_CABIN.blower_w) * 10.0
+    assert e.cumulative[0] == 0.0 and e.cumulative[-1] == pytest.approx(expect, rel=1e-12)
+    assert e.parts["hvac_energy_j"] == pytest.approx(aux.BUS_CABIN.blower_w * 10.0)
+    # a truck coasting downhill at speed burns nothing (fuel cut-off), cold engine or not
+    for ambient, soak in ((20.0, 0.0), (-5.0, 43200.0)):
+        f = sg.standin_consumption("diesel-hgv", t, np.full(11, 20.0), -2.0 * t, 40000.0,
+                                   conditions=_conditions(11, ambient, soak_s=soak))
+        assert f.cumulative[-1] == 0.0
     with pytest.raises(ValueError):
-        sg.standin_consumption("tram", t, t, t, 1.0)
+        sg.standin_consumption("tram", t, t, t, 1.0, conditions=_conditions(11))
+    with pytest.raises(ValueError, match="samples"):
+        sg.standin_consumption("electric-bus", t, t, t, 1.0, conditions=_conditions(5))
+
+
+def test_standin_adds_the_cabin_hvac_energy():
+    """The same trace at 0 degC and at 20 degC: the bus's extra energy is the cabin's
+    extra electric energy (heating: trapezoid of its per-sample power), nothing else."""
+    t = np.arange(0.0, 601.0)
+    v = np.where((t % 100) < 70, 9.0, 0.0)
+    v[0] = v[-1] = 0.0
+    h = np.zeros(t.size)
+    warm = sg.standin_consumption("electric-bus", t, v, h, 11000.0, conditions=_conditions(t.size, 20.0))
+    cold = sg.standin_consumption("electric-bus", t, v, h, 11000.0, conditions=_conditions(t.size, 0.0))
+    load = aux.cabin_load(aux.BUS_CABIN, t, v, np.zeros(t.size), np.zeros(t.size), occupants=1.0, soak_s=0.0)
+    hvac = float(np.sum(0.5 * (load.electric_w[1:] + load.electric_w[:-1])))
+    blower = aux.BUS_CABIN.blower_w * 600.0
+    assert cold.cumulative[-1] - warm.cumulative[-1] == pytest.approx(hvac - blower, rel=1e-9)
+    assert cold.parts["hvac_energy_j"] == pytest.approx(hvac, rel=1e-9)
+    assert hvac > 10 * blower  # heating at 0 degC costs kilowatts
+
+
+def test_detailed_consumption_carries_hvac_and_cold_start():
+    """logged_consumption: the bus's HVAC energy reaches the battery (within the battery's
+    resistive losses); a cold-soaked truck burns more than a warm one, and its parts say
+    how much."""
+    t = np.arange(0.0, 901.0)
+    v = np.clip(np.minimum(t, 900.0 - t) * 0.8, 0.0, 13.0)
+    h = np.zeros(t.size)
+    warm = sg.logged_consumption("electric-bus", t, v, h, 11000.0, conditions=_conditions(t.size, 20.0))
+    cold = sg.logged_consumption("electric-bus", t, v, h, 11000.0, conditions=_conditions(t.size, -5.0, soak_s=1800.0))
+    extra = cold.parts["hvac_energy_j"] - warm.parts["hvac_energy_j"]
+    assert cold.cumulative[-1] - warm.cumulative[-1] == pytest.approx(extra, rel=0.02)
+    assert cold.parts["warmup_energy_j"] > 0.0 == warm.parts["warmup_energy_j"]
+    hot = sg.logged_consumption("diesel-hgv", t, v, h, 30000.0, conditions=_conditions(t.size, 5.0, soak_s=0.0))
+    soaked = sg.logged_consumption("diesel-hgv", t, v, h, 30000.0, conditions=_conditions(t.size, 5.0, soak_s=43200.0))
+    assert hot.parts["cold_start_fuel_l"] == pytest.approx(0.0, abs=1e-12)
+    assert hot.parts["engine_start_c"] == pytest.approx(aux.DIESEL_WARMUP.hot_c)
+    assert soaked.parts["engine_start_c"] == pytest.approx(5.0 + 83.0 * math.exp(-4.0))  # 12 h, tau 3 h
+    # soaked, the cab's heater also makes up its deficit (its fans on the alternator)
+    hvac_extra = soaked.parts["hvac_fuel_l"] - hot.parts["hvac_fuel_l"]
+    assert soaked.cumulative[-1] - hot.cumulative[-1] == pytest.approx(soaked.parts["cold_start_fuel_l"] + hvac_extra,
+                                                                         rel=1e-9)
+    assert 0.02 < soaked.parts["cold_start_fuel_l"] < 0.1 * soaked.cumulative[-1]
 
 
 # --------------------------------------------------------------------------------------
@@ -469,10 +556,10 @@ def test_dsm_road_elevation_matches_truth(small, truth):
     checked = spikes = 0
     for days in trips.values():
         for tr in (t for day in days for t in day):
-            s = world.routes[tr.vehicle.route].along_m(tr.route_from_m + tr.distance_m)
+            s = world.routes[tr.route].along_m(tr.route_from_m + tr.distance_m)
             z = mosaic_bilinear(tiles, tr.x_m, tr.y_m)
             near_object = np.zeros(s.size, bool)
-            for o in truth["routes"][tr.vehicle.route]["surface_objects"]:
+            for o in truth["routes"][tr.route]["surface_objects"]:
                 near_object |= (s >= o["from_m"] - 2.0) & (s <= o["to_m"] + 2.0)
                 if o["kind"] in ("tree", "bridge"):
                     inside = (s >= o["from_m"]) & (s <= o["to_m"]) & np.isfinite(z)
@@ -483,7 +570,7 @@ def test_dsm_road_elevation_matches_truth(small, truth):
             # inside the tiles, the DSM has no value only near a hole, or within a pixel
             # of the edge of the tiled area (a bilinear neighbour is missing)
             explained = np.zeros(s.size, bool)
-            for o in truth["routes"][tr.vehicle.route]["surface_objects"]:
+            for o in truth["routes"][tr.route]["surface_objects"]:
                 if o["kind"] == "hole":
                     explained |= (s >= o["from_m"]) & (s <= o["to_m"])
             res = truth["dsm"]["resolution_m"]
@@ -570,3 +657,204 @@ def test_os_tile_names():
     assert sg.os_tile_name(485000, 238000) == "SP8538"
     assert sg.os_tile_name(530000, 180000) == "TQ3080"  # central London
     assert sg.os_tile_name(325000, 673000) == "NT2573"  # Edinburgh
+
+
+# --------------------------------------------------------------------------------------
+# Weather, the temperature column, the loads that follow it, duties
+# --------------------------------------------------------------------------------------
+
+from cevm_samplegen import weather as wx  # noqa: E402
+
+
+def test_seasonal_mean_and_forced_days():
+    c = wx.MILTON_KEYNES
+    assert c.seasonal_mean_c(c.coldest_day_of_year) == pytest.approx(c.mean_jan_c)
+    assert c.seasonal_mean_c(c.coldest_day_of_year + 365.25 / 2) == pytest.approx(c.mean_jul_c)
+    assert 3.5 < c.mean_jan_c < 5.0 and 16.5 < c.mean_jul_c < 18.0  # Milton Keynes
+    cold = wx.day_weather("2019-01-31", 7, wx.ForcedDay("2019-01-31", -5.5, 1.0, 0.15))
+    t = cold.midnight_utc_s + np.arange(0.0, 86400.0, 60.0)
+    temp = cold.ambient_c(t)
+    # the profile spans the forced extremes (to within the 0.25 K noise)
+    assert temp.min() == pytest.approx(-5.5, abs=1.0) and temp.max() == pytest.approx(1.0, abs=1.0)
+    hour_min = (t[np.argmin(temp)] - cold.midnight_utc_s) / 3600.0
+    hour_max = (t[np.argmax(temp)] - cold.midnight_utc_s) / 3600.0
+    assert abs(hour_min - (cold.sunrise_utc_h + 0.5)) < 2.5  # coldest around sunrise
+    assert 13.0 < hour_max < 16.5  # warmest in the afternoon
+    assert 7.6 < cold.sunrise_utc_h < 8.1  # sunrise near Milton Keynes on 31 January: about 07:50 UTC
+    with pytest.raises(ValueError):
+        wx.day_weather("2019-01-31", 7, wx.ForcedDay("2019-02-01", -5.0, 1.0, 0.1))
+
+
+def test_weather_is_deterministic_and_differs_by_date():
+    a, b = wx.day_weather("2019-04-10", 7), wx.day_weather("2019-04-10", 7)
+    t = a.midnight_utc_s + np.arange(0.0, 86400.0, 300.0)
+    np.testing.assert_array_equal(a.ambient_c(t), b.ambient_c(t))
+    np.testing.assert_array_equal(a.solar_w_m2(t), b.solar_w_m2(t))
+    means = [wx.day_weather(f"2019-{m:02d}-15", 7).mean_c for m in range(1, 13)]
+    assert len(set(means)) == 12
+    assert np.mean(means[5:8]) - np.mean([means[0], means[1], means[11]]) > 6.0  # summer warmer than winter
+
+
+def test_sunshine_by_hand_at_solar_noon_and_none_at_night():
+    w = wx.day_weather("2019-06-21", 7, wx.ForcedDay("2019-06-21", 12.0, 24.0, 0.0))
+    noon = w.midnight_utc_s + w.solar_noon_utc_h * 3600.0
+    elev = math.radians(90.0 - 52.04) + w.declination_rad  # at solar noon: 90 deg - latitude + declination
+    assert float(w.solar_elevation_sin(noon)) == pytest.approx(math.sin(elev), rel=1e-9)
+    assert math.degrees(w.declination_rad) == pytest.approx(23.44, abs=0.1)  # midsummer
+    clear = 1098.0 * math.sin(elev) * math.exp(-0.057 / math.sin(elev))  # Haurwitz
+    assert 0.7 * clear <= float(w.solar_w_m2(noon)) <= clear  # cloud 0: passing clouds only dim it
+    assert float(w.solar_w_m2(w.midnight_utc_s)) == 0.0
+
+
+def test_temperature_column_follows_the_days_weather(small, truth):
+    """The logged fms_ambient_air_temp_c of every srf trip: the true air temperature of
+    the trip (truth.json) plus the vehicle's sensor bias, warmed only by sun at low speed
+    (at most 2 K at 800 W/m^2), within the lag and the 1/32 degC steps."""
+    seen = set()
+    for r in (r for r in truth["trips"] if r["dialect"] == "srf"):
+        rows = trip_rows(small, r)
+        temp = rows.fms_ambient_air_temp_c.dropna().to_numpy()
+        assert temp.size > 5
+        bias = truth["vehicles"][r["vehicle_id"]]["ambient_bias_k"]
+        sun_k = 2.0 * r["solar_w_m2"] / 800.0
+        excess = temp.mean() - (r["ambient_c"] + bias)
+        assert -0.3 < excess < sun_k + 0.3, (r["vehicle_id"], r["day_index"], r["trip_index"], excess)
+        day = truth["weather"][datetime.fromtimestamp(r["start_utc_s"], timezone.utc).date().isoformat()]
+        assert day["min_c"] - 1.0 <= r["ambient_min_c"] <= r["ambient_max_c"] <= day["max_c"] + 1.0
+        seen.add(day["max_c"] < 5.0)
+    assert seen == {True, False}  # a cold and a warm day in the small sample
+
+
+def test_portal_export_has_no_temperature_column(small):
+    header = portal_file(small).read_bytes().split(b"\r\n")[0].decode("cp1252")
+    assert "temp" not in header.lower()
+
+
+def _steady(cabin, ambient_c, solar=0.0, occupants=1.0, moving=True, n=200):
+    t = np.arange(float(n))
+    v = np.full(n, 8.0 if moving else 0.0)
+    return aux.cabin_load(cabin, t, v, np.full(n, float(ambient_c)), np.full(n, float(solar)),
+                          occupants=occupants, soak_s=0.0)
+
+
+def test_bus_heating_by_hand():
+    """At 0 degC, moving, 11 people, no sun, cabin held at 18 degC: demand
+    (UA + ventilation) x 18 K - gains, from the heat pump (COP 0.40 x 318.15 / 53) within
+    its capacity (18 kW x (1 - 0.03 x 7)); electric power = that / COP + fans in
+    proportion to the load + the blower."""
+    c = aux.BUS_CABIN
+    q = (350.0 + 200.0) * 18.0 - (600.0 + 11 * 80.0)
+    cap = 18e3 * (1 - 0.03 * 7.0)
+    assert q < cap
+    cop = 0.40 * (45.0 + 273.15) / (45.0 - (0.0 - 8.0))
+    fans = 900.0 * (0.3 + 0.7 * q / (cap + 20e3))
+    load = _steady(c, 0.0, occupants=11.0)
+    np.testing.assert_allclose(load.heating_w, q)
+    np.testing.assert_allclose(load.electric_w, q / cop + fans + 400.0, rtol=1e-12)
+    assert np.all(load.compressor_w == 0.0) and np.all(load.warmup_electric_w == 0.0)
+
+
+def test_bus_cooling_by_hand_and_the_deadband():
+    c = aux.BUS_CABIN
+    # 30 degC, sun 700 W/m^2, 40 people: gains + L (T - 24), at an EER of 0.35 x 278.15 / 40
+    q = 600.0 + 40 * 80.0 + 4.0 * 700.0 + 550.0 * 6.0
+    eer = 0.35 * (5.0 + 273.15) / (30.0 + 15.0 - 5.0)
+    load = _steady(c, 30.0, solar=700.0, occupants=40.0)
+    np.testing.assert_allclose(load.cooling_w, q)
+    np.testing.assert_allclose(load.electric_w, q / eer + 900.0 * (0.3 + 0.7 * q / 20e3) + 400.0, rtol=1e-12)
+    # 20 degC, no sun, the driver alone: the cabin floats at 20 + 680 / 550 degC, inside the band
+    idle = _steady(c, 20.0)
+    np.testing.assert_allclose(idle.electric_w, 400.0)
+    # 21 degC in sun: warmer than 24 degC inside, but fresh air cools it for free
+    free = _steady(c, 21.0, solar=500.0, occupants=20.0)
+    assert 600.0 + 20 * 80.0 + 2000.0 > 550.0 * 3.0  # it would need cooling without the economiser
+    np.testing.assert_allclose(free.cooling_w, 0.0)
+
+
+def test_bus_hvac_is_convex_in_the_cold_not_a_hinge():
+    """The heat pump's COP falls with the cold and the resistive heater takes over: the
+    electric power rises faster than the heat demand, which is linear in the temperature."""
+    temps = np.arange(-10.0, 14.0, 2.0)
+    power = np.array([_steady(aux.BUS_CABIN, T, occupants=20.0).electric_w.mean() for T in temps])
+    demand = np.array([_steady(aux.BUS_CABIN, T, occupants=20.0).heating_w.mean() for T in temps])
+    slope = -np.diff(power) / 2.0  # W per K colder
+    assert np.all(slope > 0) and slope[0] > 2.5 * slope[-1]  # steeper in the cold: not a straight hinge
+    assert np.all(np.diff(slope[2:]) < 0)  # convex while the heat pump covers the demand
+    np.testing.assert_allclose(np.diff(demand), np.diff(demand)[0])  # the demand itself: a straight line
+    cop = aux.BUS_CABIN.heating_cop(temps)
+    assert np.all(np.diff(cop) > 0)
+
+
+def test_warmup_makes_up_the_layovers_deficit():
+    """After a soak the cabin starts between its held and its parked temperature; the
+    heating beyond the steady demand adds up to capacity x (setpoint - start), and grows
+    with the soak and the cold."""
+    c = aux.BUS_CABIN
+    n = 1500
+    t = np.arange(float(n))
+    v = np.full(n, 8.0)
+
+    def load(ambient, soak):
+        return aux.cabin_load(c, t, v, np.full(n, ambient), np.zeros(n), occupants=10.0, soak_s=soak)
+
+    steady = load(-5.0, 0.0)
+    soaked = load(-5.0, 1200.0)
+    tau = 300e3 / 320.0
+    start = -5.0 + (18.0 - -5.0) * math.exp(-1200.0 / tau)
+    assert soaked.start_c == pytest.approx(start)
+    extra_heat = float(np.sum(soaked.heating_w - steady.heating_w))
+    assert extra_heat == pytest.approx(300e3 * (18.0 - start), rel=1e-9)
+    warm = [float(np.sum(load(T, s).warmup_electric_w)) for T, s in ((-5.0, 600.0), (-5.0, 2400.0), (5.0, 2400.0))]
+    assert warm[1] > warm[0] and warm[1] > warm[2] > 0.0
+
+
+def test_engine_warmup_by_hand():
+    w = aux.DIESEL_WARMUP
+    assert w.start_c(5.0, 0.0) == pytest.approx(88.0)
+    assert w.start_c(5.0, 3 * 3600.0) == pytest.approx(5.0 + 83.0 / math.e)
+    t = np.arange(0.0, 2001.0)
+    temp = w.temperature_c(t, np.full(2000, 60e3), 10.0)  # 60 kW of fuel: 18 kW into 250 kJ/K
+    np.testing.assert_allclose(temp[:1000], np.minimum(10.0 + 18e3 * t[:1000] / 250e3, 88.0))
+    assert temp[-1] == 88.0
+    with_cab = w.temperature_c(t, np.full(2000, 60e3), 10.0, cab_heat_w=3e3)
+    assert with_cab[500] == pytest.approx(10.0 + 15e3 * 500 / 250e3)  # the cab heater slows it
+    assert float(w.friction_scale(20.0)) == pytest.approx(1.0 + 0.012 * 68.0)
+    assert float(w.friction_scale(95.0)) == 1.0
+
+
+def test_truck_duties_differ_by_day(small, truth):
+    """HGV-11 delivers in town on its second small day: slower, with more stops per km,
+    on the town road, with a smaller payload that falls at each round."""
+    spec = next(v for v in sg.SMALL_FLEET.srf_vehicles if v.vehicle_id == "HGV-11")
+    assert spec.duty_on(0) == ("truck-short", "regional") and spec.duty_on(1) == ("urban-short", "bus-1")
+    assert spec.duty_on(2) == spec.duty_on(0)  # the schedule repeats
+    trips = [r for r in truth["trips"] if r["vehicle_id"] == "HGV-11"]
+    stats = {}
+    for r in trips:
+        rows = trip_rows(small, r)
+        v = rows.fms_wheel_speed_kmh.dropna().to_numpy()
+        stops = int(np.sum((v[1:] < 1.0) & (v[:-1] >= 1.0)))
+        stats.setdefault(r["duty"], []).append((r["distance_m"] / r["duration_s"], stops / (r["distance_m"] / 1000)))
+        assert r["route"] == dict([spec.duty_on(0), spec.duty_on(1)])[r["duty"]]
+    (reg,), (urb,) = [np.mean(stats[d], axis=0, keepdims=True) for d in ("truck-short", "urban-short")]
+    assert urb[0] < 0.75 * reg[0] and urb[1] > reg[1]
+    urban = sorted((r for r in trips if r["duty"] == "urban-short"), key=lambda r: r["trip_index"])
+    assert all(6000 <= r["load"] <= 12000 for r in urban[:1]) and urban[1]["load"] < urban[0]["load"]
+
+
+def test_sample_fleet_spans_the_seasons_and_mixes_duties():
+    """The shipped fleet (spec only, nothing simulated): logging days from winter to
+    summer with cold and hot days forced, buses of 4-5 trips a day, trucks on two
+    duties each."""
+    f = sg.SAMPLE_FLEET
+    months = {int(d[5:7]) for d in f.srf_dates}
+    assert len(f.srf_dates) >= 5 and min(months) <= 2 and max(months) >= 7
+    forced = {d.date: d for d in f.forced_weather}
+    assert sum(d.min_c <= -4.0 for d in forced.values() if d.date in f.srf_dates) >= 2
+    assert sum(d.max_c >= 29.0 for d in forced.values() if d.date in f.srf_dates) >= 2
+    for v in f.srf_vehicles:
+        duties = {v.duty_on(i)[0] for i in range(len(f.srf_dates))}
+        if v.vehicle_type == "electric-bus":
+            assert sg.fleet.DUTIES[v.duty].trips_per_day == (4, 5)
+        else:
+            assert len(duties) == 2, v.vehicle_id

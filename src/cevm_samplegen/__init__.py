@@ -13,18 +13,29 @@ micro-trip generator of :mod:`cevm_samplegen.cycles`: stop-to-stop runs; long ha
 cruise blocks), lays it along a smooth road polyline in British National Grid (BNG,
 EPSG:27700) around Milton Keynes (position = the route point at the cumulative distance),
 takes the TRUE road elevation from a smooth terrain function (the road surface: no
-buildings), and gets the consumption from an injected function::
+buildings), the day's weather (:mod:`cevm_samplegen.weather`: air temperature and
+sunshine over Milton Keynes, a seasonal mean, the day's anomaly, a diurnal cycle and
+noise; the cold and hot days of :data:`~cevm_samplegen.fleet.SAMPLE_WEATHER` forced),
+and gets the consumption from an injected function::
 
-    consumption_fn(kind, time_s, speed_mps, elevation_m, mass_kg) -> cumulative array
+    consumption_fn(kind, time_s, speed_mps, elevation_m, mass_kg, *, conditions)
+        -> Consumption | cumulative array
 
 ``kind`` is the vehicle type, the stem of a ``configs/vehicles`` file: ``"electric-bus"``
 (result in joules at the battery, net of regeneration) or ``"diesel-hgv"`` (litres of
 diesel). Arrays are the 1 Hz truth samples of one trip (time from 0 s), ``mass_kg`` the
-trip's constant gross mass; the result has one value per sample, starting at 0. The
-default, :func:`standin_consumption`, is a STAND-IN (a longitudinal-dynamics formula with
+trip's constant gross mass, ``conditions`` a :class:`TripConditions` (the air
+temperature and sunshine at each sample, the ignition-off time before the trip, the
+people on board); the result has one value per sample, starting at 0 (a
+:class:`Consumption` adds named parts for ``truth.json``). A function that does not take
+``conditions`` is refused with a clear message. The default,
+:func:`standin_consumption`, is a STAND-IN (a longitudinal-dynamics formula with
 load-dependent efficiency, written here) for tests and trial runs; the project's sample
-logs are meant to be generated with the detailed simulator. The CE model
-(:mod:`cevm.core.model`) is never used for measured values.
+logs are generated with the detailed simulator (:func:`logged_consumption`). Both take
+the weather's loads from :mod:`cevm_samplegen.auxiliaries`: a cabin heat balance with a
+heat pump (COP falling with the cold), a resistive backup and A/C (EER falling with the
+heat), a warm-up after each layover; a diesel's cab A/C and a cold engine's extra
+friction. The CE model (:mod:`cevm.core.model`) is never used for measured values.
 
 Sensors are then derived from the truth:
 
@@ -45,7 +56,10 @@ Sensors are then derived from the truth:
   the vehicle has moved for 30 s); bus: total energy (0.1 kWh floor, net of regeneration,
   every 4-6 s: the trusted bus source), SoC (0.4 %), pack voltage and current from an
   open-circuit-voltage + resistance model, consistent with the energy (V I = battery
-  power). Comment metadata ``# vehicle_id=``, ``# logger=``, ``# started=``.
+  power); ambient air temperature (``fms_ambient_air_temp_c``, 0.03125 degC steps, every
+  4-6 s): the air plus a per-vehicle sensor bias, up to 2 K warm in full sun at
+  standstill (fading with speed), through a 60 s sensor lag. Comment metadata
+  ``# vehicle_id=``, ``# logger=``, ``# started=``.
 * ``portal`` (dialect 2): ``;``, decimal comma, cp1252 (``£``, ``é``, an en dash in
   Event texts), CRLF, Europe/London local time ``dd/mm/yyyy HH:MM:SS`` (the autumn DST
   jump makes one hour repeat), rows every 1-10 s while moving, every 30-120 s when
@@ -53,13 +67,18 @@ Sensors are then derived from the truth:
   off, ``Ignition`` On/Off rows at trip ends, heartbeats every 15-30 min while off; GPS
   speed in mph, CAN odometer in miles (0.1 mi, floor), fuel used (0.5 l, floor), rare
   no-fix rows written as 0;0; Events: harsh braking etc., a depot exit on each day's
-  first row and a fuel-card purchase on its last. Rows grouped by ``Registration``.
+  first row and a fuel-card purchase on its last. Rows grouped by ``Registration``. No
+  temperature column (the dialect has none).
 
-**Fleet** (:data:`SAMPLE_FLEET`): srf, 14-16 May 2019: electric buses EB-01 and EB-02
-on two urban loops (3 trips a day, 0-60 passengers x 75 kg per trip), diesel HGV-11 on
-a regional delivery loop (3 trips a day, payload falling at each drop) and HGV-21 on a
-trunk road (out and back: the return leg is drawn to end at the depot; heavy out,
-light back); payloads 0-26,000 kg on an 18,000 kg tractor. Portal, 25-28 October 2019:
+**Fleet** (:data:`SAMPLE_FLEET`): srf, six days from winter to summer 2019 (31 January
+and 1 February in a cold snap, -5.5 and -4 degC at dawn; 10 April and 15 May drawn from
+the climate; 25 July and 27 August hot, 31 and 29 degC in the afternoon): electric
+buses EB-01 and EB-02 on two urban loops (4-5 trips a day from a random morning hour,
+0-60 passengers x 75 kg per trip); diesel HGV-11 on regional deliveries (3 trips a day,
+payload 14-26 t falling at each drop) and urban multi-drop (4 rounds in town, 6-12 t)
+on alternate days; HGV-21 on long haul (a trunk road out and back: the return leg is
+drawn to end at the depot; heavy out, light back) and, two days, regional deliveries;
+an 18,000 kg tractor. Portal, 25-28 October 2019:
 KX19 LMR on the regional loop by day, KX19 LMT on the trunk road by night (its night of
 26-27 October spans 01:00 UTC, when the clocks went back). :func:`fleet_for_benchmark`
 writes a larger srf fleet on the same routes.
@@ -67,9 +86,10 @@ writes a larger srf fleet on the same routes.
 **File-level faults** (all listed in ``truth.json``): a backward clock correction of
 4.25 s in one srf file (EB-02, day 2, mid trip 2: the phone clock ran ahead), a
 fuel-counter reset in one file (HGV-21, day 2, mid trip 2: the new counter starts at
-12.5 l), HGV-21's counter starting near 1.84 million litres, one gzipped file
-(HGV-21, day 3, ``.csv.gz``), HGV-11's wheel speed reading 1.5 % high and its ECU fuel
-figures 3 % high (its flow meter shows the truth).
+12.5 l), HGV-21's counter starting near 1.84 million litres, gzipped files (every srf
+file but each vehicle's first day, ``.csv.gz``, to keep the repository small),
+HGV-11's wheel speed reading 1.5 % high and its ECU fuel figures 3 % high (its flow
+meter shows the truth), ambient sensors reading 0.2-0.7 K off.
 
 **DSM.** Float32 GeoTIFFs, 1 km tiles named by OS grid reference (``SP8538_DSM_2M.tif``),
 2 m pixels (5 m in ``--small``), deflate + floating-point predictor, values rounded to
@@ -86,24 +106,35 @@ holes over them: ``routes.<name>.surface_objects``.
 
 **truth.json**: per trip the vehicle, file, first and last file line, true UTC start and
 end (first and last logged tick, true clock), true distance, gross mass and load, true
-consumption (``consumption`` in ``consumption_unit``), the route and where on it the
-trip starts (``route_from_m``: the true positions are ``Route.xy(route_from_m +
-distance)``), the share inside DSM tiles; per file its faults; per vehicle the sensor
-biases; the consumption function's qualified name.
+consumption (``consumption`` in ``consumption_unit``), the duty, the route and where on
+it the trip starts (``route_from_m``: the true positions are ``Route.xy(route_from_m +
+distance)``), the share inside DSM tiles, the true air temperature (time-weighted mean,
+min, max), mean sunshine, ignition-off time before the trip, occupants, and the
+consumption function's parts: bus ``hvac_energy_j`` (heating, ventilation and A/C from
+the battery), ``warmup_energy_j`` (its share that made up the layover's cabin
+deficit), ``cabin_start_c``; truck ``hvac_fuel_l`` (cab HVAC), ``cold_start_fuel_l``
+(a cold engine's extra friction), ``engine_start_c``, ``cabin_start_c``; per day its
+weather (min, max, cloud, forced or drawn, sunrise); per file its faults; per vehicle
+the sensor biases and duty schedule; the consumption function's qualified name.
 
 **Not simulated**: lane offsets (all traffic drives on the centreline), traffic and
 signals as such (stops are random micro-trip dwells), load changes within a trip,
-charging, wrap-around of counters, OSTN15-grade datum detail (pyproj's default
+charging and depot pre-conditioning (a day's first trip starts with the cabin and the
+engine at the night's air temperature), battery temperature (its resistance and usable
+capacity do not change with the cold), wind, rain, wrap-around of counters, OSTN15-grade datum detail (pyproj's default
 BNG->WGS84 transformation is used both ways), DSM noise on the road surface (the road is
 the terrain, to 1/128 m), embankments, cuttings and bridge ramps, vehicles in the DSM.
 
 Public API: :func:`generate_sample_logs`, :func:`fleet_for_benchmark`,
 :func:`simulate_fleet`, :func:`build_world`, :func:`standin_consumption`,
-:func:`logged_consumption`, :class:`FleetSpec`, :data:`SAMPLE_FLEET`, :data:`SMALL_FLEET`.
+:func:`logged_consumption`, :class:`TripConditions`, :class:`Consumption`,
+:class:`FleetSpec`, :data:`SAMPLE_FLEET`, :data:`SMALL_FLEET`.
 
-Modules: :mod:`~cevm_samplegen.world` (terrain, roads, DSM), :mod:`~cevm_samplegen.fleet`
-(duties, vehicles, truth trips), :mod:`~cevm_samplegen.consumption` (the consumption
-functions), :mod:`~cevm_samplegen.writers` (sensors, srf and portal files) with
+Modules: :mod:`~cevm_samplegen.world` (terrain, roads, DSM), :mod:`~cevm_samplegen.weather`
+(air temperature, sunshine), :mod:`~cevm_samplegen.fleet` (duties, vehicles, truth trips),
+:mod:`~cevm_samplegen.consumption` (the consumption functions) with
+:mod:`~cevm_samplegen.auxiliaries` (cabin HVAC, engine warm-up),
+:mod:`~cevm_samplegen.writers` (sensors, srf and portal files) with
 :mod:`~cevm_samplegen.csvfmt` (number formatting), :mod:`~cevm_samplegen.cycles` (micro-trips);
 this module ties them together.
 
@@ -127,7 +158,9 @@ from cevm_samplegen.common import BNG, DEFAULT_SEED, GEOID_UNDULATION_M
 from cevm_samplegen.consumption import (
     MEASUREMENT_KIND,
     STANDIN,
+    Consumption,
     StandInParams,
+    TripConditions,
     logged_consumption,
     standin_consumption,
 )
@@ -141,6 +174,7 @@ from cevm_samplegen.fleet import (
     FleetSpec,
     TruthTrip,
     VehicleSpec,
+    check_consumption_fn,
     simulate_fleet,
 )
 from cevm_samplegen.world import (
@@ -157,6 +191,7 @@ from cevm_samplegen.world import (
 from cevm_samplegen.writers import _Counters, _portal_file, _srf_file, _transformer
 
 __all__ = [
+    "Consumption",
     "ConsumptionFn",
     "DsmSpec",
     "DutySpec",
@@ -167,6 +202,7 @@ __all__ = [
     "STANDIN",
     "StandInParams",
     "Terrain",
+    "TripConditions",
     "TruthTrip",
     "VehicleSpec",
     "World",
@@ -235,6 +271,24 @@ def _dump_json(obj, path: Path) -> None:
     path.write_text(json.dumps(obj, indent=1, sort_keys=True, ensure_ascii=False) + "\n", encoding="utf-8")
 
 
+NOTES = (
+    "Times are the true UTC of the first and last logged tick of each trip; distance and consumption are the "
+    "truth between them. ambient_c is the time-weighted mean true air temperature over that span (min, max: "
+    "on the 1 s truth grid), solar_w_m2 the mean global horizontal irradiance, soak_s the ignition-off time "
+    "before the trip (12 h before a day's first), occupants the people on board. The consumption function's "
+    "parts are over the whole truth trip (within a second of the logged span): hvac_energy_j (bus: heating, "
+    "ventilation and A/C from the battery, warm-up included), warmup_energy_j (its excess while making up the "
+    "layover's cabin deficit), hvac_fuel_l (truck: cab HVAC on the engine), cold_start_fuel_l (a cold engine's "
+    "extra friction), cabin_start_c and engine_start_c (at ignition on)."
+)
+
+
+def _weather_json(truth: dict[str, list[list[TruthTrip]]]) -> dict:
+    days = {tr.weather.date: tr.weather for days in truth.values() for day in days for tr in day}
+    return {d: {"min_c": round(w.min_c, 3), "max_c": round(w.max_c, 3), "cloud": round(w.cloud, 3),
+                "forced": w.forced, "sunrise_utc_h": round(w.sunrise_utc_h, 3)} for d, w in sorted(days.items())}
+
+
 def generate_sample_logs(outdir: str | Path, consumption_fn: ConsumptionFn = standin_consumption, *, seed: int = DEFAULT_SEED, small: bool = False, fleet: FleetSpec | None = None, write_dsm: bool = True) -> dict:
     """Generate the sample logs, DSM tiles and ``truth.json`` into ``outdir``.
 
@@ -263,12 +317,13 @@ def generate_sample_logs(outdir: str | Path, consumption_fn: ConsumptionFn = sta
         tiles = [p.relative_to(outdir).as_posix() for p in write_dsm_tiles(world, outdir / "dsm")]
     doc = {
         "generator": "cevm_samplegen",
-        "format_version": 1,
+        "format_version": 2,
         "seed": seed,
         "small": bool(small),
         "consumption_fn": _qualname(consumption_fn),
         "consumption_units": {"electric-bus": "J at the battery, net of regeneration", "diesel-hgv": "l of diesel"},
-        "notes": "Times are the true UTC of the first and last logged tick of each trip; distance and consumption are the truth between them.",
+        "notes": NOTES,
+        "weather": _weather_json(truth),
         "vehicles": _vehicles_json(fleet.srf_vehicles + fleet.portal_vehicles),
         "files": files,
         "trips": records,
@@ -353,6 +408,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--benchmark", nargs=2, type=int, metavar=("N_VEHICLES", "N_DAYS"), help="write a benchmark srf fleet instead")
     a = ap.parse_args(argv)
     fn = _load_fn(a.consumption)
+    try:
+        check_consumption_fn(fn)
+    except TypeError as e:
+        raise SystemExit(f"--consumption {a.consumption}: {e}") from None
     if a.benchmark:
         doc = fleet_for_benchmark(a.benchmark[0], a.benchmark[1], a.outdir, seed=a.seed, consumption_fn=fn)
         print(f"{len(doc['files'])} files, {doc['rows']} rows, {doc['bytes']} bytes in {a.outdir}")

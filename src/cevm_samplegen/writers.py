@@ -19,13 +19,13 @@ SRF_BUS_COLUMNS = (
     "timestamp_utc", "gps_lat_deg", "gps_lon_deg", "gps_alt_m", "gps_speed_kmh", "gps_hdop",
     "fms_wheel_speed_kmh", "fms_accel_pedal_pct", "fms_brake_switch", "fms_engine_speed_rpm",
     "fms_engine_torque_pct", "fms_battery_soc_pct", "fms_battery_voltage_v", "fms_battery_current_a",
-    "fms_total_energy_used_kwh",
+    "fms_total_energy_used_kwh", "fms_ambient_air_temp_c",
 )
 SRF_TRUCK_COLUMNS = (
     "timestamp_utc", "gps_lat_deg", "gps_lon_deg", "gps_alt_m", "gps_speed_kmh", "gps_hdop",
     "fms_wheel_speed_kmh", "fms_accel_pedal_pct", "fms_brake_switch", "fms_engine_speed_rpm",
     "fms_engine_torque_pct", "fms_total_fuel_used_l", "fms_fuel_rate_lph", "flowmeter_fuel_lph",
-    "fms_gross_weight_kg",
+    "fms_gross_weight_kg", "fms_ambient_air_temp_c",
 )
 #: (decimals, strip trailing zeros) per srf column.
 SRF_FORMAT = {
@@ -34,8 +34,17 @@ SRF_FORMAT = {
     "fms_brake_switch": (0, False), "fms_engine_speed_rpm": (3, True), "fms_engine_torque_pct": (0, False),
     "fms_battery_soc_pct": (1, False), "fms_battery_voltage_v": (1, False), "fms_battery_current_a": (1, False),
     "fms_total_energy_used_kwh": (1, False), "fms_total_fuel_used_l": (1, False), "fms_fuel_rate_lph": (2, False),
-    "flowmeter_fuel_lph": (2, False), "fms_gross_weight_kg": (0, False),
+    "flowmeter_fuel_lph": (2, False), "fms_gross_weight_kg": (0, False), "fms_ambient_air_temp_c": (5, True),
 }
+#: FMS ambient air temperature (J1939 PGN 65269, SPN 171): 0.03125 degC per bit.
+AMBIENT_RESOLUTION_C = 0.03125
+#: The ambient sensor's warm reading at standstill in full sun [K at 800 W/m^2]: it sits
+#: behind the bumper or under a mirror, heated by the sun and the road when no air flows
+#: past; the excess decays with speed (scale :data:`SENSOR_SUN_SPEED_MPS`).
+SENSOR_SUN_HEATING_K = 2.0
+SENSOR_SUN_SPEED_MPS = 3.0
+#: The sensor's thermal time constant [s] (its housing lags the air).
+SENSOR_TAU_S = 60.0
 #: Truck gearbox (12-speed AMT) and axle ratio of the plausible engine-speed model.
 _GEARS = np.array([14.9, 11.7, 9.0, 7.1, 5.6, 4.4, 3.5, 2.7, 2.1, 1.7, 1.3, 1.0])
 _AXLE = 2.8
@@ -55,6 +64,20 @@ def _arrivals(tk: np.ndarray, period_s: tuple[float, float], rng: np.random.Gene
     m = np.zeros(tk.size, bool)
     m[idx] = True
     return m
+
+
+def ambient_sensor_c(tr: TruthTrip) -> np.ndarray:
+    """What the vehicle's ambient air temperature sensor reads on the trip's 1 s truth
+    grid [degC], before quantisation: the air plus the vehicle's sensor bias, plus
+    :data:`SENSOR_SUN_HEATING_K` x (sunshine / 800 W/m^2) x exp(-v / 3 m/s), through a
+    first-order lag of :data:`SENSOR_TAU_S` starting from its reading at ignition on."""
+    from scipy.signal import lfilter
+
+    c = tr.conditions
+    raw = (c.ambient_c + tr.vehicle.ambient_bias_k
+           + SENSOR_SUN_HEATING_K * (c.solar_w_m2 / 800.0) * np.exp(-tr.speed_mps / SENSOR_SUN_SPEED_MPS))
+    a = math.exp(-1.0 / SENSOR_TAU_S)
+    return lfilter([1.0 - a], [1.0, -a], raw, zi=[a * raw[0]])[0]
 
 
 def _ar1(n: int, tau_ticks: float, sigma: float, rng: np.random.Generator) -> np.ndarray:
@@ -114,6 +137,32 @@ def _fms_common(veh: VehicleSpec, tr: TruthTrip, at: dict, rng: np.random.Genera
     out["fms_engine_speed_rpm"] = _round_q(np.maximum(rpm, 0.0), 0.125)
     out["fms_engine_torque_pct"] = np.clip(np.round(100.0 * torque / p.ref_torque_nm), -125, 125)
     return out
+
+
+def _round_part(key: str, x: float) -> float:
+    return round(x, 1 if key.endswith("_j") else 5 if key.endswith("_l") else 3)
+
+
+def conditions_record(tr: TruthTrip, t_first: float, t_last: float) -> dict:
+    """The truth record's duty, route, weather and consumption parts of a trip logged from
+    ``t_first`` to ``t_last`` [s from its start]: the air temperature's time-weighted mean,
+    minimum and maximum and the mean sunshine over that span; the ignition-off time
+    before the trip; the consumption function's parts (over the whole truth trip)."""
+    t = tr.time_s
+    inside = (t >= t_first - 1.0) & (t <= t_last + 1.0)
+    tt = np.concatenate(([t_first], t[(t > t_first) & (t < t_last)], [t_last]))
+    amb = np.interp(tt, t, tr.conditions.ambient_c)
+    sun = np.interp(tt, t, tr.conditions.solar_w_m2)
+    span = max(t_last - t_first, 1e-9)
+    return {
+        "duty": tr.duty, "route": tr.route,
+        "ambient_c": round(float(np.sum(0.5 * (amb[1:] + amb[:-1]) * np.diff(tt)) / span), 3),
+        "ambient_min_c": round(float(tr.conditions.ambient_c[inside].min()), 3),
+        "ambient_max_c": round(float(tr.conditions.ambient_c[inside].max()), 3),
+        "solar_w_m2": round(float(np.sum(0.5 * (sun[1:] + sun[:-1]) * np.diff(tt)) / span), 1),
+        "soak_s": round(tr.conditions.soak_s, 1), "occupants": tr.conditions.occupants,
+        **{k: _round_part(k, v) for k, v in sorted(tr.parts.items())},
+    }
 
 
 @dataclass
@@ -180,6 +229,8 @@ def _srf_file(world: World, veh: VehicleSpec, trips: list[TruthTrip], date: str,
             m = np.where(rng.random(n) > 0.005, 1.0, np.nan)
             for c in g:
                 cols_v[c] = fms[c] * m
+        sensed = np.interp(tk, tr.time_s, ambient_sensor_c(tr))
+        cols_v["fms_ambient_air_temp_c"] = np.where(_arrivals(tk, (4.0, 6.0), rng), _round_q(sensed, AMBIENT_RESOLUTION_C), np.nan)
         cons = state.consumption + at["cons"]
         rate = np.diff(tr.consumption)[at["k"]]  # per 1 s step: l/s or W
         if is_bus:
@@ -239,10 +290,10 @@ def _srf_file(world: World, veh: VehicleSpec, trips: list[TruthTrip], date: str,
             "vehicle_id": veh.vehicle_id, "vehicle_type": veh.vehicle_type, "dialect": "srf", "day_index": day_index,
             "trip_index": tr.trip_index, "start_utc_s": round(tr.start_utc_s + t_first, 3), "end_utc_s": round(tr.start_utc_s + t_last, 3),
             "duration_s": round(t_last - t_first, 3), "distance_m": round(float(at["distance"][-1] - at["distance"][0]), 2),
-            "mass_kg": tr.mass_kg, "consumption": float(c_last - c_first), "route": veh.route,
+            "mass_kg": tr.mass_kg, "consumption": float(c_last - c_first),
             "route_from_m": round(tr.route_from_m + float(at["distance"][0]), 2),
             "load": tr.load, "dsm_covered_share": round(float(world.in_tiles(tr.x_m, tr.y_m).mean()), 4),
-            "_rows": n,
+            **conditions_record(tr, t_first, t_last), "_rows": n,
         })
         state.consumption += float(tr.consumption[-1])
     # ---- assemble rows, repeated ticks (identical duplicate lines)
@@ -330,7 +381,7 @@ def _portal_vehicle(world: World, veh: VehicleSpec, days: list[list[TruthTrip]],
             "vehicle_id": veh.vehicle_id, "vehicle_type": veh.vehicle_type, "dialect": "portal", "day_index": tr.day_index,
             "trip_index": j, "start_utc_s": float(tr.start_utc_s), "end_utc_s": float(tr.start_utc_s + T), "duration_s": float(T),
             "distance_m": round(float(tr.distance_m[-1]), 2), "mass_kg": tr.mass_kg, "consumption": float(tr.consumption[-1]),
-            "route": veh.route, "route_from_m": round(tr.route_from_m, 2), "load": tr.load,
+            "route_from_m": round(tr.route_from_m, 2), "load": tr.load, **conditions_record(tr, 0.0, float(T)),
             "dsm_covered_share": round(float(world.in_tiles(tr.x_m, tr.y_m).mean()), 4),
         })
         state.odometer_m += float(tr.distance_m[-1])
