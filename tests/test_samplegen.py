@@ -455,7 +455,7 @@ def test_detailed_consumption_carries_hvac_and_cold_start():
     hvac_extra = soaked.parts["hvac_fuel_l"] - hot.parts["hvac_fuel_l"]
     assert soaked.cumulative[-1] - hot.cumulative[-1] == pytest.approx(soaked.parts["cold_start_fuel_l"] + hvac_extra,
                                                                          rel=1e-9)
-    assert 0.02 < soaked.parts["cold_start_fuel_l"] < 0.1 * soaked.cumulative[-1]
+    assert 0.02 < soaked.parts["cold_start_fuel_l"] < 0.2 * soaked.cumulative[-1]  # a short, light trip: cold throughout
 
 
 # --------------------------------------------------------------------------------------
@@ -813,11 +813,11 @@ def test_engine_warmup_by_hand():
     assert w.start_c(5.0, 0.0) == pytest.approx(88.0)
     assert w.start_c(5.0, 3 * 3600.0) == pytest.approx(5.0 + 83.0 / math.e)
     t = np.arange(0.0, 2001.0)
-    temp = w.temperature_c(t, np.full(2000, 60e3), 10.0)  # 60 kW of fuel: 18 kW into 250 kJ/K
-    np.testing.assert_allclose(temp[:1000], np.minimum(10.0 + 18e3 * t[:1000] / 250e3, 88.0))
-    assert temp[-1] == 88.0
-    with_cab = w.temperature_c(t, np.full(2000, 60e3), 10.0, cab_heat_w=3e3)
-    assert with_cab[500] == pytest.approx(10.0 + 15e3 * 500 / 250e3)  # the cab heater slows it
+    temp = w.temperature_c(t, np.full(2000, 200e3), 10.0)  # 200 kW of fuel: 60 kW into 650 kJ/K
+    np.testing.assert_allclose(temp, np.minimum(10.0 + 60e3 * t / 650e3, 88.0))
+    assert temp[-1] == 88.0 and temp[800] < 88.0  # hot after 845 s
+    with_cab = w.temperature_c(t, np.full(2000, 200e3), 10.0, cab_heat_w=3e3)
+    assert with_cab[500] == pytest.approx(10.0 + 57e3 * 500 / 650e3)  # the cab heater slows it
     assert float(w.friction_scale(20.0)) == pytest.approx(1.0 + 0.012 * 68.0)
     assert float(w.friction_scale(95.0)) == 1.0
 

@@ -262,16 +262,17 @@ def cabin_load(cabin: Cabin, time_s, speed_mps, ambient_c, solar_w_m2, *, occupa
 class EngineWarmup:
     """A diesel engine's warm-up and the friction it costs while cold (SI).
 
-    Defaults for a 9.3 l heavy-duty engine: ``capacity_j_per_k`` = 250 kJ/K, the oil,
-    liners and head whose temperature sets the friction (the whole engine with coolant
-    is about 700 kJ/K); ``heat_share`` = 0.30 of the fuel power into coolant and oil at
-    part load; ``hot_c`` = 88 degC (thermostat); ``soak_tau_s`` = 3 h, cooling parked
-    (from 88 to about 50 degC in 2 h at 15 degC); ``friction_per_k`` = 0.012: friction
-    1 + 0.012 (hot - T) times the hot engine's. With these the engine is hot after
-    about 10-15 minutes of regional driving from a cold start, later in town.
+    Defaults for a 9.3 l heavy-duty engine: ``capacity_j_per_k`` = 650 kJ/K, its metal
+    (about 900 kg), 35 l of coolant and 30 l of oil, which warm together while the
+    thermostat is closed; ``heat_share`` = 0.30 of the fuel power into coolant and oil
+    at part load; ``hot_c`` = 88 degC (thermostat); ``soak_tau_s`` = 3 h, cooling parked
+    (from 88 to about 50 degC in 2 h at 15 degC; 650 kJ/K over about 60 W/K);
+    ``friction_per_k`` = 0.012: friction 1 + 0.012 (hot - T) times the hot engine's.
+    With these the engine is hot after about 15 minutes of regional driving from a cold
+    start, half an hour in town.
     """
 
-    capacity_j_per_k: float = 250e3
+    capacity_j_per_k: float = 650e3
     heat_share: float = 0.30
     hot_c: float = 88.0
     soak_tau_s: float = 3.0 * 3600.0
