@@ -193,3 +193,16 @@ def test_the_calibrated_vehicle_file_holds_the_model_and_what_it_saw(tmp_path):
     assert d.cv_std_pct == pytest.approx(r.cv.std_pct, abs=1e-3)
     assert d.first_utc.startswith("2019-02-") and d.mass_kg[0] > 8000
     assert 'cda_m2 = "somewhere"' in out.read_text()  # the rest of the file is kept
+
+
+def test_the_heating_balance_temperature_is_fitted():
+    """Trips made with heating below 10 degC (not the default 16): the selection's grid
+    finds 10, and its fit is better than one held at 16."""
+    truth = dataclasses.replace(BUS, aux_power_w=3000.0, aux_heating_w_per_k=500.0, heating_below_c=10.0)
+    trips = _trips(truth)
+    sel = select(BUS, trips, time_repeats=0, nested=False)
+    assert "heat" in sel.chosen
+    assert sel.result.fitted["heating_below_c"][0] == 10.0
+    assert sel.result.vehicle.heating_below_c == 10.0
+    held = select(BUS, trips, time_repeats=0, nested=False, fit_balance=False)
+    assert sel.result.cv.std_pct < held.result.cv.std_pct

@@ -212,6 +212,12 @@ def _parameters(fitted: dict, powertrain: str) -> list[dict]:
     by_field = {t.field: t for (pt, _), t in TERMS_BY_POWERTRAIN.items() if pt == powertrain}
     out = []
     for field, (value, std) in fitted.items():
+        if field in ("heating_below_c", "cooling_above_c"):
+            what = "heating below" if field == "heating_below_c" else "cooling above"
+            out.append({"term": field, "field": field, "label": f"{what} (balance, on a 2 K grid)", "value": value,
+                        "std": None, "value_text": f"{value:g} degC", "std_text": "-",
+                        "short": f"{what.split()[0]} < {value:g} C" if field == "heating_below_c" else f"cooling > {value:g} C"})
+            continue
         t = by_field[field]
         unit, scale = t.display
         out.append({"term": t.name, "field": field, "label": f"{t.label} ({t.name})", "value": value, "std": std,

@@ -30,12 +30,16 @@ def fitted_keys(result: CalibrationResult) -> dict[str, float | str]:
         keys["ice_braking"] = v.ice_braking
     fields = {t.field: t for (pt, _), t in TERMS_BY_POWERTRAIN.items() if pt == v.powertrain}
     for name in result.fitted:
-        t = fields[name]
+        t = fields.get(name)
+        if t is None:  # the balance temperatures, below
+            continue
         key, factor = t.file
         keys[key] = getattr(v, name) * factor
-    if any(fields[n].temperature for n in result.fitted) and result.rows:
+    if any(fields[n].temperature for n in result.fitted if n in fields) and result.rows:
         temps = np.array([r.ambient_c for r in result.rows])
         keys["reference_temp_c"] = round(float(np.median(temps[np.isfinite(temps)])), 1)
+        keys["heating_below_c"] = v.heating_below_c
+        keys["cooling_above_c"] = v.cooling_above_c
     return keys
 
 

@@ -76,12 +76,11 @@ def unsupported(model: TermModel, names: Sequence[str], idx: np.ndarray) -> tupl
             if on.sum() < MIN_TRIPS_PER_TERM or len(set(groups[on])) < MIN_GROUPS_PER_TERM:
                 return name, (f"not identifiable: {int(on.sum())} of {n} trips ({len(set(groups[on]))} days) are "
                               f"{side}; needs {MIN_TRIPS_PER_TERM} on {MIN_GROUPS_PER_TERM} days ({t.hint})")
-            temps = data.ambient_c[idx]
-            spread = float(np.ptp(np.concatenate([temps[on], [model.vehicle.heating_below_c if name != 'cool'
-                                                               else model.vehicle.cooling_above_c]])))
+            spread = float(np.ptp(f))  # of the kelvin of demand over all the trips: 0 where none
             if spread < MIN_SPREAD_K:
-                return name, (f"not identifiable: the trips {side} span {spread:.1f} K from the balance "
-                              f"temperature; needs {MIN_SPREAD_K:g} K ({t.hint})")
+                return name, (f"not identifiable: the trips' kelvin of {'cooling' if name == 'cool' else 'heating'} "
+                              f"demand span {spread:.1f} K; needs {MIN_SPREAD_K:g} K (temperatures that differ, "
+                              f"some of them {side}; {t.hint})")
         if t.linear:
             col = model.feature(name, vals["cda"], vals["cr"])[idx]
             if not np.any(np.abs(col) > 0):

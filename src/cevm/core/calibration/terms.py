@@ -189,7 +189,7 @@ class TermModel:
     terms' coefficients (see the module docstring); the other terms at the vehicle's
     values."""
 
-    def __init__(self, vehicle: Vehicle, data: TripSet):
+    def __init__(self, vehicle: Vehicle, data: TripSet, components: dict | None = None):
         self.vehicle = vehicle
         self.data = data
         self.ev = vehicle.is_ev
@@ -199,6 +199,8 @@ class TermModel:
             self.w_ice = braking_weight(vehicle.ice_braking)
             self.lhv = float(vehicle.fuel_lhv_j_per_l)
         self._cache: dict = {}
+        self._components: dict = {} if components is None else components  # shared by with_balance
+        self._balanced: dict = {}
         t = data.ambient_c
         with np.errstate(invalid="ignore"):
             self.h = np.where(np.isfinite(t), energy.heating_k(np.nan_to_num(t), vehicle.heating_below_c), np.nan)
@@ -207,16 +209,30 @@ class TermModel:
     def components(self, cda: float, cr: float) -> tuple[np.ndarray, np.ndarray]:
         """P_i (E_DC1 + positive non-simplified) and N_i (negative non-simplified) [J]."""
         key = (float(cda), float(cr))
-        hit = self._cache.get(key)
+        hit = self._components.get(key)
         if hit is None:
             w01 = np.array([0.0, 1.0])
             e = np.array([wheel_energy_j(v, np.float64(m), key[0], key[1], w01)
                           for v, m in zip(self.data.vectors, self.data.mass)])
             e = e.reshape(self.data.n, 2)
             hit = (e[:, 0], e[:, 1] - e[:, 0])
-            if len(self._cache) > 256:
-                self._cache.clear()
-            self._cache[key] = hit
+            if len(self._components) > 256:
+                self._components.clear()
+            self._components[key] = hit
+        return hit
+
+    def with_balance(self, heating_below_c: float, cooling_above_c: float) -> TermModel:
+        """The same model with other balance temperatures [degC] (cached; the wheel
+        energies are shared)."""
+        key = (float(heating_below_c), float(cooling_above_c))
+        if key == (self.vehicle.heating_below_c, self.vehicle.cooling_above_c):
+            return self
+        hit = self._balanced.get(key)
+        if hit is None:
+            hit = TermModel(replace(self.vehicle, heating_below_c=key[0], cooling_above_c=key[1]), self.data,
+                            self._components)
+            hit._balanced = self._balanced
+            self._balanced[key] = hit
         return hit
 
     def feature(self, name: str, cda: float, cr: float) -> np.ndarray:
