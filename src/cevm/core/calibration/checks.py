@@ -47,6 +47,10 @@ EVIDENCE_MIN_S = 300.0
 MAX_NONTRACTION_SHARE = 1.0
 
 
+_LESS_THAN_THE_WHEELS = ("the trips measured less energy than their wheels needed (masses too high, elevation "
+                         "wrong, or a consumption column in the wrong unit?)")
+
+
 def _hint(model: TermModel, name: str) -> str:
     return TERMS_BY_POWERTRAIN[(model.vehicle.powertrain, name)].hint
 
@@ -164,23 +168,22 @@ def implausible(model: TermModel, fit: Fit, idx: np.ndarray) -> tuple[str, str] 
         lo, hi = t.plausible
         if not math.isfinite(v) or v < lo or v > hi:
             if name in ("eta", "regen", "kin") and v > 1:
-                why = ("above 1: the trips measured less energy than their wheels needed (masses too high, "
-                       "elevation wrong, or a consumption column in the wrong unit?)")
+                why = f"above 1: {_LESS_THAN_THE_WHEELS}"
             else:
-                why = f"outside the plausible {lo:g} to {_fmt(model, name, hi) if math.isfinite(hi) else 'infinity'}"
+                why = f"outside the plausible {_fmt(model, name, lo)} to " + (
+                    _fmt(model, name, hi) if math.isfinite(hi) else "infinity")
                 if name == "eta":
                     why += f" for {'an EV' if model.ev else 'a combustion engine'}"
             return name, f"implausible: {t.label} {_fmt(model, name, v)} is {why}"
         # a bound that binds where the free estimate is clearly beyond it: the data want
-        # a negative power or rate, or an efficiency above 1
+        # a negative power or rate, or (eta's coefficient 1/eta below 1) an efficiency
+        # above 1; the coefficient's standard error is sd_eta / eta^2
         free = float(fit.free[j])
-        if fit.theta[j] <= lb[j] + 1e-12 and free < lb[j] and math.isfinite(sd[j]) and free < lb[j] - 2 * sd[j] * (
-                fit.theta[j] ** 2 if name == "eta" else 1.0):
+        sd_coef = sd[j] * (fit.theta[j] ** 2 if name == "eta" else 1.0)
+        if fit.theta[j] <= lb[j] + 1e-12 and math.isfinite(sd_coef) and free < lb[j] - 2 * sd_coef:
             if name == "eta":
                 want = 1.0 / free if free > 0 else math.inf
-                return name, (f"implausible: the data want a drive efficiency of {want:.3g}, above 1: the trips "
-                              "measured less energy than their wheels needed (masses too high, elevation wrong, "
-                              "or a consumption column in the wrong unit?)")
+                return name, f"implausible: the data want a drive efficiency of {want:.3g}: {_LESS_THAN_THE_WHEELS}"
             return name, (f"implausible: the data want {t.label} = {_fmt(model, name, free)}, below "
                           f"{_fmt(model, name, lb[j])} by more than 2 standard errors: the term does not describe "
                           "these trips")
