@@ -290,258 +290,319 @@ def _convert_unit(value: float, unit: str, want_dim: str, path: Path | None, key
     return float(value) * factor
 
 
-def load_profile(source: str | Path | dict, path: Path | None = None) -> Profile:
-    """Parse and validate one profile from a TOML file path or an already-parsed dict.
+# --------------------------------------------------------------------------------------
+# Loading: TOML text -> a dict, then typed values out of it (every mistake names the key)
+# --------------------------------------------------------------------------------------
+class _Required:
+    pass
 
-    Unknown or ill-typed keys raise :class:`InputError` naming the file and the key, so
-    a typo in a user's profile is caught at load time, not silently ignored.
-    """
+
+_REQUIRED = _Required()
+
+
+def _read_toml(source: str | Path | dict, path: Path | None) -> tuple[dict, Path | None]:
+    """The profile's TOML document (``source`` itself if already parsed) and its path."""
     if isinstance(source, dict):
-        doc = source
-    else:
-        path = Path(source)
-        try:
-            doc = tomllib.loads(path.read_text(encoding="utf-8"))
-        except OSError as exc:
-            raise InputError(path, f"cannot read profile: {exc.strerror or exc}") from None
-        except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-            raise InputError(path, f"not a valid TOML profile: {exc}") from None
+        return source, path
+    path = Path(source)
+    try:
+        return tomllib.loads(path.read_text(encoding="utf-8")), path
+    except OSError as exc:
+        raise InputError(path, f"cannot read profile: {exc.strerror or exc}") from None
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise InputError(path, f"not a valid TOML profile: {exc}") from None
 
-    def fail(msg: str, key: str) -> InputError:
-        return InputError(path, msg, column=key)
 
-    def check_keys(table: Any, allowed: set[str], where: str) -> dict:
+@dataclass(frozen=True)
+class _Keys:
+    """Typed access to a profile's TOML tables; every error names the file and the key."""
+
+    path: Path | None
+
+    def fail(self, msg: str, key: str) -> InputError:
+        return InputError(self.path, msg, column=key)
+
+    def table(self, table: Any, allowed: set[str], where: str) -> dict:
+        """``table`` checked to be a table holding only ``allowed`` keys."""
         if not isinstance(table, dict):
-            raise fail("must be a table", where)
+            raise self.fail("must be a table", where)
         for k in table:
             if k not in allowed:
-                raise fail(f"unknown key (allowed: {', '.join(sorted(allowed))})", f"{where}.{k}" if where else k)
+                raise self.fail(f"unknown key (allowed: {', '.join(sorted(allowed))})", f"{where}.{k}" if where else k)
         return table
 
-    def get(table: dict, key: str, typ: type | tuple, default: Any, where: str) -> Any:
+    def get(self, table: dict, key: str, typ: type | tuple, default: Any, where: str) -> Any:
+        """``table[key]`` of type ``typ`` (an int is a float), ``default`` if absent
+        (:data:`_REQUIRED`: an error)."""
         if key not in table:
             if default is _REQUIRED:
-                raise fail("missing required key", f"{where}.{key}" if where else key)
+                raise self.fail("missing required key", f"{where}.{key}" if where else key)
             return default
         val = table[key]
         if typ is float and isinstance(val, int) and not isinstance(val, bool):
             val = float(val)
         if not isinstance(val, typ) or (typ is not bool and isinstance(val, bool)):
             tname = typ.__name__ if isinstance(typ, type) else "/".join(t.__name__ for t in typ)
-            raise fail(f"must be a {tname}, got {val!r}", f"{where}.{key}" if where else key)
+            raise self.fail(f"must be a {tname}, got {val!r}", f"{where}.{key}" if where else key)
         return val
 
-    def choice(val: str, options: tuple[str, ...], key: str) -> str:
+    def choice(self, val: str, options: tuple[str, ...], key: str) -> str:
         if val not in options:
-            raise fail(f"{val!r} is not one of {', '.join(options)}", key)
+            raise self.fail(f"{val!r} is not one of {', '.join(options)}", key)
         return val
 
-    check_keys(doc, _TOP_KEYS, "")
-    name = get(doc, "name", str, _REQUIRED, "")
+    def unit(self, value: float, unit: str, want_dim: str, key: str) -> float:
+        return _convert_unit(value, unit, want_dim, self.path, key)
+
+
+def load_profile(source: str | Path | dict, path: Path | None = None) -> Profile:
+    """Parse and validate one profile from a TOML file path or an already-parsed dict.
+
+    Unknown or ill-typed keys raise :class:`InputError` naming the file and the key, so
+    a typo in a user's profile is caught at load time, not silently ignored. Each
+    section is read and checked by its own function, in this order: the tables' keys,
+    ``name``, ``[csv]``, ``[time]``, ``[vehicle]``, ``[quality]``, ``[columns]``,
+    ``[[energy]]``, ``[detect]``.
+    """
+    doc, path = _read_toml(source, path)
+    k = _Keys(path)
+    k.table(doc, _TOP_KEYS, "")
+    name = k.get(doc, "name", str, _REQUIRED, "")
     if not re.fullmatch(r"[A-Za-z0-9_.-]+", name):
-        raise fail("profile name may hold only letters, digits, '_', '.', '-'", "name")
-    description = get(doc, "description", str, "", "")
-    detect = check_keys(doc.get("detect", {}), _SECTION_KEYS["detect"], "detect")
-    csv_t = check_keys(doc.get("csv", {}), _SECTION_KEYS["csv"], "csv")
-    time_t = check_keys(doc.get("time", None) if "time" in doc else {}, _SECTION_KEYS["time"], "time")
-    veh_t = check_keys(doc.get("vehicle", {}), _SECTION_KEYS["vehicle"], "vehicle")
-    qual_t = check_keys(doc.get("quality", {}), _SECTION_KEYS["quality"], "quality")
+        raise k.fail("profile name may hold only letters, digits, '_', '.', '-'", "name")
+    description = k.get(doc, "description", str, "", "")
+    detect = k.table(doc.get("detect", {}), _SECTION_KEYS["detect"], "detect")
+    csv_t = k.table(doc.get("csv", {}), _SECTION_KEYS["csv"], "csv")
+    time_t = k.table(doc.get("time", None) if "time" in doc else {}, _SECTION_KEYS["time"], "time")
+    veh_t = k.table(doc.get("vehicle", {}), _SECTION_KEYS["vehicle"], "vehicle")
+    qual_t = k.table(doc.get("quality", {}), _SECTION_KEYS["quality"], "quality")
 
-    # csv
-    encoding = get(csv_t, "encoding", str, "utf-8", "csv")
-    try:
-        "x".encode(encoding)
-    except LookupError:
-        raise fail(f"unknown text encoding {encoding!r}", "csv.encoding") from None
-    separator = get(csv_t, "separator", str, ",", "csv")
-    decimal = get(csv_t, "decimal", str, ".", "csv")
-    if len(separator) != 1 or len(decimal) != 1 or separator == decimal:
-        raise fail("separator and decimal must be single, different characters", "csv.separator")
-    comment_prefix = get(csv_t, "comment_prefix", str, "", "csv")
-    metadata = choice(get(csv_t, "metadata", str, "none", "csv"), ("key=value", "none"), "csv.metadata")
-    if metadata != "none" and not comment_prefix:
-        raise fail("metadata needs a comment_prefix", "csv.metadata")
-    truncated = choice(get(csv_t, "truncated_last_line", str, "drop", "csv"), ("drop", "error"), "csv.truncated_last_line")
-
-    # time
-    tcols = get(time_t, "columns", list, _REQUIRED, "time")
-    if not (1 <= len(tcols) <= 2) or not all(isinstance(c, str) and c for c in tcols):
-        raise fail("must list one datetime column or [date column, time column]", "time.columns")
-    fmt = get(time_t, "format", str, None, "time")
-    dfmt = get(time_t, "date_format", str, None, "time")
-    tfmt = get(time_t, "time_format", str, None, "time")
-    if len(tcols) == 1 and (fmt is None or dfmt or tfmt):
-        raise fail("one time column needs 'format' (and no date_format/time_format)", "time.format")
-    if len(tcols) == 2 and (fmt is not None or not dfmt or not tfmt):
-        raise fail("two time columns need 'date_format' and 'time_format' (and no 'format')", "time.date_format")
-    tz = get(time_t, "timezone", str, "UTC", "time")
-    try:
-        pd.Timestamp("2020-01-01").tz_localize(tz)
-    except Exception:  # noqa: BLE001 - any failure means an unknown zone
-        raise fail(f"unknown time zone {tz!r} (use an IANA name such as 'Europe/London')", "time.timezone") from None
-    date_repair = choice(get(time_t, "date_repair", str, "none", "time"), ("none", "dominant"), "time.date_repair")
-    if date_repair != "none" and len(tcols) != 2:
-        raise fail("date_repair needs separate date and time columns", "time.date_repair")
-    max_days = get(time_t, "date_repair_max_days", float, 1.0, "time")
-    if not max_days >= 0:
-        raise fail("must be >= 0", "time.date_repair_max_days")
-    time_spec = TimeSpec(tuple(tcols), fmt, dfmt, tfmt, tz, date_repair, max_days)
-
-    # vehicle
-    vsrc = choice(
-        get(veh_t, "source", str, "file_stem", "vehicle"),
-        ("metadata", "column", "file_stem", "parent_dir", "fixed"),
-        "vehicle.source",
-    )
-    vkey = get(veh_t, "key", str, None, "vehicle")
-    vval = get(veh_t, "value", str, None, "vehicle")
-    vfb = choice(get(veh_t, "fallback", str, "file_stem", "vehicle"), ("file_stem", "parent_dir", "error"), "vehicle.fallback")
-    if vsrc in ("metadata", "column") and not vkey:
-        raise fail(f"vehicle source {vsrc!r} needs 'key'", "vehicle.key")
-    if vsrc == "metadata" and metadata == "none":
-        raise fail("vehicle source 'metadata' needs csv.metadata = 'key=value'", "vehicle.source")
-    if vsrc == "fixed" and not vval:
-        raise fail("vehicle source 'fixed' needs 'value'", "vehicle.value")
-
-    # quality
-    zero_nofix = get(qual_t, "zero_position_is_no_fix", bool, True, "quality")
-    share = get(qual_t, "absurd_error_share", float, 0.5, "quality")
-    if not 0.0 <= share <= 1.0:
-        raise fail("must be within 0..1", "quality.absurd_error_share")
-
-    # columns
-    cols_t = doc.get("columns", {})
-    if not isinstance(cols_t, dict):
-        raise fail("must be a table", "columns")
-    maps: list[ColumnMap] = []
-    for canon, spec in cols_t.items():
-        key = f"columns.{canon}"
-        if canon not in CANONICAL_DIMENSIONS:
-            raise fail(f"not a mappable canonical column (known: {', '.join(CANONICAL_DIMENSIONS)})", key)
-        if isinstance(spec, str):
-            raise fail("must be a table such as { source = \"...\", unit = \"...\" }", key)
-        check_keys(spec, _COLUMN_KEYS, key)
-        src = get(spec, "source", str, _REQUIRED, key)
-        unit = get(spec, "unit", str, None, key)
-        vmap = get(spec, "map", dict, None, key)
-        if (unit is None) == (vmap is None):
-            raise fail("give exactly one of 'unit' or 'map'", key)
-        factor = 1.0
-        map_t = None
-        if unit is not None:
-            factor = _convert_unit(1.0, unit, CANONICAL_DIMENSIONS[canon], path, f"{key}.unit")
-        else:
-            items = []
-            for k, v in vmap.items():
-                if isinstance(v, bool) or not isinstance(v, (int, float)):
-                    raise fail(f"map value for {k!r} must be a number", f"{key}.map")
-                items.append((str(k), float(v)))
-            if not items:
-                raise fail("map is empty", f"{key}.map")
-            map_t = tuple(items)
-        miss = get(spec, "missing_values", list, [], key)
-        if not all(isinstance(m, (int, float)) and not isinstance(m, bool) for m in miss):
-            raise fail("missing_values must be numbers", f"{key}.missing_values")
-        maps.append(
-            ColumnMap(
-                canonical=canon,
-                source=src,
-                unit=unit,
-                factor=factor,
-                value_map=map_t,
-                missing_values=tuple(float(m) for m in miss),
-                required=get(spec, "required", bool, False, key),
-                negate=get(spec, "negate", bool, False, key),
-            )
-        )
-    mapped = {m.canonical for m in maps}
-    if ("lat_deg" in mapped) != ("lon_deg" in mapped):
-        raise fail("map both lat_deg and lon_deg, or neither", "columns")
-    dup = {s for s in [m.source for m in maps] if [m.source for m in maps].count(s) > 1}
-    if dup:
-        raise fail(f"source column(s) {sorted(dup)} mapped twice", "columns")
-
-    # energy
-    energy_t = doc.get("energy", [])
-    if not isinstance(energy_t, list):
-        raise fail("must be an array of tables ([[energy]])", "energy")
-    specs: list[EnergySpec] = []
-    for i, e in enumerate(energy_t):
-        key = f"energy[{i}]"
-        check_keys(e, _ENERGY_KEYS, key)
-        col = get(e, "column", str, _REQUIRED, key)
-        kind = choice(get(e, "kind", str, _REQUIRED, key), ("rate", "counter", "soc"), f"{key}.kind")
-        allowed = _ENERGY_COLUMNS[kind]
-        if col not in allowed:
-            raise fail(f"a {kind} source must use one of {', '.join(allowed)}", f"{key}.column")
-        needs = VIRTUAL_COLUMNS[col][0] if col in VIRTUAL_COLUMNS else (col,)
-        for c in needs:
-            if c not in mapped:
-                raise fail(f"column {c!r} is not mapped in [columns]", f"{key}.column")
-        dim = VIRTUAL_COLUMNS[col][1] if col in VIRTUAL_COLUMNS else CANONICAL_DIMENSIONS[col]
-        quantity = allowed[col]
-        if "quantity" in e and get(e, "quantity", str, None, key) != quantity:
-            raise fail(f"column {col!r} measures {quantity}", f"{key}.quantity")
-        res = get(e, "resolution", float, 0.0, key)
-        if not res >= 0:
-            raise fail("must be >= 0", f"{key}.resolution")
-        res_unit = get(e, "resolution_unit", str, None, key)
-        if res_unit is not None:
-            res = _convert_unit(res, res_unit, dim, path, f"{key}.resolution_unit")
-        elif res:
-            raise fail("resolution needs resolution_unit", f"{key}.resolution_unit")
-        prio = get(e, "priority", int, _REQUIRED, key)
-        if prio < 1:
-            raise fail("must be >= 1 (1 = most trusted)", f"{key}.priority")
-        cap = get(e, "capacity", float, None, key)
-        cap_j = None
-        if cap is not None:
-            if kind != "soc":
-                raise fail("capacity applies to soc sources only", f"{key}.capacity")
-            if not cap > 0:
-                raise fail("must be > 0", f"{key}.capacity")
-            cap_j = _convert_unit(cap, get(e, "capacity_unit", str, _REQUIRED, key), "energy", path, f"{key}.capacity_unit")
-        modulus = get(e, "modulus", float, None, key)
-        if modulus is not None:
-            if kind != "counter" or not modulus > 0:
-                raise fail("modulus (> 0) applies to counter sources only", f"{key}.modulus")
-            modulus = _convert_unit(modulus, get(e, "modulus_unit", str, _REQUIRED, key), dim, path,
-                                    f"{key}.modulus_unit")
-        specs.append(EnergySpec(col, kind, quantity, res, prio, cap_j, modulus,  # type: ignore[arg-type]
-                                get(e, "note", str, "", key)))
-
-    req = get(detect, "required_columns", list, _REQUIRED, "detect")
-    if not req or not all(isinstance(c, str) and c for c in req):
-        raise fail("must be a non-empty list of header column names", "detect.required_columns")
-
+    csv_opts = _csv_section(csv_t, k)
+    time_spec = _time_section(time_t, k)
+    vehicle = _vehicle_section(veh_t, csv_opts["metadata"], k)
+    quality = _quality_section(qual_t, k)
+    maps = _columns_section(doc.get("columns", {}), k)
+    specs = _energy_section(doc.get("energy", []), {m.canonical for m in maps}, k)
+    required = _detect_section(detect, k)
     return Profile(
         name=name,
         path=path,
         description=description,
-        required_columns=tuple(req),
-        encoding=encoding,
-        separator=separator,
-        decimal=decimal,
-        comment_prefix=comment_prefix,
-        metadata=metadata,  # type: ignore[arg-type]
-        truncated_last_line=truncated,  # type: ignore[arg-type]
+        required_columns=required,
+        **csv_opts,
         time=time_spec,
-        vehicle_source=vsrc,  # type: ignore[arg-type]
-        vehicle_key=vkey,
-        vehicle_value=vval,
-        vehicle_fallback=vfb,  # type: ignore[arg-type]
-        columns=tuple(maps),
-        energy=tuple(specs),
-        zero_position_is_no_fix=zero_nofix,
-        absurd_error_share=share,
+        **vehicle,
+        columns=maps,
+        energy=specs,
+        **quality,
     )
 
 
-class _Required:
-    pass
+# --------------------------------------------------------------------------------------
+# Validation: one function per section, and the rules across keys
+# --------------------------------------------------------------------------------------
+def _csv_section(t: dict, k: _Keys) -> dict[str, Any]:
+    """``[csv]``: encoding, separator, decimal, comments, metadata, truncated last line."""
+    encoding = k.get(t, "encoding", str, "utf-8", "csv")
+    try:
+        "x".encode(encoding)
+    except LookupError:
+        raise k.fail(f"unknown text encoding {encoding!r}", "csv.encoding") from None
+    separator = k.get(t, "separator", str, ",", "csv")
+    decimal = k.get(t, "decimal", str, ".", "csv")
+    if len(separator) != 1 or len(decimal) != 1 or separator == decimal:
+        raise k.fail("separator and decimal must be single, different characters", "csv.separator")
+    comment_prefix = k.get(t, "comment_prefix", str, "", "csv")
+    metadata = k.choice(k.get(t, "metadata", str, "none", "csv"), ("key=value", "none"), "csv.metadata")
+    if metadata != "none" and not comment_prefix:
+        raise k.fail("metadata needs a comment_prefix", "csv.metadata")
+    truncated = k.choice(k.get(t, "truncated_last_line", str, "drop", "csv"), ("drop", "error"),
+                         "csv.truncated_last_line")
+    return dict(encoding=encoding, separator=separator, decimal=decimal, comment_prefix=comment_prefix,
+                metadata=metadata, truncated_last_line=truncated)
 
 
-_REQUIRED = _Required()
+def _time_section(t: dict, k: _Keys) -> TimeSpec:
+    """``[time]``: one datetime column with ``format``, or date and time columns with
+    their formats; the zone; date repair (two columns only)."""
+    tcols = k.get(t, "columns", list, _REQUIRED, "time")
+    if not (1 <= len(tcols) <= 2) or not all(isinstance(c, str) and c for c in tcols):
+        raise k.fail("must list one datetime column or [date column, time column]", "time.columns")
+    fmt = k.get(t, "format", str, None, "time")
+    dfmt = k.get(t, "date_format", str, None, "time")
+    tfmt = k.get(t, "time_format", str, None, "time")
+    if len(tcols) == 1 and (fmt is None or dfmt or tfmt):
+        raise k.fail("one time column needs 'format' (and no date_format/time_format)", "time.format")
+    if len(tcols) == 2 and (fmt is not None or not dfmt or not tfmt):
+        raise k.fail("two time columns need 'date_format' and 'time_format' (and no 'format')", "time.date_format")
+    tz = _check_timezone(k.get(t, "timezone", str, "UTC", "time"), k)
+    date_repair = k.choice(k.get(t, "date_repair", str, "none", "time"), ("none", "dominant"), "time.date_repair")
+    if date_repair != "none" and len(tcols) != 2:
+        raise k.fail("date_repair needs separate date and time columns", "time.date_repair")
+    max_days = k.get(t, "date_repair_max_days", float, 1.0, "time")
+    if not max_days >= 0:
+        raise k.fail("must be >= 0", "time.date_repair_max_days")
+    return TimeSpec(tuple(tcols), fmt, dfmt, tfmt, tz, date_repair, max_days)  # type: ignore[arg-type]
+
+
+def _check_timezone(tz: str, k: _Keys) -> str:
+    try:
+        pd.Timestamp("2020-01-01").tz_localize(tz)
+    except Exception:  # noqa: BLE001 - any failure means an unknown zone
+        raise k.fail(f"unknown time zone {tz!r} (use an IANA name such as 'Europe/London')", "time.timezone") from None
+    return tz
+
+
+def _vehicle_section(t: dict, metadata: str, k: _Keys) -> dict[str, Any]:
+    """``[vehicle]``: where the vehicle id comes from (``metadata`` needs the csv's
+    ``key=value`` metadata)."""
+    vsrc = k.choice(k.get(t, "source", str, "file_stem", "vehicle"),
+                    ("metadata", "column", "file_stem", "parent_dir", "fixed"), "vehicle.source")
+    vkey = k.get(t, "key", str, None, "vehicle")
+    vval = k.get(t, "value", str, None, "vehicle")
+    vfb = k.choice(k.get(t, "fallback", str, "file_stem", "vehicle"), ("file_stem", "parent_dir", "error"),
+                   "vehicle.fallback")
+    if vsrc in ("metadata", "column") and not vkey:
+        raise k.fail(f"vehicle source {vsrc!r} needs 'key'", "vehicle.key")
+    if vsrc == "metadata" and metadata == "none":
+        raise k.fail("vehicle source 'metadata' needs csv.metadata = 'key=value'", "vehicle.source")
+    if vsrc == "fixed" and not vval:
+        raise k.fail("vehicle source 'fixed' needs 'value'", "vehicle.value")
+    return dict(vehicle_source=vsrc, vehicle_key=vkey, vehicle_value=vval, vehicle_fallback=vfb)
+
+
+def _quality_section(t: dict, k: _Keys) -> dict[str, Any]:
+    """``[quality]``: zero positions, the share of absurd values that is an error."""
+    zero_nofix = k.get(t, "zero_position_is_no_fix", bool, True, "quality")
+    share = k.get(t, "absurd_error_share", float, 0.5, "quality")
+    if not 0.0 <= share <= 1.0:
+        raise k.fail("must be within 0..1", "quality.absurd_error_share")
+    return dict(zero_position_is_no_fix=zero_nofix, absurd_error_share=share)
+
+
+def _columns_section(t: Any, k: _Keys) -> tuple[ColumnMap, ...]:
+    """``[columns]``: one :class:`ColumnMap` per entry, then the rules across them."""
+    if not isinstance(t, dict):
+        raise k.fail("must be a table", "columns")
+    maps = tuple(_column_map(canon, spec, k) for canon, spec in t.items())
+    _check_column_set(maps, k)
+    return maps
+
+
+def _column_map(canon: str, spec: Any, k: _Keys) -> ColumnMap:
+    """One ``[columns]`` entry: a source column with a unit (or a value map)."""
+    key = f"columns.{canon}"
+    if canon not in CANONICAL_DIMENSIONS:
+        raise k.fail(f"not a mappable canonical column (known: {', '.join(CANONICAL_DIMENSIONS)})", key)
+    if isinstance(spec, str):
+        raise k.fail("must be a table such as { source = \"...\", unit = \"...\" }", key)
+    k.table(spec, _COLUMN_KEYS, key)
+    src = k.get(spec, "source", str, _REQUIRED, key)
+    unit = k.get(spec, "unit", str, None, key)
+    vmap = k.get(spec, "map", dict, None, key)
+    if (unit is None) == (vmap is None):
+        raise k.fail("give exactly one of 'unit' or 'map'", key)
+    factor = 1.0
+    map_t = None
+    if unit is not None:
+        factor = k.unit(1.0, unit, CANONICAL_DIMENSIONS[canon], f"{key}.unit")
+    else:
+        map_t = _value_map(vmap, f"{key}.map", k)
+    miss = k.get(spec, "missing_values", list, [], key)
+    if not all(isinstance(m, (int, float)) and not isinstance(m, bool) for m in miss):
+        raise k.fail("missing_values must be numbers", f"{key}.missing_values")
+    return ColumnMap(
+        canonical=canon,
+        source=src,
+        unit=unit,
+        factor=factor,
+        value_map=map_t,
+        missing_values=tuple(float(m) for m in miss),
+        required=k.get(spec, "required", bool, False, key),
+        negate=k.get(spec, "negate", bool, False, key),
+    )
+
+
+def _value_map(vmap: dict, key: str, k: _Keys) -> tuple[tuple[str, float], ...]:
+    items = []
+    for name, v in vmap.items():
+        if isinstance(v, bool) or not isinstance(v, (int, float)):
+            raise k.fail(f"map value for {name!r} must be a number", key)
+        items.append((str(name), float(v)))
+    if not items:
+        raise k.fail("map is empty", key)
+    return tuple(items)
+
+
+def _check_column_set(maps: tuple[ColumnMap, ...], k: _Keys) -> None:
+    """Rules across ``[columns]``: latitude with longitude; no source mapped twice."""
+    mapped = {m.canonical for m in maps}
+    if ("lat_deg" in mapped) != ("lon_deg" in mapped):
+        raise k.fail("map both lat_deg and lon_deg, or neither", "columns")
+    sources = [m.source for m in maps]
+    dup = {s for s in sources if sources.count(s) > 1}
+    if dup:
+        raise k.fail(f"source column(s) {sorted(dup)} mapped twice", "columns")
+
+
+def _energy_section(t: Any, mapped: set[str], k: _Keys) -> tuple[EnergySpec, ...]:
+    """``[[energy]]``: one :class:`EnergySpec` per table (its columns must be mapped)."""
+    if not isinstance(t, list):
+        raise k.fail("must be an array of tables ([[energy]])", "energy")
+    return tuple(_energy_spec(e, f"energy[{i}]", mapped, k) for i, e in enumerate(t))
+
+
+def _energy_spec(e: Any, key: str, mapped: set[str], k: _Keys) -> EnergySpec:
+    """One ``[[energy]]`` table: a source's kind, column, resolution, trust, capacity or
+    modulus, each quantity converted to SI."""
+    k.table(e, _ENERGY_KEYS, key)
+    col = k.get(e, "column", str, _REQUIRED, key)
+    kind = k.choice(k.get(e, "kind", str, _REQUIRED, key), ("rate", "counter", "soc"), f"{key}.kind")
+    allowed = _ENERGY_COLUMNS[kind]
+    if col not in allowed:
+        raise k.fail(f"a {kind} source must use one of {', '.join(allowed)}", f"{key}.column")
+    needs = VIRTUAL_COLUMNS[col][0] if col in VIRTUAL_COLUMNS else (col,)
+    for c in needs:
+        if c not in mapped:
+            raise k.fail(f"column {c!r} is not mapped in [columns]", f"{key}.column")
+    dim = VIRTUAL_COLUMNS[col][1] if col in VIRTUAL_COLUMNS else CANONICAL_DIMENSIONS[col]
+    quantity = allowed[col]
+    if "quantity" in e and k.get(e, "quantity", str, None, key) != quantity:
+        raise k.fail(f"column {col!r} measures {quantity}", f"{key}.quantity")
+    res = k.get(e, "resolution", float, 0.0, key)
+    if not res >= 0:
+        raise k.fail("must be >= 0", f"{key}.resolution")
+    res_unit = k.get(e, "resolution_unit", str, None, key)
+    if res_unit is not None:
+        res = k.unit(res, res_unit, dim, f"{key}.resolution_unit")
+    elif res:
+        raise k.fail("resolution needs resolution_unit", f"{key}.resolution_unit")
+    prio = k.get(e, "priority", int, _REQUIRED, key)
+    if prio < 1:
+        raise k.fail("must be >= 1 (1 = most trusted)", f"{key}.priority")
+    cap = k.get(e, "capacity", float, None, key)
+    cap_j = None
+    if cap is not None:
+        if kind != "soc":
+            raise k.fail("capacity applies to soc sources only", f"{key}.capacity")
+        if not cap > 0:
+            raise k.fail("must be > 0", f"{key}.capacity")
+        cap_j = k.unit(cap, k.get(e, "capacity_unit", str, _REQUIRED, key), "energy", f"{key}.capacity_unit")
+    modulus = k.get(e, "modulus", float, None, key)
+    if modulus is not None:
+        if kind != "counter" or not modulus > 0:
+            raise k.fail("modulus (> 0) applies to counter sources only", f"{key}.modulus")
+        modulus = k.unit(modulus, k.get(e, "modulus_unit", str, _REQUIRED, key), dim, f"{key}.modulus_unit")
+    return EnergySpec(col, kind, quantity, res, prio, cap_j, modulus,  # type: ignore[arg-type]
+                      k.get(e, "note", str, "", key))
+
+
+def _detect_section(t: dict, k: _Keys) -> tuple[str, ...]:
+    """``[detect]``: the header columns that identify the logger."""
+    req = k.get(t, "required_columns", list, _REQUIRED, "detect")
+    if not req or not all(isinstance(c, str) and c for c in req):
+        raise k.fail("must be a non-empty list of header column names", "detect.required_columns")
+    return tuple(req)
 
 
 def builtin_profile_dirs() -> list[Path]:

@@ -29,7 +29,7 @@ import numpy as np
 import pandas as pd
 
 from cevm.errors import InputError
-from cevm.ingest.profiles import VIRTUAL_COLUMNS, ColumnMap, EnergySpec, Profile, load_profiles
+from cevm.ingest.profiles import VIRTUAL_COLUMNS, ColumnMap, EnergySpec, Profile, TimeSpec, load_profiles
 from cevm.ingest.timestamps import NAT, NS_PER_DAY, FastTimes, fast_first_column, has_offset, parse_datetimes
 
 __all__ = [
@@ -545,8 +545,33 @@ def read_log(path: str | Path, profile: Profile | str | None = None,
         column, unreadable time or number (with line and column), no position and no
         speed, a column mostly absurd, a truncated last line when the profile says
         ``truncated_last_line = "error"``.
+
+    The stages, each a function of its own: the file's bytes, decompressed, and its
+    profile (:func:`_load_bytes`); the text as UTF-8 (:func:`_decode`); the header and
+    metadata (:func:`_read_header`) and the columns the profile needs from it
+    (:func:`_plan_columns`); the data lines (:func:`_data_body`) parsed into a table
+    (:func:`_parse_body`); vehicle ids (:func:`_vehicle_codes`); times to UTC
+    (:func:`_parse_times`); columns mapped to canonical SI columns and checked
+    (:func:`_canonical_columns`); one log per vehicle (:func:`_split_vehicles`).
     """
     path = Path(path)
+    prof, raw, data = _load_bytes(path, profile, profiles)
+    data = _decode(data, prof, path)
+    hdr, metadata = _read_header(data, prof, path)
+    plan = _plan_columns(prof, hdr, path)
+    repairs: list[str] = []
+    body = _data_body(data, hdr, plan.names, prof, path, repairs)
+    df, lines, fast = _parse_body(body, hdr, plan, prof, path, repairs)
+    codes, vehicles = _vehicle_codes(df, prof, lines, path, vehicle_id, metadata, repairs)
+    utc = _parse_times(df, fast, prof.time, lines, codes, path, repairs)
+    out = _canonical_columns(df, plan.maps, utc, lines, prof, path, repairs)
+    return _split_vehicles(out, codes, vehicles, plan.maps, prof, path, metadata, repairs, raw)
+
+
+def _load_bytes(path: Path, profile: Profile | str | None,
+                profiles: dict[str, Profile] | None) -> tuple[Profile, bytes, bytes]:
+    """(profile, bytes on disk, CSV bytes after decompression); the profile given, or
+    detected from the file's first bytes."""
     if profile is None:  # detect from the bytes read for the file itself (one read)
         profiles = load_profiles() if profiles is None else profiles
         if not profiles:
@@ -560,17 +585,41 @@ def read_log(path: str | Path, profile: Profile | str | None = None,
     else:
         prof = _resolve_profile(path, profile, profiles)
         raw, data = _read_raw(path)
+    return prof, raw, data
+
+
+def _decode(data: bytes, prof: Profile, path: Path) -> bytes:
+    """The CSV bytes as UTF-8 text (see :func:`_to_utf8`); an empty file is an error."""
     if not data or data.isspace():  # isspace stops at the first other byte
         raise InputError(path, "file is empty", line=1)
-    data = _to_utf8(data, prof, path)
+    return _to_utf8(data, prof, path)
+
+
+def _read_header(data: bytes, prof: Profile, path: Path) -> tuple[_Header, dict[str, str]]:
+    """The header line (after comments and blank lines) and the metadata comments."""
     hdr = _find_header(data, prof.comment_prefix, prof.separator)
     if hdr is None:
         raise InputError(path, "no header line (only comments or blank lines)", line=data.count(b"\n") + 1)
     metadata = _parse_metadata(hdr.comments) if prof.metadata == "key=value" else {}
-    names = list(hdr.names)
-    repairs: list[str] = []
+    return hdr, metadata
 
-    # --- which columns are needed
+
+@dataclass(frozen=True)
+class _ColumnPlan:
+    """Which of the header's columns the profile reads, and as what."""
+
+    names: list[str]  # the header's column names
+    unique_names: list[str]  # the same, duplicates made unique (name NUL index)
+    maps: list[ColumnMap]  # the profile's column maps whose source is in the header
+    text_cols: list[str]  # read as text: time columns, vehicle column, value-map columns
+    num_cols: list[str]  # read as numbers
+    used: list[str]  # text_cols + num_cols, each once
+
+
+def _plan_columns(prof: Profile, hdr: _Header, path: Path) -> _ColumnPlan:
+    """The columns to read; a header lacking a required, time or vehicle column, or
+    naming a used column twice, is an error at the header's line."""
+    names = list(hdr.names)
     missing_req = [c for c in prof.required_columns if c not in names]
     if missing_req:
         raise InputError(path, f"header lacks column(s) {missing_req} required by profile {prof.name!r}",
@@ -592,8 +641,13 @@ def read_log(path: str | Path, profile: Profile | str | None = None,
     if dups:
         raise InputError(path, f"column name(s) {dups} appear more than once in the header", line=hdr.line, column=dups[0])
     unique_names = [f"{n}\x00{i}" if names.count(n) > 1 else n for i, n in enumerate(names)]
+    return _ColumnPlan(names, unique_names, maps, text_cols, num_cols, used)
 
-    # --- truncated last line
+
+def _data_body(data: bytes, hdr: _Header, names: list[str], prof: Profile, path: Path,
+               repairs: list[str]) -> bytes:
+    """The data lines after the header; a truncated last line (fewer fields than the
+    header, no line end) dropped and reported, or an error if the profile says so."""
     body = data[hdr.body_offset:]
     if body and not body.endswith(b"\n"):
         last_start = body.rfind(b"\n") + 1
@@ -608,37 +662,36 @@ def read_log(path: str | Path, profile: Profile | str | None = None,
             repairs.append(f"read: truncated last line ({n_fields} of {len(names)} fields) dropped: line {line_no}")
     if not body or body.isspace():
         raise InputError(path, "header only, no data rows", line=hdr.line + 1)
+    return body
 
-    # --- field counts per line (vectorised): pandas does not check them when reading
-    # only some columns. Files with quotes are read whole instead, letting the tokenizer check.
+
+def _parse_body(body: bytes, hdr: _Header, plan: _ColumnPlan, prof: Profile, path: Path,
+                repairs: list[str]) -> tuple[pd.DataFrame, np.ndarray, FastTimes | None]:
+    """The used columns of the data lines as a table (numbers float64, text object),
+    the file line of each row, and the first column's times when parsed straight from
+    the bytes (:func:`fast_first_column`). Field counts are checked per line first;
+    rows with no value in any used column are dropped and reported."""
+    names, used = plan.names, plan.used
     first_line = hdr.line + 1
     tspec = prof.time
+    # --- field counts per line (vectorised): pandas does not check them when reading
+    # only some columns. Files with quotes are read whole instead, letting the tokenizer check.
     quoted = b'"' in body
     fast = None
     if not quoted:
         bview = np.frombuffer(body, np.uint8)
         starts, n_sep = _line_stats(bview, ord(prof.separator))
-        blank_line = (bview[starts] == 10) | (bview[starts] == 13)
-        more = n_sep > len(names) - 1
-        if more.any():  # surplus fields that are all empty (trailing separators) are harmless
-            more &= ~_only_trailing_separators(bview, starts, n_sep - (len(names) - 1), ord(prof.separator))
-        if more.any():
-            i = int(np.flatnonzero(more)[0])
-            raise InputError(path, f"malformed CSV: {int(n_sep[i]) + 1} fields, more than the {len(names)} of "
-                                   f"the header", line=first_line + i)
-        fewer = (n_sep < len(names) - 1) & ~blank_line
-        if fewer.any():
-            repairs.append(f"read: {int(fewer.sum())} rows with fewer fields than the header (missing fields "
-                           f"read as empty): {_lines_summary(first_line + np.flatnonzero(fewer))}")
+        _check_field_counts(bview, starts, n_sep, len(names), first_line, prof, path, repairs)
         # the time column straight from the bytes when it is first and fixed-width
         if len(tspec.columns) == 1 and names[0] == tspec.columns[0] and len(used) > 1 \
                 and tspec.columns[0] not in used[1:]:
             fast = fast_first_column(body, bview, starts, prof.separator, tspec.format)  # type: ignore[arg-type]
     table_cols = used[1:] if fast is not None else used
-    df = _read_table(body, path, prof, unique_names, table_cols, num_cols, text_cols, hdr.line, all_cols=quoted)
+    df = _read_table(body, path, prof, plan.unique_names, table_cols, plan.num_cols, plan.text_cols, hdr.line,
+                     all_cols=quoted)
     if fast is not None and len(fast.ns) != len(df):  # alignment lost (should not happen): slow path
         fast = None
-        df = _read_table(body, path, prof, unique_names, used, num_cols, text_cols, hdr.line)
+        df = _read_table(body, path, prof, plan.unique_names, used, plan.num_cols, plan.text_cols, hdr.line)
     lines = first_line + np.arange(len(df), dtype=np.int64)
 
     # blank lines and rows without any used value (with the fast time column, only a
@@ -657,62 +710,92 @@ def read_log(path: str | Path, profile: Profile | str | None = None,
             fast = FastTimes(fast.ns[~empty], fast.is_utc, fast.blank[~empty])
     if len(df) == 0:
         raise InputError(path, "no data rows with values", line=first_line)
+    return df, lines, fast
 
-    # --- vehicle ids
-    if prof.vehicle_source == "column":
-        if vehicle_id is not None:
-            raise InputError(path, f"profile {prof.name!r} takes vehicle ids from column {prof.vehicle_key!r}; "
-                                   "a vehicle id override does not apply")
-        raw_codes, raw_ids = pd.factorize(df[prof.vehicle_key], sort=False)  # hash, no per-row strip
-        stripped = pd.Series(np.asarray(raw_ids, dtype=object)).str.strip()
-        uniq_codes, vehicles_idx = pd.factorize(stripped, sort=False)  # ' AB12' and 'AB12' merge
-        bad = (raw_codes < 0) | (np.asarray(stripped == "")[np.maximum(raw_codes, 0)] if len(stripped) else True)
-        if np.any(bad):
-            raise _line_col_error(path, "empty vehicle id", lines, np.asarray(bad), prof.vehicle_key)
-        codes = uniq_codes[raw_codes]
-        vehicles = [str(v) for v in vehicles_idx]
-    else:
-        codes = np.zeros(len(df), np.int64)
+
+def _check_field_counts(bview: np.ndarray, starts: np.ndarray, n_sep: np.ndarray, n_names: int,
+                        first_line: int, prof: Profile, path: Path, repairs: list[str]) -> None:
+    """More fields than the header is an error (unless only empty trailing fields);
+    fewer is reported (the missing fields read as empty)."""
+    blank_line = (bview[starts] == 10) | (bview[starts] == 13)
+    more = n_sep > n_names - 1
+    if more.any():  # surplus fields that are all empty (trailing separators) are harmless
+        more &= ~_only_trailing_separators(bview, starts, n_sep - (n_names - 1), ord(prof.separator))
+    if more.any():
+        i = int(np.flatnonzero(more)[0])
+        raise InputError(path, f"malformed CSV: {int(n_sep[i]) + 1} fields, more than the {n_names} of "
+                               f"the header", line=first_line + i)
+    fewer = (n_sep < n_names - 1) & ~blank_line
+    if fewer.any():
+        repairs.append(f"read: {int(fewer.sum())} rows with fewer fields than the header (missing fields "
+                       f"read as empty): {_lines_summary(first_line + np.flatnonzero(fewer))}")
+
+
+def _vehicle_codes(df: pd.DataFrame, prof: Profile, lines: np.ndarray, path: Path, vehicle_id: str | None,
+                   metadata: dict[str, str], repairs: list[str]) -> tuple[np.ndarray, list[str]]:
+    """Per row, the index of its vehicle in the returned list of vehicle ids (in order
+    of first appearance): from the vehicle column, else one id for the whole file."""
+    if prof.vehicle_source != "column":
         vehicles = [vehicle_id if vehicle_id is not None else _vehicle_from_profile(prof, path, metadata, repairs)]
+        return np.zeros(len(df), np.int64), vehicles
+    if vehicle_id is not None:
+        raise InputError(path, f"profile {prof.name!r} takes vehicle ids from column {prof.vehicle_key!r}; "
+                               "a vehicle id override does not apply")
+    raw_codes, raw_ids = pd.factorize(df[prof.vehicle_key], sort=False)  # hash, no per-row strip
+    stripped = pd.Series(np.asarray(raw_ids, dtype=object)).str.strip()
+    uniq_codes, vehicles_idx = pd.factorize(stripped, sort=False)  # ' AB12' and 'AB12' merge
+    bad = (raw_codes < 0) | (np.asarray(stripped == "")[np.maximum(raw_codes, 0)] if len(stripped) else True)
+    if np.any(bad):
+        raise _line_col_error(path, "empty vehicle id", lines, np.asarray(bad), prof.vehicle_key)
+    return uniq_codes[raw_codes], [str(v) for v in vehicles_idx]
 
-    # --- time
+
+def _parse_times(df: pd.DataFrame, fast: FastTimes | None, tspec: TimeSpec, lines: np.ndarray,
+                 codes: np.ndarray, path: Path, repairs: list[str]) -> np.ndarray:
+    """Each row's time as UTC ns since the epoch (int64): parsed (from the bytes, or
+    one datetime column, or date and time-of-day columns with date repair), checked,
+    and localised from the profile's zone unless the text carries one."""
     if fast is not None:
         col = tspec.columns[0]
         naive, aware = fast.ns, fast.is_utc
         _check_times(path, naive, lines, col, None)
-        utc = naive if aware else _localize(naive, tspec.timezone, codes, lines, repairs)
-    elif len(tspec.columns) == 1:
+        return naive if aware else _localize(naive, tspec.timezone, codes, lines, repairs)
+    if len(tspec.columns) == 1:
         col = tspec.columns[0]
         vals = df[col].to_numpy(dtype=object)
         naive = parse_datetimes(vals, tspec.format)  # type: ignore[arg-type]
         aware = tspec.format == "ISO8601" and has_offset(vals)
         _check_times(path, naive, lines, col, vals)
-        utc = naive if aware else _localize(naive, tspec.timezone, codes, lines, repairs)
-    else:
-        dcol, tcol = tspec.columns
-        dvals = df[dcol].to_numpy(dtype=object)
-        tvals = df[tcol].to_numpy(dtype=object)
-        dcodes, duniq = pd.factorize(pd.Series(dvals), sort=False)
-        uniq_ns = parse_datetimes(np.asarray(duniq, dtype=object), tspec.date_format)  # type: ignore[arg-type]
-        uniq_ns = np.where((uniq_ns >= _TIME_MIN) & (uniq_ns < _TIME_MAX), uniq_ns, NAT)
-        date_ns = np.where(dcodes >= 0, uniq_ns[np.maximum(dcodes, 0)] if len(uniq_ns) else NAT, NAT)
-        tod = parse_datetimes(tvals, tspec.time_format)  # type: ignore[arg-type]
-        ok_t = tod != NAT
-        day0 = (tod[ok_t] // NS_PER_DAY) * NS_PER_DAY
-        tod[ok_t] = tod[ok_t] - day0  # time of day [ns]
-        badt = ~ok_t
-        if badt.any():
-            raise _line_col_error(path, "unreadable time of day", lines, badt, tcol, tvals)
-        if tspec.date_repair == "dominant":
-            date_ns = _repair_dates(date_ns, tod, dvals, lines, tspec.date_repair_max_days, path, dcol, repairs)
-        badd = date_ns == NAT
-        if badd.any():
-            raise _line_col_error(path, f"unreadable date (format {tspec.date_format!r}):", lines, badd, dcol, dvals)
-        naive = date_ns + tod
-        _check_times(path, naive, lines, dcol, dvals)
-        utc = _localize(naive, tspec.timezone, codes, lines, repairs)
+        return naive if aware else _localize(naive, tspec.timezone, codes, lines, repairs)
+    dcol, tcol = tspec.columns
+    dvals = df[dcol].to_numpy(dtype=object)
+    tvals = df[tcol].to_numpy(dtype=object)
+    dcodes, duniq = pd.factorize(pd.Series(dvals), sort=False)
+    uniq_ns = parse_datetimes(np.asarray(duniq, dtype=object), tspec.date_format)  # type: ignore[arg-type]
+    uniq_ns = np.where((uniq_ns >= _TIME_MIN) & (uniq_ns < _TIME_MAX), uniq_ns, NAT)
+    date_ns = np.where(dcodes >= 0, uniq_ns[np.maximum(dcodes, 0)] if len(uniq_ns) else NAT, NAT)
+    tod = parse_datetimes(tvals, tspec.time_format)  # type: ignore[arg-type]
+    ok_t = tod != NAT
+    day0 = (tod[ok_t] // NS_PER_DAY) * NS_PER_DAY
+    tod[ok_t] = tod[ok_t] - day0  # time of day [ns]
+    badt = ~ok_t
+    if badt.any():
+        raise _line_col_error(path, "unreadable time of day", lines, badt, tcol, tvals)
+    if tspec.date_repair == "dominant":
+        date_ns = _repair_dates(date_ns, tod, dvals, lines, tspec.date_repair_max_days, path, dcol, repairs)
+    badd = date_ns == NAT
+    if badd.any():
+        raise _line_col_error(path, f"unreadable date (format {tspec.date_format!r}):", lines, badd, dcol, dvals)
+    naive = date_ns + tod
+    _check_times(path, naive, lines, dcol, dvals)
+    return _localize(naive, tspec.timezone, codes, lines, repairs)
 
-    # --- canonical columns
+
+def _canonical_columns(df: pd.DataFrame, maps: list[ColumnMap], utc: np.ndarray, lines: np.ndarray,
+                       prof: Profile, path: Path, repairs: list[str]) -> dict[str, np.ndarray]:
+    """The canonical columns (``time_s``, ``source_line`` and each mapped column in SI),
+    with impossible positions and absurd values handled; a log with neither position nor
+    speed values is an error."""
     out: dict[str, np.ndarray] = {"time_s": utc / 1e9, "source_line": lines}
     for m in maps:
         out[m.canonical] = _convert_column(df[m.source], m, lines, path, prof, repairs)
@@ -727,8 +810,14 @@ def read_log(path: str | Path, profile: Profile | str | None = None,
         cands = [m.source for m in prof.columns if m.canonical in ("lat_deg", "lon_deg", "wheel_speed_mps", "gps_speed_mps")]
         raise InputError(path, "no position and no speed values: cannot derive a drive cycle "
                                f"(profile {prof.name!r} looks for {', '.join(cands) or 'none'})")
+    return out
 
-    # --- split per vehicle: one frame per vehicle, built around the arrays (no copy)
+
+def _split_vehicles(out: dict[str, np.ndarray], codes: np.ndarray, vehicles: list[str], maps: list[ColumnMap],
+                    prof: Profile, path: Path, metadata: dict[str, str], repairs: list[str],
+                    raw: bytes) -> list[ParsedLog]:
+    """One :class:`ParsedLog` per vehicle: its rows' canonical columns (a frame built
+    around the arrays, no copy, for a single vehicle) and the energy sources they hold."""
     logs = []
     for k, vname in enumerate(vehicles):
         if len(vehicles) > 1:
