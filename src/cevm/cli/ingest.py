@@ -11,7 +11,11 @@ import typer
 from cevm.cli.common import EXIT_OK, EXIT_PARTIAL, StoreOption, check_workers, fail
 from cevm.cli.output import OutputFormat, write_rows
 from cevm.errors import CevmError
+from cevm.ingest.textfile import ReadLimits
 from cevm.text import printable
+
+#: The defaults of the per-file limits (the flags show them in --help).
+_LIMITS = ReadLimits()
 
 
 def ingest(
@@ -31,6 +35,15 @@ def ingest(
     scheduler: Annotated[
         Optional[str], typer.Option(help="Dask scheduler address (tcp://HOST:8786): run the per-file work on that cluster (pip install 'cevm[dask]'); the workers must read the log files at the same paths, and the DSM.")
     ] = None,
+    max_rows: Annotated[
+        int, typer.Option(min=1, help="Refuse a file of more data rows than this (memory grows with the rows; see the README).")
+    ] = _LIMITS.max_rows,
+    max_file_mb: Annotated[
+        float, typer.Option(min=0.001, help="Refuse a file of more text than this [MB], after decompression.")
+    ] = _LIMITS.max_file_mb,
+    max_expansion: Annotated[
+        float, typer.Option(min=1.0, help="Refuse a gzip file that expands more than this many times (a zip bomb).")
+    ] = _LIMITS.max_expansion,
 ) -> None:
     """Read logger CSV exports into the trip store (clean trips, DSM elevation, vectors).
 
@@ -54,7 +67,9 @@ def ingest(
         raise fail("give --workers (local processes) or --scheduler (a Dask cluster), not both")
     check_workers(workers)
 
-    options = IngestOptions(dsm=dsm, profile=profile, profiles_dir=str(profiles_dir) if profiles_dir else None, force=force)
+    limits = ReadLimits(max_file_mb=max_file_mb, max_expansion=max_expansion, max_rows=max_rows)
+    options = IngestOptions(dsm=dsm, profile=profile, profiles_dir=str(profiles_dir) if profiles_dir else None,
+                            force=force, limits=limits)
     store_path = resolve_store_path(store)
     files, missing = discover(paths)
     if not files:  # nothing to ingest: bad usage, and no store is created for it

@@ -40,6 +40,8 @@ CANONICAL_COLUMNS: dict[str, str] = {
     "brake_switch": "brake switch, 1 pressed",
     "engine_speed_rpm": "engine or motor speed [rpm]",
     "engine_torque_pct": "engine or motor torque [% of reference]",
+    "ambient_temp_c": "ambient (outside) air temperature [degC]",
+    "hvac_power_w": "heating, ventilation and air-conditioning power drawn [W]",
 }
 
 MeasurementKind = Literal["fuel_l", "energy_j"]

@@ -4,8 +4,9 @@ consumption and drive-cycle vectors -> the trip store.
 Its modules, in the order the data flows through them:
 
 - :mod:`~cevm.ingest.profiles`: logger profiles (how each logger writes its CSV);
-- :mod:`~cevm.ingest.reading` (with :mod:`~cevm.ingest.timestamps`): a file's bytes ->
-  canonical log frames in SI units;
+- :mod:`~cevm.ingest.reading` (with :mod:`~cevm.ingest.textfile`: bytes, gzip and text
+  encodings streamed within limits; and :mod:`~cevm.ingest.timestamps`): a file's bytes
+  -> canonical log frames in SI units;
 - :mod:`~cevm.ingest.cleaning`: sorting, repairs, trip splitting, speed and distance;
 - :mod:`~cevm.ingest.dsm` and :mod:`~cevm.ingest.elevation`: DSM samples -> a road
   profile;
@@ -16,10 +17,34 @@ Its modules, in the order the data flows through them:
   the store.
 
 Re-exported here: :func:`ingest`, :class:`IngestOptions`, :func:`process_file` and the
-report types.
+report types, each imported on first use (so that importing one light module of the
+package, such as :mod:`~cevm.ingest.textfile` for the CLI's option defaults, does not
+load the whole pipeline).
 """
 
-from cevm.ingest.pipeline import FileReport, IngestReport, discover, ingest
-from cevm.ingest.task import FileOutcome, IngestOptions, process_file
+import importlib
+
+_EXPORTS = {
+    "FileReport": "cevm.ingest.pipeline",
+    "IngestReport": "cevm.ingest.pipeline",
+    "discover": "cevm.ingest.pipeline",
+    "ingest": "cevm.ingest.pipeline",
+    "FileOutcome": "cevm.ingest.task",
+    "IngestOptions": "cevm.ingest.task",
+    "process_file": "cevm.ingest.task",
+}
 
 __all__ = ["FileOutcome", "FileReport", "IngestOptions", "IngestReport", "discover", "ingest", "process_file"]
+
+
+def __getattr__(name: str):
+    module = _EXPORTS.get(name)
+    if module is None:
+        raise AttributeError(f"module 'cevm.ingest' has no attribute {name!r}")
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value  # the next lookup is a plain attribute
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_EXPORTS))

@@ -795,6 +795,7 @@ def clean_log(
     params: CleanParams = CleanParams(),
     *,
     path: str | Path | None = None,
+    release_frame: bool = False,
 ) -> CleanResult:
     """Clean a canonical log frame of one vehicle into trips (see the module docstring).
 
@@ -804,6 +805,9 @@ def clean_log(
     sources : energy sources for the measured consumption (:class:`EnergySourceLike`).
     params : :class:`CleanParams`.
     path : the source file, for error messages.
+    release_frame : remove the columns from ``frame`` once the rows are sorted (the
+        cleaning works on its own arrays from then on), so that a large log is not held
+        twice; the caller's frame is left without columns (default False).
 
     Returns
     -------
@@ -823,6 +827,9 @@ def clean_log(
     order = np.argsort(t, kind="stable")
     t, line = t[order], line[order]
     cols = {k: v[order] for k, v in cols.items()}
+    if release_frame:  # the frame's arrays are not needed any more: freed here, not after
+        for c in list(frame.columns):
+            del frame[c]
     t, line, cols = _dedupe(t, line, cols, ev)
 
     quality: dict = {

@@ -21,9 +21,10 @@ from contextlib import closing
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from cevm.errors import InputError
+from cevm.errors import InputError, escape_control
 from cevm.executors import Executor, SerialExecutor, Task, TaskResult
 from cevm.ingest.profiles import load_profiles
+from cevm.ingest.textfile import mb
 from cevm.ingest.task import FileOutcome, IngestOptions, file_sha256, open_sampler, process_file
 from cevm.store import TripStore
 
@@ -94,7 +95,7 @@ def discover(inputs: Iterable[str | Path]) -> tuple[list[Path], list[str]]:
         else:
             hits = []
         if not hits:
-            missing.append(f"{s}: no such file, directory or matching log files")
+            missing.append(escape_control(f"{s}: no such file, directory or matching log files"))
         for q in hits:
             found.setdefault(str(q.resolve()), q)
     return [found[k] for k in sorted(found)], missing
@@ -165,13 +166,23 @@ def _prepare(path: Path, store: TripStore, options: IngestOptions, profiles, sam
     task's arguments (``sampler`` is None for workers: they open their own)."""
     t0 = time.perf_counter()
     try:
+        size = path.stat().st_size
+        if size > options.limits.max_file_bytes and not _is_gzip(path):  # refused unread, not hashed first
+            return FileReport(str(path), "failed", seconds=time.perf_counter() - t0, error=escape_control(
+                f"{path}: file of {mb(size)} MB: more than the limit of {options.limits.max_file_mb:g} MB "
+                "per file (--max-file-mb)"))
         sha = file_sha256(path)
     except OSError as exc:
-        return FileReport(str(path), "failed", error=f"{path}: cannot read: {exc.strerror}",
+        return FileReport(str(path), "failed", error=escape_control(f"{path}: cannot read: {exc.strerror}"),
                           seconds=time.perf_counter() - t0)
     if not options.force and not store.needs_ingest(path, sha):
         return FileReport(str(path), "unchanged", seconds=time.perf_counter() - t0)
     return Task(str(path), (path, options, profiles, sampler, sha, headers))
+
+
+def _is_gzip(path: Path) -> bool:
+    with open(path, "rb") as fh:
+        return fh.read(2) == b"\x1f\x8b"
 
 
 def _write_result(res: TaskResult, store: TripStore, options: IngestOptions, report: IngestReport) -> FileReport:
@@ -181,7 +192,7 @@ def _write_result(res: TaskResult, store: TripStore, options: IngestOptions, rep
         return res.value
     path, sha = Path(res.task.key), res.task.args[4]
     if not res.ok:  # the task itself failed: its worker died max_attempts times, or it raised
-        error = f"{path}: {res.error}"
+        error = escape_control(f"{path}: {res.error}")
         try:
             st = path.stat()
             size, mtime = st.st_size, st.st_mtime

@@ -45,7 +45,9 @@ Profile format (all keys; ``[columns]`` entries and ``[[energy]]`` tables repeat
     wheel_speed_mps = { source = "fms_wheel_speed_kmh", unit = "km/h" }
     ignition = { source = "Ignition", map = { On = 1, Off = 0 } }
     gps_alt_m = { source = "ALT", unit = "m", missing_values = [-111] }
+    ambient_temp_c = { source = "OAT", unit = "degF" }   # degC, K or degF (see UNITS)
     # per column also: required = true (error if absent from the header), negate = true
+    # (not with K or degF: an offset scale)
     [[energy]]
     column = "total_energy_j"            # canonical column carrying the measurement
     kind = "counter"                     # rate | counter | soc
@@ -77,7 +79,7 @@ import re
 import tomllib
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any, Literal, NamedTuple
 
 import pandas as pd
 
@@ -86,6 +88,7 @@ from cevm.errors import InputError
 
 __all__ = [
     "UNITS",
+    "Unit",
     "CANONICAL_DIMENSIONS",
     "VIRTUAL_COLUMNS",
     "ColumnMap",
@@ -99,44 +102,58 @@ __all__ = [
 
 # --------------------------------------------------------------------------------------
 # Units: the only place where conversion factors live. Profiles name units; code looks
-# them up here. unit name -> (dimension, factor to the SI unit of that dimension).
-# SI units per dimension: angle deg, length m, speed m/s, volume l (litres by project
-# convention), volume_rate l/s, energy J, power W, mass kg, voltage V, current A,
-# percent %, rotational_speed rpm, dimensionless -.
+# them up here. unit name -> Unit(dimension, factor, offset): a value in the unit is
+# ``value * factor + offset`` in the canonical unit of its dimension. SI units per
+# dimension: angle deg, length m, speed m/s, volume l (litres by project convention),
+# volume_rate l/s, energy J, power W, mass kg, voltage V, current A, percent %,
+# rotational_speed rpm, temperature degC (the canonical columns say _c), dimensionless -.
+# Only temperatures are affine (offset != 0): a temperature *difference* (a resolution)
+# converts with the factor alone.
 # --------------------------------------------------------------------------------------
-UNITS: dict[str, tuple[str, float]] = {
-    "deg": ("angle", 1.0),
-    "m": ("length", 1.0),
-    "km": ("length", 1000.0),
-    "mi": ("length", 1609.344),
-    "ft": ("length", 0.3048),
-    "m/s": ("speed", 1.0),
-    "km/h": ("speed", 1.0 / 3.6),
-    "mph": ("speed", 0.44704),
-    "kn": ("speed", 1852.0 / 3600.0),
-    "l": ("volume", 1.0),
-    "ml": ("volume", 1e-3),
-    "gal_us": ("volume", 3.785411784),
-    "gal_imp": ("volume", 4.54609),
-    "l/s": ("volume_rate", 1.0),
-    "l/h": ("volume_rate", 1.0 / 3600.0),
-    "ml/s": ("volume_rate", 1e-3),
-    "gal_us/h": ("volume_rate", 3.785411784 / 3600.0),
-    "J": ("energy", 1.0),
-    "kJ": ("energy", 1e3),
-    "MJ": ("energy", 1e6),
-    "Wh": ("energy", 3600.0),
-    "kWh": ("energy", 3.6e6),
-    "W": ("power", 1.0),
-    "kW": ("power", 1e3),
-    "kg": ("mass", 1.0),
-    "t": ("mass", 1000.0),
-    "lb": ("mass", 0.45359237),
-    "V": ("voltage", 1.0),
-    "A": ("current", 1.0),
-    "%": ("percent", 1.0),
-    "rpm": ("rotational_speed", 1.0),
-    "-": ("dimensionless", 1.0),
+class Unit(NamedTuple):
+    """A unit: its dimension, and ``canonical = value * factor + offset``."""
+
+    dimension: str
+    factor: float
+    offset: float = 0.0
+
+
+UNITS: dict[str, Unit] = {
+    "deg": Unit("angle", 1.0),
+    "m": Unit("length", 1.0),
+    "km": Unit("length", 1000.0),
+    "mi": Unit("length", 1609.344),
+    "ft": Unit("length", 0.3048),
+    "m/s": Unit("speed", 1.0),
+    "km/h": Unit("speed", 1.0 / 3.6),
+    "mph": Unit("speed", 0.44704),
+    "kn": Unit("speed", 1852.0 / 3600.0),
+    "l": Unit("volume", 1.0),
+    "ml": Unit("volume", 1e-3),
+    "gal_us": Unit("volume", 3.785411784),
+    "gal_imp": Unit("volume", 4.54609),
+    "l/s": Unit("volume_rate", 1.0),
+    "l/h": Unit("volume_rate", 1.0 / 3600.0),
+    "ml/s": Unit("volume_rate", 1e-3),
+    "gal_us/h": Unit("volume_rate", 3.785411784 / 3600.0),
+    "J": Unit("energy", 1.0),
+    "kJ": Unit("energy", 1e3),
+    "MJ": Unit("energy", 1e6),
+    "Wh": Unit("energy", 3600.0),
+    "kWh": Unit("energy", 3.6e6),
+    "W": Unit("power", 1.0),
+    "kW": Unit("power", 1e3),
+    "kg": Unit("mass", 1.0),
+    "t": Unit("mass", 1000.0),
+    "lb": Unit("mass", 0.45359237),
+    "V": Unit("voltage", 1.0),
+    "A": Unit("current", 1.0),
+    "%": Unit("percent", 1.0),
+    "rpm": Unit("rotational_speed", 1.0),
+    "degC": Unit("temperature", 1.0),
+    "K": Unit("temperature", 1.0, -273.15),
+    "degF": Unit("temperature", 5.0 / 9.0, -32.0 * 5.0 / 9.0),
+    "-": Unit("dimensionless", 1.0),
 }
 
 
@@ -163,6 +180,8 @@ CANONICAL_DIMENSIONS: dict[str, str] = {
     "brake_switch": "dimensionless",
     "engine_speed_rpm": "rotational_speed",
     "engine_torque_pct": "percent",
+    "ambient_temp_c": "temperature",
+    "hvac_power_w": "power",
 }
 
 
@@ -192,8 +211,9 @@ PROFILES_ENV = "CEVM_PROFILES"
 
 @dataclass(frozen=True)
 class ColumnMap:
-    """How one canonical column is read: ``canonical = source * factor`` (SI), or through
-    ``value_map`` for categorical text (e.g. ``On`` -> 1.0).
+    """How one canonical column is read: ``canonical = source * factor + offset`` (SI;
+    ``offset`` is 0 except for temperatures in K or degF), or through ``value_map`` for
+    categorical text (e.g. ``On`` -> 1.0).
 
     ``missing_values`` are numbers (in the source unit) that mean "no value" for this
     logger (e.g. the Twizy's altitude -111); they become NaN and are reported.
@@ -207,6 +227,7 @@ class ColumnMap:
     missing_values: tuple[float, ...] = ()
     required: bool = False
     negate: bool = False
+    offset: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -280,14 +301,22 @@ _ENERGY_KEYS = {"column", "kind", "quantity", "resolution", "resolution_unit", "
                 "capacity_unit", "modulus", "modulus_unit", "note"}
 
 
-def _convert_unit(value: float, unit: str, want_dim: str, path: Path | None, key: str) -> float:
-    """``value`` in ``unit`` converted to the SI unit of dimension ``want_dim``."""
+def _convert_unit(value: float, unit: str, want_dim: str, path: Path | None, key: str, *,
+                  interval: bool = False) -> float:
+    """``value`` in ``unit`` converted to the SI unit of dimension ``want_dim``; with
+    ``interval`` a difference of two values (a resolution), without the unit's offset."""
+    factor, offset = _unit_factor(unit, want_dim, path, key)
+    return float(value) * factor + (0.0 if interval else offset)
+
+
+def _unit_factor(unit: str, want_dim: str, path: Path | None, key: str) -> tuple[float, float]:
+    """(factor, offset) of ``unit``, checked to be of dimension ``want_dim``."""
     if unit not in UNITS:
         raise InputError(path, f"unknown unit {unit!r}; known units: {', '.join(UNITS)}", column=key)
-    dim, factor = UNITS[unit]
-    if dim != want_dim:
-        raise InputError(path, f"unit {unit!r} is a {dim}, expected a {want_dim}", column=key)
-    return float(value) * factor
+    u = UNITS[unit]
+    if u.dimension != want_dim:
+        raise InputError(path, f"unit {unit!r} is a {u.dimension}, expected a {want_dim}", column=key)
+    return u.factor, u.offset
 
 
 # --------------------------------------------------------------------------------------
@@ -351,8 +380,8 @@ class _Keys:
             raise self.fail(f"{val!r} is not one of {', '.join(options)}", key)
         return val
 
-    def unit(self, value: float, unit: str, want_dim: str, key: str) -> float:
-        return _convert_unit(value, unit, want_dim, self.path, key)
+    def unit(self, value: float, unit: str, want_dim: str, key: str, *, interval: bool = False) -> float:
+        return _convert_unit(value, unit, want_dim, self.path, key, interval=interval)
 
 
 def load_profile(source: str | Path | dict, path: Path | None = None) -> Profile:
@@ -502,12 +531,15 @@ def _column_map(canon: str, spec: Any, k: _Keys) -> ColumnMap:
     vmap = k.get(spec, "map", dict, None, key)
     if (unit is None) == (vmap is None):
         raise k.fail("give exactly one of 'unit' or 'map'", key)
-    factor = 1.0
+    factor, offset = 1.0, 0.0
     map_t = None
     if unit is not None:
-        factor = k.unit(1.0, unit, CANONICAL_DIMENSIONS[canon], f"{key}.unit")
+        factor, offset = _unit_factor(unit, CANONICAL_DIMENSIONS[canon], k.path, f"{key}.unit")
     else:
         map_t = _value_map(vmap, f"{key}.map", k)
+    negate = k.get(spec, "negate", bool, False, key)
+    if negate and offset:
+        raise k.fail(f"negate does not apply to a value in {unit!r} (an offset scale)", f"{key}.negate")
     miss = k.get(spec, "missing_values", list, [], key)
     if not all(isinstance(m, (int, float)) and not isinstance(m, bool) for m in miss):
         raise k.fail("missing_values must be numbers", f"{key}.missing_values")
@@ -519,7 +551,8 @@ def _column_map(canon: str, spec: Any, k: _Keys) -> ColumnMap:
         value_map=map_t,
         missing_values=tuple(float(m) for m in miss),
         required=k.get(spec, "required", bool, False, key),
-        negate=k.get(spec, "negate", bool, False, key),
+        negate=negate,
+        offset=offset,
     )
 
 
@@ -574,7 +607,7 @@ def _energy_spec(e: Any, key: str, mapped: set[str], k: _Keys) -> EnergySpec:
         raise k.fail("must be >= 0", f"{key}.resolution")
     res_unit = k.get(e, "resolution_unit", str, None, key)
     if res_unit is not None:
-        res = k.unit(res, res_unit, dim, f"{key}.resolution_unit")
+        res = k.unit(res, res_unit, dim, f"{key}.resolution_unit", interval=True)
     elif res:
         raise k.fail("resolution needs resolution_unit", f"{key}.resolution_unit")
     prio = k.get(e, "priority", int, _REQUIRED, key)

@@ -7,7 +7,17 @@ splitting are later stages), the file's metadata, the energy sources available, 
 human-readable list of every repair made while reading. Bad input raises
 :class:`cevm.errors.InputError` naming file, line and column.
 
-Everything is vectorised (pandas C parser, numpy); nothing loops over rows in Python.
+A file is streamed, never held whole: its bytes, decompressed and decoded in chunks
+(:mod:`cevm.ingest.textfile`, within :class:`ReadLimits`), are cut into blocks of whole
+lines of about 16 MiB, and each block is parsed on its own into the columns the profile
+maps (the others are dropped by the parser), so the memory of reading a file is that of
+its canonical columns plus one block. Each block is parsed by pyarrow's CSV reader on
+one thread, numbers and ISO 8601 times included; a block that reader refuses (a row
+with fewer or more fields than the header, a value that is not a number, mixed time
+notation, ...) is parsed again by pandas' C parser, which either repairs what it can
+(and says so) or raises the error with its line and column.
+
+Everything is vectorised (pyarrow, pandas, numpy); nothing loops over rows in Python.
 
 Not handled: quoted fields holding line breaks (line numbers would shift).
 """
@@ -15,11 +25,9 @@ Not handled: quoted fields holding line breaks (line numbers would shift).
 from __future__ import annotations
 
 import csv
-import gzip
 import hashlib
 import io
 import re
-import zlib
 from dataclasses import dataclass, field
 from functools import cached_property, lru_cache
 from pathlib import Path
@@ -28,14 +36,17 @@ from typing import Literal
 import numpy as np
 import pandas as pd
 
-from cevm.errors import InputError
-from cevm.ingest.profiles import VIRTUAL_COLUMNS, ColumnMap, EnergySpec, Profile, TimeSpec, load_profiles
-from cevm.ingest.timestamps import NAT, NS_PER_DAY, FastTimes, fast_first_column, has_offset, parse_datetimes
+from cevm.errors import InputError, has_control
+from cevm.ingest.profiles import VIRTUAL_COLUMNS, ColumnMap, EnergySpec, Profile, load_profiles
+from cevm.ingest.textfile import (MAX_LINE_BYTES, ByteStream, ReadLimits, Utf8Stream, _ascii_transparent,
+                                  sniff_bom, utf16_hint)
+from cevm.ingest.timestamps import NAT, NS_PER_DAY, fast_first_column, parse_datetimes
 
 __all__ = [
     "PLAUSIBLE_RANGE_SI",
     "EnergySource",
     "ParsedLog",
+    "ReadLimits",
     "detect_profile",
     "read_log",
 ]
@@ -64,6 +75,10 @@ PLAUSIBLE_RANGE_SI: dict[str, tuple[float, float]] = {
     "brake_switch": (0.0, 1.0),
     "engine_speed_rpm": (-30000.0, 30000.0),  # electric motors may report reverse as negative
     "engine_torque_pct": (-125.0, 125.0),
+    # coldest and hottest air a road vehicle meets (-60 .. +57 degC on record) with margin;
+    # the FMS "not available" code 0xFFFF reads 1775 degC and is caught
+    "ambient_temp_c": (-80.0, 80.0),
+    "hvac_power_w": (0.0, 150_000.0),  # a coach's heaters and A/C draw tens of kW
 }
 
 # Times outside this window are absurd (unset clocks read 1970 or 2000; corrupt dates).
@@ -73,6 +88,13 @@ _TIME_MAX = np.datetime64("2100-01-01T00:00:00", "ns").astype(np.int64)
 
 # Text that means "no value" in a numeric column (besides an empty field).
 _NUMERIC_NA = ["", "NA", "N/A", "n/a", "NaN", "nan", "null", "NULL", "None", "-", "--"]
+
+#: Text parsed at a time: blocks of whole lines of about this many bytes.
+BLOCK_BYTES = 16 << 20
+
+#: Parsers: "pyarrow" (default; pandas explains or repairs a block it refuses) or
+#: "pandas" (the parser before pyarrow, kept for comparison in benchmarks).
+Engine = Literal["pyarrow", "pandas"]
 
 
 # ======================================================================================
@@ -115,19 +137,18 @@ class EnergySource:
     source_column: str = ""
     modulus: float | None = None
 
-
 @dataclass(frozen=True, eq=False)
 class ParsedLog:
     """One vehicle's rows of one logger file, in canonical columns.
 
     ``frame`` has ``time_s`` (UTC seconds since the Unix epoch, float64),
-    ``source_line`` (1-based line in the file, int64), ``vehicle_id`` (str) and every
-    canonical column the profile maps and the file has (float64, SI, NaN = no value),
-    rows in file order. ``repairs`` lists every repair made while reading the file
-    (file-wide, so shared by the logs of a multi-vehicle file). ``raw_bytes`` are the
-    file's bytes as stored on disk (compressed bytes for a .gz file; shared by the logs
-    of a file) and ``sha256`` their hex digest, computed on first use (the ingest
-    pipeline hashes files itself, before reading them).
+    ``source_line`` (1-based line in the file, int64), ``vehicle_id`` (categorical: one
+    id) and every canonical column the profile maps and the file has (float64, SI,
+    NaN = no value), rows in file order. ``repairs`` lists every repair made while
+    reading the file (file-wide, so shared by the logs of a multi-vehicle file).
+    ``sha256`` is the hex digest of the file's bytes on disk (compressed bytes for a .gz
+    file), computed on first use from the file (the ingest pipeline hashes files
+    itself, before reading them).
     """
 
     path: Path
@@ -137,39 +158,17 @@ class ParsedLog:
     metadata: dict[str, str]
     energy_sources: tuple[EnergySource, ...]
     repairs: list[str]
-    raw_bytes: bytes = field(default=b"", repr=False)
 
     @cached_property
     def sha256(self) -> str:
-        """Hex SHA-256 of ``raw_bytes``."""
-        return hashlib.sha256(self.raw_bytes).hexdigest()
+        """Hex SHA-256 of the file's bytes on disk."""
+        with open(self.path, "rb") as fh:
+            return hashlib.file_digest(fh, "sha256").hexdigest()
 
 
 # ======================================================================================
-# Bytes, text and header
+# Detection from the first bytes
 # ======================================================================================
-def _read_raw(path: Path) -> tuple[bytes, bytes]:
-    """(raw bytes on disk, CSV bytes after gzip decompression if the magic bytes say so)."""
-    return _decompress(_read_bytes(path), path)
-
-
-def _read_bytes(path: Path) -> bytes:
-    try:
-        return path.read_bytes()
-    except OSError as exc:
-        raise InputError(path, f"cannot read file: {exc.strerror or exc}") from None
-
-
-def _decompress(raw: bytes, path: Path) -> tuple[bytes, bytes]:
-    """(raw, CSV bytes): gunzipped if the magic bytes say so."""
-    data = raw
-    if raw[:2] == b"\x1f\x8b":
-        try:
-            data = gzip.decompress(raw)
-        except (OSError, EOFError, zlib.error) as exc:
-            raise InputError(path, f"corrupt gzip data: {exc}") from None
-    return raw, data
-
 
 #: Bytes read from the start of a file to detect its profile.
 _HEAD_BYTES = 65536
@@ -187,95 +186,10 @@ def _looks_binary(head: bytes) -> bool:
     n_ctrl = len(sample) - len(sample.translate(None, _BINARY_BYTES))
     return n_ctrl > 0.01 * len(sample)
 
-
 def _head_bytes(path: Path, n: int = _HEAD_BYTES) -> bytes:
     """First ``n`` bytes of the (decompressed) file, for detection."""
-    try:
-        with open(path, "rb") as fh:
-            head = fh.read(n)
-            if head[:2] == b"\x1f\x8b":
-                fh.seek(0)
-                with gzip.GzipFile(fileobj=fh) as gz:
-                    head = gz.read(n)
-    except (OSError, EOFError, zlib.error) as exc:
-        raise InputError(path, f"cannot read file: {getattr(exc, 'strerror', None) or exc}") from None
-    return head
-
-
-def _to_utf8(data: bytes, prof: Profile, path: Path) -> bytes:
-    """The CSV bytes re-encoded as UTF-8 (no BOM), after checking they decode with the
-    profile's encoding and hold no NUL byte (binary data)."""
-    encoding = prof.encoding
-    enc = encoding.lower().replace("_", "-")
-    try:
-        if enc in ("utf-8", "utf8", "utf-8-sig", "ascii", "us-ascii"):
-            if not data.isascii():  # isascii is a fast scan; otherwise validate by decoding
-                data.decode("utf-8" if "ascii" not in enc else "ascii")
-            out = data
-        else:
-            out = data.decode(encoding).encode("utf-8")
-    except UnicodeDecodeError as exc:
-        line = data.count(b"\n", 0, exc.start) + 1
-        start = data.rfind(b"\n", 0, exc.start) + 1
-        column = None
-        if enc.startswith("utf-8") or enc in ("ascii", "us-ascii", "cp1252", "latin-1", "iso-8859-1"):
-            hdr = _find_header(data[:start].decode(encoding, errors="replace").encode("utf-8"),
-                               prof.comment_prefix, prof.separator)
-            field_no = data.count(prof.separator.encode(), start, exc.start)
-            if hdr is not None and line > hdr.line and field_no < len(hdr.names):
-                column = hdr.names[field_no]
-        raise InputError(
-            path,
-            f"byte 0x{data[exc.start]:02x} is not valid {encoding} text (binary data, or a file in "
-            f"another encoding: check csv.encoding of profile {prof.name!r})",
-            line=line,
-            column=column,
-        ) from None
-    if out.startswith(b"\xef\xbb\xbf"):
-        out = out[3:]
-    nul = out.find(b"\x00")
-    if nul >= 0:
-        raise InputError(path, "binary data (NUL byte), not a CSV text file", line=out.count(b"\n", 0, nul) + 1)
-    return out
-
-
-@dataclass(frozen=True)
-class _Header:
-    names: tuple[str, ...]
-    line: int  # 1-based line of the header
-    body_offset: int  # byte offset of the first data line
-    comments: tuple[str, ...]
-
-
-def _find_header(data: bytes, prefix: str, sep: str) -> _Header | None:
-    """Skip blank and comment lines; parse the header line. ``None`` if there is none."""
-    pbytes = prefix.encode("utf-8") if prefix else None
-    pos, line_no, comments = 0, 0, []
-    n = len(data)
-    while pos < n:
-        nl = data.find(b"\n", pos)
-        end = n if nl < 0 else nl
-        line_no += 1
-        raw_line = data[pos:end].strip()
-        nxt = n if nl < 0 else nl + 1
-        if pbytes and raw_line.startswith(pbytes):
-            comments.append(raw_line[len(pbytes):].decode("utf-8", errors="replace").strip())
-        elif raw_line:
-            text = raw_line.decode("utf-8", errors="replace").replace("\r", " ")
-            names = next(csv.reader([text], delimiter=sep))
-            return _Header(tuple(s.strip() for s in names), line_no, nxt, tuple(comments))
-        pos = nxt
-    return None
-
-
-def _parse_metadata(comments: tuple[str, ...]) -> dict[str, str]:
-    """``key=value`` comment lines as a dict (stripped; later keys win)."""
-    meta = {}
-    for c in comments:
-        k, eq, v = c.partition("=")
-        if eq and k.strip():
-            meta[k.strip()] = v.strip()
-    return meta
+    with ByteStream(path, ReadLimits()) as raw:
+        return raw.peek(n)
 
 
 def detect_profile(path: str | Path, profiles: dict[str, Profile] | None = None) -> Profile:
@@ -291,36 +205,32 @@ def detect_profile(path: str | Path, profiles: dict[str, Profile] | None = None)
         raise InputError(path, "no logger profiles loaded")
     return _detect_in_head(path, _head_bytes(path), profiles)
 
-
-@lru_cache(maxsize=64)
-def _ascii_transparent(encoding: str) -> bool:
-    """Whether ``encoding`` decodes every ASCII byte to that character (utf-8, cp1252,
-    latin-1, ...; not utf-16 or utf-7), so that ASCII text needs no re-encoding."""
-    try:
-        return bytes(range(128)).decode(encoding) == "".join(map(chr, range(128)))
-    except (UnicodeDecodeError, LookupError):
-        return False
-
-
 def _detect_in_head(path: Path, head: bytes, profiles: dict[str, Profile]) -> Profile:
-    """:func:`detect_profile` on the first bytes ``head`` of the (decompressed) file."""
+    """:func:`detect_profile` on the first bytes ``head`` of the (decompressed) file.
+
+    A byte order mark decides the encoding for every profile (UTF-16 and UTF-32 text is
+    decoded, not called binary); otherwise each profile's own encoding is tried."""
     if not head or head.isspace():
         raise InputError(path, "file is empty", line=1)
+    bom = sniff_bom(head)
+    if bom is not None:
+        enc, n = bom
+        head = head[n:].decode(enc, errors="replace").encode("utf-8")
+        if not head or head.isspace():
+            raise InputError(path, "file is empty", line=1)
     if _looks_binary(head):
-        raise InputError(path, "binary data, not a CSV text file", line=1)
+        raise InputError(path, "binary data, not a CSV text file" + utf16_hint(head), line=1)
     matches: list[Profile] = []
     seen_header: tuple[str, ...] = ()
     ascii_head = head.isascii()
     for prof in profiles.values():
         try:
-            if ascii_head and _ascii_transparent(prof.encoding):
+            if bom is not None or (ascii_head and _ascii_transparent(prof.encoding)):
                 text = head  # what decoding and re-encoding as UTF-8 would give
             else:
                 text = head.decode(prof.encoding, errors="replace").encode("utf-8")
         except LookupError:
             continue
-        if text.startswith(b"\xef\xbb\xbf"):
-            text = text[3:]
         hdr = _find_header(text, prof.comment_prefix, prof.separator)
         if hdr is None:
             continue
@@ -338,6 +248,146 @@ def _detect_in_head(path: Path, head: bytes, profiles: dict[str, Profile]) -> Pr
     if len(top) > 1:
         raise InputError(path, f"header matches several profiles equally well: {', '.join(p.name for p in top)}; force one")
     return top[0]
+
+
+# ======================================================================================
+# Header and metadata
+# ======================================================================================
+
+
+@dataclass(frozen=True)
+class _Header:
+    names: tuple[str, ...]
+    line: int  # 1-based line of the header
+    body_offset: int  # byte offset of the first data line
+    comments: tuple[str, ...]
+    comment_lines: tuple[int, ...] = ()  # 1-based line of each comment
+
+
+def _find_header(data: bytes, prefix: str, sep: str) -> _Header | None:
+    """Skip blank and comment lines; parse the header line. ``None`` if there is none."""
+    pbytes = prefix.encode("utf-8") if prefix else None
+    pos, line_no, comments, comment_lines = 0, 0, [], []
+    n = len(data)
+    while pos < n:
+        nl = data.find(b"\n", pos)
+        end = n if nl < 0 else nl
+        line_no += 1
+        raw_line = data[pos:end].strip()
+        nxt = n if nl < 0 else nl + 1
+        if pbytes and raw_line.startswith(pbytes):
+            comments.append(raw_line[len(pbytes):].decode("utf-8", errors="replace").strip())
+            comment_lines.append(line_no)
+        elif raw_line:
+            text = raw_line.decode("utf-8", errors="replace").replace("\r", " ")
+            names = next(csv.reader([text], delimiter=sep))
+            return _Header(tuple(s.strip() for s in names), line_no, nxt, tuple(comments), tuple(comment_lines))
+        pos = nxt
+    return None
+
+
+def _parse_metadata(comments: tuple[str, ...]) -> dict[str, str]:
+    """``key=value`` comment lines as a dict (stripped; later keys win)."""
+    meta = {}
+    for c in comments:
+        k, eq, v = c.partition("=")
+        if eq and k.strip():
+            meta[k.strip()] = v.strip()
+    return meta
+
+def _read_header(text: Utf8Stream, prof: Profile, path: Path) -> tuple[_Header, dict[str, str], bytes]:
+    """The header line (after comments and blank lines), the metadata comments, and the
+    text after the header read so far. Reads only as far as the header's line end; a
+    first line longer than :data:`MAX_LINE_BYTES` (a file without line breaks) is
+    refused there."""
+    parts: list[bytes] = []
+    while True:
+        chunk = text.read()
+        eof = not chunk
+        if chunk:
+            parts.append(chunk)
+        data = b"".join(parts) if len(parts) != 1 else parts[0]
+        parts = [data] if data else []
+        if eof and (not data or data.isspace()):  # isspace stops at the first other byte
+            raise InputError(path, "file is empty", line=1)
+        last_nl = data.rfind(b"\n")
+        if len(data) - last_nl - 1 > MAX_LINE_BYTES:
+            line = data.count(b"\n") + 1
+            raise InputError(path, f"no line break in {MAX_LINE_BYTES >> 20} MiB of text from line {line}: not a "
+                                   "CSV log (a line that long is binary data or a file without line breaks)",
+                             line=line)
+        complete = data if eof else data[:last_nl + 1]  # whole lines only: a cut header waits for its end
+        try:
+            hdr = _find_header(complete, prof.comment_prefix, prof.separator)
+        except csv.Error as exc:
+            raise InputError(path, f"unreadable header line: {exc}", line=complete.count(b"\n")) from None
+        if hdr is not None:
+            metadata = _parse_metadata(hdr.comments) if prof.metadata == "key=value" else {}
+            return hdr, metadata, data[hdr.body_offset:]
+        if eof:
+            raise InputError(path, "no header line (only comments or blank lines)", line=data.count(b"\n") + 1)
+
+
+@dataclass(frozen=True)
+class _ColumnPlan:
+    """Which of the header's columns the profile reads, and as what."""
+
+    names: list[str]  # the header's column names
+    unique_names: list[str]  # the same, duplicates made unique (name NUL index)
+    maps: list[ColumnMap]  # the profile's column maps whose source is in the header
+    text_cols: list[str]  # read as text: time columns, vehicle column, value-map columns
+    num_cols: list[str]  # read as numbers
+    used: list[str]  # text_cols + num_cols, each once
+
+def _plan_columns(prof: Profile, hdr: _Header, path: Path) -> _ColumnPlan:
+    """The columns to read; a header lacking a required, time or vehicle column, or
+    naming a used column twice, is an error at the header's line."""
+    names = list(hdr.names)
+    missing_req = [c for c in prof.required_columns if c not in names]
+    if missing_req:
+        raise InputError(path, f"header lacks column(s) {missing_req} required by profile {prof.name!r}",
+                         line=hdr.line, column=missing_req[0])
+    for c in prof.time.columns:
+        if c not in names:
+            raise InputError(path, f"no time column: header lacks {c!r} (profile {prof.name!r})", line=hdr.line, column=c)
+    if prof.vehicle_source == "column" and prof.vehicle_key not in names:
+        raise InputError(path, f"header lacks the vehicle column {prof.vehicle_key!r}", line=hdr.line, column=prof.vehicle_key)
+    maps = [m for m in prof.columns if m.source in names]
+    for m in prof.columns:
+        if m.required and m.source not in names:
+            raise InputError(path, f"header lacks required column {m.source!r}", line=hdr.line, column=m.source)
+    text_cols = list(prof.time.columns) + ([prof.vehicle_key] if prof.vehicle_source == "column" else [])
+    text_cols += [m.source for m in maps if m.value_map is not None]
+    num_cols = [m.source for m in maps if m.value_map is None]
+    used = list(dict.fromkeys(text_cols + num_cols))
+    dups = sorted({c for c in used if names.count(c) > 1})
+    if dups:
+        raise InputError(path, f"column name(s) {dups} appear more than once in the header", line=hdr.line, column=dups[0])
+    unique_names = [f"{n}\x00{i}" if names.count(n) > 1 else n for i, n in enumerate(names)]
+    return _ColumnPlan(names, unique_names, maps, text_cols, num_cols, used)
+
+def _column_finder(names: list[str], sep: str):
+    """For :attr:`Utf8Stream.column_of`: the header column of a byte in a data line."""
+    sepb = sep.encode()
+
+    def column_of(_before: bytes, line_bytes: bytes) -> str | None:
+        k = line_bytes.count(sepb)
+        return names[k] if k < len(names) else None
+
+    return column_of
+
+
+def _column_finder_before_header(prof: Profile):
+    """For :attr:`Utf8Stream.column_of` while the header is not read yet: the header
+    found in the text before the bad line, if any."""
+
+    def column_of(before: bytes, line_bytes: bytes) -> str | None:
+        hdr = _find_header(before, prof.comment_prefix, prof.separator)
+        if hdr is None or hdr.body_offset > len(before):
+            return None
+        return _column_finder(list(hdr.names), prof.separator)(before, line_bytes)
+
+    return column_of
 
 
 # ======================================================================================
@@ -370,7 +420,6 @@ def _line_stats(b: np.ndarray, sep: int) -> tuple[np.ndarray, np.ndarray]:
         i = j
     return starts, n_sep
 
-
 def _only_trailing_separators(b: np.ndarray, starts: np.ndarray, surplus: np.ndarray, sep: int,
                               max_surplus: int = 8) -> np.ndarray:
     """Per line: whether its ``surplus`` (> 0) extra fields are empty, i.e. the line
@@ -387,7 +436,6 @@ def _only_trailing_separators(b: np.ndarray, starts: np.ndarray, surplus: np.nda
         ok &= ~need | ((pos >= starts) & (b[np.maximum(pos, 0)] == sep))
     return ok
 
-
 def _lines_summary(lines: np.ndarray, limit: int = 6) -> str:
     """'lines 3-7, 12, 20-21' for sorted line numbers, at most ``limit`` runs shown."""
     lines = np.asarray(lines, np.int64)
@@ -400,10 +448,8 @@ def _lines_summary(lines: np.ndarray, limit: int = 6) -> str:
     more = f", ... ({len(starts) - limit} more runs)" if len(starts) > limit else ""
     return ("line " if len(lines) == 1 else "lines ") + ", ".join(runs) + more
 
-
 def _fmt_ns(ns: int) -> str:
     return str(np.datetime64(int(ns), "ns").astype("datetime64[s]")).replace("T", " ")
-
 
 def _repair_dates(date_ns: np.ndarray, tod_ns: np.ndarray, raw_dates: np.ndarray, lines: np.ndarray,
                   max_days: float, path: Path, col: str, repairs: list[str]) -> np.ndarray:
@@ -440,7 +486,6 @@ def _repair_dates(date_ns: np.ndarray, tod_ns: np.ndarray, raw_dates: np.ndarray
         f"the time of day kept: {_lines_summary(lines[b])}"
     )
     return fixed
-
 
 def _localize(naive: np.ndarray, tz: str, groups: np.ndarray | None, lines: np.ndarray,
               repairs: list[str]) -> np.ndarray:
@@ -493,7 +538,6 @@ def _localize(naive: np.ndarray, tz: str, groups: np.ndarray | None, lines: np.n
         )
     return out
 
-
 # ======================================================================================
 # Reading
 # ======================================================================================
@@ -509,21 +553,31 @@ def _resolve_profile(path: Path, profile: Profile | str | None,
         raise InputError(path, f"unknown logger profile {profile!r}; known: {', '.join(sorted(profiles))}")
     return profiles[profile]
 
-
 def _line_col_error(path: Path, msg: str, lines: np.ndarray, bad: np.ndarray, col: str,
-                    values: np.ndarray | None = None) -> InputError:
+                    values=None, upto_line: int | None = None) -> InputError:
+    """The error at the first ``bad`` row (its value from ``values`` if given), with the
+    count of the other bad rows (up to ``upto_line`` when only part of the file was
+    seen)."""
     i = int(np.flatnonzero(bad)[0])
     val = ""
     if values is not None:
         v = values[i]
-        val = f" {float(v):g}" if isinstance(v, (float, np.floating, int, np.integer)) else f" {str(v)!r}"
-    extra = f" (and {int(bad.sum()) - 1} more rows)" if bad.sum() > 1 else ""
+        if isinstance(v, (float, np.floating, int, np.integer)):
+            val = f" {float(v):g}"
+        else:
+            v = str(v)
+            val = f" {v!r}" if len(v) <= 60 else f" {v[:50]!r}... ({len(v):,} characters)"
+    n_more = int(bad.sum()) - 1
+    extra = ""
+    if n_more:
+        extra = f" (and {n_more} more rows" + (f" up to line {upto_line})" if upto_line is not None else ")")
     return InputError(path, f"{msg}{val}{extra}", line=int(lines[i]), column=col)
 
 
 def read_log(path: str | Path, profile: Profile | str | None = None,
              profiles: dict[str, Profile] | None = None, *,
-             vehicle_id: str | None = None) -> list[ParsedLog]:
+             vehicle_id: str | None = None, limits: ReadLimits = ReadLimits(),
+             engine: Engine = "pyarrow") -> list[ParsedLog]:
     """Read one logger CSV (plain or gzip-compressed) into one :class:`ParsedLog` per vehicle.
 
     Parameters
@@ -534,6 +588,10 @@ def read_log(path: str | Path, profile: Profile | str | None = None,
     profiles : available profiles (default ``None``: :func:`load_profiles()`).
     vehicle_id : override the vehicle id from the profile (default ``None``: use the
         profile's vehicle source); not allowed for a file split by a vehicle column.
+    limits : bounds on the file's size, gzip expansion and rows (:class:`ReadLimits`;
+        default: its defaults).
+    engine : ``"pyarrow"`` (default) or ``"pandas"``: the CSV parser of each block (see
+        the module docstring); the result is the same.
 
     Returns
     -------
@@ -542,181 +600,306 @@ def read_log(path: str | Path, profile: Profile | str | None = None,
     Raises
     ------
     InputError : empty file, header only, bad encoding, binary data, missing time
-        column, unreadable time or number (with line and column), no position and no
-        speed, a column mostly absurd, a truncated last line when the profile says
-        ``truncated_last_line = "error"``.
+        column, unreadable time or number (with line and column), mixed time zone
+        notation, a vehicle id holding a control character, no position and no speed, a
+        column mostly absurd, a truncated last line when the profile says
+        ``truncated_last_line = "error"``, a file over a limit of ``limits``.
 
     The stages, each a function of its own: the file's bytes, decompressed, and its
-    profile (:func:`_load_bytes`); the text as UTF-8 (:func:`_decode`); the header and
+    profile (:func:`_open_log`); the text as UTF-8 (:class:`Utf8Stream`); the header and
     metadata (:func:`_read_header`) and the columns the profile needs from it
-    (:func:`_plan_columns`); the data lines (:func:`_data_body`) parsed into a table
-    (:func:`_parse_body`); vehicle ids (:func:`_vehicle_codes`); times to UTC
-    (:func:`_parse_times`); columns mapped to canonical SI columns and checked
-    (:func:`_canonical_columns`); one log per vehicle (:func:`_split_vehicles`).
+    (:func:`_plan_columns`); blocks of data lines (:func:`_data_blocks`) each parsed into
+    the used columns (:func:`_parse_block`) and gathered (:class:`_Gather`: vehicle ids,
+    times, value maps, per block); times to UTC (:meth:`_Gather.utc_ns`); columns mapped
+    to canonical SI columns and checked (:func:`_canonical_columns`); one log per vehicle
+    (:func:`_split_vehicles`).
     """
     path = Path(path)
-    prof, raw, data = _load_bytes(path, profile, profiles)
-    data = _decode(data, prof, path)
-    hdr, metadata = _read_header(data, prof, path)
-    plan = _plan_columns(prof, hdr, path)
-    repairs: list[str] = []
-    body = _data_body(data, hdr, plan.names, prof, path, repairs)
-    df, lines, fast = _parse_body(body, hdr, plan, prof, path, repairs)
-    codes, vehicles = _vehicle_codes(df, prof, lines, path, vehicle_id, metadata, repairs)
-    utc = _parse_times(df, fast, prof.time, lines, codes, path, repairs)
-    out = _canonical_columns(df, plan.maps, utc, lines, prof, path, repairs)
-    return _split_vehicles(out, codes, vehicles, plan.maps, prof, path, metadata, repairs, raw)
+    with ByteStream(path, limits) as raw:
+        prof = _open_log(path, raw, profile, profiles)
+        text = Utf8Stream(raw, prof.encoding, prof.name)
+        text.column_of = _column_finder_before_header(prof)
+        hdr, metadata, rest = _read_header(text, prof, path)
+        plan = _plan_columns(prof, hdr, path)
+        text.column_of = _column_finder(plan.names, prof.separator)
+        repairs = _Repairs()
+        gather = _Gather(plan, prof, path, limits, repairs)
+        gather.set_vehicle(vehicle_id, metadata, hdr)
+        for first_line, block, last in _data_blocks(text, rest, hdr, plan.names, prof, path, repairs):
+            gather.add(_parse_block(block, first_line, plan, prof, path, engine, gather), last)
+            del block
+    lines = gather.lines()
+    codes, vehicles = gather.vehicle_codes()
+    utc = gather.utc_ns(codes, lines)
+    out = _canonical_columns(gather.pop_columns(), plan.maps, utc, lines, prof, path, repairs.columns)
+    return _split_vehicles(out, codes, vehicles, plan.maps, prof, path, metadata, repairs.all())
 
 
-def _load_bytes(path: Path, profile: Profile | str | None,
-                profiles: dict[str, Profile] | None) -> tuple[Profile, bytes, bytes]:
-    """(profile, bytes on disk, CSV bytes after decompression); the profile given, or
-    detected from the file's first bytes."""
-    if profile is None:  # detect from the bytes read for the file itself (one read)
+def _open_log(path: Path, raw: ByteStream, profile: Profile | str | None,
+              profiles: dict[str, Profile] | None) -> Profile:
+    """The profile given, or detected from the file's first bytes; a plain file over the
+    size limit is refused before anything is read."""
+    raw.check_size()
+    if profile is None:
         profiles = load_profiles() if profiles is None else profiles
         if not profiles:
             raise InputError(path, "no logger profiles loaded")
-        raw = _read_bytes(path)
-        if raw[:2] == b"\x1f\x8b":  # gzip: detect from the decompressed head, as before
-            prof = detect_profile(path, profiles)
-        else:
-            prof = _detect_in_head(path, raw[:_HEAD_BYTES], profiles)
-        raw, data = _decompress(raw, path)
+        prof = _detect_in_head(path, raw.peek(_HEAD_BYTES), profiles)
     else:
         prof = _resolve_profile(path, profile, profiles)
-        raw, data = _read_raw(path)
-    return prof, raw, data
+    return prof
 
 
-def _decode(data: bytes, prof: Profile, path: Path) -> bytes:
-    """The CSV bytes as UTF-8 text (see :func:`_to_utf8`); an empty file is an error."""
-    if not data or data.isspace():  # isspace stops at the first other byte
-        raise InputError(path, "file is empty", line=1)
-    return _to_utf8(data, prof, path)
+@dataclass
+class _Repairs:
+    """Repair messages by stage, put together in the order the stages run."""
+
+    read: list[str] = field(default_factory=list)  # truncated last line
+    rows: list[str] = field(default_factory=list)  # fewer fields, blank rows
+    vehicle: list[str] = field(default_factory=list)
+    time: list[str] = field(default_factory=list)
+    columns: list[str] = field(default_factory=list)
+
+    def all(self) -> list[str]:
+        return self.read + self.rows + self.vehicle + self.time + self.columns
 
 
-def _read_header(data: bytes, prof: Profile, path: Path) -> tuple[_Header, dict[str, str]]:
-    """The header line (after comments and blank lines) and the metadata comments."""
-    hdr = _find_header(data, prof.comment_prefix, prof.separator)
-    if hdr is None:
-        raise InputError(path, "no header line (only comments or blank lines)", line=data.count(b"\n") + 1)
-    metadata = _parse_metadata(hdr.comments) if prof.metadata == "key=value" else {}
-    return hdr, metadata
+def _data_blocks(text: Utf8Stream, rest: bytes, hdr: _Header, names: list[str], prof: Profile, path: Path,
+                 repairs: _Repairs):
+    """Yield (first line number, block, is last) for blocks of whole data lines of about
+    :data:`BLOCK_BYTES`; the last block may end without a line break. A truncated last
+    line (fewer fields than the header, no line end) is dropped and reported, or an
+    error if the profile says so; a body of blank lines only is "header only"; more than
+    :data:`MAX_LINE_BYTES` without a line break is refused as soon as it is read."""
+    first_line = hdr.line + 1
+    parts, size = ([rest] if rest else []), len(rest)
+    nl = rest.rfind(b"\n")
+    has_nl, since_nl = nl >= 0, len(rest) - nl - 1  # bytes after the last line break read
+    eof = seen_data = False
+    while True:
+        while not eof and (size < BLOCK_BYTES or not has_nl):
+            chunk = text.read()
+            if not chunk:
+                eof = True
+                break
+            parts.append(chunk)
+            size += len(chunk)
+            k = chunk.rfind(b"\n")
+            has_nl, since_nl = (True, len(chunk) - k - 1) if k >= 0 else (has_nl, since_nl + len(chunk))
+            if since_nl > MAX_LINE_BYTES:
+                line = first_line + sum(p.count(b"\n") for p in parts)
+                raise InputError(path, f"no line break in {MAX_LINE_BYTES >> 20} MiB of text from line {line}: "
+                                       "not a CSV log (binary data, or a file without line breaks)", line=line)
+        data = b"".join(parts) if len(parts) != 1 else parts[0]
+        if eof:
+            data = _drop_truncated_last_line(data, first_line, names, prof, path, repairs)
+            if not (seen_data or (data and not data.isspace())):
+                raise InputError(path, "header only, no data rows", line=hdr.line + 1)
+            yield first_line, data, True
+            return
+        cut = data.rfind(b"\n") + 1  # > 0: a line break was read
+        block, tail = (data[:cut], data[cut:]) if cut < len(data) else (data, b"")
+        del data
+        parts, size, has_nl, since_nl = ([tail] if tail else []), len(tail), False, len(tail)
+        seen_data = seen_data or not block.isspace()
+        yield first_line, block, False
+        first_line += block.count(b"\n")
 
 
-@dataclass(frozen=True)
-class _ColumnPlan:
-    """Which of the header's columns the profile reads, and as what."""
-
-    names: list[str]  # the header's column names
-    unique_names: list[str]  # the same, duplicates made unique (name NUL index)
-    maps: list[ColumnMap]  # the profile's column maps whose source is in the header
-    text_cols: list[str]  # read as text: time columns, vehicle column, value-map columns
-    num_cols: list[str]  # read as numbers
-    used: list[str]  # text_cols + num_cols, each once
-
-
-def _plan_columns(prof: Profile, hdr: _Header, path: Path) -> _ColumnPlan:
-    """The columns to read; a header lacking a required, time or vehicle column, or
-    naming a used column twice, is an error at the header's line."""
-    names = list(hdr.names)
-    missing_req = [c for c in prof.required_columns if c not in names]
-    if missing_req:
-        raise InputError(path, f"header lacks column(s) {missing_req} required by profile {prof.name!r}",
-                         line=hdr.line, column=missing_req[0])
-    for c in prof.time.columns:
-        if c not in names:
-            raise InputError(path, f"no time column: header lacks {c!r} (profile {prof.name!r})", line=hdr.line, column=c)
-    if prof.vehicle_source == "column" and prof.vehicle_key not in names:
-        raise InputError(path, f"header lacks the vehicle column {prof.vehicle_key!r}", line=hdr.line, column=prof.vehicle_key)
-    maps = [m for m in prof.columns if m.source in names]
-    for m in prof.columns:
-        if m.required and m.source not in names:
-            raise InputError(path, f"header lacks required column {m.source!r}", line=hdr.line, column=m.source)
-    text_cols = list(prof.time.columns) + ([prof.vehicle_key] if prof.vehicle_source == "column" else [])
-    text_cols += [m.source for m in maps if m.value_map is not None]
-    num_cols = [m.source for m in maps if m.value_map is None]
-    used = list(dict.fromkeys(text_cols + num_cols))
-    dups = sorted({c for c in used if names.count(c) > 1})
-    if dups:
-        raise InputError(path, f"column name(s) {dups} appear more than once in the header", line=hdr.line, column=dups[0])
-    unique_names = [f"{n}\x00{i}" if names.count(n) > 1 else n for i, n in enumerate(names)]
-    return _ColumnPlan(names, unique_names, maps, text_cols, num_cols, used)
-
-
-def _data_body(data: bytes, hdr: _Header, names: list[str], prof: Profile, path: Path,
-               repairs: list[str]) -> bytes:
-    """The data lines after the header; a truncated last line (fewer fields than the
-    header, no line end) dropped and reported, or an error if the profile says so."""
-    body = data[hdr.body_offset:]
-    if body and not body.endswith(b"\n"):
-        last_start = body.rfind(b"\n") + 1
-        last = body[last_start:]
+def _drop_truncated_last_line(data: bytes, first_line: int, names: list[str], prof: Profile, path: Path,
+                              repairs: _Repairs) -> bytes:
+    """``data`` (the end of the file) without a truncated last line: one with fewer
+    fields than the header and no line end (reported), or an error if the profile says
+    ``truncated_last_line = "error"``."""
+    if data and not data.endswith(b"\n"):
+        last_start = data.rfind(b"\n") + 1
+        last = data[last_start:]
         n_fields = len(next(csv.reader([last.decode("utf-8", errors="replace")], delimiter=prof.separator), [])) if last.strip() else len(names)
         if last.strip() and n_fields < len(names):
-            line_no = hdr.line + body.count(b"\n") + 1
+            line_no = first_line + data.count(b"\n")
             if prof.truncated_last_line == "error":
                 raise InputError(path, f"truncated last line: {n_fields} of {len(names)} fields",
                                  line=line_no, column=names[n_fields - 1] if n_fields else names[0])
-            body = body[:last_start]
-            repairs.append(f"read: truncated last line ({n_fields} of {len(names)} fields) dropped: line {line_no}")
-    if not body or body.isspace():
-        raise InputError(path, "header only, no data rows", line=hdr.line + 1)
-    return body
+            repairs.read.append(f"read: truncated last line ({n_fields} of {len(names)} fields) dropped: line {line_no}")
+            return data[:last_start]
+    return data
 
 
-def _parse_body(body: bytes, hdr: _Header, plan: _ColumnPlan, prof: Profile, path: Path,
-                repairs: list[str]) -> tuple[pd.DataFrame, np.ndarray, FastTimes | None]:
-    """The used columns of the data lines as a table (numbers float64, text object),
-    the file line of each row, and the first column's times when parsed straight from
-    the bytes (:func:`fast_first_column`). Field counts are checked per line first;
-    rows with no value in any used column are dropped and reported."""
+@dataclass
+class _Part:
+    """One block's rows, parsed: the file line of each row kept, numeric source columns
+    (float64, the logger's units), text columns (object arrays, NaN = empty), the time
+    column when the parser read it (int64 ns; UTC if ``time_utc``), and the lines of the
+    blank rows skipped and of rows with fewer fields than the header."""
+
+    lines: np.ndarray
+    numbers: dict[str, np.ndarray]
+    text: dict[str, np.ndarray]
+    time_ns: np.ndarray | None = None
+    time_utc: bool = False
+    blank: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    fewer: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    last_line: int = 0  # the block's last line
+
+
+def _parse_block(block: bytes, first_line: int, plan: _ColumnPlan, prof: Profile, path: Path, engine: Engine,
+                 gather: _Gather) -> _Part:
+    """A block of whole lines parsed into the used columns: by pyarrow when it takes the
+    block as it is, else by pandas (which repairs, or raises with line and column)."""
+    if engine == "pyarrow":
+        part = _arrow_block(block, first_line, plan, prof, gather.arrow_time_type(block, plan, prof))
+        if part is not None:
+            return part
+    return _pandas_block(block, first_line, plan, prof, path)
+
+
+@lru_cache(maxsize=1)
+def _arrow():
+    """pyarrow's csv and compute modules (imported on first use; pandas imports pyarrow
+    anyway where it is installed)."""
+    import pyarrow as pa
+    import pyarrow.compute as pc
+    import pyarrow.csv as pacsv
+
+    return pa, pc, pacsv
+
+
+def _arrow_block(block: bytes, first_line: int, plan: _ColumnPlan, prof: Profile,
+                 time_type) -> _Part | None:
+    """The block parsed by pyarrow's CSV reader (one thread): numeric columns as
+    float64, the single ISO 8601 time column as a timestamp (``time_type``), other text
+    as strings; ``None`` where pyarrow refuses the block (a row with more or fewer
+    fields, a value it cannot convert) or its rows do not match the lines."""
+    pa, pc, pacsv = _arrow()
+    n_lines = block.count(b"\n") + (0 if block.endswith(b"\n") else 1)
+    types = {c: pa.float64() for c in plan.num_cols}
+    types.update({c: pa.string() for c in plan.text_cols})
+    tcol = prof.time.columns[0] if len(prof.time.columns) == 1 else None
+    if time_type is not None:
+        types[tcol] = time_type
+    try:
+        tbl = pacsv.read_csv(
+            pa.py_buffer(block), memory_pool=pa.system_memory_pool(),
+            read_options=pacsv.ReadOptions(use_threads=False, column_names=plan.unique_names,
+                                           block_size=max(len(block) + 1, 1 << 16)),
+            parse_options=pacsv.ParseOptions(delimiter=prof.separator, quote_char='"', double_quote=True,
+                                             newlines_in_values=False, ignore_empty_lines=False),
+            convert_options=pacsv.ConvertOptions(column_types=types, include_columns=plan.used,
+                                                 null_values=_NUMERIC_NA, strings_can_be_null=False,
+                                                 decimal_point=prof.decimal),
+        )
+    except (pa.ArrowInvalid, pa.ArrowNotImplementedError):
+        return None
+    if tbl.num_rows != n_lines:
+        return None
+    has_value = np.zeros(n_lines, bool)
+    numbers: dict[str, np.ndarray] = {}
+    for c in plan.num_cols:
+        x = _arrow_values(tbl.column(c), np.float64, np.nan)
+        numbers[c] = x
+        has_value |= ~np.isnan(x)
+    text: dict[str, np.ndarray] = {}
+    time_ns = None
+    for c in plan.text_cols:
+        col = tbl.column(c)
+        if c == tcol and time_type is not None:
+            time_ns = _arrow_values(col, np.int64, NAT)  # timestamps are int64 ns
+            has_value |= time_ns != NAT
+            continue
+        col = pc.if_else(pc.equal(col, ""), pa.scalar(None, pa.string()), col)
+        has_value |= col.is_valid().to_numpy(zero_copy_only=False)
+        vals = col.to_numpy(zero_copy_only=False)
+        vals[pd.isna(vals)] = np.nan  # None -> NaN, as pandas gives
+        text[c] = vals
+    del tbl
+    lines = first_line + np.arange(n_lines, dtype=np.int64)
+    part = _Part(lines, numbers, text, time_ns, time_type is not None and time_type.tz is not None,
+                 last_line=first_line + n_lines - 1)
+    return _drop_empty_rows(part, ~has_value)
+
+
+def _arrow_values(col, dtype, null) -> np.ndarray:
+    """A pyarrow column of fixed-width values as a numpy array of its own (``null``
+    where a value is missing). Copied from pyarrow's buffers here rather than by
+    ``to_numpy``, which allocates in pyarrow's pool: memory that pool keeps after a
+    block would add up to a second copy of the columns."""
+    out = np.empty(len(col), dtype)
+    pos = 0
+    for ch in col.chunks:
+        n = len(ch)
+        validity, data = ch.buffers()[:2]
+        seg = out[pos:pos + n]
+        if data is None or ch.null_count == n:
+            seg[:] = null
+        else:
+            seg[:] = np.frombuffer(data, dtype, count=n, offset=ch.offset * out.itemsize)
+            if ch.null_count:
+                bits = np.unpackbits(np.frombuffer(validity, np.uint8), bitorder="little")[ch.offset:ch.offset + n]
+                seg[bits == 0] = null
+        pos += n
+    return out
+
+
+def _drop_empty_rows(part: _Part, empty: np.ndarray) -> _Part:
+    """``part`` without its rows that hold no value in any used column (blank lines)."""
+    if not empty.any():
+        return part
+    keep = ~empty
+    part.blank = part.lines[empty]
+    part.lines = part.lines[keep]
+    part.numbers = {c: a[keep] for c, a in part.numbers.items()}
+    part.text = {c: a[keep] for c, a in part.text.items()}
+    if part.time_ns is not None:
+        part.time_ns = part.time_ns[keep]
+    return part
+
+
+def _pandas_block(block: bytes, first_line: int, plan: _ColumnPlan, prof: Profile, path: Path) -> _Part:
+    """The block parsed by pandas' C parser (the parser before pyarrow): field counts
+    checked per line first (more fields than the header is an error unless they are
+    empty trailing fields; fewer are read as empty, and reported), the first column's
+    times straight from the bytes where it is a fixed-width datetime
+    (:func:`fast_first_column`), then the used columns; rows with no value in any used
+    column dropped (and reported)."""
     names, used = plan.names, plan.used
-    first_line = hdr.line + 1
     tspec = prof.time
-    # --- field counts per line (vectorised): pandas does not check them when reading
-    # only some columns. Files with quotes are read whole instead, letting the tokenizer check.
-    quoted = b'"' in body
+    quoted = b'"' in block
     fast = None
+    fewer = np.zeros(0, np.int64)
     if not quoted:
-        bview = np.frombuffer(body, np.uint8)
+        bview = np.frombuffer(block, np.uint8)
         starts, n_sep = _line_stats(bview, ord(prof.separator))
-        _check_field_counts(bview, starts, n_sep, len(names), first_line, prof, path, repairs)
+        fewer = _check_field_counts(bview, starts, n_sep, len(names), first_line, prof, path)
         # the time column straight from the bytes when it is first and fixed-width
         if len(tspec.columns) == 1 and names[0] == tspec.columns[0] and len(used) > 1 \
                 and tspec.columns[0] not in used[1:]:
-            fast = fast_first_column(body, bview, starts, prof.separator, tspec.format)  # type: ignore[arg-type]
+            fast = fast_first_column(block, bview, starts, prof.separator, tspec.format)  # type: ignore[arg-type]
     table_cols = used[1:] if fast is not None else used
-    df = _read_table(body, path, prof, plan.unique_names, table_cols, plan.num_cols, plan.text_cols, hdr.line,
-                     all_cols=quoted)
+    df = _read_table(block, path, prof, plan.unique_names, table_cols, plan.num_cols, plan.text_cols,
+                     first_line - 1, all_cols=quoted)
     if fast is not None and len(fast.ns) != len(df):  # alignment lost (should not happen): slow path
         fast = None
-        df = _read_table(body, path, prof, plan.unique_names, used, plan.num_cols, plan.text_cols, hdr.line)
+        df = _read_table(block, path, prof, plan.unique_names, used, plan.num_cols, plan.text_cols, first_line - 1)
     lines = first_line + np.arange(len(df), dtype=np.int64)
-
-    # blank lines and rows without any used value (with the fast time column, only a
-    # blank line can be one: every other line holds a time)
+    # rows without any used value (with the fast time column, only a blank line can be
+    # one: every other line holds a time)
     if fast is not None:
         empty = fast.blank.copy()
         if empty.any():
             empty &= df.isna().all(axis=1).to_numpy()
     else:
         empty = df.isna().all(axis=1).to_numpy().copy()
-    if empty.any():
-        repairs.append(f"read: {int(empty.sum())} blank rows (no value in any used column) skipped: {_lines_summary(lines[empty])}")
-        df = df.loc[~empty].reset_index(drop=True)
-        lines = lines[~empty]
-        if fast is not None:
-            fast = FastTimes(fast.ns[~empty], fast.is_utc, fast.blank[~empty])
-    if len(df) == 0:
-        raise InputError(path, "no data rows with values", line=first_line)
-    return df, lines, fast
+    numbers = {c: _writable(df[c].to_numpy(dtype=np.float64)) for c in plan.num_cols}  # copy-on-write views
+    text = {c: df[c].to_numpy(dtype=object) for c in plan.text_cols if c in df.columns}
+    part = _Part(lines, numbers, text, fast.ns if fast is not None else None, bool(fast is not None and fast.is_utc),
+                 fewer=fewer, last_line=first_line + len(df) - 1)
+    return _drop_empty_rows(part, empty)
 
 
 def _check_field_counts(bview: np.ndarray, starts: np.ndarray, n_sep: np.ndarray, n_names: int,
-                        first_line: int, prof: Profile, path: Path, repairs: list[str]) -> None:
+                        first_line: int, prof: Profile, path: Path) -> np.ndarray:
     """More fields than the header is an error (unless only empty trailing fields);
-    fewer is reported (the missing fields read as empty)."""
+    returns the lines with fewer (the missing fields read as empty)."""
     blank_line = (bview[starts] == 10) | (bview[starts] == 13)
     more = n_sep > n_names - 1
     if more.any():  # surplus fields that are all empty (trailing separators) are harmless
@@ -725,111 +908,282 @@ def _check_field_counts(bview: np.ndarray, starts: np.ndarray, n_sep: np.ndarray
         i = int(np.flatnonzero(more)[0])
         raise InputError(path, f"malformed CSV: {int(n_sep[i]) + 1} fields, more than the {n_names} of "
                                f"the header", line=first_line + i)
-    fewer = (n_sep < n_names - 1) & ~blank_line
-    if fewer.any():
-        repairs.append(f"read: {int(fewer.sum())} rows with fewer fields than the header (missing fields "
-                       f"read as empty): {_lines_summary(first_line + np.flatnonzero(fewer))}")
+    return first_line + np.flatnonzero((n_sep < n_names - 1) & ~blank_line)
 
 
-def _vehicle_codes(df: pd.DataFrame, prof: Profile, lines: np.ndarray, path: Path, vehicle_id: str | None,
-                   metadata: dict[str, str], repairs: list[str]) -> tuple[np.ndarray, list[str]]:
-    """Per row, the index of its vehicle in the returned list of vehicle ids (in order
-    of first appearance): from the vehicle column, else one id for the whole file."""
-    if prof.vehicle_source != "column":
-        vehicles = [vehicle_id if vehicle_id is not None else _vehicle_from_profile(prof, path, metadata, repairs)]
-        return np.zeros(len(df), np.int64), vehicles
-    if vehicle_id is not None:
-        raise InputError(path, f"profile {prof.name!r} takes vehicle ids from column {prof.vehicle_key!r}; "
-                               "a vehicle id override does not apply")
-    raw_codes, raw_ids = pd.factorize(df[prof.vehicle_key], sort=False)  # hash, no per-row strip
-    stripped = pd.Series(np.asarray(raw_ids, dtype=object)).str.strip()
-    uniq_codes, vehicles_idx = pd.factorize(stripped, sort=False)  # ' AB12' and 'AB12' merge
-    bad = (raw_codes < 0) | (np.asarray(stripped == "")[np.maximum(raw_codes, 0)] if len(stripped) else True)
-    if np.any(bad):
-        raise _line_col_error(path, "empty vehicle id", lines, np.asarray(bad), prof.vehicle_key)
-    return uniq_codes[raw_codes], [str(v) for v in vehicles_idx]
+#: ISO 8601 text that ends in a zone designator ('Z', +hh:mm, +hhmm), as
+#: :func:`cevm.ingest.timestamps.has_offset` reads it.
+_ZONE = r"(?:Z|[+-]\d\d:?\d\d)"
+_ZONE_RE = _ZONE + r"\s*$"
+#: The ISO 8601 forms pyarrow's timestamp parser reads (date, hours, minutes, seconds,
+#: fraction; a zone designator); other forms are read as text.
+_ISO_SAMPLE_RE = re.compile(r"^\d{4}-\d\d-\d\d(?:[T ]\d\d(?::\d\d(?::\d\d(?:\.\d{1,9})?)?)?)?" + _ZONE + "?$")
 
 
-def _parse_times(df: pd.DataFrame, fast: FastTimes | None, tspec: TimeSpec, lines: np.ndarray,
-                 codes: np.ndarray, path: Path, repairs: list[str]) -> np.ndarray:
-    """Each row's time as UTC ns since the epoch (int64): parsed (from the bytes, or
-    one datetime column, or date and time-of-day columns with date repair), checked,
-    and localised from the profile's zone unless the text carries one."""
-    if fast is not None:
-        col = tspec.columns[0]
-        naive, aware = fast.ns, fast.is_utc
-        _check_times(path, naive, lines, col, None)
-        return naive if aware else _localize(naive, tspec.timezone, codes, lines, repairs)
-    if len(tspec.columns) == 1:
-        col = tspec.columns[0]
-        vals = df[col].to_numpy(dtype=object)
-        naive = parse_datetimes(vals, tspec.format)  # type: ignore[arg-type]
-        aware = tspec.format == "ISO8601" and has_offset(vals)
-        _check_times(path, naive, lines, col, vals)
-        return naive if aware else _localize(naive, tspec.timezone, codes, lines, repairs)
-    dcol, tcol = tspec.columns
-    dvals = df[dcol].to_numpy(dtype=object)
-    tvals = df[tcol].to_numpy(dtype=object)
-    dcodes, duniq = pd.factorize(pd.Series(dvals), sort=False)
-    uniq_ns = parse_datetimes(np.asarray(duniq, dtype=object), tspec.date_format)  # type: ignore[arg-type]
-    uniq_ns = np.where((uniq_ns >= _TIME_MIN) & (uniq_ns < _TIME_MAX), uniq_ns, NAT)
-    date_ns = np.where(dcodes >= 0, uniq_ns[np.maximum(dcodes, 0)] if len(uniq_ns) else NAT, NAT)
-    tod = parse_datetimes(tvals, tspec.time_format)  # type: ignore[arg-type]
-    ok_t = tod != NAT
-    day0 = (tod[ok_t] // NS_PER_DAY) * NS_PER_DAY
-    tod[ok_t] = tod[ok_t] - day0  # time of day [ns]
-    badt = ~ok_t
-    if badt.any():
-        raise _line_col_error(path, "unreadable time of day", lines, badt, tcol, tvals)
-    if tspec.date_repair == "dominant":
-        date_ns = _repair_dates(date_ns, tod, dvals, lines, tspec.date_repair_max_days, path, dcol, repairs)
-    badd = date_ns == NAT
-    if badd.any():
-        raise _line_col_error(path, f"unreadable date (format {tspec.date_format!r}):", lines, badd, dcol, dvals)
-    naive = date_ns + tod
-    _check_times(path, naive, lines, dcol, dvals)
-    return _localize(naive, tspec.timezone, codes, lines, repairs)
+class _Gather:
+    """The blocks' columns gathered into whole-file arrays, with what must be done per
+    block while the text is at hand: vehicle ids (to codes), the time column (to ns),
+    value-map columns (to numbers); the row limit."""
 
+    def __init__(self, plan: _ColumnPlan, prof: Profile, path: Path, limits: ReadLimits, repairs: _Repairs) -> None:
+        self.plan, self.prof, self.path, self.limits, self.repairs = plan, prof, path, limits, repairs
+        self._lines: list[np.ndarray] = []
+        self._numbers: dict[str, list[np.ndarray]] = {c: [] for c in plan.num_cols}
+        self._mapped: dict[str, list[np.ndarray]] = {m.canonical: [] for m in plan.maps if m.value_map is not None}
+        self._time: list[np.ndarray] = []  # single time column: ns, naive or UTC (self.time_utc)
+        self._dates: list[np.ndarray] = []  # two time columns: codes into self._date_values
+        self._tods: list[np.ndarray] = []  # ... and times of day [ns]
+        self._date_index: dict[str, int] = {}
+        self._vcodes: list[np.ndarray] = []
+        self._vindex: dict[str, int] = {}
+        self._blank: list[np.ndarray] = []
+        self._fewer: list[np.ndarray] = []
+        self.rows = 0
+        self.time_utc: bool | None = None  # whether the file's times carry a zone (single ISO column)
+        self._time_type_decided = False
+        self._time_type = None
+        self.vehicle: str | None = None
+        self.first_data_line = 0
 
-def _canonical_columns(df: pd.DataFrame, maps: list[ColumnMap], utc: np.ndarray, lines: np.ndarray,
-                       prof: Profile, path: Path, repairs: list[str]) -> dict[str, np.ndarray]:
-    """The canonical columns (``time_s``, ``source_line`` and each mapped column in SI),
-    with impossible positions and absurd values handled; a log with neither position nor
-    speed values is an error."""
-    out: dict[str, np.ndarray] = {"time_s": utc / 1e9, "source_line": lines}
-    for m in maps:
-        out[m.canonical] = _convert_column(df[m.source], m, lines, path, prof, repairs)
-    _check_position(out, prof, lines, path, repairs)
-    for m in maps:
-        if m.canonical not in ("lat_deg", "lon_deg"):
-            _check_absurd(out, m, lines, path, prof, repairs)
-
-    has_pos = "lat_deg" in out and np.isfinite(out["lat_deg"]).any()
-    has_speed = any(c in out and np.isfinite(out[c]).any() for c in ("wheel_speed_mps", "gps_speed_mps"))
-    if not (has_pos or has_speed):
-        cands = [m.source for m in prof.columns if m.canonical in ("lat_deg", "lon_deg", "wheel_speed_mps", "gps_speed_mps")]
-        raise InputError(path, "no position and no speed values: cannot derive a drive cycle "
-                               f"(profile {prof.name!r} looks for {', '.join(cands) or 'none'})")
-    return out
-
-
-def _split_vehicles(out: dict[str, np.ndarray], codes: np.ndarray, vehicles: list[str], maps: list[ColumnMap],
-                    prof: Profile, path: Path, metadata: dict[str, str], repairs: list[str],
-                    raw: bytes) -> list[ParsedLog]:
-    """One :class:`ParsedLog` per vehicle: its rows' canonical columns (a frame built
-    around the arrays, no copy, for a single vehicle) and the energy sources they hold."""
-    logs = []
-    for k, vname in enumerate(vehicles):
-        if len(vehicles) > 1:
-            sel = codes == k
-            arrays = {c: a[sel] for c, a in out.items()}
+    # --- before the data
+    def set_vehicle(self, vehicle_id: str | None, metadata: dict[str, str], hdr: _Header) -> None:
+        """The file's one vehicle id (unless the profile takes ids from a column)."""
+        prof, path = self.prof, self.path
+        if prof.vehicle_source == "column":
+            if vehicle_id is not None:
+                raise InputError(path, f"profile {prof.name!r} takes vehicle ids from column {prof.vehicle_key!r}; "
+                                       "a vehicle id override does not apply")
+            return
+        self.first_data_line = hdr.line + 1
+        if vehicle_id is not None:
+            vid = vehicle_id
+            _check_vehicle_id(vid, path, None, None, "the vehicle id given")
         else:
-            arrays = out
-        fr = pd.DataFrame(arrays, copy=False)
-        fr.insert(2, "vehicle_id", vname)
-        sources = tuple(_energy_source(e, fr, maps) for e in prof.energy if _has_energy_data(e, arrays))
-        logs.append(ParsedLog(path, prof.name, vname, fr, dict(metadata), sources, list(repairs), raw))
-    return logs
+            vid = _vehicle_from_profile(prof, path, metadata, self.repairs.vehicle)
+            src, line = prof.vehicle_source, None
+            if src == "metadata" and not metadata.get(prof.vehicle_key or "", "").strip():
+                src = prof.vehicle_fallback
+            elif src == "metadata":
+                line = next((ln for c, ln in zip(hdr.comments, hdr.comment_lines)
+                             if c.partition("=")[0].strip() == prof.vehicle_key), None)
+            where = {"metadata": f"metadata key {prof.vehicle_key!r}", "fixed": "the profile's vehicle.value",
+                     "file_stem": "the file name", "parent_dir": "the directory name"}[src]
+            _check_vehicle_id(vid, path, line, None, where)
+        self.vehicle = vid
+
+    def arrow_time_type(self, block: bytes, plan: _ColumnPlan, prof: Profile):
+        """The pyarrow type of the time column: a timestamp for one ISO 8601 column (with
+        a zone if the file's first time has one), else None (read as text)."""
+        if not self._time_type_decided:
+            self._time_type_decided = True
+            if len(prof.time.columns) == 1 and prof.time.format == "ISO8601":
+                sample = _first_value(block, plan.names.index(prof.time.columns[0]), prof.separator)
+                if sample is not None and _ISO_SAMPLE_RE.match(sample):
+                    pa = _arrow()[0]
+                    zoned = bool(re.search(_ZONE_RE, sample))
+                    self._time_type = pa.timestamp("ns", tz="UTC") if zoned else pa.timestamp("ns")
+        return self._time_type
+
+    # --- per block
+    def add(self, part: _Part, last: bool) -> None:
+        n = len(part.lines)
+        self.rows += n
+        if self.rows > self.limits.max_rows:
+            over = part.lines[n - (self.rows - self.limits.max_rows)]
+            raise InputError(self.path, f"more than {self.limits.max_rows:,} data rows: over the limit per file "
+                                        "that keeps memory bounded (--max-rows)", line=int(over))
+        if len(part.blank):
+            self._blank.append(part.blank)
+        if len(part.fewer):
+            self._fewer.append(part.fewer)
+        if n == 0:
+            return
+        upto = None if last else part.last_line
+        self._lines.append(part.lines)
+        if self.prof.vehicle_source == "column":
+            self._vcodes.append(self._vehicle_part(part, upto))
+        self._time_part(part, upto)
+        for m in self.plan.maps:
+            if m.value_map is not None:
+                self._mapped[m.canonical].append(_map_values(part.text[m.source], m, part.lines, self.path, upto))
+        for c, x in part.numbers.items():
+            self._numbers[c].append(x)
+
+    def _vehicle_part(self, part: _Part, upto: int | None) -> np.ndarray:
+        key = self.prof.vehicle_key
+        raw_codes, raw_ids = pd.factorize(part.text[key], sort=False)  # hash, no per-row strip
+        stripped = pd.Series(np.asarray(raw_ids, dtype=object)).str.strip()
+        bad = (raw_codes < 0) | (np.asarray(stripped == "")[np.maximum(raw_codes, 0)] if len(stripped) else True)
+        if np.any(bad):
+            raise _line_col_error(self.path, "empty vehicle id", part.lines, np.asarray(bad), key, upto_line=upto)
+        to_global = np.empty(len(stripped), np.int64)
+        for j, vid in enumerate(stripped):  # ' AB12' and 'AB12' merge; a few ids, not rows
+            if vid not in self._vindex:
+                _check_vehicle_id(vid, self.path, int(part.lines[np.argmax(raw_codes == j)]), key, None)
+                self._vindex[vid] = len(self._vindex)
+            to_global[j] = self._vindex[vid]
+        return to_global[raw_codes]
+
+    def _time_part(self, part: _Part, upto: int | None) -> None:
+        tspec, path = self.prof.time, self.path
+        if len(tspec.columns) == 2:
+            dcol, tcol = tspec.columns
+            dvals, tvals = part.text[dcol], part.text[tcol]
+            dcodes, duniq = pd.factorize(pd.Series(dvals, dtype=object), sort=False)
+            to_global = np.array([self._date_index.setdefault(u, len(self._date_index)) for u in duniq], np.int64)
+            self._dates.append(np.where(dcodes >= 0, to_global[np.maximum(dcodes, 0)] if len(to_global) else -1, -1))
+            tod = parse_datetimes(tvals, tspec.time_format)  # type: ignore[arg-type]
+            ok_t = tod != NAT
+            tod[ok_t] -= (tod[ok_t] // NS_PER_DAY) * NS_PER_DAY  # time of day [ns]
+            if not ok_t.all():
+                raise _line_col_error(path, "unreadable time of day", part.lines, ~ok_t, tcol, tvals, upto)
+            self._tods.append(tod)
+            return
+        col = tspec.columns[0]
+        if part.time_ns is not None:
+            ns, vals = part.time_ns, None
+            self._time_notation(part.time_utc, part.lines[0], col)
+        else:
+            vals = part.text[col]
+            if tspec.format == "ISO8601":
+                self._check_notation(vals, part.lines, col, upto)
+            ns = parse_datetimes(vals, tspec.format)  # type: ignore[arg-type]
+        _check_times(path, ns, part.lines, col, vals, upto)
+        self._time.append(ns)
+
+    def _time_notation(self, utc: bool, line: int, col: str, value=None) -> None:
+        if self.time_utc is None:
+            self.time_utc = utc
+        elif utc != self.time_utc:
+            raise InputError(self.path, _mixed_zone_message(self.time_utc) + (f" {value!r}" if value else ""),
+                             line=int(line), column=col)
+
+    def _check_notation(self, vals: np.ndarray, lines: np.ndarray, col: str, upto: int | None) -> None:
+        """One file, one notation: every ISO 8601 time carries a zone designator, or none
+        does (a mix would put some rows an offset away from the others)."""
+        s = pd.Series(vals, dtype=object)
+        present = s.notna().to_numpy()
+        if not present.any():
+            return
+        zoned = s[present].astype(str).str.contains(_ZONE_RE, regex=True).to_numpy()
+        if self.time_utc is None:
+            self.time_utc = bool(zoned[0])
+        bad = np.zeros(len(vals), bool)
+        bad[present] = zoned != self.time_utc
+        if bad.any():
+            raise _line_col_error(self.path, _mixed_zone_message(self.time_utc) + ":", lines, bad, col, vals, upto)
+
+    # --- after the data
+    def lines(self) -> np.ndarray:
+        if self.rows == 0:
+            raise InputError(self.path, "no data rows with values", line=self.first_data_line)
+        if self._fewer:
+            f = np.concatenate(self._fewer)
+            self.repairs.rows.append(f"read: {len(f)} rows with fewer fields than the header (missing fields "
+                                     f"read as empty): {_lines_summary(f)}")
+        if self._blank:
+            b = np.concatenate(self._blank)
+            self.repairs.rows.append(f"read: {len(b)} blank rows (no value in any used column) skipped: "
+                                     f"{_lines_summary(b)}")
+        self._line_array = _concat(self._lines)
+        return self._line_array
+
+    def vehicle_codes(self) -> tuple[np.ndarray, list[str]]:
+        """Per row, the index of its vehicle in the list of vehicle ids (in order of
+        first appearance)."""
+        if self.prof.vehicle_source != "column":
+            return np.zeros(self.rows, np.int8), [self.vehicle]  # type: ignore[list-item]
+        return _concat(self._vcodes), list(self._vindex)
+
+    def utc_ns(self, codes: np.ndarray, lines: np.ndarray) -> np.ndarray:
+        """Each row's time as UTC ns since the epoch (int64): localised from the
+        profile's zone unless the text carries one; dates repaired (two columns)."""
+        tspec, path, repairs = self.prof.time, self.path, self.repairs.time
+        if len(tspec.columns) == 1:
+            naive = _concat(self._time)
+            return naive if self.time_utc else _localize(naive, tspec.timezone, codes, lines, repairs)
+        dcol = tspec.columns[0]
+        values = np.array(list(self._date_index), dtype=object)
+        date_codes = _concat(self._dates)
+        tod = _concat(self._tods)
+        uniq_ns = parse_datetimes(values, tspec.date_format)  # type: ignore[arg-type]
+        uniq_ns = np.where((uniq_ns >= _TIME_MIN) & (uniq_ns < _TIME_MAX), uniq_ns, NAT)
+        date_ns = np.where(date_codes >= 0, uniq_ns[np.maximum(date_codes, 0)] if len(uniq_ns) else NAT, NAT)
+        dvals = _Lookup(values, date_codes)
+        if tspec.date_repair == "dominant":
+            date_ns = _repair_dates(date_ns, tod, dvals, lines, tspec.date_repair_max_days, path, dcol, repairs)
+        badd = date_ns == NAT
+        if badd.any():
+            raise _line_col_error(path, f"unreadable date (format {tspec.date_format!r}):", lines, badd, dcol, dvals)
+        naive = date_ns + tod
+        del date_ns, tod
+        _check_times(path, naive, lines, dcol, dvals)
+        return _localize(naive, tspec.timezone, codes, lines, repairs)
+
+    def pop_columns(self) -> dict[str, np.ndarray]:
+        """The numeric source columns (by source name) and the value-map columns (by
+        canonical name), each as one array; the blocks' pieces are released as it goes."""
+        out: dict[str, np.ndarray] = {}
+        for c in list(self._numbers):
+            out[c] = _concat(self._numbers.pop(c))
+        for c in list(self._mapped):
+            out[c] = _concat(self._mapped.pop(c))
+        return out
+
+
+def _writable(x: np.ndarray) -> np.ndarray:
+    """``x``, or a copy of it where it is a read-only view (the columns are converted in
+    place later)."""
+    return x if x.flags.writeable else x.copy()
+
+
+def _concat(parts: list[np.ndarray]) -> np.ndarray:
+    """One array of the parts (the part itself if there is one: no copy)."""
+    if len(parts) == 1:
+        a = parts[0]
+    else:
+        a = np.concatenate(parts)
+    parts.clear()
+    return a
+
+
+class _Lookup:
+    """Row values of a factorised text column, made on demand (for messages)."""
+
+    def __init__(self, values: np.ndarray, codes: np.ndarray) -> None:
+        self.values, self.codes = values, codes
+
+    def __getitem__(self, idx):
+        c = self.codes[idx]
+        if np.ndim(c) == 0:
+            return self.values[c] if c >= 0 else np.nan
+        return np.where(c >= 0, self.values[np.maximum(c, 0)] if len(self.values) else np.nan, np.nan)
+
+
+def _mixed_zone_message(first_zoned: bool) -> str:
+    if first_zoned:
+        return ("time zone notation mixed in one file: the file's first time carries a zone designator "
+                "('Z' or +hh:mm), this one none")
+    return ("time zone notation mixed in one file: the file's first time carries no zone designator, this one "
+            "does ('Z' or +hh:mm)")
+
+
+def _first_value(block: bytes, index: int, sep: str, max_lines: int = 50) -> str | None:
+    """The first non-empty value of field ``index`` in the first lines of ``block``."""
+    head = block[: 1 << 16].decode("utf-8", errors="replace").splitlines()[:max_lines]
+    for row in csv.reader(head, delimiter=sep):
+        if index < len(row) and row[index].strip():
+            return row[index].strip()
+    return None
+
+
+def _check_vehicle_id(vid: str, path: Path, line: int | None, column: str | None, where: str | None) -> None:
+    """A vehicle id may not hold control characters (a carriage return or line feed in
+    an id breaks CSV output and forges lines); refused at read."""
+    if has_control(vid):
+        src = f" from {where}" if where else ""
+        raise InputError(path, f"vehicle id {vid!r}{src} holds a control character; ids must be printable text",
+                         line=line, column=column)
 
 
 def _read_table(body: bytes, path: Path, prof: Profile, names: list[str], usecols: list[str],
@@ -883,6 +1237,59 @@ def _read_table(body: bytes, path: Path, prof: Profile, names: list[str], usecol
     df.columns = [c.split("\x00")[0] for c in df.columns]
     return df
 
+def _canonical_columns(columns: dict[str, np.ndarray], maps: list[ColumnMap], utc: np.ndarray,
+                       lines: np.ndarray, prof: Profile, path: Path, repairs: list[str]) -> dict[str, np.ndarray]:
+    """The canonical columns (``time_s``, ``source_line`` and each mapped column in SI),
+    with impossible positions and absurd values handled; a log with neither position nor
+    speed values is an error. ``columns`` (numbers by source name, value-map columns by
+    canonical name) are converted in place and released from the dict."""
+    out: dict[str, np.ndarray] = {"time_s": utc / 1e9, "source_line": lines}
+    del utc
+    for m in maps:
+        if m.value_map is not None:
+            out[m.canonical] = columns.pop(m.canonical)
+        else:
+            out[m.canonical] = _to_si(columns.pop(m.source), m, lines, repairs)
+        if m.negate:
+            out[m.canonical] = np.negative(out[m.canonical], out=out[m.canonical])
+    _check_position(out, prof, lines, path, repairs)
+    for m in maps:
+        if m.canonical not in ("lat_deg", "lon_deg"):
+            _check_absurd(out, m, lines, path, prof, repairs)
+
+    has_pos = "lat_deg" in out and np.isfinite(out["lat_deg"]).any()
+    has_speed = any(c in out and np.isfinite(out[c]).any() for c in ("wheel_speed_mps", "gps_speed_mps"))
+    if not (has_pos or has_speed):
+        cands = [m.source for m in prof.columns if m.canonical in ("lat_deg", "lon_deg", "wheel_speed_mps", "gps_speed_mps")]
+        raise InputError(path, "no position and no speed values: cannot derive a drive cycle "
+                               f"(profile {prof.name!r} looks for {', '.join(cands) or 'none'})")
+    return out
+
+
+def _split_vehicles(out: dict[str, np.ndarray], codes: np.ndarray, vehicles: list[str], maps: list[ColumnMap],
+                    prof: Profile, path: Path, metadata: dict[str, str], repairs: list[str]) -> list[ParsedLog]:
+    """One :class:`ParsedLog` per vehicle: its rows' canonical columns (a frame built
+    around the arrays, no copy) and the energy sources they hold. With several vehicles
+    each column is reordered by vehicle once (stable: file order within a vehicle) and
+    the vehicles' frames are slices of it."""
+    if len(vehicles) == 1:
+        per = [out]
+    else:
+        order = np.argsort(codes, kind="stable")
+        bounds = np.searchsorted(codes[order], np.arange(len(vehicles) + 1))
+        per = [{} for _ in vehicles]
+        for c in list(out):
+            a = out.pop(c)[order]
+            for k in range(len(vehicles)):
+                per[k][c] = a[bounds[k]:bounds[k + 1]]
+    logs = []
+    for vname, arrays in zip(vehicles, per):
+        fr = pd.DataFrame(arrays, copy=False)
+        fr.insert(2, "vehicle_id", pd.Categorical.from_codes(np.zeros(len(fr), np.int8), [vname]))
+        sources = tuple(_energy_source(e, fr, maps) for e in prof.energy if _has_energy_data(e, arrays))
+        logs.append(ParsedLog(path, prof.name, vname, fr, dict(metadata), sources, list(repairs)))
+    return logs
+
 
 def _has_energy_data(e: EnergySpec, arrays: dict[str, np.ndarray]) -> bool:
     """Whether the canonical columns ``arrays`` hold any value of the source (both
@@ -893,12 +1300,10 @@ def _has_energy_data(e: EnergySpec, arrays: dict[str, np.ndarray]) -> bool:
             (np.isfinite(arrays[a]).any() and np.isfinite(arrays[b]).any()))
     return e.column in arrays and bool(np.isfinite(arrays[e.column]).any())
 
-
 def _energy_source(e: EnergySpec, fr: pd.DataFrame, maps: list[ColumnMap]) -> EnergySource:
     cols = VIRTUAL_COLUMNS[e.column][0] if e.column in VIRTUAL_COLUMNS else (e.column,)
     src = "*".join(next(m.source for m in maps if m.canonical == c) for c in cols)
     return EnergySource(e.column, e.kind, e.quantity, e.resolution, e.priority, e.capacity_j, src, e.modulus)
-
 
 def _vehicle_from_profile(prof: Profile, path: Path, metadata: dict[str, str], repairs: list[str]) -> str:
     src = prof.vehicle_source
@@ -919,42 +1324,46 @@ def _vehicle_from_profile(prof: Profile, path: Path, metadata: dict[str, str], r
     return path.resolve().parent.name if src == "parent_dir" else name
 
 
-def _check_times(path: Path, naive: np.ndarray, lines: np.ndarray, col: str, vals: np.ndarray | None) -> None:
+def _check_times(path: Path, naive: np.ndarray, lines: np.ndarray, col: str, vals=None,
+                 upto: int | None = None) -> None:
     """Unparseable or absurd (before 1990 or from 2100) times are errors with their line."""
     bad = (naive == NAT) | (naive < _TIME_MIN) | (naive >= _TIME_MAX)
     if bad.any():
-        raise _line_col_error(path, "unreadable or impossible time", lines, bad, col, vals)
+        raise _line_col_error(path, "unreadable or impossible time", lines, bad, col, vals, upto)
 
 
-def _convert_column(s: pd.Series, m: ColumnMap, lines: np.ndarray, path: Path, prof: Profile,
-                    repairs: list[str]) -> np.ndarray:
-    """One source column as float64 in SI (NaN = no value)."""
-    if m.value_map is not None:
-        mapping = dict(m.value_map)
-        res = s.map(mapping)
-        todo = (res.isna() & s.notna()).to_numpy()
-        if todo.any():
-            folded = {k.strip().casefold(): v for k, v in m.value_map}
-            res2 = s[todo].str.strip().str.casefold().map(folded)
-            res[todo] = res2
-            still = (res.isna() & s.notna()).to_numpy()
-            if still.any():
-                raise _line_col_error(path, f"value not in the profile's map ({', '.join(k for k, _ in m.value_map)}):",
-                                      lines, still, m.source, s.to_numpy())
-        x = res.to_numpy(dtype=np.float64)
-    else:
-        x = s.to_numpy(dtype=np.float64, copy=True)
-        if m.missing_values:
-            miss = np.isin(x, np.asarray(m.missing_values))
-            if miss.any():
-                x[miss] = np.nan
-                repairs.append(f"{m.canonical}: {int(miss.sum())} values equal to the logger's missing-value "
-                               f"marker ({', '.join(f'{v:g}' for v in m.missing_values)}) in column "
-                               f"'{m.source}' set to NaN: {_lines_summary(lines[miss])}")
-        if m.factor != 1.0:
-            x *= m.factor
-    if m.negate:
-        x = -x
+def _map_values(vals: np.ndarray, m: ColumnMap, lines: np.ndarray, path: Path, upto: int | None) -> np.ndarray:
+    """A value-map column's text (e.g. ``On``/``Off``) as float64 (NaN = no value);
+    matched exactly, else ignoring case and surrounding space; other text is an error."""
+    s = pd.Series(vals, dtype=object)
+    mapping = dict(m.value_map)  # type: ignore[arg-type]
+    res = s.map(mapping)
+    todo = (res.isna() & s.notna()).to_numpy()
+    if todo.any():
+        folded = {k.strip().casefold(): v for k, v in m.value_map}  # type: ignore[union-attr]
+        res2 = s[todo].str.strip().str.casefold().map(folded)
+        res[todo] = res2
+        still = (res.isna() & s.notna()).to_numpy()
+        if still.any():
+            raise _line_col_error(path, f"value not in the profile's map ({', '.join(k for k, _ in m.value_map)}):",
+                                  lines, still, m.source, vals, upto)
+    return res.to_numpy(dtype=np.float64)
+
+
+def _to_si(x: np.ndarray, m: ColumnMap, lines: np.ndarray, repairs: list[str]) -> np.ndarray:
+    """A numeric source column in SI, in place: the logger's missing-value markers to
+    NaN (reported), then ``x * factor + offset``."""
+    if m.missing_values:
+        miss = np.isin(x, np.asarray(m.missing_values))
+        if miss.any():
+            x[miss] = np.nan
+            repairs.append(f"{m.canonical}: {int(miss.sum())} values equal to the logger's missing-value "
+                           f"marker ({', '.join(f'{v:g}' for v in m.missing_values)}) in column "
+                           f"'{m.source}' set to NaN: {_lines_summary(lines[miss])}")
+    if m.factor != 1.0:
+        x *= m.factor
+    if m.offset != 0.0:
+        x += m.offset
     return x
 
 
@@ -971,7 +1380,6 @@ def _absurd_verdict(n_bad: int, n_values: int, canon: str, src: str, lines: np.n
             lines, bad, src, raw)
     repairs.append(f"{canon}: {n_bad} impossible {what} in column '{src}' (e.g. {raw[np.flatnonzero(bad)[0]]:g}{u}; "
                    f"allowed {lo:g}..{hi:g} in SI) set to NaN: {_lines_summary(lines[bad])}")
-
 
 def _check_absurd(out: dict[str, np.ndarray], m: ColumnMap, lines: np.ndarray, path: Path,
                   prof: Profile, repairs: list[str]) -> None:
@@ -990,11 +1398,10 @@ def _check_absurd(out: dict[str, np.ndarray], m: ColumnMap, lines: np.ndarray, p
     if not bad.any():
         return
     n_values = int(np.isfinite(x).sum())
-    as_logged = (-x if m.negate else x) / m.factor  # for messages, in the logger's unit
+    as_logged = ((-x if m.negate else x) - m.offset) / m.factor  # for messages, in the logger's unit
     _absurd_verdict(int(bad.sum()), n_values, m.canonical, m.source, lines, bad, as_logged, path, prof,
                     repairs, "values", m.unit)
     x[bad] = np.nan
-
 
 def _check_position(out: dict[str, np.ndarray], prof: Profile, lines: np.ndarray, path: Path,
                     repairs: list[str]) -> None:

@@ -26,13 +26,13 @@ import numpy as np
 
 from cevm.core.cycle import CR0_DEFAULT, drive_cycle_vector
 from cevm.core.trip import Trip, TripRecord
-from cevm.errors import CevmError, InputError
+from cevm.errors import CevmError, InputError, escape_control
 from cevm.executors import worker_cache
 from cevm.ingest.cleaning import CleanParams, CleanTrip, clean_log
 from cevm.ingest.dsm import DsmHeaders, DsmSampler
 from cevm.ingest.elevation import ElevationParams, trip_elevation
 from cevm.ingest.profiles import Profile
-from cevm.ingest.reading import read_log
+from cevm.ingest.reading import ReadLimits, read_log
 from cevm.store import trip_profile_blob
 
 
@@ -47,6 +47,7 @@ class IngestOptions:
     elevation: ElevationParams = field(default_factory=ElevationParams)
     cr0: float = CR0_DEFAULT
     force: bool = False  # re-ingest files even when unchanged
+    limits: ReadLimits = field(default_factory=ReadLimits)  # bounds on each file (size, gzip expansion, rows)
 
 
 @dataclass(frozen=True, eq=False)
@@ -134,12 +135,12 @@ def process_file(
         size, mtime = st.st_size, st.st_mtime
         sha = sha256 or file_sha256(path)
     except OSError as exc:
-        return FileOutcome(str(path), None, None, None, error=f"{path}: cannot read: {exc.strerror}")
+        return FileOutcome(str(path), None, None, None, error=escape_control(f"{path}: cannot read: {exc.strerror}"))
     try:
         if sampler is None and options.dsm is not None:
             sampler = worker_sampler(options.dsm, dsm_headers)
         t0 = time.perf_counter()
-        logs = read_log(path, options.profile, profiles)
+        logs = read_log(path, options.profile, profiles, limits=options.limits)
         stage["read"] = time.perf_counter() - t0
         trips: list[TripRecord] = []
         vectors: list[bytes] = []
@@ -149,7 +150,7 @@ def process_file(
         for log in logs:
             n_rows += len(log.frame)
             t0 = time.perf_counter()
-            result = clean_log(log.frame, log.energy_sources, options.clean, path=path)
+            result = clean_log(log.frame, log.energy_sources, options.clean, path=path, release_frame=True)
             stage["clean"] = stage.get("clean", 0.0) + time.perf_counter() - t0
             dropped.extend({"vehicle_id": log.vehicle_id, **d} for d in result.dropped)
             for ct in result.trips:
@@ -178,13 +179,14 @@ def process_file(
     except CevmError as exc:
         return FileOutcome(str(path), sha, size, mtime, error=str(exc), stage_s=stage)
     except (ValueError, OSError, csv.Error, UnicodeError) as exc:  # a file we could not make sense of
-        return FileOutcome(str(path), sha, size, mtime, error=f"{path}: {type(exc).__name__}: {exc}", stage_s=stage)
+        return FileOutcome(str(path), sha, size, mtime, error=escape_control(f"{path}: {type(exc).__name__}: {exc}"),
+                           stage_s=stage)
     except Exception as exc:  # a bug in cevm: still only this file fails, and it says so
         where = traceback.extract_tb(exc.__traceback__)[-1]
         return FileOutcome(
             str(path), sha, size, mtime, stage_s=stage,
-            error=f"{path}: internal error (a cevm bug, please report): {type(exc).__name__}: {exc} "
-                  f"at {Path(where.filename).name}:{where.lineno}",
+            error=escape_control(f"{path}: internal error (a cevm bug, please report): {type(exc).__name__}: {exc} "
+                                 f"at {Path(where.filename).name}:{where.lineno}"),
         )
 
 

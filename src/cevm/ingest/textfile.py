@@ -1,0 +1,347 @@
+"""A log file's bytes as UTF-8 text, streamed in bounded pieces, within limits.
+
+The first part of the reading stage (:mod:`cevm.ingest.reading`): no stage ever holds a
+whole file. :class:`ByteStream` reads a file in chunks and, when its first bytes are the
+gzip magic, decompresses it incrementally (every member of a multi-member file), never
+more than a chunk at a time, so a small file that expands to gigabytes is stopped at a
+limit instead of being expanded first. :class:`Utf8Stream` decodes those bytes from the
+file's text encoding to UTF-8 (validating UTF-8 input as it goes) and refuses NUL bytes.
+:func:`sniff_bom` names the encoding a byte order mark declares: a BOM decides the
+encoding whatever the profile says (a UTF-8 BOM on a cp1252 portal export, UTF-16 from a
+spreadsheet's "Unicode text" export).
+
+:class:`ReadLimits` are the bounds, each an option of ``cevm ingest`` and of
+:class:`cevm.ingest.IngestOptions`; :data:`MAX_LINE_BYTES` is fixed. Every violation is
+an :class:`~cevm.errors.InputError` naming the file (and line where there is one) and
+the option that would allow it.
+"""
+
+from __future__ import annotations
+
+import codecs
+import os
+import zlib
+from dataclasses import dataclass
+from functools import lru_cache
+from pathlib import Path
+
+from cevm.errors import InputError
+
+__all__ = ["MAX_LINE_BYTES", "ByteStream", "ReadLimits", "Utf8Stream", "sniff_bom", "utf16_hint"]
+
+#: Raw bytes read from the file at a time; also the most one decompression call yields.
+CHUNK_BYTES = 1 << 20
+
+#: The longest line a log may have [bytes]: a longer one (a file without line breaks) is
+#: not a CSV log. 1 MiB holds a header of 20,000 columns.
+MAX_LINE_BYTES = 1 << 20
+
+
+@dataclass(frozen=True)
+class ReadLimits:
+    """Bounds on one log file, so that memory and time stay bounded whatever the input.
+
+    Parameters
+    ----------
+    max_file_mb : the most text a file may hold [MB = 10^6 bytes], after decompression
+        (default 1000: about 10 million rows of a typical srf log; the row limit comes
+        first for ordinary rows). A plain file larger than this on disk is refused before
+        it is read.
+    max_expansion : the most a gzip file may expand (decompressed bytes per compressed
+        byte, default 100; logger CSVs compress 3-20 times); checked once more than
+        :data:`EXPANSION_FLOOR_BYTES` are decompressed, so that small files never trip it.
+        A gzip bomb is stopped after its first 32 MB.
+    max_rows : the most data rows a file may hold (default 3,000,000: a month of 1 Hz
+        logging in one file). Memory grows with the rows kept (about 130 bytes a row for
+        the reading stage's frame, plus the cleaning stage's working arrays; see the
+        README), so this is the bound that keeps a worker's memory bounded.
+    """
+
+    max_file_mb: float = 1000.0
+    max_expansion: float = 100.0
+    max_rows: int = 3_000_000
+
+    def __post_init__(self) -> None:
+        if not (self.max_file_mb > 0 and self.max_expansion >= 1 and self.max_rows >= 1):
+            raise ValueError(f"read limits must be positive (expansion at least 1): {self}")
+
+    @property
+    def max_file_bytes(self) -> int:
+        return int(self.max_file_mb * 1e6)
+
+
+def mb(n_bytes: int) -> str:
+    """A size in MB (10^6 bytes) for messages: 3 significant digits, thousands
+    separated."""
+    x = n_bytes / 1e6
+    return f"{x:,.0f}" if x >= 100 else f"{x:.3g}"
+
+
+#: Decompressed bytes after which the expansion limit applies.
+EXPANSION_FLOOR_BYTES = 32 << 20
+
+_GZIP_MAGIC = b"\x1f\x8b"
+
+
+class ByteStream:
+    """A file's bytes, gunzipped if its first two bytes are the gzip magic, in chunks of
+    at most :data:`CHUNK_BYTES`, counted against ``limits``.
+
+    ``read()`` returns the next chunk (``b""`` at the end); ``peek(n)`` the first ``n``
+    bytes without consuming them. Use as a context manager (closes the file).
+    """
+
+    def __init__(self, path: Path, limits: ReadLimits) -> None:
+        self.path = path
+        self.limits = limits
+        try:
+            self._fh = open(path, "rb")
+            self.size_on_disk = os.fstat(self._fh.fileno()).st_size
+            self.gzip = self._fh.read(2) == _GZIP_MAGIC
+            self._fh.seek(0)
+        except OSError as exc:
+            raise InputError(path, f"cannot read file: {exc.strerror or exc}") from None
+        self._z = zlib.decompressobj(31) if self.gzip else None
+        self._zin = b""  # compressed bytes read and not yet decompressed
+        self._pushed: list[bytes] = []
+        self.bytes_in = 0  # raw bytes read from the file
+        self.bytes_out = 0  # bytes returned (decompressed)
+
+    def __enter__(self) -> ByteStream:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def close(self) -> None:
+        self._fh.close()
+
+    def check_size(self) -> None:
+        """Refuse a plain file larger than ``max_file_mb`` before reading it."""
+        if not self.gzip and self.size_on_disk > self.limits.max_file_bytes:
+            raise InputError(self.path, f"file of {mb(self.size_on_disk)} MB: more than the limit of "
+                                        f"{self.limits.max_file_mb:g} MB per file (--max-file-mb)")
+
+    def peek(self, n: int) -> bytes:
+        """The next ``n`` bytes (fewer at the end), left to be read again."""
+        got, size = [], 0
+        while size < n:
+            chunk = self.read()
+            if not chunk:
+                break
+            got.append(chunk)
+            size += len(chunk)
+        data = b"".join(got)
+        if data:
+            self._pushed.append(data)
+        return data[:n]
+
+    def read(self) -> bytes:
+        if self._pushed:
+            return self._pushed.pop()
+        try:
+            data = self._read_gzip() if self.gzip else self._read_plain()
+        except OSError as exc:
+            raise InputError(self.path, f"cannot read file: {exc.strerror or exc}") from None
+        if data:
+            self._count(len(data))
+        return data
+
+    def _read_plain(self) -> bytes:
+        data = self._fh.read(CHUNK_BYTES)
+        self.bytes_in += len(data)
+        return data
+
+    def _read_gzip(self) -> bytes:
+        try:
+            while True:
+                if self._z.eof:  # a member ended: another may follow (zero padding is allowed)
+                    rest = self._z.unused_data or self._raw_chunk()
+                    while rest and not rest.strip(b"\x00"):
+                        rest = self._raw_chunk()
+                    rest = rest.lstrip(b"\x00")
+                    if not rest:
+                        return b""
+                    if not rest.startswith(_GZIP_MAGIC[: len(rest)]):
+                        raise InputError(self.path, "corrupt gzip data: trailing bytes after the compressed data")
+                    self._z = zlib.decompressobj(31)
+                    self._zin = rest
+                if not self._zin:
+                    self._zin = self._raw_chunk()
+                    if not self._zin:
+                        raise InputError(self.path, "corrupt gzip data: the file ends inside the compressed stream")
+                out = self._z.decompress(self._zin, CHUNK_BYTES)
+                self._zin = self._z.unconsumed_tail
+                if out:
+                    return out
+        except zlib.error as exc:
+            raise InputError(self.path, f"corrupt gzip data: {exc}") from None
+
+    def _raw_chunk(self) -> bytes:
+        data = self._fh.read(CHUNK_BYTES)
+        self.bytes_in += len(data)
+        return data
+
+    def _count(self, n: int) -> None:
+        self.bytes_out += n
+        lim = self.limits
+        if self.bytes_out > lim.max_file_bytes:
+            what = "decompresses to" if self.gzip else "holds"
+            raise InputError(self.path, f"file {what} more than the limit of {lim.max_file_mb:g} MB of text per "
+                                        f"file (--max-file-mb)")
+        if not self.gzip or self.bytes_out <= EXPANSION_FLOOR_BYTES:
+            return
+        pending = len(self._z.unused_data) if self._z.eof else len(self._zin)  # read, not yet decompressed
+        consumed = self.bytes_in - pending
+        if self.bytes_out > lim.max_expansion * max(consumed, 1):
+            raise InputError(self.path, f"gzip data expands more than {lim.max_expansion:g} times "
+                                        f"({mb(self.bytes_out)} MB from {mb(consumed)} MB so far): "
+                                        "refused as a likely zip bomb; if the file is genuine, raise the limit "
+                                        "(--max-expansion)")
+
+
+#: Byte order marks and the encodings they declare (UTF-32 before UTF-16: FF FE 00 00
+#: starts with the UTF-16 LE mark).
+_BOMS = (
+    (codecs.BOM_UTF8, "utf-8"),
+    (codecs.BOM_UTF32_LE, "utf-32-le"),
+    (codecs.BOM_UTF32_BE, "utf-32-be"),
+    (codecs.BOM_UTF16_LE, "utf-16-le"),
+    (codecs.BOM_UTF16_BE, "utf-16-be"),
+)
+
+
+def sniff_bom(head: bytes) -> tuple[str, int] | None:
+    """(encoding, length of the mark) of the byte order mark ``head`` starts with, if
+    any. A BOM is what a text's writer says its encoding is, so it wins over a profile's
+    ``csv.encoding``."""
+    for bom, enc in _BOMS:
+        if head.startswith(bom):
+            return enc, len(bom)
+    return None
+
+
+def utf16_hint(data: bytes) -> str:
+    """A hint for a message about binary data when ``data`` looks like UTF-16 text
+    without a byte order mark (every other byte NUL), else ``""``."""
+    sample = data[:4096]
+    if len(sample) < 16:
+        return ""
+    even, odd = sample[0::2], sample[1::2]
+    for zeros, enc in ((odd, "utf-16-le"), (even, "utf-16-be")):
+        other = even if zeros is odd else odd
+        if zeros.count(0) > 0.9 * len(zeros) and other.count(0) < 0.1 * len(other):
+            return f" (it looks like {enc.upper()} text without a byte order mark: set csv.encoding = {enc!r})"
+    return ""
+
+
+_UTF8_NAMES = {"utf-8", "utf8", "utf-8-sig", "u8"}
+_ASCII_NAMES = {"ascii", "us-ascii"}
+
+
+class Utf8Stream:
+    """The text of a :class:`ByteStream` as UTF-8 bytes, chunk by chunk.
+
+    ``encoding``: the profile's (a BOM at the start overrides it; the BOM itself is
+    dropped). UTF-8 and ASCII input is validated and passed through; any other encoding
+    is decoded incrementally and re-encoded. A byte that does not decode, or a NUL byte
+    (binary data), raises :class:`~cevm.errors.InputError` with its line; with
+    ``column_of(line_bytes)`` set (by the reader, once it knows the header) the error
+    names the column too: it is called with the UTF-8 text before the error's line in
+    the current chunk (where the header may be) and the raw bytes of that line before
+    the bad byte.
+    """
+
+    def __init__(self, raw: ByteStream, encoding: str, profile_name: str) -> None:
+        self.raw = raw
+        self.path = raw.path
+        self.profile_name = profile_name
+        bom = sniff_bom(raw.peek(4))
+        self._skip = 0
+        if bom is not None:
+            encoding, self._skip = bom
+        self.encoding = encoding
+        enc = codecs.lookup(encoding).name
+        self._utf8 = enc in ("utf-8", "utf-8-sig") or encoding.lower() in _UTF8_NAMES
+        self._ascii = enc == "ascii" or encoding.lower() in _ASCII_NAMES
+        self._ascii_compatible = self._utf8 or self._ascii or _ascii_transparent(encoding)
+        self._dec = codecs.getincrementaldecoder("ascii" if self._ascii else "utf-8" if self._utf8
+                                                 else encoding)(errors="strict")
+        self.lines_done = 0  # line breaks in the text returned so far
+        self._carry = b""  # the start of a UTF-8 sequence cut at the end of a chunk
+        self._tail = b""  # raw bytes of the current (unfinished) line, for error columns
+        self.column_of = None  # callable(text before the line, line's bytes before the error) -> column
+        self._done = False
+
+    def read(self) -> bytes:
+        """The next chunk of UTF-8 text (``b""`` at the end)."""
+        while not self._done:
+            chunk = self.raw.read()
+            if self._skip:
+                chunk, self._skip = chunk[self._skip:], 0
+            final = not chunk
+            self._done = final
+            out = self._decode(chunk, final)
+            if out:
+                nul = out.find(b"\x00")
+                if nul >= 0:
+                    raise InputError(self.path, "binary data (NUL byte), not a CSV text file" + utf16_hint(out),
+                                     line=self.lines_done + out.count(b"\n", 0, nul) + 1)
+                self.lines_done += out.count(b"\n")
+                return out
+        return b""
+
+    def _decode(self, chunk: bytes, final: bool) -> bytes:
+        data = self._carry + chunk if self._carry else chunk
+        self._carry = b""
+        try:
+            if self._utf8 or self._ascii:  # validate, pass the bytes through
+                if data.isascii():  # a fast scan
+                    out = data
+                elif self._ascii:
+                    data.decode("ascii")  # raises
+                    out = data
+                else:
+                    _, used = codecs.utf_8_decode(data, "strict", final)
+                    out, self._carry = data[:used], data[used:]  # a sequence cut by the chunk waits
+            elif self._ascii_compatible and data.isascii() and not self._dec.getstate()[0]:
+                out = data  # what decoding and re-encoding as UTF-8 would give
+            else:
+                out = self._dec.decode(data, final).encode("utf-8")
+        except UnicodeDecodeError as exc:
+            raise self._decode_error(exc) from None
+        if self._ascii_compatible:
+            done = data[: len(data) - len(self._carry)]
+            nl = done.rfind(b"\n")
+            self._tail = done[nl + 1:] if nl >= 0 else (self._tail + done)[-MAX_LINE_BYTES:]
+        return out
+
+    def _decode_error(self, exc: UnicodeDecodeError) -> InputError:
+        data, start = exc.object, exc.start
+        column = None
+        if self._ascii_compatible:
+            line = self.lines_done + data.count(b"\n", 0, start) + 1
+            ls = data.rfind(b"\n", 0, start) + 1
+            line_bytes = (self._tail if ls == 0 else b"") + data[ls:start]
+            if self.column_of is not None:
+                before = data[:ls].decode(self.encoding, errors="replace").encode("utf-8")
+                column = self.column_of(before, line_bytes)
+        else:
+            line = self.lines_done + data[:start].decode(self.encoding, errors="replace").count("\n") + 1
+        return InputError(
+            self.path,
+            f"byte 0x{data[start]:02x} is not valid {self.encoding} text (binary data, or a file in "
+            f"another encoding: check csv.encoding of profile {self.profile_name!r})",
+            line=line,
+            column=column,
+        )
+
+
+@lru_cache(maxsize=64)
+def _ascii_transparent(encoding: str) -> bool:
+    """Whether ``encoding`` decodes every ASCII byte to that character (utf-8, cp1252,
+    latin-1, ...; not utf-16 or utf-7), so that ASCII text needs no re-encoding."""
+    try:
+        return bytes(range(128)).decode(encoding) == "".join(map(chr, range(128)))
+    except (UnicodeDecodeError, LookupError):
+        return False
