@@ -6,8 +6,11 @@ Generates a fleet of srf logs on the sample routes (cevm_samplegen.fleet_for_ben
 the stand-in consumption: the benchmark measures ingest, not the detailed model) with
 the sample DSM tiles, then ingests it serially into a fresh store and prints samples/s
 end to end (CSV bytes to stored vector, DSM lookup included) and each stage's share.
-Baseline in the same run: the bare cost of reading the same files with pandas.read_csv,
-the floor of any CSV-based pipeline. Target (issue 4): >= 1 million samples/s.
+Baselines in the same run: the bare cost of reading the same files with pandas.read_csv,
+the floor of any CSV-based pipeline; and the read stage alone (``read_log`` of every
+file) with each parser, pyarrow (what ingest uses) and pandas (the parser before,
+still the fallback for blocks pyarrow refuses), best of two, CPU seconds. Target
+(issue 4): >= 1 million samples/s.
 
 The process runs with :func:`cevm.runtime.tune_allocator` applied, as the ``cevm``
 command does (``CEVM_TUNE_ALLOCATOR=0`` to measure glibc's defaults: ~7 % slower,
@@ -61,6 +64,22 @@ def main() -> None:
         rows = sum(len(pd.read_csv(f, comment="#")) for f in files)
         dt_read = time.perf_counter() - t0
         print(f"baseline pandas.read_csv only: {rows:,} rows in {dt_read:.2f} s = {rows / dt_read / 1e6:.2f} M rows/s")
+
+        # the read stage alone, with each parser (CPU time: this machine is shared)
+        from cevm.ingest.profiles import load_profiles
+        from cevm.ingest.reading import read_log
+
+        profs = load_profiles()
+        best = {"pandas": float("inf"), "pyarrow": float("inf")}
+        for _ in range(2):
+            for engine in best:
+                t0 = time.process_time()
+                for f in files:
+                    read_log(f, profs["srf"], profs, engine=engine)
+                best[engine] = min(best[engine], time.process_time() - t0)
+        print(f"read stage alone (read_log, CPU s, best of 2): pandas parser (before) {best['pandas']:.2f} s "
+              f"= {rows / best['pandas'] / 1e6:.2f} M rows/s; pyarrow parser (now) {best['pyarrow']:.2f} s "
+              f"= {rows / best['pyarrow'] / 1e6:.2f} M rows/s: {best['pandas'] / best['pyarrow']:.2f}x")
 
         with TripStore.open(tmp / "bench.sqlite") as st:
             t0 = time.perf_counter()

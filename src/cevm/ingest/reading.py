@@ -1284,8 +1284,12 @@ def _split_vehicles(out: dict[str, np.ndarray], codes: np.ndarray, vehicles: lis
                 per[k][c] = a[bounds[k]:bounds[k + 1]]
     logs = []
     for vname, arrays in zip(vehicles, per):
-        fr = pd.DataFrame(arrays, copy=False)
-        fr.insert(2, "vehicle_id", pd.Categorical.from_codes(np.zeros(len(fr), np.int8), [vname]))
+        n = len(arrays["time_s"])
+        names = list(arrays)
+        ids = pd.Categorical.from_codes(np.zeros(n, np.int8), dtype=pd.CategoricalDtype([vname]))
+        # built in column order at once (an insert afterwards costs pandas 3 ms a file)
+        fr = pd.DataFrame({**{c: arrays[c] for c in names[:2]}, "vehicle_id": ids,
+                           **{c: arrays[c] for c in names[2:]}}, copy=False)
         sources = tuple(_energy_source(e, fr, maps) for e in prof.energy if _has_energy_data(e, arrays))
         logs.append(ParsedLog(path, prof.name, vname, fr, dict(metadata), sources, list(repairs)))
     return logs
