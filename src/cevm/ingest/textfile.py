@@ -51,15 +51,18 @@ class ReadLimits:
         byte, default 100; logger CSVs compress 3-20 times); checked once more than
         :data:`EXPANSION_FLOOR_BYTES` are decompressed, so that small files never trip it.
         A gzip bomb is stopped after its first 32 MB.
-    max_rows : the most data rows a file may hold (default 3,000,000: a month of 1 Hz
-        logging in one file). Memory grows with the rows kept (about 130 bytes a row for
-        the reading stage's frame, plus the cleaning stage's working arrays; see the
-        README), so this is the bound that keeps a worker's memory bounded.
+    max_rows : the most data rows a file may hold (default 2,500,000: a 2 M-row log, 23
+        days of 1 Hz logging in one file, still ingests). This is the bound on memory:
+        a worker's peak grows with the rows of a file (``python
+        benchmarks/bench_memory.py``: about 180 MB + 300 bytes a row for a 15-column
+        srf log, 0.48 GB at 1 M rows, 0.78 GB at 2 M; most of it is the cleaning stage's
+        working arrays), so it is what keeps a worker's memory bounded whatever the
+        input.
     """
 
     max_file_mb: float = 1000.0
     max_expansion: float = 100.0
-    max_rows: int = 3_000_000
+    max_rows: int = 2_500_000
 
     def __post_init__(self) -> None:
         if not (self.max_file_mb > 0 and self.max_expansion >= 1 and self.max_rows >= 1):

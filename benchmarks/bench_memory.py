@@ -1,0 +1,258 @@
+"""Benchmark of peak memory of `cevm ingest` on one file: a large valid log and hostile ones.
+
+    python benchmarks/bench_memory.py [--rows N] [--bomb-gib G] [--keep DIR] [--cases NAME...]
+
+Each case runs `cevm ingest FILE --workers 1 -q` (the command as a user runs it, with
+its default limits and allocator settings) in a fresh subprocess, and prints that
+process's peak resident memory (``resource.getrusage(RUSAGE_SELF).ru_maxrss``), the
+exit code, the wall time and the first line of its output. The cases:
+
+- ``2M rows``: a valid srf log of ``--rows`` rows (default 2,000,000, about 191 MB: one
+  long-haul truck's working day of the benchmark fleet, 15 mapped columns, repeated on
+  consecutive days, as one file), ingested with the sample DSM (and ``--max-rows`` at
+  least ``--rows``; ``--cases big`` runs this case alone). The peak of each stage of the ingest of this file (read,
+  cleaning, elevation, the vectors, the store) is printed too, from the process's
+  high-water mark reset before each stage (``/proc/self/clear_refs``, Linux).
+- ``gzip bomb``: about 10 MB of gzip expanding to ``--bomb-gib`` GiB (default 3) of
+  valid, identical srf rows: it must fail fast with a clear message.
+- ``no line breaks``: 415 MB of text without a line break: must fail from its first
+  bytes.
+- ``all NUL``: a 2 GB sparse file of NUL bytes: must fail without being read whole.
+
+Baseline in the same run: the peak of a Python process that has imported cevm's ingest
+pipeline and done nothing else (``import only``), and the size of the 2M-row file
+itself. The default limits are printed first. The goal (issue 17): under 500 MB per
+worker for any input on the default settings.
+"""
+
+from __future__ import annotations
+
+import argparse
+import gzip
+import json
+import os
+import re
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "src"))
+
+GOAL_MB = 500.0
+
+
+# ------------------------------------------------------------------------ the cases
+def make_large_srf(out: Path, rows: int, workdir: Path) -> Path:
+    """A valid srf log of about ``rows`` rows: one long-haul truck's working day of the
+    benchmark fleet (cevm_samplegen), repeated on consecutive days (dates shifted), as
+    one file; the DSM that covers it is ``workdir/sample/dsm``."""
+    from cevm_samplegen import fleet_for_benchmark, generate_sample_logs
+
+    sample = workdir / "sample"
+    generate_sample_logs(sample, small=False)
+    fleet_for_benchmark(4, 1, workdir / "day", full_days=True, dsm_dir=sample / "dsm")
+    day = (workdir / "day" / "srf" / "BM-004_2019-05-13.csv").read_bytes()
+    lines = day.split(b"\n")
+    head = [ln for ln in lines if ln.startswith(b"#")]
+    header = lines[len(head)]
+    body = [ln for ln in lines[len(head) + 1:] if ln]
+    assert all(ln[:10] == b"2019-05-13" for ln in body), "a day that crosses midnight"
+    tails = [ln[10:] for ln in body]
+    import datetime as dt
+
+    d0 = dt.date(2019, 5, 13)
+    with open(out, "wb") as fh:
+        fh.write(b"\n".join(head + [header]) + b"\n")
+        k = n = 0
+        while n < rows:
+            date = (d0 + dt.timedelta(days=k)).isoformat().encode()
+            take = tails[: rows - n]
+            fh.write(b"".join(date + t + b"\n" for t in take))
+            n += len(take)
+            k += 1
+    return out
+
+
+def make_bomb(out: Path, gib: float) -> Path:
+    """gzip of ``gib`` GiB of one valid srf row repeated (a zip bomb of valid data)."""
+    row = b"2020-06-01T10:00:00.000Z,51.5,-0.1,36.0,36.0,100.0\n"
+    block = row * ((8 << 20) // len(row))
+    member = gzip.compress(block, compresslevel=9)
+    with open(out, "wb") as fh:
+        fh.write(gzip.compress(b"# vehicle_id=BOMB-1\ntimestamp_utc,gps_lat_deg,gps_lon_deg,gps_speed_kmh,"
+                               b"fms_wheel_speed_kmh,fms_total_energy_used_kwh\n"))
+        for _ in range(int(gib * (1 << 30) / len(block))):
+            fh.write(member)  # concatenated gzip members decompress to the concatenation
+    return out
+
+
+def make_lineless(out: Path, mb: int = 415) -> Path:
+    chunk = b"timestamp_utc,abc,def,ghi,jkl;" * (1 << 15)
+    with open(out, "wb") as fh:
+        for _ in range(mb * (1 << 20) // len(chunk)):
+            fh.write(chunk)
+    return out
+
+
+def make_nul(out: Path, gb: float = 2.0) -> Path:
+    with open(out, "wb") as fh:
+        fh.truncate(int(gb * 1e9))  # sparse: reads as NUL bytes
+    return out
+
+
+# ------------------------------------------------------------------------ the child
+def _hwm_mb() -> float:
+    with open("/proc/self/status") as fh:
+        return int(re.search(r"VmHWM:\s+(\d+)", fh.read()).group(1)) / 1024
+
+
+def _reset_hwm() -> bool:
+    try:
+        with open("/proc/self/clear_refs", "w") as fh:
+            fh.write("5")
+        return True
+    except OSError:
+        return False
+
+
+def child(argv: list[str], stages: bool) -> None:
+    """Run ``cevm ingest ARGV`` in this process; print a JSON line with the peak."""
+    peaks: dict[str, float] = {}
+    if stages and _reset_hwm():
+        import cevm.ingest.task as task
+        from cevm.store import TripStore
+
+        def wrap(owner, name, stage):
+            fn = getattr(owner, name)
+
+            def timed(*a, **k):
+                # a reset lowers ru_maxrss too: keep the peak so far first
+                peaks["_overall"] = max(peaks.get("_overall", 0.0), _hwm_mb())
+                _reset_hwm()
+                try:
+                    return fn(*a, **k)
+                finally:
+                    peaks[stage] = max(peaks.get(stage, 0.0), _hwm_mb())
+
+            setattr(owner, name, timed)
+
+        wrap(task, "read_log", "read")
+        wrap(task, "clean_log", "clean")
+        wrap(task, "trip_elevation", "elevation")
+        wrap(task, "drive_cycle_vector", "vector")
+        wrap(task, "trip_profile_blob", "profile")
+        wrap(TripStore, "replace_file_trips", "store")
+    from cevm.cli import main as cevm_main
+
+    sys.argv = ["cevm", "ingest", *argv]
+    code = 0
+    t0 = time.perf_counter()
+    try:
+        cevm_main()  # applies the allocator settings, as the command does
+    except SystemExit as exc:
+        code = exc.code if isinstance(exc.code, int) else 1
+    dt = time.perf_counter() - t0
+    rss = max(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, peaks.pop("_overall", 0.0))
+    sys.stdout.flush()
+    print("\n@@" + json.dumps({"peak_mb": rss, "code": code, "seconds": dt, "stages": peaks}))
+
+
+def run_case(name: str, path: Path | None, store: Path, extra: list[str] = (), stages: bool = False,
+             timeout_s: float = 600.0) -> dict:
+    env = dict(os.environ, PYTHONPATH=str(ROOT / "src"), OMP_NUM_THREADS="1", GDAL_NUM_THREADS="1")
+    if path is None:
+        code = ("import resource, cevm.ingest.pipeline, cevm.cli; "
+                "print('\\n@@{\"peak_mb\": %f, \"code\": 0, \"seconds\": 0, \"stages\": {}}' "
+                "% (resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024))")
+        cmd = [sys.executable, "-c", code]
+    else:
+        cmd = [sys.executable, __file__, "--child", *(["--stages"] if stages else []), "--",
+               str(path), "--store", str(store), "--workers", "1", "-q", *extra]
+    t0 = time.perf_counter()
+    try:
+        p = subprocess.run(cmd, capture_output=True, text=True, env=env, timeout=timeout_s)
+    except subprocess.TimeoutExpired:
+        return dict(name=name, wall=time.perf_counter() - t0, peak_mb=float("nan"), code=-1, stages={},
+                    message=f"TIMEOUT: killed after {timeout_s:.0f} s")
+    wall = time.perf_counter() - t0
+    m = re.search(r"^@@(\{.*\})$", p.stdout, re.M)
+    if not m:
+        tail = (p.stdout + p.stderr).strip().splitlines()[-1:] or [""]
+        return dict(name=name, wall=wall, peak_mb=float("nan"), code=p.returncode, stages={},
+                    message=f"the process died (exit {p.returncode}): {tail[0]}")
+    res = json.loads(m.group(1))
+    text = [ln for ln in (p.stderr + p.stdout[: m.start()]).splitlines() if ln.strip()]  # failures first
+    res.update(name=name, wall=wall, message=text[0] if text else "")
+    return res
+
+
+def print_case(c: dict) -> None:
+    msg = c["message"] if len(c["message"]) < 150 else c["message"][:147] + "..."
+    print(f"{c['name']:16s} {c['peak_mb']:8.0f} {c['code']:4d} {c['wall']:7.2f}  {msg}", flush=True)
+    if c["stages"]:
+        print("  peak during each stage [MB]: " + ", ".join(f"{k} {v:.0f}" for k, v in c["stages"].items()),
+              flush=True)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--rows", type=int, default=2_000_000)
+    ap.add_argument("--bomb-gib", type=float, default=3.0)
+    ap.add_argument("--keep", type=Path, default=None, help="make the inputs in this directory and keep them")
+    ap.add_argument("--cases", nargs="*", default=None, help="run only these cases (by name)")
+    ap.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
+    ap.add_argument("--stages", action="store_true", help=argparse.SUPPRESS)
+    ap.add_argument("rest", nargs="*", help=argparse.SUPPRESS)
+    args = ap.parse_args()
+    if args.child:
+        child(args.rest, args.stages)
+        return
+
+    from cevm.ingest.textfile import ReadLimits
+
+    lim = ReadLimits()
+    print(f"default limits (cevm ingest): --max-rows {lim.max_rows:,}, --max-file-mb {lim.max_file_mb:g}, "
+          f"--max-expansion {lim.max_expansion:g}; goal: peak < {GOAL_MB:.0f} MB per worker")
+    with tempfile.TemporaryDirectory(prefix="cevm-mem-") as tmp:
+        work = args.keep or Path(tmp)
+        work.mkdir(parents=True, exist_ok=True)
+        t0 = time.perf_counter()
+        big, dsm = work / f"big-{args.rows}.csv", work / "sample" / "dsm"
+        if not (args.keep and big.exists() and dsm.is_dir()):  # --keep: made once, reused
+            make_large_srf(big, args.rows, work)
+        bomb, lineless, nul = work / "bomb.csv.gz", work / "lineless.csv", work / "nul.csv"
+        if not (args.keep and bomb.exists()):
+            make_bomb(bomb, args.bomb_gib)
+        if not (args.keep and lineless.exists()):
+            make_lineless(lineless)
+        if not (args.keep and nul.exists()):
+            make_nul(nul)
+        print(f"inputs made in {time.perf_counter() - t0:.1f} s: {big.name} {big.stat().st_size / 1e6:.0f} MB "
+              f"({args.rows:,} rows), {bomb.name} {bomb.stat().st_size / 1e6:.1f} MB -> {args.bomb_gib:g} GiB, "
+              f"{lineless.name} {lineless.stat().st_size / 1e6:.0f} MB, {nul.name} {nul.stat().st_size / 1e9:.1f} GB")
+        print(f"{'case':16s} {'peak MB':>8s} {'exit':>4s} {'wall s':>7s}  output")
+        big_name = f"{args.rows / 1e6:g}M rows"
+        todo = [("import only", None, []), (big_name, big, ["--dsm", str(dsm), "--max-rows", str(max(args.rows, lim.max_rows))]),
+                ("gzip bomb", bomb, []),
+                ("no line breaks", lineless, []), ("all NUL", nul, [])]
+        cases = []
+        for k, (name, path, extra) in enumerate(todo):
+            if args.cases and name not in args.cases and not (name == big_name and "big" in args.cases):
+                continue
+            store = work / f"s{k}.sqlite"
+            for p in store.parent.glob(store.name + "*"):
+                p.unlink()
+            cases.append(run_case(name, path, store, extra, stages=name == big_name))
+            print_case(cases[-1])
+        worst = max(c["peak_mb"] for c in cases)
+        bad = [c["name"] for c in cases if not c["peak_mb"] < GOAL_MB]
+        print(f"worst peak {worst:.0f} MB: goal < {GOAL_MB:.0f} MB per worker "
+              f"{'met' if not bad else 'NOT met (' + ', '.join(bad) + ')'}")
+
+
+if __name__ == "__main__":
+    main()
