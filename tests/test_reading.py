@@ -400,3 +400,33 @@ def test_shipped_profiles_map_the_ambient_temperature(tmp_path, profiles):
     first = twizy.read_text().splitlines()
     col = first[0].split(",").index("Temperature")
     assert tw.frame["ambient_temp_c"].iloc[0] == float(first[1].split(",")[col])
+
+
+def test_ingest_flags_set_the_limits_and_an_oversized_file_is_refused_unhashed(tmp_path, monkeypatch):
+    from typer.testing import CliRunner
+
+    import cevm.ingest.pipeline as pipeline
+    from cevm.cli import app
+
+    f = write(tmp_path / "r.csv", srf_text(srf_rows(50)))
+    store = str(tmp_path / "s.sqlite")
+    res = CliRunner().invoke(app, ["ingest", str(f), "--store", store, "-q", "--max-rows", "20"])
+    assert res.exit_code == 1 and "more than 20 data rows" in res.output and ":23:" in res.output, res.output
+    hashed = []
+    monkeypatch.setattr(pipeline, "file_sha256", lambda p: hashed.append(p) or "0" * 64)
+    res = CliRunner().invoke(app, ["ingest", str(f), "--store", store, "-q", "--max-file-mb", "0.001"])
+    assert res.exit_code == 1 and "more than the limit of 0.001 MB per file (--max-file-mb)" in res.output, res.output
+    assert hashed == []
+    res = CliRunner().invoke(app, ["ingest", str(f), "--store", store, "-q", "--max-expansion", "0.5"])
+    assert res.exit_code == 2  # below the allowed range: bad usage
+
+
+@pytest.mark.parametrize("engine", ["pyarrow", "pandas"])
+def test_mixed_zone_notation_across_blocks(tmp_path, monkeypatch, profiles, engine):
+    monkeypatch.setattr(reading, "BLOCK_BYTES", 300)
+    rows = srf_rows(40)
+    rows[20:] = srf_rows(40, zone="")[20:]  # from line 2 + 21 on, no zone designator
+    f = write(tmp_path / "z.csv", srf_text(rows, meta="# vehicle_id=A\n"))
+    with pytest.raises(InputError, match="time zone notation mixed in one file") as ei:
+        read_log(f, profiles=profiles, engine=engine)
+    assert (ei.value.line, ei.value.column) == (3 + 20, "timestamp_utc")
