@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-from cevm.errors import InputError, escape_control, has_control
+from cevm.errors import InputError, has_control
+from cevm.text import printable
 
 
 def test_input_error_is_one_line_whatever_its_parts_hold():
@@ -12,7 +13,7 @@ def test_input_error_is_one_line_whatever_its_parts_hold():
     assert text == "logs/a\\ncevm: failed: b.csv:3: column 'col\\tumn': bad value 'x\\r\\x1b[2J'"
 
 
-def test_escape_control_keeps_printable_text_and_escapes_the_rest():
-    assert escape_control("Ølstrøm – café\\path 42") == "Ølstrøm – café\\path 42"
-    assert escape_control("a\x00b\x7fc\x9fd\u2028e\u2029") == "a\\x00b\\x7fc\\x9fd\\u2028e\\u2029"
+def test_printable_keeps_printable_text_and_control_characters_are_found():
+    assert printable("Ølstrøm – café\\path 42") == "Ølstrøm – café\\path 42"
+    assert printable("a\x00b\x7fc\x9fd\u2028e\u2029") == "a\\x00b\\x7fc\\x9fd\\u2028e\\u2029"
     assert has_control("EB\r07") and not has_control("EB-07 é")

@@ -10,22 +10,17 @@ import re
 from dataclasses import dataclass
 from pathlib import Path
 
-#: Characters that can forge or break a line of output: C0 controls (line feed, carriage
-#: return, tab, escape, ...), DEL, C1 controls, and the Unicode line and paragraph
-#: separators.
+from cevm.text import printable
+
+#: Control characters: C0 (line feed, carriage return, tab, escape, ...), DEL, C1, and
+#: the Unicode line and paragraph separators.
 _CONTROL = re.compile("[\x00-\x1f\x7f-\x9f\u2028\u2029]")
 
 
 def has_control(text: str) -> bool:
-    """Whether ``text`` holds a control character (see :func:`escape_control`)."""
+    """Whether ``text`` holds a control character (a vehicle id must not: it would
+    break a CSV record or forge a line)."""
     return _CONTROL.search(text) is not None
-
-
-def escape_control(text: str) -> str:
-    """``text`` with every control character written as a Python escape (``\\n``,
-    ``\\r``, ``\\x1b``, ``\\u2028``), so that a file name or a value holding one
-    prints as one line and cannot forge a second."""
-    return _CONTROL.sub(lambda m: repr(m.group())[1:-1], text)
 
 
 class CevmError(Exception):
@@ -46,11 +41,12 @@ class InputError(CevmError):
         super().__init__(str(self))
 
     def __str__(self) -> str:
-        """``file:line: column 'c': message``, control characters escaped (a file name
-        or value holding a line break cannot forge a second line of output)."""
+        """``file:line: column 'c': message``, non-printable characters escaped
+        (:func:`cevm.text.printable`: a file name or value holding a line break cannot
+        forge a second line of output)."""
         where = str(self.path) if self.path is not None else "<input>"
         if self.line is not None:
             where += f":{self.line}"
         if self.column is not None:
             where += f": column '{self.column}'"
-        return escape_control(f"{where}: {self.message}")
+        return printable(f"{where}: {self.message}")

@@ -21,7 +21,8 @@ from contextlib import closing
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from cevm.errors import InputError, escape_control
+from cevm.errors import InputError
+from cevm.text import printable
 from cevm.executors import Executor, SerialExecutor, Task, TaskResult
 from cevm.ingest.profiles import load_profiles
 from cevm.ingest.textfile import mb
@@ -95,7 +96,7 @@ def discover(inputs: Iterable[str | Path]) -> tuple[list[Path], list[str]]:
         else:
             hits = []
         if not hits:
-            missing.append(escape_control(f"{s}: no such file, directory or matching log files"))
+            missing.append(printable(f"{s}: no such file, directory or matching log files"))
         for q in hits:
             found.setdefault(str(q.resolve()), q)
     return [found[k] for k in sorted(found)], missing
@@ -168,12 +169,12 @@ def _prepare(path: Path, store: TripStore, options: IngestOptions, profiles, sam
     try:
         size = path.stat().st_size
         if size > options.limits.max_file_bytes and not _is_gzip(path):  # refused unread, not hashed first
-            return FileReport(str(path), "failed", seconds=time.perf_counter() - t0, error=escape_control(
+            return FileReport(str(path), "failed", seconds=time.perf_counter() - t0, error=printable(
                 f"{path}: file of {mb(size)} MB: more than the limit of {options.limits.max_file_mb:g} MB "
                 "per file (--max-file-mb)"))
         sha = file_sha256(path)
     except OSError as exc:
-        return FileReport(str(path), "failed", error=escape_control(f"{path}: cannot read: {exc.strerror}"),
+        return FileReport(str(path), "failed", error=printable(f"{path}: cannot read: {exc.strerror}"),
                           seconds=time.perf_counter() - t0)
     if not options.force and not store.needs_ingest(path, sha):
         return FileReport(str(path), "unchanged", seconds=time.perf_counter() - t0)
@@ -192,7 +193,7 @@ def _write_result(res: TaskResult, store: TripStore, options: IngestOptions, rep
         return res.value
     path, sha = Path(res.task.key), res.task.args[4]
     if not res.ok:  # the task itself failed: its worker died max_attempts times, or it raised
-        error = escape_control(f"{path}: {res.error}")
+        error = printable(f"{path}: {res.error}")
         try:
             st = path.stat()
             size, mtime = st.st_size, st.st_mtime

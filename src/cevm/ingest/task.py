@@ -26,7 +26,8 @@ import numpy as np
 
 from cevm.core.cycle import CR0_DEFAULT, drive_cycle_vector
 from cevm.core.trip import Trip, TripRecord
-from cevm.errors import CevmError, InputError, escape_control
+from cevm.errors import CevmError, InputError
+from cevm.text import printable
 from cevm.executors import worker_cache
 from cevm.ingest.cleaning import CleanParams, CleanTrip, clean_log
 from cevm.ingest.dsm import DsmHeaders, DsmSampler
@@ -135,7 +136,7 @@ def process_file(
         size, mtime = st.st_size, st.st_mtime
         sha = sha256 or file_sha256(path)
     except OSError as exc:
-        return FileOutcome(str(path), None, None, None, error=escape_control(f"{path}: cannot read: {exc.strerror}"))
+        return FileOutcome(str(path), None, None, None, error=printable(f"{path}: cannot read: {exc.strerror}"))
     try:
         if sampler is None and options.dsm is not None:
             sampler = worker_sampler(options.dsm, dsm_headers)
@@ -179,13 +180,13 @@ def process_file(
     except CevmError as exc:
         return FileOutcome(str(path), sha, size, mtime, error=str(exc), stage_s=stage)
     except (ValueError, OSError, csv.Error, UnicodeError) as exc:  # a file we could not make sense of
-        return FileOutcome(str(path), sha, size, mtime, error=escape_control(f"{path}: {type(exc).__name__}: {exc}"),
+        return FileOutcome(str(path), sha, size, mtime, error=printable(f"{path}: {type(exc).__name__}: {exc}"),
                            stage_s=stage)
     except Exception as exc:  # a bug in cevm: still only this file fails, and it says so
         where = traceback.extract_tb(exc.__traceback__)[-1]
         return FileOutcome(
             str(path), sha, size, mtime, stage_s=stage,
-            error=escape_control(f"{path}: internal error (a cevm bug, please report): {type(exc).__name__}: {exc} "
+            error=printable(f"{path}: internal error (a cevm bug, please report): {type(exc).__name__}: {exc} "
                                  f"at {Path(where.filename).name}:{where.lineno}"),
         )
 
