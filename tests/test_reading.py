@@ -429,3 +429,9 @@ def test_mixed_zone_notation_across_blocks(tmp_path, monkeypatch, profiles, engi
     with pytest.raises(InputError, match="time zone notation mixed in one file") as ei:
         read_log(f, profiles=profiles, engine=engine)
     assert (ei.value.line, ei.value.column) == (3 + 20, "timestamp_utc")
+
+
+def test_last_line_with_a_stray_carriage_return_is_an_input_error_not_a_crash(tmp_path, profiles):
+    f = write(tmp_path / "cr.csv", srf_text([]).rstrip("\n") + "\n\r0")
+    with pytest.raises(InputError):  # before: csv.Error from the truncated-line check
+        read_log(f, profiles=profiles)

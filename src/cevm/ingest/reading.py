@@ -714,7 +714,7 @@ def _drop_truncated_last_line(data: bytes, first_line: int, names: list[str], pr
     if data and not data.endswith(b"\n"):
         last_start = data.rfind(b"\n") + 1
         last = data[last_start:]
-        n_fields = len(next(csv.reader([last.decode("utf-8", errors="replace")], delimiter=prof.separator), [])) if last.strip() else len(names)
+        n_fields = _count_fields(last, prof.separator) if last.strip() else len(names)
         if last.strip() and n_fields < len(names):
             line_no = first_line + data.count(b"\n")
             if prof.truncated_last_line == "error":
@@ -723,6 +723,16 @@ def _drop_truncated_last_line(data: bytes, first_line: int, names: list[str], pr
             repairs.read.append(f"read: truncated last line ({n_fields} of {len(names)} fields) dropped: line {line_no}")
             return data[:last_start]
     return data
+
+
+def _count_fields(line: bytes, sep: str) -> int:
+    """Fields on one line, quotes respected where they parse (a stray carriage return
+    or quote falls back to counting separators)."""
+    text = line.decode("utf-8", errors="replace").replace("\r", " ")
+    try:
+        return len(next(csv.reader([text], delimiter=sep), []))
+    except csv.Error:
+        return text.count(sep) + 1
 
 
 @dataclass
