@@ -3,13 +3,18 @@
 - :mod:`~cevm.store.location`: where the store lives (``--store``, ``$CEVM_STORE``, the
   XDG data directory) and how a source file is keyed;
 - :mod:`~cevm.store.codec`: the stored form of a trip's profile arrays;
-- :mod:`~cevm.store.trips`: :class:`TripStore`, the tables of files, trips and runs, its
-  writes (one transaction per file) and queries, and the display of listed trips;
+- :mod:`~cevm.store.schema`: the tables of files, trips, blobs and runs, created or
+  checked on open;
+- :mod:`~cevm.store.writing`: a source file's trips written in one transaction, failures,
+  forgotten files, ingest runs;
+- :mod:`~cevm.store.queries`: files, trips, vectors, profiles and runs read back;
+- :mod:`~cevm.store.trips`: :class:`TripStore`, the connection that composes the three;
+- :mod:`~cevm.store.display`: listed trips as a person reads them;
 - :mod:`~cevm.store.routes`: named routes (sequences of stored trips and cycles);
 - :mod:`~cevm.store.calibration`: a vehicle's stored trips as the calibration's input;
 - :mod:`~cevm.store.sources`: stored trips and routes as sweep sources and fleet legs.
 
-Re-exported here: what callers use of the first three.
+Re-exported here: what callers use of location, codec and the store.
 """
 
 from cevm.store.codec import PROFILE_DTYPES, decode_profile, encode_profile, trip_profile_blob

@@ -1,0 +1,257 @@
+"""Reading the trip store: source files, trips (scalars as DataFrames; vectors, profiles
+and whole trips by id), runs, and SQLite's integrity check. Nothing here writes."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from cevm.core.trip import Measurement, Trip
+from cevm.errors import CevmError
+from cevm.store.codec import decode_profile
+from cevm.store.location import file_key
+from cevm.store.schema import FILE_COLUMNS, TRIP_COLUMNS, TRIP_FLOAT_COLUMNS, in_json, nan_for_null
+
+
+@dataclass(frozen=True)
+class FileState:
+    """What the store knows about one source file (a row of ``files``).
+
+    ``sha256``/``size_bytes``/``mtime_s`` describe the version last seen, ``status`` is
+    how its ingest ended, ``trips_sha256`` is the version whose ``n_trips`` trips are
+    stored (it differs from ``sha256`` after a failed new version; None if none).
+    """
+
+    path: str
+    sha256: str
+    size_bytes: int | None
+    mtime_s: float | None
+    profile: str | None
+    status: str
+    error: str | None
+    ingested_utc_s: float
+    trips_sha256: str | None
+    n_trips: int
+    n_duplicates: int
+
+
+class TripQueries:
+    """The reads of :class:`~cevm.store.TripStore` (a mixin: it needs the store's ``con``
+    and ``path``)."""
+
+    def _count_hint(self) -> str:
+        n = self.count_trips()
+        return f"the store {self.path} holds {n} trip{'s' if n != 1 else ''}; `cevm trips` lists them"
+
+    # ----------------------------------------------------------------------- files
+
+    def file_state(self, path: str | Path) -> FileState | None:
+        """The stored state of a source file, or None if the store never saw it."""
+        row = self.con.execute(
+            f"SELECT {', '.join(FILE_COLUMNS)} FROM files WHERE path = ?", (file_key(path),)
+        ).fetchone()
+        return None if row is None else FileState(*row)
+
+    def needs_ingest(self, path: str | Path, sha256: str, *, retry_failed: bool = True) -> bool:
+        """Whether the file with content ``sha256`` must be (re-)ingested.
+
+        False only if this path is stored with this sha256 and status ``'ok'``, or (with
+        ``retry_failed=False``) with this sha256 and status ``'failed'``. Default
+        ``retry_failed=True``: a file that failed is tried again on every run, since the
+        cause may be the configuration or cevm rather than the file, and the failure
+        stays visible in every run's summary.
+        """
+        state = self.file_state(path)
+        if state is None or state.sha256 != sha256:
+            return True
+        return state.status == "failed" and retry_failed
+
+    def list_files(self, status: str | None = None) -> pd.DataFrame:
+        """All known source files (columns of :class:`FileState`), optionally only those
+        with ``status`` ``'ok'`` or ``'failed'``, ordered by path."""
+        sql = f"SELECT {', '.join(FILE_COLUMNS)} FROM files"
+        args: tuple = ()
+        if status is not None:
+            sql += " WHERE status = ?"
+            args = (status,)
+        rows = self.con.execute(sql + " ORDER BY path", args).fetchall()
+        return pd.DataFrame.from_records(rows, columns=list(FILE_COLUMNS))
+
+    # ----------------------------------------------------------------------- trips
+
+    def count_trips(self, vehicle_id: str | None = None) -> int:
+        """Number of stored trips, of one vehicle if ``vehicle_id`` is given."""
+        if vehicle_id is None:
+            return int(self.con.execute("SELECT COUNT(*) FROM trips").fetchone()[0])
+        return int(
+            self.con.execute(
+                "SELECT COUNT(*) FROM trips WHERE vehicle_id = ?", (vehicle_id,)
+            ).fetchone()[0]
+        )
+
+    def vehicle_ids(self) -> list[str]:
+        """The ids of all vehicles with stored trips, sorted."""
+        return [r[0] for r in self.con.execute("SELECT DISTINCT vehicle_id FROM trips ORDER BY 1")]
+
+    def _check_vehicle(self, vehicle_id: str) -> None:
+        if self.con.execute(
+            "SELECT 1 FROM trips WHERE vehicle_id = ? LIMIT 1", (vehicle_id,)
+        ).fetchone() is None:
+            known = self.vehicle_ids()
+            shown = ", ".join(known[:10]) + (", ..." if len(known) > 10 else "")
+            raise CevmError(
+                f"no trips of vehicle '{vehicle_id}' in the store {self.path}; "
+                f"{len(known)} vehicle(s) known" + (f": {shown}" if known else "")
+                + "; `cevm trips` lists them"
+            )
+
+    def _check_trip_ids(self, trip_ids: Sequence[str]) -> None:
+        found = {
+            r[0]
+            for r in self.con.execute(
+                "SELECT trip_id FROM trips WHERE trip_id IN (SELECT value FROM json_each(?))",
+                (in_json(trip_ids),),
+            )
+        }
+        missing = [t for t in dict.fromkeys(trip_ids) if t not in found]
+        if missing:
+            shown = ", ".join(f"'{t}'" for t in missing[:5]) + (" ..." if len(missing) > 5 else "")
+            raise CevmError(
+                f"unknown trip id{'s' if len(missing) > 1 else ''} {shown}; {self._count_hint()}"
+            )
+
+    def _where(self, vehicle_id: str | None, trip_ids: Sequence[str] | None) -> tuple[str, list]:
+        clauses, args = [], []
+        if vehicle_id is not None:
+            self._check_vehicle(vehicle_id)
+            clauses.append("t.vehicle_id = ?")
+            args.append(vehicle_id)
+        if trip_ids is not None:
+            trip_ids = [str(t) for t in trip_ids]
+            self._check_trip_ids(trip_ids)
+            clauses.append("t.trip_id IN (SELECT value FROM json_each(?))")
+            args.append(in_json(trip_ids))
+        return (" WHERE " + " AND ".join(clauses) if clauses else ""), args
+
+    def list_trips(
+        self, vehicle_id: str | None = None, trip_ids: Sequence[str] | None = None
+    ) -> pd.DataFrame:
+        """Stored trips as a DataFrame in SI units, ordered by vehicle and start time.
+
+        Columns: trip_id, vehicle_id, source_file, source_sha256, trip_index,
+        start_utc_s [s since epoch], duration_s, distance_m, n_samples,
+        elevation_source, dsm_coverage_pct, gross_weight_kg, measured_kind ('fuel_l' |
+        'energy_j' | None), measured_value [l or J], measured_source,
+        measured_resolution, measured_uncertainty, quality_json. Float columns hold NaN
+        for missing values. An unknown ``vehicle_id`` or any unknown id in ``trip_ids``
+        raises :class:`CevmError`. :func:`~cevm.store.format_trips` makes the display
+        table.
+        """
+        where, args = self._where(vehicle_id, trip_ids)
+        cols = ", ".join(f"t.{c}" for c in TRIP_COLUMNS)
+        rows = self.con.execute(
+            f"SELECT {cols} FROM trips t{where} ORDER BY t.vehicle_id, t.start_utc_s, t.trip_id",
+            args,
+        ).fetchall()
+        df = pd.DataFrame.from_records(rows, columns=list(TRIP_COLUMNS))
+        for c in TRIP_FLOAT_COLUMNS:
+            df[c] = df[c].astype(np.float64)
+        for c in ("trip_index", "n_samples"):
+            df[c] = df[c].astype(np.int64)
+        return df
+
+    def _blob(self, trip_id: str, column: str) -> bytes:
+        row = self.con.execute(
+            f"SELECT {column} FROM trip_blobs WHERE trip_id = ?", (trip_id,)
+        ).fetchone()
+        if row is None:
+            raise CevmError(f"unknown trip id '{trip_id}'; {self._count_hint()}")
+        return bytes(row[0])
+
+    def load_vector_bytes(self, trip_id: str) -> bytes:
+        """The drive-cycle vector bytes stored with a trip, as given at ingest."""
+        return self._blob(trip_id, "vector")
+
+    def load_profile(self, trip_id: str) -> dict[str, np.ndarray]:
+        """A trip's profile: float64 arrays keyed as :data:`PROFILE_DTYPES` (time_s,
+        speed_mps, distance_m, elevation_m, lat_deg, lon_deg)."""
+        return decode_profile(self._blob(trip_id, "profile"))
+
+    def load_vectors(
+        self, vehicle_id: str | None = None, trip_ids: Sequence[str] | None = None
+    ) -> dict[str, bytes]:
+        """Vector bytes of many trips in one query: ``{trip_id: bytes}`` ordered by
+        vehicle and start time; all trips, or those of ``vehicle_id`` and/or
+        ``trip_ids`` (unknown ones raise :class:`CevmError`)."""
+        where, args = self._where(vehicle_id, trip_ids)
+        rows = self.con.execute(
+            "SELECT t.trip_id, b.vector FROM trips t JOIN trip_blobs b USING (trip_id)"
+            f"{where} ORDER BY t.vehicle_id, t.start_utc_s, t.trip_id",
+            args,
+        )
+        return {tid: bytes(vec) for tid, vec in rows}
+
+    def load_trip(self, trip_id: str) -> Trip:
+        """Rebuild a stored :class:`~cevm.core.trip.Trip` with its profile arrays (float64;
+        speed and elevation rounded to float32 by storage; NaN scalars come back as NaN,
+        a NaN gross weight as None). ``source_file`` is the stored resolved path."""
+        cols = ", ".join(f"t.{c}" for c in TRIP_COLUMNS)
+        row = self.con.execute(  # one statement: scalars and profile of one version
+            f"SELECT {cols}, b.profile FROM trips t JOIN trip_blobs b USING (trip_id) "
+            "WHERE t.trip_id = ?",
+            (trip_id,),
+        ).fetchone()
+        if row is None:
+            raise CevmError(f"unknown trip id '{trip_id}'; {self._count_hint()}")
+        r = dict(zip(TRIP_COLUMNS, row[:-1]))
+        prof = decode_profile(row[-1])
+        measured = None
+        if r["measured_kind"] is not None:
+            measured = Measurement(
+                kind=r["measured_kind"],
+                value=nan_for_null(r["measured_value"]),
+                source=r["measured_source"],
+                resolution=nan_for_null(r["measured_resolution"]),
+                uncertainty=nan_for_null(r["measured_uncertainty"]),
+            )
+        return Trip(
+            vehicle_id=r["vehicle_id"],
+            source_file=r["source_file"],
+            source_sha256=r["source_sha256"],
+            trip_index=int(r["trip_index"]),
+            start_utc_s=float(r["start_utc_s"]),
+            elevation_source=r["elevation_source"],
+            dsm_coverage_pct=nan_for_null(r["dsm_coverage_pct"]),
+            measured=measured,
+            gross_weight_kg=r["gross_weight_kg"],
+            quality=json.loads(r["quality_json"]),
+            **prof,
+        )
+
+    # ------------------------------------------------------------------------ runs
+
+    def list_runs(self, limit: int = 20) -> pd.DataFrame:
+        """The last ``limit`` runs (default 20, a screenful), newest first: run_id,
+        started_utc_s, finished_utc_s (NaN if unfinished), host, pid, counts (dict)."""
+        rows = self.con.execute(
+            "SELECT run_id, started_utc_s, finished_utc_s, host, pid, counts_json FROM runs "
+            "ORDER BY run_id DESC LIMIT ?",
+            (int(limit),),
+        ).fetchall()
+        df = pd.DataFrame.from_records(
+            rows, columns=["run_id", "started_utc_s", "finished_utc_s", "host", "pid", "counts_json"]
+        )
+        df["finished_utc_s"] = df["finished_utc_s"].astype(np.float64)
+        df["counts"] = [json.loads(c) if c else {} for c in df.pop("counts_json")]
+        return df
+
+    # ------------------------------------------------------------------------ misc
+
+    def integrity_check(self) -> str:
+        """SQLite's ``PRAGMA integrity_check``: ``'ok'`` or the problems found."""
+        return "\n".join(r[0] for r in self.con.execute("PRAGMA integrity_check"))
