@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from cevm.core.trip import Measurement, Trip
+from cevm.core.trip import TRIP_EVIDENCE_FIELDS, Measurement, Trip
 from cevm.errors import CevmError
 from cevm.store.codec import decode_profile
 from cevm.store.location import file_key
@@ -147,8 +147,9 @@ class TripQueries:
         start_utc_s [s since epoch], duration_s, distance_m, n_samples,
         elevation_source, dsm_coverage_pct, gross_weight_kg, measured_kind ('fuel_l' |
         'energy_j' | None), measured_value [l or J], measured_source,
-        measured_resolution, measured_uncertainty, quality_json. Float columns hold NaN
-        for missing values. An unknown ``vehicle_id`` or any unknown id in ``trip_ids``
+        measured_resolution, measured_uncertainty, quality_json, then the evidence of
+        :data:`~cevm.core.trip.TRIP_EVIDENCE_FIELDS` (ambient_temp_c, ...,
+        standstill_fuel_lps). Float columns hold NaN for missing values. An unknown ``vehicle_id`` or any unknown id in ``trip_ids``
         raises :class:`CevmError`. :func:`~cevm.store.format_trips` makes the display
         table.
         """
@@ -199,7 +200,7 @@ class TripQueries:
     def load_trip(self, trip_id: str) -> Trip:
         """Rebuild a stored :class:`~cevm.core.trip.Trip` with its profile arrays (float64;
         speed and elevation rounded to float32 by storage; NaN scalars come back as NaN,
-        a NaN gross weight as None). ``source_file`` is the stored resolved path."""
+        a NaN gross weight and missing evidence as None). ``source_file`` is the stored resolved path."""
         cols = ", ".join(f"t.{c}" for c in TRIP_COLUMNS)
         row = self.con.execute(  # one statement: scalars and profile of one version
             f"SELECT {cols}, b.profile FROM trips t JOIN trip_blobs b USING (trip_id) "
@@ -230,6 +231,7 @@ class TripQueries:
             measured=measured,
             gross_weight_kg=r["gross_weight_kg"],
             quality=json.loads(r["quality_json"]),
+            **{f: r[f] for f in TRIP_EVIDENCE_FIELDS},
             **prof,
         )
 

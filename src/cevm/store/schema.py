@@ -1,6 +1,6 @@
-"""The trip store's table layout (schema version :data:`SCHEMA_VERSION`), created or
-checked when a store is opened (:func:`ensure_schema`), and how Python values are kept in
-its columns.
+"""The trip store's table layout (schema version :data:`SCHEMA_VERSION`), its
+migrations (:data:`MIGRATIONS`, applied when a store is opened: :func:`ensure_schema`),
+and how Python values are kept in its columns.
 
 Tables
     ``meta``       key/value: ``schema_version``, ``created_utc_s``, ``cevm_version``.
@@ -12,11 +12,19 @@ Tables
                    [s since the Unix epoch, UTC], duration [s], distance [m], quality
                    summary (JSON), measured consumption (kind, value, source, resolution,
                    uncertainty; NULL when not measured), gross weight [kg],
-                   elevation source, DSM coverage [%].
+                   elevation source, DSM coverage [%]; the evidence of
+                   :data:`cevm.core.trip.TRIP_EVIDENCE_FIELDS` (ambient temperature
+                   [degC], standstill time [s] and rate [W or l/s]; NULL when not logged).
     ``trip_blobs`` per trip: the drive-cycle vector (opaque bytes from the caller) and
                    the profile arrays (see :func:`cevm.store.codec.encode_profile`). Kept
                    apart from ``trips`` so that listing trips never reads the blobs.
     ``runs``       one row per ``cevm ingest`` run: start, end, host, pid, counts (JSON).
+
+Versions
+    A new store is made by running every migration from version 0; an older store gets
+    the ones it lacks, in order, in one write transaction when it is opened (all or
+    none). A store of a higher version than this cevm's was written by a newer cevm and
+    is refused, never opened.
 """
 
 from __future__ import annotations
@@ -25,17 +33,14 @@ import json
 import math
 import time
 from collections.abc import Iterable
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from cevm import __version__
+from cevm.core.trip import TRIP_EVIDENCE_FIELDS
 from cevm.errors import CevmError
-
-SCHEMA_VERSION = 1
-"""Version of the table layout written by this code. A store with a higher version was
-written by a newer cevm and is refused; lower versions would be migrated on open."""
-
 
 TRIP_COLUMNS: tuple[str, ...] = (
     "trip_id",
@@ -56,6 +61,7 @@ TRIP_COLUMNS: tuple[str, ...] = (
     "measured_resolution",
     "measured_uncertainty",
     "quality_json",
+    *TRIP_EVIDENCE_FIELDS,
 )
 TRIP_FLOAT_COLUMNS = (
     "start_utc_s",
@@ -66,6 +72,7 @@ TRIP_FLOAT_COLUMNS = (
     "measured_value",
     "measured_resolution",
     "measured_uncertainty",
+    *TRIP_EVIDENCE_FIELDS,
 )
 
 FILE_COLUMNS: tuple[str, ...] = (
@@ -82,12 +89,30 @@ FILE_COLUMNS: tuple[str, ...] = (
     "n_duplicates",
 )
 
-_SCHEMA_STATEMENTS: tuple[str, ...] = (
-    """CREATE TABLE IF NOT EXISTS meta (
+
+# ------------------------------------------------------------------------ migrations
+
+
+@dataclass(frozen=True)
+class Migration:
+    """One step of the layout: from version ``version - 1`` to ``version``.
+
+    ``statements`` run in order inside the opening's write transaction. A migration is
+    never edited once released (stores out there were made by it): a new layout is a
+    new migration at the end of :data:`MIGRATIONS`.
+    """
+
+    version: int
+    what: str
+    statements: tuple[str, ...]
+
+
+_V1_STATEMENTS: tuple[str, ...] = (
+    """CREATE TABLE meta (
         key TEXT PRIMARY KEY,
         value TEXT NOT NULL
     )""",
-    """CREATE TABLE IF NOT EXISTS files (
+    """CREATE TABLE files (
         path TEXT PRIMARY KEY,
         sha256 TEXT NOT NULL,
         size_bytes INTEGER,
@@ -100,7 +125,7 @@ _SCHEMA_STATEMENTS: tuple[str, ...] = (
         n_trips INTEGER NOT NULL DEFAULT 0,
         n_duplicates INTEGER NOT NULL DEFAULT 0
     )""",
-    """CREATE TABLE IF NOT EXISTS trips (
+    """CREATE TABLE trips (
         trip_id TEXT PRIMARY KEY,
         vehicle_id TEXT NOT NULL,
         source_file TEXT NOT NULL REFERENCES files(path),
@@ -121,13 +146,13 @@ _SCHEMA_STATEMENTS: tuple[str, ...] = (
         quality_json TEXT NOT NULL,
         UNIQUE (source_file, trip_index)
     )""",
-    "CREATE INDEX IF NOT EXISTS trips_by_vehicle ON trips (vehicle_id, start_utc_s)",
-    """CREATE TABLE IF NOT EXISTS trip_blobs (
+    "CREATE INDEX trips_by_vehicle ON trips (vehicle_id, start_utc_s)",
+    """CREATE TABLE trip_blobs (
         trip_id TEXT PRIMARY KEY REFERENCES trips(trip_id),
         vector BLOB NOT NULL,
         profile BLOB NOT NULL
     )""",
-    """CREATE TABLE IF NOT EXISTS runs (
+    """CREATE TABLE runs (
         run_id INTEGER PRIMARY KEY AUTOINCREMENT,
         started_utc_s REAL NOT NULL,
         finished_utc_s REAL,
@@ -137,41 +162,82 @@ _SCHEMA_STATEMENTS: tuple[str, ...] = (
     )""",
 )
 
+#: The trip evidence of migration 2, spelt out: a migration never changes, so a new
+#: field of :data:`cevm.core.trip.TRIP_EVIDENCE_FIELDS` needs a new migration (a test
+#: checks that the two agree).
+_V2_EVIDENCE_COLUMNS = ("ambient_temp_c", "ambient_temp_min_c", "ambient_temp_max_c", "standstill_s",
+                        "standstill_power_w", "standstill_fuel_lps")
 
-def ensure_schema(store) -> None:
-    """Create the tables of a new store, or check an existing one, in one write
-    transaction of ``store`` (a :class:`~cevm.store.TripStore`; its ``con``, ``path`` and
-    ``_write()``). Refuses an SQLite database of something else, and a store written by a
-    newer cevm (schema version above :data:`SCHEMA_VERSION`)."""
+MIGRATIONS: tuple[Migration, ...] = (
+    Migration(1, "files, trips, their blobs and ingest runs", _V1_STATEMENTS),
+    Migration(2, "trip evidence: ambient temperature (mean, min, max), standstill time and rate",
+              tuple(f"ALTER TABLE trips ADD COLUMN {c} REAL" for c in _V2_EVIDENCE_COLUMNS)),
+)
+
+SCHEMA_VERSION = MIGRATIONS[-1].version
+"""Version of the table layout written by this code: the last of :data:`MIGRATIONS`. A
+store with a higher version was written by a newer cevm and is refused; a lower one is
+migrated when opened."""
+
+
+def _stored_version(con, path: Path) -> int:
+    """The schema version of the database on ``con``: 0 for an empty database; refuses a
+    database of something else."""
+    tables = {r[0] for r in con.execute("SELECT name FROM sqlite_master WHERE type='table'")}
+    if "meta" in tables:
+        row = con.execute("SELECT value FROM meta WHERE key='schema_version'").fetchone()
+        if row is not None:
+            return int(row[0])
+    if not tables - {"sqlite_sequence"}:
+        return 0
+    raise CevmError(
+        f"{path}: an SQLite database of something else (tables "
+        f"{sorted(tables)[:5]}), not a cevm store; choose another --store"
+    )
+
+
+def ensure_schema(store) -> int:
+    """Bring the store on ``store`` (a :class:`~cevm.store.TripStore`: its ``con``,
+    ``path`` and ``_write()``) to :data:`SCHEMA_VERSION`; returns the version it had (0
+    for a new store).
+
+    A store at this version is only read. Otherwise the missing migrations run in order
+    inside one write transaction (all or none: a failure leaves the store at the version
+    it had), and ``schema_version`` in ``meta`` is set. Refuses an SQLite database of
+    something else, and a store written by a newer cevm (a version above this one's).
+    """
     con = store.con
+    version = _stored_version(con, store.path)
+    if version == SCHEMA_VERSION:
+        return version
+    _refuse_newer(version, store.path)
     with store._write():
-        tables = {r[0] for r in con.execute("SELECT name FROM sqlite_master WHERE type='table'")}
-        version = None
-        if "meta" in tables:
-            row = con.execute("SELECT value FROM meta WHERE key='schema_version'").fetchone()
-            version = int(row[0]) if row else None
-        elif tables - {"sqlite_sequence"}:
-            raise CevmError(
-                f"{store.path}: an SQLite database of something else (tables "
-                f"{sorted(tables)[:5]}), not a cevm store; choose another --store"
-            )
-        if version is not None and version > SCHEMA_VERSION:
-            raise CevmError(
-                f"{store.path}: store schema version {version} was written by a newer "
-                f"cevm; this cevm {__version__} reads up to version {SCHEMA_VERSION}. "
-                "Upgrade cevm or use another --store."
-            )
-        for stmt in _SCHEMA_STATEMENTS:
-            con.execute(stmt)
-        if version is None:
+        version = _stored_version(con, store.path)  # another process may have migrated it
+        _refuse_newer(version, store.path)
+        for m in MIGRATIONS[version:]:
+            for stmt in m.statements:
+                con.execute(stmt)
+        if version == 0:
             con.executemany(
-                "INSERT OR IGNORE INTO meta (key, value) VALUES (?, ?)",
-                [
-                    ("schema_version", str(SCHEMA_VERSION)),
-                    ("created_utc_s", repr(time.time())),
-                    ("cevm_version", __version__),
-                ],
+                "INSERT INTO meta (key, value) VALUES (?, ?)",
+                [("created_utc_s", repr(time.time())), ("cevm_version", __version__)],
             )
+        if version < SCHEMA_VERSION:
+            con.execute(
+                "INSERT INTO meta (key, value) VALUES ('schema_version', ?) "
+                "ON CONFLICT (key) DO UPDATE SET value = excluded.value",
+                (str(SCHEMA_VERSION),),
+            )
+    return version
+
+
+def _refuse_newer(version: int, path: Path) -> None:
+    if version > SCHEMA_VERSION:
+        raise CevmError(
+            f"{path}: store schema version {version} was written by a newer "
+            f"cevm; this cevm {__version__} reads up to version {SCHEMA_VERSION}. "
+            "Upgrade cevm or use another --store."
+        )
 
 
 # ------------------------------------------------------------ values in the columns

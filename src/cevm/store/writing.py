@@ -31,7 +31,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from cevm.core.trip import Trip, TripRecord
+from cevm.core.trip import TRIP_EVIDENCE_FIELDS, Trip, TripRecord
 from cevm.store.codec import trip_profile_blob
 from cevm.store.location import file_key
 from cevm.store.schema import FILE_COLUMNS, TRIP_COLUMNS, in_json, json_default, sql_real
@@ -82,6 +82,7 @@ def trip_row(t: Trip | TripRecord, key: str) -> tuple:
         None if m is None else sql_real(m.resolution),
         None if m is None else sql_real(m.uncertainty),
         json.dumps(t.quality, default=json_default, sort_keys=True),
+        *(sql_real(getattr(t, f)) for f in TRIP_EVIDENCE_FIELDS),
     )
 
 
