@@ -7,6 +7,7 @@ import dataclasses
 import json
 import math
 import sqlite3
+import zlib
 from pathlib import Path
 
 import numpy as np
@@ -17,6 +18,7 @@ from cevm.core.cycle import DriveCycle, cycle_vector
 from cevm.core.trip import TRIP_EVIDENCE_FIELDS, Measurement, Trip
 from cevm.errors import CevmError
 from cevm.store import SCHEMA_VERSION, TripStore, encode_profile
+from cevm.store.routes import encode_cycle_profile, load_route_legs
 
 # The layout of schema version 1 as cevm 0.1 wrote it, verbatim (not taken from the code
 # under test: this is what stores out there hold).
@@ -42,6 +44,18 @@ CREATE TABLE IF NOT EXISTS runs (
     pid INTEGER, counts_json TEXT);
 """
 
+# The route tables as cevm 0.1's routes module made them on first use (routes_schema_version 1).
+V1_ROUTES_DDL = """
+CREATE TABLE IF NOT EXISTS routes (
+    name TEXT PRIMARY KEY, created_utc_s REAL NOT NULL, n_legs INTEGER NOT NULL CHECK (n_legs > 0), note TEXT);
+CREATE TABLE IF NOT EXISTS route_legs (
+    route TEXT NOT NULL REFERENCES routes(name) ON DELETE CASCADE, position INTEGER NOT NULL,
+    kind TEXT NOT NULL CHECK (kind IN ('trip', 'cycle')), ref TEXT NOT NULL, label TEXT NOT NULL, sha256 TEXT,
+    vector BLOB, profile BLOB, PRIMARY KEY (route, position),
+    CHECK ((kind = 'cycle') = (vector IS NOT NULL AND profile IS NOT NULL)));
+INSERT INTO meta (key, value) VALUES ('routes_schema_version', '1');
+"""
+
 SHA = "ab" * 32
 TRIP_ID = f"HGV-11:1700000000:{SHA[:8]}"
 
@@ -54,8 +68,9 @@ def v1_profile() -> dict[str, np.ndarray]:
             "lon_deg": np.full(t.size, -0.1)}
 
 
-def make_v1_store(path: Path) -> dict:
-    """A store as cevm 0.1 made it: the version-1 DDL and one file, trip, blob and run."""
+def make_v1_store(path: Path, with_route: bool = False) -> dict:
+    """A store as cevm 0.1 made it: the version-1 DDL and one file, trip, blob and run
+    (and, ``with_route``, the route tables and a route of the trip and a cycle)."""
     prof = v1_profile()
     vector = cycle_vector(DriveCycle(prof["time_s"], prof["speed_mps"], prof["elevation_m"], name="t")).to_bytes()
     con = sqlite3.connect(path)
@@ -71,9 +86,20 @@ def make_v1_store(path: Path) -> dict:
         con.execute("INSERT INTO trip_blobs VALUES (?, ?, ?)", (TRIP_ID, vector, encode_profile(prof)))
         con.execute("INSERT INTO runs (started_utc_s, finished_utc_s, host, pid, counts_json) "
                     "VALUES (1.7e9, 1.7e9 + 5, 'h', 7, '{\"files\": 1}')")
+    made = {"vector": vector, "profile": prof}
+    if with_route:
+        cyc = DriveCycle(np.arange(0.0, 61.0), np.full(61, 10.0), None, name="flat")
+        made["cycle_vector"] = cycle_vector(cyc).to_bytes()
+        made["cycle_profile"] = encode_cycle_profile(cyc)
+        con.executescript(V1_ROUTES_DDL)
+        with con:
+            con.execute("INSERT INTO routes VALUES ('R1', 1.7e9, 2, 'old')")
+            con.execute("INSERT INTO route_legs VALUES ('R1', 0, 'trip', ?, ?, NULL, NULL, NULL)", (TRIP_ID, TRIP_ID))
+            con.execute("INSERT INTO route_legs VALUES ('R1', 1, 'cycle', '/c/flat.csv', 'flat', 'ff', ?, ?)",
+                        (made["cycle_vector"], made["cycle_profile"]))
     con.execute("PRAGMA journal_mode=WAL")
     con.close()
-    return {"vector": vector, "profile": prof}
+    return made
 
 
 def stored_version(path: Path) -> int:
@@ -118,6 +144,25 @@ def test_a_version_1_store_is_migrated_with_its_data_intact(tmp_path):
     assert dict(con.execute("SELECT key, value FROM meta WHERE key != 'schema_version'")) == {
         "created_utc_s": "1700000000.0", "cevm_version": "0.1.0"}
     con.close()
+
+
+def test_a_version_1_store_with_routes_gets_checksums_and_keeps_its_routes(tmp_path):
+    db = tmp_path / "old.sqlite"
+    made = make_v1_store(db, with_route=True)
+    with TripStore(db) as st:
+        legs = load_route_legs(st, "R1")
+        assert [leg.info.kind for leg in legs] == ["trip", "cycle"]
+        assert legs[1].vector.to_bytes() == made["cycle_vector"]
+        np.testing.assert_array_equal(legs[0].profile["time_s"], made["profile"]["time_s"])
+    con = sqlite3.connect(db)
+    crcs = con.execute("SELECT vector, vector_crc32, profile, profile_crc32 FROM trip_blobs").fetchall()
+    legs = con.execute("SELECT kind, vector, vector_crc32, profile, profile_crc32 FROM route_legs").fetchall()
+    keys = {r[0] for r in con.execute("SELECT key FROM meta")}
+    con.close()
+    assert [(zlib.crc32(v), zlib.crc32(p)) for v, _, p, _ in crcs] == [(vc, pc) for _, vc, _, pc in crcs]
+    assert [(k, vc, pc) for k, _, vc, _, pc in legs] == [
+        ("trip", None, None), ("cycle", zlib.crc32(made["cycle_vector"]), zlib.crc32(made["cycle_profile"]))]
+    assert "routes_schema_version" not in keys  # one schema version for the whole store
 
 
 def test_a_new_store_has_every_column_the_code_writes(tmp_path):

@@ -1,13 +1,14 @@
 """The ``cevm`` command line: a thin layer over the library.
 
 Exit codes: 0 success; 1 some inputs of a batch failed (the rest was done);
-2 bad usage or bad input (nothing was done). Errors caused by input are printed as one
-line on stderr, without a traceback.
+2 bad usage or bad input (nothing was done); 3 the store could not be written (nothing
+was changed); 4 the store is damaged (see :mod:`cevm.cli.common`). Errors caused by input
+are printed as one line on stderr, without a traceback.
 
 This module creates the app and registers the commands of one module per command (group):
 :mod:`~cevm.cli.ingest`, :mod:`~cevm.cli.trips`, :mod:`~cevm.cli.calibrate`,
 :mod:`~cevm.cli.simulate`, :mod:`~cevm.cli.fleet`, :mod:`~cevm.cli.predict`,
-:mod:`~cevm.cli.feasibility`, :mod:`~cevm.cli.route`, :mod:`~cevm.cli.vehicle`; what they share is
+:mod:`~cevm.cli.feasibility`, :mod:`~cevm.cli.route`, :mod:`~cevm.cli.vehicle`, :mod:`~cevm.cli.store`; what they share is
 :mod:`~cevm.cli.common` and :mod:`~cevm.cli.output`. The command modules never import
 this package's app, nor each other; the library never imports the command line.
 """
@@ -20,8 +21,8 @@ from typing import Annotated
 import typer
 
 from cevm import __version__
-from cevm.cli import calibrate, feasibility, fleet, ingest, predict, route, simulate, trips, vehicle
-from cevm.cli.common import EXIT_INPUT, fail
+from cevm.cli import calibrate, feasibility, fleet, ingest, predict, route, simulate, store, trips, vehicle
+from cevm.cli.common import exit_code_for, fail
 from cevm.errors import CevmError
 
 app = typer.Typer(
@@ -59,6 +60,7 @@ app.command("predict")(predict.predict_cmd)
 app.command("feasibility")(feasibility.feasibility_cmd)
 app.add_typer(route.app, name="route")
 app.add_typer(vehicle.app, name="vehicle")
+app.add_typer(store.app, name="store")
 
 
 def main() -> None:
@@ -69,5 +71,5 @@ def main() -> None:
     try:
         app()
     except CevmError as exc:  # a user's mistake that escaped a command: one line, no traceback
-        fail(str(exc))
-        sys.exit(EXIT_INPUT)
+        fail(exc)
+        sys.exit(exit_code_for(exc))

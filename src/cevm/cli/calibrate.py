@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING, Annotated, Optional
 import numpy as np
 import typer
 
-from cevm.cli.common import StoreOption, existing_store, fail
+from cevm.cli.common import EXIT_PARTIAL, StoreOption, existing_store, fail, warn_damaged
 from cevm.cli.output import OutputFormat, write_rows
 from cevm.core.model import ICE_BRAKING_MODES
 from cevm.errors import CevmError
@@ -81,7 +81,7 @@ def calibrate(
             if veh.is_ev:
                 raise CevmError(f"{vehicle}: --ice-braking applies to ICE vehicles only")
             veh = dataclasses.replace(veh, ice_braking=ice_braking)
-        with TripStore.open(path) as st:
+        with TripStore.open(path, readonly=True) as st:
             sel = trips_for_calibration(st, vehicle_id, veh)
         if forced:
             result = fit_vehicle(veh, sel.trips, ["eta", *forced], cv_folds=cv_folds,
@@ -103,7 +103,7 @@ def calibrate(
         if plot is not None:
             plot_calibration(result, plot, f"{veh.name} ({vehicle_id}): {'+'.join(result.terms)}")
     except CevmError as exc:
-        raise fail(str(exc)) from None
+        raise fail(exc) from None
     report = result_json(result, vehicle_id, sel.notes + (() if selection is None else selection.notes), selection)
     if fmt == OutputFormat.json:
         typer.echo(dumps(report))
@@ -113,6 +113,10 @@ def calibrate(
         _print_calibration(report, veh.is_ev)
     if out is not None and fmt == OutputFormat.table:
         typer.echo(f"calibrated vehicle written to {out}")
+    for exc in sel.damaged:
+        warn_damaged(exc)
+    if sel.damaged:
+        raise typer.Exit(EXIT_PARTIAL)
 
 
 #: The paper's CE-model figures (tables 1 and 2), for comparison.

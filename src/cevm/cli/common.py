@@ -1,7 +1,12 @@
 """What the command modules share: exit codes, common options, the one-line error.
 
-Exit codes: 0 success; 1 some inputs of a batch failed (the rest was done); 2 bad usage
-or bad input (nothing was done).
+Exit codes: 0 success; 1 some inputs of a batch failed (the rest was done: failed files,
+manifest rows that matched no trip, damaged trips skipped); 2 bad usage or bad input
+(nothing was done); 3 the store could not be written (or read): disk full, read-only,
+locked by another process past the busy timeout, an I/O error; the store is as it was
+before the write that failed; 4 the store is damaged (a damaged database file, or a
+damaged trip or route asked for by name): restore a backup or re-ingest, 'cevm store
+check' says where.
 """
 
 from __future__ import annotations
@@ -25,6 +30,8 @@ from cevm.text import printable
 EXIT_OK = 0
 EXIT_PARTIAL = 1
 EXIT_INPUT = 2
+EXIT_STORE_ACCESS = 3
+EXIT_STORE_DAMAGED = 4
 
 
 StoreOption = Annotated[
@@ -33,16 +40,36 @@ StoreOption = Annotated[
 ]
 
 
-def fail(message: str, code: int = EXIT_INPUT) -> typer.Exit:
+def exit_code_for(exc: BaseException) -> int:
+    """The exit code of an error that stops a command: :data:`EXIT_STORE_ACCESS` or
+    :data:`EXIT_STORE_DAMAGED` for the store's failures, else :data:`EXIT_INPUT`."""
+    from cevm.store.failures import DamagedRowError, StoreAccessError, StoreDamagedError
+
+    if isinstance(exc, StoreAccessError):
+        return EXIT_STORE_ACCESS
+    if isinstance(exc, (StoreDamagedError, DamagedRowError)):
+        return EXIT_STORE_DAMAGED
+    return EXIT_INPUT
+
+
+def fail(message: str | BaseException, code: int | None = None) -> typer.Exit:
     """Print the one-line error (control characters escaped: a file name holding a
-    newline cannot forge a second line) and return the Exit to raise."""
-    typer.echo(f"cevm: error: {printable(message)}", err=True)
+    newline cannot forge a second line) and return the Exit to raise: ``fail(exc)``
+    picks the code for the error (:func:`exit_code_for`), ``fail(text)`` is bad input (2)."""
+    if code is None:
+        code = exit_code_for(message) if isinstance(message, BaseException) else EXIT_INPUT
+    typer.echo(f"cevm: error: {printable(str(message))}", err=True)
     return typer.Exit(code)
 
 
 def warn(message: str) -> None:
     """A one-line warning on stderr (control characters escaped)."""
     typer.echo(f"cevm: warning: {printable(message)}", err=True)
+
+
+def warn_damaged(exc: BaseException) -> None:
+    """The warning for a damaged trip that a command skips (and counts: exit 1)."""
+    warn(f"skipped: {exc}")
 
 
 def existing_store(store: Optional[Path], hint: Optional[str] = None) -> Path:
@@ -52,7 +79,7 @@ def existing_store(store: Optional[Path], hint: Optional[str] = None) -> Path:
     try:
         return existing_store_path(store, hint or NO_STORE_HINT)
     except CevmError as exc:
-        raise fail(str(exc)) from None
+        raise fail(exc) from None
 
 
 #: Rows printed by ``--format table``; beyond that, use csv or json.
@@ -163,13 +190,15 @@ def cycle_format(cycle_sep: Optional[str] = None, cycle_decimal: Optional[str] =
                            speed_columns=tuple(speed_col or ()), speed_unit=speed_unit, elevation_column=elevation_col,
                            grade_column=grade_col, grade_unit=grade_unit, grade_file=grade_file).check("cycle options")
     except CevmError as exc:
-        raise fail(str(exc)) from None
+        raise fail(exc) from None
 
 
-def load_sources(stack: ExitStack, store: Optional[Path], cycles, trips, vehicle_ids, routes, cr0: float, cycle_fmt):
+def load_sources(stack: ExitStack, store: Optional[Path], cycles, trips, vehicle_ids, routes, cr0: float, cycle_fmt,
+                 **stored):
     """:func:`cevm.store.sources.load_sources`, but cycle files are read without the
     store package, which is imported only for stored sources: a command on cycle files
-    alone then imports neither it nor pandas (a third of a short command's time)."""
+    alone then imports neither it nor pandas (a third of a short command's time).
+    ``stored``: its keywords for stored sources (``need_profiles``, ``on_damaged``)."""
     from cevm.core.sweep import Source
     from cevm.io.cycles import read_cycle_files
 
@@ -177,7 +206,7 @@ def load_sources(stack: ExitStack, store: Optional[Path], cycles, trips, vehicle
     if trips or vehicle_ids or routes:
         from cevm.store.sources import load_sources as load_stored
 
-        sources += load_stored(stack, store, [], trips or [], vehicle_ids or [], routes or [], cr0)
+        sources += load_stored(stack, store, [], trips or [], vehicle_ids or [], routes or [], cr0, **stored)
     return sources
 
 

@@ -10,6 +10,7 @@ from typing import IO, Annotated, Optional
 import typer
 
 from cevm.cli.common import (
+    EXIT_PARTIAL,
     TABLE_MAX_ROWS,
     AmbientOption,
     Cr0Option,
@@ -28,6 +29,7 @@ from cevm.cli.common import (
     fail,
     load_sources,
     open_out,
+    warn_damaged,
     with_cycle_options,
 )
 from cevm.cli.output import OutputFormat, write_rows
@@ -123,9 +125,11 @@ def feasibility_cmd(
 
         vehicles = load_vehicles(vehicle)
         rows: list[dict] = []
+        skipped: list[CevmError] = []  # damaged stored trips of --vehicle-id, left out
         with ExitStack() as stack:
             sources = load_sources(stack, store, cycle or [], trip or [], vehicle_id or [], route or [], cr0,
-                                   cycle_fmt)
+                                   cycle_fmt, need_profiles=any(v.is_ev for v in vehicles),
+                                   on_damaged=skipped.append)
             seen: list[tuple] = []
             for src in sources:
                 res = feasibility(src, vehicles, soc_start_pct=soc_start, reserve_pct=reserve_pct,
@@ -141,8 +145,12 @@ def feasibility_cmd(
             else:
                 write_rows(rows, fmt, stream=stream)
     except CevmError as exc:
-        raise fail(str(exc)) from None
+        raise fail(exc) from None
     _warn_outside_calibration(vehicles, seen)
+    for exc in skipped:
+        warn_damaged(exc)
+    if skipped:
+        raise typer.Exit(EXIT_PARTIAL)
 
 
 def _warn_outside_calibration(vehicles, seen: list[tuple]) -> None:

@@ -32,6 +32,7 @@ def fleet_plan(
     Each day's ambient temperature: --ambient-c for every day, else the scenario's
     ambient_c per day, else each vehicle's reference."""
     import json
+    from contextlib import ExitStack
 
     from cevm.io.scenario import default_resolver, fleet_report
     from cevm.store.sources import store_resolver
@@ -42,14 +43,14 @@ def fleet_plan(
     days = list(day) if day else None  # names or 1-based numbers (cevm.io.scenario.resolve_day)
     try:
         store_path = resolve_store_path(store)
-        if store_path.exists():  # legs may be stored trips or routes
-            with TripStore.open(store_path) as st:
-                report = fleet_report(scenario, days, method=method, resolve_leg=store_resolver(st),
-                                      ambient_c=ambient_c)
+        if store_path.exists():  # legs may be stored trips or routes: opened read-only when one is
+            with ExitStack() as stack:
+                resolver = store_resolver(lambda: stack.enter_context(TripStore.open(store_path, readonly=True)))
+                report = fleet_report(scenario, days, method=method, resolve_leg=resolver, ambient_c=ambient_c)
         else:
             report = fleet_report(scenario, days, method=method, resolve_leg=default_resolver, ambient_c=ambient_c)
     except CevmError as exc:
-        raise fail(str(exc)) from None
+        raise fail(exc) from None
     if fmt == OutputFormat.json:
         typer.echo(json.dumps(report, indent=2))
         return

@@ -62,6 +62,7 @@ def ingest(
     from cevm.ingest import ingest as run_ingest
     from cevm.executors import make_executor
     from cevm.store import TripStore, resolve_store_path
+    from cevm.store.failures import StoreAccessError
 
     if workers is not None and scheduler is not None:
         raise fail("give --workers (local processes) or --scheduler (a Dask cluster), not both")
@@ -104,9 +105,15 @@ def ingest(
 
     try:
         with make_executor(workers, scheduler) as executor, TripStore.open(store_path) as st:
+            st.require_intact()  # never write into a damaged database
             report = run_ingest(paths, st, options, on_file=on_file, on_start=on_start, executor=executor)
+    except StoreAccessError as exc:
+        stop = fail(exc)
+        typer.echo("cevm: note: the files written before the failure are stored, the one being written was rolled "
+                   "back; run the same command again once it is fixed (stored files are skipped)", err=True)
+        raise stop from None
     except CevmError as exc:
-        raise fail(str(exc)) from None
+        raise fail(exc) from None
     finally:
         if progress is not None:
             progress.stop()

@@ -38,6 +38,7 @@ import numpy as np
 import typer
 
 from cevm.cli.common import (
+    EXIT_PARTIAL,
     TABLE_MAX_ROWS,
     AmbientOption,
     Cr0Option,
@@ -57,6 +58,7 @@ from cevm.cli.common import (
     fail,
     load_sources,
     open_out,
+    warn_damaged,
     with_cycle_options,
 )
 from cevm.cli.output import OutputFormat, csv_writer, write_rows
@@ -555,9 +557,11 @@ def predict_cmd(
         pset = PredictionSet.build(vehicles, mass_kg=masses, payload_kg=payloads, ice_braking=ice_braking,
                                    ambient_c=ambient_c)
         assumed = Assumptions(pset)
+        skipped: list[CevmError] = []  # damaged stored trips of --vehicle-id, left out
         with ExitStack() as stack:
             sources = load_sources(stack, store, cycle or [], trip or [], vehicle_id or [], route or [], cr0,
-                                   cycle_fmt)
+                                   cycle_fmt, need_profiles=any(v.is_ev for v in vehicles),
+                                   on_damaged=skipped.append)
             executor = stack.enter_context(make_executor(None if scheduler else (workers or 1), scheduler))
             stream = open_out(stack, out)
             writer = _PredictWriter(fmt, stream, temperature_used=any(uses_temperature(v) for v in vehicles))
@@ -578,7 +582,7 @@ def predict_cmd(
                 plot_predictions(plot, sources, pset, plot_data, soc_start, reserve_pct, ice_braking,
                                  warn=lambda message: typer.echo(message, err=True))
     except CevmError as exc:
-        raise fail(str(exc)) from None
+        raise fail(exc) from None
     for line in assumed.lines():
         typer.echo(line, err=True)
     over = int(pset.over_max_gross.sum()) * len(sources)
@@ -593,4 +597,8 @@ def predict_cmd(
             typer.echo(f"cevm: warning: {n_rows} predictions {what}", err=True)
     if out is not None and fmt != OutputFormat.table:
         typer.echo(f"cevm predict: {writer.rows} rows -> {out}", err=True)
+    for exc in skipped:
+        warn_damaged(exc)
+    if skipped:
+        raise typer.Exit(EXIT_PARTIAL)
 

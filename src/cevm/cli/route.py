@@ -68,7 +68,7 @@ def route_add(
         with TripStore.open(path) as st:
             info = add_route(st, name, legs, replace=replace, cr0=cr0, note=note)
     except CevmError as exc:
-        raise fail(str(exc)) from None
+        raise fail(exc) from None
     n_trip = sum(1 for x in info.legs if x.kind == "trip")
     n_cycle = len(info.legs) - n_trip
     msg = f"route {info.name!r}: {len(info.legs)} legs ({n_trip} trips, {n_cycle} cycles) stored in {path}"
@@ -83,13 +83,13 @@ def route_list(
     fmt: FormatOption = OutputFormat.table,
 ) -> None:
     """List the stored routes: legs, distance, duration."""
-    from cevm.store.routes import list_routes, load_route_legs
+    from cevm.store.routes import check_route_profiles, list_routes, load_route_legs
     from cevm.store import TripStore, format_utc
 
     path = existing_store(store, "run 'cevm ingest' or 'cevm route add' first, or give --store")
     rows = []
     try:
-        with TripStore.open(path) as st:
+        with TripStore.open(path, readonly=True) as st:
             for info in list_routes(st):
                 row = {"route": info.name, "legs": len(info.legs),
                        "trips": sum(1 for x in info.legs if x.kind == "trip"),
@@ -99,13 +99,14 @@ def route_list(
                        "note": info.note}
                 try:
                     legs = load_route_legs(st, info.name, profiles=False)
+                    check_route_profiles(st, info.name)
                     row["distance_km"] = sum(x.vector.distance_m for x in legs) / 1000.0
                     row["duration_s"] = sum(x.vector.duration_s for x in legs)
                 except CevmError as exc:
                     row["status"] = f"broken: {exc}"
                 rows.append(row)
     except CevmError as exc:
-        raise fail(str(exc)) from None
+        raise fail(exc) from None
     if fmt == OutputFormat.table:
         for r in rows:
             r["sources"] = _short_legs(r["sources"])
@@ -142,7 +143,7 @@ def route_remove(
         with TripStore.open(path) as st:
             gone = remove_route(st, name)
     except CevmError as exc:
-        raise fail(str(exc)) from None
+        raise fail(exc) from None
     if not gone:
         raise fail(f"no route {name!r} in {path}; 'cevm route list' shows them")
     typer.echo(f"route {name!r} removed from {path}")

@@ -62,14 +62,14 @@ def simulate(
             c = read_cycle_csv(cycle, cycle_fmt)
             name, t, v, h = c.name, c.time_s, c.speed_mps, c.elevation_m
         else:
-            from cevm.store import TripStore, resolve_store_path
+            from cevm.store import TripStore, existing_store_path
 
-            with TripStore.open(resolve_store_path(store)) as st:
+            with TripStore.open(existing_store_path(store), readonly=True) as st:
                 prof = st.load_profile(trip)
             name, t, v, h = trip, prof["time_s"], prof["speed_mps"], prof["elevation_m"]
         res = run_simulation(veh, t, v, h, mass_kg=mass_kg, soc_start=soc_start_pct / 100.0)
     except CevmError as exc:
-        raise fail(str(exc)) from None
+        raise fail(exc) from None
     except ValueError as exc:  # inconsistent [detailed] parameters or trace
         raise fail(f"{vehicle}: {exc}") from None
     frame = res.to_frame()

@@ -21,10 +21,10 @@ def trips(
 
     path = existing_store(store)
     try:
-        with TripStore.open(path) as st:
+        with TripStore.open(path, readonly=True) as st:
             df = format_trips(st.list_trips(vehicle_id=vehicle_id))
     except CevmError as exc:
-        raise fail(str(exc)) from None
+        raise fail(exc) from None
     rows = [{k: (None if isinstance(v, float) and v != v else v) for k, v in r.items()} for r in df.to_dict("records")]
     columns = ["trip_id", "vehicle_id", "start_utc", "distance_km", "duration_s", "measured_fuel_l",
                "measured_energy_kwh", "dsm_coverage_pct", "elevation_source"]

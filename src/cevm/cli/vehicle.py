@@ -134,7 +134,7 @@ def vehicle_show(
         figures = _figures(vehicle, cycles)
         references = _references(vehicle, cycles)
     except CevmError as exc:
-        raise fail(str(exc)) from None
+        raise fail(exc) from None
     terms = [{"term": k, "value": data[k], "what": TERM_KEYS[k]} for k in TERM_KEYS
              if k in data and data[k] not in (0, 0.0, None)]
     calibration = data.get("calibration") if isinstance(data.get("calibration"), dict) else None

@@ -15,6 +15,7 @@ run.
 from __future__ import annotations
 
 import glob
+import sys
 import time
 from collections.abc import Callable, Iterable
 from contextlib import closing
@@ -28,6 +29,7 @@ from cevm.ingest.profiles import load_profiles
 from cevm.ingest.textfile import mb
 from cevm.ingest.task import FileOutcome, IngestOptions, file_sha256, open_sampler, process_file
 from cevm.store import TripStore
+from cevm.store.failures import StoreAccessError
 
 
 #: File names taken from a directory (recursively).
@@ -158,7 +160,15 @@ def ingest(
         if sampler is not None:
             sampler.close()
         report.seconds = time.perf_counter() - t_start
-        store.finish_run(run_id, {k: v for k, v in report.summary().items() if not isinstance(v, dict)})
+        counts = {k: v for k, v in report.summary().items() if not isinstance(v, dict)}
+        stopped_by = sys.exc_info()[1]  # the run ends with an exception: say so in its record
+        if stopped_by is not None:
+            counts["stopped_by"] = str(stopped_by) or type(stopped_by).__name__
+        try:
+            store.finish_run(run_id, counts)
+        except StoreAccessError:
+            if stopped_by is None:  # else report the write that failed first, not this one
+                raise
     return report
 
 

@@ -8,7 +8,11 @@
 - :mod:`~cevm.store.writing`: a source file's trips written in one transaction, failures,
   forgotten files, ingest runs;
 - :mod:`~cevm.store.queries`: files, trips, vectors, profiles and runs read back;
-- :mod:`~cevm.store.trips`: :class:`TripStore`, the connection that composes the three;
+- :mod:`~cevm.store.trips`: :class:`TripStore`, the connection that composes the three
+  (read-write, or read-only for the commands that only read);
+- :mod:`~cevm.store.failures`: SQLite's errors as the store's (damaged, could not be
+  written) and the damaged trips and routes;
+- :mod:`~cevm.store.check`: ``cevm store check`` and ``info``;
 - :mod:`~cevm.store.display`: listed trips as a person reads them;
 - :mod:`~cevm.store.routes`: named routes (sequences of stored trips and cycles);
 - :mod:`~cevm.store.calibration`: a vehicle's stored trips as the calibration's input;

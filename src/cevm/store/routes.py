@@ -4,20 +4,23 @@ A route is an ordered list of legs; each leg is a stored trip (by trip id) or a 
 cycle. A route's CE vector is the sum of its legs' vectors (vectors of consecutive pieces
 add), and its profile is the legs' profiles one after another (no step joins two legs).
 
-Storage (the trip store's SQLite file, own tables, created ``IF NOT EXISTS`` in one
-transaction on first use; ``meta`` key ``routes_schema_version``)::
+Storage (tables of the trip store's schema, :mod:`cevm.store.schema`, since version 3;
+before, they were made on first use under ``meta`` key ``routes_schema_version``)::
 
     routes      name (primary key), created_utc_s, n_legs, note
     route_legs  (route, position) primary key, kind ('trip' | 'cycle'), ref (trip id, or
                 the cycle file's resolved path when added), label (trip id or file
                 stem), sha256 (of the cycle file), vector, profile (BLOBs, cycle legs)
+                and their CRC-32s, checked whenever they are read
 
 Cycle legs keep their own copy of the cycle: the CE vector (computed in float64 when the
 route is added, with the Cr0 given) and the profile (time, speed and elevation in
 float64, lossless), so a route does not depend on the file staying where it was, or
 staying the same. Trip legs refer to the trip by id only (no foreign key: re-ingesting a
 changed log file replaces its trips, which a foreign key would forbid); a route whose
-trip has gone is reported when loaded, with the way out (re-create the route).
+trip has gone is reported when loaded, with the way out (re-create the route). A route
+is stored only from sound legs: a trip leg whose vector or profile is damaged is refused
+(:class:`~cevm.store.failures.DamagedTripError`), never referred to.
 """
 
 from __future__ import annotations
@@ -38,34 +41,11 @@ import numpy as np
 from cevm.core.cycle import CR0_DEFAULT, CycleVector, DriveCycle, cycle_vector
 from cevm.errors import CevmError, InputError
 from cevm.store import TripStore
-
-ROUTES_SCHEMA_VERSION = 1
-"""Version of the route tables' layout (``meta`` key ``routes_schema_version``)."""
+from cevm.store.failures import DamagedRouteError
+from cevm.store.schema import blob_crc32
 
 _NAME_RE = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,99}\Z")
 _PROFILE_MAGIC = b"CEVMRTP1"
-
-_TABLES = (
-    """CREATE TABLE IF NOT EXISTS routes (
-        name TEXT PRIMARY KEY,
-        created_utc_s REAL NOT NULL,
-        n_legs INTEGER NOT NULL CHECK (n_legs > 0),
-        note TEXT
-    )""",
-    """CREATE TABLE IF NOT EXISTS route_legs (
-        route TEXT NOT NULL REFERENCES routes(name) ON DELETE CASCADE,
-        position INTEGER NOT NULL,
-        kind TEXT NOT NULL CHECK (kind IN ('trip', 'cycle')),
-        ref TEXT NOT NULL,
-        label TEXT NOT NULL,
-        sha256 TEXT,
-        vector BLOB,
-        profile BLOB,
-        PRIMARY KEY (route, position),
-        CHECK ((kind = 'cycle') = (vector IS NOT NULL AND profile IS NOT NULL))
-    )""",
-)
-
 
 # ------------------------------------------------------------------------ leg inputs
 
@@ -182,39 +162,12 @@ def decode_cycle_profile(blob: bytes) -> dict[str, np.ndarray]:
     return {"time_s": t, "speed_mps": v, "distance_m": dist, "elevation_m": h, "lat_deg": nan, "lon_deg": nan.copy()}
 
 
-def _begin(store: TripStore) -> None:
-    store.con.execute("BEGIN IMMEDIATE")
-
-
-def _finish(store: TripStore, ok: bool) -> None:
-    con = store.con
-    if ok:
-        con.execute("COMMIT")
-    elif con.in_transaction:
-        con.execute("ROLLBACK")
-
-
-def ensure_route_tables(store: TripStore) -> None:
-    """Create the route tables if missing (one transaction; a no-op once done)."""
-    con = store.con
-    have = {r[0] for r in con.execute("SELECT name FROM sqlite_master WHERE type='table' AND name LIKE 'route%'")}
-    if {"routes", "route_legs"} <= have:
-        return
-    _begin(store)
-    ok = False
-    try:
-        for stmt in _TABLES:
-            con.execute(stmt)
-        con.execute("INSERT OR IGNORE INTO meta (key, value) VALUES ('routes_schema_version', ?)",
-                    (str(ROUTES_SCHEMA_VERSION),))
-        ok = True
-    finally:
-        _finish(store, ok)
-
-
-def _has_tables(store: TripStore) -> bool:
-    row = store.con.execute("SELECT COUNT(*) FROM sqlite_master WHERE type='table' AND name IN ('routes', 'route_legs')")
-    return int(row.fetchone()[0]) == 2
+def _checked_blob(route: str, part: str, blob: bytes, crc: int | None) -> bytes:
+    """A cycle leg's ``blob`` if it matches its checksum, else :class:`DamagedRouteError`."""
+    blob = bytes(blob)
+    if crc is not None and blob_crc32(blob) != crc:
+        raise DamagedRouteError(route, part, "checksum mismatch")
+    return blob
 
 
 # ---------------------------------------------------------------------------- writing
@@ -239,22 +192,25 @@ def add_route(
     check_route_name(name)
     if not legs:
         raise CevmError(f"route {name!r}: give at least one leg (--trip or --cycle)")
-    ensure_route_tables(store)
     trip_ids = [leg.trip_id for leg in legs if isinstance(leg, TripLeg)]
     vectors: dict[str, CycleVector] = {}
     if trip_ids:
-        vectors = {tid: CycleVector.from_bytes(b) for tid, b in store.load_vectors(trip_ids=trip_ids).items()}
+        vectors = store.load_cycle_vectors(trip_ids=trip_ids)  # a damaged one raises
+        damaged = store.damaged_profiles(trip_ids)
+        if damaged:
+            raise damaged[0]
     rows = []
     total: CycleVector | None = None
     for pos, leg in enumerate(legs):
         if isinstance(leg, TripLeg):
             vec = vectors[leg.trip_id]
-            rows.append((name, pos, "trip", leg.trip_id, leg.trip_id, None, None, None))
+            rows.append((name, pos, "trip", leg.trip_id, leg.trip_id, None, None, None, None, None))
         elif isinstance(leg, CycleLeg):
             vec = cycle_vector(leg.cycle, cr0=cr0)
             label = leg.cycle.name or Path(leg.ref).stem
-            rows.append((name, pos, "cycle", leg.ref, label, leg.sha256, vec.to_bytes(),
-                         encode_cycle_profile(leg.cycle)))
+            vblob, pblob = vec.to_bytes(), encode_cycle_profile(leg.cycle)
+            rows.append((name, pos, "cycle", leg.ref, label, leg.sha256, vblob, pblob, blob_crc32(vblob),
+                         blob_crc32(pblob)))
         else:
             raise TypeError(f"a leg is a TripLeg or a CycleLeg, not {type(leg).__name__}")
         try:
@@ -262,10 +218,7 @@ def add_route(
         except ValueError as exc:
             raise CevmError(f"route {name!r}: leg {pos + 1} cannot follow the others: {exc} "
                             f"(trips were ingested with another --cr0?)") from None
-    con = store.con
-    _begin(store)
-    ok = False
-    try:
+    with store._write() as con:
         exists = con.execute("SELECT 1 FROM routes WHERE name = ?", (name,)).fetchone() is not None
         if exists and not replace:
             raise CevmError(f"route {name!r} already exists; add --replace to overwrite it, "
@@ -276,26 +229,16 @@ def add_route(
         created = time.time()
         con.execute("INSERT INTO routes (name, created_utc_s, n_legs, note) VALUES (?, ?, ?, ?)",
                     (name, created, len(rows), note))
-        con.executemany("INSERT INTO route_legs (route, position, kind, ref, label, sha256, vector, profile) "
-                        "VALUES (?, ?, ?, ?, ?, ?, ?, ?)", rows)
-        ok = True
-    finally:
-        _finish(store, ok)
+        con.executemany("INSERT INTO route_legs (route, position, kind, ref, label, sha256, vector, profile, "
+                        "vector_crc32, profile_crc32) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?)", rows)
     return RouteInfo(name, created, tuple(RouteLegInfo(r[1], r[2], r[3], r[4]) for r in rows), note)
 
 
 def remove_route(store: TripStore, name: str) -> bool:
     """Delete the route ``name`` (one transaction); False if there was none."""
-    if not _has_tables(store):
-        return False
-    _begin(store)
-    ok = False
-    try:
-        store.con.execute("DELETE FROM route_legs WHERE route = ?", (name,))
-        n = store.con.execute("DELETE FROM routes WHERE name = ?", (name,)).rowcount
-        ok = True
-    finally:
-        _finish(store, ok)
+    with store._write() as con:
+        con.execute("DELETE FROM route_legs WHERE route = ?", (name,))
+        n = con.execute("DELETE FROM routes WHERE name = ?", (name,)).rowcount
     return n > 0
 
 
@@ -304,8 +247,6 @@ def remove_route(store: TripStore, name: str) -> bool:
 
 def list_routes(store: TripStore) -> list[RouteInfo]:
     """All stored routes, by name."""
-    if not _has_tables(store):
-        return []
     legs: dict[str, list[RouteLegInfo]] = {}
     for route, pos, kind, ref, label in store.con.execute(
         "SELECT route, position, kind, ref, label FROM route_legs ORDER BY route, position"
@@ -318,8 +259,6 @@ def list_routes(store: TripStore) -> list[RouteInfo]:
 def route_names(store: TripStore, pattern: str | None = None) -> list[str]:
     """Names of the stored routes, sorted; only those matching the glob ``pattern``
     (``fnmatch``, case-sensitive) if given."""
-    if not _has_tables(store):
-        return []
     names = [r[0] for r in store.con.execute("SELECT name FROM routes ORDER BY name")]
     return names if pattern is None else [n for n in names if fnmatch.fnmatchcase(n, pattern)]
 
@@ -354,11 +293,9 @@ def _routes_hint(names: list[str], store: TripStore) -> str:
 def _leg_rows(store: TripStore, name: str, columns: str) -> list[tuple]:
     """Rows (position, kind, ref, label, *columns) of route ``name``'s legs, checked:
     unknown routes and trips no longer stored raise :class:`CevmError`."""
-    rows = []
-    if _has_tables(store):
-        rows = store.con.execute(
-            f"SELECT position, kind, ref, label{columns} FROM route_legs WHERE route = ? ORDER BY position", (name,)
-        ).fetchall()
+    rows = store.con.execute(
+        f"SELECT position, kind, ref, label{columns} FROM route_legs WHERE route = ? ORDER BY position", (name,)
+    ).fetchall()
     if not rows:
         raise CevmError(f"unknown route {name!r}; {_routes_hint(route_names(store), store)}")
     trip_ids = [r[2] for r in rows if r[1] == "trip"]
@@ -377,19 +314,45 @@ def _leg_rows(store: TripStore, name: str, columns: str) -> list[tuple]:
 def load_route_legs(store: TripStore, name: str, *, profiles: bool = True) -> list[StoredLeg]:
     """The legs of route ``name`` with vectors and (if ``profiles``, default True)
     profiles; an empty dict as profile otherwise. Raises :class:`CevmError` for an
-    unknown route or a trip that is no longer stored."""
+    unknown route or a trip that is no longer stored, :class:`DamagedRouteError` or
+    :class:`~cevm.store.failures.DamagedTripError` for a leg whose blobs are damaged."""
     out = []
-    for pos, kind, ref, label, vblob, pblob in _leg_rows(store, name, ", vector, profile" if profiles else
-                                                         ", vector, NULL"):
+    columns = ", vector, vector_crc32, profile, profile_crc32" if profiles else ", vector, vector_crc32, NULL, NULL"
+    for pos, kind, ref, label, vblob, vcrc, pblob, pcrc in _leg_rows(store, name, columns):
         info = RouteLegInfo(int(pos), kind, ref, label)
         if kind == "trip":
-            vec = CycleVector.from_bytes(store.load_vector_bytes(ref))
+            vec = store.load_cycle_vectors(trip_ids=[ref])[ref]
             prof = store.load_profile(ref) if profiles else {}
         else:
-            vec = CycleVector.from_bytes(vblob)
-            prof = decode_cycle_profile(pblob) if profiles else {}
+            vec = _decoded(name, "vector", CycleVector.from_bytes, _checked_blob(name, "vector", vblob, vcrc))
+            prof = _cycle_profile(name, pblob, pcrc) if profiles else {}
         out.append(StoredLeg(info, vec, prof))
     return out
+
+
+def _decoded(route: str, part: str, decode, blob: bytes):
+    try:
+        return decode(blob)
+    except Exception as exc:  # whatever a damaged blob makes the decoder raise
+        raise DamagedRouteError(route, part, f"does not decode: {exc}") from None
+
+
+def _cycle_profile(route: str, blob: bytes, crc: int | None) -> dict[str, np.ndarray]:
+    return _decoded(route, "profile", decode_cycle_profile, _checked_blob(route, "profile", blob, crc))
+
+
+def check_route_profiles(store: TripStore, name: str) -> None:
+    """Raise :class:`DamagedRouteError` (or :class:`~cevm.store.failures.DamagedTripError`)
+    if a profile of route ``name``'s legs fails its checksum; reads the blobs one at a
+    time and keeps none (for a reader that will load them later and must not fail
+    half-way)."""
+    rows = _leg_rows(store, name, ", crc32(profile) IS NOT profile_crc32 AND profile_crc32 IS NOT NULL")
+    for _, kind, _, _, bad in rows:
+        if kind == "cycle" and bad:
+            raise DamagedRouteError(name, "profile", "checksum mismatch")
+    trip_ids = [ref for _, kind, ref, _, _ in rows if kind == "trip"]
+    for exc in store.damaged_profiles(trip_ids) if trip_ids else []:
+        raise exc
 
 
 def load_route_vector(store: TripStore, name: str) -> CycleVector:
@@ -405,5 +368,5 @@ def load_route_profiles(store: TripStore, name: str) -> list[dict[str, np.ndarra
     """The profiles of route ``name``'s legs, in order (one dict per leg, keys of
     :data:`cevm.store.PROFILE_DTYPES`, float64; trip legs as stored, so speed and
     elevation carry float32 rounding; cycle legs lossless). Reads no vectors."""
-    return [store.load_profile(ref) if kind == "trip" else decode_cycle_profile(pblob)
-            for _, kind, ref, _, pblob in _leg_rows(store, name, ", profile")]
+    return [store.load_profile(ref) if kind == "trip" else _cycle_profile(name, pblob, pcrc)
+            for _, kind, ref, _, pblob, pcrc in _leg_rows(store, name, ", profile, profile_crc32")]

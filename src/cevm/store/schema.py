@@ -19,6 +19,15 @@ Tables
                    the profile arrays (see :func:`cevm.store.codec.encode_profile`). Kept
                    apart from ``trips`` so that listing trips never reads the blobs.
     ``runs``       one row per ``cevm ingest`` run: start, end, host, pid, counts (JSON).
+    ``routes``, ``route_legs``: named routes (:mod:`cevm.store.routes`).
+
+Checksums
+    Every blob (a trip's vector and profile, a route's cycle leg's) is stored with its
+    CRC-32 (:func:`blob_crc32`, zlib's), written with it in the same statement and
+    checked by every reader: a blob damaged on disk is found and named, never decoded
+    into wrong numbers. Blobs stored before version 3 got theirs when the store was
+    migrated, so damage done before then is found only by decoding (``cevm store
+    check`` decodes every blob).
 
 Versions
     A new store is made by running every migration from version 0; an older store gets
@@ -32,6 +41,7 @@ from __future__ import annotations
 import json
 import math
 import time
+import zlib
 from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
@@ -168,10 +178,43 @@ _V1_STATEMENTS: tuple[str, ...] = (
 _V2_EVIDENCE_COLUMNS = ("ambient_temp_c", "ambient_temp_min_c", "ambient_temp_max_c", "standstill_s",
                         "standstill_power_w", "standstill_fuel_lps")
 
+#: Migration 3: a CRC-32 of every blob, computed for the blobs already stored (by the
+#: ``crc32`` SQL function of the store's connection), and the route tables, which
+#: :mod:`cevm.store.routes` created on first use (``routes_schema_version`` 1), made part
+#: of the schema.
+_V3_STATEMENTS: tuple[str, ...] = (
+    "ALTER TABLE trip_blobs ADD COLUMN vector_crc32 INTEGER",
+    "ALTER TABLE trip_blobs ADD COLUMN profile_crc32 INTEGER",
+    "UPDATE trip_blobs SET vector_crc32 = crc32(vector), profile_crc32 = crc32(profile)",
+    """CREATE TABLE IF NOT EXISTS routes (
+        name TEXT PRIMARY KEY,
+        created_utc_s REAL NOT NULL,
+        n_legs INTEGER NOT NULL CHECK (n_legs > 0),
+        note TEXT
+    )""",
+    """CREATE TABLE IF NOT EXISTS route_legs (
+        route TEXT NOT NULL REFERENCES routes(name) ON DELETE CASCADE,
+        position INTEGER NOT NULL,
+        kind TEXT NOT NULL CHECK (kind IN ('trip', 'cycle')),
+        ref TEXT NOT NULL,
+        label TEXT NOT NULL,
+        sha256 TEXT,
+        vector BLOB,
+        profile BLOB,
+        PRIMARY KEY (route, position),
+        CHECK ((kind = 'cycle') = (vector IS NOT NULL AND profile IS NOT NULL))
+    )""",
+    "ALTER TABLE route_legs ADD COLUMN vector_crc32 INTEGER",
+    "ALTER TABLE route_legs ADD COLUMN profile_crc32 INTEGER",
+    "UPDATE route_legs SET vector_crc32 = crc32(vector), profile_crc32 = crc32(profile) WHERE kind = 'cycle'",
+    "DELETE FROM meta WHERE key = 'routes_schema_version'",
+)
+
 MIGRATIONS: tuple[Migration, ...] = (
     Migration(1, "files, trips, their blobs and ingest runs", _V1_STATEMENTS),
     Migration(2, "trip evidence: ambient temperature (mean, min, max), standstill time and rate",
               tuple(f"ALTER TABLE trips ADD COLUMN {c} REAL" for c in _V2_EVIDENCE_COLUMNS)),
+    Migration(3, "a checksum with every blob; the route tables", _V3_STATEMENTS),
 )
 
 SCHEMA_VERSION = MIGRATIONS[-1].version
@@ -180,7 +223,7 @@ store with a higher version was written by a newer cevm and is refused; a lower 
 migrated when opened."""
 
 
-def _stored_version(con, path: Path) -> int:
+def stored_version(con, path: Path) -> int:
     """The schema version of the database on ``con``: 0 for an empty database; refuses a
     database of something else."""
     tables = {r[0] for r in con.execute("SELECT name FROM sqlite_master WHERE type='table'")}
@@ -207,13 +250,13 @@ def ensure_schema(store) -> int:
     something else, and a store written by a newer cevm (a version above this one's).
     """
     con = store.con
-    version = _stored_version(con, store.path)
+    version = stored_version(con, store.path)
     if version == SCHEMA_VERSION:
         return version
-    _refuse_newer(version, store.path)
+    refuse_newer(version, store.path)
     with store._write():
-        version = _stored_version(con, store.path)  # another process may have migrated it
-        _refuse_newer(version, store.path)
+        version = stored_version(con, store.path)  # another process may have migrated it
+        refuse_newer(version, store.path)
         for m in MIGRATIONS[version:]:
             for stmt in m.statements:
                 con.execute(stmt)
@@ -231,7 +274,7 @@ def ensure_schema(store) -> int:
     return version
 
 
-def _refuse_newer(version: int, path: Path) -> None:
+def refuse_newer(version: int, path: Path) -> None:
     if version > SCHEMA_VERSION:
         raise CevmError(
             f"{path}: store schema version {version} was written by a newer "
@@ -241,6 +284,11 @@ def _refuse_newer(version: int, path: Path) -> None:
 
 
 # ------------------------------------------------------------ values in the columns
+
+
+def blob_crc32(blob: bytes | None) -> int | None:
+    """The checksum stored with a blob: zlib's CRC-32 (unsigned); None for None."""
+    return None if blob is None else zlib.crc32(blob)
 
 
 def json_default(obj: object) -> object:

@@ -14,6 +14,16 @@ Concurrency and crashes
     constraints are the last line of defence against duplicates. WAL needs a local
     file system (not NFS/SMB), as SQLite documents.
 
+Read-only
+    ``TripStore(path, readonly=True)`` opens with SQLite's ``mode=ro`` (nothing can be
+    written; a read-only file works), falling back to ``immutable=1`` in a read-only
+    directory where the WAL's ``-shm`` file cannot be made (see :meth:`_open_readonly`).
+
+Failures
+    Every statement's SQLite error is raised as the store's (:mod:`cevm.store.failures`):
+    a damaged database, or a store that could not be written (full, read-only, locked
+    past :data:`BUSY_TIMEOUT_S`, I/O), its transaction rolled back.
+
 Units: SI inside (s, m, m/s, kg, J; fuel in litres, ``_l``); :func:`format_trips` is the
 edge that turns rows into what a person reads (ISO 8601 times, km, kWh).
 """
@@ -28,9 +38,10 @@ from pathlib import Path
 
 from cevm.errors import CevmError
 from cevm.store.display import format_trips, format_utc
+from cevm.store.failures import StoreAccessError, StoreConnection
 from cevm.store.location import resolve_store_path
 from cevm.store.queries import FileState, TripQueries
-from cevm.store.schema import SCHEMA_VERSION, ensure_schema
+from cevm.store.schema import SCHEMA_VERSION, blob_crc32, ensure_schema, refuse_newer, stored_version
 from cevm.store.writing import TripWriting, WriteResult
 
 BUSY_TIMEOUT_S = 60.0
@@ -58,19 +69,24 @@ class TripStore(TripWriting, TripQueries):
     :class:`~cevm.store.queries.TripQueries`'.
     """
 
-    def __init__(self, path: str | Path):
+    def __init__(self, path: str | Path, *, readonly: bool = False, migrate: bool = True):
         self.path = Path(path).expanduser()
-        self._con: sqlite3.Connection | None = None
+        self.readonly = readonly
+        self.immutable = False
+        self.schema_version = SCHEMA_VERSION
+        self._migrate = migrate
+        self._con: StoreConnection | None = None
         if self.path.is_dir():
             raise CevmError(f"{self.path}: is a directory, not a cevm store file")
+        if readonly:
+            self._open_readonly()
+            return
         try:
             self.path.parent.mkdir(parents=True, exist_ok=True)
         except OSError as exc:
             raise CevmError(f"{self.path}: cannot create the store's directory: {exc}") from exc
         try:
-            self._con = sqlite3.connect(
-                str(self.path), timeout=BUSY_TIMEOUT_S, isolation_level=None
-            )
+            self._con = self._connect(str(self.path))
             self._enable_wal()
             # NORMAL in WAL mode: a power cut may lose the last commits, never corrupts.
             self._con.execute("PRAGMA synchronous=NORMAL")
@@ -82,6 +98,62 @@ class TripStore(TripWriting, TripQueries):
         except BaseException:
             self.close()
             raise
+
+    def _connect(self, database: str, uri: bool = False) -> StoreConnection:
+        con = sqlite3.connect(database, timeout=BUSY_TIMEOUT_S, isolation_level=None, uri=uri,
+                              factory=StoreConnection)
+        con.store_path = self.path
+        con.busy_timeout_s = BUSY_TIMEOUT_S
+        con.create_function("crc32", 1, blob_crc32, deterministic=True)
+        return con
+
+    def _open_readonly(self) -> None:
+        """Open with ``mode=ro``: nothing can be written. A store in WAL mode needs its
+        ``-shm`` file, which SQLite cannot create in a read-only directory: then, if no
+        ``-wal`` file holds changes, the file is opened ``immutable=1`` (read as it is,
+        with no locks: nobody can be writing it, since a writer would have made the
+        ``-shm`` file); with changes in a ``-wal`` file it is refused (they would be
+        missed). An older schema is first migrated, which needs write access once."""
+        if not self.path.exists():
+            raise CevmError(f"{self.path}: no trip store here")
+        uri = self.path.resolve().as_uri() + "?mode=ro"
+        try:
+            try:
+                self._con = self._connect(uri, uri=True)
+                version = stored_version(self._con, self.path)
+            except StoreAccessError as exc:
+                if exc.reason not in ("cantopen", "readonly"):
+                    raise
+                self.close()
+                wal = Path(f"{self.path}-wal")
+                if wal.exists() and wal.stat().st_size > 0:
+                    raise StoreAccessError(
+                        f"{self.path}: the store could not be read: it has changes in its write-ahead log ({wal}) "
+                        "that SQLite cannot read without creating its -shm file, and its directory is read-only; "
+                        "copy the store with its -wal file to a writable directory, or open it once with write "
+                        "access", "readonly") from None
+                self._con = self._connect(uri + "&immutable=1", uri=True)
+                self.immutable = True
+                version = stored_version(self._con, self.path)
+            self._con.execute("PRAGMA query_only=1")
+        except BaseException:
+            self.close()
+            raise
+        self.schema_version = version
+        if version < SCHEMA_VERSION and not self._migrate:
+            return  # for SQLite's own checks only: the queries need the current layout
+        if version < SCHEMA_VERSION:  # migrated by a writable opening, then read
+            self.close()
+            try:
+                TripStore(self.path).close()
+            except StoreAccessError as exc:
+                raise StoreAccessError(
+                    f"{self.path}: the store has schema version {version} and this cevm reads version "
+                    f"{SCHEMA_VERSION}; migrating it needs write access once ({exc})", exc.reason) from None
+            self._open_readonly()
+        elif version > SCHEMA_VERSION:
+            self.close()
+            refuse_newer(version, self.path)
 
     def _enable_wal(self) -> str:
         """Switch to the WAL journal (persistent in the file; a no-op once done).
@@ -96,17 +168,18 @@ class TripStore(TripWriting, TripQueries):
         while True:
             try:
                 return str(self.con.execute("PRAGMA journal_mode=WAL").fetchone()[0])
-            except sqlite3.OperationalError as exc:
-                msg = str(exc).lower()
-                if ("locked" not in msg and "busy" not in msg) or time.monotonic() > deadline:
+            except StoreAccessError as exc:
+                if exc.reason != "locked" or time.monotonic() > deadline:
                     raise
                 time.sleep(delay_s)
                 delay_s = min(2.0 * delay_s, 0.1)
 
     @classmethod
-    def open(cls, path: str | Path | None = None) -> TripStore:
-        """Open the store at ``path``, or at :func:`default_store_path` if None."""
-        return cls(resolve_store_path(path))
+    def open(cls, path: str | Path | None = None, *, readonly: bool = False) -> TripStore:
+        """Open the store at ``path``, or at :func:`default_store_path` if None;
+        ``readonly`` (default False) for a command that only reads: it works on a
+        read-only file, directory or file system, and never creates the store."""
+        return cls(resolve_store_path(path), readonly=readonly)
 
     def close(self) -> None:
         """Close the connection (idempotent)."""
@@ -123,13 +196,13 @@ class TripStore(TripWriting, TripQueries):
     # ------------------------------------------------------------------ internals
 
     @property
-    def con(self) -> sqlite3.Connection:
+    def con(self) -> StoreConnection:
         if self._con is None:
             raise CevmError(f"{self.path}: store is closed")
         return self._con
 
     @contextmanager
-    def _write(self) -> Iterator[sqlite3.Connection]:
+    def _write(self) -> Iterator[StoreConnection]:
         """One write transaction (``BEGIN IMMEDIATE``: the write lock, waiting up to
         :data:`BUSY_TIMEOUT_S` for it): committed when the block ends, rolled back if it
         raises anything (even KeyboardInterrupt)."""
@@ -140,7 +213,10 @@ class TripStore(TripWriting, TripQueries):
             con.execute("COMMIT")
         except BaseException:
             if self._con is not None and self._con.in_transaction:
-                self._con.execute("ROLLBACK")
+                try:
+                    self._con.execute("ROLLBACK")
+                except (sqlite3.Error, CevmError):
+                    pass  # SQLite rolled back already (disk full, I/O error): keep the first error
             raise
 
     def _checkpoint(self, stage: str) -> None:

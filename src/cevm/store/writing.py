@@ -25,7 +25,6 @@ from __future__ import annotations
 import json
 import os
 import socket
-import sqlite3
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -34,7 +33,7 @@ from pathlib import Path
 from cevm.core.trip import TRIP_EVIDENCE_FIELDS, Trip, TripRecord
 from cevm.store.codec import trip_profile_blob
 from cevm.store.location import file_key
-from cevm.store.schema import FILE_COLUMNS, TRIP_COLUMNS, in_json, json_default, sql_real
+from cevm.store.schema import FILE_COLUMNS, TRIP_COLUMNS, blob_crc32, in_json, json_default, sql_real
 
 
 @dataclass(frozen=True)
@@ -151,7 +150,8 @@ class TripWriting:
         trip_rows, blob_rows, ids = [], [], []
         for t, vec, prof in zip(trips, vectors, profile_blobs):
             trip_rows.append(trip_row(t, key))
-            blob_rows.append((t.trip_id, sqlite3.Binary(bytes(vec)), prof))
+            vec, prof = bytes(vec), bytes(prof)
+            blob_rows.append((t.trip_id, vec, prof, blob_crc32(vec), blob_crc32(prof)))
             ids.append(t.trip_id)
 
         con = self.con
@@ -219,7 +219,8 @@ class TripWriting:
             )
             self._checkpoint("trips_inserted")
             con.executemany(
-                "INSERT INTO trip_blobs (trip_id, vector, profile) VALUES (?, ?, ?)",
+                "INSERT INTO trip_blobs (trip_id, vector, profile, vector_crc32, profile_crc32) "
+                "VALUES (?, ?, ?, ?, ?)",
                 [blob_rows[i] for i in keep],
             )
             self._checkpoint("blobs_inserted")
@@ -293,9 +294,10 @@ class TripWriting:
             )
         return int(cur.lastrowid)
 
-    def finish_run(self, run_id: int, counts: Mapping[str, int | float]) -> None:
+    def finish_run(self, run_id: int, counts: Mapping[str, int | float | str]) -> None:
         """Record the end (now) and the counts (e.g. files seen/ingested/unchanged/
-        failed, trips inserted/replaced/duplicate) of run ``run_id``."""
+        failed, trips inserted/replaced/duplicate; ``stopped_by``: the error that ended
+        it early) of run ``run_id``."""
         with self._write():
             self.con.execute(
                 "UPDATE runs SET finished_utc_s = ?, counts_json = ? WHERE run_id = ?",
