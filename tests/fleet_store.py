@@ -5,6 +5,9 @@ synthetic trips whose measured consumption is the plain per-step model (tests/re
   gross weight logged on odd trips (alternately 30 t and 40 t), none on even ones;
 - ``EB-09``: 3 electric-bus trips, battery energy measured at eta 0.7;
 - route ``R1``: the first bus trip, then the shipped urban-bus cycle.
+
+:func:`make_fleet` adds a vehicle file of the plain CE model the diesel trips were
+measured with (:data:`HGV_FILE`); :func:`write_manifest` a manifest of their true masses.
 """
 
 from __future__ import annotations
@@ -15,7 +18,7 @@ import numpy as np
 
 from cevm.core.cycle import drive_cycle_vector
 from cevm.core.trip import Measurement, Trip
-from cevm.io import load_vehicle, read_cycle_csv
+from cevm.io import load_vehicle
 from cevm.store import TripStore
 from cevm.store.routes import CycleLeg, TripLeg, add_route
 from cevm_samplegen.cycles import MicroTripSpec, micro_trip_cycle
@@ -82,5 +85,57 @@ def make_store(path: Path, logs_dir: Path) -> dict:
     return out
 
 
-def urban_cycle():
-    return read_cycle_csv(URBAN)
+# A diesel truck as the trips were measured: the plain CE model (no idle or other terms).
+HGV_FILE = """name = "Test HGV"
+powertrain = "ice"
+kerb_mass_kg = 18000.0
+max_gross_kg = 44000.0
+cda_m2 = 6.62
+cr = 0.0066
+eta = {eta}
+fuel_lhv_mj_per_l = 35.8
+ice_braking = "no-credit"
+tank_l = 400.0
+[detailed]
+"""
+
+
+def make_fleet(tmp_path: Path):
+    """The store of :func:`make_store` in ``tmp_path``, a vehicle file of the plain CE
+    model at the diesel trips' eta, and each diesel trip's (start, duration)."""
+    db = tmp_path / "cevm.sqlite"
+    ids = make_store(db, tmp_path / "logs")
+    hgv = tmp_path / "hgv.toml"  # the plain CE model at the eta the trips were measured with
+    hgv.write_text(HGV_FILE.format(eta=HGV_ETA))
+    with TripStore(db) as st:
+        df = st.list_trips(vehicle_id="HGV-77")
+    starts = dict(zip(df["trip_id"], zip(df["start_utc_s"], df["duration_s"])))
+    return db, ids, hgv, starts
+
+
+def unlogged(ids):
+    """The diesel trips without a logged gross weight (trip_index 0 of each file)."""
+    return ids["HGV-77"][0::2]
+
+
+def iso_local(t_s: float, zone: str) -> str:
+    from zoneinfo import ZoneInfo
+    import datetime as dt
+
+    return dt.datetime.fromtimestamp(t_s, ZoneInfo(zone)).strftime("%Y-%m-%d %H:%M:%S")
+
+
+def write_manifest(path: Path, ids, starts, zone="Europe/London") -> Path:
+    """A TMS export, as a German office writes it: ';', decimal comma, tonnes, local times;
+    one window per unlogged trip (around its midpoint), plus rows that cannot apply."""
+    lines = ["Kennzeichen;Abfahrt;Ankunft;Gesamtgewicht (t)"]
+    for tid in unlogged(ids):
+        t0, dur = starts[tid]
+        lines.append(f"HGV-77;{iso_local(t0 - 600, zone)};{iso_local(t0 + dur + 600, zone)};"
+                     f"{ids['hgv_mass_kg'][tid] / 1000:.3f}".replace(".", ","))
+    day0 = starts[ids["HGV-77"][0]][0]
+    lines.append(f"HGV-77;{iso_local(day0 - 86400, zone)};{iso_local(day0 - 80000, zone)};35,0")  # no trip
+    lines.append(f"HGV-77;{iso_local(day0 - 3600, zone)};{iso_local(day0 + 86400, zone)};35,0")  # both of day 0
+    lines.append(f"XX-01;{iso_local(day0, zone)};{iso_local(day0 + 60, zone)};35,0")  # unknown vehicle
+    path.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    return path

@@ -52,7 +52,7 @@ def _root(
 
 # In the order of 'cevm --help'.
 app.command()(ingest.ingest)
-app.command()(trips.trips)
+app.add_typer(trips.app, name="trips")
 app.command()(calibrate.calibrate)
 app.command()(simulate.simulate)
 app.add_typer(fleet.app, name="fleet")

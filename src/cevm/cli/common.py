@@ -290,3 +290,28 @@ class OutFile:
 
 def open_out(stack: ExitStack, out: Optional[Path]) -> IO[str]:
     return sys.stdout if out is None else stack.enter_context(OutFile(out))
+
+
+def apply_manifest(st, path: Path, manifest, *, dry_run: bool = False) -> tuple[int, int]:
+    """Match the manifest read from ``path`` (:func:`cevm.io.manifest.read_manifest`) to
+    the trips of the open store ``st`` and give them their masses (unless ``dry_run``);
+    print one warning per row not applied (file and line), one note per mass that
+    disagrees with a logged gross weight, and a summary line. Returns (rows applied, rows
+    not applied)."""
+    from cevm.store.masses import match_manifest, set_masses
+
+    match = match_manifest(st, manifest)
+    new = replaced = 0
+    if match.masses and not dry_run:
+        new, replaced = set_masses(st, match.masses)
+    for line, why in match.problems:
+        warn(f"{path}:{line}: not applied: {why}")
+    for text in match.disagreements:
+        typer.echo(f"cevm: note: {path}: {printable(text)}", err=True)
+    cols = ", ".join(f"{role} {col!r}" for role, col in manifest.columns.items())
+    done = (f"would give {len(match.masses)} trips their masses" if dry_run else
+            f"{len(match.masses)} trips given their masses ({new} new, {replaced} replaced)")
+    typer.echo(printable(f"cevm: manifest {path}: {len(manifest.rows) + len(manifest.problems)} rows; {done}; "
+                         f"{len(match.problems)} rows not applied (columns: {cols}; mass in {manifest.mass_unit}, "
+                         f"decimal mark {manifest.decimal!r})"), err=True)
+    return len(match.masses), len(match.problems)

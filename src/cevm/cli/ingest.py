@@ -8,7 +8,7 @@ from typing import Annotated, Optional
 
 import typer
 
-from cevm.cli.common import EXIT_OK, EXIT_PARTIAL, StoreOption, check_workers, fail
+from cevm.cli.common import EXIT_OK, EXIT_PARTIAL, StoreOption, apply_manifest, check_workers, fail
 from cevm.cli.output import OutputFormat, write_rows
 from cevm.errors import CevmError
 from cevm.ingest.textfile import ReadLimits
@@ -44,6 +44,12 @@ def ingest(
     max_expansion: Annotated[
         float, typer.Option(min=1.0, help="Refuse a gzip file that expands more than this many times (a zip bomb).")
     ] = _LIMITS.max_expansion,
+    manifest: Annotated[
+        Optional[Path], typer.Option(help="A manifest CSV of trip masses, applied after the logs (its columns detected; for other layouts: 'cevm trips set-mass --manifest' with column options).")
+    ] = None,
+    manifest_tz: Annotated[
+        Optional[str], typer.Option(help="The manifest's zone for times without one (Europe/London, UTC, +01:00).")
+    ] = None,
 ) -> None:
     """Read logger CSV exports into the trip store (clean trips, DSM elevation, vectors).
 
@@ -54,7 +60,11 @@ def ingest(
     Each failed file is reported on stderr (file, line, column, why) as it happens and
     skipped; the rest is stored. Exit 0 if every file was ingested or unchanged, 1 if any
     failed, 2 for bad options (no input holds a log file: then no store is created;
-    unknown profile, unreadable DSM, unreachable scheduler)."""
+    unknown profile, unreadable DSM, unreachable scheduler).
+
+    --manifest gives the trips their masses once the logs are stored (as 'cevm trips
+    set-mass --manifest' does); its rows that match no stored trip, or several, are
+    reported with their line (exit 1)."""
     import json
 
     from cevm.ingest import IngestOptions
@@ -103,10 +113,21 @@ def ingest(
         if progress is not None and task is not None:  # inputs that matched nothing come before the bar
             progress.update(task, advance=1, description=Path(fr.path).name)
 
+    masses = None
+    if manifest is not None:  # a manifest cevm cannot read stops the run before any work
+        from cevm.io.manifest import ManifestFormat, read_manifest
+
+        try:
+            masses = read_manifest(manifest, ManifestFormat(tz=manifest_tz))
+        except CevmError as exc:
+            raise fail(exc) from None
+    not_applied = 0
     try:
         with make_executor(workers, scheduler) as executor, TripStore.open(store_path) as st:
             st.require_intact()  # never write into a damaged database
             report = run_ingest(paths, st, options, on_file=on_file, on_start=on_start, executor=executor)
+            if masses is not None:
+                _, not_applied = apply_manifest(st, manifest, masses)
     except StoreAccessError as exc:
         stop = fail(exc)
         typer.echo("cevm: note: the files written before the failure are stored, the one being written was rolled "
@@ -124,7 +145,7 @@ def ingest(
         typer.echo(_summary_line(summary, store_path))
     else:
         _print_ingest_table(report, summary, store_path)
-    raise typer.Exit(EXIT_PARTIAL if report.failed else EXIT_OK)
+    raise typer.Exit(EXIT_PARTIAL if report.failed or not_applied else EXIT_OK)
 
 
 def _file_dict(fr) -> dict:

@@ -27,6 +27,7 @@ class OutputFormat(str, Enum):
 
 #: Columns of identifiers: left-aligned, never wrapped nor cut in tables.
 ID_COLUMNS = {"cycle", "vehicle", "vehicle_key", "trip_id", "vehicle_id", "source", "route", "file", "id", "day",
+              "mass_source",
               "vehicle id", "start_utc", "created_utc"}
 #: Columns printed left-aligned and allowed to wrap in tables.
 TEXT_COLUMNS = {"kind", "problem", "value", "basis", "what", "cycle", "vehicle", "trip_id", "vehicle_id", "source", "route", "file", "status", "profile", "start_utc", "elevation_source", "day", "day 1", "day 2", "day 3", "method", "stops", "item", "parameter", "std", "in-sample", "cross-validated", "quantity", "terms", "parameters"}

@@ -102,6 +102,8 @@ def store_info_cmd(
         ("files", f"{info['files_ok']} ok, {info['files_failed']} failed"),
         ("trips", f"{info['trips']} of {info['vehicles']} vehicles"),
         ("routes", str(info["routes"])),
+        ("trip masses", f"{info['trip_masses']} given" + (f" ({info['trip_masses_of_trips_gone']} of trips no longer "
+                                                          "stored)" if info["trip_masses_of_trips_gone"] else "")),
         ("last ingest", "-" if last is None else
          f"{format_utc(last['started_utc_s'])} on {last['host']}"
          + ("" if last["finished_utc_s"] is not None else " (unfinished: crashed or running)")),

@@ -15,6 +15,8 @@
 - :mod:`~cevm.store.check`: ``cevm store check`` and ``info``;
 - :mod:`~cevm.store.display`: listed trips as a person reads them;
 - :mod:`~cevm.store.routes`: named routes (sequences of stored trips and cycles);
+- :mod:`~cevm.store.masses`: trip masses given by manifests or by hand, and which mass a
+  trip is predicted and calibrated at;
 - :mod:`~cevm.store.calibration`: a vehicle's stored trips as the calibration's input;
 - :mod:`~cevm.store.sources`: stored trips and routes as sweep sources and fleet legs.
 

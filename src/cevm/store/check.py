@@ -124,7 +124,8 @@ def _journal_mode(store: TripStore) -> str:
 
 def store_info(store: TripStore) -> dict:
     """What the store holds and how it was made: schema version, creation, counts of
-    files (ok, failed), trips, vehicles and routes, the last ingest run, the journal."""
+    files (ok, failed), trips, vehicles and routes, masses given to trips (and to trips no
+    longer stored: they come back with their trip), the last ingest run, the journal."""
     con = store.con
     meta = dict(con.execute("SELECT key, value FROM meta").fetchall())
     files = dict(con.execute("SELECT status, COUNT(*) FROM files GROUP BY status").fetchall())
@@ -150,5 +151,8 @@ def store_info(store: TripStore) -> dict:
         "trips": store.count_trips(),
         "vehicles": len(store.vehicle_ids()),
         "routes": len(route_names(store)),
+        "trip_masses": int(con.execute("SELECT COUNT(*) FROM trip_masses").fetchone()[0]),
+        "trip_masses_of_trips_gone": int(con.execute(
+            "SELECT COUNT(*) FROM trip_masses WHERE trip_id NOT IN (SELECT trip_id FROM trips)").fetchone()[0]),
         "last_run": last,
     }

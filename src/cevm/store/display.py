@@ -3,6 +3,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+
 import numpy as np
 import pandas as pd
 
@@ -18,14 +20,19 @@ def format_utc(t_s: np.ndarray | pd.Series | float) -> pd.Series | str:
     return str(out.iloc[0]) if scalar else out
 
 
-def format_trips(df: pd.DataFrame) -> pd.DataFrame:
+def format_trips(df: pd.DataFrame, masses: Mapping | None = None) -> pd.DataFrame:
     """The display table of :meth:`~cevm.store.TripStore.list_trips` rows: trip_id, vehicle_id,
     start_utc (ISO 8601, ``Z``), duration_s, distance_km, measured_fuel_l,
     measured_energy_kwh (from joules, 1 kWh = 3.6e6 J), dsm_coverage_pct,
-    elevation_source, source_file. Unmeasured values are NaN."""
+    elevation_source, source_file; with ``masses`` (:func:`cevm.store.masses.trip_masses`)
+    also each trip's mass: mass_kg (the gross mass it is predicted at, as far as known
+    without a vehicle file: given, else logged), payload_kg (a payload given to it),
+    mass_source (``manifest tms.csv:12``, ``by hand``, ``logged``, ``vehicle file``),
+    logged_gross_kg and mass_vs_logged_pct (a given gross mass against the logged one).
+    Unknown values are NaN."""
     kind = df["measured_kind"]
     value = df["measured_value"].astype(np.float64)
-    return pd.DataFrame(
+    out = pd.DataFrame(
         {
             "trip_id": df["trip_id"],
             "vehicle_id": df["vehicle_id"],
@@ -40,3 +47,20 @@ def format_trips(df: pd.DataFrame) -> pd.DataFrame:
         },
         index=df.index,
     )
+    if masses is not None:
+        nan = float("nan")
+        ms = [masses[t] for t in df["trip_id"]]
+        gross = [m.assigned.mass_kg if m.assigned is not None and m.assigned.kind == "gross" else
+                 (m.logged_gross_kg if m.assigned is None and m.logged_gross_kg is not None else nan) for m in ms]
+        out["mass_kg"] = np.array(gross, dtype=np.float64)
+        out["payload_kg"] = np.array([m.assigned.mass_kg if m.assigned is not None and m.assigned.kind == "payload"
+                                      else nan for m in ms], dtype=np.float64)
+        out["mass_source"] = [m.describe() + (" (payload)" if m.assigned is not None and m.assigned.kind == "payload"
+                                              else "") for m in ms]
+        logged = np.array([nan if m.logged_gross_kg is None else m.logged_gross_kg for m in ms], dtype=np.float64)
+        out["logged_gross_kg"] = logged
+        with np.errstate(invalid="ignore"):
+            given = np.array([m.assigned.mass_kg if m.assigned is not None and m.assigned.kind == "gross" else nan
+                              for m in ms], dtype=np.float64)
+            out["mass_vs_logged_pct"] = 100.0 * (given - logged) / logged
+    return out

@@ -20,6 +20,9 @@ Tables
                    apart from ``trips`` so that listing trips never reads the blobs.
     ``runs``       one row per ``cevm ingest`` run: start, end, host, pid, counts (JSON).
     ``routes``, ``route_legs``: named routes (:mod:`cevm.store.routes`).
+    ``trip_masses`` a trip's gross mass or payload [kg] given by a manifest (its file and
+                   line) or by hand, and when (:mod:`cevm.store.masses`); keyed on the
+                   trip id, without a foreign key: a value outlives a re-ingest.
 
 Checksums
     Every blob (a trip's vector and profile, a route's cycle leg's) is stored with its
@@ -215,6 +218,17 @@ MIGRATIONS: tuple[Migration, ...] = (
     Migration(2, "trip evidence: ambient temperature (mean, min, max), standstill time and rate",
               tuple(f"ALTER TABLE trips ADD COLUMN {c} REAL" for c in _V2_EVIDENCE_COLUMNS)),
     Migration(3, "a checksum with every blob; the route tables", _V3_STATEMENTS),
+    Migration(4, "trip masses from manifests or by hand", (
+        """CREATE TABLE trip_masses (
+            trip_id TEXT PRIMARY KEY,
+            kind TEXT NOT NULL CHECK (kind IN ('gross', 'payload')),
+            mass_kg REAL NOT NULL CHECK (mass_kg >= 0),
+            source TEXT NOT NULL CHECK (source IN ('manifest', 'hand')),
+            source_file TEXT,
+            source_line INTEGER,
+            set_utc_s REAL NOT NULL
+        )""",
+    )),
 )
 
 SCHEMA_VERSION = MIGRATIONS[-1].version

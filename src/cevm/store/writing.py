@@ -10,6 +10,9 @@ Idempotence and replacement
     its last good version: a bad new version of a file is reported, and the data we had
     stays usable until a good version arrives.
 
+A trip's given mass (:mod:`cevm.store.masses`) follows it into a file's new version when
+the trip keeps its vehicle and start.
+
 Same content at another path (a moved or copied file)
     That is another file. Its trips whose ``trip_id`` is already stored (``trip_id``
     derives from vehicle, start time and content hash) are skipped and reported in
@@ -83,6 +86,23 @@ def trip_row(t: Trip | TripRecord, key: str) -> tuple:
         json.dumps(t.quality, default=json_default, sort_keys=True),
         *(sql_real(getattr(t, f)) for f in TRIP_EVIDENCE_FIELDS),
     )
+
+
+def _carry_masses(con, old_ids: Sequence[str], new_ids: Sequence[str]) -> None:
+    """Give the trips of a file's new version the masses of its old version's trips that
+    had the same vehicle and start (the same trip, its file grown or corrected: only the
+    content hash in its id differs). Masses of trips that are gone stay, keyed on their
+    old id (:mod:`cevm.store.masses`)."""
+    if not old_ids or not new_ids:
+        return
+    old_by_start = {tid.rsplit(":", 1)[0]: tid for tid in old_ids}
+    moves = [(new, old_by_start[new.rsplit(":", 1)[0]]) for new in new_ids
+             if old_by_start.get(new.rsplit(":", 1)[0], new) != new]
+    if moves:
+        taken = {r[0] for r in con.execute("SELECT trip_id FROM trip_masses WHERE trip_id IN "
+                                           "(SELECT value FROM json_each(?))", (in_json([n for n, _ in moves]),))}
+        con.executemany("UPDATE trip_masses SET trip_id = ? WHERE trip_id = ?",
+                        [(new, old) for new, old in moves if new not in taken])
 
 
 class TripWriting:
@@ -162,9 +182,8 @@ class TripWriting:
             if not force and state is not None and state == (sha256, "ok"):
                 return WriteResult(key, unchanged=True, inserted=0, replaced=0)
             self._checkpoint("begun")
-            (n_old,) = con.execute(
-                "SELECT COUNT(*) FROM trips WHERE source_file = ?", (key,)
-            ).fetchone()
+            old_ids = [r[0] for r in con.execute("SELECT trip_id FROM trips WHERE source_file = ?", (key,))]
+            n_old = len(old_ids)
             con.execute(
                 "DELETE FROM trip_blobs WHERE trip_id IN "
                 "(SELECT trip_id FROM trips WHERE source_file = ?)",
@@ -224,6 +243,7 @@ class TripWriting:
                 [blob_rows[i] for i in keep],
             )
             self._checkpoint("blobs_inserted")
+            _carry_masses(con, old_ids, [ids[i] for i in keep])
         return WriteResult(
             key, unchanged=False, inserted=len(keep), replaced=n_old, duplicates=tuple(duplicates)
         )
