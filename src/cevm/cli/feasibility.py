@@ -4,6 +4,7 @@ largest payload (:mod:`cevm.core.feasibility`)."""
 from __future__ import annotations
 
 import math
+from collections import Counter
 from contextlib import ExitStack
 from typing import IO, Annotated, Optional
 
@@ -39,6 +40,21 @@ from cevm.core.sweep import DEFAULT_RESERVE_PCT, DEFAULT_SOC_START_PCT
 from cevm.errors import CevmError
 from cevm.text import printable
 from cevm.units import J_PER_KWH
+
+
+def _mass_for(src, mass_kg: float | None, payload_kg: float | None) -> tuple[float | None, float | None, str]:
+    """(gross mass, payload, mass_source) of the feasibility of ``src``: the given one,
+    else a stored trip's own (given to it, else logged: :mod:`cevm.store.masses`), else
+    each vehicle's mass_kg (both None)."""
+    if mass_kg is not None:
+        return mass_kg, None, "--mass-kg"
+    if payload_kg is not None:
+        return None, payload_kg, "--payload-kg"
+    own = getattr(src, "mass", None)  # a stored trip's (cevm.store.sources.StoredTrip)
+    key = None if own is None else own.sweep_key()
+    if key is None:
+        return None, None, "vehicle file"
+    return (key[1], None, own.origin) if key[0] == "gross" else (None, key[1], own.origin)
 
 
 def _feasibility_rows(res: Feasibility) -> list[dict]:
@@ -132,10 +148,16 @@ def feasibility_cmd(
                                    on_damaged=skipped.append)
             seen: list[tuple] = []
             for src in sources:
-                res = feasibility(src, vehicles, soc_start_pct=soc_start, reserve_pct=reserve_pct,
-                                  payload_kg=payload_kg, mass_kg=mass_kg, payload_cap_kg=payload_cap_kg,
-                                  ice_braking=ice_braking, ambient_c=ambient_c)
-                rows.extend(_feasibility_rows(res))
+                src_mass, src_payload, mass_source = _mass_for(src, mass_kg, payload_kg)
+                try:
+                    res = feasibility(src, vehicles, soc_start_pct=soc_start, reserve_pct=reserve_pct,
+                                      payload_kg=src_payload, mass_kg=src_mass, payload_cap_kg=payload_cap_kg,
+                                      ice_braking=ice_braking, ambient_c=ambient_c)
+                except CevmError as exc:
+                    if mass_source in ("--mass-kg", "--payload-kg", "vehicle file"):
+                        raise
+                    raise CevmError(f"trip {src.name!r} ({src.mass.describe()} mass): {exc}") from None
+                rows.extend(dict(r, mass_source=mass_source) for r in _feasibility_rows(res))
                 speed = src.distance_m / src.duration_s if src.duration_s > 0 else float("nan")
                 seen += [(i, res.mass_kg[i], res.ambient_c[i], speed) for i in range(len(vehicles))]
                 src.release()
@@ -207,3 +229,7 @@ def _print_feasibility(rows: list[dict], stream: IO[str]) -> None:
     legend = "; ".join(f"{k} = {v}" for k, v in names.items() if k != v)
     if legend:
         stream.write(printable(f"vehicles: {legend}") + "\n")
+    origins = Counter({r["source"]: r["mass_source"] for r in rows}.values())
+    stream.write("mass from: " + ", ".join(f"{what} ({n} source{'s' if n > 1 else ''})" for what, n in
+                                           sorted(origins.items(), key=lambda kv: (-kv[1], kv[0])))
+                 + " (column mass_source in --format csv or json)\n")

@@ -29,6 +29,7 @@ from __future__ import annotations
 import io
 import json
 import math
+from collections import Counter
 from collections.abc import Sequence
 from contextlib import ExitStack
 from pathlib import Path
@@ -86,23 +87,30 @@ CSV_DECIMALS = {
     "mass_kg": 3, "payload_kg": 3, "distance_km": 6, "duration_s": 3, "wheel_energy_kwh": 6, "energy_kwh": 6,
     "energy_kwh_per_km": 6, "fuel_l": 6, "fuel_l_per_100km": 6, "soc_end_pct": 6, "soc_min_pct": 6, "ambient_c": 3,
     "reserve_at_km": 6, "reserve_at_s": 3, "empty_at_km": 6, "empty_at_s": 3, "range_km": 6, "range_reserve_km": 6,
+    "measured_fuel_l": 6, "measured_energy_kwh": 6, "error_pct": 6,
 }
+#: Columns of a stored source's truth, after all others: where the mass of each row comes
+#: from (:data:`cevm.store.masses.MASS_SOURCES`), and for a stored trip what it measured
+#: and the error e = (modelled - measured) / measured [%] (at the trip's own mass only:
+#: empty for rows at --mass-kg / --payload-kg). Made by :func:`_truth_columns`.
+TRUTH_COLUMNS = ("mass_source", "measured_fuel_l", "measured_energy_kwh", "error_pct")
 #: Columns of ``predict`` in CSV order: the first contract's, then the new ones.
 PREDICT_COLUMNS = (
     "cycle", "vehicle", "mass_kg", "distance_km", "duration_s", "wheel_energy_kwh", "energy_kwh", "energy_kwh_per_km",
     "fuel_l", "fuel_l_per_100km", "source_kind", "powertrain", "payload_kg", "over_max_gross", "soc_end_pct",
     "soc_min_pct", "reserve_ok", "tank_ok", "ice_braking", "ambient_c", "ambient_from", "vehicle_key", "reserve_at_km",
     "reserve_at_s", "empty_at_km", "empty_at_s", "range_km", "range_reserve_km", "over_power", "over_speed",
-)
+) + TRUTH_COLUMNS
 _EV_KEYS = ("cycle", "vehicle", "powertrain", "mass_kg", "distance_km", "duration_s", "wheel_energy_kwh",
             "energy_kwh", "energy_kwh_per_km", "source_kind", "payload_kg", "over_max_gross", "soc_end_pct",
             "soc_min_pct", "reserve_ok", "ambient_c", "ambient_from", "vehicle_key", "reserve_at_km", "reserve_at_s",
-            "empty_at_km", "empty_at_s", "range_km", "range_reserve_km", "over_power", "over_speed")
+            "empty_at_km", "empty_at_s", "range_km", "range_reserve_km", "over_power", "over_speed"
+            ) + ("mass_source", "measured_energy_kwh", "error_pct")
 _ICE_KEYS = ("cycle", "vehicle", "powertrain", "mass_kg", "distance_km", "duration_s", "wheel_energy_kwh",
              "fuel_l", "fuel_l_per_100km", "ice_braking", "source_kind", "payload_kg", "over_max_gross", "tank_ok",
              "ambient_c", "ambient_from", "vehicle_key", "empty_at_km", "empty_at_s", "range_km", "over_power",
-             "over_speed")
-_TEXT = {"cycle", "vehicle", "source_kind", "powertrain", "ice_braking", "ambient_from", "vehicle_key"}
+             "over_speed") + ("mass_source", "measured_fuel_l", "error_pct")
+_TEXT = {"cycle", "vehicle", "source_kind", "powertrain", "ice_braking", "ambient_from", "vehicle_key", "mass_source"}
 _BOOL = {"over_max_gross", "reserve_ok", "tank_ok", "over_power", "over_speed"}
 
 PREDICT_HEADERS = {
@@ -111,10 +119,13 @@ PREDICT_HEADERS = {
     "fuel_l_per_100km": "l/100km", "soc_end_pct": "SoC end %", "soc_min_pct": "SoC min %",
     "reserve_ok": "reserve ok", "tank_ok": "tank ok", "over_max_gross": "over max gross",
     "status": "reserve / tank ok", "ambient_c": "ambient degC", "vehicle_key": "vehicle", "range_km": "range km",
+    "mass_source": "mass from", "measured_fuel_l": "measured l", "measured_energy_kwh": "measured kWh",
+    "error_pct": "error %",
 }
 PREDICT_DIGITS = {"mass_kg": 0, "payload_kg": 0, "duration_s": 0, "distance_km": 2, "wheel_energy_kwh": 2,
                   "energy_kwh": 2, "energy_kwh_per_km": 3, "fuel_l": 2, "fuel_l_per_100km": 1, "soc_end_pct": 1,
-                  "soc_min_pct": 1, "ambient_c": 1, "range_km": 1}
+                  "soc_min_pct": 1, "ambient_c": 1, "range_km": 1, "measured_fuel_l": 2, "measured_energy_kwh": 2,
+                  "error_pct": 1}
 
 
 def _values(specs: Optional[list[str]], option: str) -> np.ndarray | None:
@@ -126,9 +137,10 @@ def _values(specs: Optional[list[str]], option: str) -> np.ndarray | None:
 # ------------------------------------------------------------------- predict columns
 
 
-def _block_columns(block: SweepBlock) -> dict[str, object]:
-    """Column arrays of a block (SI converted to the output units). Text columns are
-    (codes, categories) pairs; boolean columns float 1/0/NaN."""
+def _block_columns(block: SweepBlock, mass_source: str = "vehicle file") -> dict[str, object]:
+    """Column arrays of a block (SI converted to the output units), whose masses come
+    from ``mass_source``. Text columns are (codes, categories) pairs; boolean columns
+    float 1/0/NaN."""
     ps = block.pset
     src = block.source
     n = ps.n
@@ -171,7 +183,27 @@ def _block_columns(block: SweepBlock) -> dict[str, object]:
         "range_reserve_km": _optional(block.range_reserve_m, n, 1e-3),
         "over_power": _optional(block.over_power, n),
         "over_speed": _optional(block.over_speed, n),
+        **_truth_columns(block, mass_source),
     }
+
+
+def _truth_columns(block: SweepBlock, mass_source: str) -> dict[str, object]:
+    """:data:`TRUTH_COLUMNS` of a block: its rows' mass source, and a stored trip's
+    measured consumption (litres for a fuel measurement, kWh for a battery one) with the
+    error of each row of the matching powertrain, when the rows are at the trip's own
+    mass (not at a --mass-kg or --payload-kg given for every source)."""
+    n = block.n
+    fuel, energy, error = np.full(n, np.nan), np.full(n, np.nan), np.full(n, np.nan)
+    measured = getattr(block.source, "measured", None)  # a stored trip's (cevm.store.sources.StoredTrip)
+    if measured is not None and measured.value > 0:
+        if measured.kind == "fuel_l":
+            fuel[:], modelled = measured.value, block.fuel_l
+        else:
+            energy[:], modelled = measured.value / J_PER_KWH, block.energy_j
+        if mass_source not in ("--mass-kg", "--payload-kg"):
+            error = 100.0 * (modelled - measured.value) / measured.value  # NaN on rows of the other powertrain
+    return {"mass_source": (np.zeros(n, dtype=np.int64), [mass_source]), "measured_fuel_l": fuel,
+            "measured_energy_kwh": energy, "error_pct": error}
 
 
 def _optional(values: np.ndarray | None, n: int, scale: float = 1.0) -> np.ndarray:
@@ -319,20 +351,20 @@ class _PredictWriter:
         self.fmt = fmt
         self.stream = stream
         self.temperature_used = temperature_used
-        self.pending: list[SweepBlock] = []
+        self.pending: list[tuple[SweepBlock, str]] = []
         self.pending_rows = 0
         self.rows = 0
         self.table_rows: list[dict] = []
         self.names: dict[str, str] = {}
         self.started = False
 
-    def add(self, block: SweepBlock) -> None:
+    def add(self, block: SweepBlock, mass_source: str = "vehicle file") -> None:
         self.rows += block.n
         if self.fmt == OutputFormat.table:
             if len(self.table_rows) < TABLE_MAX_ROWS:
-                self._table_add(block)
+                self._table_add(block, mass_source)
             return
-        self.pending.append(block)
+        self.pending.append((block, mass_source))
         self.pending_rows += block.n
         if self.pending_rows >= WRITE_BATCH_ROWS:
             self._flush()
@@ -340,8 +372,8 @@ class _PredictWriter:
     def _flush(self) -> None:
         if not self.pending:
             return
-        cols = _concat_columns([_block_columns(b) for b in self.pending])
-        is_ev = np.concatenate([b.pset.is_ev for b in self.pending])
+        cols = _concat_columns([_block_columns(b, m) for b, m in self.pending])
+        is_ev = np.concatenate([b.pset.is_ev for b, _ in self.pending])
         self.pending, self.pending_rows = [], 0
         for lo in range(0, is_ev.size, WRITE_BATCH_ROWS):  # bounded memory for huge blocks
             sl = slice(lo, lo + WRITE_BATCH_ROWS)
@@ -355,8 +387,8 @@ class _PredictWriter:
                 self.stream.write(("[\n  " if not self.started else ",\n  ") + ",\n  ".join(rows))
             self.started = True
 
-    def _table_add(self, block: SweepBlock) -> None:
-        cols = _block_columns(block)
+    def _table_add(self, block: SweepBlock, mass_source: str) -> None:
+        cols = _block_columns(block, mass_source)
         n = min(block.n, TABLE_MAX_ROWS - len(self.table_rows))
         for i in range(n):
             row = {}
@@ -373,9 +405,12 @@ class _PredictWriter:
     def close(self) -> None:
         if self.fmt == OutputFormat.table:
             rows = self.table_rows
-            columns = ["cycle", "vehicle_key", "mass_kg", "distance_km", "energy_kwh", "energy_kwh_per_km",
-                       "soc_min_pct", "fuel_l", "fuel_l_per_100km", "range_km", "status"]
+            columns = ["cycle", "vehicle_key", "mass_kg", "mass_source", "distance_km", "energy_kwh",
+                       "measured_energy_kwh", "energy_kwh_per_km", "soc_min_pct", "fuel_l", "measured_fuel_l",
+                       "error_pct", "fuel_l_per_100km", "range_km", "status"]
             columns = [c for c in columns if any(r.get(c) is not None for r in rows)]
+            if "error_pct" in columns:  # measured beside modelled: the per-km figures only in csv and json
+                columns = [c for c in columns if c not in ("energy_kwh_per_km", "fuel_l_per_100km")]
             if self.temperature_used:
                 columns.insert(3, "ambient_c")
             title = "cevm predict" + (f" (first {len(rows)} of {self.rows} rows)" if self.rows > len(rows) else "")
@@ -415,9 +450,13 @@ class Assumptions:
         self.v_lo = np.inf
         self.v_hi = -np.inf
         self.origins: list[set] = [set() for _ in range(nv)]
+        self.m_lo = np.full(nv, np.inf)
+        self.m_hi = np.full(nv, -np.inf)
 
     def add(self, block: SweepBlock) -> None:
-        vi = self.pset.vehicle_index
+        vi = block.pset.vehicle_index  # a stored trip's block has a set at its own mass
+        np.minimum.at(self.m_lo, vi, block.pset.mass_kg)
+        np.maximum.at(self.m_hi, vi, block.pset.mass_kg)
         np.minimum.at(self.t_lo, vi, block.ambient_c)
         np.maximum.at(self.t_hi, vi, block.ambient_c)
         for v, code in set(zip(vi.tolist(), block.ambient_from.astype(int).tolist())):
@@ -439,7 +478,7 @@ class Assumptions:
             if uses_temperature(veh):
                 span = f"{lo:.1f}" if lo == hi else f"{lo:.1f} to {hi:.1f}"
                 out.append(f"cevm: note: {veh.name}: ambient {span} degC ({', '.join(sorted(self.origins[v]))})")
-            masses = self.pset.mass_kg[self.pset.vehicle_index == v]
+            masses = np.array([self.m_lo[v], self.m_hi[v]])
             speeds = np.array([self.v_lo, self.v_hi]) if np.isfinite(self.v_lo) else None
             for w in domain_warnings(veh, mass_kg=masses, ambient_c=np.array([lo, hi]), mean_speed_mps=speeds):
                 out.append(f"cevm: warning: {w}")
@@ -473,6 +512,39 @@ def _with_status(row: dict) -> dict:
         status += f" (cannot follow: {', '.join(cannot)})"
     row["status"] = status
     return row
+
+
+# ------------------------------------------------------------------------ masses
+
+
+def _mass_runs(sources, pset: PredictionSet, vehicles, masses, payloads, ice_braking, ambient_c):
+    """(sources, prediction set, mass_source) runs: every source at the given masses, or
+    each stored trip at its own (:func:`cevm.store.sources.mass_runs`), the rest at each
+    vehicle's mass_kg."""
+    if masses is not None or payloads is not None:
+        return [(sources, pset, "--mass-kg" if masses is not None else "--payload-kg")]
+    if not any(src.kind == "trip" for src in sources):
+        return [(sources, pset, "vehicle file")]
+    from cevm.store.sources import mass_runs
+
+    def build(**mass) -> PredictionSet:
+        return PredictionSet.build(vehicles, ice_braking=ice_braking, ambient_c=ambient_c, **mass) if mass else pset
+
+    return mass_runs(sources, build)
+
+
+def _mass_lines(sources, used: Counter) -> list[str]:
+    """A note on the masses the stored trips were predicted at, and a warning for the
+    given masses that disagree with the logged gross weights."""
+    if not used:
+        return []
+    counts = ", ".join(f"{n} {what}" for what, n in sorted(used.items(), key=lambda kv: (-kv[1], kv[0])))
+    out = [f"cevm: note: stored trips' masses: {counts} (column mass_source)"]
+    off = [t for t in (getattr(src, "mass", None) for src in sources) if t is not None and t.disagreement()]
+    if off:
+        out.append(f"cevm: warning: {len(off)} trip(s) have a given mass more than 5 % from their logged gross weight "
+                   f"(the given one is used), e.g. {off[0].disagreement()}")
+    return out
 
 
 # ---------------------------------------------------------------------------- predict
@@ -567,25 +639,33 @@ def predict_cmd(
             writer = _PredictWriter(fmt, stream, temperature_used=any(uses_temperature(v) for v in vehicles))
             keep_for_plot = plot is not None and np.bincount(pset.vehicle_index).max() > 1
             flagged = np.zeros(3, dtype=np.int64)
-            plot_data = []
-            for block in sweep(sources, pset, soc_start_pct=soc_start, reserve_pct=reserve_pct, executor=executor,
-                               ranges=with_range):
-                flagged += _count_flags(block)
-                writer.add(block)
-                assumed.add(block)
-                if keep_for_plot and block.source_index < PLOT_MAX_LINES:
-                    plot_data.append({"energy_kwh": block.energy_j / J_PER_KWH, "fuel_l": block.fuel_l})
-                if plot is None:
-                    block.source.release()  # free its profile: the sweep is past it
+            plot_data, psets = [], []
+            over, used = 0, Counter()
+            for run, run_pset, mass_source in _mass_runs(sources, pset, vehicles, masses, payloads, ice_braking,
+                                                         ambient_c):
+                for block in sweep(run, run_pset, soc_start_pct=soc_start, reserve_pct=reserve_pct,
+                                   executor=executor, ranges=with_range):
+                    flagged += _count_flags(block)
+                    writer.add(block, mass_source)
+                    assumed.add(block)
+                    over += int(run_pset.over_max_gross.sum())
+                    if block.source.kind == "trip":
+                        used[mass_source] += 1
+                    if keep_for_plot and len(psets) < PLOT_MAX_LINES:
+                        plot_data.append({"energy_kwh": block.energy_j / J_PER_KWH, "fuel_l": block.fuel_l})
+                    psets.append(run_pset)
+                    if plot is None:
+                        block.source.release()  # free its profile: the sweep is past it
             writer.close()
             if plot is not None:
-                plot_predictions(plot, sources, pset, plot_data, soc_start, reserve_pct, ice_braking,
-                                 warn=lambda message: typer.echo(message, err=True))
+                plot_predictions(plot, sources, pset if keep_for_plot else psets, plot_data, soc_start, reserve_pct,
+                                 ice_braking, warn=lambda message: typer.echo(message, err=True))
     except CevmError as exc:
         raise fail(exc) from None
     for line in assumed.lines():
         typer.echo(line, err=True)
-    over = int(pset.over_max_gross.sum()) * len(sources)
+    for line in _mass_lines(sources, used):
+        typer.echo(line, err=True)
     if over:
         typer.echo(f"cevm: warning: {over} predictions exceed their vehicle's max_gross_kg (column over_max_gross)",
                    err=True)

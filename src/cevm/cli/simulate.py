@@ -53,19 +53,36 @@ def simulate(
                 "defaults, which describe " + ("a 10 m electric bus with a 180 kW motor" if veh.is_ev else
                                                "a 235 kW diesel tractor with a 12-speed gearbox")
                 + "; configs/vehicles/*.toml show every key), or use 'cevm predict' (the CE model)")
+        mass_source, measured = "vehicle file", None
         if payload_kg is not None:
             mass_kg = (veh.kerb_mass_kg if veh.kerb_mass_kg is not None else veh.mass_kg) + float(
                 checks.payloads_kg(payload_kg))
+            mass_source = "--payload-kg"
         elif mass_kg is not None:
             mass_kg = float(checks.masses_for([veh], mass_kg))
+            mass_source = "--mass-kg"
         if cycle is not None:
             c = read_cycle_csv(cycle, cycle_fmt)
             name, t, v, h = c.name, c.time_s, c.speed_mps, c.elevation_m
         else:
             from cevm.store import TripStore, existing_store_path
 
+            from cevm.store.masses import trip_masses
+            from cevm.store.queries import row_measurement
+
             with TripStore.open(existing_store_path(store), readonly=True) as st:
                 prof = st.load_profile(trip)
+                listed = st.list_trips(trip_ids=[trip])
+                own = trip_masses(st, listed)[trip]
+            r = listed.iloc[0]
+            measured = row_measurement(r["measured_kind"], r["measured_value"], r["measured_source"],
+                                       r["measured_resolution"], r["measured_uncertainty"])
+            if mass_kg is None:  # the trip's own mass: given to it, else logged (cevm.store.masses)
+                mass_kg, mass_source = own.gross_kg(veh), own.origin
+                try:
+                    mass_kg = float(checks.masses_for([veh], mass_kg))
+                except CevmError as exc:
+                    raise CevmError(f"trip {trip!r} ({own.describe()} mass): {exc}") from None
             name, t, v, h = trip, prof["time_s"], prof["speed_mps"], prof["elevation_m"]
         res = run_simulation(veh, t, v, h, mass_kg=mass_kg, soc_start=soc_start_pct / 100.0)
     except CevmError as exc:
@@ -77,7 +94,8 @@ def simulate(
         frame.to_csv(out, index=False, float_format="%.6g")
     if plot is not None:
         plot_simulation(frame, res, plot, f"{veh.name}: {name}")
-    row = {"cycle": name, "vehicle": veh.name, "mass_kg": res.mass_kg, "distance_km": res.distance_m / 1e3,
+    row = {"cycle": name, "vehicle": veh.name, "mass_kg": res.mass_kg, "mass_source": mass_source,
+           "distance_km": res.distance_m / 1e3,
            "duration_s": res.duration_s, "wheel_energy_kwh": res.wheel_energy_j / J_PER_KWH,
            "friction_brake_kwh": res.friction_brake_energy_j / J_PER_KWH,
            "traction_deficit_kwh": res.traction_deficit_j / J_PER_KWH}
@@ -88,6 +106,13 @@ def simulate(
     else:
         row["fuel_l"] = res.fuel_l
         row["fuel_l_per_100km"] = 100.0 * res.fuel_l / (res.distance_m / 1e3) if res.distance_m > 0 else None
+    if measured is not None and measured.value > 0:  # a stored trip: what it measured beside the model
+        fuel = measured.kind == "fuel_l"
+        reference = measured.value if fuel else measured.value / J_PER_KWH
+        row["measured_fuel_l" if fuel else "measured_energy_kwh"] = reference
+        modelled = row.get("fuel_l" if fuel else "energy_kwh")  # None on a vehicle of the other powertrain
+        own_mass = mass_source not in ("--mass-kg", "--payload-kg")
+        row["error_pct"] = 100.0 * (modelled - reference) / reference if own_mass and modelled is not None else None
     if fmt == OutputFormat.table:
         write_rows([{"quantity": k, "value": v} for k, v in row.items()], fmt, title="cevm simulate (detailed model)")
     else:

@@ -3,7 +3,7 @@ matplotlib with the Agg backend, imported when a figure is drawn)."""
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Optional
 
@@ -88,13 +88,16 @@ def vehicle_label(vehicle) -> str:
     return name if not vehicle.id or vehicle.id == vehicle.name else f"{name} [{printable(vehicle.id)}]"
 
 
-def plot_predictions(path: Path, sources: list[Source], pset: PredictionSet, sweep_data: list, soc_start: float,
-                     reserve_pct: float, ice_braking: Optional[str],
+def plot_predictions(path: Path, sources: list[Source], pset: PredictionSet | Sequence[PredictionSet],
+                     sweep_data: list, soc_start: float, reserve_pct: float, ice_braking: Optional[str],
                      warn: Callable[[str], None] | None = None) -> None:
     """SoC (EV) or fuel (ICE) along each source for each vehicle (one mass each: the
     paper's figure 4), or energy / fuel against payload when vehicles have several
-    masses. ``warn`` is called with a message when only the first
+    masses. ``pset``: one prediction set for every source, or one per source (each
+    stored trip at its own mass). ``warn`` is called with a message when only the first
     :data:`PLOT_MAX_LINES` (source, vehicle) pairs are drawn."""
+    per_source = list(pset) if isinstance(pset, (list, tuple)) else None
+    pset = per_source[0] if per_source else pset
     import matplotlib
 
     matplotlib.use("Agg")
@@ -138,7 +141,8 @@ def plot_predictions(path: Path, sources: list[Source], pset: PredictionSet, swe
     else:  # state of charge along the route (the paper's figure 4)
         for s, v in pairs:
             veh = pset.vehicles[v]
-            m = float(pset.mass_kg[pset.vehicle_index == v][0])
+            ps = per_source[s] if per_source else pset
+            m = float(ps.mass_kg[ps.vehicle_index == v][0])
             _, dist, e = energy_trajectory(sources[s], veh, m, ice_braking=ice_braking)
             label = f"{vehicle_label(veh)} on {printable(sources[s].name)} ({m:,.0f} kg)"
             if veh.is_ev:

@@ -8,15 +8,17 @@ file is :mod:`cevm.io.calibrated`, the paper's figures 5 and 7 :mod:`cevm.io.plo
 
 from __future__ import annotations
 
+from collections import Counter
 from dataclasses import dataclass
 
 import numpy as np
 
 from cevm.core.calibration import TripData
-from cevm.core.trip import Measurement
 from cevm.core.vehicle import Vehicle
 from cevm.errors import CevmError
 from cevm.store.failures import DamagedTripError
+from cevm.store.masses import trip_masses
+from cevm.store.queries import row_measurement
 from cevm.store.trips import TripStore
 
 
@@ -52,12 +54,15 @@ def _opt(x) -> float | None:
 def trips_for_calibration(store: TripStore, vehicle_id: str, vehicle: Vehicle) -> TripSelection:
     """The stored trips of ``vehicle_id`` as :class:`TripData`.
 
-    Mass: the trip's measured gross weight where the logger reported one, else the
-    vehicle file's mass. Group: the trip's UTC day, so trips of one day (one driver, one
-    load, one weather) are held out together in cross-validation. Evidence: the trip's
-    logged mean ambient temperature, its start, its time at standstill and the rate
-    measured then (battery power for an EV, fuel rate for an ICE). Trips whose vector is
-    damaged are left out and listed in :attr:`TripSelection.damaged`.
+    Mass (:mod:`cevm.store.masses`): a mass given to the trip (a manifest, by hand; a
+    payload on the vehicle file's kerb mass), else the gross weight its logger recorded,
+    else the vehicle file's mass; each trip's ``mass_source`` says which, the notes count
+    them and name the trips whose given and logged masses disagree by more than 5 %.
+    Group: the trip's UTC day, so trips of one day (one driver, one load, one weather)
+    are held out together in cross-validation. Evidence: the trip's logged mean ambient
+    temperature, its start, its time at standstill and the rate measured then (battery
+    power for an EV, fuel rate for an ICE). Trips whose vector is damaged are left out
+    and listed in :attr:`TripSelection.damaged`.
     """
     df = store.list_trips(vehicle_id=vehicle_id)
     if df.empty:
@@ -65,26 +70,28 @@ def trips_for_calibration(store: TripStore, vehicle_id: str, vehicle: Vehicle) -
         raise CevmError(f"vehicle id {vehicle_id!r} has no stored trips (stored vehicle ids: {known}); see 'cevm trips'")
     damaged: list[DamagedTripError] = []
     vectors = store.load_cycle_vectors(vehicle_id=vehicle_id, on_damaged=damaged.append)
+    masses = trip_masses(store, df)
     rate_column = "standstill_power_w" if vehicle.is_ev else "standstill_fuel_lps"
     out: list[TripData] = []
-    n_weight = 0
+    origins: Counter = Counter()
+    disagreements = []
     for r in df.itertuples(index=False):
         if r.trip_id not in vectors:
             continue  # damaged
-        meas = None
-        if isinstance(r.measured_kind, str) and np.isfinite(r.measured_value):
-            meas = Measurement(r.measured_kind, float(r.measured_value), str(r.measured_source),
-                               float(r.measured_resolution), float(r.measured_uncertainty))
-        gw = r.gross_weight_kg
-        has_weight = gw is not None and np.isfinite(gw) and gw > 0
-        n_weight += has_weight
+        mass = masses[r.trip_id]
+        origins[mass.origin] += 1
+        text = mass.disagreement(vehicle)
+        if text:
+            disagreements.append(text)
         day = np.datetime_as_string(np.datetime64(int(r.start_utc_s), "s"), unit="D")
         out.append(TripData.from_measurement(
-            r.trip_id, vectors[r.trip_id], meas,
-            mass_kg=float(gw) if has_weight else vehicle.mass_kg,
+            r.trip_id, vectors[r.trip_id],
+            row_measurement(r.measured_kind, r.measured_value, r.measured_source, r.measured_resolution,
+                            r.measured_uncertainty),
+            mass_kg=mass.gross_kg(vehicle),
             quality=elevation_quality(r.elevation_source, r.dsm_coverage_pct),
             group=day,
-            mass_source="logged" if has_weight else "vehicle file",
+            mass_source=mass.origin,
             ambient_c=_opt(r.ambient_temp_c),
             start_utc_s=float(r.start_utc_s),
             standstill_s=_opt(r.standstill_s),
@@ -93,11 +100,17 @@ def trips_for_calibration(store: TripStore, vehicle_id: str, vehicle: Vehicle) -
     if not out:
         raise CevmError(f"vehicle id {vehicle_id!r}: every stored trip is damaged ({damaged[0]}); "
                         "'cevm store check' lists them")
-    if n_weight == len(out):
-        notes = [f"mass: the measured gross weight of each of the {len(out)} trips"]
+    own = len(out) - origins["vehicle file"]
+    counts = ", ".join(f"{n} {what}" for what, n in sorted(origins.items(), key=lambda kv: (-kv[1], kv[0])))
+    if not origins["vehicle file"]:
+        notes = [f"mass: each of the {len(out)} trips at its own ({counts})"]
     else:
-        notes = [f"mass: measured gross weight on {n_weight} of {len(out)} trips, the vehicle file's "
-                 f"{vehicle.mass_kg:,.0f} kg on the other {len(out) - n_weight} (give trips a gross weight for a better fit)"]
+        notes = [f"mass: {own} of {len(out)} trips at their own, the other {origins['vehicle file']} at the vehicle "
+                 f"file's {vehicle.mass_kg:,.0f} kg ({counts}; give trips their masses with 'cevm trips set-mass' "
+                 "for a better fit)"]
+    notes += [f"mass disagreement: {text}" for text in disagreements[:10]]
+    if len(disagreements) > 10:
+        notes.append(f"mass disagreement: ... and {len(disagreements) - 10} more trips ('cevm trips' shows them)")
     if damaged:
         notes.append(f"{len(damaged)} damaged trip(s) left out: " + ", ".join(e.trip_id for e in damaged[:10])
                      + (" ..." if len(damaged) > 10 else ""))

@@ -47,6 +47,14 @@ class FileState:
     n_duplicates: int
 
 
+def row_measurement(kind, value, source, resolution, uncertainty) -> Measurement | None:
+    """The :class:`~cevm.core.trip.Measurement` of a :meth:`TripQueries.list_trips` row's
+    measured_* columns; None when the trip has none."""
+    if not isinstance(kind, str) or value is None or not np.isfinite(value):
+        return None
+    return Measurement(kind, float(value), str(source), float(resolution), float(uncertainty))
+
+
 class TripQueries:
     """The reads of :class:`~cevm.store.TripStore` (a mixin: it needs the store's ``con``
     and ``path``)."""

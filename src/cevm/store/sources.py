@@ -6,18 +6,22 @@ routes."""
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from contextlib import ExitStack
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Optional
 
 from cevm.core.assignment import LegSource
 from cevm.core.cycle import CycleVector
-from cevm.core.sweep import LegProfile, Source
+from cevm.core.sweep import LegProfile, PredictionSet, Source
+from cevm.core.trip import Measurement
 from cevm.errors import CevmError
 from cevm.io.cycles import CycleFormat, read_cycle_files
 from cevm.io.scenario import LegResolver, default_resolver
 from cevm.store.failures import DamagedTripError
+from cevm.store.masses import TripMass, trip_masses
+from cevm.store.queries import row_measurement
 from cevm.store.location import existing_store_path
 from cevm.store.routes import (
     check_route_profiles,
@@ -27,6 +31,51 @@ from cevm.store.routes import (
     resolve_route_patterns,
 )
 from cevm.store.trips import TripStore
+
+
+@dataclass(frozen=True, eq=False)
+class StoredTrip(Source):
+    """A stored trip as a sweep source, with what the store knows of it beyond its cycle:
+    its mass (:class:`~cevm.store.masses.TripMass`: given, logged) and its measured
+    consumption (None if unmeasured), to predict it at its own mass and show the
+    measurement beside the model."""
+
+    mass: TripMass | None = None
+    measured: Measurement | None = None
+
+
+def mass_runs(sources: Sequence[Source], build: Callable[..., PredictionSet]
+              ) -> Iterator[tuple[Sequence[Source], PredictionSet, str]]:
+    """The sources in consecutive runs that share a prediction set, each with its
+    ``mass_source`` (:data:`~cevm.store.masses.MASS_SOURCES`): a stored trip at its own
+    mass (:mod:`cevm.store.masses`: given, else logged), anything else at each vehicle's
+    ``mass_kg``. ``build(mass_kg=..., payload_kg=...)`` makes a set (the caller's vehicles
+    and options); one set per distinct mass, made once."""
+    made: dict = {}
+
+    def pset(src: Source) -> tuple[PredictionSet, str]:
+        mass = src.mass if isinstance(src, StoredTrip) else None
+        key = None if mass is None else mass.sweep_key()
+        label = "vehicle file" if mass is None else mass.origin
+        if key not in made:
+            try:
+                made[key] = (build() if key is None else build(mass_kg=[key[1]]) if key[0] == "gross"
+                             else build(payload_kg=[key[1]]))
+            except CevmError as exc:  # a payload on a vehicle without a kerb mass, a mass below it
+                raise CevmError(f"trip {src.name!r} ({mass.describe()} mass): {exc}") from None
+        return made[key], label
+
+    run: list[Source] = []
+    current = None
+    for src in sources:
+        ps, label = pset(src)
+        if current is not None and (ps, label) != current:
+            yield run, current[0], current[1]
+            run = []
+        run.append(src)
+        current = (ps, label)
+    if run:
+        yield run, current[0], current[1]
 
 
 def load_sources(stack: ExitStack, store: Optional[Path], cycles: Sequence[Path], trips: Sequence[str],
@@ -67,18 +116,23 @@ def load_sources(stack: ExitStack, store: Optional[Path], cycles: Sequence[Path]
             raise CevmError(f"vehicle id {vid!r} has no usable stored trips (all are damaged); "
                             "'cevm store check' lists them")
         vectors.update((tid, vec) for tid, vec in got.items() if tid not in vectors)
-    ambient = {}
+    facts: dict[str, tuple] = {}
     if vectors:
         rows = st.list_trips(trip_ids=list(vectors))
-        ambient = dict(zip(rows["trip_id"], rows["ambient_temp_c"]))
+        masses = trip_masses(st, rows)
+        for r in rows.itertuples(index=False):
+            t_c = r.ambient_temp_c
+            facts[r.trip_id] = (None if not math.isfinite(t_c) else float(t_c), masses[r.trip_id],
+                                row_measurement(r.measured_kind, r.measured_value, r.measured_source,
+                                                r.measured_resolution, r.measured_uncertainty))
 
     def trip_legs(tid: str):
         return lambda: (LegProfile.from_profile(st.load_profile(tid)),)
 
     for tid, vec in vectors.items():
-        t_c = ambient.get(tid)
-        sources.append(Source(name=tid, kind="trip", vector=vec, legs=trip_legs(tid),
-                              ambient_c=None if t_c is None or not math.isfinite(t_c) else float(t_c)))
+        ambient, mass, measured = facts[tid]
+        sources.append(StoredTrip(name=tid, kind="trip", vector=vec, legs=trip_legs(tid), ambient_c=ambient,
+                                  mass=mass, measured=measured))
 
     def route_legs(name: str):
         return lambda: [LegProfile.from_profile(p) for p in load_route_profiles(st, name)]
