@@ -411,6 +411,8 @@ class _PredictWriter:
             columns = [c for c in columns if any(r.get(c) is not None for r in rows)]
             if "error_pct" in columns:  # measured beside modelled: the per-km figures only in csv and json
                 columns = [c for c in columns if c not in ("energy_kwh_per_km", "fuel_l_per_100km")]
+            else:  # at masses given for every source the measurement is no comparison: csv and json only
+                columns = [c for c in columns if c not in ("measured_energy_kwh", "measured_fuel_l")]
             if self.temperature_used:
                 columns.insert(3, "ambient_c")
             title = "cevm predict" + (f" (first {len(rows)} of {self.rows} rows)" if self.rows > len(rows) else "")
