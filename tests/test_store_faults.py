@@ -27,7 +27,7 @@ from fleet_store import BUS, DIESEL, URBAN, make_store
 runner = CliRunner()
 TESTS_DIR = Path(__file__).resolve().parent
 ROOT = TESTS_DIR.parent
-SAMPLE_LOG = ROOT / "sample_logs" / "srf" / "HGV-11_2019-05-14.csv"
+SAMPLE_LOG = sorted((ROOT / "sample_logs" / "srf").glob("HGV-11_*"))[0]  # a real log to ingest
 EXIT_PARTIAL, EXIT_INPUT, EXIT_STORE_ACCESS, EXIT_STORE_DAMAGED = 1, 2, 3, 4
 
 

@@ -147,21 +147,34 @@ def test_simulate_and_feasibility_use_the_trips_own_mass(fleet):
 
 
 def test_ingest_takes_a_manifest_and_reports_a_disagreement_with_the_logger(tmp_path, root):
-    db = tmp_path / "s.sqlite"
-    log = root / "sample_logs" / "srf" / "HGV-11_2019-05-14.csv"
+    import datetime as dt
+
+    log = sorted((root / "sample_logs" / "srf").glob("HGV-11_*"))[0]
+    scratch = tmp_path / "scratch.sqlite"  # to learn the first trip's time and logged weight
+    assert cevm("ingest", log, "--store", scratch, "--workers", "1", "-q").exit_code == 0
+    first = json.loads(cevm("trips", "--store", scratch, "-f", "json").stdout)[0]
+    t0 = dt.datetime.fromisoformat(first["start_utc"].replace("Z", "+00:00"))
+    mid = t0 + dt.timedelta(seconds=first["duration_s"] / 2)
+    given_kg = round(0.9 * first["logged_gross_kg"])
+
+    def window(t):
+        return f"{(t - dt.timedelta(minutes=5)).isoformat()},{(t + dt.timedelta(minutes=5)).isoformat()}"
+
     manifest = tmp_path / "tms.csv"
-    manifest.write_text("vehicle,start,end,gross_kg\nHGV-11,2019-05-14T05:30:00Z,2019-05-14T06:30:00Z,39000\n"
-                        "HGV-11,2019-05-15T05:30:00Z,2019-05-15T06:30:00Z,39000\n")
+    manifest.write_text(f"vehicle,start,end,gross_kg\nHGV-11,{window(mid)},{given_kg}\n"
+                        f"HGV-11,{window(mid + dt.timedelta(days=365))},39000\n")
+    db = tmp_path / "s.sqlite"
     res = cevm("ingest", log, "--store", db, "--workers", "1", "-q", "--manifest", manifest)
-    assert res.exit_code == 1, res.stderr  # the second row: no such trip (that day's file was not ingested)
+    assert res.exit_code == 1, res.stderr  # the second row: no such trip (a year later)
     assert f"{manifest}:3: not applied" in res.stderr
-    assert "its logger 43,240 kg (-9.8 %)" in res.stderr  # the first trip's logged gross weight
+    assert f"its logger {first['logged_gross_kg']:,.0f} kg (-10.0 %)" in res.stderr
     listed = json.loads(cevm("trips", "--store", db, "-f", "json").stdout)
     given = [x for x in listed if x["mass_source"].startswith("manifest")]
-    assert len(given) == 1 and given[0]["mass_kg"] == 39000.0 and given[0]["logged_gross_kg"] == 43240.0
+    assert [x["trip_id"] for x in given] == [first["trip_id"]]
+    assert (given[0]["mass_kg"], given[0]["logged_gross_kg"]) == (given_kg, first["logged_gross_kg"])
     assert given[0]["mass_source"] == "manifest tms.csv:2"
     r = rows_by_trip(cevm("predict", "-v", DIESEL, "--trip", given[0]["trip_id"], "--store", db, "-f", "json"))
-    assert (r[given[0]["trip_id"]]["mass_kg"], r[given[0]["trip_id"]]["mass_source"]) == (39000.0, "manifest")
+    assert (r[given[0]["trip_id"]]["mass_kg"], r[given[0]["trip_id"]]["mass_source"]) == (given_kg, "manifest")
     bad = tmp_path / "bad.csv"
     bad.write_text("vehicle,when,weight\n")
     res = cevm("ingest", log, "--store", tmp_path / "t.sqlite", "--manifest", bad)
