@@ -60,6 +60,14 @@ SHA = "ab" * 32
 TRIP_ID = f"HGV-11:1700000000:{SHA[:8]}"
 
 
+def as_version_2(vector: bytes) -> bytes:
+    """A format-3 vector blob as cevm 0.1 wrote it (format 2: ``CEVMVEC2``, the 11
+    scalars before k_pos and traction_s), from the layout documented in
+    CycleVector.to_bytes."""
+    assert vector[:8] == b"CEVMVEC3"
+    return b"CEVMVEC2" + vector[8:12] + vector[12 : 12 + 8 * 11] + vector[12 + 8 * 13 :]
+
+
 def v1_profile() -> dict[str, np.ndarray]:
     t = np.arange(0.0, 121.0)
     v = np.clip(np.minimum(t, 120.0 - t) * 0.5, 0.0, None)
@@ -72,7 +80,8 @@ def make_v1_store(path: Path, with_route: bool = False) -> dict:
     """A store as cevm 0.1 made it: the version-1 DDL and one file, trip, blob and run
     (and, ``with_route``, the route tables and a route of the trip and a cycle)."""
     prof = v1_profile()
-    vector = cycle_vector(DriveCycle(prof["time_s"], prof["speed_mps"], prof["elevation_m"], name="t")).to_bytes()
+    fresh = cycle_vector(DriveCycle(prof["time_s"], prof["speed_mps"], prof["elevation_m"], name="t")).to_bytes()
+    vector = as_version_2(fresh)
     con = sqlite3.connect(path)
     con.executescript(V1_DDL)
     with con:
@@ -86,10 +95,11 @@ def make_v1_store(path: Path, with_route: bool = False) -> dict:
         con.execute("INSERT INTO trip_blobs VALUES (?, ?, ?)", (TRIP_ID, vector, encode_profile(prof)))
         con.execute("INSERT INTO runs (started_utc_s, finished_utc_s, host, pid, counts_json) "
                     "VALUES (1.7e9, 1.7e9 + 5, 'h', 7, '{\"files\": 1}')")
-    made = {"vector": vector, "profile": prof}
+    made = {"vector": vector, "vector_v3": fresh, "profile": prof}
     if with_route:
         cyc = DriveCycle(np.arange(0.0, 61.0), np.full(61, 10.0), None, name="flat")
-        made["cycle_vector"] = cycle_vector(cyc).to_bytes()
+        made["cycle_vector_v3"] = cycle_vector(cyc).to_bytes()
+        made["cycle_vector"] = as_version_2(made["cycle_vector_v3"])
         made["cycle_profile"] = encode_cycle_profile(cyc)
         con.executescript(V1_ROUTES_DDL)
         with con:
@@ -129,7 +139,9 @@ def test_a_version_1_store_is_migrated_with_its_data_intact(tmp_path):
         assert (row["vehicle_id"], row["gross_weight_kg"], row["measured_value"]) == ("HGV-11", 43240.0, 10.6)
         assert (row["distance_m"], row["dsm_coverage_pct"], row["n_samples"]) == (1800.0, 98.5, 121)
         assert all(math.isnan(row[f]) for f in TRIP_EVIDENCE_FIELDS)  # not logged before version 2
-        assert st.load_vector_bytes(TRIP_ID) == made["vector"]
+        # migration 5 remade the format-2 vector in format 3 from the stored profile: the
+        # same as a vector made from those samples today
+        assert st.load_vector_bytes(TRIP_ID) == made["vector_v3"]
         trip = st.load_trip(TRIP_ID)
         assert trip.measured == Measurement("fuel_l", 10.6, "fms_total_fuel", 0.5, 0.3)
         assert trip.quality == {"repairs": ["clock_jump"]}
@@ -152,7 +164,7 @@ def test_a_version_1_store_with_routes_gets_checksums_and_keeps_its_routes(tmp_p
     with TripStore(db) as st:
         legs = load_route_legs(st, "R1")
         assert [leg.info.kind for leg in legs] == ["trip", "cycle"]
-        assert legs[1].vector.to_bytes() == made["cycle_vector"]
+        assert legs[1].vector.to_bytes() == made["cycle_vector_v3"]
         np.testing.assert_array_equal(legs[0].profile["time_s"], made["profile"]["time_s"])
     con = sqlite3.connect(db)
     crcs = con.execute("SELECT vector, vector_crc32, profile, profile_crc32 FROM trip_blobs").fetchall()
@@ -161,7 +173,7 @@ def test_a_version_1_store_with_routes_gets_checksums_and_keeps_its_routes(tmp_p
     con.close()
     assert [(zlib.crc32(v), zlib.crc32(p)) for v, _, p, _ in crcs] == [(vc, pc) for _, vc, _, pc in crcs]
     assert [(k, vc, pc) for k, _, vc, _, pc in legs] == [
-        ("trip", None, None), ("cycle", zlib.crc32(made["cycle_vector"]), zlib.crc32(made["cycle_profile"]))]
+        ("trip", None, None), ("cycle", zlib.crc32(made["cycle_vector_v3"]), zlib.crc32(made["cycle_profile"]))]
     assert "routes_schema_version" not in keys  # one schema version for the whole store
 
 

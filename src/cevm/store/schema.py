@@ -213,6 +213,19 @@ _V3_STATEMENTS: tuple[str, ...] = (
     "DELETE FROM meta WHERE key = 'routes_schema_version'",
 )
 
+#: Migration 5: vectors stored before format 3 (``CEVMVEC2``, or the npz of format 1)
+#: lack k_pos and traction_s. They are remade, scalars kept, from the profile stored
+#: beside them by the SQL functions ``cevm_trip_vector_v3`` and
+#: ``cevm_route_vector_v3`` of the store's connection (:func:`upgrade_trip_vector`), and
+#: their checksums rewritten.
+_OLD_VECTOR = "(substr(vector, 1, 8) = CAST('CEVMVEC2' AS BLOB) OR substr(vector, 1, 2) = CAST('PK' AS BLOB))"
+_V5_STATEMENTS: tuple[str, ...] = (
+    f"UPDATE trip_blobs SET vector = cevm_trip_vector_v3(vector, profile) WHERE {_OLD_VECTOR}",
+    "UPDATE trip_blobs SET vector_crc32 = crc32(vector)",
+    f"UPDATE route_legs SET vector = cevm_route_vector_v3(vector, profile) WHERE kind = 'cycle' AND {_OLD_VECTOR}",
+    "UPDATE route_legs SET vector_crc32 = crc32(vector) WHERE kind = 'cycle'",
+)
+
 MIGRATIONS: tuple[Migration, ...] = (
     Migration(1, "files, trips, their blobs and ingest runs", _V1_STATEMENTS),
     Migration(2, "trip evidence: ambient temperature (mean, min, max), standstill time and rate",
@@ -229,6 +242,8 @@ MIGRATIONS: tuple[Migration, ...] = (
             set_utc_s REAL NOT NULL
         )""",
     )),
+    Migration(5, "cycle vectors in format 3 (with the positive kinetic energy and the traction time the "
+                 "energy terms need), computed from each trip's or route leg's stored profile", _V5_STATEMENTS),
 )
 
 SCHEMA_VERSION = MIGRATIONS[-1].version
@@ -298,6 +313,22 @@ def refuse_newer(version: int, path: Path) -> None:
 
 
 # ------------------------------------------------------------ values in the columns
+
+
+def upgrade_trip_vector(vector: bytes, profile: bytes, decode) -> bytes:
+    """A vector blob in format 3: ``vector`` with the k_pos and traction_s of the cycle in
+    ``profile`` (decoded by ``decode`` into time_s, speed_mps, elevation_m arrays); an
+    undecodable pair is left as it was (``cevm store check`` names it)."""
+    from cevm.core.cycle import CycleVector
+
+    try:
+        vec = CycleVector.from_bytes(vector)
+        if vec.has_trip_sums:
+            return vector
+        p = decode(profile)
+        return vec.with_trip_sums(p["time_s"], p["speed_mps"], p.get("elevation_m")).to_bytes()
+    except Exception:  # damaged: kept as it is, found by the checks that read it
+        return vector
 
 
 def blob_crc32(blob: bytes | None) -> int | None:

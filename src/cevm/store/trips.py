@@ -59,6 +59,22 @@ def _checkpoint(stage: str) -> None:
     """
 
 
+def _trip_vector_v3(vector: bytes, profile: bytes) -> bytes:
+    """SQL function of migration 5 (:func:`cevm.store.schema.upgrade_trip_vector`)."""
+    from cevm.store.codec import decode_profile
+    from cevm.store.schema import upgrade_trip_vector
+
+    return upgrade_trip_vector(vector, profile, decode_profile)
+
+
+def _route_vector_v3(vector: bytes, profile: bytes) -> bytes:
+    """SQL function of migration 5 for a route's cycle leg (its own profile format)."""
+    from cevm.store.routes import decode_cycle_profile
+    from cevm.store.schema import upgrade_trip_vector
+
+    return upgrade_trip_vector(vector, profile, decode_cycle_profile)
+
+
 class TripStore(TripWriting, TripQueries):
     """A connection to the trip store (see :mod:`cevm.store.schema` for the layout).
 
@@ -105,6 +121,8 @@ class TripStore(TripWriting, TripQueries):
         con.store_path = self.path
         con.busy_timeout_s = BUSY_TIMEOUT_S
         con.create_function("crc32", 1, blob_crc32, deterministic=True)
+        con.create_function("cevm_trip_vector_v3", 2, _trip_vector_v3, deterministic=True)
+        con.create_function("cevm_route_vector_v3", 2, _route_vector_v3, deterministic=True)
         return con
 
     def _open_readonly(self) -> None:
