@@ -404,8 +404,9 @@ def _load(frame: pd.DataFrame, path) -> tuple[np.ndarray, np.ndarray, dict[str, 
 
 
 def _repair_time(t, line, cols, p: CleanParams, ev: _Events):
-    """File-order time repairs. Returns (t, line, cols, info) with rows still in file
-    order, times shifted at clock steps, outlier rows removed."""
+    """File-order time repairs (step 1 of the module docstring). Returns (t, line, cols,
+    info) with rows still in file order, outlier rows removed, times shifted at clock
+    steps; an unordered file is returned as it is (it is simply sorted afterwards)."""
     n = t.size
     info: dict = {"file_order": "ordered", "clock_step_corrections_s": []}
     if n < 3:
@@ -420,7 +421,37 @@ def _repair_time(t, line, cols, p: CleanParams, ev: _Events):
     nominal = float(np.median(pos)) if pos.size else 1.0
     info["nominal_dt_s"] = nominal
 
-    # time outliers: blocks of k rows far outside the bracket of agreeing neighbours
+    drop = _time_outlier_rows(t, d, nominal, p)
+    outlier_at = np.empty(0, dtype=np.int64)  # kept row just before each dropped row
+    if drop.any():
+        keep = ~drop
+        outlier_at = np.maximum(np.cumsum(keep)[np.flatnonzero(drop)] - 1, 0)
+        t, line = t[keep], line[keep]
+        cols = {k: v[keep] for k, v in cols.items()}
+        n = t.size
+        if n < 3:
+            ev.add("time_outliers_dropped", t[outlier_at])
+            return t, line, cols, info
+        d = np.diff(t)
+
+    back_step = _backward_clock_steps(t, d, p)
+    fwd_step = _forward_clock_steps(t, d, cols, nominal, p)
+    step = back_step | fwd_step
+    info["clock_steps_backward"] = int(back_step.sum())
+    info["clock_steps_forward"] = int(fwd_step.sum())
+    if step.any():
+        t, rows, corr = _shift_before_clock_steps(t, step, nominal)
+        info["clock_step_corrections_s"] = [float(c) for c in corr[:20]]
+        ev.add("clock_steps", t[rows])
+    ev.add("time_outliers_dropped", t[outlier_at])
+    return t, line, cols, info
+
+
+def _time_outlier_rows(t: np.ndarray, d: np.ndarray, nominal: float, p: CleanParams) -> np.ndarray:
+    """Rows of junk timestamps: blocks of at most ``time_outlier_max_rows`` rows whose
+    times lie far outside the bracket of their two neighbours, while the neighbours
+    agree with each other (``d = diff(t)``, ``nominal`` the median positive step)."""
+    n = t.size
     drop = np.zeros(n, dtype=bool)
     for k in range(1, p.time_outlier_max_rows + 1):
         if n < k + 2:
@@ -439,82 +470,87 @@ def _repair_time(t, line, cols, p: CleanParams, ev: _Events):
         hit = i[agree & outside]
         for j in range(k):
             drop[hit + j] = True
-    outlier_at = np.empty(0, dtype=np.int64)  # kept row just before each dropped row
-    if drop.any():
-        keep = ~drop
-        outlier_at = np.maximum(np.cumsum(keep)[np.flatnonzero(drop)] - 1, 0)
-        t, line = t[keep], line[keep]
-        cols = {k: v[keep] for k, v in cols.items()}
-        n = t.size
-        if n < 3:
-            ev.add("time_outliers_dropped", t[outlier_at])
-            return t, line, cols, info
-        d = np.diff(t)
+    return drop
 
-    # backward clock steps: the log overlaps itself after the jump
-    i = np.arange(1, n)
-    jump = d  # d[i-1] = t[i] - t[i-1]
+
+def _backward_clock_steps(t: np.ndarray, d: np.ndarray, p: CleanParams) -> np.ndarray:
+    """Steps (``d[i-1] = t[i] - t[i-1]``) where the clock was set back: a backward jump
+    of more than ``clock_step_min_s`` and at most ``max_clock_step_s`` after which the
+    next row is still before the previous one (the log overlaps itself)."""
     nxt_before_prev = np.concatenate((t[2:] < t[:-2], [True]))  # t[i+1] < t[i-1]
-    back_step = (-jump > p.clock_step_min_s) & (-jump <= p.max_clock_step_s) & nxt_before_prev
+    return (-d > p.clock_step_min_s) & (-d <= p.max_clock_step_s) & nxt_before_prev
 
-    # forward clock steps: motion on both sides, positions moved by about one tick
-    fwd_cand = (jump > max(p.clock_step_min_s, 3 * nominal)) & (jump <= p.max_clock_step_s)
+
+def _forward_clock_steps(t: np.ndarray, d: np.ndarray, cols: dict, nominal: float, p: CleanParams) -> np.ndarray:
+    """Steps where the clock jumped forward: a jump of at most ``max_clock_step_s``
+    while the vehicle moves at >= ``clock_moving_mps`` on both sides and the positions
+    (or the odometer) across the jump moved by about one tick, not by the jump."""
+    n = t.size
+    i = np.arange(1, n)
+    fwd_cand = (d > max(p.clock_step_min_s, 3 * nominal)) & (d <= p.max_clock_step_s)
     fwd_step = np.zeros(n - 1, dtype=bool)
-    if fwd_cand.any():
-        spd = np.full(n, np.nan)
-        for name in ("gps_speed_mps", "wheel_speed_mps"):  # wheel overrides GPS
-            if name in cols:
-                v = cols[name]
-                spd = np.where(np.isfinite(v), v, spd)
-        spd_ok = np.isfinite(spd)
-        sb = _last_valid_index(spd_ok)
-        sa = _next_valid_index(spd_ok)
-        ii = i[fwd_cand]
-        jb_s, ja_s = sb[ii - 1], sa[ii]
-        has_v = (jb_s >= 0) & (ii - 1 - jb_s <= 3) & (ja_s < n) & (ja_s - ii <= 3)
-        vb = np.where(has_v, spd[np.clip(jb_s, 0, n - 1)], np.nan)
-        va = np.where(has_v, spd[np.clip(ja_s, 0, n - 1)], np.nan)
-        moving = (np.minimum(vb, va) >= p.clock_moving_mps)
-        disp = np.full(ii.size, np.nan)
-        extra = np.full(ii.size, np.nan)  # time within the two sides [s]
-        if "lat_deg" in cols and "lon_deg" in cols:
-            lat, lon = cols["lat_deg"], cols["lon_deg"]
-            fix = _valid_fix(lat, lon, cols.get("gps_hdop"), p)
-            fb, fa = _last_valid_index(fix), _next_valid_index(fix)
-            jb, ja = fb[ii - 1], fa[ii]
-            ok = (jb >= 0) & (ii - 1 - jb <= 3) & (ja < n) & (ja - ii <= 3)
-            jb, ja = np.clip(jb, 0, n - 1), np.clip(ja, 0, n - 1)
-            dd = local_distance_m(lat[jb], lon[jb], lat[ja], lon[ja])
-            disp = np.where(ok, dd, disp)
-            extra = np.where(ok, (t[ii - 1] - t[jb]) + (t[ja] - t[ii]), extra)
-        if "odometer_m" in cols:
-            odo = cols["odometer_m"]
-            fo = np.isfinite(odo)
-            ob, oa = _last_valid_index(fo), _next_valid_index(fo)
-            jb, ja = ob[ii - 1], oa[ii]
-            ok = (jb >= 0) & (ii - 1 - jb <= 3) & (ja < n) & (ja - ii <= 3) & ~np.isfinite(disp)
-            jb, ja = np.clip(jb, 0, n - 1), np.clip(ja, 0, n - 1)
-            disp = np.where(ok, np.abs(odo[ja] - odo[jb]), disp)
-            extra = np.where(ok, (t[ii - 1] - t[jb]) + (t[ja] - t[ii]), extra)
-        vmax, vmin = np.maximum(vb, va), np.minimum(vb, va)
-        one_tick = disp <= 2 * vmax * (extra + nominal) + p.gps_jump_tolerance_m
-        not_gap = disp < 0.5 * vmin * (extra + jump[ii - 1])
-        fwd_step[ii - 1] = moving & one_tick & not_gap
+    if not fwd_cand.any():
+        return fwd_step
+    spd = np.full(n, np.nan)
+    for name in ("gps_speed_mps", "wheel_speed_mps"):  # wheel overrides GPS
+        if name in cols:
+            v = cols[name]
+            spd = np.where(np.isfinite(v), v, spd)
+    spd_ok = np.isfinite(spd)
+    sb = _last_valid_index(spd_ok)
+    sa = _next_valid_index(spd_ok)
+    ii = i[fwd_cand]
+    jb_s, ja_s = sb[ii - 1], sa[ii]
+    has_v = (jb_s >= 0) & (ii - 1 - jb_s <= 3) & (ja_s < n) & (ja_s - ii <= 3)
+    vb = np.where(has_v, spd[np.clip(jb_s, 0, n - 1)], np.nan)
+    va = np.where(has_v, spd[np.clip(ja_s, 0, n - 1)], np.nan)
+    moving = (np.minimum(vb, va) >= p.clock_moving_mps)
+    disp = np.full(ii.size, np.nan)
+    extra = np.full(ii.size, np.nan)  # time within the two sides [s]
+    if "lat_deg" in cols and "lon_deg" in cols:
+        lat, lon = cols["lat_deg"], cols["lon_deg"]
+        fix = _valid_fix(lat, lon, cols.get("gps_hdop"), p)
+        fb, fa = _last_valid_index(fix), _next_valid_index(fix)
+        jb, ja = fb[ii - 1], fa[ii]
+        ok = (jb >= 0) & (ii - 1 - jb <= 3) & (ja < n) & (ja - ii <= 3)
+        jb, ja = np.clip(jb, 0, n - 1), np.clip(ja, 0, n - 1)
+        dd = local_distance_m(lat[jb], lon[jb], lat[ja], lon[ja])
+        disp = np.where(ok, dd, disp)
+        extra = np.where(ok, (t[ii - 1] - t[jb]) + (t[ja] - t[ii]), extra)
+    if "odometer_m" in cols:
+        odo = cols["odometer_m"]
+        fo = np.isfinite(odo)
+        ob, oa = _last_valid_index(fo), _next_valid_index(fo)
+        jb, ja = ob[ii - 1], oa[ii]
+        ok = (jb >= 0) & (ii - 1 - jb <= 3) & (ja < n) & (ja - ii <= 3) & ~np.isfinite(disp)
+        jb, ja = np.clip(jb, 0, n - 1), np.clip(ja, 0, n - 1)
+        disp = np.where(ok, np.abs(odo[ja] - odo[jb]), disp)
+        extra = np.where(ok, (t[ii - 1] - t[jb]) + (t[ja] - t[ii]), extra)
+    vmax, vmin = np.maximum(vb, va), np.minimum(vb, va)
+    one_tick = disp <= 2 * vmax * (extra + nominal) + p.gps_jump_tolerance_m
+    not_gap = disp < 0.5 * vmin * (extra + d[ii - 1])
+    fwd_step[ii - 1] = moving & one_tick & not_gap
+    return fwd_step
 
-    step = back_step | fwd_step
-    info["clock_steps_backward"] = int(back_step.sum())
-    info["clock_steps_forward"] = int(fwd_step.sum())
-    if step.any():
-        rows = i[step]
-        corr = np.zeros(n)
-        corr[rows] = (t[rows] - nominal) - t[rows - 1]
-        rev = np.cumsum(corr[::-1])[::-1]  # sum over steps at or after each row
-        offset = np.concatenate((rev[1:], [0.0]))  # steps strictly after the row
-        t = t + offset
-        info["clock_step_corrections_s"] = [float(c) for c in corr[rows][:20]]
-        ev.add("clock_steps", t[rows])
-    ev.add("time_outliers_dropped", t[outlier_at])
-    return t, line, cols, info
+
+def _shift_before_clock_steps(t: np.ndarray, step: np.ndarray, nominal: float):
+    """Correct clock steps (``step[i-1]``: between rows i-1 and i) keeping file order:
+    every row before a step is shifted so that the step becomes one ``nominal`` tick
+    (the clock after a correction is right; steps compose). Returns the shifted times,
+    the rows after each step and each step's correction [s]."""
+    n = t.size
+    rows = np.arange(1, n)[step]
+    corr = np.zeros(n)
+    corr[rows] = (t[rows] - nominal) - t[rows - 1]
+    rev = np.cumsum(corr[::-1])[::-1]  # sum over steps at or after each row
+    offset = np.concatenate((rev[1:], [0.0]))  # steps strictly after the row
+    return t + offset, rows, corr[rows]
+
+
+def _sort_by_time(t, line, cols):
+    """Rows stably sorted by time (file order among equal times)."""
+    order = np.argsort(t, kind="stable")
+    return t[order], line[order], {k: v[order] for k, v in cols.items()}
 
 
 def _dedupe(t, line, cols, ev: _Events):
@@ -616,7 +652,8 @@ class _Fixes:
 
 
 def _clean_gps(t, cols, moving, p: CleanParams, ev: _Events) -> tuple[_Fixes, np.ndarray]:
-    """Clean GPS fixes; returns the fixes and a per-row 'stale fix' mask."""
+    """Clean GPS fixes (step 3 of the module docstring): invalid, then stale, then
+    jumping fixes rejected. Returns the fixes and a per-row 'stale fix' mask."""
     n = t.size
     empty = _Fixes(*(np.empty(0) for _ in range(5)))
     stale_rows = np.zeros(n, dtype=bool)
@@ -628,35 +665,53 @@ def _clean_gps(t, cols, moving, p: CleanParams, ev: _Events) -> tuple[_Fixes, np
     ev.add("gps_rejected_invalid", t[carried & ~valid])
     f = np.flatnonzero(valid)
     if f.size > 1:
-        rep = (lat[f[1:]] == lat[f[:-1]]) & (lon[f[1:]] == lon[f[:-1]]) & moving[f[1:]]
-        stale_rows[f[1:][rep]] = True
-        ev.add("gps_rejected_stale", t[f[1:][rep]])
-        f = f[np.concatenate(([True], ~rep))]
+        f, stale = _drop_stale_fixes(f, lat, lon, moving)
+        stale_rows[stale] = True
+        ev.add("gps_rejected_stale", t[stale])
     step_m = np.empty(0)
     if f.size > 1:
-        dist = local_distance_m(lat[f[:-1]], lon[f[:-1]], lat[f[1:]], lon[f[1:]])
-        jump = dist > p.max_speed_mps * np.diff(t[f]) + p.gps_jump_tolerance_m
-        if jump.any():
-            run = np.concatenate(([0], np.cumsum(jump)))
-            size = np.bincount(run)
-            small = size <= p.gps_outlier_max_fixes
-            if not small.all():
-                bad = small[run]
-                ev.add("gps_rejected_jump", t[f[bad]])
-                f = f[~bad]
-                if f.size > 1:
-                    dist = local_distance_m(lat[f[:-1]], lon[f[:-1]], lat[f[1:]], lon[f[1:]])
-                    jump = dist > p.max_speed_mps * np.diff(t[f]) + p.gps_jump_tolerance_m
-            if f.size > 1:
-                ev.add("gps_unresolved_jumps", t[f[1:][jump]])
-        if f.size > 1:
-            step_m = dist
+        f, step_m = _drop_gps_jumps(f, t, lat, lon, p, ev)
     fixes = _Fixes(t[f], lat[f], lon[f], np.empty(0), np.empty(0), step_m)
     if "gps_alt_m" in cols:
         alt = cols["gps_alt_m"][f]
         ok = np.isfinite(alt) & (alt > -500) & (alt < 9000)
         fixes.alt_t, fixes.alt = fixes.t[ok], alt[ok]
     return fixes, stale_rows
+
+
+def _drop_stale_fixes(f: np.ndarray, lat, lon, moving) -> tuple[np.ndarray, np.ndarray]:
+    """Fix rows ``f`` without the stale ones (exactly the previous fix repeated while
+    the vehicle moves: a logger repeating its last value), and the stale rows."""
+    rep = (lat[f[1:]] == lat[f[:-1]]) & (lon[f[1:]] == lon[f[:-1]]) & moving[f[1:]]
+    return f[np.concatenate(([True], ~rep))], f[1:][rep]
+
+
+def _drop_gps_jumps(f: np.ndarray, t, lat, lon, p: CleanParams, ev: _Events) -> tuple[np.ndarray, np.ndarray]:
+    """Fix rows ``f`` (at least two) without outliers, and the distance between
+    consecutive kept fixes [m].
+
+    Consecutive fixes farther apart than ``max_speed_mps * dt + gps_jump_tolerance_m``
+    cut the fixes into runs; runs of at most ``gps_outlier_max_fixes`` are rejected
+    (``gps_rejected_jump``) unless every run is that short; jumps left between kept
+    fixes are counted (``gps_unresolved_jumps``)."""
+    dist = local_distance_m(lat[f[:-1]], lon[f[:-1]], lat[f[1:]], lon[f[1:]])
+    jump = dist > p.max_speed_mps * np.diff(t[f]) + p.gps_jump_tolerance_m
+    if not jump.any():
+        return f, dist
+    run = np.concatenate(([0], np.cumsum(jump)))
+    size = np.bincount(run)
+    small = size <= p.gps_outlier_max_fixes
+    if not small.all():
+        bad = small[run]
+        ev.add("gps_rejected_jump", t[f[bad]])
+        f = f[~bad]
+        if f.size > 1:
+            dist = local_distance_m(lat[f[:-1]], lon[f[:-1]], lat[f[1:]], lon[f[1:]])
+            jump = dist > p.max_speed_mps * np.diff(t[f]) + p.gps_jump_tolerance_m
+    if f.size > 1:
+        ev.add("gps_unresolved_jumps", t[f[1:][jump]])
+        return f, dist
+    return f, np.empty(0)
 
 
 def _speed_rows(t, cols, name, p: CleanParams, ev: _Events) -> np.ndarray | None:
@@ -717,19 +772,36 @@ def _row_speed(t, cols, p: CleanParams, ev: _Events):
 # ------------------------------------------------------------------------ segmentation
 
 
+_SPLIT_REASONS = ("start", "ignition", "gap", "speed_gap", "long_stop")
+
+
 def _segment(ts, vs, on, p: CleanParams):
-    """Split the speed rows (times ts, speeds vs, ignition on) into trips.
+    """Split the speed rows (times ts, speeds vs, ignition on) into trips (step 5 of
+    the module docstring).
 
     Returns kept row indices (into ts), trip id per kept row, and the reason each trip
     started ('start', 'ignition', 'gap', 'speed_gap', 'long_stop')."""
     prev_on = np.concatenate(([False], on[:-1]))
     keep = on | prev_on  # the first "off" row ends the trip before it
     idx = np.flatnonzero(keep)
-    tt, vv, oo = ts[idx], vs[idx], on[idx]
-    k = idx.size
-    reason = np.zeros(k, dtype=np.int8)  # 0 none, 1 ignition, 2 gap, 3 speed_gap, 4 long_stop
-    if k == 0:
+    if idx.size == 0:
         return idx, np.zeros(0, dtype=np.int64), []
+    tt, vv, oo = ts[idx], vs[idx], on[idx]
+    reason = _split_points(tt, vv, oo, idx, p)
+    idx, reason = _split_long_stops(tt, vv, idx, reason, p)
+    trip_id = np.cumsum(reason > 0)
+    starts = np.concatenate(([0], np.flatnonzero(reason > 0)))
+    start_reasons = [_SPLIT_REASONS[int(reason[s])] if s > 0 else "start" for s in starts]
+    return idx, trip_id, start_reasons
+
+
+def _split_points(tt, vv, oo, idx, p: CleanParams) -> np.ndarray:
+    """Per kept row, why a trip starts there (an index into :data:`_SPLIT_REASONS`, 0
+    for none): the ignition turned on (or came back after dropped rows), no speed for
+    more than ``gap_s``, or a hole over ``max_fill_s`` with the vehicle moving at either
+    end (a hole between two standstill rows is a stop)."""
+    k = idx.size
+    reason = np.zeros(k, dtype=np.int8)
     dt = np.diff(tt)
     ign = np.concatenate(([False], oo[1:] & (~oo[:-1] | (np.diff(idx) > 1))))
     st = vv <= p.standstill_mps
@@ -738,24 +810,36 @@ def _segment(ts, vs, on, p: CleanParams):
     reason[sgap] = 3
     reason[gap] = 2
     reason[ign] = 1
-    brk = reason > 0
-    # long stops: standstill runs (not crossing a break) longer than stop_s
-    first, last = _runs(st, brk)
+    return reason
+
+
+def _split_long_stops(tt, vv, idx, reason, p: CleanParams):
+    """Standstill runs (not crossing a split) lasting more than ``stop_s`` end their
+    trip where the stop starts; the next starts where it ends, and the rows inside are
+    dropped. Returns the kept ``idx`` and ``reason``."""
+    k = idx.size
+    st = vv <= p.standstill_mps
+    first, last = _runs(st, reason > 0)
     long_ = (tt[last] - tt[first]) > p.stop_s
-    if long_.any():
-        f, l = first[long_], last[long_]
-        diff = np.zeros(k + 1, dtype=np.int64)
-        np.add.at(diff, f + 1, 1)
-        np.add.at(diff, l, -1)
-        interior = np.cumsum(diff)[:k] > 0
-        reason[l[reason[l] == 0]] = 4
-        sel = ~interior
-        idx, reason = idx[sel], reason[sel]
-    trip_id = np.cumsum(reason > 0)
-    names = ["start", "ignition", "gap", "speed_gap", "long_stop"]
-    starts = np.concatenate(([0], np.flatnonzero(reason > 0)))
-    start_reasons = [names[int(reason[s])] if s > 0 else "start" for s in starts]
-    return idx, trip_id, start_reasons
+    if not long_.any():
+        return idx, reason
+    f, l = first[long_], last[long_]
+    diff = np.zeros(k + 1, dtype=np.int64)
+    np.add.at(diff, f + 1, 1)
+    np.add.at(diff, l, -1)
+    interior = np.cumsum(diff)[:k] > 0
+    reason[l[reason[l] == 0]] = 4
+    sel = ~interior
+    return idx[sel], reason[sel]
+
+
+def _ignition_on(cols: dict, rows: np.ndarray) -> np.ndarray:
+    """Ignition state of ``rows``: the ignition column forward-filled (unknown before its
+    first value = on); all on without the column."""
+    if "ignition" in cols and np.isfinite(cols["ignition"]).any():
+        ign = _ffill(cols["ignition"])
+        return ~(ign[rows] < 0.5)  # NaN before the first value = on
+    return np.ones(rows.size, dtype=bool)
 
 
 # ------------------------------------------------------------------------------ trips
@@ -789,6 +873,205 @@ def _freeze_standstill(v, arrays, p: CleanParams):
     return out, int(st.sum())
 
 
+@dataclass(frozen=True, eq=False)
+class _Log:
+    """The cleaned rows of one log that its trips are cut from: strictly increasing
+    times ``t``, file lines, canonical columns, the cleaned GPS fixes and the repairs."""
+
+    t: np.ndarray
+    line: np.ndarray
+    cols: dict
+    fixes: _Fixes
+    ev: _Events
+
+
+@dataclass(frozen=True, eq=False)
+class _Segment:
+    """The speed rows of one trip (times, speeds, speed source codes) and why it starts
+    and ends."""
+
+    t: np.ndarray
+    v: np.ndarray
+    src: np.ndarray
+    split_before: str
+    split_after: str
+
+
+def _speed_on_grid(q: np.ndarray, seg: _Segment, p: CleanParams) -> tuple[np.ndarray, int]:
+    """Speed at the grid times ``q`` (linear between rows), 0 inside the holes over
+    ``max_fill_s`` that a trip keeps (between two standstill rows by construction:
+    stops); and the number of such holes."""
+    v = np.interp(q, seg.t, seg.v)
+    hole = np.flatnonzero(np.diff(seg.t) > p.max_fill_s)
+    if hole.size:
+        a = np.searchsorted(q, seg.t[hole], "right")
+        b = np.searchsorted(q, seg.t[hole + 1], "left")
+        diff = np.zeros(q.size + 1, dtype=np.int64)
+        np.add.at(diff, a, 1)
+        np.add.at(diff, b, -1)
+        v[np.cumsum(diff)[:-1] > 0] = 0.0
+    return v, int(hole.size)
+
+
+def _trapezoid_distance(q: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Cumulative distance [m] from 0: the trapezoidal integral of speed (the CE
+    model's r_i = (v_i + v_{i+1}) / 2 dt_i)."""
+    return np.concatenate(([0.0], np.cumsum(0.5 * (v[1:] + v[:-1]) * np.diff(q))))
+
+
+def _dropped(start_s: float, duration_s: float, distance_m: float, lines: tuple[int, int], reason: str) -> dict:
+    return _jsonable({
+        "start_utc_s": start_s, "duration_s": duration_s, "distance_m": distance_m,
+        "first_source_line": lines[0], "last_source_line": lines[1], "reason": reason,
+    })
+
+
+def _positions_on_grid(q: np.ndarray, v: np.ndarray, fixes: _Fixes, p: CleanParams):
+    """Positions and GPS altitude at the grid times: fixes interpolated over at most
+    ``gps_max_fill_s`` (dropouts filled), NaN beyond; each stop frozen at the median of
+    its samples. Returns (lat, lon, alt, frozen samples, the raw GPS steps [m] at
+    standstill before freezing, and their step indices)."""
+    lat, lon = _interp_limited(q, fixes.t, fixes.lat, p.gps_max_fill_s, fixes.lon)
+    alt = _interp_limited(q, fixes.alt_t, fixes.alt, p.gps_max_fill_s)
+    still = (v[1:] <= p.standstill_mps) & (v[:-1] <= p.standstill_mps)
+    si = np.flatnonzero(still)
+    raw_still = local_distance_m(lat[si], lon[si], lat[si + 1], lon[si + 1])
+    (lat, lon, alt), frozen = _freeze_standstill(v, [lat, lon, alt], p)
+    return lat, lon, alt, frozen, raw_still, si
+
+
+def _gps_distance_check(lat, lon, dist: np.ndarray, raw_still: np.ndarray, si: np.ndarray) -> dict:
+    """The speed distance against the geodesic length of the GPS track, on the steps
+    where both ends have a position; and the GPS path length that freezing removed."""
+    gps_steps = geodesic_steps_m(lat, lon)
+    okstep = np.isfinite(gps_steps)
+    gps_dist = float(gps_steps[okstep].sum())
+    speed_on_gps = float(np.diff(dist)[okstep].sum())
+    return {
+        "jitter_removed_m": float(np.nansum(raw_still - gps_steps[si])),
+        "distance_gps_m": gps_dist,
+        "distance_ratio_speed_vs_gps": speed_on_gps / gps_dist if gps_dist > 1.0 else None,
+    }
+def _gps_fix_stats(q: np.ndarray, fixes: _Fixes, p: CleanParams) -> tuple[int, int]:
+    """Fixes inside the trip's grid span, and the dropouts among them that were filled
+    (steps over twice the nominal fix interval, up to ``gps_max_fill_s``)."""
+    fix_in = (fixes.t >= q[0]) & (fixes.t <= q[-1])
+    fdt = np.diff(fixes.t[fix_in])
+    if not fdt.size:
+        return int(fix_in.sum()), 0
+    nominal_fix = float(np.median(fdt))
+    return int(fix_in.sum()), int(((fdt > 2 * nominal_fix) & (fdt <= p.gps_max_fill_s)).sum())
+
+
+def _speed_holes_bridged(seg: _Segment, p: CleanParams) -> tuple[int, float]:
+    """Speed holes (steps over twice the nominal row interval, up to ``max_fill_s``)
+    interpolated across: their number and total duration [s]."""
+    dts = np.diff(seg.t)
+    nominal_row = float(np.median(dts)) if dts.size else math.nan
+    bridged = (dts > 2 * nominal_row) & (dts <= p.max_fill_s)
+    return int(bridged.sum()), float(dts[bridged].sum())
+
+
+def _speed_source_share(seg: _Segment) -> tuple[str | None, dict]:
+    """The speed source of most rows (None without rows) and each source's share."""
+    share = {SPEED_SOURCES[c]: float(np.mean(seg.src == c)) for c in range(3) if np.any(seg.src == c)}
+    return (max(share, key=share.get) if share else None), share
+
+
+def _odometer_ratio(log: _Log, lo: int, hi: int, q: np.ndarray, dist: np.ndarray) -> float | None:
+    """Speed distance over odometer distance between the trip's first and last odometer
+    readings inside the grid span (None without two readings or odometer progress)."""
+    if "odometer_m" not in log.cols:
+        return None
+    odo_t = log.t[lo:hi]
+    odo = log.cols["odometer_m"][lo:hi]
+    ok = np.isfinite(odo) & (odo_t >= q[0]) & (odo_t <= q[-1])
+    if ok.sum() < 2:
+        return None
+    o_t, o_v = odo_t[ok], odo[ok]
+    d_odo = float(o_v[-1] - o_v[0])
+    d_spd = float(np.interp(o_t[-1], q, dist) - np.interp(o_t[0], q, dist))
+    return d_spd / d_odo if d_odo > 0 else None
+
+
+def _gross_weight(log: _Log, lo: int, hi: int) -> float | None:
+    """Median of the trip's positive gross-weight readings, or None."""
+    if "gross_weight_kg" not in log.cols:
+        return None
+    w = log.cols["gross_weight_kg"][lo:hi]
+    w = w[np.isfinite(w) & (w > 0)]
+    return float(np.median(w)) if w.size else None
+
+
+def _clean_trip(log: _Log, seg: _Segment, sources: Sequence[EnergySourceLike], p: CleanParams) -> CleanTrip | dict:
+    """One trip from its speed rows (steps 6-9 of the module docstring): a
+    :class:`CleanTrip`, or the dict of a dropped segment (too short)."""
+    lo = int(np.searchsorted(log.t, seg.t[0], "left"))
+    hi = int(np.searchsorted(log.t, seg.t[-1], "right"))
+    row_lines = log.line[lo:hi]
+    lines = (int(row_lines.min()), int(row_lines.max()))
+    q = _grid(seg.t, p.grid_s) if seg.t.size > 1 else np.empty(0)
+    if q.size < 2:
+        return _dropped(float(seg.t[0]), float(seg.t[-1] - seg.t[0]), 0.0, lines, "shorter than one grid step")
+    v, standstill_holes = _speed_on_grid(q, seg, p)
+    dist = _trapezoid_distance(q, v)
+    duration = float(q[-1] - q[0])
+    if duration < p.min_duration_s or dist[-1] < p.min_distance_m:
+        return _dropped(float(q[0]), duration, float(dist[-1]), lines,
+                        f"shorter than {p.min_duration_s:g} s or {p.min_distance_m:g} m")
+    lat, lon, alt, frozen, raw_still, si = _positions_on_grid(q, v, log.fixes, p)
+    gps_check = _gps_distance_check(lat, lon, dist, raw_still, si)
+    n_fixes, dropouts = _gps_fix_stats(q, log.fixes, p)
+    holes_bridged, hole_s = _speed_holes_bridged(seg, p)
+    speed_source, share = _speed_source_share(seg)
+    measured, mq = measure_trip(log.t, log.cols, sources, float(q[0]), float(q[-1]), p.consumption)
+    tq = {
+        "rows": int(hi - lo),
+        "samples": int(q.size),
+        "grid_s": p.grid_s,
+        "split_before": seg.split_before,
+        "split_after": seg.split_after,
+        **log.ev.between(float(seg.t[0]), float(seg.t[-1])),
+        "speed_source": speed_source,
+        "speed_source_share": share,
+        "speed_holes_filled": holes_bridged,
+        "speed_hole_s": hole_s,
+        "standstill_holes_filled": standstill_holes,
+        "gps_fixes": n_fixes,
+        "gps_coverage": float(np.mean(np.isfinite(lat))),
+        "gps_dropouts_filled": dropouts,
+        "gps_alt_coverage": float(np.mean(np.isfinite(alt))) if "gps_alt_m" in log.cols else 0.0,
+        "jitter_frozen_samples": frozen,
+        "jitter_removed_m": gps_check["jitter_removed_m"],
+        "distance_speed_m": float(dist[-1]),
+        "distance_gps_m": gps_check["distance_gps_m"],
+        "distance_ratio_speed_vs_gps": gps_check["distance_ratio_speed_vs_gps"],
+        "distance_ratio_speed_vs_odometer": _odometer_ratio(log, lo, hi, q, dist),
+        "consumption": mq,
+    }
+    return CleanTrip(
+        start_utc_s=float(q[0]),
+        time_s=q - q[0],
+        speed_mps=v,
+        distance_m=dist,
+        lat_deg=lat,
+        lon_deg=lon,
+        gps_alt_m=alt,
+        gross_weight_kg=_gross_weight(log, lo, hi),
+        measured=measured,
+        quality=_jsonable(tq),
+        first_source_line=lines[0],
+        last_source_line=lines[1],
+    )
+
+
+def _require_speed_or_position(cols: dict, path) -> None:
+    if not any(c in cols for c in ("wheel_speed_mps", "gps_speed_mps")) and not (
+        "lat_deg" in cols and "lon_deg" in cols
+    ):
+        raise InputError(path, "no speed or position column (wheel_speed_mps, gps_speed_mps or lat_deg+lon_deg)")
+
+
 def clean_log(
     frame: pd.DataFrame,
     sources: Sequence[EnergySourceLike] = (),
@@ -818,28 +1101,15 @@ def clean_log(
     p = params
     n_in = len(frame)
     t, line, cols, no_time = _load(frame, path)
-    if not any(c in cols for c in ("wheel_speed_mps", "gps_speed_mps")) and not (
-        "lat_deg" in cols and "lon_deg" in cols
-    ):
-        raise InputError(path, "no speed or position column (wheel_speed_mps, gps_speed_mps or lat_deg+lon_deg)")
+    _require_speed_or_position(cols, path)
     ev = _Events()
     t, line, cols, tinfo = _repair_time(t, line, cols, p, ev)
-    order = np.argsort(t, kind="stable")
-    t, line = t[order], line[order]
-    cols = {k: v[order] for k, v in cols.items()}
+    t, line, cols = _sort_by_time(t, line, cols)
     if release_frame:  # the frame's arrays are not needed any more: freed here, not after
         for c in list(frame.columns):
             del frame[c]
     t, line, cols = _dedupe(t, line, cols, ev)
-
-    quality: dict = {
-        "rows_in": n_in,
-        "rows_without_time": no_time,
-        "rows_clean": int(t.size),
-        **tinfo,
-    }
-    trips: list[CleanTrip] = []
-    dropped: list[dict] = []
+    quality: dict = {"rows_in": n_in, "rows_without_time": no_time, "rows_clean": int(t.size), **tinfo}
     if t.size < 2:
         ev.finish()
         quality.update(ev.totals(), trips=0, trips_dropped=0)
@@ -847,145 +1117,22 @@ def clean_log(
 
     v_row, src_row, fixes = _row_speed(t, cols, p, ev)
     ev.finish()
-    has_v = np.isfinite(v_row)
-    rows_v = np.flatnonzero(has_v)
+    rows_v = np.flatnonzero(np.isfinite(v_row))
     ts, vs = t[rows_v], v_row[rows_v]
-    on = np.ones(ts.size, dtype=bool)
-    if "ignition" in cols and np.isfinite(cols["ignition"]).any():
-        ign = _ffill(cols["ignition"])
-        on = ~(ign[rows_v] < 0.5)  # NaN before the first value = on
-    keep_idx, trip_id, start_reasons = _segment(ts, vs, on, p)
+    keep_idx, trip_id, start_reasons = _segment(ts, vs, _ignition_on(cols, rows_v), p)
     n_trips = int(trip_id.max()) + 1 if trip_id.size else 0
     bounds = np.searchsorted(trip_id, np.arange(n_trips + 1))
-    alt_present = "gps_alt_m" in cols
+    log = _Log(t, line, cols, fixes, ev)
+    trips: list[CleanTrip] = []
+    dropped: list[dict] = []
     for j in range(n_trips):
         sel = keep_idx[bounds[j]:bounds[j + 1]]
-        tt, vv, ss = ts[sel], vs[sel], src_row[rows_v[sel]]
-        split_after = start_reasons[j + 1] if j + 1 < n_trips else "end"
-        lo = int(np.searchsorted(t, tt[0], "left"))
-        hi = int(np.searchsorted(t, tt[-1], "right"))
-        lines = line[lo:hi]
-        first_line, last_line = int(lines.min()), int(lines.max())
-        q = _grid(tt, p.grid_s) if tt.size > 1 else np.empty(0)
-        if q.size < 2:
-            dropped.append(_jsonable({
-                "start_utc_s": float(tt[0]), "duration_s": float(tt[-1] - tt[0]),
-                "distance_m": 0.0, "first_source_line": first_line,
-                "last_source_line": last_line, "reason": "shorter than one grid step",
-            }))
-            continue
-        v = np.interp(q, tt, vv)
-        hole = np.flatnonzero(np.diff(tt) > p.max_fill_s)  # standstill holes by construction
-        if hole.size:
-            a = np.searchsorted(q, tt[hole], "right")
-            b = np.searchsorted(q, tt[hole + 1], "left")
-            diff = np.zeros(q.size + 1, dtype=np.int64)
-            np.add.at(diff, a, 1)
-            np.add.at(diff, b, -1)
-            v[np.cumsum(diff)[:-1] > 0] = 0.0
-        dq = np.diff(q)
-        dist = np.concatenate(([0.0], np.cumsum(0.5 * (v[1:] + v[:-1]) * dq)))
-        duration = float(q[-1] - q[0])
-        if duration < p.min_duration_s or dist[-1] < p.min_distance_m:
-            dropped.append(_jsonable({
-                "start_utc_s": float(q[0]), "duration_s": duration,
-                "distance_m": float(dist[-1]), "first_source_line": first_line,
-                "last_source_line": last_line,
-                "reason": f"shorter than {p.min_duration_s:g} s or {p.min_distance_m:g} m",
-            }))
-            continue
-
-        # positions: dropouts filled over gps_max_fill_s, jitter frozen at standstill
-        lat, lon = _interp_limited(q, fixes.t, fixes.lat, p.gps_max_fill_s, fixes.lon)
-        alt = _interp_limited(q, fixes.alt_t, fixes.alt, p.gps_max_fill_s)
-        still = (v[1:] <= p.standstill_mps) & (v[:-1] <= p.standstill_mps)
-        si = np.flatnonzero(still)
-        raw_still = local_distance_m(lat[si], lon[si], lat[si + 1], lon[si + 1])
-        (lat, lon, alt), frozen = _freeze_standstill(v, [lat, lon, alt], p)
-        gps_steps = geodesic_steps_m(lat, lon)
-        okstep = np.isfinite(gps_steps)
-        gps_dist = float(gps_steps[okstep].sum())
-        speed_steps = np.diff(dist)
-        speed_on_gps = float(speed_steps[okstep].sum())
-        # GPS path length that freezing removed (noise at standstill)
-        jitter_removed = float(np.nansum(raw_still - gps_steps[si]))
-        fix_in = (fixes.t >= q[0]) & (fixes.t <= q[-1])
-        ft = fixes.t[fix_in]
-        fdt = np.diff(ft)
-        nominal_fix = float(np.median(fdt)) if fdt.size else math.nan
-        dropouts = (fdt > 2 * nominal_fix) & (fdt <= p.gps_max_fill_s) if fdt.size else np.zeros(0, bool)
-
-        # speed holes bridged
-        dts = np.diff(tt)
-        nominal_row = float(np.median(dts)) if dts.size else math.nan
-        bridged = (dts > 2 * nominal_row) & (dts <= p.max_fill_s)
-        share = {
-            SPEED_SOURCES[c]: float(np.mean(ss == c)) for c in range(3) if np.any(ss == c)
-        }
-        speed_source = max(share, key=share.get) if share else None
-
-        # odometer cross-check
-        odo_ratio = None
-        if "odometer_m" in cols:
-            odo_t = t[lo:hi]
-            odo = cols["odometer_m"][lo:hi]
-            ok = np.isfinite(odo) & (odo_t >= q[0]) & (odo_t <= q[-1])
-            if ok.sum() >= 2:
-                o_t, o_v = odo_t[ok], odo[ok]
-                d_odo = float(o_v[-1] - o_v[0])
-                d_spd = float(np.interp(o_t[-1], q, dist) - np.interp(o_t[0], q, dist))
-                odo_ratio = d_spd / d_odo if d_odo > 0 else None
-
-        gross = None
-        if "gross_weight_kg" in cols:
-            w = cols["gross_weight_kg"][lo:hi]
-            w = w[np.isfinite(w) & (w > 0)]
-            gross = float(np.median(w)) if w.size else None
-
-        measured, mq = measure_trip(t, cols, sources, float(q[0]), float(q[-1]), p.consumption)
-
-        tq = {
-            "rows": int(hi - lo),
-            "samples": int(q.size),
-            "grid_s": p.grid_s,
-            "split_before": start_reasons[j],
-            "split_after": split_after,
-            **ev.between(float(tt[0]), float(tt[-1])),
-            "speed_source": speed_source,
-            "speed_source_share": share,
-            "speed_holes_filled": int(bridged.sum()),
-            "speed_hole_s": float(dts[bridged].sum()),
-            "standstill_holes_filled": int(hole.size),
-            "gps_fixes": int(ft.size),
-            "gps_coverage": float(np.mean(np.isfinite(lat))),
-            "gps_dropouts_filled": int(dropouts.sum()),
-            "gps_alt_coverage": float(np.mean(np.isfinite(alt))) if alt_present else 0.0,
-            "jitter_frozen_samples": frozen,
-            "jitter_removed_m": jitter_removed,
-            "distance_speed_m": float(dist[-1]),
-            "distance_gps_m": gps_dist,
-            "distance_ratio_speed_vs_gps": speed_on_gps / gps_dist if gps_dist > 1.0 else None,
-            "distance_ratio_speed_vs_odometer": odo_ratio,
-            "consumption": mq,
-        }
-        trips.append(
-            CleanTrip(
-                start_utc_s=float(q[0]),
-                time_s=q - q[0],
-                speed_mps=v,
-                distance_m=dist,
-                lat_deg=lat,
-                lon_deg=lon,
-                gps_alt_m=alt,
-                gross_weight_kg=gross,
-                measured=measured,
-                quality=_jsonable(tq),
-                first_source_line=first_line,
-                last_source_line=last_line,
-            )
-        )
+        seg = _Segment(ts[sel], vs[sel], src_row[rows_v[sel]], start_reasons[j],
+                       start_reasons[j + 1] if j + 1 < n_trips else "end")
+        out = _clean_trip(log, seg, sources, p)
+        (trips if isinstance(out, CleanTrip) else dropped).append(out)
     quality.update(ev.totals())
-    splits = {r: start_reasons[1:].count(r) for r in ("ignition", "gap", "speed_gap", "long_stop")}
+    splits = {r: start_reasons[1:].count(r) for r in _SPLIT_REASONS[1:]}
     quality.update(
         splits=splits,
         trips=len(trips),
