@@ -330,7 +330,7 @@ def test_small_caches_evict_and_stay_correct(tmp_path):
         s.max_open = 2
         z = s.sample_xy(x, y, BNG)
         z2 = s.sample_xy(x, y, BNG)
-        assert s.stats.windows_read > 2 * 12 and len(s._open) <= 2
+        assert s.stats.windows_read > 2 * 12 and len(s.windows._open) <= 2
     np.testing.assert_allclose(z, ref_bilinear(big, X0, Y0, 1.0, 1.0, x, y), rtol=0, atol=1e-9)
     np.testing.assert_array_equal(z, z2)
 

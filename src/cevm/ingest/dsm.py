@@ -3,10 +3,16 @@ WGS84 fixes.
 
 :class:`DsmSampler` samples a DSM with bilinear interpolation. The DSM is a GeoTIFF, a
 directory of GeoTIFF tiles, a VRT, or any GDAL name rasterio opens (``/vsicurl/...``,
-``https://...`` to a COG or VRT). Tiles may be in any CRS. Only the windows that hold
-points are read, each once per call, and kept in a small LRU cache across calls.
-:class:`DsmHeaders` are the rasters' headers, read once and handed to workers. Turning
-the samples into a road profile is :mod:`cevm.ingest.elevation`.
+``https://...`` to a COG or VRT). Tiles may be in any CRS. It is made of three parts:
+
+- the :class:`TileIndex`: the rasters' headers (:class:`DsmHeaders`, read once and
+  handed to workers), grouped by CRS, and where each point falls;
+- the :class:`WindowReader`: the windows of the rasters that hold points, read once per
+  call and kept in a small LRU cache across calls;
+- the sampling itself (:meth:`DsmSampler.sample`): the transform of the fixes, and
+  bilinear interpolation between pixel centres, exact across tile seams.
+
+Turning the samples into a road profile is :mod:`cevm.ingest.elevation`.
 """
 
 from __future__ import annotations
@@ -23,7 +29,7 @@ import numpy as np
 
 from cevm.errors import InputError
 
-__all__ = ["DsmHeaders", "DsmSampler", "SamplerStats"]
+__all__ = ["DsmHeaders", "DsmSampler", "SamplerStats", "TileIndex", "WindowReader"]
 
 WGS84 = "EPSG:4326"
 
@@ -259,6 +265,106 @@ class _CrsGroup:
         return out
 
 
+class TileIndex:
+    """Where the DSM's rasters are: their headers grouped by CRS, each group with a
+    bucket index that finds the tile holding a point (the first, in sorted path order,
+    where tiles overlap), and per-tile arrays for vectorised pixel arithmetic. Built
+    from the headers alone; reads nothing."""
+
+    def __init__(self, tiles: Sequence[_Tile]):
+        self.tiles: list[_Tile] = list(tiles)
+        by_crs: dict[str, list[int]] = {}
+        for i, t in enumerate(self.tiles):
+            by_crs.setdefault(t.crs_key, []).append(i)
+        self.groups = [_CrsGroup(k, ids, self.tiles) for k, ids in by_crs.items()]
+        self.group_of_tile = np.empty(len(self.tiles), dtype=np.int64)
+        for gi, grp in enumerate(self.groups):
+            self.group_of_tile[grp.tile_ids] = gi
+        f = lambda attr: np.array([getattr(t, attr) for t in self.tiles], dtype=np.float64)  # noqa: E731
+        self.x0, self.y0, self.a, self.e = f("x0"), f("y0"), f("a"), f("e")
+        self.w = np.array([t.width for t in self.tiles], dtype=np.int64)
+        self.h = np.array([t.height for t in self.tiles], dtype=np.int64)
+
+    def locate(self, x: np.ndarray, y: np.ndarray, crs: str):
+        """The tile holding each point (``x``, ``y`` in ``crs``) and the point in that
+        tile's CRS: ``(tile, px, py, pts)``, for the points ``pts`` inside a tile
+        (``pts`` None: every point, in order). Non-finite points are in no tile."""
+        finite = np.isfinite(x) & np.isfinite(y)
+        if len(self.groups) == 1 and bool(finite.all()):
+            # Common case, no index arrays: one CRS, every fix finite.
+            grp = self.groups[0]
+            px, py = _to_crs(x, y, crs, grp.crs_key)
+            t = grp.locate(px, py)
+            pts = None
+            if not (t >= 0).all():
+                pts = np.flatnonzero(t >= 0)
+                t, px, py = t[pts], px[pts], py[pts]
+            return t, px, py, pts
+        live = np.flatnonzero(finite)
+        tile = np.full(x.size, -1, dtype=np.int64)
+        tx = np.full(x.size, np.nan)
+        ty = np.full(x.size, np.nan)
+        for grp in self.groups:
+            todo = live[tile[live] < 0]
+            if todo.size == 0:
+                break
+            if len(self.groups) > 1:
+                todo = todo[self._in_group_bbox(grp, x[todo], y[todo], crs)]
+            gx, gy = _to_crs(x[todo], y[todo], crs, grp.crs_key)
+            found = grp.locate(gx, gy)
+            hit = found >= 0
+            sel = todo[hit]
+            tile[sel], tx[sel], ty[sel] = found[hit], gx[hit], gy[hit]
+        pts = np.flatnonzero(tile >= 0)
+        return tile[pts], tx[pts], ty[pts], pts
+
+    def pixels_holding(self, tile: np.ndarray, cx: np.ndarray, cy: np.ndarray):
+        """For points (``cx``, ``cy``) in the CRS of ``tile`` (one per point): the tile
+        of that CRS whose pixel area holds each, and the pixel's row and column
+        (``(sel, tile, row, col)`` for the points ``sel`` that some tile holds)."""
+        sels, tiles, rows, cols = [], [], [], []
+        grp = self.group_of_tile[tile]
+        for gi in np.unique(grp).tolist():
+            sel = np.flatnonzero(grp == gi)
+            nt = self.groups[gi].locate(cx[sel], cy[sel])
+            ok = nt >= 0
+            sel, nt = sel[ok], nt[ok]
+            col = np.floor((cx[sel] - self.x0[nt]) / self.a[nt]).astype(np.int64)
+            row = np.floor((cy[sel] - self.y0[nt]) / self.e[nt]).astype(np.int64)
+            sels.append(sel)
+            tiles.append(nt)
+            rows.append(np.clip(row, 0, self.h[nt] - 1))
+            cols.append(np.clip(col, 0, self.w[nt] - 1))
+        if len(sels) == 1:
+            return sels[0], tiles[0], rows[0], cols[0]
+        return tuple(np.concatenate(a) if a else np.empty(0, dtype=np.int64) for a in (sels, tiles, rows, cols))
+
+    @staticmethod
+    def _in_group_bbox(grp: _CrsGroup, x: np.ndarray, y: np.ndarray, crs: str) -> np.ndarray:
+        """Cheap pre-filter: points inside the group's bounding box seen in ``crs``
+        (with a 1 % margin). Everything passes if the box cannot be computed."""
+        if crs not in grp.lonlat_bbox:
+            try:
+                tr = _transformer(grp.crs_key, crs)
+                xmin, ymin, xmax, ymax = tr.transform_bounds(*grp.bbox, densify_pts=21)
+                mx, my = 0.01 * (xmax - xmin), 0.01 * (ymax - ymin)
+                box = (xmin - mx, ymin - my, xmax + mx, ymax + my)
+                grp.lonlat_bbox[crs] = box if all(map(math.isfinite, box)) and xmin <= xmax else None
+            except Exception:  # noqa: BLE001 - a pre-filter only
+                grp.lonlat_bbox[crs] = None
+        box = grp.lonlat_bbox[crs]
+        if box is None:
+            return np.ones(x.size, dtype=bool)
+        return (x >= box[0]) & (x <= box[2]) & (y >= box[1]) & (y <= box[3])
+
+
+def _to_crs(x: np.ndarray, y: np.ndarray, src: str, dst: str) -> tuple[np.ndarray, np.ndarray]:
+    if src == dst:
+        return x, y
+    gx, gy = _transformer(src, dst).transform(x, y)
+    return np.asarray(gx, dtype=np.float64), np.asarray(gy, dtype=np.float64)
+
+
 class _Pool:
     """Cached raster blocks of one shape and dtype: row ``slot`` of ``data`` holds one
     block, C order, ``shape[1]`` pixels per row (blocks at a tile's right or bottom edge
@@ -293,39 +399,25 @@ class _Pool:
         return slot
 
 
-class DsmSampler:
-    """Bilinear lookup of a DSM (one raster, a VRT, or many tiles in any CRSs).
+class WindowReader:
+    """Pixels of the DSM's rasters, read in square windows and cached.
 
-    Open with :meth:`open`; use as a context manager (or call :meth:`close`). Not
-    thread-safe: use one sampler per thread.
-
-    How a lookup works: fixes are transformed with pyproj into each tile CRS (one
-    cached transformer per CRS); a tile index (bounds from the headers, read once when
-    the sampler opens) finds the tile holding each point; points are grouped by square blocks of their tile
-    (``block_px``), and each block is read once (with a one-pixel margin for the
-    bilinear neighbours) and interpolated with numpy. Blocks stay in an LRU cache of
-    ``cache_mb`` megabytes across calls (the blocks of one call stay until it is done),
-    so nothing bigger than a block is ever read for a point and a national mosaic is
-    never loaded. Cached blocks of one shape share one array, so a call gathers its
-    pixels with one fancy index whatever the number of blocks (Python loops run over
-    the distinct blocks of a call, one cache lookup each, never over points).
-
-    Bilinear interpolation is between pixel centres. If any of the four neighbours is
-    nodata or NaN, the point is NaN. Points within half a pixel of a tile's edge take
-    their missing neighbours from the adjacent tile of the same CRS (the pixel whose
-    area holds the neighbour's centre), so seams of a tiled grid interpolate exactly as
-    the mosaic would; with no adjacent tile, or beyond every tile, the point is NaN.
-    Where tiles overlap, the first in sorted path order wins.
+    A raster is read in blocks of ``block_px`` (per tile: the given size, else the
+    raster's own square internal tile size between 128 and 1024 px, else 512), each
+    with a one-pixel margin right and below for the bilinear neighbours, as float
+    (float32 for plain float32 rasters) with NaN for nodata and the raster's scale and
+    offset applied. Blocks stay in an LRU cache of ``cache_bytes`` across calls (the
+    blocks of one :meth:`gather` stay until it is done); cached blocks of one shape
+    share one array (:class:`_Pool`), so a gather fetches its pixels with one fancy
+    index whatever the number of blocks. At most ``max_open`` datasets stay open.
     """
 
-    def __init__(self, tiles: Sequence[_Tile], *, block_px: int | None = None, cache_mb: float = 256.0, max_open: int = 32, label: str = "DSM"):
-        if block_px is not None and not 2 <= block_px < (1 << 20):
-            raise ValueError("block_px must be in [2, 2**20)")
-        self.tiles: list[_Tile] = list(tiles)
-        self.label = label
+    def __init__(self, tiles: Sequence[_Tile], *, block_px: int | None, cache_mb: float, max_open: int,
+                 stats: SamplerStats):
+        self.tiles = list(tiles)
         self.cache_bytes = int(cache_mb * 1e6)
         self.max_open = int(max_open)
-        self.stats = SamplerStats()
+        self.stats = stats
         # Block cache: key (tile << 42 | brow << 21 | bcol) -> (pool, slot, nbytes), LRU
         # order. A block lives in a slot of a pool: one 2-D array per (slot height,
         # width, dtype), one row per slot, so that a lookup gathers from every cached
@@ -335,62 +427,7 @@ class DsmSampler:
         self._pools: list[_Pool] = []
         self._pool_index: dict[tuple[int, int, str], int] = {}
         self._open: OrderedDict[int, object] = OrderedDict()
-        by_crs: dict[str, list[int]] = {}
-        for i, t in enumerate(self.tiles):
-            by_crs.setdefault(t.crs_key, []).append(i)
-        self._groups = [_CrsGroup(k, ids, self.tiles) for k, ids in by_crs.items()]
-        self._group_of_tile = np.empty(len(self.tiles), dtype=np.int64)
-        for gi, grp in enumerate(self._groups):
-            self._group_of_tile[grp.tile_ids] = gi
-        # Per-tile arrays for vectorised pixel arithmetic.
-        f = lambda attr: np.array([getattr(t, attr) for t in self.tiles], dtype=np.float64)  # noqa: E731
-        self._x0, self._y0, self._a, self._e = f("x0"), f("y0"), f("a"), f("e")
-        self._w = np.array([t.width for t in self.tiles], dtype=np.int64)
-        self._h = np.array([t.height for t in self.tiles], dtype=np.int64)
         self._blk = np.array([block_px or (t.block if 128 <= t.block <= 1024 else 512) for t in self.tiles], dtype=np.int64)
-
-    # ---- construction ----------------------------------------------------------------
-
-    @classmethod
-    def open(cls, source: str | os.PathLike | Sequence[str | os.PathLike], *, block_px: int | None = None, cache_mb: float = 256.0) -> DsmSampler:
-        """Open a DSM.
-
-        Parameters
-        ----------
-        source : path, URL or sequence of them
-            A GeoTIFF, a VRT, a directory searched recursively for ``*.tif`` /
-            ``*.tiff`` tiles, or a GDAL name that rasterio opens without it being a
-            local file: ``/vsicurl/https://...``, ``https://...`` (a COG or a VRT),
-            ``/vsizip/...``. Such names are not checked on disk.
-        block_px : int or None, default None
-            Side of the square windows read from a raster [px]. None: the raster's own
-            square internal tile size if it has one between 128 and 1024 px (a COG's
-            256 or 512: a window then decompresses one internal tile, plus the one-pixel
-            margin from the neighbours, which GDAL's block cache keeps), else 512.
-        cache_mb : float, default 256
-            Budget of the block cache [MB]: about 240 float32 (120 float64) windows
-            of 513 x 513 px, i.e. 60 km² of a 1 m DSM, or 200+ km of road.
-
-        Raises
-        ------
-        InputError
-            Missing path, empty directory, unreadable raster, raster without CRS.
-        """
-        names = _list_sources(source)
-        shown = os.fspath(source) if not isinstance(source, (list, tuple)) else None
-        tiles = [_read_header(n, n) for n in names]
-        return cls(tiles, block_px=block_px, cache_mb=cache_mb, label=shown or f"{len(names)} rasters")
-
-    @property
-    def headers(self) -> DsmHeaders:
-        """The rasters' headers (see :class:`DsmHeaders`)."""
-        return DsmHeaders(tuple(self.tiles), self.label)
-
-    @classmethod
-    def from_headers(cls, headers: DsmHeaders, *, block_px: int | None = None, cache_mb: float = 256.0) -> DsmSampler:
-        """A sampler from headers read elsewhere (:attr:`headers`); rasters are opened
-        when first read, so a raster that vanished since is an error then."""
-        return cls(headers.tiles, block_px=block_px, cache_mb=cache_mb, label=headers.label)
 
     def close(self) -> None:
         """Close open datasets and drop the block cache."""
@@ -401,18 +438,6 @@ class DsmSampler:
         self._cached_bytes = 0
         self._pools.clear()
         self._pool_index.clear()
-
-    def __enter__(self) -> DsmSampler:
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self.close()
-
-    def __repr__(self) -> str:
-        crss = ", ".join(g.crs_key[:40] for g in self._groups)
-        return f"DsmSampler({self.label!r}, {len(self.tiles)} tiles, CRS {crss})"
-
-    # ---- raster access -----------------------------------------------------------------
 
     def _dataset(self, tile: int):
         ds = self._open.get(tile)
@@ -489,7 +514,7 @@ class DsmSampler:
             self._pools[pi].free.append(slot)
             self._cached_bytes -= nbytes
 
-    def _gather(self, tile: np.ndarray, row: np.ndarray, col: np.ndarray, quad: bool) -> np.ndarray:
+    def gather(self, tile: np.ndarray, row: np.ndarray, col: np.ndarray, quad: bool) -> np.ndarray:
         """Pixel values at (tile, row, col); with ``quad`` also the right, lower and
         lower-right neighbours (requires row <= height-2, col <= width-2). Returns shape
         (n,) or (4, n): [z(r,c), z(r,c+1), z(r+1,c), z(r+1,c+1)]."""
@@ -524,6 +549,109 @@ class DsmSampler:
                 out[sel] = data[flat]
         return out
 
+
+class DsmSampler:
+    """Bilinear lookup of a DSM (one raster, a VRT, or many tiles in any CRSs).
+
+    Open with :meth:`open`; use as a context manager (or call :meth:`close`). Not
+    thread-safe: use one sampler per thread.
+
+    How a lookup works: fixes are transformed with pyproj into each tile CRS (one
+    cached transformer per CRS); the :class:`TileIndex` (bounds from the headers, read
+    once when the sampler opens) finds the tile holding each point; the
+    :class:`WindowReader` fetches the four neighbour pixels of every point from its
+    cached windows, and they are interpolated with numpy. Nothing bigger than a window
+    is ever read for a point and a national mosaic is never loaded; Python loops run
+    over the distinct windows of a call, one cache lookup each, never over points.
+
+    Bilinear interpolation is between pixel centres. If any of the four neighbours is
+    nodata or NaN, the point is NaN. Points within half a pixel of a tile's edge take
+    their missing neighbours from the adjacent tile of the same CRS (the pixel whose
+    area holds the neighbour's centre), so seams of a tiled grid interpolate exactly as
+    the mosaic would; with no adjacent tile, or beyond every tile, the point is NaN.
+    Where tiles overlap, the first in sorted path order wins.
+    """
+
+    def __init__(self, tiles: Sequence[_Tile], *, block_px: int | None = None, cache_mb: float = 256.0, max_open: int = 32, label: str = "DSM"):
+        if block_px is not None and not 2 <= block_px < (1 << 20):
+            raise ValueError("block_px must be in [2, 2**20)")
+        self.label = label
+        self.stats = SamplerStats()
+        self.index = TileIndex(tiles)
+        self.windows = WindowReader(self.index.tiles, block_px=block_px, cache_mb=cache_mb, max_open=max_open,
+                                    stats=self.stats)
+
+    @property
+    def tiles(self) -> list[_Tile]:
+        """The rasters' headers, in sorted path order."""
+        return self.index.tiles
+
+    @property
+    def max_open(self) -> int:
+        """Datasets kept open at most (least recently used closed first)."""
+        return self.windows.max_open
+
+    @max_open.setter
+    def max_open(self, value: int) -> None:
+        self.windows.max_open = int(value)
+
+    # ---- construction ----------------------------------------------------------------
+
+    @classmethod
+    def open(cls, source: str | os.PathLike | Sequence[str | os.PathLike], *, block_px: int | None = None, cache_mb: float = 256.0) -> DsmSampler:
+        """Open a DSM.
+
+        Parameters
+        ----------
+        source : path, URL or sequence of them
+            A GeoTIFF, a VRT, a directory searched recursively for ``*.tif`` /
+            ``*.tiff`` tiles, or a GDAL name that rasterio opens without it being a
+            local file: ``/vsicurl/https://...``, ``https://...`` (a COG or a VRT),
+            ``/vsizip/...``. Such names are not checked on disk.
+        block_px : int or None, default None
+            Side of the square windows read from a raster [px]. None: the raster's own
+            square internal tile size if it has one between 128 and 1024 px (a COG's
+            256 or 512: a window then decompresses one internal tile, plus the one-pixel
+            margin from the neighbours, which GDAL's block cache keeps), else 512.
+        cache_mb : float, default 256
+            Budget of the block cache [MB]: about 240 float32 (120 float64) windows
+            of 513 x 513 px, i.e. 60 km² of a 1 m DSM, or 200+ km of road.
+
+        Raises
+        ------
+        InputError
+            Missing path, empty directory, unreadable raster, raster without CRS.
+        """
+        names = _list_sources(source)
+        shown = os.fspath(source) if not isinstance(source, (list, tuple)) else None
+        tiles = [_read_header(n, n) for n in names]
+        return cls(tiles, block_px=block_px, cache_mb=cache_mb, label=shown or f"{len(names)} rasters")
+
+    @property
+    def headers(self) -> DsmHeaders:
+        """The rasters' headers (see :class:`DsmHeaders`)."""
+        return DsmHeaders(tuple(self.tiles), self.label)
+
+    @classmethod
+    def from_headers(cls, headers: DsmHeaders, *, block_px: int | None = None, cache_mb: float = 256.0) -> DsmSampler:
+        """A sampler from headers read elsewhere (:attr:`headers`); rasters are opened
+        when first read, so a raster that vanished since is an error then."""
+        return cls(headers.tiles, block_px=block_px, cache_mb=cache_mb, label=headers.label)
+
+    def close(self) -> None:
+        """Close open datasets and drop the block cache."""
+        self.windows.close()
+
+    def __enter__(self) -> DsmSampler:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def __repr__(self) -> str:
+        crss = ", ".join(g.crs_key[:40] for g in self.index.groups)
+        return f"DsmSampler({self.label!r}, {len(self.tiles)} tiles, CRS {crss})"
+
     # ---- lookup --------------------------------------------------------------------------
 
     def sample(self, lon_deg, lat_deg) -> np.ndarray:
@@ -555,41 +683,14 @@ class DsmSampler:
         out = np.full(x.size, np.nan)
         if x.size == 0 or not self.tiles:
             return out
-        finite = np.isfinite(x) & np.isfinite(y)
-        all_live = bool(finite.all())
-        if len(self._groups) == 1 and all_live:
-            # Common case, no index arrays: one CRS, every fix finite.
-            grp = self._groups[0]
-            px, py = self._to_crs(x, y, crs, grp.crs_key)
-            t = grp.locate(px, py)
-            pts = None
-            if not (t >= 0).all():
-                pts = np.flatnonzero(t >= 0)
-                t, px, py = t[pts], px[pts], py[pts]
-        else:
-            live = np.flatnonzero(finite)
-            tile = np.full(x.size, -1, dtype=np.int64)
-            tx = np.full(x.size, np.nan)
-            ty = np.full(x.size, np.nan)
-            for grp in self._groups:
-                todo = live[tile[live] < 0]
-                if todo.size == 0:
-                    break
-                if len(self._groups) > 1:
-                    todo = todo[self._in_group_bbox(grp, x[todo], y[todo], crs)]
-                gx, gy = self._to_crs(x[todo], y[todo], crs, grp.crs_key)
-                found = grp.locate(gx, gy)
-                hit = found >= 0
-                sel = todo[hit]
-                tile[sel], tx[sel], ty[sel] = found[hit], gx[hit], gy[hit]
-            pts = np.flatnonzero(tile >= 0)
-            t, px, py = tile[pts], tx[pts], ty[pts]
+        t, px, py, pts = self.index.locate(x, y, crs)
         if t.size == 0:
             return out
-        w, h = self._w[t], self._h[t]
+        ix = self.index
+        w, h = ix.w[t], ix.h[t]
         # Continuous pixel coordinates with pixel centres at integers.
-        colf = (px - self._x0[t]) / self._a[t] - 0.5
-        rowf = (py - self._y0[t]) / self._e[t] - 0.5
+        colf = (px - ix.x0[t]) / ix.a[t] - 0.5
+        rowf = (py - ix.y0[t]) / ix.e[t] - 0.5
         c0 = np.floor(colf).astype(np.int64)
         r0 = np.floor(rowf).astype(np.int64)
         # Exactly on the last centre row/column: use the cell before it (weight 1).
@@ -598,11 +699,11 @@ class DsmSampler:
         inner = (c0 >= 0) & (c0 <= w - 2) & (r0 >= 0) & (r0 <= h - 2)
         res = np.empty(t.size)
         if inner.all():
-            z = self._gather(t, r0, c0, quad=True)
+            z = self.windows.gather(t, r0, c0, quad=True)
             res[:] = _bilinear(z, colf - c0, rowf - r0)
         else:
             ii = np.flatnonzero(inner)
-            z = self._gather(t[ii], r0[ii], c0[ii], quad=True)
+            z = self.windows.gather(t[ii], r0[ii], c0[ii], quad=True)
             res[ii] = _bilinear(z, colf[ii] - c0[ii], rowf[ii] - r0[ii])
             ee = np.flatnonzero(~inner)
             res[ee] = self._sample_edge(t[ee], colf[ee], rowf[ee])
@@ -611,17 +712,11 @@ class DsmSampler:
         out[pts] = res
         return out
 
-    @staticmethod
-    def _to_crs(x: np.ndarray, y: np.ndarray, src: str, dst: str) -> tuple[np.ndarray, np.ndarray]:
-        if src == dst:
-            return x, y
-        gx, gy = _transformer(src, dst).transform(x, y)
-        return np.asarray(gx, dtype=np.float64), np.asarray(gy, dtype=np.float64)
-
     def _sample_edge(self, t, colf, rowf) -> np.ndarray:
         """Bilinear for points within half a pixel of their tile's edge: each of the four
         neighbour pixel centres (on the point's tile grid) is looked up in whatever tile
         of the same CRS holds it."""
+        ix = self.index
         c0 = np.floor(colf)
         r0 = np.floor(rowf)
         m = t.size
@@ -629,38 +724,12 @@ class DsmSampler:
         dr = np.repeat(np.array([0, 0, 1, 1]), m)
         dc = np.repeat(np.array([0, 1, 0, 1]), m)
         tt = np.tile(t, 4)
-        cx = self._x0[tt] + self._a[tt] * (np.tile(c0, 4) + dc + 0.5)
-        cy = self._y0[tt] + self._e[tt] * (np.tile(r0, 4) + dr + 0.5)
+        cx = ix.x0[tt] + ix.a[tt] * (np.tile(c0, 4) + dc + 0.5)
+        cy = ix.y0[tt] + ix.e[tt] * (np.tile(r0, 4) + dr + 0.5)
         z = np.full(4 * m, np.nan)
-        grp = self._group_of_tile[tt]
-        for gi in np.unique(grp).tolist():
-            sel = np.flatnonzero(grp == gi)
-            nt = self._groups[gi].locate(cx[sel], cy[sel])
-            ok = nt >= 0
-            sel, nt = sel[ok], nt[ok]
-            col = np.floor((cx[sel] - self._x0[nt]) / self._a[nt]).astype(np.int64)
-            row = np.floor((cy[sel] - self._y0[nt]) / self._e[nt]).astype(np.int64)
-            col = np.clip(col, 0, self._w[nt] - 1)
-            row = np.clip(row, 0, self._h[nt] - 1)
-            z[sel] = self._gather(nt, row, col, quad=False)
+        sel, nt, row, col = ix.pixels_holding(tt, cx, cy)
+        z[sel] = self.windows.gather(nt, row, col, quad=False)
         return _bilinear(z.reshape(4, m), colf - c0, rowf - r0)
-
-    def _in_group_bbox(self, grp: _CrsGroup, x: np.ndarray, y: np.ndarray, crs: str) -> np.ndarray:
-        """Cheap pre-filter: points inside the group's bounding box seen in ``crs``
-        (with a 1 % margin). Everything passes if the box cannot be computed."""
-        if crs not in grp.lonlat_bbox:
-            try:
-                tr = _transformer(grp.crs_key, crs)
-                xmin, ymin, xmax, ymax = tr.transform_bounds(*grp.bbox, densify_pts=21)
-                mx, my = 0.01 * (xmax - xmin), 0.01 * (ymax - ymin)
-                box = (xmin - mx, ymin - my, xmax + mx, ymax + my)
-                grp.lonlat_bbox[crs] = box if all(map(math.isfinite, box)) and xmin <= xmax else None
-            except Exception:  # noqa: BLE001 - a pre-filter only
-                grp.lonlat_bbox[crs] = None
-        box = grp.lonlat_bbox[crs]
-        if box is None:
-            return np.ones(x.size, dtype=bool)
-        return (x >= box[0]) & (x <= box[2]) & (y >= box[1]) & (y <= box[3])
 
 
 def _nodata_mask(raw: np.ndarray, nodata: float) -> np.ndarray:
