@@ -1,7 +1,8 @@
 """Cleaning stage of ``cevm ingest``: the canonical log frame of ONE vehicle -> clean trips.
 
-Input: a DataFrame with columns of :data:`cevm.core.trip.CANONICAL_COLUMNS` (``time_s``, UTC
-epoch seconds, and ``source_line`` required; asynchronous fields NaN where a tick carried
+Input: a DataFrame with columns of :data:`cevm.core.trip.CANONICAL_COLUMNS` and
+:data:`cevm.ingest.evidence.EVIDENCE_COLUMNS` (``time_s``, UTC epoch seconds, and
+``source_line`` required; asynchronous fields NaN where a tick carried
 no value), rows in file order. Output: :class:`CleanTrip` segments with time from 0 on a
 regular grid, speed, distance, position and the measured consumption
 (:mod:`cevm.ingest.consumption`), each with a JSON-serialisable ``quality`` dict counting every
@@ -92,6 +93,7 @@ from pyproj import Geod
 from cevm.core.trip import CANONICAL_COLUMNS, Measurement
 from cevm.errors import InputError
 from cevm.ingest.consumption import ConsumptionParams, EnergySourceLike, _interp_limited, measure_trip
+from cevm.ingest.evidence import EVIDENCE_COLUMNS
 
 _GEOD = Geod(ellps="WGS84")
 _WGS84_A_M = 6378137.0
@@ -168,7 +170,10 @@ class CleanTrip:
     ``lat_deg``/``lon_deg`` (WGS84) and ``gps_alt_m`` NaN where unknown;
     ``gross_weight_kg`` median of the trip's readings or None; ``measured`` the measured
     consumption or None; ``first_source_line``/``last_source_line`` the lowest and
-    highest file line of the trip's rows.
+    highest file line of the trip's rows. ``rows`` holds the trip's cleaned readings of
+    the :data:`cevm.ingest.evidence.EVIDENCE_COLUMNS` the log has, at the row times
+    ``rows_t_s`` [s, UTC epoch] from ``consumption.max_gap_s`` before the first sample
+    to as long after the last (for :func:`cevm.ingest.evidence.trip_evidence`).
     """
 
     start_utc_s: float
@@ -183,6 +188,8 @@ class CleanTrip:
     quality: dict
     first_source_line: int
     last_source_line: int
+    rows_t_s: np.ndarray = field(default_factory=lambda: np.empty(0))
+    rows: dict = field(default_factory=dict)
 
     @property
     def duration_s(self) -> float:
@@ -376,7 +383,7 @@ def _load(frame: pd.DataFrame, path) -> tuple[np.ndarray, np.ndarray, dict[str, 
         line = np.arange(1, n + 1, dtype=np.int64)
     cols: dict[str, np.ndarray] = {}
     present = set(frame.columns)
-    for name in CANONICAL_COLUMNS:
+    for name in dict.fromkeys((*CANONICAL_COLUMNS, *EVIDENCE_COLUMNS)):
         if name in ("source_line", "vehicle_id") or name not in present:
             continue
         s = frame[name]
@@ -1025,6 +1032,7 @@ def _clean_trip(log: _Log, seg: _Segment, sources: Sequence[EnergySourceLike], p
     holes_bridged, hole_s = _speed_holes_bridged(seg, p)
     speed_source, share = _speed_source_share(seg)
     measured, mq = measure_trip(log.t, log.cols, sources, float(q[0]), float(q[-1]), p.consumption)
+    rows_t, rows = _evidence_rows(log, float(q[0]), float(q[-1]), p)
     tq = {
         "rows": int(hi - lo),
         "samples": int(q.size),
@@ -1062,7 +1070,21 @@ def _clean_trip(log: _Log, seg: _Segment, sources: Sequence[EnergySourceLike], p
         quality=_jsonable(tq),
         first_source_line=lines[0],
         last_source_line=lines[1],
+        rows_t_s=rows_t,
+        rows=rows,
     )
+
+
+def _evidence_rows(log: _Log, t0: float, t1: float, p: CleanParams) -> tuple[np.ndarray, dict]:
+    """The log's rows from ``consumption.max_gap_s`` before ``t0`` to as long after
+    ``t1``: their times and the evidence columns the log has (copies)."""
+    names = [c for c in EVIDENCE_COLUMNS if c in log.cols]
+    if not names:
+        return np.empty(0), {}
+    w = p.consumption.max_gap_s
+    a = int(np.searchsorted(log.t, t0 - w, "left"))
+    b = int(np.searchsorted(log.t, t1 + w, "right"))
+    return log.t[a:b].copy(), {c: log.cols[c][a:b].copy() for c in names}
 
 
 def _require_speed_or_position(cols: dict, path) -> None:

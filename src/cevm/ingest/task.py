@@ -32,6 +32,7 @@ from cevm.executors import worker_cache
 from cevm.ingest.cleaning import CleanParams, CleanTrip, clean_log
 from cevm.ingest.dsm import DsmHeaders, DsmSampler
 from cevm.ingest.elevation import ElevationParams, trip_elevation
+from cevm.ingest.evidence import EvidenceParams, trip_evidence
 from cevm.ingest.profiles import Profile
 from cevm.ingest.reading import ReadLimits, read_log
 from cevm.store import trip_profile_blob
@@ -46,6 +47,7 @@ class IngestOptions:
     profiles_dir: str | None = None  # extra profiles directory (besides configs/loggers)
     clean: CleanParams = field(default_factory=CleanParams)
     elevation: ElevationParams = field(default_factory=ElevationParams)
+    evidence: EvidenceParams = field(default_factory=EvidenceParams)
     cr0: float = CR0_DEFAULT
     force: bool = False  # re-ingest files even when unchanged
     limits: ReadLimits = field(default_factory=ReadLimits)  # bounds on each file (size, gzip expansion, rows)
@@ -84,11 +86,16 @@ def file_sha256(path: Path) -> str:
 
 
 def _trip_from_clean(ct: CleanTrip, *, vehicle_id: str, path: Path, sha256: str, index: int,
-                     sampler: DsmSampler | None, params: ElevationParams, repairs: list[str]) -> Trip:
+                     sampler: DsmSampler | None, options: IngestOptions, repairs: list[str]) -> Trip:
+    """A :class:`Trip` from a clean trip: road elevation, the evidence fields
+    (:func:`cevm.ingest.evidence.trip_evidence`) and the quality of both."""
     gps_alt = ct.gps_alt_m if np.isfinite(ct.gps_alt_m).any() else None
-    elev = trip_elevation(ct.distance_m, ct.lon_deg, ct.lat_deg, gps_alt, sampler, params)
+    elev = trip_elevation(ct.distance_m, ct.lon_deg, ct.lat_deg, gps_alt, sampler, options.elevation)
+    evidence, evidence_q = trip_evidence(ct.start_utc_s + ct.time_s, ct.speed_mps, ct.rows_t_s, ct.rows,
+                                         options.clean.standstill_mps, options.evidence)
     quality = dict(ct.quality)
     quality["elevation"] = elev.quality()
+    quality["evidence"] = evidence_q
     quality["source_lines"] = [ct.first_source_line, ct.last_source_line]
     if repairs:
         quality["read_repairs"] = list(repairs)
@@ -109,6 +116,7 @@ def _trip_from_clean(ct: CleanTrip, *, vehicle_id: str, path: Path, sha256: str,
         measured=ct.measured,
         gross_weight_kg=ct.gross_weight_kg,
         quality=quality,
+        **evidence,
     )
 
 
@@ -158,7 +166,7 @@ def process_file(
                 t0 = time.perf_counter()
                 trip = _trip_from_clean(
                     ct, vehicle_id=log.vehicle_id, path=path, sha256=sha, index=len(trips),
-                    sampler=sampler, params=options.elevation, repairs=log.repairs,
+                    sampler=sampler, options=options, repairs=log.repairs,
                 )
                 t1 = time.perf_counter()
                 vec = drive_cycle_vector(trip.time_s, trip.speed_mps, trip.elevation_m, cr0=options.cr0)
