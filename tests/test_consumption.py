@@ -135,7 +135,11 @@ def test_counter_quantisation_uncertainty_is_q_over_sqrt6():
     m, q = measure_trip(t, {"total_fuel_l": c}, [src], 0.0, 1000.0)
     assert m.value == pytest.approx(3.0)
     assert m.resolution == 0.5
-    assert m.uncertainty == pytest.approx(0.5 / math.sqrt(6), rel=1e-12)  # 0.204 l: 7 %
+    # quantisation 0.5 / sqrt(6) = 0.204 l (7 %); with the counter kind's default
+    # systematic 2 % of 3 l = 0.06 l in quadrature
+    assert q["sources"][0]["random_uncertainty"] == pytest.approx(0.5 / math.sqrt(6), rel=1e-12)
+    assert q["sources"][0]["systematic_uncertainty"] == pytest.approx(0.06, rel=1e-12)
+    assert m.uncertainty == pytest.approx(math.sqrt(0.5**2 / 6 + 0.06**2), rel=1e-12)
     assert q["source"] == "total_fuel_l"
 
 
@@ -162,7 +166,8 @@ def test_counter_reset_continues_from_new_base():
     # the lost step adds the mean rate x its duration to the uncertainty
     mean_rate = 8.0 / 170.0
     expected = math.sqrt(0.5**2 / 6 + (mean_rate * 10.0) ** 2)
-    assert est.uncertainty == pytest.approx(expected, rel=1e-12)
+    assert est.random_uncertainty == pytest.approx(expected, rel=1e-12)
+    assert est.uncertainty == pytest.approx(math.hypot(expected, 0.02 * 8.0), rel=1e-12)  # + 2 % of 8 l
 
 
 def test_counter_wrap_without_modulus_counts_as_reset():
@@ -220,7 +225,8 @@ def test_soc_times_capacity():
     assert m.kind == "energy_j"
     assert m.value == pytest.approx(0.20 * cap)  # 7.2 MJ = 2 kWh
     assert m.resolution == pytest.approx(0.0001 * cap)  # 3600 J
-    assert m.uncertainty == pytest.approx(0.0001 * cap / math.sqrt(6), rel=1e-9)
+    # quantisation of two readings, and the SoC kind's default systematic 5 % of 2 kWh
+    assert m.uncertainty == pytest.approx(math.hypot(0.0001 * cap / math.sqrt(6), 0.05 * 0.20 * cap), rel=1e-9)
 
 
 def test_soc_uses_first_and_last_valid_readings():
@@ -261,8 +267,11 @@ def test_most_trusted_valid_source_is_chosen_and_others_cross_checked():
     m, q = measure_trip(t, cols, sources, 0.0, 1000.0)
     assert m.source == "flowmeter_fuel_lps"
     assert m.value == pytest.approx(2.0)
-    assert "fuel_rate_lps vs flowmeter_fuel_lps: +3.0 %" in q["cross_checks"]
-    assert "total_fuel_l vs flowmeter_fuel_lps: -25.0 %" in q["cross_checks"]
+    # defaults 2 %: flow meter 0.04 l, ECU rate 0.0412 l, counter sqrt(0.5^2/6 + 0.03^2)
+    # = 0.2063 l; 0.06 / hypot(0.04, 0.0412) = 1.0 sigma, 0.5 / hypot(0.04, 0.2063) = 2.4
+    assert "fuel_rate_lps vs flowmeter_fuel_lps: +3.0 % (1.0 sigma)" in q["cross_checks"]
+    assert "total_fuel_l vs flowmeter_fuel_lps: -25.0 % (2.4 sigma)" in q["cross_checks"]
+    assert q["warnings"] == []
     assert len(q["sources"]) == 3
 
 
@@ -273,6 +282,90 @@ def test_invalid_trusted_source_falls_back_to_next():
     assert m.source == "fuel_rate_lps"
     flow = next(s for s in q["sources"] if s["source"] == "flowmeter_fuel_lps")
     assert flow["valid"] is False and flow["reason"]
+
+
+@dataclass(frozen=True)
+class AccSrc(Src):
+    accuracy_pct: float | None = None
+
+
+def _shipped_srf_sources(*columns):
+    """The shipped srf profile's energy sources of ``columns`` (as the reader makes them)."""
+    from cevm.ingest.profiles import load_profiles
+    from cevm.ingest.reading import EnergySource
+
+    specs = {e.column: e for e in load_profiles()["srf"].energy}
+    return [EnergySource(e.column, e.kind, e.quantity, e.resolution, e.priority, e.capacity_j, "", e.modulus,
+                         e.accuracy_pct) for e in (specs[c] for c in columns)]
+
+
+@pytest.mark.parametrize("energy_kwh, duration_s, chosen", [(2.0, 360.0, "battery_power_w"),
+                                                            (100.0, 7200.0, "total_energy_j")])
+def test_integrated_power_beats_a_coarse_counter_on_a_short_trip_only(energy_kwh, duration_s, chosen):
+    """The shipped srf figures: a 0.1 kWh counter (quantisation 0.1 / sqrt(6) = 0.041
+    kWh, systematic 1 %) and V x I at 1 Hz (systematic 1.005 %). On 2 kWh: 0.020 kWh
+    against hypot(0.041, 0.020) = 0.045: the power. On 100 kWh: 1.005 kWh against
+    hypot(0.041, 1.0) = 1.0008: the counter (they cross at 0.041 / sqrt(1.005^2 - 1) %
+    = 41 kWh), although the counter is the profile's most trusted (priority 1)."""
+    t = np.arange(0.0, duration_s + 1.0)
+    power_w = energy_kwh * 3.6e6 / duration_s
+    q = 0.1 * 3.6e6
+    cols = {
+        "total_energy_j": np.floor((12345.0 * 3.6e6 + power_w * t) / q) * q,
+        "battery_voltage_v": np.full(t.size, 600.0),
+        "battery_current_a": np.full(t.size, power_w / 600.0),
+    }
+    sources = _shipped_srf_sources("total_energy_j", "battery_power_w")
+    m, qual = measure_trip(t, cols, sources, 0.0, duration_s)
+    assert m.source == chosen and qual["chosen_by"] == "least uncertainty"
+    assert {s["source"] for s in qual["sources"] if s["valid"]} == {"total_energy_j", "battery_power_w"}
+    assert qual["warnings"] == []  # the two agree within their uncertainties
+
+
+def test_equal_accuracies_do_not_favour_the_lower_reading():
+    """Two rates of one accuracy differ by 5 %: the more trusted is chosen whichever
+    reads less (their uncertainties are compared at one common value)."""
+    t = np.arange(0.0, 1001.0)
+    sources = [AccSrc("flowmeter_fuel_lps", "rate", "fuel_l", 0.0, 1, accuracy_pct=2.0),
+               AccSrc("fuel_rate_lps", "rate", "fuel_l", 0.0, 2, accuracy_pct=2.0)]
+    for a, b in ((0.002, 0.0019), (0.0019, 0.002)):
+        cols = {"flowmeter_fuel_lps": np.full(t.size, a), "fuel_rate_lps": np.full(t.size, b)}
+        m, _ = measure_trip(t, cols, sources, 0.0, 1000.0)
+        assert m.source == "flowmeter_fuel_lps"
+
+
+def test_more_accurate_source_wins_over_priority():
+    t = np.arange(0.0, 1001.0)
+    sources = [AccSrc("fuel_rate_lps", "rate", "fuel_l", 0.0, 1, accuracy_pct=3.0),
+               AccSrc("flowmeter_fuel_lps", "rate", "fuel_l", 0.0, 2, accuracy_pct=1.0)]
+    cols = {"flowmeter_fuel_lps": np.full(t.size, 0.002), "fuel_rate_lps": np.full(t.size, 0.00201)}
+    m, q = measure_trip(t, cols, sources, 0.0, 1000.0)
+    assert m.source == "flowmeter_fuel_lps"
+    assert m.uncertainty == pytest.approx(0.01 * 2.0)  # 1 % of 2 l, no random part
+    assert q["sources"][1]["accuracy_pct"] == 1.0
+
+
+def test_disagreement_beyond_the_combined_uncertainty_is_a_warning():
+    """1 % sources 10 % apart: 0.2 l / hypot(0.02, 0.022) = 6.7 sigma, a warning; 1 %
+    apart: 0.7 sigma, none."""
+    t = np.arange(0.0, 1001.0)
+    sources = [AccSrc("flowmeter_fuel_lps", "rate", "fuel_l", 0.0, 1, accuracy_pct=1.0),
+               AccSrc("fuel_rate_lps", "rate", "fuel_l", 0.0, 2, accuracy_pct=1.0)]
+    cols = {"flowmeter_fuel_lps": np.full(t.size, 0.002), "fuel_rate_lps": np.full(t.size, 0.0022)}
+    m, q = measure_trip(t, cols, sources, 0.0, 1000.0)
+    assert q["cross_checks"] == ["fuel_rate_lps vs flowmeter_fuel_lps: +10.0 % (6.7 sigma)"]
+    assert len(q["warnings"]) == 1 and "disagrees" in q["warnings"][0] and "+10.0 %" in q["warnings"][0]
+    cols["fuel_rate_lps"] = np.full(t.size, 0.00202)
+    _, q = measure_trip(t, cols, sources, 0.0, 1000.0)
+    assert q["cross_checks"] == ["fuel_rate_lps vs flowmeter_fuel_lps: +1.0 % (0.7 sigma)"] and q["warnings"] == []
+
+
+def test_default_accuracy_by_kind():
+    from cevm.ingest.consumption import DEFAULT_ACCURACY_PCT, accuracy_pct_of
+
+    assert accuracy_pct_of(Src("soc_pct", "soc", "energy_j", 0.01, 1)) == DEFAULT_ACCURACY_PCT["soc"] == 5.0
+    assert accuracy_pct_of(Src("total_fuel_l", "counter", "fuel_l", 0.5, 1)) == 2.0
+    assert accuracy_pct_of(AccSrc("total_fuel_l", "counter", "fuel_l", 0.5, 1, accuracy_pct=0.3)) == 0.3
 
 
 def test_missing_column_and_no_sources():
@@ -327,3 +420,28 @@ def test_battery_power_samples_equal_a_plain_loop(n, seed, share_v, share_i):
                 want_p.append(pk)
     np.testing.assert_array_equal(ts, want_t)
     np.testing.assert_allclose(p, want_p, rtol=1e-12, atol=1e-9)
+
+
+def test_disagreeing_sources_are_a_repair_of_the_ingested_file(tmp_path):
+    """Through the per-file task: a flow meter and an ECU rate 20 % apart (1 % and 3 %
+    declared by the srf profile: 0.3 l / hypot(0.015, 0.054) = 5.4 sigma) are named in
+    the file's repairs, and the trip keeps both estimates."""
+    import pandas as pd
+
+    from cevm.ingest.task import IngestOptions, process_file
+
+    tau = np.arange(0.0, 601.0)
+    times = pd.to_datetime(1.6e9 + tau, unit="s", utc=True).strftime("%Y-%m-%dT%H:%M:%S.000Z")
+    df = pd.DataFrame({"timestamp_utc": times, "fms_wheel_speed_kmh": 36.0,
+                       "flowmeter_fuel_lph": 9.0, "fms_fuel_rate_lph": 10.8})
+    with open(tmp_path / "hgv.csv", "w") as f:
+        f.write("# vehicle_id=HGV-9\n")
+        df.to_csv(f, index=False)
+    out = process_file(tmp_path / "hgv.csv", IngestOptions())
+    assert out.ok, out.error
+    (rec,) = out.trips
+    assert rec.measured.source == "flowmeter_fuel_lps" and rec.measured.value == pytest.approx(1.5)
+    assert [s["source"] for s in rec.quality["consumption"]["sources"] if s["valid"]] == [
+        "flowmeter_fuel_lps", "fuel_rate_lps"]
+    (warning,) = [r for r in out.repairs if "disagrees" in r]
+    assert rec.trip_id in warning and "+20.0 % (5.4 sigma)" in warning

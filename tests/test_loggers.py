@@ -104,6 +104,16 @@ def test_builtin_profiles_load(profiles):
     assert profiles["portal"].energy[0].resolution == 0.5
 
 
+def test_shipped_energy_sources_declare_their_accuracy(profiles):
+    """Every shipped [[energy]] entry states its systematic uncertainty (issue 15)."""
+    for prof in profiles.values():
+        if prof.path is not None and prof.path.parent.name == "loggers":
+            for e in prof.energy:
+                assert e.accuracy_pct is not None and 0 < e.accuracy_pct < 10, (prof.name, e.column)
+    srf = {e.column: e for e in profiles["srf"].energy}
+    assert srf["flowmeter_fuel_lps"].accuracy_pct < srf["fuel_rate_lps"].accuracy_pct
+
+
 def test_unit_table_and_dimensions_cover_canonical_columns():
     mappable = set(CANONICAL_COLUMNS) - {"time_s", "source_line", "vehicle_id"}
     assert set(CANONICAL_DIMENSIONS) == mappable
@@ -135,6 +145,12 @@ BASE_PROFILE = {
         ({"vehicle": {"source": "column"}}, "vehicle.key"),
         ({"energy": [{"column": "wheel_speed_mps", "kind": "rate", "priority": 1}]}, "energy[0].column"),
         ({"time": {"columns": ["t"], "format": "ISO8601", "date_repair": "dominant"}}, "time.date_repair"),
+        ({"columns": {"wheel_speed_mps": {"source": "v", "unit": "km/h"}, "total_fuel_l": {"source": "f", "unit": "l"}},
+          "energy": [{"column": "total_fuel_l", "kind": "counter", "priority": 1, "accuracy_pct": -1.0}]},
+         "energy[0].accuracy_pct"),
+        ({"columns": {"wheel_speed_mps": {"source": "v", "unit": "km/h"}, "total_fuel_l": {"source": "f", "unit": "l"}},
+          "energy": [{"column": "total_fuel_l", "kind": "counter", "priority": 1, "accuracy_pct": 100.0}]},
+         "energy[0].accuracy_pct"),
     ],
 )
 def test_bad_profile_keys_are_named(tmp_path, patch, key):
@@ -209,7 +225,7 @@ def test_srf_sample(profiles):
     src = {e.column: e for e in log.energy_sources}
     assert set(src) == {"flowmeter_fuel_lps", "total_fuel_l", "fuel_rate_lps"}
     assert src["total_fuel_l"] == EnergySource("total_fuel_l", "counter", "fuel_l", 0.5, 2, None,
-                                               "fms_total_fuel_used_l", 2.0**31)
+                                               "fms_total_fuel_used_l", 2.0**31, 3.0)
     assert src["flowmeter_fuel_lps"].priority == 1
     # all columns float64 except the id and line
     assert str(fr["source_line"].dtype) == "int64"

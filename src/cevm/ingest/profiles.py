@@ -58,6 +58,8 @@ Profile format (all keys; ``[columns]`` entries and ``[[energy]]`` tables repeat
     capacity_unit = "kWh"                # ... in this unit
     modulus = 2147483648                 # counter only: wraps to 0 at this value ...
     modulus_unit = "l"                   # ... in this unit
+    accuracy_pct = 1.0                   # systematic (calibration) uncertainty, 1 sigma, % of
+                                         # the value (default by kind: cevm.ingest.consumption)
     # column may also be "battery_power_w" (rate, W): battery_voltage_v * battery_current_a
 
 Defaults and why: encoding utf-8, separator ',', decimal '.' (the CSV norm); no comment
@@ -242,6 +244,7 @@ class EnergySpec:
     capacity_j: float | None = None
     modulus: float | None = None
     note: str = ""
+    accuracy_pct: float | None = None  # None: the default of its kind (cevm.ingest.consumption)
 
 
 @dataclass(frozen=True)
@@ -298,7 +301,7 @@ _COLUMN_KEYS = {"source", "unit", "map", "missing_values", "required", "negate"}
 
 
 _ENERGY_KEYS = {"column", "kind", "quantity", "resolution", "resolution_unit", "priority", "capacity",
-                "capacity_unit", "modulus", "modulus_unit", "note"}
+                "capacity_unit", "modulus", "modulus_unit", "note", "accuracy_pct"}
 
 
 def _convert_unit(value: float, unit: str, want_dim: str, path: Path | None, key: str, *,
@@ -626,8 +629,11 @@ def _energy_spec(e: Any, key: str, mapped: set[str], k: _Keys) -> EnergySpec:
         if kind != "counter" or not modulus > 0:
             raise k.fail("modulus (> 0) applies to counter sources only", f"{key}.modulus")
         modulus = k.unit(modulus, k.get(e, "modulus_unit", str, _REQUIRED, key), dim, f"{key}.modulus_unit")
+    accuracy = k.get(e, "accuracy_pct", float, None, key)
+    if accuracy is not None and not 0 <= accuracy < 100:
+        raise k.fail("must be >= 0 and < 100 (1-sigma systematic uncertainty, % of the value)", f"{key}.accuracy_pct")
     return EnergySpec(col, kind, quantity, res, prio, cap_j, modulus,  # type: ignore[arg-type]
-                      k.get(e, "note", str, "", key))
+                      k.get(e, "note", str, "", key), accuracy)
 
 
 def _detect_section(t: dict, k: _Keys) -> tuple[str, ...]:

@@ -126,6 +126,9 @@ class EnergySource:
     source_column : the logger's own column name(s), for messages.
     modulus : value at which a counter wraps to 0 (same unit), when the profile knows it
         (the FMS 32-bit fuel counter at 0.5 l per bit: 2**31 l); ``None`` otherwise.
+    accuracy_pct : the profile's systematic (calibration) uncertainty of the source, 1
+        sigma, in % of the value; ``None``: the default of its kind
+        (:data:`cevm.ingest.consumption.DEFAULT_ACCURACY_PCT`).
     """
 
     column: str
@@ -136,6 +139,7 @@ class EnergySource:
     capacity_j: float | None = None
     source_column: str = ""
     modulus: float | None = None
+    accuracy_pct: float | None = None
 
 @dataclass(frozen=True, eq=False)
 class ParsedLog:
@@ -1317,7 +1321,8 @@ def _has_energy_data(e: EnergySpec, arrays: dict[str, np.ndarray]) -> bool:
 def _energy_source(e: EnergySpec, fr: pd.DataFrame, maps: list[ColumnMap]) -> EnergySource:
     cols = VIRTUAL_COLUMNS[e.column][0] if e.column in VIRTUAL_COLUMNS else (e.column,)
     src = "*".join(next(m.source for m in maps if m.canonical == c) for c in cols)
-    return EnergySource(e.column, e.kind, e.quantity, e.resolution, e.priority, e.capacity_j, src, e.modulus)
+    return EnergySource(e.column, e.kind, e.quantity, e.resolution, e.priority, e.capacity_j, src, e.modulus,
+                        e.accuracy_pct)
 
 def _vehicle_from_profile(prof: Profile, path: Path, metadata: dict[str, str], repairs: list[str]) -> str:
     src = prof.vehicle_source

@@ -120,6 +120,14 @@ def _trip_from_clean(ct: CleanTrip, *, vehicle_id: str, path: Path, sha256: str,
     )
 
 
+def trip_warnings(trip: Trip) -> list[str]:
+    """The warnings of a trip's quality (measured sources that disagree, DSM values
+    refused), each naming the trip, for the file's repairs."""
+    q = trip.quality
+    found = [*q.get("consumption", {}).get("warnings", ()), *q.get("elevation", {}).get("elevation_warnings", ())]
+    return [f"trip {trip.trip_id}: {w}" for w in found]
+
+
 def process_file(
     path: str | Path,
     options: IngestOptions,
@@ -155,6 +163,7 @@ def process_file(
         vectors: list[bytes] = []
         blobs: list[bytes] = []
         dropped: list[dict] = []
+        warnings: list[str] = []
         n_rows = 0
         for log in logs:
             n_rows += len(log.frame)
@@ -177,12 +186,13 @@ def process_file(
                 stage["vector"] = stage.get("vector", 0.0) + t2 - t1
                 stage["profile"] = stage.get("profile", 0.0) + time.perf_counter() - t2
                 trips.append(trip.record())
+                warnings.extend(trip_warnings(trip))
         return FileOutcome(
             str(path), sha, size, mtime,
             profile=logs[0].profile if logs else None,
             trips=tuple(trips), vectors=tuple(vectors), profile_blobs=tuple(blobs), n_rows=n_rows,
             n_samples=sum(t.n_samples for t in trips),
-            dropped=tuple(dropped), repairs=tuple(logs[0].repairs) if logs else (),
+            dropped=tuple(dropped), repairs=(*(logs[0].repairs if logs else ()), *warnings),
             stage_s=stage,
         )
     except CevmError as exc:
