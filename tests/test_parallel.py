@@ -301,7 +301,7 @@ def test_process_file_opens_the_workers_dsm_once_not_per_file(tmp_path, cog_dir,
 
     opened = []
     real = ing.open_sampler
-    monkeypatch.setattr(ing, "open_sampler", lambda dsm: opened.append(dsm) or real(dsm))
+    monkeypatch.setattr(ing, "open_sampler", lambda dsm, *a: opened.append(dsm) or real(dsm, *a))
     dsm = f"{cog_dir}/./dsm.vrt"  # a name of its own: nothing cached by other tests
     opts = ing.IngestOptions(dsm=dsm)
     outs = []
@@ -549,10 +549,10 @@ def test_dsm_over_http_range_requests_gives_the_local_elevations(cog_dir, http_r
     assert np.isfinite(want[inside]).all() and np.isnan(want[~inside & ((x < DSM_X0) | (y > DSM_Y1))]).all()
     assert want[inside] == pytest.approx(plane(x, y)[inside], abs=1e-3)  # a plane is bilinear-exact
     for url in (f"{base}/dsm.vrt", f"/vsicurl/{base}/dsm.vrt"):
-        with DsmSampler.open(url) as remote:
+        with DsmSampler.open(url, allow_remote=True) as remote:
             got = remote.sample(lon, lat)
         np.testing.assert_array_equal(got, want)
-    with DsmSampler.open(f"{base}/tile_1_1.tif") as one:  # a single COG by URL
+    with DsmSampler.open(f"{base}/tile_1_1.tif", allow_remote=True) as one:  # a single COG by URL
         got = one.sample(lon, lat)
     in11 = (x > DSM_X0 + 1001) & (x < DSM_X0 + 1999) & (y < DSM_Y1 - 1001) & (y > DSM_Y1 - 1999)
     np.testing.assert_array_equal(got[in11], want[in11])
@@ -563,7 +563,8 @@ def test_dsm_over_http_range_requests_gives_the_local_elevations(cog_dir, http_r
     # an ingest whose workers read the DSM over HTTP stores what the local DSM gives
     local_store, http_store = tmp_path / "local.sqlite", tmp_path / "http.sqlite"
     run("ingest", logs, "--store", local_store, "--dsm", cog_dir / "dsm.vrt", "--workers", "1", "-q")
-    res = run("ingest", logs, "--store", http_store, "--dsm", f"{base}/dsm.vrt", "--workers", "2", "-q")
+    res = run("ingest", logs, "--store", http_store, "--dsm", f"{base}/dsm.vrt", "--workers", "2", "-q",
+              "--allow-remote-dsm")
     assert res.exit_code == 1, res.output  # the junk file
     got, want = store_content(http_store), store_content(local_store)
     assert got == want and len(want["trips"]) == 6

@@ -24,6 +24,9 @@ def ingest(
     dsm: Annotated[
         Optional[str], typer.Option(help="DSM for road elevation: a GeoTIFF, a directory of tiles, a VRT, or a GDAL URL.")
     ] = None,
+    allow_remote_dsm: Annotated[
+        bool, typer.Option(help="Allow a DSM (or VRT sources) that GDAL fetches over a network: URLs, /vsicurl/, /vsis3/ ... (also: CEVM_ALLOW_REMOTE_DSM=1). Off: local GeoTIFFs and VRTs only.")
+    ] = False,
     profile: Annotated[Optional[str], typer.Option(help="Force a logger profile by name (default: detect from the header).")] = None,
     profiles_dir: Annotated[Optional[Path], typer.Option(help="A directory of extra logger profiles (TOML).")] = None,
     force: Annotated[bool, typer.Option(help="Re-ingest files even when unchanged.")] = False,
@@ -80,7 +83,7 @@ def ingest(
 
     limits = ReadLimits(max_file_mb=max_file_mb, max_expansion=max_expansion, max_rows=max_rows)
     options = IngestOptions(dsm=dsm, profile=profile, profiles_dir=str(profiles_dir) if profiles_dir else None,
-                            force=force, limits=limits)
+                            force=force, limits=limits, allow_remote_dsm=True if allow_remote_dsm else None)
     store_path = resolve_store_path(store)
     files, missing = discover(paths)
     if not files:  # nothing to ingest: bad usage, and no store is created for it

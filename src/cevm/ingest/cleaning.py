@@ -46,7 +46,9 @@ The steps, in order (parameters in :class:`CleanParams`):
    positions (distance between consecutive fixes / dt, at the midpoint time). Each
    source is interpolated linearly in time between its own samples, over at most
    ``max_fill_s``; a row takes the first source available. Values outside
-   ``[0, max_speed_mps]`` are rejected. GPS-based speeds below ``standstill_mps`` are set
+   ``[0, max_speed_mps]`` are rejected, and so are spikes: runs of at most
+   ``speed_outlier_max_samples`` readings that a source reaches and leaves faster than
+   ``max_accel_mps2`` (plus ``speed_jump_tolerance_mps``) allows. GPS-based speeds below ``standstill_mps`` are set
    to 0 (GPS speed noise at rest would otherwise accrue distance); wheel speed is kept.
 5. **Trips.** Split (and the rows between dropped) at: ignition off (where an ignition
    column exists; NaN forward-filled, unknown before the first value = on; the first
@@ -123,6 +125,13 @@ class CleanParams:
       enough); longer dropouts stay NaN.
     - ``max_speed_mps = 70``: 252 km/h; faster implied GPS motion is impossible for a
       road vehicle; also bounds speed readings (FMS "not available" 0xFFFF = 256 km/h).
+    - ``max_accel_mps2 = 15``: 1.5 g. Tyre grip limits a road vehicle's acceleration and
+      braking to about 1.0-1.2 g (sports cars on dry asphalt; buses and trucks well
+      under 0.7 g), so a speed reading that jumps faster, and back, is a spike.
+    - ``speed_jump_tolerance_mps = 1``: speed noise allowed on top of the acceleration
+      bound (phone GPS speed at 1 Hz scatters by a few tenths of a m/s).
+    - ``speed_outlier_max_samples = 3``: runs of at most 3 speed readings between two
+      impossible jumps are spikes (rejected); longer runs are kept and the jump reported.
     - ``gps_jump_tolerance_m = 20``: position noise allowed on top of the speed bound
       (a consumer GPS is good to a few metres, 20 m keeps short-dt fixes from tripping).
     - ``gps_outlier_max_fixes = 5``: runs of at most 5 fixes between two jumps are
@@ -148,6 +157,9 @@ class CleanParams:
     max_fill_s: float = 15.0
     gps_max_fill_s: float = 30.0
     max_speed_mps: float = 70.0
+    max_accel_mps2: float = 15.0
+    speed_jump_tolerance_mps: float = 1.0
+    speed_outlier_max_samples: int = 3
     gps_jump_tolerance_m: float = 20.0
     gps_outlier_max_fixes: int = 5
     max_hdop: float = 20.0
@@ -335,7 +347,7 @@ class _Events:
         "time_outliers_dropped", "clock_steps", "duplicate_rows_dropped", "ticks_merged",
         "conflicting_values", "gps_rejected_invalid", "gps_rejected_stale",
         "gps_rejected_jump", "gps_unresolved_jumps", "speed_values_rejected",
-        "gps_speed_zeroed",
+        "speed_spikes_rejected", "speed_unresolved_jumps", "gps_speed_zeroed",
     )
 
     def __init__(self) -> None:
@@ -686,6 +698,16 @@ def _clean_gps(t, cols, moving, p: CleanParams, ev: _Events) -> tuple[_Fixes, np
     return fixes, stale_rows
 
 
+def _short_runs_between_jumps(jump: np.ndarray, max_len: int) -> np.ndarray | None:
+    """Samples to reject, given ``jump[i]`` (an impossible step from sample i to i+1):
+    the jumps cut the samples into runs, and runs of at most ``max_len`` samples are
+    outliers (they jump away and back). None when every run is that short (nothing
+    to tell the outliers from)."""
+    run = np.concatenate(([0], np.cumsum(jump)))
+    small = np.bincount(run) <= max_len
+    return None if small.all() else small[run]
+
+
 def _drop_stale_fixes(f: np.ndarray, lat, lon, moving) -> tuple[np.ndarray, np.ndarray]:
     """Fix rows ``f`` without the stale ones (exactly the previous fix repeated while
     the vehicle moves: a logger repeating its last value), and the stale rows."""
@@ -705,11 +727,8 @@ def _drop_gps_jumps(f: np.ndarray, t, lat, lon, p: CleanParams, ev: _Events) -> 
     jump = dist > p.max_speed_mps * np.diff(t[f]) + p.gps_jump_tolerance_m
     if not jump.any():
         return f, dist
-    run = np.concatenate(([0], np.cumsum(jump)))
-    size = np.bincount(run)
-    small = size <= p.gps_outlier_max_fixes
-    if not small.all():
-        bad = small[run]
+    bad = _short_runs_between_jumps(jump, p.gps_outlier_max_fixes)
+    if bad is not None:
         ev.add("gps_rejected_jump", t[f[bad]])
         f = f[~bad]
         if f.size > 1:
@@ -730,6 +749,32 @@ def _speed_rows(t, cols, name, p: CleanParams, ev: _Events) -> np.ndarray | None
     fin = np.isfinite(v)
     ok = fin & (v >= 0) & (v <= p.max_speed_mps)
     ev.add("speed_values_rejected", t[fin & ~ok])
+    return _drop_speed_spikes(t, v, ok, p, ev)
+
+
+def _drop_speed_spikes(t, v, ok: np.ndarray, p: CleanParams, ev: _Events) -> np.ndarray:
+    """``ok`` without speed spikes: consecutive readings whose change exceeds
+    ``max_accel_mps2 * dt + speed_jump_tolerance_mps`` are impossible jumps; runs of at
+    most ``speed_outlier_max_samples`` readings between them are rejected
+    (``speed_spikes_rejected``), jumps left are counted (``speed_unresolved_jumps``)."""
+    idx = np.flatnonzero(ok)
+    if idx.size < 2:
+        return ok
+
+    def jumps(rows):
+        return np.abs(np.diff(v[rows])) > p.max_accel_mps2 * np.diff(t[rows]) + p.speed_jump_tolerance_mps
+
+    jump = jumps(idx)
+    if not jump.any():
+        return ok
+    bad = _short_runs_between_jumps(jump, p.speed_outlier_max_samples)
+    if bad is not None:
+        ev.add("speed_spikes_rejected", t[idx[bad]])
+        ok = ok.copy()
+        ok[idx[bad]] = False
+        idx = idx[~bad]
+        jump = jumps(idx) if idx.size > 1 else np.zeros(0, dtype=bool)
+    ev.add("speed_unresolved_jumps", t[idx[1:][jump]])
     return ok
 
 

@@ -28,6 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from cevm.errors import InputError
+from cevm.ingest.dsm_sources import check_local, remote_allowed
 
 __all__ = ["DsmHeaders", "DsmSampler", "SamplerStats", "TileIndex", "WindowReader"]
 
@@ -40,13 +41,15 @@ class SamplerStats:
 
     ``windows_read`` and ``pixels_read`` count raster windows read from GDAL (cache
     misses); ``cache_hits`` counts windows served from the sampler's cache;
-    ``points`` counts points asked for.
+    ``points`` counts points asked for; ``windows_failed`` windows that could not be
+    read (their tile is then unreadable: :attr:`DsmSampler.unreadable`).
     """
 
     windows_read: int = 0
     pixels_read: int = 0
     cache_hits: int = 0
     points: int = 0
+    windows_failed: int = 0
 
 
 @dataclass(frozen=True)
@@ -69,6 +72,7 @@ class _Tile:
     scale: float
     offset: float
     block: int = 0  # side of the file's square internal tiles [px], 0 if not square-tiled
+    driver: str = ""  # the only GDAL driver to open it with ("": any; see cevm.ingest.dsm_sources)
 
     @property
     def bounds(self) -> tuple[float, float, float, float]:
@@ -112,12 +116,12 @@ def _transformer(src: str, dst: str):
     return pyproj.Transformer.from_crs(src, dst, always_xy=True)
 
 
-def _read_header(name: str, shown: str) -> _Tile:
+def _read_header(name: str, shown: str, driver: str = "") -> _Tile:
     import rasterio
     from rasterio.errors import RasterioError
 
     try:
-        with rasterio.open(name) as ds:
+        with rasterio.open(name, driver=driver or None) as ds:
             if ds.count < 1:
                 raise InputError(shown, "raster has no band")
             if ds.crs is None:
@@ -144,6 +148,7 @@ def _read_header(name: str, shown: str) -> _Tile:
                 scale=float(scale),
                 offset=float(offset),
                 block=int(block),
+                driver=driver,
             )
     except RasterioError as exc:
         raise InputError(shown, f"cannot open as a raster: {exc}") from None
@@ -427,6 +432,7 @@ class WindowReader:
         self._pools: list[_Pool] = []
         self._pool_index: dict[tuple[int, int, str], int] = {}
         self._open: OrderedDict[int, object] = OrderedDict()
+        self.failed: dict[int, str] = {}  # tile -> why it cannot be read
         self._blk = np.array([block_px or (t.block if 128 <= t.block <= 1024 else 512) for t in self.tiles], dtype=np.int64)
 
     def close(self) -> None:
@@ -445,12 +451,8 @@ class WindowReader:
             self._open.move_to_end(tile)
             return ds
         import rasterio
-        from rasterio.errors import RasterioError
 
-        try:
-            ds = rasterio.open(self.tiles[tile].name)
-        except RasterioError as exc:
-            raise InputError(self.tiles[tile].name, f"cannot open as a raster: {exc}") from None
+        ds = rasterio.open(self.tiles[tile].name, driver=self.tiles[tile].driver or None)
         self._open[tile] = ds
         while len(self._open) > self.max_open:
             _, old = self._open.popitem(last=False)
@@ -459,7 +461,9 @@ class WindowReader:
 
     def _read_block(self, tile: int, brow: int, bcol: int) -> np.ndarray:
         """Pixels of block (brow, bcol) of a tile plus a one-pixel margin right and
-        below, as float (float32 for float32 rasters) with NaN for nodata."""
+        below, as float (float32 for float32 rasters) with NaN for nodata. A tile that
+        cannot be opened or read gives NaN from then on (:attr:`failed` says why): it
+        costs only the points it covers."""
         from rasterio.errors import RasterioError
         from rasterio.windows import Window
 
@@ -467,10 +471,14 @@ class WindowReader:
         b = int(self._blk[tile])
         r0, c0 = brow * b, bcol * b
         h, w = min(b + 1, t.height - r0), min(b + 1, t.width - c0)
+        if tile in self.failed:
+            return np.full((h, w), np.nan)
         try:
             raw = self._dataset(tile).read(1, window=Window(c0, r0, w, h))
-        except RasterioError as exc:
-            raise InputError(t.name, f"cannot read window {w}x{h} at col {c0}, row {r0}: {exc}") from None
+        except (RasterioError, OSError) as exc:
+            self.failed[tile] = f"cannot read window {w}x{h} at col {c0}, row {r0}: {exc}"
+            self.stats.windows_failed += 1
+            return np.full((h, w), np.nan)
         plain = t.scale == 1.0 and t.offset == 0.0
         # float32 rasters stay float32 in the cache (half the memory; exact in float64
         # arithmetic later); anything else becomes float64.
@@ -587,6 +595,24 @@ class DsmSampler:
         return self.index.tiles
 
     @property
+    def unreadable(self) -> dict[str, str]:
+        """Tiles found unreadable while sampling (name -> why); their points are NaN."""
+        return {self.tiles[i].name: why for i, why in self.windows.failed.items()}
+
+    def tiles_at(self, lon_deg, lat_deg) -> np.ndarray:
+        """Index (into :attr:`tiles`) of the tile holding each WGS84 point, -1 for none."""
+        x = np.asarray(lon_deg, dtype=np.float64).ravel()
+        y = np.asarray(lat_deg, dtype=np.float64).ravel()
+        out = np.full(x.size, -1, dtype=np.int64)
+        if x.size and self.tiles:
+            t, _, _, pts = self.index.locate(x, y, WGS84)
+            if pts is None:
+                out[:] = t
+            else:
+                out[pts] = t
+        return out
+
+    @property
     def max_open(self) -> int:
         """Datasets kept open at most (least recently used closed first)."""
         return self.windows.max_open
@@ -598,7 +624,8 @@ class DsmSampler:
     # ---- construction ----------------------------------------------------------------
 
     @classmethod
-    def open(cls, source: str | os.PathLike | Sequence[str | os.PathLike], *, block_px: int | None = None, cache_mb: float = 256.0) -> DsmSampler:
+    def open(cls, source: str | os.PathLike | Sequence[str | os.PathLike], *, block_px: int | None = None,
+             cache_mb: float = 256.0, allow_remote: bool | None = None) -> DsmSampler:
         """Open a DSM.
 
         Parameters
@@ -616,15 +643,22 @@ class DsmSampler:
         cache_mb : float, default 256
             Budget of the block cache [MB]: about 240 float32 (120 float64) windows
             of 513 x 513 px, i.e. 60 km² of a 1 m DSM, or 200+ km of road.
+        allow_remote : bool or None, default None
+            Allow names and VRT sources that make GDAL fetch over a network; None: as
+            the environment's ``CEVM_ALLOW_REMOTE_DSM`` says (off unless set to 1).
+            Without it only local GeoTIFFs and VRTs of them are opened
+            (:mod:`cevm.ingest.dsm_sources`).
 
         Raises
         ------
         InputError
-            Missing path, empty directory, unreadable raster, raster without CRS.
+            Missing path, empty directory, unreadable raster, raster without CRS, a
+            remote source without ``allow_remote``.
         """
         names = _list_sources(source)
         shown = os.fspath(source) if not isinstance(source, (list, tuple)) else None
-        tiles = [_read_header(n, n) for n in names]
+        local = not remote_allowed(allow_remote)
+        tiles = [_read_header(n, n, check_local(n) if local else "") for n in names]
         return cls(tiles, block_px=block_px, cache_mb=cache_mb, label=shown or f"{len(names)} rasters")
 
     @property

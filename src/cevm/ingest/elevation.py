@@ -15,6 +15,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field, replace
 from functools import lru_cache
+from pathlib import Path
 
 import numpy as np
 from scipy import ndimage
@@ -90,6 +91,19 @@ class ElevationParams:
         Plausible GPS altitudes [m]; values outside are treated as missing (loggers write
         0, -1000 or 99999 as "no fix"). A trip whose GPS altitude is constant is rejected
         too (a placeholder, not a measurement).
+    dsm_range_m : tuple[float, float], default (-500.0, 9000.0)
+        Plausible DSM heights [m]: from below the Dead Sea shore (-430 m) to above
+        Everest (8849 m), roofs and towers included. Raw DSM samples outside are refused
+        (a DSM in the wrong unit or with a wrong scale factor: heights in mm, or scaled by
+        1e6) and the trip falls back as in a DSM gap, with a warning.
+    dsm_gps_max_median_m : float, default 250.0
+        A DSM whose heights differ from the trip's GPS altitude by more than this median
+        [m] is suspect (its unit or vertical datum): a warning. GPS altitude is off by tens
+        of metres, and above the ellipsoid rather than the geoid (up to about 100 m apart).
+    steep_warn_share : float, default 0.1
+        When the grade bound changes the profile by more than 1 m on over this share of
+        the trip's road, the raw profile was implausibly steep (DSM cliffs, a bad join):
+        a warning.
     """
 
     grid_step_m: float = 5.0
@@ -103,6 +117,9 @@ class ElevationParams:
     gps_spike_threshold_m: float = 30.0
     gps_min_valid_pct: float = 50.0
     gps_alt_range_m: tuple[float, float] = (-500.0, 9000.0)
+    dsm_range_m: tuple[float, float] = (-500.0, 9000.0)
+    dsm_gps_max_median_m: float = 250.0
+    steep_warn_share: float = 0.1
 
     def for_gps(self) -> ElevationParams:
         """These parameters with the GPS-altitude smoothing in place of the DSM's."""
@@ -126,9 +143,10 @@ class ElevationParams:
             value = getattr(self, name)
             if not ok or (isinstance(value, float) and math.isnan(value)):
                 raise ValueError(f"ElevationParams.{name} = {value!r} is out of range")
-        lo, hi = self.gps_alt_range_m
-        if not lo < hi:
-            raise ValueError(f"ElevationParams.gps_alt_range_m = {self.gps_alt_range_m!r}: need low < high")
+        for name in ("gps_alt_range_m", "dsm_range_m"):
+            lo, hi = getattr(self, name)
+            if not lo < hi:
+                raise ValueError(f"ElevationParams.{name} = {getattr(self, name)!r}: need low < high")
 
 
 @dataclass(frozen=True, eq=False)
@@ -156,6 +174,13 @@ class ElevationResult:
         Road length [m] filled by a straight line between DSM ends or held level.
     notes : tuple of str
         Human-readable remarks (why a fallback was taken, ...).
+    warnings : tuple of str
+        What the caller should report (refused DSM heights, unreadable tiles, a DSM
+        that disagrees with GPS altitude, an implausibly steep profile).
+    dsm_refused : int
+        Samples whose raw DSM height was outside ``dsm_range_m`` (refused).
+    grade_bounded_m : float
+        Road length [m] where the grade bound moved the profile by more than 1 m.
     """
 
     elevation_m: np.ndarray
@@ -165,6 +190,9 @@ class ElevationResult:
     filled_gps_m: float = 0.0
     filled_flat_m: float = 0.0
     notes: tuple[str, ...] = ()
+    warnings: tuple[str, ...] = ()
+    dsm_refused: int = 0
+    grade_bounded_m: float = 0.0
 
     def quality(self) -> dict:
         """JSON-serialisable summary for ``Trip.quality``."""
@@ -175,6 +203,9 @@ class ElevationResult:
             "elevation_filled_gps_m": round(float(self.filled_gps_m), 1),
             "elevation_filled_flat_m": round(float(self.filled_flat_m), 1),
             "elevation_notes": list(self.notes),
+            "elevation_warnings": list(self.warnings),
+            "dsm_refused_samples": int(self.dsm_refused),
+            "elevation_grade_bounded_m": round(float(self.grade_bounded_m), 1),
         }
 
 
@@ -511,14 +542,30 @@ def combine_elevation(distance_m, raw_dsm_m, gps_alt_m=None, params: ElevationPa
     if n == 0:
         return ElevationResult(np.empty(0), "flat", 0.0, notes=("empty trip",))
     _check_distance(d)
+    notes: list[str] = []
+    warnings: list[str] = []
+    lo_m, hi_m = params.dsm_range_m
+    implausible = np.isfinite(z) & ~((z >= lo_m) & (z <= hi_m))
+    refused = int(implausible.sum())
+    if refused:
+        z = np.where(implausible, np.nan, z)
+        warnings.append(f"DSM heights outside {lo_m:g}..{hi_m:g} m refused at {refused} of {n} samples "
+                        f"(median {float(np.median(np.asarray(raw_dsm_m, dtype=np.float64)[implausible])):.4g} m: "
+                        "a DSM in the wrong unit or scale?)")
     valid = np.isfinite(z)
     coverage = 100.0 * valid.sum() / n if have_dsm else 0.0
-    notes: list[str] = []
     grid = _grid(d[0], d[-1], params.grid_step_m)
     step = grid[1] - grid[0] if grid.size > 1 else params.grid_step_m
     h, gaps = _profile_grid(d, z, params, grid, params.max_gap_m)
     gps, why_not_gps = _gps_usable(gps_alt_m, params)
     filled_gps = filled_flat = 0.0
+    if gps is not None and valid.mean() >= 0.5:
+        both = valid & np.isfinite(gps)
+        if both.sum() >= 0.5 * n:
+            off = float(np.median(np.abs(z[both] - gps[both])))
+            if off > params.dsm_gps_max_median_m:
+                warnings.append(f"DSM heights differ from GPS altitude by {off:.0f} m (median): "
+                                "check the DSM's unit and vertical datum")
 
     if not valid.any():
         notes.append("no DSM given" if not have_dsm else "no valid DSM value on this trip")
@@ -572,15 +619,25 @@ def combine_elevation(distance_m, raw_dsm_m, gps_alt_m=None, params: ElevationPa
                 notes.append(f"{int((~by_gps).sum())} DSM gap(s) over {_gap_str(params)} ({filled_flat:.0f} m) bridged by straight lines ({why})")
         if short > 0:
             notes.append(f"DSM gaps up to {_gap_str(params)} ({short:.0f} m) interpolated along distance")
-    h = bound_grade(h, step, params.max_grade)
+    bounded = bound_grade(h, step, params.max_grade)
+    moved_m = float(np.count_nonzero(np.abs(bounded - h) > 1.0) * step) if grid.size > 1 else 0.0
+    if moved_m > 0:
+        notes.append(f"grade bounded to {100 * params.max_grade:g} %: profile moved by over 1 m on {moved_m:.0f} m")
+        road_m = float(d[-1] - d[0])
+        if road_m > 0 and moved_m > params.steep_warn_share * road_m:
+            warnings.append(f"road profile implausibly steep: the {100 * params.max_grade:g} % grade bound moved it "
+                            f"by over 1 m on {moved_m:.0f} of {road_m:.0f} m")
     return ElevationResult(
-        elevation_m=_to_samples(d, grid, h),
+        elevation_m=_to_samples(d, grid, bounded),
         source=source,
         dsm_coverage_pct=float(coverage),
         filled_short_m=float(short),
         filled_gps_m=float(filled_gps),
         filled_flat_m=float(filled_flat),
         notes=tuple(notes),
+        warnings=tuple(warnings),
+        dsm_refused=refused,
+        grade_bounded_m=moved_m,
     )
 
 
@@ -628,4 +685,26 @@ def trip_elevation(distance_m, lon_deg, lat_deg, gps_alt_m=None, sampler: DsmSam
     if sampler is None:
         return combine_elevation(distance_m, None, gps_alt_m, params, have_dsm=False)
     raw = sampler.sample(lon_deg, lat_deg)
-    return combine_elevation(distance_m, raw, gps_alt_m, params)
+    res = combine_elevation(distance_m, raw, gps_alt_m, params)
+    return _name_dsm_tiles(res, raw, lon_deg, lat_deg, sampler, params)
+
+
+def _name_dsm_tiles(res: ElevationResult, raw: np.ndarray, lon_deg, lat_deg, sampler: DsmSampler,
+                    params: ElevationParams) -> ElevationResult:
+    """``res`` with warnings naming the tiles whose heights were refused and the
+    unreadable tiles the trip crossed (their samples had no DSM value). Looks the
+    tiles up only when there is something to say."""
+    lo, hi = params.dsm_range_m
+    refused = np.isfinite(raw) & ~((raw >= lo) & (raw <= hi))
+    unreadable = sampler.windows.failed
+    if not refused.any() and not (unreadable and np.isnan(raw).any()):
+        return res
+    tiles = sampler.tiles_at(lon_deg, lat_deg)
+    warnings = list(res.warnings)
+    if refused.any():
+        names = sorted({Path(sampler.tiles[i].name).name for i in np.unique(tiles[refused]) if i >= 0})
+        warnings.append(f"refused DSM heights in tile(s) {', '.join(names[:3])}{' ...' if len(names) > 3 else ''}")
+    for i in sorted(set(np.unique(tiles[np.isnan(raw)]).tolist()) & set(unreadable)):
+        n = int(np.count_nonzero(tiles == i))
+        warnings.append(f"DSM tile {sampler.tiles[i].name} unreadable ({unreadable[i]}): {n} samples without DSM")
+    return replace(res, warnings=tuple(warnings))

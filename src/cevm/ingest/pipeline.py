@@ -137,7 +137,7 @@ def ingest(
     profiles = load_profiles(options.profiles_dir) if options.profiles_dir else load_profiles()
     if options.profile is not None and options.profile not in profiles:
         raise InputError(options.profile, f"unknown logger profile; available: {', '.join(sorted(profiles))}")
-    sampler = open_sampler(options.dsm)  # here too: a bad DSM stops the run before any work
+    sampler = open_sampler(options.dsm, options.allow_remote_dsm)  # here too: a bad DSM stops the run before any work
     if executor is None or len(files) < 2:  # one file cannot run in parallel
         executor = SerialExecutor()
     headers = None

@@ -43,6 +43,7 @@ class IngestOptions:
     """What an ingest run does to each file (the per-file task's parameters)."""
 
     dsm: str | None = None  # GeoTIFF, directory of tiles, VRT, or GDAL/HTTP name
+    allow_remote_dsm: bool | None = None  # network DSM names and VRT sources; None: $CEVM_ALLOW_REMOTE_DSM
     profile: str | None = None  # force a logger profile by name; None: detect
     profiles_dir: str | None = None  # extra profiles directory (besides configs/loggers)
     clean: CleanParams = field(default_factory=CleanParams)
@@ -155,7 +156,7 @@ def process_file(
         return FileOutcome(str(path), None, None, None, error=printable(f"{path}: cannot read: {exc.strerror}"))
     try:
         if sampler is None and options.dsm is not None:
-            sampler = worker_sampler(options.dsm, dsm_headers)
+            sampler = worker_sampler(options.dsm, dsm_headers, options.allow_remote_dsm)
         t0 = time.perf_counter()
         logs = read_log(path, options.profile, profiles, limits=options.limits)
         stage["read"] = time.perf_counter() - t0
@@ -209,26 +210,28 @@ def process_file(
         )
 
 
-def open_sampler(dsm: str | None) -> DsmSampler | None:
-    """Open the DSM, or None. A DSM that cannot be opened is the user's error."""
+def open_sampler(dsm: str | None, allow_remote: bool | None = None) -> DsmSampler | None:
+    """Open the DSM, or None. A DSM that cannot be opened is the user's error, and so
+    is a remote one without ``allow_remote`` (None: ``$CEVM_ALLOW_REMOTE_DSM``)."""
     if dsm is None:
         return None
     try:
-        return DsmSampler.open(dsm)
+        return DsmSampler.open(dsm, allow_remote=allow_remote)
     except CevmError:
         raise
     except Exception as exc:  # rasterio errors have many types
         raise InputError(dsm, f"cannot open the DSM: {exc}") from None
 
 
-def worker_sampler(dsm: str, headers: DsmHeaders | None = None) -> DsmSampler:
+def worker_sampler(dsm: str, headers: DsmHeaders | None = None, allow_remote: bool | None = None) -> DsmSampler:
     """This worker's (process and thread) sampler of ``dsm``, opened on first use and
     kept for the next files (:func:`cevm.executors.worker_cache`). ``headers``: the
     rasters' headers as the writer read them (:attr:`DsmSampler.headers`), so that a
     new worker does not read every tile's header again (~1.5 ms a tile); rasters
     are then opened when a window of them is needed. A long-lived worker given other
-    headers (a DSM changed between runs) opens a new sampler."""
+    headers (a DSM changed between runs) opens a new sampler. The headers carry the
+    drivers the writer vetted the rasters for (:mod:`cevm.ingest.dsm_sources`)."""
     if headers is None:
-        return worker_cache(("cevm.ingest.DsmSampler", dsm), lambda: open_sampler(dsm))
+        return worker_cache(("cevm.ingest.DsmSampler", dsm, allow_remote), lambda: open_sampler(dsm, allow_remote))
     return worker_cache(("cevm.ingest.DsmSampler", dsm, headers), lambda: DsmSampler.from_headers(headers))
 
