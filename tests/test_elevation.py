@@ -730,3 +730,29 @@ def test_fft_size_is_the_next_5_smooth_number():
         while not smooth(m):
             m += 1
         assert _fft_size(n) == m
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.integers(3, 6), st.integers(3, 5), st.floats(0.3, 1.0))
+def test_regular_tile_grid_locates_as_the_bucket_index(seed, nx, ny, keep):
+    """A regular grid of tiles (some missing) finds the same tile as the general bucket
+    index for every point: random ones, points exactly on edges and corners, and points
+    one ulp either side of them."""
+    from cevm.ingest.dsm import TileIndex, _Tile
+
+    rng = np.random.default_rng(seed)
+    tw, th = 1000.0, 500.0
+    cells = [(i, j) for i in range(nx) for j in range(ny)]
+    chosen = rng.permutation(len(cells))[: max(9, int(keep * len(cells)))]  # over 8: the indexed case
+    tiles = [_Tile(f"t{i}_{j}", BNG, 500, 250, X0 + i * tw, Y0 - j * th, 2.0, -2.0, None, 1.0, 0.0)
+             for i, j in (cells[k] for k in sorted(chosen))]
+    grp = TileIndex(tiles).groups[0]
+    xs = X0 + tw * np.arange(nx + 1)
+    ys = Y0 - th * np.arange(ny + 1)
+    ex, ey = np.meshgrid(np.concatenate([xs, np.nextafter(xs, -np.inf), np.nextafter(xs, np.inf)]),
+                         np.concatenate([ys, np.nextafter(ys, -np.inf), np.nextafter(ys, np.inf)]))
+    x = np.concatenate([rng.uniform(X0 - 500, X0 + nx * tw + 500, 2000), ex.ravel(), [np.nan]])
+    y = np.concatenate([rng.uniform(Y0 - ny * th - 500, Y0 + 500, 2000), ey.ravel(), [Y0]])
+    assert grp._grid is not None  # the fast path is taken
+    np.testing.assert_array_equal(grp.locate(x, y), grp._locate_buckets(x, y))
+    assert (grp.locate(x, y) >= 0).sum() > 100  # many points do lie in a tile (9+ of 0.5 km2 in < 25 km2)

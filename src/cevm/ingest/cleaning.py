@@ -101,6 +101,7 @@ _GEOD = Geod(ellps="WGS84")
 _WGS84_A_M = 6378137.0
 _WGS84_F = 1.0 / 298.257223563
 _WGS84_E2 = _WGS84_F * (2.0 - _WGS84_F)
+_RAD = math.pi / 180.0
 
 #: Speed sources in order of preference (``quality["speed_source"]`` uses these names).
 SPEED_SOURCES = ("wheel_speed_mps", "gps_speed_mps", "gps_positions")
@@ -232,13 +233,18 @@ def local_distance_m(lat1, lon1, lat2, lon2) -> np.ndarray:
     fast (pure numpy). Longitude differences are wrapped to [-180, 180).
     """
     lat1, lon1, lat2, lon2 = (np.asarray(a, dtype=float) for a in (lat1, lon1, lat2, lon2))
-    phi = np.radians(0.5 * (lat1 + lat2))
-    s = np.sin(phi)
-    w2 = 1.0 - _WGS84_E2 * s * s
+    s = np.sin((0.5 * _RAD) * (lat1 + lat2))
+    s2 = s * s
+    w2 = 1.0 - _WGS84_E2 * s2
     n_m = _WGS84_A_M / np.sqrt(w2)
     m_m = n_m * (1.0 - _WGS84_E2) / w2
-    dlam = np.radians((lon2 - lon1 + 180.0) % 360.0 - 180.0)
-    return np.hypot(m_m * np.radians(lat2 - lat1), n_m * np.cos(phi) * dlam)
+    dlon = lon2 - lon1
+    wrap = np.abs(dlon) > 180.0  # across the antimeridian (rare: wrapped only there)
+    if wrap.any():
+        dlon = np.where(wrap, (dlon + 180.0) % 360.0 - 180.0, dlon)
+    east = n_m * np.sqrt(1.0 - s2) * (_RAD * dlon)  # cos(phi) >= 0 for |phi| <= 90 deg
+    north = m_m * (_RAD * (lat2 - lat1))
+    return np.sqrt(north * north + east * east)
 
 
 #: Steps at least this long [m] are measured with pyproj's geodesic; shorter ones with

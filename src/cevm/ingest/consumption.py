@@ -78,6 +78,7 @@ chosen, 0.9 combined standard uncertainties), and a difference beyond
 from __future__ import annotations
 
 import math
+import statistics
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Protocol
@@ -538,7 +539,7 @@ def measure_trip(
     same = [e for e in valid if e.quantity == quantity]
     # uncertainties compared at one common value (the median estimate), so that equal
     # accuracies do not favour the source that happens to read less
-    ref = float(np.median([abs(e.value) for e in same]))
+    ref = statistics.median(abs(e.value) for e in same)
     best = min(same, key=lambda e: (_sortable(math.hypot(e.random_uncertainty, e.accuracy_pct / 100.0 * ref)),
                                     e.priority))
     quality.update(

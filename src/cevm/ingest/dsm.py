@@ -231,6 +231,55 @@ class _CrsGroup:
             self._bptr = np.append(np.flatnonzero(first), ka.size).astype(np.int64)
             self._bcand = ca
         self.lonlat_bbox: dict[str, tuple[float, float, float, float] | None] = {}
+        self._grid = self._regular_grid(b) if len(tile_ids) > 8 else None
+
+    #: Largest table of a regular tile grid [cells] (4 bytes each).
+    MAX_GRID_CELLS = 4_000_000
+
+    def _regular_grid(self, b: np.ndarray) -> np.ndarray | None:
+        """The tiles as a table (row from the top, column from the left) of tile
+        indices, -1 for no tile, when they form a regular grid: one size, edges on
+        multiples of it from the bounding box's corner, no two in one cell (the usual
+        national DSM, e.g. 1 km tiles on the grid's kilometres). None otherwise."""
+        w, h = b[:, 2] - b[:, 0], b[:, 3] - b[:, 1]
+        tw, th = float(w[0]), float(h[0])
+        if not (tw > 0 and th > 0) or np.abs(w - tw).max() > 1e-9 * tw or np.abs(h - th).max() > 1e-9 * th:
+            return None
+        fc = (b[:, 0] - self.bbox[0]) / tw
+        fr = (self.bbox[3] - b[:, 3]) / th
+        col, row = np.rint(fc), np.rint(fr)
+        if np.abs(fc - col).max() > 1e-6 or np.abs(fr - row).max() > 1e-6:
+            return None
+        nx, ny = int(col.max()) + 1, int(row.max()) + 1
+        if nx * ny > self.MAX_GRID_CELLS:
+            return None
+        grid = np.full((ny, nx), -1, dtype=np.int32)
+        flat = row.astype(np.int64) * nx + col.astype(np.int64)
+        if np.unique(flat).size != flat.size:
+            return None  # overlapping tiles: the bucket index keeps "first wins"
+        grid.reshape(-1)[flat] = np.arange(flat.size, dtype=np.int32)
+        self._tw, self._th = tw, th
+        return grid
+
+    def _locate_regular(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(tile, undecided): each point's tile on the regular grid, checked against the
+        tile's exact bounds; ``undecided`` marks points within rounding of a cell edge
+        (or failing the check), which the general index decides."""
+        grid = self._grid
+        ny, nx = grid.shape
+        fc = (x - self.bbox[0]) / self._tw
+        fr = (self.bbox[3] - y) / self._th
+        with np.errstate(invalid="ignore"):
+            inside = (fc >= 0) & (fc < nx) & (fr >= 0) & (fr < ny)
+        ci = np.where(inside, fc, 0).astype(np.int64)
+        ri = np.where(inside, fr, 0).astype(np.int64)
+        k = np.where(inside, grid[ri, ci], -1).astype(np.int64)
+        kk = np.maximum(k, 0)
+        ok = (k >= 0) & (x >= self.xmin[kk]) & (x < self.xmax[kk]) & (y > self.ymin[kk]) & (y <= self.ymax[kk])
+        eps = 1e-7
+        near = (np.abs(fc - np.rint(fc)) < eps) | (np.abs(fr - np.rint(fr)) < eps)
+        undecided = (k >= 0) & ~ok | (near & np.isfinite(fc) & np.isfinite(fr))
+        return np.where(ok, self.tile_ids[kk], -1), undecided
 
     def _cell(self, x, y):
         return np.floor((x - self.bbox[0]) / self.cell), np.floor((y - self.bbox[1]) / self.cell)
@@ -250,6 +299,17 @@ class _CrsGroup:
                 m = (out < 0) & (x >= self.xmin[k]) & (x < self.xmax[k]) & (y > self.ymin[k]) & (y <= self.ymax[k])
                 out[m] = self.tile_ids[k]
             return out
+        if self._grid is not None:
+            out, undecided = self._locate_regular(x, y)
+            if undecided.any():
+                u = np.flatnonzero(undecided)
+                out[u] = self._locate_buckets(x[u], y[u])
+            return out
+        return self._locate_buckets(x, y)
+
+    def _locate_buckets(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        """:meth:`locate` through the bucket index (any layout of tiles)."""
+        out = np.full(x.shape, -1, dtype=np.int64)
         cx, cy = self._cell(x, y)
         ok = np.isfinite(cx) & np.isfinite(cy)
         keys = np.where(ok, self._key(np.where(ok, cx, 0), np.where(ok, cy, 0)), -1)

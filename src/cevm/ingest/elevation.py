@@ -28,6 +28,7 @@ __all__ = [
     "bound_grade",
     "combine_elevation",
     "road_profile_m",
+    "sample_trips",
     "trip_elevation",
 ]
 
@@ -405,6 +406,13 @@ def bound_grade(h: np.ndarray, step: float, max_grade: float) -> np.ndarray:
     return 0.5 * (lower_env + upper_env)
 
 
+def _bound_grade_or_same(h: np.ndarray, step: float, max_grade: float) -> np.ndarray:
+    """:func:`bound_grade`, returning ``h`` itself (not a copy) where it obeys the bound."""
+    if h.size < 2 or np.all(np.abs(np.diff(h)) <= max_grade * step):
+        return h
+    return bound_grade(h, step, max_grade)
+
+
 def _profile_grid(d: np.ndarray, z: np.ndarray, params: ElevationParams, grid: np.ndarray, max_gap_m: float) -> tuple[np.ndarray, _Gaps]:
     """Smoothed (not yet grade-bounded) profile on ``grid``, NaN inside long gaps."""
     valid = np.isfinite(z)
@@ -560,8 +568,9 @@ def combine_elevation(distance_m, raw_dsm_m, gps_alt_m=None, params: ElevationPa
     gps, why_not_gps = _gps_usable(gps_alt_m, params)
     filled_gps = filled_flat = 0.0
     if gps is not None and valid.mean() >= 0.5:
-        both = valid & np.isfinite(gps)
-        if both.sum() >= 0.5 * n:
+        both = np.flatnonzero(valid & np.isfinite(gps))
+        if both.size >= 0.5 * n:
+            both = both[:: max(1, both.size // 1000)]  # a median of up to ~2000 samples is plenty
             off = float(np.median(np.abs(z[both] - gps[both])))
             if off > params.dsm_gps_max_median_m:
                 warnings.append(f"DSM heights differ from GPS altitude by {off:.0f} m (median): "
@@ -619,8 +628,8 @@ def combine_elevation(distance_m, raw_dsm_m, gps_alt_m=None, params: ElevationPa
                 notes.append(f"{int((~by_gps).sum())} DSM gap(s) over {_gap_str(params)} ({filled_flat:.0f} m) bridged by straight lines ({why})")
         if short > 0:
             notes.append(f"DSM gaps up to {_gap_str(params)} ({short:.0f} m) interpolated along distance")
-    bounded = bound_grade(h, step, params.max_grade)
-    moved_m = float(np.count_nonzero(np.abs(bounded - h) > 1.0) * step) if grid.size > 1 else 0.0
+    bounded = _bound_grade_or_same(h, step, params.max_grade)
+    moved_m = 0.0 if bounded is h else float(np.count_nonzero(np.abs(bounded - h) > 1.0) * step)
     if moved_m > 0:
         notes.append(f"grade bounded to {100 * params.max_grade:g} %: profile moved by over 1 m on {moved_m:.0f} m")
         road_m = float(d[-1] - d[0])
@@ -666,7 +675,8 @@ def _gap_str(params: ElevationParams) -> str:
     return f"{params.max_gap_m:g} m"
 
 
-def trip_elevation(distance_m, lon_deg, lat_deg, gps_alt_m=None, sampler: DsmSampler | None = None, params: ElevationParams = ElevationParams()) -> ElevationResult:
+def trip_elevation(distance_m, lon_deg, lat_deg, gps_alt_m=None, sampler: DsmSampler | None = None,
+                   params: ElevationParams = ElevationParams(), *, raw_dsm_m=None) -> ElevationResult:
     """Road elevation of a trip: DSM lookup at the fixes (if ``sampler``), then
     :func:`combine_elevation`.
 
@@ -681,12 +691,26 @@ def trip_elevation(distance_m, lon_deg, lat_deg, gps_alt_m=None, sampler: DsmSam
     sampler : DsmSampler or None
         The DSM; None gives GPS altitude (if plausible) or a flat profile.
     params : ElevationParams
+    raw_dsm_m : array_like or None
+        ``sampler.sample(lon_deg, lat_deg)`` if the caller has it already (sampling the
+        trips of a file in one call costs less than one call per trip,
+        :func:`sample_trips`).
     """
     if sampler is None:
         return combine_elevation(distance_m, None, gps_alt_m, params, have_dsm=False)
-    raw = sampler.sample(lon_deg, lat_deg)
+    raw = sampler.sample(lon_deg, lat_deg) if raw_dsm_m is None else np.asarray(raw_dsm_m, dtype=np.float64)
     res = combine_elevation(distance_m, raw, gps_alt_m, params)
     return _name_dsm_tiles(res, raw, lon_deg, lat_deg, sampler, params)
+
+
+def sample_trips(sampler: DsmSampler, lon_deg: list, lat_deg: list) -> list[np.ndarray]:
+    """Raw DSM samples of several trips (lists of WGS84 longitude and latitude arrays)
+    in one lookup: the values of one :meth:`DsmSampler.sample` per trip, for less
+    per-call work (transform, tile search and window gathering run once)."""
+    if not lon_deg:
+        return []
+    z = sampler.sample(np.concatenate(lon_deg), np.concatenate(lat_deg))
+    return np.split(z, np.cumsum([np.size(a) for a in lon_deg])[:-1])
 
 
 def _name_dsm_tiles(res: ElevationResult, raw: np.ndarray, lon_deg, lat_deg, sampler: DsmSampler,

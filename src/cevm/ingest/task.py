@@ -31,7 +31,7 @@ from cevm.text import printable
 from cevm.executors import worker_cache
 from cevm.ingest.cleaning import CleanParams, CleanTrip, clean_log
 from cevm.ingest.dsm import DsmHeaders, DsmSampler
-from cevm.ingest.elevation import ElevationParams, trip_elevation
+from cevm.ingest.elevation import ElevationParams, sample_trips, trip_elevation
 from cevm.ingest.evidence import EvidenceParams, trip_evidence
 from cevm.ingest.profiles import Profile
 from cevm.ingest.reading import ReadLimits, read_log
@@ -87,13 +87,19 @@ def file_sha256(path: Path) -> str:
 
 
 def _trip_from_clean(ct: CleanTrip, *, vehicle_id: str, path: Path, sha256: str, index: int,
-                     sampler: DsmSampler | None, options: IngestOptions, repairs: list[str]) -> Trip:
-    """A :class:`Trip` from a clean trip: road elevation, the evidence fields
+                     sampler: DsmSampler | None, options: IngestOptions, repairs: list[str],
+                     raw_dsm_m: np.ndarray | None = None, stage: dict | None = None) -> Trip:
+    """A :class:`Trip` from a clean trip: road elevation (from the DSM samples
+    ``raw_dsm_m`` when given), the evidence fields
     (:func:`cevm.ingest.evidence.trip_evidence`) and the quality of both."""
     gps_alt = ct.gps_alt_m if np.isfinite(ct.gps_alt_m).any() else None
-    elev = trip_elevation(ct.distance_m, ct.lon_deg, ct.lat_deg, gps_alt, sampler, options.elevation)
+    elev = trip_elevation(ct.distance_m, ct.lon_deg, ct.lat_deg, gps_alt, sampler, options.elevation,
+                          raw_dsm_m=raw_dsm_m)
+    t0 = time.perf_counter()
     evidence, evidence_q = trip_evidence(ct.start_utc_s + ct.time_s, ct.speed_mps, ct.rows_t_s, ct.rows,
                                          options.clean.standstill_mps, options.evidence)
+    if stage is not None:
+        stage["evidence"] = stage.get("evidence", 0.0) + time.perf_counter() - t0
     quality = dict(ct.quality)
     quality["elevation"] = elev.quality()
     quality["evidence"] = evidence_q
@@ -172,18 +178,23 @@ def process_file(
             result = clean_log(log.frame, log.energy_sources, options.clean, path=path, release_frame=True)
             stage["clean"] = stage.get("clean", 0.0) + time.perf_counter() - t0
             dropped.extend({"vehicle_id": log.vehicle_id, **d} for d in result.dropped)
-            for ct in result.trips:
+            t0 = time.perf_counter()
+            raws = (sample_trips(sampler, [ct.lon_deg for ct in result.trips], [ct.lat_deg for ct in result.trips])
+                    if sampler is not None else [None] * len(result.trips))
+            stage["elevation"] = stage.get("elevation", 0.0) + time.perf_counter() - t0
+            for ct, raw in zip(result.trips, raws):
+                ev0 = stage.setdefault("evidence", 0.0)
                 t0 = time.perf_counter()
                 trip = _trip_from_clean(
                     ct, vehicle_id=log.vehicle_id, path=path, sha256=sha, index=len(trips),
-                    sampler=sampler, options=options, repairs=log.repairs,
+                    sampler=sampler, options=options, repairs=log.repairs, raw_dsm_m=raw, stage=stage,
                 )
                 t1 = time.perf_counter()
                 vec = drive_cycle_vector(trip.time_s, trip.speed_mps, trip.elevation_m, cr0=options.cr0)
                 vectors.append(vec.to_bytes())
                 t2 = time.perf_counter()
                 blobs.append(trip_profile_blob(trip))
-                stage["elevation"] = stage.get("elevation", 0.0) + t1 - t0
+                stage["elevation"] = stage.get("elevation", 0.0) + t1 - t0 - (stage["evidence"] - ev0)
                 stage["vector"] = stage.get("vector", 0.0) + t2 - t1
                 stage["profile"] = stage.get("profile", 0.0) + time.perf_counter() - t2
                 trips.append(trip.record())
