@@ -1,6 +1,7 @@
 """Benchmark of `cevm ingest` on one core: generated srf logs and tiled DSM -> store.
 
     python benchmarks/bench_ingest.py [--quick] [--vehicles N] [--days D]
+                                      [--baseline-src DIR] [--repeat N]
 
 Generates a fleet of srf logs on the sample routes (cevm_samplegen.fleet_for_benchmark,
 the stand-in consumption: the benchmark measures ingest, not the detailed model) with
@@ -12,6 +13,13 @@ file) with each parser, pyarrow (what ingest uses) and pandas (the parser before
 still the fallback for blocks pyarrow refuses), best of two, CPU seconds. Target
 (issue 4): >= 1 million samples/s.
 
+``--baseline-src DIR`` also ingests the same files with another checkout's ``src`` (its
+``configs`` beside it: e.g. ``git archive COMMIT src configs | tar -x -C /tmp/before``
+and ``--baseline-src /tmp/before/src``),
+in a subprocess of the same run, alternating ``--repeat`` times, and prints each
+stage's seconds and share for both (the minimum of the repeats): before and after a
+change, measured side by side.
+
 The process runs with :func:`cevm.runtime.tune_allocator` applied, as the ``cevm``
 command does (``CEVM_TUNE_ALLOCATOR=0`` to measure glibc's defaults: ~7 % slower,
 from page faults).
@@ -20,7 +28,9 @@ from page faults).
 from __future__ import annotations
 
 import argparse
+import json
 import os
+import subprocess
 import sys
 import tempfile
 import time
@@ -39,11 +49,60 @@ from cevm_samplegen import fleet_for_benchmark, generate_sample_logs  # noqa: E4
 from cevm.store import TripStore  # noqa: E402
 
 
+# Ingests ``fleet`` with the DSM into a new store with whatever cevm is first on the path
+# (the baseline checkout's src), one core, and prints the report as JSON.
+_RUN_INGEST = r"""
+import json, os, sys, tempfile, time
+os.environ.setdefault("OMP_NUM_THREADS", "1"); os.environ.setdefault("GDAL_NUM_THREADS", "1")
+from cevm.ingest import IngestOptions, ingest
+from cevm.runtime import tune_allocator
+from cevm.store import TripStore
+tune_allocator()
+fleet, dsm = sys.argv[1], sys.argv[2]
+with tempfile.TemporaryDirectory() as d, TripStore.open(os.path.join(d, "b.sqlite")) as st:
+    t0 = time.perf_counter()
+    rep = ingest([fleet], st, IngestOptions(dsm=dsm))
+    dt = time.perf_counter() - t0
+assert rep.failed == 0, [f.error for f in rep.files if f.error][:3]
+print(json.dumps({"seconds": dt, "samples": rep.summary()["samples"], "stage_s": rep.stage_s}))
+"""
+
+
+def _ingest_with(src: str, fleet: Path, dsm: Path) -> dict:
+    env = {**os.environ, "PYTHONPATH": src}
+    out = subprocess.run([sys.executable, "-c", _RUN_INGEST, str(fleet), str(dsm)], env=env, check=True,
+                         capture_output=True, text=True).stdout
+    return json.loads(out.strip().splitlines()[-1])
+
+
+def _print_side_by_side(runs: dict[str, list[dict]]) -> None:
+    """Each stage's seconds and share of the run, minimum over repeats, per source."""
+    best = {name: min(r, key=lambda x: x["seconds"]) for name, r in runs.items()}
+    stages = sorted({k for b in best.values() for k in b["stage_s"]}, key=lambda k: -best["this"]["stage_s"].get(k, 0))
+    names = list(best)
+    print("  side by side (fastest of the repeats; other = hashing, discovery, bookkeeping):")
+    print("    " + f"{'stage':10s}" + "".join(f"{n:>22s}" for n in names))
+    for k in [*stages, "other", "total"]:
+        cells = []
+        for n in names:
+            b = best[n]
+            v = b["seconds"] - sum(b["stage_s"].values()) if k == "other" else (
+                b["seconds"] if k == "total" else b["stage_s"].get(k, 0.0))
+            cells.append(f"{v:8.2f} s {100 * v / b['seconds']:5.1f} %   ")
+        print("    " + f"{k:10s}" + "".join(f"{c:>22s}" for c in cells))
+    for n in names:
+        b = best[n]
+        print(f"    {n}: {b['samples'] / b['seconds'] / 1e6:.3f} M samples/s "
+              "(all repeats: " + ", ".join(f"{r['seconds']:.2f}" for r in runs[n]) + " s)")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="a small fleet (a few seconds)")
     ap.add_argument("--vehicles", type=int, default=None)
     ap.add_argument("--days", type=int, default=None)
+    ap.add_argument("--baseline-src", default=None, help="another checkout's src/ to ingest the same files with")
+    ap.add_argument("--repeat", type=int, default=1, help="alternating runs of this and the baseline (with --baseline-src)")
     args = ap.parse_args()
     n_veh = args.vehicles or (8 if args.quick else 40)
     n_days = args.days or (2 if args.quick else 5)
@@ -97,6 +156,14 @@ def main() -> None:
             print(f"    {k:10s} {v:7.2f} s  {100 * v / dt:5.1f} %")
         print(f"    {'other':10s} {dt - total:7.2f} s  {100 * (dt - total) / dt:5.1f} %  (hashing, discovery, bookkeeping)")
         print("  target: >= 1,000,000 samples/s")
+        if args.baseline_src:
+            this_src = str(Path(__file__).resolve().parents[1] / "src")
+            runs: dict[str, list[dict]] = {"baseline": [], "this": []}
+            for _ in range(max(1, args.repeat)):
+                runs["baseline"].append(_ingest_with(args.baseline_src, tmp / "fleet", tmp / "sample" / "dsm"))
+                runs["this"].append(_ingest_with(this_src, tmp / "fleet", tmp / "sample" / "dsm"))
+            print(f"baseline: {args.baseline_src}")
+            _print_side_by_side(runs)
 
 
 if __name__ == "__main__":
