@@ -344,13 +344,22 @@ def _gaussian_valid(x: np.ndarray, sigma: float, r: int) -> np.ndarray:
     ``r = int(4 * sigma + 0.5)``, whatever its boundary mode. Long kernels (the GPS
     profile's, 481 taps) go through an FFT, O(n log n) instead of O(n r); the result
     differs only by floating-point rounding (about 1e-12 m)."""
-    if 2 * r + 1 < _FFT_MIN_TAPS:
-        return ndimage.gaussian_filter1d(x, sigma, mode="nearest", truncate=4.0)[r:-r]
-    k = np.exp(-0.5 / (sigma * sigma) * np.arange(-r, r + 1, dtype=np.float64) ** 2)
-    k /= k.sum()
+    k = _gaussian_weights(float(sigma), int(r))
+    if 2 * r + 1 < _FFT_MIN_TAPS:  # gaussian_filter1d's own steps, with the weights made once
+        return ndimage.correlate1d(x, k, mode="nearest")[r:-r]
     nfft = _fft_size(x.size + k.size - 1)
     y = np.fft.irfft(np.fft.rfft(x, nfft) * np.fft.rfft(k, nfft), nfft)
     return y[2 * r : x.size]
+
+
+@lru_cache(maxsize=32)
+def _gaussian_weights(sigma: float, r: int) -> np.ndarray:
+    """The normalised Gaussian kernel of ``2 r + 1`` taps (symmetric), as scipy's
+    ``gaussian_filter1d`` makes it; made once per (sigma, r), read-only."""
+    k = np.exp(-0.5 / (sigma * sigma) * np.arange(-r, r + 1, dtype=np.float64) ** 2)
+    k /= k.sum()
+    k.setflags(write=False)
+    return k
 
 
 @lru_cache(maxsize=1)
@@ -499,11 +508,13 @@ def _gps_usable(gps: np.ndarray | None, params: ElevationParams) -> tuple[np.nda
         return None, "no GPS altitude"
     g = np.asarray(gps, dtype=np.float64).copy()
     lo, hi = params.gps_alt_range_m
-    g[~((g >= lo) & (g <= hi))] = np.nan
-    n_ok = int(np.isfinite(g).sum())
+    ok = (g >= lo) & (g <= hi)
+    g[~ok] = np.nan
+    n_ok = int(np.count_nonzero(ok))
     if g.size == 0 or 100.0 * n_ok / g.size < params.gps_min_valid_pct:
         return None, f"GPS altitude valid on {100.0 * n_ok / max(g.size, 1):.0f}% of samples only"
-    if np.nanmax(g) == np.nanmin(g) and n_ok > 1:
+    valid = g[ok]
+    if n_ok > 1 and valid.max() == valid.min():
         return None, "GPS altitude is constant (a placeholder)"
     return g, ""
 
@@ -567,11 +578,12 @@ def combine_elevation(distance_m, raw_dsm_m, gps_alt_m=None, params: ElevationPa
     h, gaps = _profile_grid(d, z, params, grid, params.max_gap_m)
     gps, why_not_gps = _gps_usable(gps_alt_m, params)
     filled_gps = filled_flat = 0.0
-    if gps is not None and valid.mean() >= 0.5:
-        both = np.flatnonzero(valid & np.isfinite(gps))
-        if both.size >= 0.5 * n:
-            both = both[:: max(1, both.size // 1000)]  # a median of up to ~2000 samples is plenty
-            off = float(np.median(np.abs(z[both] - gps[both])))
+    if gps is not None:
+        k = max(1, n // 2000)  # every k-th sample: a median of up to ~4000 is plenty for a warning
+        dz = np.abs(z[::k] - gps[::k])
+        both = np.isfinite(dz)
+        if both.sum() >= 0.5 * dz.size:
+            off = float(np.median(dz[both]))
             if off > params.dsm_gps_max_median_m:
                 warnings.append(f"DSM heights differ from GPS altitude by {off:.0f} m (median): "
                                 "check the DSM's unit and vertical datum")
