@@ -1128,14 +1128,15 @@ def _clean_trip(log: _Log, seg: _Segment, sources: Sequence[EnergySourceLike], p
 
 def _evidence_rows(log: _Log, t0: float, t1: float, p: CleanParams) -> tuple[np.ndarray, dict]:
     """The log's rows from ``consumption.max_gap_s`` before ``t0`` to as long after
-    ``t1``: their times and the evidence columns the log has (copies)."""
+    ``t1``: their times and the evidence columns the log has (views of the log's
+    arrays, which nothing writes to)."""
     names = [c for c in EVIDENCE_COLUMNS if c in log.cols]
     if not names:
         return np.empty(0), {}
     w = p.consumption.max_gap_s
     a = int(np.searchsorted(log.t, t0 - w, "left"))
     b = int(np.searchsorted(log.t, t1 + w, "right"))
-    return log.t[a:b].copy(), {c: log.cols[c][a:b].copy() for c in names}
+    return log.t[a:b], {c: log.cols[c][a:b] for c in names}
 
 
 def _require_speed_or_position(cols: dict, path) -> None:

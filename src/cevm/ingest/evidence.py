@@ -196,13 +196,15 @@ def _standstill_mean(t, still, ts, vs, max_gap_s: float) -> tuple[float, float] 
     known (trapezoid on the trip's samples), None if it is known on none."""
     if ts.size == 0 or not still.any():
         return None
-    r = _interp_limited(t, ts, vs, max_gap_s)
-    known = still & np.isfinite(r[1:]) & np.isfinite(r[:-1])
-    dt = np.diff(t)
-    covered = float(dt[known].sum())
+    i = np.flatnonzero(still)  # the rate only at both ends of the standstill steps
+    r0 = _interp_limited(t[i], ts, vs, max_gap_s)
+    r1 = _interp_limited(t[i + 1], ts, vs, max_gap_s)
+    known = np.isfinite(r0) & np.isfinite(r1)
+    dt = t[i + 1][known] - t[i][known]
+    covered = float(dt.sum())
     if covered <= 0:
         return None
-    total = float(np.sum(0.5 * (r[1:] + r[:-1])[known] * dt[known]))
+    total = float(np.sum(0.5 * (r0[known] + r1[known]) * dt))
     return total / covered, covered
 
 
