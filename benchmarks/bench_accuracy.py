@@ -153,6 +153,9 @@ def main(argv=None) -> None:
                     help="directory of the Twizy logs (skipped when absent)")
     ap.add_argument("--markdown", action="store_true", help="print the table as Markdown (for the README)")
     ap.add_argument("--no-fleet", action="store_true", help="skip the fleet case study")
+    ap.add_argument("--no-manifests", action="store_true",
+                    help="calibrate the sample vehicles without the manifests' masses (buses and portal trucks at "
+                         "the vehicle file's mass)")
     args = ap.parse_args(argv)
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
@@ -160,6 +163,12 @@ def main(argv=None) -> None:
         with TripStore.open(sample) as st:
             ingest([ROOT / "sample_logs" / "srf", ROOT / "sample_logs" / "portal"], st,
                    IngestOptions(dsm=str(ROOT / "sample_logs" / "dsm")))
+            if not args.no_manifests:  # the operator's loads: the buses' counts, the portal trucks' TMS
+                from cevm.io.manifest import read_manifest
+                from cevm.store.masses import match_manifest, set_masses
+
+                for name in ("bus-loads.csv", "portal-tms.csv"):
+                    set_masses(st, match_manifest(st, read_manifest(ROOT / "sample_logs" / "manifests" / name)).masses)
         rows += calibrate_store(sample, "sample_logs")
         twizy = Path(args.twizy)
         if twizy.is_dir():

@@ -64,7 +64,7 @@ def frames_equal(a: list, b: list) -> None:
 # ======================================================================================
 # Blocks and parsers: the same result whatever the block size or the parser
 # ======================================================================================
-SAMPLES = sorted((ROOT / "sample_logs").rglob("*.csv")) + sorted(DATA.glob("*.csv"))
+SAMPLES = sorted(p for d in ("srf", "portal") for p in (ROOT / "sample_logs" / d).rglob("*.csv")) + sorted(DATA.glob("*.csv"))
 
 
 @pytest.mark.parametrize("path", SAMPLES[:6] + SAMPLES[-4:], ids=lambda p: p.name)

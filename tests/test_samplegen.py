@@ -858,3 +858,29 @@ def test_sample_fleet_spans_the_seasons_and_mixes_duties():
             assert sg.fleet.DUTIES[v.duty].trips_per_day == (4, 5)
         else:
             assert len(duties) == 2, v.vehicle_id
+
+
+def test_manifests_give_the_true_loads(small, truth):
+    """The operator's manifests: the buses' passenger counts (x 75 kg) and the portal
+    trucks' TMS gross weights (to 0.1 t), each trip's window around its true start and
+    end, read back with cevm's manifest reader."""
+    from cevm.io.manifest import read_manifest
+
+    trips = {(r["vehicle_id"], round(r["start_utc_s"])): r for r in truth["trips"]}
+    assert sorted(truth["manifests"]) == ["manifests/bus-loads.csv", "manifests/portal-tms.csv"]
+    bus = read_manifest(small / "manifests" / "bus-loads.csv")
+    portal = read_manifest(small / "manifests" / "portal-tms.csv")
+    assert not bus.problems and not portal.problems
+    n_bus = sum(1 for r in truth["trips"] if r["load_unit"] == "passengers")
+    n_portal = sum(1 for r in truth["trips"] if r["dialect"] == "portal")
+    assert (len(bus.rows), len(portal.rows)) == (n_bus, n_portal) and n_bus and n_portal
+    for row in bus.rows + portal.rows:
+        match = [r for (vid, _), r in trips.items()
+                 if vid == row.vehicle_id and row.start_utc_s <= r["start_utc_s"] and r["end_utc_s"] <= row.end_utc_s]
+        assert len(match) == 1, row
+        r = match[0]
+        assert row.end_utc_s - row.start_utc_s < r["end_utc_s"] - r["start_utc_s"] + 121  # to the minute at most
+        if row.kind == "payload":
+            assert row.mass_kg == r["load"] * 75.0
+        else:
+            assert abs(row.mass_kg - r["mass_kg"]) <= 50.0

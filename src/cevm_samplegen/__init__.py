@@ -6,6 +6,8 @@ writes, from a seed alone (no wall clock, no network; same bytes on every run)::
     OUTDIR/srf/<vehicle>_<yyyy-mm-dd>.csv[.gz]   one file per vehicle and logging day
     OUTDIR/portal/portal_export_<first>_<last>.csv  two vehicles, several days, one DST jump
     OUTDIR/dsm/<OS tile>_DSM_<r>M.tif              DSM tiles, EPSG:27700
+    OUTDIR/manifests/bus-loads.csv, portal-tms.csv the operator's trip loads
+                                                   (cevm_samplegen.manifests)
     OUTDIR/truth.json                              what really happened (see below)
 
 **Truth first, then sensors.** For every trip the generator draws a speed trace (the
@@ -188,6 +190,7 @@ from cevm_samplegen.world import (
     route_dsm_summary,
     write_dsm_tiles,
 )
+from cevm_samplegen.manifests import write_manifests
 from cevm_samplegen.writers import _Counters, _portal_file, _srf_file, _transformer
 
 __all__ = [
@@ -312,6 +315,7 @@ def generate_sample_logs(outdir: str | Path, consumption_fn: ConsumptionFn = sta
         files.append({"path": rel, "sha256": hashlib.sha256(data).hexdigest(), "bytes": len(data), **pinfo})
         records.extend(precs)
     _finish_records(records)
+    manifests = [p.relative_to(outdir).as_posix() for p in write_manifests(outdir, records)]
     tiles = []
     if write_dsm:
         tiles = [p.relative_to(outdir).as_posix() for p in write_dsm_tiles(world, outdir / "dsm")]
@@ -326,6 +330,7 @@ def generate_sample_logs(outdir: str | Path, consumption_fn: ConsumptionFn = sta
         "weather": _weather_json(truth),
         "vehicles": _vehicles_json(fleet.srf_vehicles + fleet.portal_vehicles),
         "files": files,
+        "manifests": manifests,
         "trips": records,
         "routes": {name: route_dsm_summary(world, r) for name, r in sorted(world.routes.items())},
         "dsm": {

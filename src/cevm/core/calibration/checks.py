@@ -20,7 +20,8 @@ After a fit:
   power or rate the bounds only hid (the unbounded estimate more than 2 standard errors
   below 0); terms that take more than the trip's whole measured consumption; an idle or
   auxiliary rate several times (:data:`EVIDENCE_RATIO`) the rate the logs measured while
-  standing still (battery power, fuel flow), or a fraction of it.
+  standing still (battery power, fuel flow), or a fraction of it (for a model with that
+  term: an EV's ``aux``, an ICE's ``idle``; without it the standstill load is in eta).
 """
 
 from __future__ import annotations
@@ -195,10 +196,13 @@ def implausible(model: TermModel, fit: Fit, idx: np.ndarray) -> tuple[str, str] 
             f"implausible: {', '.join(extra)} would take {100 * share[i]:.0f} % of trip "
             f"{model.data.ids[idx[i]]}'s measured consumption")
     ev = evidence(model, fit, idx)
-    if ev is not None and ev["ratio"] is not None:
+    # the term meant to be the standstill rate: an EV's auxiliary power, an ICE's idle
+    # rate (without it, a standstill load is absorbed by eta and comparing says nothing)
+    base = "aux" if model.ev else "idle"
+    if ev is not None and ev["ratio"] is not None and base in fit.names:
         r = ev["ratio"]
         if r > EVIDENCE_RATIO or r < 1.0 / EVIDENCE_RATIO:
-            name = next((n for n in ("idle", "aux", "heat", "cool") if n in fit.names), None)
+            name = base
             if name is not None:
                 what = "battery power" if model.ev else "fuel flow"
                 return name, (f"implausible: the fitted standstill rate {ev['fitted_text']} is {r:.1f} times the "
