@@ -22,7 +22,7 @@ if TYPE_CHECKING:
 
 
 def calibrate(
-    vehicle: Annotated[Path, typer.Option("--vehicle", "-v", help="The vehicle file to start from.")],
+    vehicle: Annotated[Path, typer.Option("--vehicle", "-v", metavar="FILE", help="The vehicle file to start from.")],
     vehicle_id: Annotated[str, typer.Option("--vehicle-id", help="Whose stored trips to fit (see 'cevm trips').")],
     store: StoreOption = None,
     fit: Annotated[
@@ -38,11 +38,11 @@ def calibrate(
     ] = None,
     nested: Annotated[bool, typer.Option("--nested/--no-nested", help="Also cross-validate the choice itself "
                                                                         "(nested cross-validation).")] = True,
-    out: Annotated[Optional[Path], typer.Option("--out", "-o", help="Write the calibrated vehicle file here.")] = None,
+    out: Annotated[Optional[Path], typer.Option("--out", "-o", metavar="FILE", help="Write the calibrated vehicle file here.")] = None,
     force: Annotated[bool, typer.Option(help="Allow --out to overwrite an existing file.")] = False,
     cv_folds: Annotated[int, typer.Option(help="Cross-validation folds over days (leave-one-day-out below 10 days).")] = 5,
     max_rel_uncertainty: Annotated[float, typer.Option(help="Exclude trips measured worse than this (relative 1-sigma).")] = 0.10,
-    plot: Annotated[Optional[Path], typer.Option(help="Write predicted-vs-measured and error-vs-distance plots (PNG).")] = None,
+    plot: Annotated[Optional[Path], typer.Option(metavar="FILE.png", help="Write predicted-vs-measured and error-vs-distance plots (PNG).")] = None,
     ice_braking: Annotated[
         Optional[str],
         typer.Option(help="ICE: fit under this braking mode (no-credit or paper) and write it to --out. Default: the vehicle file's."),

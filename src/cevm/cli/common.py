@@ -144,7 +144,7 @@ TimeStepOption = Annotated[
 ]
 SpeedColOption = Annotated[
     Optional[list[str]],
-    typer.Option("--speed-col", help="Speed column, or a glob such as 'Long haul*': each column is one cycle "
+    typer.Option("--speed-col", metavar="COLUMN", help="Speed column, or a glob such as 'Long haul*': each column is one cycle "
                                      "(files with one mission per column). Repeatable.", rich_help_panel=_CYCLE_PANEL),
 ]
 SpeedUnitOption = Annotated[
@@ -163,7 +163,7 @@ GradeUnitOption = Annotated[
                                 rich_help_panel=_CYCLE_PANEL)
 ]
 GradeFileOption = Annotated[
-    Optional[Path], typer.Option("--grade-file", help="A second file with the same rows holding the grade: the column "
+    Optional[Path], typer.Option("--grade-file", metavar="FILE", help="A second file with the same rows holding the grade: the column "
                                                       "named like the speed column, or --grade-col (VECTO's "
                                                       "gradient_*.csv).", rich_help_panel=_CYCLE_PANEL)
 ]

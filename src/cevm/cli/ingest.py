@@ -28,27 +28,27 @@ def ingest(
         bool, typer.Option(help="Allow a DSM (or VRT sources) that GDAL fetches over a network: URLs, /vsicurl/, /vsis3/ ... (also: CEVM_ALLOW_REMOTE_DSM=1). Off: local GeoTIFFs and VRTs only.")
     ] = False,
     profile: Annotated[Optional[str], typer.Option(help="Force a logger profile by name (default: detect from the header).")] = None,
-    profiles_dir: Annotated[Optional[Path], typer.Option(help="A directory of extra logger profiles (TOML).")] = None,
+    profiles_dir: Annotated[Optional[Path], typer.Option(metavar="DIR", help="A directory of extra logger profiles (TOML).")] = None,
     force: Annotated[bool, typer.Option(help="Re-ingest files even when unchanged.")] = False,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar and no table: failures and one summary line only.")] = False,
     log_json: Annotated[bool, typer.Option(help="One JSON object per file on stdout, then a summary object (for cron and scripts).")] = False,
     workers: Annotated[
-        Optional[int], typer.Option("--workers", "-w", min=1, help="Worker processes, one file per task (default: the machine's cores; 1: serial, in this process).")
+        Optional[int], typer.Option("--workers", "-w", min=1, metavar="N", help="Worker processes, one file per task (default: the machine's cores; 1: serial, in this process).")
     ] = None,
     scheduler: Annotated[
         Optional[str], typer.Option(help="Dask scheduler address (tcp://HOST:8786): run the per-file work on that cluster (pip install 'cevm[dask]'); the workers must read the log files at the same paths, and the DSM.")
     ] = None,
     max_rows: Annotated[
-        int, typer.Option(min=1, help="Refuse a file of more data rows than this (memory grows with the rows; see the README).")
+        int, typer.Option(min=1, metavar="ROWS", help="Refuse a file of more data rows than this (memory grows with the rows; see the README).")
     ] = _LIMITS.max_rows,
     max_file_mb: Annotated[
-        float, typer.Option(min=0.001, help="Refuse a file of more text than this [MB], after decompression.")
+        float, typer.Option(min=0.001, metavar="MB", help="Refuse a file of more text than this [MB], after decompression.")
     ] = _LIMITS.max_file_mb,
     max_expansion: Annotated[
-        float, typer.Option(min=1.0, help="Refuse a gzip file that expands more than this many times (a zip bomb).")
+        float, typer.Option(min=1.0, metavar="RATIO", help="Refuse a gzip file that expands more than this many times (a zip bomb).")
     ] = _LIMITS.max_expansion,
     manifest: Annotated[
-        Optional[Path], typer.Option(help="A manifest CSV of trip masses, applied after the logs (its columns detected; for other layouts: 'cevm trips set-mass --manifest' with column options).")
+        Optional[Path], typer.Option(metavar="FILE", help="A manifest CSV of trip masses, applied after the logs (its columns detected; for other layouts: 'cevm trips set-mass --manifest' with column options).")
     ] = None,
     manifest_tz: Annotated[
         Optional[str], typer.Option(help="The manifest's zone for times without one (Europe/London, UTC, +01:00).")

@@ -576,7 +576,7 @@ def predict_cmd(
     out: OutOption = None,
     plot: Annotated[
         Optional[Path],
-        typer.Option(help="Write a PNG: state of charge along each source (one mass per vehicle), or energy "
+        typer.Option(metavar="FILE.png", help="Write a PNG: state of charge along each source (one mass per vehicle), or energy "
                           "against payload (a mass sweep)."),
     ] = None,
     ice_braking: IceBrakingOption = None,
@@ -589,7 +589,7 @@ def predict_cmd(
                                            "(about 10x the time of a sweep without it).")
     ] = False,
     workers: Annotated[
-        Optional[int], typer.Option("--workers", "-w", min=1, help="Worker processes, a batch of sources per task "
+        Optional[int], typer.Option("--workers", "-w", min=1, metavar="N", help="Worker processes, a batch of sources per task "
                                     "(default 1: in this process; a large sweep of many routes runs ~1.3x faster "
                                     "on 2 cores, a small one is slower for the processes' start).")
     ] = None,

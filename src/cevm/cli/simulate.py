@@ -25,8 +25,8 @@ def simulate(
     mass_kg: Annotated[Optional[float], typer.Option("--mass-kg", "-m", help="Gross mass [kg]. Default: the vehicle's.")] = None,
     payload_kg: Annotated[Optional[float], typer.Option("--payload-kg", "-p", help="Payload [kg] on the vehicle's kerb mass (instead of --mass-kg).")] = None,
     soc_start_pct: SocStartOption = 100.0,
-    out: Annotated[Optional[Path], typer.Option("--out", "-o", help="Per-second output CSV.")] = None,
-    plot: Annotated[Optional[Path], typer.Option(help="PNG: state of charge (EV, the paper's figure 4) or fuel and elevation (ICE, figure 6).")] = None,
+    out: Annotated[Optional[Path], typer.Option("--out", "-o", metavar="FILE", help="Per-second output CSV.")] = None,
+    plot: Annotated[Optional[Path], typer.Option(metavar="FILE.png", help="PNG: state of charge (EV, the paper's figure 4) or fuel and elevation (ICE, figure 6).")] = None,
     fmt: Annotated[OutputFormat, typer.Option("--format", "-f", help="Format of the summary.")] = OutputFormat.table,
     cycle_fmt=None,
 ) -> None:
