@@ -202,12 +202,10 @@ def implausible(model: TermModel, fit: Fit, idx: np.ndarray) -> tuple[str, str] 
     if ev is not None and ev["ratio"] is not None and base in fit.names:
         r = ev["ratio"]
         if r > EVIDENCE_RATIO or r < 1.0 / EVIDENCE_RATIO:
-            name = base
-            if name is not None:
-                what = "battery power" if model.ev else "fuel flow"
-                return name, (f"implausible: the fitted standstill rate {ev['fitted_text']} is {r:.1f} times the "
-                              f"{what} the logs measured standing still ({ev['measured_text']} over "
-                              f"{ev['seconds'] / 60:.0f} min)")
+            what = "battery power" if model.ev else "fuel flow"
+            return base, (f"implausible: the fitted standstill rate {ev['fitted_text']} is {r:.1f} times the "
+                          f"{what} the logs measured standing still ({ev['measured_text']} over "
+                          f"{ev['seconds'] / 60:.0f} min)")
     return None
 
 

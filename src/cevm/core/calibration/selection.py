@@ -304,7 +304,6 @@ def select(
             p = mf.predict(list(ch), ff.theta, test)
             err[test] = (p - data.y[test]) / data.y[test] * 100.0
         nested_cv = ErrorStats.of(err)
-        result = replace(result, warnings=result.warnings)
     rule = ("the simplest candidate whose cross-validated mean squared error is within one standard error "
             "(paired, over groups) of the best")
     return Selection(tuple(cands), tuple(chosen), tuple(best), result, nested_cv, scheme, rule, tuple(notes))
