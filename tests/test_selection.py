@@ -145,11 +145,18 @@ def test_temperature_terms_need_logged_temperatures():
     sel = select(BUS, [dataclasses.replace(t, ambient_c=None) for t in trips], time_repeats=0)
     assert not any("heat" in c.terms for c in sel.candidates)
     assert any("no trip has a logged ambient temperature" in n for n in sel.notes)
-    # some logged: a candidate with them is refused, naming how many trips lack one
+    # most logged (a sensor that dropped out on some days): the others are left out, said
+    # so, and the temperature terms are tried on the rest
     some = [dataclasses.replace(t, ambient_c=None) if i % 4 == 0 else t for i, t in enumerate(trips)]
-    sel = select(BUS, some, time_repeats=0)
+    sel = select(BUS, some, time_repeats=0, nested=False)
+    assert "heat" in sel.chosen and len(sel.result.rows) == 45
+    assert sum("no ambient temperature logged" in why for why in sel.result.excluded.values()) == 15
+    assert any("15 of 60 usable trips logged no ambient temperature" in n for n in sel.notes)
+    # a few logged: a candidate with them is refused, naming how many trips lack one
+    few = [t if i % 4 == 0 else dataclasses.replace(t, ambient_c=None) for i, t in enumerate(trips)]
+    sel = select(BUS, few, time_repeats=0, nested=False)
     heat = next(c for c in sel.candidates if c.terms == ("eta", "heat"))
-    assert not heat.ok and "15 of 60 trips have no ambient temperature" in heat.status
+    assert not heat.ok and "45 of 60 trips have no ambient temperature" in heat.status
     assert "heat" not in sel.chosen
 
 

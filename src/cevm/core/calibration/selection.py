@@ -255,12 +255,14 @@ def select(
     """
     base = neutral(vehicle)
     data, excluded = select_trips(base, trips, max_rel_uncertainty, min_distance_m, rel_uncertainty_floor)
+    data, excluded, t_note = _trips_with_temperature(base, data, excluded, terms)
     if data.n < 3:
         why = "; ".join(f"{k}: {v}" for k, v in list(excluded.items())[:5])
         raise CalibrationError(f"eta needs at least 3 usable trips, {data.n} of {len(trips)} are usable"
                                + (f" (excluded: {why}{' ...' if len(excluded) > 5 else ''})" if excluded else ""))
     model = TermModel(base, data)
     extras, notes = _possible_terms(model, EXTRA_TERMS[base.powertrain] if terms is None else tuple(terms))
+    notes = ([t_note] if t_note else []) + notes
     sets = candidate_sets(base, extras)
     idx = np.arange(data.n)
     fold_of, scheme = folds(data, cv_folds, loo_below, seed)
@@ -307,6 +309,30 @@ def select(
     rule = ("the simplest candidate whose cross-validated mean squared error is within one standard error "
             "(paired, over groups) of the best")
     return Selection(tuple(cands), tuple(chosen), tuple(best), result, nested_cv, scheme, rule, tuple(notes))
+
+
+#: When at least this share of the usable trips logged a temperature, the others are left
+#: out (and said so) so that the temperature terms can be tried: every candidate is
+#: compared on the same trips, and a temperature term needs one on every trip.
+TEMPERATURE_QUORUM = 0.5
+
+
+def _trips_with_temperature(vehicle: Vehicle, data, excluded: dict, terms) -> tuple:
+    """``data`` without its trips that logged no temperature, when most did (a sensor
+    that dropped out on some days); else unchanged. Returns (data, excluded, note)."""
+    wanted = EXTRA_TERMS[vehicle.powertrain] if terms is None else tuple(terms)
+    if not any(TERMS_BY_POWERTRAIN[(vehicle.powertrain, n)].temperature for n in wanted):
+        return data, excluded, None
+    has_t = np.isfinite(data.ambient_c)
+    if has_t.all() or not has_t.any() or has_t.mean() < TEMPERATURE_QUORUM:
+        return data, excluded, None
+    excluded = dict(excluded)
+    for i in np.flatnonzero(~has_t):
+        excluded[data.ids[i]] = (f"no ambient temperature logged, while {int(has_t.sum())} of the {data.n} usable "
+                                 "trips have one: left out so that the temperature terms can be compared")
+    note = (f"{int((~has_t).sum())} of {data.n} usable trips logged no ambient temperature and were left out "
+            "(the temperature terms need one on every trip)")
+    return data.subset(np.flatnonzero(has_t)), excluded, note
 
 
 def _balance_fields(model: TermModel, names) -> dict:
