@@ -18,8 +18,8 @@ from pyproj import Transformer
 from typer.testing import CliRunner
 
 from cevm.cli import app
+import faults
 from cevm.executors import (
-    CRASH_ENV_VAR,
     DaskExecutor,
     ProcessExecutor,
     SerialExecutor,
@@ -446,22 +446,24 @@ def test_predict_cli_with_workers_writes_what_a_serial_run_writes(monkeypatch):
 # ------------------------------------------------------------------------- faults
 
 
-def test_a_worker_killed_mid_file_is_retried_and_a_file_that_kills_twice_fails(logs, tmp_path):
+def test_a_worker_killed_mid_file_is_retried_and_a_file_that_kills_twice_fails(logs, tmp_path, monkeypatch):
+    import cevm.ingest.pipeline as pipeline
+
     serial = tmp_path / "serial.sqlite"
     run("ingest", logs, "--store", serial, "--workers", "1", "-q")
-    crash = tmp_path / "crash"
-    crash.mkdir()
-    (crash / "1.v0_d1.csv").touch()  # kills one worker once: retried elsewhere
-    (crash / "1.v2_d0.csv").touch()
+    (logs / "v0_d1.csv.kill-0").touch()  # kills one worker once: retried elsewhere
+    (logs / "v2_d0.csv.kill-0").touch()
     for k in range(3):  # kills every worker that tries it: failed after two deaths
-        (crash / f"{k}.v1_d1.csv").touch()
+        (logs / f"v1_d1.csv.kill-{k}").touch()
+    monkeypatch.setattr(pipeline, "process_file", faults.process_file_or_die)
     store = tmp_path / "pool.sqlite"
-    res, files, summary = ingest_json(logs, "--store", store, "--workers", "2", env={CRASH_ENV_VAR: str(crash)})
+    res, files, summary = ingest_json(logs, "--store", store, "--workers", "2")
     assert res.exit_code == 1
-    left = sorted(p.name for p in crash.iterdir() if not p.name.startswith("done-"))
+    left = faults.markers(logs, "*.kill-*")
     # once, once, and twice alone (three times if its first death was beside another
     # task's: that one is charged to neither)
-    assert left in (["2.v1_d1.csv"], [])
+    assert left in (["v1_d1.csv.kill-2"], [])
+    assert faults.markers(logs, "v0_d1.csv.killed-*") and faults.markers(logs, "v2_d0.csv.killed-*")
     status = {Path(f["path"]).name: f for f in files}
     assert status["v0_d1.csv"]["status"] == status["v2_d0.csv"]["status"] == "ingested"
     assert status["v1_d1.csv"]["status"] == "failed" and "died 2 times" in status["v1_d1.csv"]["error"]
@@ -476,20 +478,19 @@ def test_a_worker_killed_mid_file_is_retried_and_a_file_that_kills_twice_fails(l
     assert store_content(store)["trips"] == want["trips"]
 
 
-def test_a_task_running_beside_a_killer_is_not_blamed():
+def _sleepers(marker_dir: str, *specs: tuple[str, float]) -> list[Task]:
+    return [Task(name, (marker_dir, name, seconds)) for name, seconds in specs]
+
+
+def test_a_task_running_beside_a_killer_is_not_blamed(tmp_path):
     """Two tasks running when the pool breaks: both are suspects; each is re-run alone,
     so the innocent one succeeds and the killer fails after two deaths of its own."""
-    import tempfile
-
-    with tempfile.TemporaryDirectory() as crash, ProcessExecutor(2) as ex:
-        for k in range(3):
-            Path(crash, f"{k}.killer").touch()
-        os.environ[CRASH_ENV_VAR] = crash
-        try:
-            res = list(ex.run(time.sleep, [Task("innocent", (0.3,)), Task("killer", (0.0,)), Task("later", (0.0,))]))
-        finally:
-            del os.environ[CRASH_ENV_VAR]
-        left = [p for p in os.listdir(crash) if not p.startswith("done-")]
+    crash = str(tmp_path)
+    for k in range(3):
+        Path(crash, f"{k}.killer").touch()
+    with ProcessExecutor(2) as ex:
+        res = list(ex.run(faults.sleep_or_die, _sleepers(crash, ("innocent", 0.3), ("killer", 0.0), ("later", 0.0))))
+    left = [p for p in os.listdir(crash) if not p.startswith("done-")]
     assert res[0].ok and res[2].ok
     assert not res[1].ok and "died" in res[1].error
     # the killer was charged two deaths alone; a first death beside the innocent task
@@ -498,36 +499,31 @@ def test_a_task_running_beside_a_killer_is_not_blamed():
     assert "died 2 times" in res[1].error
 
 
-def test_a_task_that_killed_once_beside_a_killer_is_not_failed():
+def test_a_task_that_killed_once_beside_a_killer_is_not_failed(tmp_path):
     """A task that kills its worker once (then runs clean) started beside one that
     kills every worker: it succeeds on its retry, and only the killer fails, charged
     with two deaths."""
-    import tempfile
-
-    with tempfile.TemporaryDirectory() as crash, ProcessExecutor(2) as ex:
-        Path(crash, "0.once").touch()
-        for k in range(3):
-            Path(crash, f"{k}.killer").touch()
-        os.environ[CRASH_ENV_VAR] = crash
-        try:
-            res = list(ex.run(time.sleep, [Task("once", (0.0,)), Task("killer", (0.0,))]))
-        finally:
-            del os.environ[CRASH_ENV_VAR]
+    crash = str(tmp_path)
+    Path(crash, "0.once").touch()
+    for k in range(3):
+        Path(crash, f"{k}.killer").touch()
+    with ProcessExecutor(2) as ex:
+        res = list(ex.run(faults.sleep_or_die, _sleepers(crash, ("once", 0.0), ("killer", 0.0))))
     assert res[0].ok, res[0].error
     assert not res[1].ok and "died 2 times" in res[1].error
 
 
-def test_dask_reschedules_a_killed_workers_file_without_duplicates(logs, tmp_path, dask_cluster):
+def test_dask_reschedules_a_killed_workers_file_without_duplicates(logs, tmp_path, dask_cluster, monkeypatch):
+    import cevm.ingest.pipeline as pipeline
+
     serial = tmp_path / "serial.sqlite"
     run("ingest", logs, "--store", serial, "--workers", "1", "-q")
-    crash = tmp_path / "crash"
-    crash.mkdir()
-    (crash / "1.v2_d1.csv").touch()
+    (logs / "v2_d1.csv.kill-0").touch()
+    monkeypatch.setattr(pipeline, "process_file", faults.process_file_or_die)
     store = tmp_path / "dask.sqlite"
-    res, files, summary = ingest_json(logs, "--store", store, "--scheduler", dask_cluster.scheduler_address,
-                                      env={CRASH_ENV_VAR: str(crash)})
+    res, files, summary = ingest_json(logs, "--store", store, "--scheduler", dask_cluster.scheduler_address)
     assert res.exit_code == 1 and summary["failed"] == 1  # the junk file only
-    assert [p.name for p in crash.iterdir()][0].startswith("done-")  # the worker did die
+    assert faults.markers(logs, "*.kill-*") == [] and faults.markers(logs, "v2_d1.csv.killed-0-*")  # it did die
     assert store_content(store) == store_content(serial)
 
 

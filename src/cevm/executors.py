@@ -66,13 +66,11 @@ from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor
 from concurrent.futures import wait as cf_wait
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 from cevm.errors import CevmError
 
 __all__ = [
-    "CRASH_ENV_VAR",
     "DaskExecutor",
     "Executor",
     "ProcessExecutor",
@@ -95,13 +93,6 @@ ingest result is a few MB per vehicle-day)."""
 MIN_WINDOW = 32
 """Least default window of a parallel run: a Dask round trip costs milliseconds, so a
 few tasks queued ahead per worker keep them busy (32 ingest results: ~100 MB at most)."""
-
-CRASH_ENV_VAR = "CEVM_TEST_CRASH_DIR"
-"""Test-only fault injection. When this variable is set in the *submitting* process to a
-directory, a worker about to run the task with key ``K`` looks in it for files named
-``<anything>.<basename of K>``; it renames one of them to ``done-<pid>-<name>``
-(atomically: one worker wins) and exits at once with ``os._exit(1)``, as a process killed mid-file would. Each
-marker kills one worker once. Never set it in production; it is read once per run."""
 
 WORKER_ENV = {"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}
 """Environment of the local worker processes (where the user has not set these): one
@@ -198,27 +189,10 @@ def worker_cache(key: Any, factory: Callable[[], Any]) -> Any:
         return obj
 
 
-def _crash_hook(key: str, crash_dir: str) -> None:
-    """Test-only fault injection, see :data:`CRASH_ENV_VAR`."""
-    name = Path(key).name
-    try:
-        entries = sorted(os.listdir(crash_dir))
-    except OSError:
-        return
-    for entry in entries:
-        if entry.startswith("done-") or entry.partition(".")[2] != name:
-            continue
-        try:
-            os.rename(os.path.join(crash_dir, entry), os.path.join(crash_dir, f"done-{os.getpid()}-{entry}"))
-        except OSError:
-            continue  # another worker took this marker
-        os._exit(1)
-
-
 _ALLOCATOR_TUNED = False
 
 
-def _execute(fn: Callable, key: str, args: tuple, crash_dir: str | None) -> tuple[Any, float]:
+def _execute(fn: Callable, args: tuple) -> tuple[Any, float]:
     """Run one task in a worker: ``(fn(*args), wall seconds)``. The first task in a
     process applies :func:`cevm.runtime.tune_allocator` there (a Dask worker runs its
     tasks in a thread, whose malloc arena otherwise hands freed pages back to the system
@@ -229,8 +203,6 @@ def _execute(fn: Callable, key: str, args: tuple, crash_dir: str | None) -> tupl
 
         tune_allocator()
         _ALLOCATOR_TUNED = True
-    if crash_dir:
-        _crash_hook(key, crash_dir)
     t0 = time.perf_counter()
     value = fn(*args)
     return value, time.perf_counter() - t0
@@ -248,10 +220,10 @@ def _pool_init(slots, counter) -> None:
     _SLOTS = slots
 
 
-def _pool_execute(fn: Callable, index: int, key: str, args: tuple, crash_dir: str | None) -> tuple[Any, float]:
+def _pool_execute(fn: Callable, index: int, args: tuple) -> tuple[Any, float]:
     _SLOTS[_SLOT] = index
     try:
-        return _execute(fn, key, args, crash_dir)
+        return _execute(fn, args)
     finally:
         _SLOTS[_SLOT] = -1
 
@@ -286,7 +258,7 @@ class Executor(ABC):
     # ---- per-executor hooks ---------------------------------------------------------
 
     @abstractmethod
-    def _submit(self, fn: Callable, entry: _Entry, crash_dir: str | None):
+    def _submit(self, fn: Callable, entry: _Entry):
         """Start ``fn`` on ``entry``'s task; return a handle."""
 
     @abstractmethod
@@ -318,7 +290,6 @@ class Executor(ABC):
         if window is None:
             window = 1 if self.inline else max(MIN_WINDOW, WINDOW_PER_SLOT * self.slots)
         window = max(1, int(window))
-        crash_dir = None if self.inline else (os.environ.get(CRASH_ENV_VAR) or None)
         source = enumerate(items)
         exhausted = False
         st = _RunState()
@@ -328,10 +299,10 @@ class Executor(ABC):
             while True:
                 if st.alone:
                     if not st.pending:
-                        self._put(fn, st.alone.popleft(), st, crash_dir)
+                        self._put(fn, st.alone.popleft(), st)
                 else:
                     while st.retry:
-                        self._put(fn, st.retry.popleft(), st, crash_dir)
+                        self._put(fn, st.retry.popleft(), st)
                     while not exhausted and not st.alone and next_in - next_out < window:
                         try:
                             i, item = next(source)
@@ -340,7 +311,7 @@ class Executor(ABC):
                             break
                         next_in = i + 1
                         if isinstance(item, Task):
-                            self._put(fn, _Entry(i, item), st, crash_dir)
+                            self._put(fn, _Entry(i, item), st)
                         else:
                             ready[i] = TaskResult(i, None, value=item)
                         while next_out in ready:  # overlap the caller's work with the tasks
@@ -363,9 +334,9 @@ class Executor(ABC):
             if st.pending:
                 self._cancel(list(st.pending))
 
-    def _put(self, fn: Callable, entry: _Entry, st: _RunState, crash_dir: str | None) -> None:
+    def _put(self, fn: Callable, entry: _Entry, st: _RunState) -> None:
         entry.attempts += 1
-        st.pending[self._submit(fn, entry, crash_dir)] = entry
+        st.pending[self._submit(fn, entry)] = entry
 
     def close(self) -> None:
         """Release the workers (a no-op for executors that hold none)."""
@@ -393,7 +364,7 @@ class SerialExecutor(Executor):
     slots = 1
     name = "serial"
 
-    def _submit(self, fn, entry, crash_dir):
+    def _submit(self, fn, entry):
         fut: Future = Future()
         t0 = time.perf_counter()
         try:
@@ -466,9 +437,9 @@ class ProcessExecutor(Executor):
                                              initargs=(self._slots_arr, counter))
         return self._pool
 
-    def _submit(self, fn, entry, crash_dir):
+    def _submit(self, fn, entry):
         try:
-            return self._ensure_pool().submit(_pool_execute, fn, entry.index, entry.task.key, entry.task.args, crash_dir)
+            return self._ensure_pool().submit(_pool_execute, fn, entry.index, entry.task.args)
         except BrokenProcessPool as exc:  # broke since the last wait: _finish sorts it out
             fut: Future = Future()
             fut.set_exception(exc)
@@ -611,10 +582,10 @@ class DaskExecutor(Executor):
                 self._shared.pop(next(iter(self._shared)))[1].release()
         return hit[1]
 
-    def _submit(self, fn, entry, crash_dir):
+    def _submit(self, fn, entry):
         args = tuple(self._by_reference(a) for a in entry.task.args)
         fut = self.client.submit(
-            _execute, fn, entry.task.key, args, crash_dir,
+            _execute, fn, args,
             key=f"{getattr(fn, '__name__', 'task')}-{self._token}-{entry.index}-{entry.attempts}",
             pure=False, retries=self.max_attempts - 1,
         )
