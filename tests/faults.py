@@ -1,4 +1,5 @@
-"""Fault injection for the tests, kept out of cevm: task functions that wrap the real ones.
+"""Fault injection for the tests, kept out of cevm: task functions that wrap the real ones,
+a command-line entry point that installs them in a subprocess, and a /proc scan.
 
 Faults are described by marker files, which every worker sees (a worker's memory and
 environment are not the test's: a forkserver keeps the environment it started with):
@@ -9,14 +10,20 @@ environment are not the test's: a forkserver keeps the environment it started wi
   kills one worker once); else it sleeps.
 - ``process_file_or_die(path, ...)``: :func:`cevm.ingest.task.process_file`, but a file
   ``<log path>.kill-<k>`` beside the log kills its worker once (renamed to
-  ``<log path>.killed-<k>-<pid>``). (Directories are searched for ``*.csv`` and
-  ``*.csv.gz``: the markers are never taken for logs.) A test installs it as the
-  ingest's task with ``monkeypatch.setattr(cevm.ingest.pipeline, "process_file", ...)``.
+  ``<log path>.killed-<k>-<pid>``), and a file ``<log path>.hold`` makes the task write
+  ``<log path>.held-<pid>`` and wait forever. (Directories are searched for ``*.csv``
+  and ``*.csv.gz``: the markers are never taken for logs.)
+
+``python tests/faults.py [--stall-write NAME] CEVM-ARGS...`` runs the ``cevm`` command
+(its :func:`cevm.cli.main`) with ``process_file_or_die`` as the ingest task;
+``--stall-write NAME`` stalls the store transaction of the log named NAME for a second
+(after writing ``<store>.in-transaction``).
 """
 
 from __future__ import annotations
 
 import os
+import sys
 import time
 from pathlib import Path
 
@@ -47,8 +54,71 @@ def process_file_or_die(path, *args, **kwargs):
         k = marker.name.rpartition("-")[2]
         if _take_marker(marker, marker.with_name(f"{path.name}.killed-{k}-{os.getpid()}")):
             os._exit(1)
+    if path.with_name(path.name + ".hold").exists():
+        path.with_name(f"{path.name}.held-{os.getpid()}").touch()
+        while True:
+            time.sleep(0.05)
     return process_file(path, *args, **kwargs)
 
 
 def markers(directory: Path, pattern: str) -> list[str]:
     return sorted(p.name for p in Path(directory).rglob(pattern))
+
+
+def session_processes(sid: int) -> list[tuple[int, str]]:
+    """Live processes of session ``sid`` (pid, command), from /proc; zombies (ended,
+    not yet reaped by their new parent) do not count."""
+    out = []
+    for entry in os.listdir("/proc"):
+        if not entry.isdigit():
+            continue
+        try:
+            stat = Path("/proc", entry, "stat").read_text()
+            cmd = Path("/proc", entry, "cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
+        except OSError:
+            continue  # gone meanwhile
+        fields = stat[stat.rindex(")") + 2:].split()  # after "pid (comm) "
+        state, session = fields[0], int(fields[3])
+        if session == sid and state not in ("Z", "X"):
+            out.append((int(entry), cmd.strip()))
+    return out
+
+
+def _main(argv: list[str]) -> None:
+    stall = None
+    while argv and argv[0].startswith("--"):
+        opt = argv.pop(0)
+        if opt == "--stall-write":
+            stall = argv.pop(0)
+        else:
+            raise SystemExit(f"faults.py: unknown option {opt}")
+    import cevm.ingest.pipeline as pipeline
+    import cevm.store.trips as trips
+
+    pipeline.process_file = process_file_or_die
+    if stall is not None:
+        store_arg = argv[argv.index("--store") + 1]
+        state = {}
+        real_replace = trips.TripStore.replace_file_trips
+
+        def replace_file_trips(self, path, *a, **kw):
+            state["path"] = Path(path).name
+            return real_replace(self, path, *a, **kw)
+
+        def checkpoint(stage: str) -> None:
+            if stage == "trips_inserted" and state.get("path") == stall:
+                Path(store_arg + ".in-transaction").touch()
+                t_end = time.monotonic() + 1.0
+                while time.monotonic() < t_end:  # a busy transaction (signals may arrive)
+                    time.sleep(0.01)
+
+        trips.TripStore.replace_file_trips = replace_file_trips
+        trips._checkpoint = checkpoint
+    from cevm.cli import main
+
+    sys.argv = ["cevm", *argv]
+    main()
+
+
+if __name__ == "__main__":
+    _main(sys.argv[1:])

@@ -40,6 +40,15 @@ Faults
     ``DASK_DISTRIBUTED__SCHEDULER__ALLOWED_FAILURES=1`` for the same rule); exceptions
     raised by the task are retried ``max_attempts - 1`` times (``retries``).
 
+Worker lifetime
+    Local workers end with the process that made the pool, whatever ended it (a
+    ``kill -9`` too): on Linux the forkserver and each worker ask the kernel for SIGKILL
+    when their parent dies (``prctl(PR_SET_PDEATHSIG)``), and each worker also watches
+    the pool's owner itself (a thread that waits on a pidfd of it, or polls it where
+    there is none). Workers ignore SIGINT (a Ctrl-C in a terminal reaches the whole
+    process group; the owner decides); closing an executor while an exception
+    propagates (an interrupt) kills its workers instead of waiting for their tasks.
+
 Worker resources
     :func:`worker_cache` keeps objects that are costly to open (a DSM sampler) once per
     worker process and thread, keyed by what they were opened from.
@@ -57,6 +66,8 @@ from abc import ABC, abstractmethod
 
 import multiprocessing as mp
 import os
+import signal
+import sys
 import threading
 import time
 import uuid
@@ -108,6 +119,14 @@ a Dask worker that lives for many runs with other DSMs must not keep every one o
 
 #: Recurring task arguments a :class:`DaskExecutor` keeps on the cluster (oldest dropped).
 SHARED_ARGS_KEPT = 16
+
+
+WATCHDOG_POLL_S = 1.0
+"""How often a worker without a pidfd (not Linux) checks that its pool's owner lives [s]."""
+
+#: Environment variable that hands the forkserver the pid of the process it must not
+#: outlive (set only while the forkserver starts; read once, by the forkserver).
+_FORKSERVER_PARENT_ENV = "CEVM_FORKSERVER_PARENT"
 
 
 def _identity(obj: Any) -> Any:
@@ -208,12 +227,81 @@ def _execute(fn: Callable, args: tuple) -> tuple[Any, float]:
     return value, time.perf_counter() - t0
 
 
+# ------------------------------------------------------------------ worker lifetime
+
+_PR_SET_PDEATHSIG = 1  # linux/prctl.h
+
+
+def _set_parent_death_signal(sig: int = signal.SIGKILL) -> bool:
+    """Ask the kernel to send ``sig`` to this process when its parent (the thread that
+    forked it) dies; Linux only. True if set."""
+    if not sys.platform.startswith("linux"):
+        return False
+    try:
+        import ctypes
+
+        libc = ctypes.CDLL(None, use_errno=True)
+        return libc.prctl(_PR_SET_PDEATHSIG, int(sig), 0, 0, 0) == 0
+    except (OSError, AttributeError):
+        return False
+
+
+def _watch_owner(owner_pid: int) -> None:
+    """End this process (``os._exit``) as soon as process ``owner_pid`` has ended: a
+    daemon thread waits on a pidfd of it (Linux 5.3+), or else polls it every
+    :data:`WATCHDOG_POLL_S`. If it has ended already, end now."""
+    try:
+        fd = os.pidfd_open(owner_pid)
+    except ProcessLookupError:
+        os._exit(1)
+    except (AttributeError, OSError):
+        fd = None
+
+    def wait_pidfd() -> None:
+        import select
+
+        p = select.poll()
+        p.register(fd, select.POLLIN)
+        while not p.poll():
+            pass
+        os._exit(1)
+
+    def poll_pid() -> None:
+        while True:
+            time.sleep(WATCHDOG_POLL_S)
+            try:
+                os.kill(owner_pid, 0)
+            except ProcessLookupError:
+                os._exit(1)
+            except PermissionError:  # alive, another user's (its pid was reused: rare)
+                pass
+
+    threading.Thread(target=wait_pidfd if fd is not None else poll_pid, name="cevm-owner-watch", daemon=True).start()
+
+
+def _forkserver_lifeline() -> None:
+    """In the forkserver that :func:`_start_forkserver` started (it imports this module
+    first): die with the process that started it, as its workers die with it. Does
+    nothing in any other process."""
+    want = os.environ.get(_FORKSERVER_PARENT_ENV)
+    if want and want == str(os.getppid()):
+        if not _set_parent_death_signal():
+            _watch_owner(int(want))
+        elif os.getppid() != int(want):  # it died before the request took effect
+            os._exit(1)
+
+
 _SLOTS = None  # shared array: index of the task each pool worker runs, -1 when idle
 _SLOT = -1
 
 
-def _pool_init(slots, counter) -> None:
+def _pool_init(slots, counter, owner_pid: int) -> None:
     global _SLOTS, _SLOT
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the owner handles a Ctrl-C, and ends us
+    parent = os.getppid()
+    if _set_parent_death_signal() and os.getppid() != parent:
+        os._exit(1)  # our parent (the forkserver) died before the request took effect
+    _watch_owner(owner_pid)  # the pool's owner, which may not be our parent
     with counter.get_lock():
         _SLOT = counter.value % len(slots)
         counter.value += 1
@@ -341,11 +429,19 @@ class Executor(ABC):
     def close(self) -> None:
         """Release the workers (a no-op for executors that hold none)."""
 
+    def terminate(self) -> None:
+        """Release the workers now, without waiting for running tasks (their results
+        are lost): what leaving a ``with`` block on an exception does."""
+        self.close()
+
     def __enter__(self):
         return self
 
-    def __exit__(self, *exc) -> None:
-        self.close()
+    def __exit__(self, exc_type, *exc) -> None:
+        if exc_type is None:
+            self.close()
+        else:  # an interrupt, an error of the caller: no result of a running task is wanted
+            self.terminate()
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}({self.name!r}, slots={self.slots})"
@@ -421,8 +517,8 @@ class ProcessExecutor(Executor):
         self.slots = int(workers)
         self.max_attempts = int(max_attempts)
         self._ctx = mp.get_context(start_method)
-        if start_method == "forkserver" and preload:
-            self._ctx.set_forkserver_preload(list(preload))
+        if start_method == "forkserver":  # first: the forkserver must not outlive us
+            self._ctx.set_forkserver_preload(["cevm.executors", *preload])
         self._pool: ProcessPoolExecutor | None = None
         self._slots_arr = None
         self.restarts = 0  # pools recreated after a worker died
@@ -434,7 +530,7 @@ class ProcessExecutor(Executor):
             self._slots_arr = self._ctx.Array("q", [-1] * self.slots, lock=False)
             counter = self._ctx.Value("i", 0)
             self._pool = ProcessPoolExecutor(self.slots, mp_context=self._ctx, initializer=_pool_init,
-                                             initargs=(self._slots_arr, counter))
+                                             initargs=(self._slots_arr, counter, os.getpid()))
         return self._pool
 
     def _submit(self, fn, entry):
@@ -495,17 +591,45 @@ class ProcessExecutor(Executor):
             self._pool.shutdown(wait=True, cancel_futures=True)
             self._pool = None
 
+    def terminate(self) -> None:
+        """Kill the workers (SIGKILL), then release the pool: for an interrupt, when
+        nothing a running task returns is wanted and waiting for it would delay the
+        exit by up to a task."""
+        pool, self._pool = self._pool, None
+        if pool is None:
+            return
+        kill = getattr(pool, "kill_workers", None)  # Python 3.14+
+        if callable(kill):
+            kill()
+        else:
+            for p in list((getattr(pool, "_processes", None) or {}).values()):
+                try:
+                    p.kill()
+                except (OSError, ValueError):
+                    pass  # gone already
+        pool.shutdown(wait=True, cancel_futures=True)
+
+
 
 def _start_forkserver() -> None:
     """Start this process's forkserver (if not running) with :data:`WORKER_ENV`: its
     preload imports numpy, whose BLAS reads the thread count then, and the workers it
-    forks inherit that."""
+    forks inherit that. Started from the main thread, it also learns this process's pid
+    (:func:`_forkserver_lifeline`: it dies with it). Not from another thread: Linux's
+    parent-death signal follows the thread that forks, which may end long before this
+    process (the workers still watch this process themselves)."""
     from multiprocessing import forkserver
 
-    saved = {k: os.environ.get(k) for k in WORKER_ENV}
+    env = dict(WORKER_ENV)
+    if threading.current_thread() is threading.main_thread():
+        env[_FORKSERVER_PARENT_ENV] = str(os.getpid())
+    saved = {k: os.environ.get(k) for k in env}
     try:
-        for k, v in WORKER_ENV.items():
-            os.environ.setdefault(k, v)
+        for k, v in env.items():
+            if k == _FORKSERVER_PARENT_ENV:
+                os.environ[k] = v
+            else:
+                os.environ.setdefault(k, v)
         forkserver.ensure_running()
     finally:
         for k, v in saved.items():
@@ -655,3 +779,6 @@ def make_executor(workers: int | None = None, scheduler: str | None = None, *,
     if n < 1:
         raise ValueError(f"workers must be >= 1, got {n}")
     return SerialExecutor() if n == 1 else ProcessExecutor(n, max_attempts=max_attempts)
+
+
+_forkserver_lifeline()

@@ -8,6 +8,9 @@ per 4 kB on every new array: about a quarter of the run time of
 ``benchmarks/bench_sweep.py``. :func:`tune_allocator` keeps freed memory in the process
 instead (it is reused by the next arrays), at the cost of a higher resident size after
 a peak.
+
+:func:`signals_deferred` holds back SIGINT and SIGTERM handlers over a short piece of
+work that must not be split (a store write and its report).
 """
 
 from __future__ import annotations
@@ -15,7 +18,11 @@ from __future__ import annotations
 import ctypes
 import ctypes.util
 import os
+import signal
 import sys
+import threading
+from collections.abc import Iterator
+from contextlib import contextmanager
 
 #: glibc's mallopt parameters (malloc.h)
 _M_TRIM_THRESHOLD = -1
@@ -54,3 +61,35 @@ def tune_allocator() -> bool:
     settings = ((_M_MMAP_THRESHOLD, MMAP_THRESHOLD_BYTES), (_M_TRIM_THRESHOLD, TRIM_THRESHOLD_BYTES),
                 (_M_TOP_PAD, TOP_PAD_BYTES))
     return all([mallopt(param, value) == 1 for param, value in settings])
+
+
+@contextmanager
+def signals_deferred(signums: tuple[int, ...] = (signal.SIGINT, signal.SIGTERM)) -> Iterator[None]:
+    """Hold back the Python handlers of ``signums`` (SIGINT's KeyboardInterrupt, the
+    command line's SIGTERM) for the duration of the block, then run the first one that
+    arrived: for a few milliseconds of work that must not be split, such as writing one
+    file's outcome to the store and reporting it.
+
+    Only in the main thread (where Python runs signal handlers) and only for signals with
+    a Python handler: a signal whose action is the system default (SIGTERM in a program
+    that set none) still ends the process at once, which the store survives (its
+    transactions are atomic).
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    arrived: list[tuple[int, object]] = []
+    saved = {}
+    for s in signums:
+        handler = signal.getsignal(s)
+        if callable(handler):
+            saved[s] = handler
+            signal.signal(s, lambda signum, frame: arrived.append((signum, frame)))
+    try:
+        yield
+    finally:
+        for s, handler in saved.items():
+            signal.signal(s, handler)
+        if arrived:
+            signum, frame = arrived[0]
+            saved[signum](signum, frame)

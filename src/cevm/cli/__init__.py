@@ -2,8 +2,9 @@
 
 Exit codes: 0 success; 1 some inputs of a batch failed (the rest was done);
 2 bad usage or bad input (nothing was done); 3 the store could not be written (nothing
-was changed); 4 the store is damaged (see :mod:`cevm.cli.common`). Errors caused by input
-are printed as one line on stderr, without a traceback.
+was changed); 4 the store is damaged (see :mod:`cevm.cli.common`); 130 after SIGINT and
+143 after SIGTERM (:mod:`~cevm.cli.interrupts`). Errors caused by input are printed as
+one line on stderr, without a traceback.
 
 This module creates the app and registers the commands of one module per command (group):
 :mod:`~cevm.cli.ingest`, :mod:`~cevm.cli.trips`, :mod:`~cevm.cli.calibrate`,
@@ -65,11 +66,18 @@ app.add_typer(store.app, name="store")
 
 def main() -> None:
     """Console entry point."""
+    from cevm.cli import interrupts
     from cevm.runtime import tune_allocator
 
     tune_allocator()
-    try:
-        app()
-    except CevmError as exc:  # a user's mistake that escaped a command: one line, no traceback
-        fail(exc)
-        sys.exit(exit_code_for(exc))
+    with interrupts.interrupts_raise():  # SIGTERM stops a command as SIGINT does
+        try:
+            app()
+        except CevmError as exc:  # a user's mistake that escaped a command: one line, no traceback
+            fail(exc)
+            sys.exit(exit_code_for(exc))
+        except SystemExit as exc:
+            signum = interrupts.received()
+            if signum is not None and exc.code == 1:  # click's "Aborted!" after an interrupt
+                sys.exit(interrupts.EXIT_SIGNAL_BASE + signum)
+            raise

@@ -64,12 +64,15 @@ def ingest(
     skipped; the rest is stored. Exit 0 if every file was ingested or unchanged, 1 if any
     failed, 2 for bad options (no input holds a log file: then no store is created;
     unknown profile, unreadable DSM, unreachable scheduler).
+    SIGINT (Ctrl-C) or SIGTERM stops the run: the file being written is finished, the
+    rest left as it was, one line says which; exit 130 (SIGINT) or 143 (SIGTERM).
 
     --manifest gives the trips their masses once the logs are stored (as 'cevm trips
     set-mass --manifest' does); its rows that match no stored trip, or several, are
     reported with their line (exit 1)."""
     import json
 
+    from cevm.cli import interrupts
     from cevm.ingest import IngestOptions
     from cevm.ingest.pipeline import discover
     from cevm.ingest import ingest as run_ingest
@@ -97,14 +100,19 @@ def ingest(
         progress = Progress(TextColumn("ingest"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
                             TextColumn("{task.description}"), transient=True)
     task = None
+    n_files: list[int] = []
+    done: list = []  # the reports of the files written (or found unchanged, or failed), in order
 
     def on_start(n: int) -> None:
         nonlocal task
+        n_files.append(n)
         if progress is not None:
             progress.start()
             task = progress.add_task("", total=n)
 
     def on_file(fr) -> None:
+        if n_files:  # not an input that matched nothing (those come before on_start)
+            done.append(fr)
         if log_json:
             typer.echo(json.dumps({"event": "file", **_file_dict(fr)}))
         elif fr.status == "failed":
@@ -138,6 +146,15 @@ def ingest(
         raise stop from None
     except CevmError as exc:
         raise fail(exc) from None
+    except KeyboardInterrupt as exc:  # SIGINT, or SIGTERM under cevm.cli.main: what is stored, what is not
+        if progress is not None:
+            progress.stop()
+        typer.echo(_interrupted_line(exc, done, n_files, store_path), err=True)
+        if log_json:
+            typer.echo(json.dumps({"event": "interrupted", "signal": interrupts.signal_name(exc),
+                                   "store": str(store_path), "files": n_files[0] if n_files else None,
+                                   "done": len(done), "not_done": n_files[0] - len(done) if n_files else None}))
+        raise typer.Exit(interrupts.exit_code(exc)) from None
     finally:
         if progress is not None:
             progress.stop()
@@ -161,6 +178,20 @@ def _summary_line(s: dict, store_path: Path) -> str:
     return (f"cevm ingest: {s['files']} files ({s['ingested']} ingested, {s['unchanged']} unchanged, "
             f"{s['failed']} failed), {s['trips']} trips, {s['samples']} samples, {s['km']:.1f} km "
             f"in {s['seconds']:.2f} s -> {store_path}")
+
+
+def _interrupted_line(exc: BaseException, done: list, n_files: list[int], store_path: Path) -> str:
+    """One line after an interrupt: the files done (each stored as reported), the files
+    not done (left as the store had them)."""
+    from cevm.cli.interrupts import signal_name
+
+    head = f"cevm ingest: interrupted by {signal_name(exc)}"
+    if not n_files:
+        return f"{head} before any file was read; nothing stored -> {store_path}"
+    counts = {k: sum(1 for f in done if f.status == k) for k in ("ingested", "unchanged", "failed")}
+    return (f"{head}: {len(done)} of {n_files[0]} files done ({counts['ingested']} ingested, "
+            f"{counts['unchanged']} unchanged, {counts['failed']} failed) and stored as reported; "
+            f"{n_files[0] - len(done)} not done, left as they were (run again to ingest them) -> {store_path}")
 
 
 def _print_ingest_table(report, summary: dict, store_path: Path) -> None:

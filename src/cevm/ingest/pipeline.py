@@ -9,7 +9,9 @@ mid-file leaves the store as it was, an unchanged file is skipped, a changed fil
 replaces its trips, and a bad file is reported and skipped while the batch goes on (its
 previously stored trips are kept). The outcomes of parallel runs come back in input
 order and are written in that order, so the store ends up exactly as after a serial
-run.
+run. A signal (SIGINT, or SIGTERM under the command line) never splits the writing of a
+file's outcome from its report: it is raised once the file is written, so the reports a
+caller has seen are exactly what is stored.
 """
 
 from __future__ import annotations
@@ -28,6 +30,7 @@ from cevm.executors import Executor, SerialExecutor, Task, TaskResult
 from cevm.ingest.profiles import load_profiles
 from cevm.ingest.textfile import mb
 from cevm.ingest.task import FileOutcome, IngestOptions, file_sha256, open_sampler, process_file
+from cevm.runtime import signals_deferred
 from cevm.store import TripStore
 from cevm.store.failures import StoreAccessError
 
@@ -150,12 +153,13 @@ def ingest(
         jobs = (_prepare(path, store, options, profiles, sampler, headers) for path in files)
         with closing(executor.run(process_file, jobs)) as results:  # closing: cancels what is left on errors
             for res in results:
-                t0 = time.perf_counter()
-                fr = _write_result(res, store, options, report)
-                fr.seconds += time.perf_counter() - t0
-                report.files.append(fr)
-                if on_file:
-                    on_file(fr)
+                with signals_deferred():  # a file written is a file reported
+                    t0 = time.perf_counter()
+                    fr = _write_result(res, store, options, report)
+                    fr.seconds += time.perf_counter() - t0
+                    report.files.append(fr)
+                    if on_file:
+                        on_file(fr)
     finally:
         if sampler is not None:
             sampler.close()
@@ -164,11 +168,12 @@ def ingest(
         stopped_by = sys.exc_info()[1]  # the run ends with an exception: say so in its record
         if stopped_by is not None:
             counts["stopped_by"] = str(stopped_by) or type(stopped_by).__name__
-        try:
-            store.finish_run(run_id, counts)
-        except StoreAccessError:
-            if stopped_by is None:  # else report the write that failed first, not this one
-                raise
+        with signals_deferred():
+            try:
+                store.finish_run(run_id, counts)
+            except StoreAccessError:
+                if stopped_by is None:  # else report the write that failed first, not this one
+                    raise
     return report
 
 
