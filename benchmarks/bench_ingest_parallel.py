@@ -3,6 +3,7 @@
     python benchmarks/bench_ingest_parallel.py [--quick] [--vehicles N] [--days D]
                                                [--workers W] [--repeat R] [--no-dask]
                                                [--short-days] [--days-per-file K]
+                                               [--small-repeat R]
 
 Generates a fleet of srf logs with ``cevm_samplegen.fleet_for_benchmark`` (default 40
 vehicles x 5 working days, one file per vehicle-day of 4-6 h of driving, ~17,000
@@ -11,16 +12,21 @@ fresh store with :func:`cevm.ingest.ingest`, DSM lookup included:
 
 - ``serial``: one process (:class:`~cevm.executors.SerialExecutor`, ``--workers 1``),
   single-threaded BLAS like the workers (set before numpy loads);
-- ``pool``: ``W`` worker processes (:class:`~cevm.executors.ProcessExecutor`), default 2;
-  ``pool warm``: the same workers again (DSM samplers open, imports done: the steady
-  state of a long run);
+- ``pool``: ``W`` worker processes (:class:`~cevm.executors.ProcessExecutor`), default 2,
+  with small files grouped into tasks of about :data:`~cevm.executors.TASK_S` of work
+  (estimated from their sizes, as ``cevm ingest`` does); ``pool 1/file``: one file per
+  task (``task_s=0``), the baseline before grouping; ``pool warm``: the grouped pool's
+  workers again (DSM samplers open, imports done: the steady state of a long run);
 - ``dask``: a LocalCluster of ``W`` worker processes x 1 thread on 127.0.0.1
-  (:class:`~cevm.executors.DaskExecutor`), started before the clock starts; ``dask
-  warm``: the same workers again;
+  (:class:`~cevm.executors.DaskExecutor`), started before the clock starts, grouped;
+  ``dask 1/file`` one file per task; ``dask warm``: the same workers again;
 - ``2 x serial``: the fleet split in two halves ingested by two independent serial
   processes at once, into two stores: what this machine gives two processes running
   this workload with no executor, no single writer and no pickling at all. It is the
-  ceiling against which the pool's overhead is judged.
+  ceiling against which the pool's overhead is judged;
+- the small batch (``--small-repeat``): whole ``cevm ingest`` commands on 16 files of
+  ~1.4 h (~80,000 samples), the default number of workers against ``--workers 1`` and
+  ``--workers 2`` (the old default here), interleaved.
 
 Task size matters (the per-task cost of a Dask cluster is fixed, ~5-10 ms of CPU here,
 and so is each new worker's start: transformer, DSM blocks): ``--short-days`` makes
@@ -44,8 +50,9 @@ tree (psutil, if installed) and by the whole machine, with the hypervisor's stea
 (/proc/stat): other programs on a shared machine show up there. The stores of the
 three modes are compared (trips, vectors and profiles must be identical).
 
-Targets (issue 9): pool >= 1.7x the serial throughput on 2 cores; Dask overhead under
-15 % against the pool at this size.
+Targets (issues 9 and 18): pool >= 1.7x the serial throughput on 2 cores on working
+days; Dask overhead under 15 % against the pool on ``--short-days``; the default never
+slower than ``--workers 1`` on the small batch.
 """
 
 from __future__ import annotations
@@ -72,7 +79,7 @@ sys.path.insert(0, str(ROOT / "src"))
 
 from cevm.ingest import IngestOptions, ingest  # noqa: E402
 from cevm.runtime import tune_allocator  # noqa: E402
-from cevm.executors import DaskExecutor, ProcessExecutor, SerialExecutor, Task, local_dask_cluster  # noqa: E402
+from cevm.executors import TASK_S, DaskExecutor, ProcessExecutor, SerialExecutor, Task, local_dask_cluster  # noqa: E402
 from cevm.store import TripStore  # noqa: E402
 
 try:
@@ -232,6 +239,31 @@ def line(name: str, samples: int, m: Meter, serial_rate: float | None, workers: 
     return rate
 
 
+def small_batch(tmp: Path, repeat: int) -> None:
+    """Whole ``cevm ingest`` commands on 16 files of ~1.4 h (8 vehicles x 2 days,
+    ~80,000 samples, DSM included): the default number of workers against
+    ``--workers 1`` and ``--workers 2`` (the old default on this machine: every core),
+    interleaved, each into a fresh store."""
+    files, dsm = generate(tmp / "small", 8, 2, full_days=False)
+    logs = files[0].parent
+    modes = {"default": [], "--workers 1": ["--workers", "1"], "--workers 2": ["--workers", "2"]}
+    walls: dict[str, list[float]] = {m: [] for m in modes}
+    env = {**os.environ, "PYTHONPATH": str(ROOT / "src") + os.pathsep + os.environ.get("PYTHONPATH", "")}
+    for rep in range(repeat):
+        for name, opt in modes.items():
+            store = tmp / "small" / f"{name.strip('-').replace(' ', '')}-{rep}.sqlite"
+            t0 = time.perf_counter()
+            subprocess.run([sys.executable, "-m", "cevm", "ingest", str(logs), "--dsm", dsm, "--store", str(store),
+                            "-q", *opt], check=True, env=env, stdout=subprocess.DEVNULL)
+            walls[name].append(time.perf_counter() - t0)
+    print(f"\nsmall batch, whole commands ({len(files)} files, {repeat} runs each, interleaved; min-max, median):")
+    med = {m: statistics.median(v) for m, v in walls.items()}
+    for name, v in walls.items():
+        print(f"  cevm ingest {name:<12} {min(v):5.2f}-{max(v):5.2f} s, median {med[name]:5.2f} s")
+    print(f"  default / --workers 1: x{med['default'] / med['--workers 1']:.2f} (median; target <= 1), "
+          f"old default (--workers 2) / --workers 1: x{med['--workers 2'] / med['--workers 1']:.2f}")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="8 vehicles x 2 days, one repeat")
@@ -244,6 +276,8 @@ def main() -> None:
                     help="the sample fleet's ~1.4 h vehicle-days (5,000 samples a file) instead of working days")
     ap.add_argument("--days-per-file", type=int, default=1,
                     help="merge this many days of a vehicle into one file: bigger tasks (default 1)")
+    ap.add_argument("--small-repeat", type=int, default=None,
+                    help="runs of each command of the small-batch case (default 5, --quick 1; 0: skip it)")
     ap.add_argument("--child", nargs=argparse.REMAINDER, help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.child is not None:
@@ -255,6 +289,7 @@ def main() -> None:
     n_veh = args.vehicles or (8 if args.quick else 40)
     n_days = args.days or (2 if args.quick else 5)
     repeat = args.repeat or (1 if args.quick else 2)
+    small_repeat = args.small_repeat if args.small_repeat is not None else (1 if args.quick else 5)
     w = args.workers
     dask_ok = not args.no_dask
     if dask_ok:
@@ -288,16 +323,20 @@ def main() -> None:
         stage = {}
         stores = {}
         for rep in range(repeat):
-            modes = ["serial", "pool", "pool warm"] + (["dask", "dask warm"] if dask_ok else [])
+            modes = ["serial", "pool 1/file", "pool", "pool warm"] + (
+                ["dask 1/file", "dask", "dask warm"] if dask_ok else [])
             for name in modes:
                 # every run starts cold, as a cevm ingest command does: a new pool (the
                 # forkserver stays: its start-up is printed above) and restarted Dask
-                # workers, so no worker keeps a DSM sampler warm from the previous run
-                if name == "pool":
+                # workers, so no worker keeps a DSM sampler warm from the previous run.
+                # "1/file": one file per task (task_s = 0), the old baseline; the others
+                # group small files into tasks of cevm.executors.TASK_S of work.
+                if name.startswith("pool") and name != "pool warm":
                     pool.close()
-                    ex = pool = ProcessExecutor(w)
-                elif name == "dask":
+                    ex = pool = ProcessExecutor(w, task_s=0.0 if name == "pool 1/file" else TASK_S)
+                elif name in ("dask", "dask 1/file"):
                     client_ex.client.restart()
+                    client_ex.task_s = 0.0 if name == "dask 1/file" else TASK_S
                     ex = client_ex
                 elif name == "pool warm":  # the same workers again: their DSM samplers are open
                     ex = pool
@@ -305,8 +344,11 @@ def main() -> None:
                     ex = client_ex
                 else:
                     ex = SerialExecutor()
-                store = tmp / f"{name.replace(' ', '-')}-{rep}.sqlite"
+                store = tmp / f"{name.replace(' ', '-').replace('/', '-')}-{rep}.sqlite"
+                submitted0 = ex.submitted
                 summary, m = run_ingest(files, store, dsm, ex)
+                if name == "pool":
+                    n_groups = ex.submitted - submitted0
                 if summary["failed"]:
                     raise SystemExit(f"{name}: {summary['failed']} files failed")
                 stores[name] = store
@@ -320,42 +362,50 @@ def main() -> None:
             if "2 x serial" not in best or m2.wall < best["2 x serial"][1].wall:
                 best["2 x serial"] = (samples2, m2)
 
-        print(f"\ningest of {best['serial'][0]:,} samples, best of {repeat} (wall; throughput; vs serial):")
+        print(f"\ningest of {best['serial'][0]:,} samples in {len(files)} files ({n_groups} tasks of about "
+              f"{TASK_S * 1e3:.0f} ms of estimated work or more, when grouped), best of {repeat} "
+              f"(wall; throughput; vs serial):")
         serial_rate = line("serial", *best["serial"], None, 1)
         rates = {}
-        for name in ("pool", "pool warm", "dask", "dask warm", "2 x serial"):
+        for name in ("pool 1/file", "pool", "pool warm", "dask 1/file", "dask", "dask warm", "2 x serial"):
             if name in best:
                 rates[name] = line(name.replace("pool", f"pool x{w}"), *best[name], serial_rate, w)
         total_stage = sum(stage.values())
         print(f"\nserial stages [s]: " + ", ".join(f"{k} {v:.2f}" for k, v in stage.items())
               + f"; the writer's share (store) {100 * stage.get('store', 0) / max(total_stage, 1e-9):.0f} %")
-        if "pool" in rates:
-            ceiling = rates.get("2 x serial", float("nan")) / serial_rate
-            print(f"pool: x{rates['pool'] / serial_rate:.2f} vs serial, x{rates['pool warm'] / serial_rate:.2f} with warm "
-                  f"workers (target >= 1.7 on 2 cores); "
-                  f"two independent serial processes reach x{ceiling:.2f} on this machine now")
+        ceiling = rates.get("2 x serial", float("nan")) / serial_rate
+        print(f"pool: x{rates['pool'] / serial_rate:.2f} vs serial (one file per task: "
+              f"x{rates['pool 1/file'] / serial_rate:.2f}), x{rates['pool warm'] / serial_rate:.2f} with warm "
+              f"workers (target >= 1.7 on 2 cores); two independent serial processes reach x{ceiling:.2f} "
+              f"on this machine now")
         if repeat > 1:
             med = {k: statistics.median(v) for k, v in walls.items()}
             print("median walls [s]: " + ", ".join(f"{k} {v:.2f}" for k, v in med.items())
-                  + f"; pool x{med['serial'] / med['pool']:.2f}, warm x{med['serial'] / med['pool warm']:.2f}"
-                  + (f"; dask overhead vs pool {100 * (med['dask'] / med['pool'] - 1):+.0f} %, warm "
+                  + f"; pool x{med['serial'] / med['pool']:.2f} (1/file x{med['serial'] / med['pool 1/file']:.2f}), "
+                    f"warm x{med['serial'] / med['pool warm']:.2f}"
+                  + (f"; dask overhead vs pool {100 * (med['dask'] / med['pool'] - 1):+.0f} % (1/file vs 1/file "
+                     f"{100 * (med['dask 1/file'] / med['pool 1/file'] - 1):+.0f} %), warm "
                      f"{100 * (med['dask warm'] / med['pool warm'] - 1):+.0f} %" if "dask" in med else ""))
         if "dask" in rates:
-            per_task_ms = 1e3 * (best["dask"][1].wall - best["pool"][1].wall) / len(files) * w
-            cpu_ms = 1e3 * (best["dask"][1].cpu - best["pool"][1].cpu) / len(files)
+            cpu_ms = 1e3 * (best["dask"][1].cpu - best["pool"][1].cpu) / n_groups
+            cpu_ms_1 = 1e3 * (best["dask 1/file"][1].cpu - best["pool 1/file"][1].cpu) / len(files)
             print(f"dask overhead vs the pool: {100 * (rates['pool'] / rates['dask'] - 1):+.0f} % cold, "
-                  f"{100 * (rates['pool warm'] / rates['dask warm'] - 1):+.0f} % warm (target < 15 %); cold: "
-                  f"{per_task_ms:.1f} ms of a worker slot and {cpu_ms:.1f} ms of CPU per file-task of "
+                  f"{100 * (rates['pool warm'] / rates['dask warm'] - 1):+.0f} % warm (target < 15 %); one file "
+                  f"per task: {100 * (rates['pool 1/file'] / rates['dask 1/file'] - 1):+.0f} % cold; extra CPU "
+                  f"{cpu_ms:.1f} ms per grouped task, {cpu_ms_1:.1f} ms per file-task of "
                   f"{best['serial'][0] / len(files):,.0f} samples ({1e3 * best['serial'][1].wall / len(files):.0f} ms serial)")
         print(f"per-core throughput (serial): {serial_rate / 1e3:.0f} k samples/s")
-        same = [n for n in ("pool", "dask") if n in stores and store_content(stores[n]) == store_content(stores["serial"])]
+        compared = [n for n in ("pool 1/file", "pool", "dask 1/file", "dask") if n in stores]
+        same = [n for n in compared if store_content(stores[n]) == store_content(stores["serial"])]
         print(f"stores identical to the serial one: {', '.join(same) or 'none'}"
-              f"{'' if len(same) == len([n for n in ('pool', 'dask') if n in stores]) else '  <-- MISMATCH'}")
-        print(f"load average after: {os.getloadavg()[0]:.2f}")
+              f"{'' if len(same) == len(compared) else '  <-- MISMATCH'}")
         pool.close()
         if client_ex is not None:
             client_ex.close()
             cluster.close()
+        if small_repeat:
+            small_batch(tmp, small_repeat)
+        print(f"load average after: {os.getloadavg()[0]:.2f}")
 
 
 if __name__ == "__main__":

@@ -14,10 +14,11 @@ environment are not the test's: a forkserver keeps the environment it started wi
   ``<log path>.held-<pid>`` and wait forever. (Directories are searched for ``*.csv``
   and ``*.csv.gz``: the markers are never taken for logs.)
 
-``python tests/faults.py [--stall-write NAME] CEVM-ARGS...`` runs the ``cevm`` command
-(its :func:`cevm.cli.main`) with ``process_file_or_die`` as the ingest task;
-``--stall-write NAME`` stalls the store transaction of the log named NAME for a second
-(after writing ``<store>.in-transaction``).
+``python tests/faults.py [--task-s S] [--stall-write NAME] CEVM-ARGS...`` runs the
+``cevm`` command (its :func:`cevm.cli.main`) with ``process_file_or_die`` as the
+ingest task; ``--task-s`` sets the local pool's task size, ``--stall-write NAME``
+stalls the store transaction of the log named NAME for a second (after writing
+``<store>.in-transaction``).
 """
 
 from __future__ import annotations
@@ -85,17 +86,30 @@ def session_processes(sid: int) -> list[tuple[int, str]]:
 
 
 def _main(argv: list[str]) -> None:
+    task_s = None
     stall = None
     while argv and argv[0].startswith("--"):
         opt = argv.pop(0)
-        if opt == "--stall-write":
+        if opt == "--task-s":
+            task_s = float(argv.pop(0))
+        elif opt == "--stall-write":
             stall = argv.pop(0)
         else:
             raise SystemExit(f"faults.py: unknown option {opt}")
+    import cevm.executors as executors
     import cevm.ingest.pipeline as pipeline
     import cevm.store.trips as trips
 
     pipeline.process_file = process_file_or_die
+    if task_s is not None:
+        real_make = executors.make_executor
+
+        def make_executor(workers=None, scheduler=None, **kw):
+            ex = real_make(workers, scheduler, **kw)
+            ex.task_s = task_s
+            return ex
+
+        executors.make_executor = make_executor
     if stall is not None:
         store_arg = argv[argv.index("--store") + 1]
         state = {}

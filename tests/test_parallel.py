@@ -329,6 +329,65 @@ def test_make_executor_and_the_cli_options(logs, tmp_path):
     assert res.exit_code == 2 and "not both" in res.output
 
 
+def test_the_default_number_of_workers_follows_the_work():
+    from cevm.executors import POOL_START_S, workers_for
+
+    # a pool pays for its start once the work saved exceeds it: work (1 - 1 / (n e)) > start
+    assert workers_for(0.5, 16, 2, start_s=1.0, efficiency=1.0) == 1  # 0.25 s saved < 1 s
+    assert workers_for(1.9, 16, 2, start_s=1.0, efficiency=1.0) == 1
+    assert workers_for(2.1, 16, 2, start_s=1.0, efficiency=1.0) == 2
+    assert workers_for(2.1, 16, 8, start_s=1.0, efficiency=1.0) == 8  # more cores, more saved
+    assert workers_for(1.1, 16, 8, start_s=1.0, efficiency=1.0) == 1  # 1 s + 1.1 s / 8: still slower
+    assert workers_for(1000.0, 3, 8) == 3  # never more workers than tasks, nor than cores
+    assert workers_for(1000.0, 1, 8) == workers_for(1000.0, 50, 1) == 1
+    ex = make_executor()
+    if ex.slots > 1:  # a 1-core machine gets the serial executor whatever the work
+        small = ex.sized_for(POOL_START_S, 16)
+        assert isinstance(small, SerialExecutor)
+        assert ex.sized_for(1000.0, 2) is ex and ex.slots == 2
+    explicit = make_executor(2)
+    assert explicit.sized_for(0.001, 2) is explicit  # a number the user gave is kept
+
+
+def test_estimated_work_follows_the_uncompressed_size(tmp_path):
+    import gzip
+
+    from cevm.ingest.pipeline import INGEST_FILE_S, INGEST_S_PER_BYTE, estimated_work_s
+
+    text = "".join(f"2019-05-14T08:00:{i % 60:02d}Z,{i},{i * 0.5}\n" for i in range(20_000)).encode()
+    plain, packed = tmp_path / "a.csv", tmp_path / "a.csv.gz"
+    plain.write_bytes(text)
+    packed.write_bytes(gzip.compress(text))
+    want = INGEST_FILE_S + INGEST_S_PER_BYTE * len(text)
+    assert estimated_work_s(plain, plain.stat().st_size) == pytest.approx(want, rel=1e-12)
+    assert packed.stat().st_size < len(text) / 3  # the trailer is read, not the compressed size
+    assert estimated_work_s(packed, packed.stat().st_size) == pytest.approx(want, rel=1e-12)
+
+
+def test_a_small_batch_runs_in_this_process_and_a_big_one_on_a_pool(logs, tmp_path, monkeypatch):
+    """The default executor starts no pool for the 7 small files (their estimated work
+    is far below a pool's start), does for the same files when each is thought to take
+    seconds, and stores the same either way; files stored already at their size and
+    modification time are not counted as work."""
+    import cevm.ingest.pipeline as pipeline
+    from cevm.ingest import IngestOptions, ingest
+    from cevm.store import TripStore
+
+    stores = {}
+    for name, s_per_byte in (("small", pipeline.INGEST_S_PER_BYTE), ("big", 1e-4)):
+        monkeypatch.setattr(pipeline, "INGEST_S_PER_BYTE", s_per_byte)
+        ex = ProcessExecutor(2, auto=True)
+        with ex, TripStore(tmp_path / f"{name}.sqlite") as st:
+            report = ingest([logs], st, IngestOptions(), executor=ex)
+            started = ex._pool is not None
+            assert pipeline._work_to_do(sorted(logs.rglob("*.csv")), st, IngestOptions()) == \
+                {str(logs / "junk.csv"): pytest.approx(pipeline.estimated_work_s(logs / "junk.csv", 1500))}
+        assert started == (name == "big"), name
+        assert report.count("ingested") == 7 and report.failed == 1  # (the copy: ingested, its trip a duplicate)
+        stores[name] = store_content(tmp_path / f"{name}.sqlite")
+    assert stores["small"]["trips"] == stores["big"]["trips"] and stores["small"]["blobs"] == stores["big"]["blobs"]
+
+
 # --------------------------------------------------------------- same store content
 
 
@@ -457,11 +516,13 @@ def test_a_worker_killed_mid_file_is_retried_and_a_file_that_kills_twice_fails(l
         (logs / f"v1_d1.csv.kill-{k}").touch()
     monkeypatch.setattr(pipeline, "process_file", faults.process_file_or_die)
     store = tmp_path / "pool.sqlite"
+    # the seven small files are one group of tasks (cevm.executors.TASK_S): a death in it
+    # is charged to none of them, and each of its files then runs alone
     res, files, summary = ingest_json(logs, "--store", store, "--workers", "2")
     assert res.exit_code == 1
     left = faults.markers(logs, "*.kill-*")
-    # once, once, and twice alone (three times if its first death was beside another
-    # task's: that one is charged to neither)
+    # once, once, and twice alone (three times if its first death was in the group or
+    # beside another task: that one is charged to no file)
     assert left in (["v1_d1.csv.kill-2"], [])
     assert faults.markers(logs, "v0_d1.csv.killed-*") and faults.markers(logs, "v2_d0.csv.killed-*")
     status = {Path(f["path"]).name: f for f in files}
@@ -478,8 +539,8 @@ def test_a_worker_killed_mid_file_is_retried_and_a_file_that_kills_twice_fails(l
     assert store_content(store)["trips"] == want["trips"]
 
 
-def _sleepers(marker_dir: str, *specs: tuple[str, float]) -> list[Task]:
-    return [Task(name, (marker_dir, name, seconds)) for name, seconds in specs]
+def _sleepers(marker_dir: str, *specs: tuple[str, float], cost_s: float | None = None) -> list[Task]:
+    return [Task(name, (marker_dir, name, seconds), cost_s=cost_s) for name, seconds in specs]
 
 
 def test_a_task_running_beside_a_killer_is_not_blamed(tmp_path):
@@ -513,6 +574,90 @@ def test_a_task_that_killed_once_beside_a_killer_is_not_failed(tmp_path):
     assert not res[1].ok and "died 2 times" in res[1].error
 
 
+def _count_submissions(ex, monkeypatch) -> list[int]:
+    """The number of tasks in each submission ``ex`` makes (a group counts its tasks)."""
+    sizes = []
+    real = ex._submit
+
+    def submit(fn, entry):
+        sizes.append(len(entry.items))
+        return real(fn, entry)
+
+    monkeypatch.setattr(ex, "_submit", submit)
+    return sizes
+
+
+def test_tasks_with_a_cost_are_grouped_up_to_the_task_size_and_come_back_one_by_one(tmp_path, monkeypatch):
+    crash = str(tmp_path)
+    items = _sleepers(crash, *[(f"t{i}", 0.001 * i) for i in range(12)], cost_s=0.125)
+    items[5:5] = ["unchanged"]  # a pass-through item amid a group
+    items.append(Task("big", (crash, "big", 0.0), cost_s=0.5))  # worth a task of its own
+    items.append(Task("no cost", (crash, "no cost", 0.0)))  # never grouped
+    with ProcessExecutor(2, task_s=0.5) as ex:
+        sizes = _count_submissions(ex, monkeypatch)
+        res = list(ex.run(faults.sleep_or_die, items))
+    assert sizes == [4, 4, 4, 1, 1]  # 0.5 s of work each, and the two that go alone
+    assert [r.index for r in res] == list(range(len(items)))
+    assert [r.value for r in res] == [0.001 * i for i in range(5)] + ["unchanged"] + \
+        [0.001 * i for i in range(5, 12)] + [0.0, 0.0]
+    assert all(r.ok and r.attempts == (0 if r.task is None else 1) for r in res)
+    assert res[3].seconds == pytest.approx(0.003, abs=0.05)  # each task's own time, not its group's
+    # without costs (or on a serial executor) nothing is grouped
+    with ProcessExecutor(2, task_s=0.0) as ex:
+        sizes = _count_submissions(ex, monkeypatch)
+        list(ex.run(faults.sleep_or_die, items))
+    assert sizes == [1] * 14
+
+
+def test_a_task_that_raises_in_a_group_fails_alone_with_its_own_error(tmp_path, monkeypatch):
+    items = [Task(f"t{i}", (2, i), cost_s=0.01) for i in range(4)] + [Task("bad", (2, -1, 0), cost_s=0.01)]
+    items += [Task(f"u{i}", (3, i), cost_s=0.01) for i in range(3)]
+    with ProcessExecutor(2, task_s=1.0) as ex:
+        sizes = _count_submissions(ex, monkeypatch)
+        res = list(ex.run(pow, items))
+    assert sizes == [8, 1]  # one group; then the task that raised, alone
+    assert [r.value for r in res] == [1, 2, 4, 8, None, 1, 3, 9]
+    assert res[4].error.startswith("ValueError") and res[4].attempts == 1  # as if it had run alone
+    assert all(r.ok for k, r in enumerate(res) if k != 4)
+
+
+def test_a_group_whose_worker_dies_is_split_and_only_the_killer_fails(tmp_path, monkeypatch):
+    crash = str(tmp_path)
+    for k in range(3):
+        Path(crash, f"{k}.killer").touch()
+    Path(crash, "0.t1").touch()  # kills once: fine when run again
+    items = _sleepers(crash, ("t0", 0.0), ("t1", 0.0), ("killer", 0.0), ("t3", 0.0), cost_s=0.01)
+    with ProcessExecutor(2, task_s=1.0) as ex:
+        sizes = _count_submissions(ex, monkeypatch)
+        res = list(ex.run(faults.sleep_or_die, items))
+    assert [r.ok for r in res] == [True, True, False, True]
+    assert "died 2 times" in res[2].error and res[2].attempts == 2
+    assert [r.attempts for r in res if r.ok] == [1, 1, 1]  # the group's runs are charged to none
+    # the group died (at t1), then each task alone: t0, t1, the killer twice, t3
+    assert sizes == [4, 1, 1, 1, 1, 1] and ex.restarts == 3
+    assert sorted(p.partition("-")[2].partition("-")[2] for p in os.listdir(crash) if p.startswith("done-")) \
+        == ["0.killer", "0.t1", "1.killer"]
+
+
+def test_the_window_counts_work_not_items(tmp_path):
+    """Cheap tasks are taken ahead by their share of a task's work: 40 tasks of a
+    quarter task each fill a window of 10 tasks; without a cost, 10 fill it."""
+    pulled = []
+
+    def items(n, cost_s):
+        for i in range(n):
+            pulled.append(i)
+            yield Task(str(i), (1.0, 1), cost_s=cost_s)
+
+    with ProcessExecutor(2, task_s=0.5) as ex:
+        for cost_s, ahead in ((0.125, 40), (None, 10)):
+            pulled.clear()
+            gen = ex.run(pow, items(200, cost_s), window=10)
+            next(gen)
+            assert len(pulled) in (ahead, ahead + 1), cost_s  # (+1: the one pulled after the first yield)
+            gen.close()
+
+
 def test_dask_reschedules_a_killed_workers_file_without_duplicates(logs, tmp_path, dask_cluster, monkeypatch):
     import cevm.ingest.pipeline as pipeline
 
@@ -525,6 +670,19 @@ def test_dask_reschedules_a_killed_workers_file_without_duplicates(logs, tmp_pat
     assert res.exit_code == 1 and summary["failed"] == 1  # the junk file only
     assert faults.markers(logs, "*.kill-*") == [] and faults.markers(logs, "v2_d1.csv.killed-0-*")  # it did die
     assert store_content(store) == store_content(serial)
+
+
+def test_dask_splits_a_group_that_kills_its_workers_and_fails_only_the_killer(tmp_path, dask_cluster):
+    crash = str(tmp_path)
+    for k in range(5):
+        Path(crash, f"{k}.killer").touch()
+    items = _sleepers(crash, ("t0", 0.0), ("killer", 0.0), ("t2", 0.0), cost_s=0.01)
+    with DaskExecutor(dask_cluster.scheduler_address, task_s=1.0) as ex:
+        res = list(ex.run(faults.sleep_or_die, items))
+    assert [r.ok for r in res] == [True, False, True]
+    assert "KilledWorker" in res[1].error
+    # the group died on two workers (allowed-failures = 1), then the killer alone on two more
+    assert len([p for p in os.listdir(crash) if p.startswith("done-")]) == 4
 
 
 # ---------------------------------------------------------------------- DSM over HTTP

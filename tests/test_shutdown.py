@@ -120,7 +120,7 @@ def check_consistent(store: Path, reference: dict, logs: Path, stored: int) -> N
 def test_sigkill_of_an_ingest_leaves_no_process_and_a_consistent_store(logs, reference, tmp_path):
     store = tmp_path / "s.sqlite"
     (logs / "z_held.csv.hold").touch()
-    proc, _, _ = start(["ingest", logs, "--store", store, "--workers", "2", "-q"], tmp_path)
+    proc, _, _ = start(["--task-s", "0", "ingest", logs, "--store", store, "--workers", "2", "-q"], tmp_path)
     try:
         held_mid_run(logs, store, proc, N_FILES - 1)
         os.kill(proc.pid, signal.SIGKILL)
@@ -140,7 +140,7 @@ def test_sigterm_and_sigint_stop_an_ingest_cleanly_and_say_what_was_stored(logs,
     workers included (Ctrl-C in a terminal): the same clean stop, and no other line."""
     store = tmp_path / "s.sqlite"
     (logs / "z_held.csv.hold").touch()
-    proc, out, err = start(["ingest", logs, "--store", store, "--workers", "2", "--log-json"],
+    proc, out, err = start(["--task-s", "0", "ingest", logs, "--store", store, "--workers", "2", "--log-json"],
                            tmp_path)
     try:
         held_mid_run(logs, store, proc, N_FILES - 1)

@@ -18,25 +18,42 @@ Executors (thin wrappers, no home-made scheduling):
 
 :func:`make_executor` picks one from ``--workers`` / ``--scheduler``.
 
+Tasks sized by work
+    A submitted task costs the executor a fixed amount (a Dask cluster ~9 ms of CPU for
+    its scheduler, client and worker event loops; a process pool ~1 ms of pickling and
+    pipes), whatever its work. A :class:`Task` may say what it costs
+    (``cost_s``: estimated seconds of work on one core); a parallel executor then
+    submits consecutive small tasks together, as one **group** of about ``task_s``
+    seconds of work (default :data:`TASK_S`; at most :data:`MAX_GROUP` tasks). A group
+    runs its tasks one after the other in one worker and returns each one's result;
+    results are still yielded one per task, in input order. Tasks without a cost (or
+    costing ``task_s`` or more) go alone, as before.
+
 Faults
-    A task whose worker process dies is run again elsewhere; after ``max_attempts``
-    (default 2) deaths that are provably its own, it is reported as a failed result
-    (``error`` set), never silently dropped. In a process pool a dead worker breaks the
-    whole pool (:class:`~concurrent.futures.process.BrokenProcessPool`): the pool is
-    recreated, tasks that had not started are resubmitted for free, and the tasks that
-    were running are suspects. Each worker writes the index of the task it runs into a
-    shared array, so suspects are known exactly. A lone suspect is charged the death;
-    several suspects are not (only one of them killed its worker; the pool terminated
-    the others, and which is which is unknown). Every suspect is then re-run **alone**
-    in the pool, where a death is its own. A task is failed once it has been charged
+    Per-task isolation survives grouping: a task that raises inside a group is run
+    again alone (so what it reports is what it reports alone), and a group whose worker
+    died is split: each of its tasks is run again alone. A task whose worker process
+    dies is run again elsewhere; after ``max_attempts`` (default 2) deaths that are
+    provably its own, it is reported as a failed result (``error`` set), never silently
+    dropped. In a process pool a dead worker breaks the whole pool
+    (:class:`~concurrent.futures.process.BrokenProcessPool`): the pool is recreated,
+    tasks that had not started are resubmitted for free, and the tasks that were running
+    are suspects. Each worker writes the index of the task (or group) it runs into a
+    shared array, so suspects are known exactly. A lone suspect task is charged the
+    death; several suspects (or the tasks of one group) are not (only one of them killed
+    its worker, and which is unknown). Every suspect is then re-run **alone** in the
+    pool, where a death is its own. A task is failed once it has been charged
     ``max_attempts`` deaths: a task that kills every worker it runs on kills
-    ``max_attempts`` of them (one more if its first death was beside another task), and
-    neither a task that ran beside it nor one that killed its worker once, beside it,
-    and then ran clean, is blamed. On Dask, the
-    scheduler does this itself: a dead worker's tasks are rescheduled, and a task that
-    was on ``distributed.scheduler.allowed-failures + 1`` dead workers fails with
-    ``KilledWorker`` (:class:`DaskExecutor` sets ``allowed-failures = max_attempts - 1``
-    on the clusters it creates; start a remote scheduler with
+    ``max_attempts`` of them (one more if its first death was beside another task or in
+    a group), and neither a task that ran beside it nor one that killed its worker once,
+    beside it, and then ran clean, is blamed. On Dask, the scheduler does this itself: a
+    dead worker's tasks are rescheduled, and a task that was on
+    ``distributed.scheduler.allowed-failures + 1`` dead workers fails with
+    ``KilledWorker`` (a group that does is split into its tasks, which then run alone:
+    the scheduler charges a death to every task the dead worker held, so a task that
+    ran beside a killer could be failed with it;
+    :class:`DaskExecutor` sets ``allowed-failures = max_attempts - 1`` on the clusters
+    it creates; start a remote scheduler with
     ``DASK_DISTRIBUTED__SCHEDULER__ALLOWED_FAILURES=1`` for the same rule); exceptions
     raised by the task are retried ``max_attempts - 1`` times (``retries``).
 
@@ -56,8 +73,10 @@ Worker resources
 Determinism
     Results are yielded in input order whatever the completion order, so a caller that
     writes them as they come writes exactly what a serial run writes. At most
-    ``window`` items (default: four per worker slot, at least 32) are in flight or
-    waiting for an earlier one, which bounds memory whatever the number of items.
+    ``window`` tasks' worth of items (default: four per worker slot, at least 32) are in
+    flight or waiting for an earlier one, which bounds memory whatever the number of
+    items: an item counts as a whole task unless it has a cost, then as its share of
+    ``task_s`` (at least ``1 / MAX_GROUP``).
 """
 
 from __future__ import annotations
@@ -97,13 +116,22 @@ MAX_ATTEMPTS = 2
 reported failed: one retry, as a file that kills a worker twice will do it again."""
 
 WINDOW_PER_SLOT = 4
-"""Default items in flight or waiting, per worker slot: enough that a slow task does not
-idle the other workers at once, few enough to bound the results held in memory (an
-ingest result is a few MB per vehicle-day)."""
+"""Default tasks' worth of items in flight or waiting, per worker slot: enough that a
+slow task does not idle the other workers at once, few enough to bound the results held
+in memory (an ingest result is a few MB per vehicle-day)."""
 
 MIN_WINDOW = 32
 """Least default window of a parallel run: a Dask round trip costs milliseconds, so a
 few tasks queued ahead per worker keep them busy (32 ingest results: ~100 MB at most)."""
+
+TASK_S = 0.1
+"""Default work per submitted task of a parallel executor [s]: tasks with a smaller
+``cost_s`` are grouped up to this. A Dask task costs ~9 ms of CPU here (scheduler,
+client, worker event loops), so a group of 100 ms spends under 10 % on it, and 4
+groups per worker in flight are still only ~0.4 s of work each."""
+
+MAX_GROUP = 64
+"""Most tasks in one group (however cheap they claim to be)."""
 
 WORKER_ENV = {"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}
 """Environment of the local worker processes (where the user has not set these): one
@@ -120,6 +148,16 @@ a Dask worker that lives for many runs with other DSMs must not keep every one o
 #: Recurring task arguments a :class:`DaskExecutor` keeps on the cluster (oldest dropped).
 SHARED_ARGS_KEPT = 16
 
+POOL_START_S = 0.9
+"""What a fresh local pool costs before its first result, in wall time [s], measured
+on this project's 2-core machine (``benchmarks/bench_ingest_parallel.py``): the
+forkserver importing cevm, rasterio, pyproj and scipy (~0.5-0.8 s), each worker's first
+ingest task (a pyproj transformer, the DSM's rasters opened: ~0.1 s), the first
+results' pickles. A run whose work is smaller is faster in one process."""
+
+PARALLEL_EFFICIENCY = 0.85
+"""Speed-up per worker a pool reaches on CPU-bound ingest work, measured here (2
+workers: 1.6-1.9x one process)."""
 
 WATCHDOG_POLL_S = 1.0
 """How often a worker without a pidfd (not Linux) checks that its pool's owner lives [s]."""
@@ -145,10 +183,14 @@ on a LAN answers in milliseconds; 20 s allows for one starting up."""
 @dataclass(frozen=True)
 class Task:
     """One unit of work: ``fn(*args)`` for the run's task function ``fn``. ``key``
-    names it in messages (for ingest: the file path); ``args`` must pickle."""
+    names it in messages (for ingest: the file path); ``args`` must pickle.
+    ``cost_s``: its estimated work [s on one core], if known; a parallel executor then
+    groups it with its neighbours into a task of about ``task_s`` (see the module
+    docstring). None: it always goes alone."""
 
     key: str
     args: tuple = ()
+    cost_s: float | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -158,9 +200,9 @@ class TaskResult:
     ``value``: the task function's return value, or the item itself when it was not a
     :class:`Task` (``attempts == 0``). ``error``: why there is no value (the task raised,
     or its workers died ``max_attempts`` times); None if ok. ``attempts``: runs started
-    (1 for a task that ran once). ``seconds``: wall time of the successful run in the
-    worker [s] (0 if none). ``task``: the submitted :class:`Task` (None for a
-    pass-through item).
+    (1 for a task that ran once; runs in a group that died, not charged to it, do not
+    count). ``seconds``: wall time of the successful run in the worker [s] (0 if none).
+    ``task``: the submitted :class:`Task` (None for a pass-through item).
     """
 
     index: int
@@ -211,20 +253,42 @@ def worker_cache(key: Any, factory: Callable[[], Any]) -> Any:
 _ALLOCATOR_TUNED = False
 
 
-def _execute(fn: Callable, args: tuple) -> tuple[Any, float]:
-    """Run one task in a worker: ``(fn(*args), wall seconds)``. The first task in a
-    process applies :func:`cevm.runtime.tune_allocator` there (a Dask worker runs its
-    tasks in a thread, whose malloc arena otherwise hands freed pages back to the system
-    and faults them in again on the next task: a third of Dask's overhead measured)."""
+def _tune_once() -> None:
+    """The first task in a process applies :func:`cevm.runtime.tune_allocator` there (a
+    Dask worker runs its tasks in a thread, whose malloc arena otherwise hands freed
+    pages back to the system and faults them in again on the next task: a third of
+    Dask's overhead measured)."""
     global _ALLOCATOR_TUNED
     if not _ALLOCATOR_TUNED:
         from cevm.runtime import tune_allocator
 
         tune_allocator()
         _ALLOCATOR_TUNED = True
+
+
+def _execute(fn: Callable, args: tuple) -> tuple[Any, float]:
+    """Run one task in a worker: ``(fn(*args), wall seconds)``."""
+    _tune_once()
     t0 = time.perf_counter()
     value = fn(*args)
     return value, time.perf_counter() - t0
+
+
+def _execute_group(fn: Callable, group: list[tuple]) -> list[tuple[Any, float, str | None]]:
+    """Run a group's tasks one after the other in a worker: per task ``(value, wall
+    seconds, None)``, or ``(None, 0, error)`` for one that raised (the caller runs that
+    one again alone, so its own failure is what is reported)."""
+    _tune_once()
+    out = []
+    for args in group:
+        t0 = time.perf_counter()
+        try:
+            value = fn(*args)
+        except Exception as exc:
+            out.append((None, 0.0, _error_text(exc)))
+        else:
+            out.append((value, time.perf_counter() - t0, None))
+    return out
 
 
 # ------------------------------------------------------------------ worker lifetime
@@ -291,7 +355,7 @@ def _forkserver_lifeline() -> None:
             os._exit(1)
 
 
-_SLOTS = None  # shared array: index of the task each pool worker runs, -1 when idle
+_SLOTS = None  # shared array: index of the task (or group) each pool worker runs, -1 when idle
 _SLOT = -1
 
 
@@ -308,10 +372,10 @@ def _pool_init(slots, counter, owner_pid: int) -> None:
     _SLOTS = slots
 
 
-def _pool_execute(fn: Callable, index: int, args: tuple) -> tuple[Any, float]:
+def _pool_execute(fn: Callable, index: int, payload, grouped: bool):
     _SLOTS[_SLOT] = index
     try:
-        return _execute(fn, args)
+        return _execute_group(fn, payload) if grouped else _execute(fn, payload)
     finally:
         _SLOTS[_SLOT] = -1
 
@@ -321,9 +385,30 @@ def _pool_execute(fn: Callable, index: int, args: tuple) -> tuple[Any, float]:
 
 @dataclass(eq=False)
 class _Entry:
-    index: int
-    task: Task
+    """What one submission runs: one task, or a group of consecutive tasks."""
+
+    items: list  # [(index, Task)], in input order
     attempts: int = 0  # runs started (deaths suspected of it + the current run)
+
+    @property
+    def index(self) -> int:
+        return self.items[0][0]
+
+    @property
+    def task(self) -> Task:
+        return self.items[0][1]
+
+    @property
+    def grouped(self) -> bool:
+        return len(self.items) > 1
+
+    def payload(self):
+        """The submitted argument: a task's args, or a group's list of them."""
+        return [t.args for _, t in self.items] if self.grouped else self.task.args
+
+    def singles(self) -> list[_Entry]:
+        """Each task of a group alone, its run in the group not counted."""
+        return [_Entry([it], self.attempts - 1) for it in self.items]
 
 
 @dataclass
@@ -341,13 +426,17 @@ class Executor(ABC):
     #: Tasks that can run at once.
     slots: int = 1
     max_attempts: int = MAX_ATTEMPTS
+    #: Work per submitted task [s]: tasks with a smaller ``cost_s`` are grouped (0: never).
+    task_s: float = 0.0
+    #: Submissions made so far (a group counts once; reruns count again).
+    submitted: int = 0
     name: str = "executor"
 
     # ---- per-executor hooks ---------------------------------------------------------
 
     @abstractmethod
     def _submit(self, fn: Callable, entry: _Entry):
-        """Start ``fn`` on ``entry``'s task; return a handle."""
+        """Start ``fn`` on ``entry``'s task (or group); return a handle."""
 
     @abstractmethod
     def _wait(self, handles: list) -> Iterable:
@@ -361,28 +450,58 @@ class Executor(ABC):
         for h in handles:
             h.cancel()
 
+    # ---- shared by the hooks ----------------------------------------------------------
+
+    @staticmethod
+    def _finished(entry: _Entry, value, seconds: float, st: _RunState) -> list[TaskResult]:
+        """The results of a finished submission: a task's, or a group's (a task that
+        raised in its group goes to run again alone)."""
+        if not entry.grouped:
+            return [TaskResult(entry.index, entry.task, value=value, attempts=entry.attempts, seconds=seconds)]
+        out = []
+        for (i, task), (v, s, error), single in zip(entry.items, value, entry.singles()):
+            if error is None:
+                out.append(TaskResult(i, task, value=v, attempts=entry.attempts, seconds=s))
+            else:
+                st.retry.append(single)
+        return out
+
     # ---- the driver -------------------------------------------------------------------
 
     def run(self, fn: Callable, items: Iterable, *, window: int | None = None) -> Iterator[TaskResult]:
         """Run ``fn(*task.args)`` for every :class:`Task` in ``items``; yield one
         :class:`TaskResult` per item, in input order.
 
-        ``items`` is consumed lazily, at most ``window`` items ahead of the last one
-        yielded (default: :data:`WINDOW_PER_SLOT` per slot, at least :data:`MIN_WINDOW`;
-        1 for a serial executor, which runs a task as it is submitted), so
-        work the caller does to make an item (hashing a file) overlaps the running tasks.
-        ``fn`` must be a module-level function (workers import it by name). Closing
-        the generator (breaking out of the loop, an exception in it) cancels the tasks
-        not yet started.
+        ``items`` is consumed lazily, at most ``window`` tasks' worth ahead of the last
+        one yielded (default: :data:`WINDOW_PER_SLOT` per slot, at least
+        :data:`MIN_WINDOW`; 1 for a serial executor, which runs a task as it is
+        submitted), so work the caller does to make an item (hashing a file) overlaps
+        the running tasks. Consecutive tasks with a ``cost_s`` below :attr:`task_s` are
+        submitted together (module docstring). ``fn`` must be a module-level function
+        (workers import it by name). Closing the generator (breaking out of the loop, an
+        exception in it) cancels the tasks not yet started.
         """
         if window is None:
             window = 1 if self.inline else max(MIN_WINDOW, WINDOW_PER_SLOT * self.slots)
         window = max(1, int(window))
+        target = 0.0 if self.inline else float(self.task_s)
+        least = 1.0 / MAX_GROUP
         source = enumerate(items)
         exhausted = False
         st = _RunState()
         ready: dict[int, TaskResult] = {}
-        next_in = next_out = 0
+        weight: dict[int, float] = {}  # window share of each item pulled and not yet yielded
+        load = 0.0
+        group: list = []
+        group_s = 0.0
+        next_out = 0
+
+        def flush() -> None:
+            nonlocal group, group_s
+            if group:
+                self._put(fn, _Entry(group), st)
+                group, group_s = [], 0.0
+
         try:
             while True:
                 if st.alone:
@@ -391,21 +510,33 @@ class Executor(ABC):
                 else:
                     while st.retry:
                         self._put(fn, st.retry.popleft(), st)
-                    while not exhausted and not st.alone and next_in - next_out < window:
+                    while not exhausted and not st.alone and load < window:
                         try:
                             i, item = next(source)
                         except StopIteration:
                             exhausted = True
                             break
-                        next_in = i + 1
-                        if isinstance(item, Task):
-                            self._put(fn, _Entry(i, item), st)
-                        else:
+                        if not isinstance(item, Task):
+                            weight[i] = least
                             ready[i] = TaskResult(i, None, value=item)
+                        elif target > 0 and item.cost_s is not None and item.cost_s < target:
+                            weight[i] = max(least, item.cost_s / target)
+                            group.append((i, item))
+                            group_s += item.cost_s
+                            if group_s >= target or len(group) >= MAX_GROUP:
+                                flush()
+                        else:
+                            weight[i] = 1.0
+                            flush()
+                            self._put(fn, _Entry([(i, item)]), st)
+                        load += weight[i]
                         while next_out in ready:  # overlap the caller's work with the tasks
+                            load -= weight.pop(next_out)
                             yield ready.pop(next_out)
                             next_out += 1
+                    flush()
                 while next_out in ready:
+                    load -= weight.pop(next_out)
                     yield ready.pop(next_out)
                     next_out += 1
                 if not st.pending:
@@ -424,7 +555,14 @@ class Executor(ABC):
 
     def _put(self, fn: Callable, entry: _Entry, st: _RunState) -> None:
         entry.attempts += 1
+        self.submitted += 1
         st.pending[self._submit(fn, entry)] = entry
+
+    def sized_for(self, work_s: float, n_tasks: int) -> Executor:
+        """The executor to run ``n_tasks`` tasks of ``work_s`` estimated seconds of work
+        in all on: this one (an executor chosen by the user), or for the default one
+        (:func:`make_executor` without a number of workers) one that pays for itself."""
+        return self
 
     def close(self) -> None:
         """Release the workers (a no-op for executors that hold none)."""
@@ -478,8 +616,21 @@ class SerialExecutor(Executor):
         exc = handle.exception()
         if exc is not None:
             return [TaskResult(entry.index, entry.task, error=_error_text(exc), attempts=entry.attempts)]
-        value, seconds = handle.result()
-        return [TaskResult(entry.index, entry.task, value=value, attempts=entry.attempts, seconds=seconds)]
+        return self._finished(entry, *handle.result(), st)
+
+
+def workers_for(work_s: float, n_tasks: int, cores: int, *, start_s: float = POOL_START_S,
+                efficiency: float = PARALLEL_EFFICIENCY) -> int:
+    """How many local workers pay for themselves on ``n_tasks`` tasks of ``work_s``
+    seconds of work in all: the number ``n`` (1: this process, no pool) of the least
+    estimated wall time, ``work_s`` in one process, ``start_s + work_s / (n efficiency)``
+    on a fresh pool of ``n``; never more than the cores or the tasks."""
+    best_n, best_t = 1, work_s
+    for n in range(2, max(1, min(int(cores), int(n_tasks))) + 1):
+        t = start_s + work_s / (n * efficiency)
+        if t < best_t:
+            best_n, best_t = n, t
+    return best_n
 
 
 class ProcessExecutor(Executor):
@@ -504,24 +655,42 @@ class ProcessExecutor(Executor):
     preload : tuple of str, default ``("cevm.ingest.task", "rasterio", "pyproj", "scipy.ndimage")``
         Modules the forkserver imports before forking workers (the ingest task's, some
         imported lazily), so that a new worker does not import them again.
+    task_s : float, default :data:`TASK_S`
+        Work per submitted task [s]: tasks with a smaller ``cost_s`` are grouped (0:
+        never).
+    auto : bool, default False
+        ``workers`` is a most, not a choice: :meth:`sized_for` uses fewer, or this
+        process alone, where a pool would not pay for its start (:func:`workers_for`).
     """
 
     name = "processes"
 
     def __init__(self, workers: int, *, max_attempts: int = MAX_ATTEMPTS, start_method: str = "forkserver",
-                 preload: tuple[str, ...] = ("cevm.ingest.task", "rasterio", "pyproj", "scipy.ndimage")):
+                 preload: tuple[str, ...] = ("cevm.ingest.task", "rasterio", "pyproj", "scipy.ndimage"),
+                 task_s: float = TASK_S, auto: bool = False):
         if workers < 1:
             raise ValueError("workers must be >= 1")
         if max_attempts < 1:
             raise ValueError("max_attempts must be >= 1")
         self.slots = int(workers)
         self.max_attempts = int(max_attempts)
+        self.task_s = float(task_s)
+        self.auto = bool(auto)
         self._ctx = mp.get_context(start_method)
         if start_method == "forkserver":  # first: the forkserver must not outlive us
             self._ctx.set_forkserver_preload(["cevm.executors", *preload])
         self._pool: ProcessPoolExecutor | None = None
         self._slots_arr = None
         self.restarts = 0  # pools recreated after a worker died
+
+    def sized_for(self, work_s: float, n_tasks: int) -> Executor:
+        if not self.auto or self._pool is not None:
+            return self
+        n = workers_for(work_s, n_tasks, self.slots)
+        if n < 2:
+            return SerialExecutor()
+        self.slots = n
+        return self
 
     def _ensure_pool(self) -> ProcessPoolExecutor:
         if self._pool is None:
@@ -535,7 +704,7 @@ class ProcessExecutor(Executor):
 
     def _submit(self, fn, entry):
         try:
-            return self._ensure_pool().submit(_pool_execute, fn, entry.index, entry.task.args)
+            return self._ensure_pool().submit(_pool_execute, fn, entry.index, entry.payload(), entry.grouped)
         except BrokenProcessPool as exc:  # broke since the last wait: _finish sorts it out
             fut: Future = Future()
             fut.set_exception(exc)
@@ -548,14 +717,16 @@ class ProcessExecutor(Executor):
         exc = handle.exception()
         if isinstance(exc, BrokenProcessPool):
             return self._on_broken(entry, st)
-        if exc is not None:
+        if exc is not None:  # a lone task raised (a group catches its tasks' exceptions)
+            if entry.grouped:
+                st.retry.extend(entry.singles())
+                return []
             return [TaskResult(entry.index, entry.task, error=_error_text(exc), attempts=entry.attempts)]
-        value, seconds = handle.result()
-        return [TaskResult(entry.index, entry.task, value=value, attempts=entry.attempts, seconds=seconds)]
+        return self._finished(entry, *_unpack(handle.result(), entry), st)
 
     def _on_broken(self, first: _Entry, st: _RunState) -> list[TaskResult]:
-        """A worker died: sort the tasks the pool held into done, free to resubmit and
-        suspects (running when it broke); recreate the pool lazily."""
+        """A worker died: sort the submissions the pool held into done, free to
+        resubmit and suspects (running when it broke); recreate the pool lazily."""
         started = {int(i) for i in self._slots_arr if i >= 0} if self._slots_arr is not None else set()
         pool, self._pool = self._pool, None
         if pool is not None:
@@ -565,25 +736,28 @@ class ProcessExecutor(Executor):
         victims = [first]
         for h, e in list(st.pending.items()):
             del st.pending[h]
-            if h.done() and not h.cancelled() and h.exception() is None:
-                value, seconds = h.result()  # finished before the break
-                results.append(TaskResult(e.index, e.task, value=value, attempts=e.attempts, seconds=seconds))
+            if h.done() and not h.cancelled() and h.exception() is None:  # finished before the break
+                results.extend(self._finished(e, *_unpack(h.result(), e), st))
             else:
                 victims.append(e)
         suspects = sorted((e for e in victims if e.index in started), key=lambda e: e.index)
         for e in sorted((e for e in victims if e.index not in started), key=lambda e: e.index):
             e.attempts -= 1  # never started: this run does not count
             st.retry.append(e)
-        if len(suspects) > 1:
-            for e in suspects:
+        lone = len(suspects) == 1 and not suspects[0].grouped  # then the death is provably its own
+        for e in suspects:
+            if e.grouped:  # which of its tasks killed the worker is unknown: each runs alone, uncharged
+                st.alone.extend(e.singles())
+            elif not lone:
                 e.attempts -= 1  # not provably its death: run alone, uncharged
-        if len(suspects) == 1 and suspects[0].attempts >= self.max_attempts:
-            e = suspects.pop()
-            results.append(TaskResult(
-                e.index, e.task, attempts=e.attempts,
-                error=f"its worker process died {e.attempts} times while running it (killed, out of memory "
-                      "or crashed in native code)"))
-        st.alone.extend(suspects)  # from now on each runs alone: a death is then its own
+                st.alone.append(e)
+            elif e.attempts >= self.max_attempts:
+                results.append(TaskResult(
+                    e.index, e.task, attempts=e.attempts,
+                    error=f"its worker process died {e.attempts} times while running it (killed, out of memory "
+                          "or crashed in native code)"))
+            else:
+                st.alone.append(e)  # from now on it runs alone: a death is then its own
         return results
 
     def close(self) -> None:
@@ -609,6 +783,10 @@ class ProcessExecutor(Executor):
                     pass  # gone already
         pool.shutdown(wait=True, cancel_futures=True)
 
+
+def _unpack(result, entry: _Entry) -> tuple[Any, float]:
+    """``(value, seconds)`` of a finished submission: a group returns its list."""
+    return (result, 0.0) if entry.grouped else result
 
 
 def _start_forkserver() -> None:
@@ -655,12 +833,15 @@ class DaskExecutor(Executor):
         deaths are counted by the scheduler (``allowed-failures``, see module docstring).
     timeout_s : float, default :data:`DASK_CONNECT_TIMEOUT_S`
         How long to wait for the scheduler [s].
+    task_s : float, default :data:`TASK_S`
+        Work per submitted task [s]: tasks with a smaller ``cost_s`` are grouped (0:
+        never).
     """
 
     name = "dask"
 
     def __init__(self, address: str | None = None, *, client=None, max_attempts: int = MAX_ATTEMPTS,
-                 timeout_s: float = DASK_CONNECT_TIMEOUT_S):
+                 timeout_s: float = DASK_CONNECT_TIMEOUT_S, task_s: float = TASK_S):
         try:
             import distributed
         except ImportError:
@@ -668,6 +849,7 @@ class DaskExecutor(Executor):
         if client is None and address is None:
             raise ValueError("give a scheduler address or a client")
         self.max_attempts = int(max_attempts)
+        self.task_s = float(task_s)
         self._own = client is None
         if client is None:
             try:
@@ -677,6 +859,7 @@ class DaskExecutor(Executor):
         self.client = client
         self.slots = max(1, sum(w.get("nthreads", 1) for w in client.scheduler_info()["workers"].values()))
         self._token = uuid.uuid4().hex[:12]
+        self._n_submitted = 0
         self._shared: dict[int, tuple] = {}  # id(arg) -> (arg, future of it), oldest first
         self._n_shared = 0
         # Completed futures and their results arrive here from the client's event loop
@@ -707,12 +890,14 @@ class DaskExecutor(Executor):
         return hit[1]
 
     def _submit(self, fn, entry):
-        args = tuple(self._by_reference(a) for a in entry.task.args)
-        fut = self.client.submit(
-            _execute, fn, args,
-            key=f"{getattr(fn, '__name__', 'task')}-{self._token}-{entry.index}-{entry.attempts}",
-            pure=False, retries=self.max_attempts - 1,
-        )
+        self._n_submitted += 1
+        key = f"{getattr(fn, '__name__', 'task')}-{self._token}-{entry.index}-{self._n_submitted}"
+        if entry.grouped:
+            group = [tuple(self._by_reference(a) for a in t.args) for _, t in entry.items]
+            fut = self.client.submit(_execute_group, fn, group, key=key, pure=False, retries=self.max_attempts - 1)
+        else:
+            args = tuple(self._by_reference(a) for a in entry.task.args)
+            fut = self.client.submit(_execute, fn, args, key=key, pure=False, retries=self.max_attempts - 1)
         self._done.add(fut)
         return fut
 
@@ -730,8 +915,10 @@ class DaskExecutor(Executor):
         status = handle.status
         handle.release()
         if status == "finished":
-            value, seconds = result
-            return [TaskResult(entry.index, entry.task, value=value, attempts=entry.attempts, seconds=seconds)]
+            return self._finished(entry, *_unpack(result, entry), st)
+        if entry.grouped:  # its workers died (or it could not run): each of its tasks alone, where
+            st.alone.extend(entry.singles())  # the scheduler's count of deaths is then the task's own
+            return []
         exc = result[1] if isinstance(result, tuple) and len(result) == 3 else result
         if isinstance(exc, KilledWorker):
             return [TaskResult(entry.index, entry.task, attempts=self.max_attempts,
@@ -768,14 +955,19 @@ def make_executor(workers: int | None = None, scheduler: str | None = None, *,
     """The executor for ``--workers N`` / ``--scheduler ADDRESS``.
 
     ``scheduler`` set: a :class:`DaskExecutor` on it (``workers`` must then be None).
-    Else ``workers`` (default: ``os.cpu_count()``, every core): 1 gives the
-    :class:`SerialExecutor`, more a :class:`ProcessExecutor`.
+    ``workers`` 1 gives the :class:`SerialExecutor`, more a :class:`ProcessExecutor` of
+    that many. None (the default): up to every core (``os.cpu_count()``), as many as the
+    run's work pays for (:meth:`Executor.sized_for`, which callers that know their work
+    ask; one that does not gets every core); this process alone for a small run.
     """
     if scheduler is not None:
         if workers is not None:
             raise ValueError("give either a number of local workers or a Dask scheduler, not both")
         return DaskExecutor(scheduler, max_attempts=max_attempts)
-    n = (os.cpu_count() or 1) if workers is None else int(workers)
+    if workers is None:
+        cores = os.cpu_count() or 1
+        return SerialExecutor() if cores == 1 else ProcessExecutor(cores, max_attempts=max_attempts, auto=True)
+    n = int(workers)
     if n < 1:
         raise ValueError(f"workers must be >= 1, got {n}")
     return SerialExecutor() if n == 1 else ProcessExecutor(n, max_attempts=max_attempts)

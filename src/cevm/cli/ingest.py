@@ -33,7 +33,7 @@ def ingest(
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar and no table: failures and one summary line only.")] = False,
     log_json: Annotated[bool, typer.Option(help="One JSON object per file on stdout, then a summary object (for cron and scripts).")] = False,
     workers: Annotated[
-        Optional[int], typer.Option("--workers", "-w", min=1, metavar="N", help="Worker processes, one file per task (default: the machine's cores; 1: serial, in this process).")
+        Optional[int], typer.Option("--workers", "-w", min=1, metavar="N", help="Worker processes (default: as many of the machine's cores as the batch's work pays for, none for a small batch; 1: serial, in this process).")
     ] = None,
     scheduler: Annotated[
         Optional[str], typer.Option(help="Dask scheduler address (tcp://HOST:8786): run the per-file work on that cluster (pip install 'cevm[dask]'); the workers must read the log files at the same paths, and the DSM.")

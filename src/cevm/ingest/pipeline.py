@@ -2,7 +2,10 @@
 
 Discovery expands files, directories and globs (:func:`discover`); each file to
 (re-)ingest becomes one task (:func:`cevm.ingest.task.process_file`) on an executor
-(:mod:`cevm.executors`: serial, a process pool or a Dask cluster).
+(:mod:`cevm.executors`: serial, a process pool or a Dask cluster), with its work
+estimated from its size (:func:`estimated_work_s`): the executor groups small files into
+tasks of about 0.1 s, and the default executor runs a batch too small to pay for a
+pool's start in this process.
 
 :func:`ingest` is the store's single writer: one transaction per file, so a crash
 mid-file leaves the store as it was, an unchanged file is skipped, a changed file
@@ -17,6 +20,7 @@ caller has seen are exactly what is stored.
 from __future__ import annotations
 
 import glob
+import os
 import sys
 import time
 from collections.abc import Callable, Iterable
@@ -37,6 +41,18 @@ from cevm.store.failures import StoreAccessError
 
 #: File names taken from a directory (recursively).
 LOG_PATTERNS = ("*.csv", "*.csv.gz", "*.CSV", "*.CSV.GZ")
+
+INGEST_S_PER_BYTE = 4.0e-8
+"""Ingest work per byte of (uncompressed) log [s], DSM lookup included, measured on this
+project's 2-core machine: 38-42 ns per byte of srf on working-day and 1.4-hour files
+(``benchmarks/bench_ingest_parallel.py``, serial). Only for sizing tasks and choosing the
+default number of workers: within a factor of two is enough."""
+
+INGEST_FILE_S = 0.002
+"""Fixed ingest work per file [s] (open, detect the profile, one trip's set-up)."""
+
+GZIP_RATIO = 6.0
+"""Assumed expansion of a gzip log whose trailer cannot tell its size (several members)."""
 
 
 @dataclass
@@ -141,8 +157,11 @@ def ingest(
     if options.profile is not None and options.profile not in profiles:
         raise InputError(options.profile, f"unknown logger profile; available: {', '.join(sorted(profiles))}")
     sampler = open_sampler(options.dsm, options.allow_remote_dsm)  # here too: a bad DSM stops the run before any work
-    if executor is None or len(files) < 2:  # one file cannot run in parallel
+    costs = _work_to_do(files, store, options)
+    if executor is None or len(costs) < 2:  # one file cannot run in parallel
         executor = SerialExecutor()
+    else:  # the default executor: as many workers as the work pays for (maybe none)
+        executor = executor.sized_for(sum(costs.values()), len(costs))
     headers = None
     if not executor.inline and sampler is not None:
         headers = sampler.headers  # workers open their own, from these headers
@@ -150,7 +169,7 @@ def ingest(
         sampler = None
     run_id = store.start_run()
     try:
-        jobs = (_prepare(path, store, options, profiles, sampler, headers) for path in files)
+        jobs = (_prepare(path, store, options, profiles, sampler, headers, costs.get(str(path))) for path in files)
         with closing(executor.run(process_file, jobs)) as results:  # closing: cancels what is left on errors
             for res in results:
                 with signals_deferred():  # a file written is a file reported
@@ -177,9 +196,51 @@ def ingest(
     return report
 
 
-def _prepare(path: Path, store: TripStore, options: IngestOptions, profiles, sampler, headers) -> FileReport | Task:
+def estimated_work_s(path: Path, size_bytes: int) -> float:
+    """Ingest work of one log file [s on one core], from its size (a gzip file's from the
+    uncompressed size its trailer records): :data:`INGEST_FILE_S` +
+    :data:`INGEST_S_PER_BYTE` per byte. An estimate for scheduling, never a limit."""
+    return INGEST_FILE_S + INGEST_S_PER_BYTE * _content_size(path, size_bytes)
+
+
+def _content_size(path: Path, size_bytes: int) -> int:
+    """The file's size, or for a gzip file (by its magic bytes) the uncompressed size its
+    trailer records (modulo 4 GiB, of its last member only), or :data:`GZIP_RATIO` times
+    its size where that is implausible."""
+    try:
+        with open(path, "rb") as f:
+            if f.read(2) != b"\x1f\x8b":
+                return size_bytes
+            f.seek(-4, os.SEEK_END)
+            isize = int.from_bytes(f.read(4), "little")
+    except OSError:
+        return size_bytes
+    plausible = size_bytes <= isize <= 1032 * size_bytes  # deflate expands at most 1032x
+    return isize if plausible else int(GZIP_RATIO * size_bytes)
+
+
+def _work_to_do(files: list[Path], store: TripStore, options: IngestOptions) -> dict[str, float]:
+    """The estimated work [s] of each file that will probably be (re-)ingested: all of
+    them but those the store holds ingested at the same size and modification time
+    (the writer still hashes every file to decide)."""
+    costs = {}
+    for path in files:
+        try:
+            st = path.stat()
+        except OSError:
+            continue  # reported by _prepare
+        state = None if options.force else store.file_state(path)
+        if state is not None and state.status == "ok" and state.size_bytes == st.st_size and state.mtime_s == st.st_mtime:
+            continue
+        costs[str(path)] = estimated_work_s(path, st.st_size)
+    return costs
+
+
+def _prepare(path: Path, store: TripStore, options: IngestOptions, profiles, sampler, headers,
+             cost_s: float | None) -> FileReport | Task:
     """In the writer, before the task: hash the file and skip it if unchanged; else the
-    task's arguments (``sampler`` is None for workers: they open their own)."""
+    task's arguments (``sampler`` is None for workers: they open their own) and its
+    estimated work (None for a file thought unchanged: it goes alone)."""
     t0 = time.perf_counter()
     try:
         size = path.stat().st_size
@@ -193,7 +254,7 @@ def _prepare(path: Path, store: TripStore, options: IngestOptions, profiles, sam
                           seconds=time.perf_counter() - t0)
     if not options.force and not store.needs_ingest(path, sha):
         return FileReport(str(path), "unchanged", seconds=time.perf_counter() - t0)
-    return Task(str(path), (path, options, profiles, sampler, sha, headers))
+    return Task(str(path), (path, options, profiles, sampler, sha, headers), cost_s=cost_s)
 
 
 def _is_gzip(path: Path) -> bool:
