@@ -416,6 +416,16 @@ def test_serial_process_pool_and_dask_cluster_store_exactly_the_same(logs, tmp_p
             assert summary[k] == serial_summary[k], (name, k)
 
 
+def test_a_tls_scheduler_without_client_certificates_is_one_clear_error(logs, tmp_path):
+    dask = pytest.importorskip("dask")
+    pytest.importorskip("distributed")
+    with dask.config.set({"distributed.comm.tls.ca-file": None, "distributed.comm.tls.client.cert": None}):
+        res = run("ingest", logs, "--store", tmp_path / "s.sqlite", "--scheduler", "tls://127.0.0.1:1")
+    assert res.exit_code == 2
+    assert "tls:// scheduler needs this client's certificates" in res.output
+    assert "DASK_DISTRIBUTED__COMM__TLS__CLIENT__CERT" in res.output and "Traceback" not in res.output
+
+
 def _weigh(table: dict, key: str) -> float:
     return table[key] * len(table)
 

@@ -172,6 +172,10 @@ def _identity(obj: Any) -> Any:
     return obj
 
 
+#: The environment variables that give a client its TLS certificates (Dask's configuration).
+TLS_CLIENT_SETTINGS = ("DASK_DISTRIBUTED__COMM__TLS__CA_FILE", "DASK_DISTRIBUTED__COMM__TLS__CLIENT__CERT",
+                       "DASK_DISTRIBUTED__COMM__TLS__CLIENT__KEY")
+
 DASK_CONNECT_TIMEOUT_S = 20.0
 """How long :class:`DaskExecutor` waits for a scheduler [s] before giving up: a scheduler
 on a LAN answers in milliseconds; 20 s allows for one starting up."""
@@ -820,6 +824,12 @@ def _start_forkserver() -> None:
 class DaskExecutor(Executor):
     """Tasks on a Dask distributed cluster (``pip install cevm[dask]``).
 
+    Work travels to the workers as pickles, and unpickling can run any code: whoever can
+    reach the scheduler can run code as the workers (and in this client, through the
+    results). Run the cluster on a private network, or with TLS (a ``tls://`` address;
+    this client's certificates from Dask's configuration, :data:`TLS_CLIENT_SETTINGS`):
+    README, "More than one machine".
+
     Parameters
     ----------
     address : str or None
@@ -852,9 +862,16 @@ class DaskExecutor(Executor):
         self.task_s = float(task_s)
         self._own = client is None
         if client is None:
+            if str(address).startswith("tls://"):
+                import dask
+
+                if not (dask.config.get("distributed.comm.tls.ca-file", None)  # (a key may be in the cert)
+                        and dask.config.get("distributed.comm.tls.client.cert", None)):
+                    raise CevmError(f"{address}: a tls:// scheduler needs this client's certificates: set "
+                                    f"{', '.join(TLS_CLIENT_SETTINGS)} (or the same in Dask's configuration file)")
             try:
                 client = distributed.Client(address, timeout=timeout_s, set_as_default=False)
-            except (OSError, TimeoutError, ValueError) as exc:
+            except (OSError, TimeoutError, ValueError, TypeError) as exc:  # TypeError: a TLS setting missing
                 raise CevmError(f"cannot reach the Dask scheduler at {address}: {_error_text(exc)}") from None
         self.client = client
         self.slots = max(1, sum(w.get("nthreads", 1) for w in client.scheduler_info()["workers"].values()))
