@@ -41,8 +41,8 @@ first task), so the serial baseline is the command's own.
 
 Every run starts cold (DSM blocks not yet read), as a ``cevm ingest`` command does: a
 new pool each time (the pool's start-up, ~30 ms once the forkserver runs, is counted;
-the forkserver's own start, ~0.5 s once per command, is printed apart), and Dask workers
-restarted before each run (not counted: a cluster outlives the runs). Each mode runs
+the forkserver's own start, ~0.5 s once per command, is printed apart), and a new Dask
+LocalCluster before each cold run (not counted: a cluster outlives the runs). Each mode runs
 ``R`` times interleaved (default 2, ``--quick``: 1); the best wall time
 is shown, and the medians. Samples/s, the speed-up and the efficiency (speed-up / W) are against the
 serial run of the same invocation. Also printed: the CPU seconds used by this process
@@ -327,17 +327,23 @@ def main() -> None:
                 ["dask 1/file", "dask", "dask warm"] if dask_ok else [])
             for name in modes:
                 # every run starts cold, as a cevm ingest command does: a new pool (the
-                # forkserver stays: its start-up is printed above) and restarted Dask
-                # workers, so no worker keeps a DSM sampler warm from the previous run.
+                # forkserver stays: its start-up is printed above) and a new Dask
+                # cluster, so no worker keeps a DSM sampler warm from the previous run.
                 # "1/file": one file per task (task_s = 0), the old baseline; the others
                 # group small files into tasks of cevm.executors.TASK_S of work.
                 if name.startswith("pool") and name != "pool warm":
                     pool.close()
                     ex = pool = ProcessExecutor(w, task_s=0.0 if name == "pool 1/file" else TASK_S)
                 elif name in ("dask", "dask 1/file"):
-                    client_ex.client.restart()
-                    client_ex.task_s = 0.0 if name == "dask 1/file" else TASK_S
-                    ex = client_ex
+                    # a new cluster, not client.restart(): here a restart after a local
+                    # pool has run sometimes never gets its workers back (seen with the
+                    # executors of main too), and the benchmark then hangs
+                    client_ex.close()
+                    cluster.close()
+                    cluster = local_dask_cluster(w, 1, processes=True)
+                    ex = client_ex = DaskExecutor(cluster.scheduler_address,
+                                                  task_s=0.0 if name == "dask 1/file" else TASK_S)
+                    list(ex.run(abs, [Task(str(i), (i,)) for i in range(w)]))  # workers up
                 elif name == "pool warm":  # the same workers again: their DSM samplers are open
                     ex = pool
                 elif name == "dask warm":
@@ -378,6 +384,10 @@ def main() -> None:
               f"x{rates['pool 1/file'] / serial_rate:.2f}), x{rates['pool warm'] / serial_rate:.2f} with warm "
               f"workers (target >= 1.7 on 2 cores); two independent serial processes reach x{ceiling:.2f} "
               f"on this machine now")
+        if len(files) > n_groups:
+            saved = best["pool 1/file"][1].cpu - best["pool"][1].cpu
+            print(f"pool CPU (this process and workers) one file per task minus grouped: {saved:+.2f} s, "
+                  f"{1e3 * saved / (len(files) - n_groups):+.1f} ms per task saved")
         if repeat > 1:
             med = {k: statistics.median(v) for k, v in walls.items()}
             print("median walls [s]: " + ", ".join(f"{k} {v:.2f}" for k, v in med.items())

@@ -148,12 +148,14 @@ a Dask worker that lives for many runs with other DSMs must not keep every one o
 #: Recurring task arguments a :class:`DaskExecutor` keeps on the cluster (oldest dropped).
 SHARED_ARGS_KEPT = 16
 
-POOL_START_S = 0.9
+POOL_START_S = 1.0
 """What a fresh local pool costs before its first result, in wall time [s], measured
-on this project's 2-core machine (``benchmarks/bench_ingest_parallel.py``): the
-forkserver importing cevm, rasterio, pyproj and scipy (~0.5-0.8 s), each worker's first
-ingest task (a pyproj transformer, the DSM's rasters opened: ~0.1 s), the first
-results' pickles. A run whose work is smaller is faster in one process."""
+on this project's 2-core machine (``benchmarks/bench_ingest_parallel.py``, small
+batch: ``--workers 2`` 0.6-1.1 s slower than ``--workers 1`` on 0.4 s of work, so a
+start of 0.8-1.3 s): the forkserver importing cevm, rasterio, pyproj and scipy
+(0.7-0.8 s), each worker's first ingest task (a pyproj transformer, the DSM's rasters
+opened: ~0.1 s), the first results' pickles. Erring high costs a medium batch some
+speed, erring low makes it slower than one process."""
 
 PARALLEL_EFFICIENCY = 0.85
 """Speed-up per worker a pool reaches on CPU-bound ingest work, measured here (2
