@@ -183,3 +183,37 @@ def test_cli_route_errors(store, cycles, root):
                       (["predict", "-v", bus, "-r", "gh*", "--store", s], "no stored route matches 'gh*'")):
         res = runner.invoke(app, args)
         assert res.exit_code == 2 and msg in res.output, (args, res.output)
+
+
+def test_a_route_of_trips_is_predicted_at_its_legs_mean_temperature(tmp_path, cycles):
+    """A route's ambient temperature is the duration-weighted mean of its trip legs' logged
+    temperatures (computed here by hand); a route with a cycle leg, or with a trip that
+    logged none, has none (the prediction then says it used the vehicle's reference)."""
+    import dataclasses
+    from contextlib import ExitStack
+
+    from cevm.store.sources import load_sources
+
+    path = tmp_path / "s.sqlite"
+    temps = {0: -4.0, 1: 12.0, 2: None}
+    with TripStore.open(path) as st:
+        for i, seed in enumerate((11, 12, 13)):
+            src = str(tmp_path / f"log{i}.csv")
+            trip = dataclasses.replace(make_trip("EB-01", seed, 1_557_820_800 + 86400 * i, src),
+                                       ambient_temp_c=temps[i])
+            vec = drive_cycle_vector(trip.time_s, trip.speed_mps, trip.elevation_m)
+            st.replace_file_trips(src, [trip], [vec.to_bytes()], sha256=trip.source_sha256, size_bytes=1,
+                                  mtime_s=0.0, profile="test")
+        rows = st.list_trips().sort_values("start_utc_s")
+        ids = list(rows.trip_id)
+        durations = list(rows.duration_s)
+        add_route(st, "warm-and-cold", [TripLeg(ids[0]), TripLeg(ids[1])])
+        add_route(st, "with-cycle", [TripLeg(ids[0]), CycleLeg.from_file(cycles[0])])
+        add_route(st, "one-unlogged", [TripLeg(ids[0]), TripLeg(ids[2])])
+    with ExitStack() as stack:
+        got = {s.name: s.ambient_c for s in load_sources(stack, path, [], [], [], ["*"], 0.0)}
+    expected = (-4.0 * durations[0] + 12.0 * durations[1]) / (durations[0] + durations[1])
+    assert got["warm-and-cold"] == pytest.approx(expected, rel=1e-9)
+    assert durations[0] != durations[1]  # so that the weighting is tested, not a plain mean
+    assert got["with-cycle"] is None
+    assert got["one-unlogged"] is None

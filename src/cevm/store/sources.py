@@ -85,7 +85,8 @@ def load_sources(stack: ExitStack, store: Optional[Path], cycles: Sequence[Path]
     """Sources in the order cycles (every cycle of each file, read with ``cycle_format``),
     trips, trips of vehicle ids, routes. A store is opened read-only (and kept open on
     ``stack``) only when a stored source is asked for; profiles are read from it when
-    first needed. A stored trip's source carries its logged mean ambient temperature.
+    first needed. A stored trip's source carries its logged mean ambient temperature, a
+    route the duration-weighted mean of its trip legs' (:func:`route_ambient_c`).
 
     Damaged blobs: a trip asked for by id (``trips``) or a route with a damaged leg raises
     :class:`DamagedTripError` / :class:`~cevm.store.failures.DamagedRouteError`; the
@@ -144,8 +145,25 @@ def load_sources(stack: ExitStack, store: Optional[Path], cycles: Sequence[Path]
         vec = legs[0].vector
         for leg in legs[1:]:
             vec = vec + leg.vector
-        sources.append(Source(name=name, kind="route", vector=vec, legs=route_legs(name)))
+        sources.append(Source(name=name, kind="route", vector=vec, legs=route_legs(name),
+                              ambient_c=route_ambient_c(st, legs)))
     return sources
+
+
+def route_ambient_c(st: TripStore, legs: Sequence) -> float | None:
+    """A route's ambient temperature [degC]: the duration-weighted mean of its legs'
+    logged temperatures when every leg is a stored trip that logged one; None otherwise
+    (a cycle leg has no temperature, and a mean over some legs only would pass for the
+    whole route's), so that the prediction falls back to the vehicle's reference and says
+    so."""
+    if not legs or any(leg.info.kind != "trip" for leg in legs):
+        return None
+    rows = st.list_trips(trip_ids=[leg.info.ref for leg in legs]).set_index("trip_id")
+    temps = [rows.at[leg.info.ref, "ambient_temp_c"] if leg.info.ref in rows.index else math.nan for leg in legs]
+    weights = [leg.vector.duration_s for leg in legs]
+    if not all(math.isfinite(t) for t in temps) or sum(weights) <= 0:
+        return None
+    return float(sum(t * w for t, w in zip(temps, weights)) / sum(weights))
 
 
 def store_resolver(store: TripStore | Callable[[], TripStore]) -> LegResolver:
