@@ -47,7 +47,7 @@ def calibrate(
         Optional[str],
         typer.Option(help="ICE: fit under this braking mode (no-credit or paper) and write it to --out. Default: the vehicle file's."),
     ] = None,
-    fmt: Annotated[OutputFormat, typer.Option("--format", "-f", help="table, or json (figures plus per-trip rows).")] = OutputFormat.table,
+    fmt: Annotated[OutputFormat, typer.Option("--format", "-f", help="table; csv (the per-trip rows); or json (figures plus per-trip rows).")] = OutputFormat.table,
 ) -> None:
     """Fit the vehicle's model to its measured trips, choosing the terms by cross-validation.
 
