@@ -176,6 +176,16 @@ def test_missing_input_and_unknown_profile(tmp_path, fleet):
     assert res.exit_code == 1 and "nowhere" in res.output  # part of a batch failed
     res = run("ingest", logs, "--store", store, "--profile", "nosuch")
     assert res.exit_code == 2 and "nosuch" in res.output
+    assert store.exists()  # the store made by the run before is kept
+
+
+@pytest.mark.parametrize("bad", [("--profile", "nosuch"), ("--dsm", "no-such-dsm.tif")], ids=["profile", "dsm"])
+def test_options_refused_once_the_store_is_open_leave_no_new_store(tmp_path, fleet, bad):
+    logs, _ = fleet
+    store = tmp_path / "new.sqlite"
+    res = run("ingest", logs, "--store", store, *bad)
+    assert res.exit_code == 2 and bad[1] in res.output
+    assert not list(tmp_path.glob("new.sqlite*"))  # neither the store nor SQLite's side files
 
 
 def test_two_ingests_at_once_store_everything_once(tmp_path, fleet):

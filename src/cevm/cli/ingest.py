@@ -133,6 +133,7 @@ def ingest(
         except CevmError as exc:
             raise fail(exc) from None
     not_applied = 0
+    new_store = not store_path.exists()
     try:
         with make_executor(workers, scheduler) as executor, TripStore.open(store_path) as st:
             st.require_intact()  # never write into a damaged database
@@ -144,7 +145,9 @@ def ingest(
         typer.echo("cevm: note: the files written before the failure are stored, the one being written was rolled "
                    "back; run the same command again once it is fixed (stored files are skipped)", err=True)
         raise stop from None
-    except CevmError as exc:
+    except CevmError as exc:  # bad options found once the store was open (profile, DSM): no store made for them
+        if new_store and not done:
+            _remove_store_files(store_path)
         raise fail(exc) from None
     except KeyboardInterrupt as exc:  # SIGINT, or SIGTERM under cevm.cli.main: what is stored, what is not
         if progress is not None:
@@ -166,6 +169,12 @@ def ingest(
     else:
         _print_ingest_table(report, summary, store_path)
     raise typer.Exit(EXIT_PARTIAL if report.failed or not_applied else EXIT_OK)
+
+
+def _remove_store_files(store_path: Path) -> None:
+    """Remove a store this run created and wrote no file into (and SQLite's side files)."""
+    for p in (store_path, *(store_path.with_name(store_path.name + s) for s in ("-wal", "-shm", "-journal"))):
+        p.unlink(missing_ok=True)
 
 
 def _file_dict(fr) -> dict:
