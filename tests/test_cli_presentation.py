@@ -10,6 +10,7 @@ import io
 import json
 import re
 
+import numpy as np
 import pytest
 import typer.main
 from typer.testing import CliRunner
@@ -205,3 +206,13 @@ def test_a_leg_repeated_past_the_limit_is_refused_at_once(root, tmp_path):
     p.write_text(text.replace("repeat = 3", "repeat = 100000000"))
     line = _error_line(runner.invoke(app, ["fleet", "plan", str(p)]))  # before: never returned
     assert "repeat must be an integer from 1 to 1,000, got 100000000" in line
+
+
+def test_csv_writes_booleans_as_predicts_fast_path_and_json_do():
+    # predict's fast CSV path writes "true"/"false"; every other CSV output must agree,
+    # numpy booleans included (a column read back by one parser for every command).
+    rows = [{"ok": True, "flag": np.bool_(False), "n": 1}]
+    buf = io.StringIO()
+    write_rows(rows, OutputFormat.csv, stream=buf)
+    got = list(csv.DictReader(io.StringIO(buf.getvalue())))
+    assert got == [{"ok": "true", "flag": "false", "n": "1"}]

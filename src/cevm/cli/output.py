@@ -16,6 +16,8 @@ from collections.abc import Sequence
 from enum import Enum
 from typing import IO, Any
 
+import numpy as np
+
 from cevm.text import printable
 
 
@@ -43,6 +45,8 @@ def _csv_cell(value: Any) -> Any:
     value = _clean(value)
     if value is None:
         return ""
+    if isinstance(value, (bool, np.bool_)):  # as predict's fast CSV path and JSON write them
+        return "true" if value else "false"
     if isinstance(value, str):
         return printable(value)
     return value
