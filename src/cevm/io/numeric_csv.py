@@ -9,8 +9,8 @@ Two steps, for any CSV of numbers a user gives (cycle files, and other numeric t
    when the separator is not a comma and the data show a digit, comma, digit; else
    ``.``), unless given. It refuses binary data and a file without line breaks.
 2. :func:`read_numeric_columns` parses the columns asked for straight into float64
-   arrays in C (pandas' C parser, float dtypes; every row's field count checked by the
-   parser). Empty cells are NaN; what they mean is the caller's to say, and
+   arrays in C (``numpy.loadtxt`` for a file of plain numbers, else pandas' C parser with
+   float dtypes; every row's field count checked by the parser). Empty cells are NaN; what they mean is the caller's to say, and
    :func:`describe_missing` names an empty cell or a short line for its message. A cell
    that is not a finite number, or a line with more fields than the header, raises
    :class:`~cevm.errors.InputError` with the line (1-based, the header is line 1) and
