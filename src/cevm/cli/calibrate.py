@@ -40,7 +40,7 @@ def calibrate(
                                                                         "(nested cross-validation).")] = True,
     out: Annotated[Optional[Path], typer.Option("--out", "-o", metavar="FILE", help="Write the calibrated vehicle file here.")] = None,
     force: Annotated[bool, typer.Option(help="Allow --out to overwrite an existing file.")] = False,
-    cv_folds: Annotated[int, typer.Option(help="Cross-validation folds over days (leave-one-day-out below 10 days).")] = 5,
+    cv_folds: Annotated[int, typer.Option(help="Cross-validation folds over days; with fewer than 10 days, or no more days than folds, each day is its own fold (leave-one-day-out).")] = 5,
     max_rel_uncertainty: Annotated[float, typer.Option(help="Exclude trips measured worse than this (relative 1-sigma).")] = 0.10,
     plot: Annotated[Optional[Path], typer.Option(metavar="FILE.png", help="Write predicted-vs-measured and error-vs-distance plots (PNG).")] = None,
     ice_braking: Annotated[
