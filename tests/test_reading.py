@@ -435,3 +435,41 @@ def test_last_line_with_a_stray_carriage_return_is_an_input_error_not_a_crash(tm
     f = write(tmp_path / "cr.csv", srf_text([]).rstrip("\n") + "\n\r0")
     with pytest.raises(InputError):  # before: csv.Error from the truncated-line check
         read_log(f, profiles=profiles)
+
+
+# ======================================================================================
+# Times as numbers since the Unix epoch (CAN and OBD loggers)
+# ======================================================================================
+def epoch_profile(fmt: str, **time) -> dict:
+    return {"name": "can", "detect": {"required_columns": ["ts"]},
+            "time": {"columns": ["ts"], "format": fmt, **time},
+            "columns": {"wheel_speed_mps": {"source": "v", "unit": "m/s"}}}
+
+
+@pytest.mark.parametrize("engine", ["pyarrow", "pandas"])
+@pytest.mark.parametrize("fmt, scale", [("unix_s", 1), ("unix_ms", 1000)])
+def test_epoch_times_are_utc_whatever_the_engine(tmp_path, engine, fmt, scale):
+    # 2021-03-28 00:59:59 .. 01:00:02 UTC crosses the start of British summer time: an
+    # epoch time is UTC, so no zone (and no DST step) may touch it
+    t0 = int(datetime(2021, 3, 28, 0, 59, 59, tzinfo=UTC).timestamp())
+    times = [t0 + i * 0.5 for i in range(8)]
+    cells = [f"{t * scale:.0f}" if scale > 1 else f"{t:.1f}" for t in times]
+    f = write(tmp_path / "can.csv", "ts,v\n" + "".join(f"{c},{3 + i}\n" for i, c in enumerate(cells)))
+    (log,) = read_log(f, load_profile(epoch_profile(fmt)), vehicle_id="CAN-1", engine=engine)
+    np.testing.assert_allclose(log.frame["time_s"].to_numpy(), times, rtol=0, atol=1e-6)
+    np.testing.assert_array_equal(log.frame["wheel_speed_mps"].to_numpy(), 3.0 + np.arange(8))
+
+
+def test_epoch_times_in_the_wrong_unit_are_named_with_line_and_column(tmp_path):
+    ms = int(datetime(2021, 6, 1, tzinfo=UTC).timestamp()) * 1000  # milliseconds read as seconds: year 53,000
+    f = write(tmp_path / "can.csv", "ts,v\n" + "".join(f"{ms + 1000 * i},3\n" for i in range(5)))
+    for engine in ("pyarrow", "pandas"):
+        with pytest.raises(InputError, match="unreadable or impossible time") as ei:
+            read_log(f, load_profile(epoch_profile("unix_s")), vehicle_id="CAN-1", engine=engine)
+        assert (ei.value.line, ei.value.column) == (2, "ts")
+
+
+def test_an_epoch_profile_with_a_zone_is_refused():
+    with pytest.raises(InputError, match="no zone applies") as ei:
+        load_profile(epoch_profile("unix_ms", timezone="Europe/London"))
+    assert "time.timezone" in str(ei.value)

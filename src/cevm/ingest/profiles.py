@@ -27,7 +27,8 @@ Profile format (all keys; ``[columns]`` entries and ``[[energy]]`` tables repeat
     truncated_last_line = "drop"         # "drop" (and report) or "error"
     [time]
     columns = ["timestamp_utc"]          # one datetime column, or [date, time-of-day]
-    format = "ISO8601"                   # one column: "ISO8601" or a strptime format
+    format = "ISO8601"                   # one column: "ISO8601", a strptime format, or "unix_s" /
+                                         # "unix_ms" (numbers since 1970-01-01 UTC; no zone applies)
     date_format = "%m/%d/%Y"             # two columns: strptime formats of each
     time_format = "%H:%M:%S"
     timezone = "UTC"                     # IANA zone of naive times
@@ -87,6 +88,7 @@ import pandas as pd
 
 from cevm.configs_dir import shipped_configs_dir
 from cevm.errors import InputError
+from cevm.ingest.timestamps import EPOCH_FORMATS
 
 __all__ = [
     "UNITS",
@@ -468,6 +470,9 @@ def _time_section(t: dict, k: _Keys) -> TimeSpec:
     if len(tcols) == 2 and (fmt is not None or not dfmt or not tfmt):
         raise k.fail("two time columns need 'date_format' and 'time_format' (and no 'format')", "time.date_format")
     tz = _check_timezone(k.get(t, "timezone", str, "UTC", "time"), k)
+    if fmt in EPOCH_FORMATS and tz != "UTC":
+        raise k.fail(f"times in {fmt!r} count from 1970-01-01 UTC: no zone applies to them (remove 'timezone')",
+                     "time.timezone")
     date_repair = k.choice(k.get(t, "date_repair", str, "none", "time"), ("none", "dominant"), "time.date_repair")
     if date_repair != "none" and len(tcols) != 2:
         raise k.fail("date_repair needs separate date and time columns", "time.date_repair")

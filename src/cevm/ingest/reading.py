@@ -40,7 +40,7 @@ from cevm.errors import InputError, has_control
 from cevm.ingest.profiles import VIRTUAL_COLUMNS, ColumnMap, EnergySpec, Profile, load_profiles
 from cevm.ingest.textfile import (MAX_LINE_BYTES, ByteStream, ReadLimits, Utf8Stream, _ascii_transparent,
                                   sniff_bom, utf16_hint)
-from cevm.ingest.timestamps import NAT, NS_PER_DAY, fast_first_column, parse_datetimes
+from cevm.ingest.timestamps import EPOCH_FORMATS, NAT, NS_PER_DAY, epoch_ns, fast_first_column, parse_datetimes
 
 __all__ = [
     "PLAUSIBLE_RANGE_SI",
@@ -1057,6 +1057,10 @@ class _Gather:
         if part.time_ns is not None:
             ns, vals = part.time_ns, None
             self._time_notation(part.time_utc, part.lines[0], col)
+        elif tspec.format in EPOCH_FORMATS:  # numbers since the epoch: UTC by definition
+            vals = part.text[col]
+            self._time_notation(True, part.lines[0], col)
+            ns = epoch_ns(vals, EPOCH_FORMATS[tspec.format], self.prof.decimal)
         else:
             vals = part.text[col]
             if tspec.format == "ISO8601":

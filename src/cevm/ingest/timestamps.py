@@ -1,7 +1,8 @@
 """Timestamp parsing for the reading stage (vectorised): datetime text to int64
 nanoseconds, by fixed-width layouts straight from the bytes where possible.
 
-:func:`parse_datetimes` parses a column of strings (ISO 8601 or a strptime layout);
+:func:`parse_datetimes` parses a column of strings (ISO 8601, a strptime layout, or
+numbers since the Unix epoch: :data:`EPOCH_FORMATS`);
 :func:`fast_first_column` parses the first field of every line of a file's bytes without
 one Python string per row. Date repair and time zones are in :mod:`cevm.ingest.reading`.
 """
@@ -18,6 +19,11 @@ import pandas as pd
 NAT = np.iinfo(np.int64).min
 NS_PER_S = 1_000_000_000
 NS_PER_DAY = 86_400 * NS_PER_S
+
+#: Time formats of plain numbers: seconds or milliseconds since 1970-01-01T00:00:00 UTC
+#: (what many CAN and OBD loggers write) -> nanoseconds per unit. Such times are UTC by
+#: definition: a profile's zone does not apply to them.
+EPOCH_FORMATS = {"unix_s": NS_PER_S, "unix_ms": 1_000_000}
 
 
 _FIXED_FIELDS = {"%Y": 4, "%m": 2, "%d": 2, "%H": 2, "%M": 2, "%S": 2}
@@ -149,6 +155,8 @@ def parse_datetimes(values: np.ndarray, fmt: str) -> np.ndarray:
     strings with a zone designator ('Z', '+01:00') are converted to UTC; the caller must
     then not localise them again (see :func:`has_offset`).
     """
+    if fmt in EPOCH_FORMATS:
+        return epoch_ns(values, EPOCH_FORMATS[fmt])
     n = len(values)
     out = np.full(n, NAT, np.int64)
     rest = np.ones(n, bool)
@@ -177,6 +185,26 @@ def parse_datetimes(values: np.ndarray, fmt: str) -> np.ndarray:
     return out
 
 
+def epoch_ns(values: np.ndarray, ns_per_unit: int, decimal: str = ".") -> np.ndarray:
+    """UTC times [ns since epoch, int64; ``NAT`` where empty or not a finite number] of
+    numbers since the Unix epoch written as text (object array, NaN for empty fields),
+    ``ns_per_unit`` nanoseconds per unit (:data:`EPOCH_FORMATS`).
+
+    Whole numbers are converted exactly; a fractional part to float64's precision (about
+    0.2 µs at today's epoch seconds)."""
+    s = pd.Series(values, dtype=object)
+    if decimal != ".":
+        s = s.str.replace(decimal, ".", regex=False)
+    x = pd.to_numeric(s, errors="coerce").to_numpy(np.float64)
+    ok = np.isfinite(x) & (np.abs(x) < 9e18 / ns_per_unit)
+    out = np.full(len(x), NAT, np.int64)
+    whole = ok & (x == np.floor(x))
+    out[whole] = x[whole].astype(np.int64) * ns_per_unit
+    frac = ok & ~whole
+    out[frac] = np.round(x[frac] * ns_per_unit).astype(np.int64)
+    return out
+
+
 @dataclass(frozen=True)
 class FastTimes:
     ns: np.ndarray  # int64 ns, naive or UTC (see is_utc)
@@ -193,7 +221,7 @@ def fast_first_column(body: bytes, b: np.ndarray, starts: np.ndarray, sep: str, 
     ``None`` when the fast path does not apply or any non-blank line fails to parse;
     the caller then reads the column as text and reports errors with lines.
     """
-    if not body:
+    if not body or fmt in EPOCH_FORMATS:
         return None
     first_line = body[: body.find(b"\n") if b"\n" in body else len(body)].decode("utf-8", "replace").strip()
     sample = first_line.split(sep)[0].strip()
