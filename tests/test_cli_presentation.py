@@ -216,3 +216,28 @@ def test_csv_writes_booleans_as_predicts_fast_path_and_json_do():
     write_rows(rows, OutputFormat.csv, stream=buf)
     got = list(csv.DictReader(io.StringIO(buf.getvalue())))
     assert got == [{"ok": "true", "flag": "false", "n": "1"}]
+
+
+def test_every_ice_answer_says_its_braking_mode(root):
+    # the vehicle files state their modes (diesel-hgv.toml: no-credit, diesel-hgv-paper.toml
+    # and the paper's fleet case: paper); an override must show as the mode used
+    veh, cyc = root / "configs/vehicles", str(root / "configs/cycles/urban-bus.csv")
+    res = runner.invoke(app, ["predict", "-v", str(veh / "diesel-hgv.toml"), "-v", str(veh / "electric-bus.toml"),
+                              "-c", cyc])
+    assert res.exit_code == 0, res.output
+    legend = [x for x in res.stdout.splitlines() if x.startswith("vehicles: ")]
+    assert len(legend) == 1 and "diesel-hgv = Scania P320 diesel HGV (ICE, braking energy not credited)" in legend[0]
+    assert "electric-bus = Optare Metrocity EV" in legend[0] and "EV (ICE" not in legend[0]
+    res = runner.invoke(app, ["feasibility", "-v", str(veh / "diesel-hgv.toml"), "-c", cyc, "--ice-braking", "paper"])
+    assert res.exit_code == 0, res.output
+    assert "diesel-hgv = Scania P320 diesel HGV (ICE, braking energy credited (eq. 24))" in res.stdout
+    res = runner.invoke(app, ["feasibility", "-v", str(veh / "diesel-hgv.toml"), "-c", cyc, "--ice-braking", "paper",
+                              "-f", "json"])
+    assert [r["ice_braking"] for r in json.loads(res.stdout)] == ["paper"]
+    scenario = str(root / "configs/fleet/paper-case-study.toml")
+    res = runner.invoke(app, ["fleet", "plan", scenario])
+    assert res.exit_code == 0, res.output
+    assert "vehicles: HGV1, HGV2, HGV3 = diesel-hgv-paper: " in res.stdout and "braking energy credited" in res.stdout
+    res = runner.invoke(app, ["fleet", "plan", scenario, "-f", "json"])
+    got = {v["id"]: (v["vehicle_key"], v["ice_braking"]) for v in json.loads(res.stdout)["vehicles"]}
+    assert got == {f"HGV{i}": ("diesel-hgv-paper", "paper") for i in (1, 2, 3)}

@@ -33,12 +33,11 @@ from cevm.cli.common import (
     warn_damaged,
     with_cycle_options,
 )
-from cevm.cli.output import OutputFormat, write_rows
+from cevm.cli.output import OutputFormat, vehicle_legend, write_rows
 from cevm.core.cycle import CR0_DEFAULT
 from cevm.core.feasibility import Feasibility, feasibility
 from cevm.core.sweep import DEFAULT_RESERVE_PCT, DEFAULT_SOC_START_PCT
 from cevm.errors import CevmError
-from cevm.text import printable
 from cevm.units import J_PER_KWH
 
 
@@ -57,7 +56,7 @@ def _mass_for(src, mass_kg: float | None, payload_kg: float | None) -> tuple[flo
     return (key[1], None, own.origin) if key[0] == "gross" else (None, key[1], own.origin)
 
 
-def _feasibility_rows(res: Feasibility) -> list[dict]:
+def _feasibility_rows(res: Feasibility, ice_braking: str | None = None) -> list[dict]:
     src = res.source
     rows = []
 
@@ -78,7 +77,8 @@ def _feasibility_rows(res: Feasibility) -> list[dict]:
             row.update(energy_kwh=num(res.energy_j[i] / J_PER_KWH), soc_end_pct=num(res.soc_end_pct[i]),
                        soc_min_pct=num(res.soc_min_pct[i]), reserve_margin_pct=num(res.reserve_margin_pct[i]))
         else:
-            row.update(fuel_l=num(res.fuel_l[i]), tank_l=veh.tank_l, tank_margin_l=num(res.tank_margin_l[i]))
+            row.update(fuel_l=num(res.fuel_l[i]), tank_l=veh.tank_l, tank_margin_l=num(res.tank_margin_l[i]),
+                       ice_braking=ice_braking or veh.ice_braking)
         row.update(max_payload_kg=num(res.max_payload_kg[i]), min_payload_kg=num(res.min_payload_kg[i]),
                    limited_by=res.limited_by[i], ambient_c=num(res.ambient_c[i]), ambient_from=res.ambient_from[i])
         if veh.is_ev:
@@ -157,7 +157,7 @@ def feasibility_cmd(
                     if mass_source in ("--mass-kg", "--payload-kg", "vehicle file"):
                         raise
                     raise CevmError(f"trip {src.name!r} ({src.mass.describe()} mass): {exc}") from None
-                rows.extend(dict(r, mass_source=mass_source) for r in _feasibility_rows(res))
+                rows.extend(dict(r, mass_source=mass_source) for r in _feasibility_rows(res, ice_braking))
                 speed = src.distance_m / src.duration_s if src.duration_s > 0 else float("nan")
                 seen += [(i, res.mass_kg[i], res.ambient_c[i], speed) for i in range(len(vehicles))]
                 src.release()
@@ -196,7 +196,7 @@ def _print_feasibility(rows: list[dict], stream: IO[str]) -> None:
         return "?" if f is None else ("yes" if f else "NO")
 
     table = []
-    names: dict[str, str] = {}
+    names: dict[str, tuple[str, str | None]] = {}
     for r in rows[:TABLE_MAX_ROWS]:
         if r["powertrain"] == "ev":
             end = "-" if r["soc_end_pct"] is None else f"{r['soc_end_pct']:.1f}"
@@ -220,15 +220,15 @@ def _print_feasibility(rows: list[dict], stream: IO[str]) -> None:
         table.append({"route": r["source"], "vehicle": r["vehicle_key"], "payload kg": r["payload_kg"],
                       "feasible": mark(r["feasible"]), "state": state, "margin": margin,
                       "range km": r["range_km"], "max payload kg": payload, "limited by": r["limited_by"]})
-        names[r["vehicle_key"]] = r["vehicle"]
+        names[r["vehicle_key"]] = (r["vehicle"], r.get("ice_braking"))
     title = "cevm feasibility" + (f" (first {len(table)} of {len(rows)})" if len(rows) > len(table) else "")
     write_rows(table, OutputFormat.table, title=title, digits={"payload kg": 0, "range km": 1}, stream=stream,
                columns=["route", "vehicle", "payload kg", "feasible", "state", "margin", "range km", "max payload kg",
                         "limited by"],
                headers={"state": "SoC min/end, fuel/tank"})
-    legend = "; ".join(f"{k} = {v}" for k, v in names.items() if k != v)
+    legend = vehicle_legend(names)
     if legend:
-        stream.write(printable(f"vehicles: {legend}") + "\n")
+        stream.write(legend + "\n")
     origins = Counter({r["source"]: r["mass_source"] for r in rows}.values())
     stream.write("mass from: " + ", ".join(f"{what} ({n} source{'s' if n > 1 else ''})" for what, n in
                                            sorted(origins.items(), key=lambda kv: (-kv[1], kv[0])))

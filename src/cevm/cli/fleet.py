@@ -9,7 +9,7 @@ from typing import Annotated, Optional
 import typer
 
 from cevm.cli.common import AmbientOption, StoreOption, fail
-from cevm.cli.output import OutputFormat, write_rows
+from cevm.cli.output import OutputFormat, vehicle_legend, write_rows
 from cevm.errors import CevmError
 
 
@@ -63,6 +63,12 @@ def fleet_plan(
     day_cols = [k for k in report["table"][0] if k != "vehicle"] if report["table"] else []
     write_rows(report["table"], OutputFormat.table, columns=["vehicle", *day_cols],
                title=f"{report['scenario']}: stops per vehicle (the paper's table 4)")
+    files: dict[tuple, list[str]] = {}  # the fleet's ids per vehicle file: what the litres assumed
+    for v in report["vehicles"]:
+        files.setdefault((v["vehicle_key"], v["vehicle"], v["ice_braking"]), []).append(v["id"])
+    legend = vehicle_legend({", ".join(ids): (f"{key}: {name}", braking) for (key, name, braking), ids in files.items()})
+    if legend:
+        typer.echo(legend)
     temps = {d: t for d, t in report.get("ambient_c", {}).items() if t is not None}
     if temps:
         typer.echo("ambient: " + ", ".join(f"{d} {t:g} degC" for d, t in temps.items()))

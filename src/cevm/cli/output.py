@@ -35,6 +35,25 @@ ID_COLUMNS = {"cycle", "vehicle", "vehicle_key", "trip_id", "vehicle_id", "sourc
 TEXT_COLUMNS = {"kind", "problem", "value", "basis", "what", "cycle", "vehicle", "trip_id", "vehicle_id", "source", "route", "file", "status", "profile", "start_utc", "elevation_source", "day", "day 1", "day 2", "day 3", "method", "stops", "item", "parameter", "std", "in-sample", "cross-validated", "quantity", "terms", "parameters"}
 
 
+#: How a table's legend says an ICE braking mode (:data:`cevm.core.model.ICE_BRAKING_MODES`):
+#: the assumption that moves a truck's fuel most in stop-and-go driving.
+BRAKING_WORDS = {"no-credit": "braking energy not credited", "paper": "braking energy credited (eq. 24)"}
+
+
+def vehicle_legend(vehicles: dict[str, tuple[str, str | None]]) -> str | None:
+    """The ``vehicles:`` line under a table, from ``{key: (name, ICE braking mode or
+    None)}``: each key with its name where they differ, and each ICE vehicle's braking
+    mode; ``None`` when there is nothing to say."""
+    parts = []
+    for key, (name, braking) in vehicles.items():
+        text = key if key == name else f"{key} = {name}"
+        if braking:
+            text += f" (ICE, {BRAKING_WORDS.get(braking, 'braking ' + braking)})"
+        if text != key:
+            parts.append(text)
+    return printable("vehicles: " + "; ".join(parts)) if parts else None
+
+
 def _clean(value: Any) -> Any:
     if isinstance(value, float) and not math.isfinite(value):
         return None

@@ -62,7 +62,7 @@ from cevm.cli.common import (
     warn_damaged,
     with_cycle_options,
 )
-from cevm.cli.output import OutputFormat, csv_writer, write_rows
+from cevm.cli.output import OutputFormat, csv_writer, vehicle_legend, write_rows
 from cevm.core.cycle import CR0_DEFAULT
 from cevm.core.sweep import (
     AMBIENT_ORIGINS,
@@ -355,7 +355,7 @@ class _PredictWriter:
         self.pending_rows = 0
         self.rows = 0
         self.table_rows: list[dict] = []
-        self.names: dict[str, str] = {}
+        self.names: dict[str, tuple[str, str | None]] = {}
         self.started = False
 
     def add(self, block: SweepBlock, mass_source: str = "vehicle file") -> None:
@@ -400,7 +400,7 @@ class _PredictWriter:
                     x = float(c[i])
                     row[k] = None if x != x else (x > 0.5 if k in _BOOL else x)
             self.table_rows.append(_with_status(row))
-            self.names[row["vehicle_key"]] = row["vehicle"]
+            self.names[row["vehicle_key"]] = (row["vehicle"], row.get("ice_braking"))
 
     def close(self) -> None:
         if self.fmt == OutputFormat.table:
@@ -418,9 +418,9 @@ class _PredictWriter:
             title = "cevm predict" + (f" (first {len(rows)} of {self.rows} rows)" if self.rows > len(rows) else "")
             write_rows(rows, OutputFormat.table, columns=columns, title=title, digits=PREDICT_DIGITS,
                        headers=PREDICT_HEADERS, stream=self.stream)
-            legend = "; ".join(f"{k} = {v}" for k, v in self.names.items() if k != v)
+            legend = vehicle_legend(self.names)
             if legend:
-                self.stream.write(printable(f"vehicles: {legend}") + "\n")
+                self.stream.write(legend + "\n")
             self.stream.flush()
             if self.rows > len(rows):
                 typer.echo(f"cevm: {self.rows - len(rows)} more rows not shown; use --format csv or json "

@@ -402,6 +402,10 @@ def fleet_report(path: str | Path, days: Sequence[str | int] | None = None, *, m
         "unit": sc.unit,
         "mass_model": sc.mass_model,
         "load_time_s": sc.load_time_s,
+        "vehicles": [{"id": fv.id, "vehicle_key": fv.vehicle.label, "vehicle": fv.vehicle.name,
+                      "powertrain": fv.vehicle.powertrain,
+                      "ice_braking": None if fv.vehicle.is_ev else fv.vehicle.ice_braking,
+                      "calibrated": fv.vehicle.calibration is not None} for fv in sc.vehicles],
         "table": table4_rows(plans),
         "summary": [
             {
