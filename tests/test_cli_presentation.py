@@ -241,3 +241,20 @@ def test_every_ice_answer_says_its_braking_mode(root):
     res = runner.invoke(app, ["fleet", "plan", scenario, "-f", "json"])
     got = {v["id"]: (v["vehicle_key"], v["ice_braking"]) for v in json.loads(res.stdout)["vehicles"]}
     assert got == {f"HGV{i}": ("diesel-hgv-paper", "paper") for i in (1, 2, 3)}
+
+
+def test_simulate_says_the_auxiliary_power_it_assumed(root, tmp_path):
+    # electric-bus.toml's [detailed] table: aux_base_power_kw 4.0, hvac_power_kw 0.0; with
+    # hvac_power_kw 12 the battery feeds 16 kW besides the motor
+    bus = root / "configs/vehicles/electric-bus.toml"
+    cyc = str(root / "configs/cycles/urban-bus.csv")
+    res = runner.invoke(app, ["simulate", "-v", str(bus), "-c", cyc, "-f", "json"])
+    assert res.exit_code == 0, res.output
+    assert json.loads(res.stdout)[0]["aux_power_kw"] == pytest.approx(4.0)
+    winter = tmp_path / "bus-winter.toml"
+    text = bus.read_text()
+    assert "hvac_power_kw = 0.0" in text
+    winter.write_text(text.replace("hvac_power_kw = 0.0", "hvac_power_kw = 12.0"))
+    res = runner.invoke(app, ["simulate", "-v", str(winter), "-c", cyc, "-f", "json"])
+    assert res.exit_code == 0, res.output
+    assert json.loads(res.stdout)[0]["aux_power_kw"] == pytest.approx(16.0)

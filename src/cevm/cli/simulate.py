@@ -32,7 +32,9 @@ def simulate(
 ) -> None:
     """Detailed time-step simulation of one vehicle over a trace (the baseline model).
 
-    Motor map, regeneration limits and battery for an EV; gearbox and fuel map for a diesel."""
+    Motor map, regeneration limits and battery for an EV; gearbox and fuel map for a diesel.
+    It takes no ambient temperature: an EV's auxiliaries are its [detailed] table's
+    aux_base_power_kw + hvac_power_kw (the summary's aux_power_kw says what was used)."""
     from cevm.core.detailed import simulate as run_simulation
     from cevm.io.plots import plot_simulation
     from cevm.io import load_vehicle, read_cycle_csv
@@ -99,6 +101,9 @@ def simulate(
            "duration_s": res.duration_s, "wheel_energy_kwh": res.wheel_energy_j / J_PER_KWH,
            "friction_brake_kwh": res.friction_brake_energy_j / J_PER_KWH,
            "traction_deficit_kwh": res.traction_deficit_j / J_PER_KWH}
+    aux_w = res.steps.get("aux_power_w")
+    if aux_w is not None and res.duration_s > 0:  # what the battery fed besides the motor: an assumption
+        row["aux_power_kw"] = float(np.sum(aux_w * res.steps["dt_s"]) / res.duration_s) / 1e3
     if veh.is_ev:
         row["energy_kwh"] = res.energy_j / J_PER_KWH
         row["soc_end_pct"] = float(res.samples["soc"][-1]) * 100.0
