@@ -258,3 +258,25 @@ def test_simulate_says_the_auxiliary_power_it_assumed(root, tmp_path):
     res = runner.invoke(app, ["simulate", "-v", str(winter), "-c", cyc, "-f", "json"])
     assert res.exit_code == 0, res.output
     assert json.loads(res.stdout)[0]["aux_power_kw"] == pytest.approx(16.0)
+
+
+def test_fleet_plan_warns_outside_what_a_calibration_saw(root, tmp_path):
+    # a calibration on 12 light, cold trips: the paper's case loads HGV1 to 43,000 kg on
+    # its first leg, at the vehicle's default 20 degC (the scenario gives no temperature)
+    veh = tmp_path / "hgv-cal.toml"
+    veh.write_text((root / "configs/vehicles/diesel-hgv-paper.toml").read_text()
+                   + '\n[calibration]\nterms = ["eta"]\nn_trips = 12\nmass_kg = [18000, 25000]\nambient_c = [0, 5]\n')
+    text = (root / "configs/fleet/paper-case-study.toml").read_text()
+    cycles = (root / "configs/cycles").as_posix()
+    sc = tmp_path / "case.toml"
+    sc.write_text(text.replace('"../vehicles/diesel-hgv-paper.toml"', f'"{veh.as_posix()}"')
+                  .replace('"../cycles/', f'"{cycles}/'))
+    res = runner.invoke(app, ["fleet", "plan", str(sc), "-f", "json"])
+    assert res.exit_code == 0, res.output
+    warnings = json.loads(res.stdout)["warnings"]
+    hgv1 = [w for w in warnings if w.startswith("HGV1: ")]
+    assert any("calibrated on 12 trips at 18,000 to 25,000 kg; asked at" in w and "43,000 kg" in w for w in hgv1)
+    assert any("calibrated on 12 trips at 0.0 to 5.0 degC; asked at 20.0 degC" in w for w in hgv1)
+    assert "cevm: warning: HGV1: " in res.stderr
+    res = runner.invoke(app, ["fleet", "plan", str(root / "configs/fleet/paper-case-study.toml"), "-f", "json"])
+    assert json.loads(res.stdout)["warnings"] == [] and "warning" not in res.stderr  # not calibrated: nothing to say

@@ -53,13 +53,13 @@ def fleet_plan(
         raise fail(exc) from None
     if fmt == OutputFormat.json:
         typer.echo(json.dumps(report, indent=2))
-        return
+        return _warn(report)
     unit = report["unit"]
     if fmt == OutputFormat.csv:
         rows = [{"day": p["day"], "vehicle": v["vehicle"], "stops": " ".join(v["stops"]), f"consumption_{unit}": v["value"]}
                 for p in report["plans"] for v in p["vehicles"]]
         write_rows(rows, fmt)
-        return
+        return _warn(report)
     day_cols = [k for k in report["table"][0] if k != "vehicle"] if report["table"] else []
     write_rows(report["table"], OutputFormat.table, columns=["vehicle", *day_cols],
                title=f"{report['scenario']}: stops per vehicle (the paper's table 4)")
@@ -82,3 +82,11 @@ def fleet_plan(
                 "solve ms": s["solve_time_s"] * 1e3} for s in report["summary"]]
     write_rows(summary, OutputFormat.table, title="optimum against the default assignment",
                digits={f"total {unit}": 2, f"default {unit}": 2, "saving %": 2, "solve ms": 2})
+    _warn(report)
+
+
+def _warn(report: dict) -> None:
+    """After the output, in every format: each vehicle planned outside what its
+    calibration saw."""
+    for w in report["warnings"]:
+        typer.echo(f"cevm: warning: {w}", err=True)

@@ -29,6 +29,7 @@ from cevm.core.assignment import (
     Prices,
     Route,
     Scenario,
+    calibration_warnings,
     plan,
     quote_key,
     table4_rows,
@@ -406,6 +407,7 @@ def fleet_report(path: str | Path, days: Sequence[str | int] | None = None, *, m
                       "powertrain": fv.vehicle.powertrain,
                       "ice_braking": None if fv.vehicle.is_ev else fv.vehicle.ice_braking,
                       "calibrated": fv.vehicle.calibration is not None} for fv in sc.vehicles],
+        "warnings": calibration_warnings(sc, plans),
         "table": table4_rows(plans),
         "summary": [
             {
