@@ -473,3 +473,41 @@ def test_an_epoch_profile_with_a_zone_is_refused():
     with pytest.raises(InputError, match="no zone applies") as ei:
         load_profile(epoch_profile("unix_ms", timezone="Europe/London"))
     assert "time.timezone" in str(ei.value)
+
+
+# ======================================================================================
+# Fuel by mass (PEMS, gravimetric flow meters)
+# ======================================================================================
+def pems_profile(**fuel) -> dict:
+    return {"name": "pems", "detect": {"required_columns": ["ts"]},
+            "time": {"columns": ["ts"], "format": "unix_s"},
+            "columns": {"wheel_speed_mps": {"source": "v", "unit": "km/h"},
+                        "flowmeter_fuel_lps": {"source": "fuel", **fuel}},
+            "energy": [{"column": "flowmeter_fuel_lps", "kind": "rate", "priority": 1,
+                        "resolution": 0.01, "resolution_unit": fuel.get("unit", "l/h")}]}
+
+
+def test_fuel_by_mass_is_converted_to_litres_with_its_density(tmp_path):
+    t0 = int(datetime(2021, 6, 1, 8, tzinfo=UTC).timestamp())
+    grams_per_s = [0.5, 2.0, 8.35, 0.0]
+    f = write(tmp_path / "pems.csv", "ts,v,fuel\n" + "".join(f"{t0 + i},50,{g}\n" for i, g in enumerate(grams_per_s)))
+    prof = load_profile(pems_profile(unit="g/s", density_kg_per_l=0.835))
+    (log,) = read_log(f, prof, vehicle_id="HGV-P")
+    # 8.35 g/s of a 0.835 kg/l diesel is 10 ml/s
+    np.testing.assert_allclose(log.frame["flowmeter_fuel_lps"].to_numpy(), np.array(grams_per_s) / 835.0, rtol=1e-12)
+    # the resolution, given in the column's mass unit: 0.01 g/s -> 0.01 / 835 l/s
+    (spec,) = prof.energy
+    assert spec.resolution == pytest.approx(0.01 / 835.0, rel=1e-12)
+    kg_h = load_profile(pems_profile(unit="kg/h", density_kg_per_l=0.82))
+    assert kg_h.columns[1].factor == pytest.approx(1.0 / 3600.0 / 0.82, rel=1e-12)
+
+
+@pytest.mark.parametrize("fuel, match", [
+    ({"unit": "g/s"}, "give the fuel's density_kg_per_l"),
+    ({"unit": "l/h", "density_kg_per_l": 0.835}, "applies to a fuel column given in a mass unit"),
+    ({"unit": "g/s", "density_kg_per_l": 835.0}, "must be within 0.6-1.0 kg/l"),
+])
+def test_fuel_by_mass_needs_a_plausible_density_and_nothing_else_takes_one(fuel, match):
+    with pytest.raises(InputError, match=match) as ei:
+        load_profile(pems_profile(**fuel))
+    assert "columns.flowmeter_fuel_lps.density_kg_per_l" in str(ei.value)

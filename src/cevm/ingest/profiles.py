@@ -49,6 +49,10 @@ Profile format (all keys; ``[columns]`` entries and ``[[energy]]`` tables repeat
     ambient_temp_c = { source = "OAT", unit = "degF" }   # degC, K or degF (see UNITS)
     # per column also: required = true (error if absent from the header), negate = true
     # (not with K or degF: an offset scale)
+    fuel_rate_lps = { source = "Fuel mass flow", unit = "g/s", density_kg_per_l = 0.835 }
+    # fuel by mass (PEMS, gravimetric meters: g/s, kg/h; counters in kg): litres through
+    # the fuel's stated density (required there, refused elsewhere; 0.6-1.0 kg/l);
+    # [[energy]] resolution_unit / modulus_unit may then be mass units too
     [[energy]]
     column = "total_energy_j"            # canonical column carrying the measurement
     kind = "counter"                     # rate | counter | soc
@@ -110,7 +114,8 @@ __all__ = [
 # ``value * factor + offset`` in the canonical unit of its dimension. SI units per
 # dimension: angle deg, length m, speed m/s, volume l (litres by project convention),
 # volume_rate l/s, energy J, power W, mass kg, voltage V, current A, percent %,
-# rotational_speed rpm, temperature degC (the canonical columns say _c), dimensionless -.
+# rotational_speed rpm, temperature degC (the canonical columns say _c), dimensionless -,
+# mass_rate kg/s (fuel by mass, see FUEL_MASS_DIMENSIONS).
 # Only temperatures are affine (offset != 0): a temperature *difference* (a resolution)
 # converts with the factor alone.
 # --------------------------------------------------------------------------------------
@@ -150,6 +155,11 @@ UNITS: dict[str, Unit] = {
     "kg": Unit("mass", 1.0),
     "t": Unit("mass", 1000.0),
     "lb": Unit("mass", 0.45359237),
+    "g": Unit("mass", 1e-3),
+    "kg/s": Unit("mass_rate", 1.0),
+    "kg/h": Unit("mass_rate", 1.0 / 3600.0),
+    "g/s": Unit("mass_rate", 1e-3),
+    "g/h": Unit("mass_rate", 1e-3 / 3600.0),
     "V": Unit("voltage", 1.0),
     "A": Unit("current", 1.0),
     "%": Unit("percent", 1.0),
@@ -187,6 +197,15 @@ CANONICAL_DIMENSIONS: dict[str, str] = {
     "ambient_temp_c": "temperature",
     "hvac_power_w": "power",
 }
+
+
+# Fuel given by mass (a PEMS or a gravimetric flow meter: g/s, kg/h; a counter in kg) is
+# converted to litres with the density the profile states: canonical dimension -> the
+# mass dimension that may feed it.
+FUEL_MASS_DIMENSIONS: dict[str, str] = {"volume_rate": "mass_rate", "volume": "mass"}
+#: Plausible densities of liquid fuels [kg/l]: petrol 0.72-0.78, diesel and HVO 0.77-0.85,
+#: biodiesel 0.86-0.90 (EN 228, EN 590, EN 15940, EN 14214), with margin.
+FUEL_DENSITY_RANGE_KG_PER_L = (0.6, 1.0)
 
 
 # Energy source kinds and the canonical columns they may use.
@@ -232,6 +251,7 @@ class ColumnMap:
     required: bool = False
     negate: bool = False
     offset: float = 0.0
+    density_kg_per_l: float | None = None  # fuel given by mass: its density (factor includes it)
 
 
 @dataclass(frozen=True)
@@ -299,7 +319,7 @@ _SECTION_KEYS = {
 }
 
 
-_COLUMN_KEYS = {"source", "unit", "map", "missing_values", "required", "negate"}
+_COLUMN_KEYS = {"source", "unit", "map", "missing_values", "required", "negate", "density_kg_per_l"}
 
 
 _ENERGY_KEYS = {"column", "kind", "quantity", "resolution", "resolution_unit", "priority", "capacity",
@@ -416,7 +436,7 @@ def load_profile(source: str | Path | dict, path: Path | None = None) -> Profile
     vehicle = _vehicle_section(veh_t, csv_opts["metadata"], k)
     quality = _quality_section(qual_t, k)
     maps = _columns_section(doc.get("columns", {}), k)
-    specs = _energy_section(doc.get("energy", []), {m.canonical for m in maps}, k)
+    specs = _energy_section(doc.get("energy", []), {m.canonical: m for m in maps}, k)
     required = _detect_section(detect, k)
     return Profile(
         name=name,
@@ -541,7 +561,10 @@ def _column_map(canon: str, spec: Any, k: _Keys) -> ColumnMap:
         raise k.fail("give exactly one of 'unit' or 'map'", key)
     factor, offset = 1.0, 0.0
     map_t = None
-    if unit is not None:
+    density = _fuel_density(canon, spec, unit, k, key)
+    if density is not None:  # fuel by mass: litres through the stated density
+        factor = UNITS[unit].factor / density  # type: ignore[index]
+    elif unit is not None:
         factor, offset = _unit_factor(unit, CANONICAL_DIMENSIONS[canon], k.path, f"{key}.unit")
     else:
         map_t = _value_map(vmap, f"{key}.map", k)
@@ -561,7 +584,29 @@ def _column_map(canon: str, spec: Any, k: _Keys) -> ColumnMap:
         required=k.get(spec, "required", bool, False, key),
         negate=negate,
         offset=offset,
+        density_kg_per_l=density,
     )
+
+
+def _fuel_density(canon: str, spec: dict, unit: str | None, k: _Keys, key: str) -> float | None:
+    """The ``density_kg_per_l`` of a fuel column given in a mass unit (required there,
+    refused anywhere else, within :data:`FUEL_DENSITY_RANGE_KG_PER_L`); None otherwise."""
+    mass_dim = FUEL_MASS_DIMENSIONS.get(CANONICAL_DIMENSIONS[canon])
+    udim = UNITS[unit].dimension if unit in UNITS else None
+    density = k.get(spec, "density_kg_per_l", float, None, key)
+    if density is None:
+        if mass_dim is not None and udim == mass_dim:
+            raise k.fail(f"unit {unit!r} is a {udim}: give the fuel's density_kg_per_l to convert it to litres "
+                         "(diesel EN 590: 0.820-0.845 kg/l)", f"{key}.density_kg_per_l")
+        return None
+    if mass_dim is None or udim != mass_dim:
+        raise k.fail("density_kg_per_l applies to a fuel column given in a mass unit "
+                     "(g/s, kg/h, kg/s, g/h; a counter in kg or g)", f"{key}.density_kg_per_l")
+    lo, hi = FUEL_DENSITY_RANGE_KG_PER_L
+    if not lo <= density <= hi:
+        raise k.fail(f"must be within {lo}-{hi} kg/l (liquid fuels: petrol 0.72-0.78, diesel 0.82-0.85); "
+                     f"got {density!r}", f"{key}.density_kg_per_l")
+    return density
 
 
 def _value_map(vmap: dict, key: str, k: _Keys) -> tuple[tuple[str, float], ...]:
@@ -586,14 +631,14 @@ def _check_column_set(maps: tuple[ColumnMap, ...], k: _Keys) -> None:
         raise k.fail(f"source column(s) {sorted(dup)} mapped twice", "columns")
 
 
-def _energy_section(t: Any, mapped: set[str], k: _Keys) -> tuple[EnergySpec, ...]:
+def _energy_section(t: Any, mapped: dict[str, ColumnMap], k: _Keys) -> tuple[EnergySpec, ...]:
     """``[[energy]]``: one :class:`EnergySpec` per table (its columns must be mapped)."""
     if not isinstance(t, list):
         raise k.fail("must be an array of tables ([[energy]])", "energy")
     return tuple(_energy_spec(e, f"energy[{i}]", mapped, k) for i, e in enumerate(t))
 
 
-def _energy_spec(e: Any, key: str, mapped: set[str], k: _Keys) -> EnergySpec:
+def _energy_spec(e: Any, key: str, mapped: dict[str, ColumnMap], k: _Keys) -> EnergySpec:
     """One ``[[energy]]`` table: a source's kind, column, resolution, trust, capacity or
     modulus, each quantity converted to SI."""
     k.table(e, _ENERGY_KEYS, key)
@@ -607,6 +652,14 @@ def _energy_spec(e: Any, key: str, mapped: set[str], k: _Keys) -> EnergySpec:
         if c not in mapped:
             raise k.fail(f"column {c!r} is not mapped in [columns]", f"{key}.column")
     dim = VIRTUAL_COLUMNS[col][1] if col in VIRTUAL_COLUMNS else CANONICAL_DIMENSIONS[col]
+    density = mapped[col].density_kg_per_l if col in mapped else None
+
+    def to_si(value: float, unit: str, what: str, interval: bool) -> float:
+        """``value`` in ``unit``: the column's own dimension, or mass for fuel by mass."""
+        if density is not None and unit in UNITS and UNITS[unit].dimension == FUEL_MASS_DIMENSIONS[dim]:
+            return float(value) * UNITS[unit].factor / density
+        return k.unit(value, unit, dim, what, interval=interval)
+
     quantity = allowed[col]
     if "quantity" in e and k.get(e, "quantity", str, None, key) != quantity:
         raise k.fail(f"column {col!r} measures {quantity}", f"{key}.quantity")
@@ -615,7 +668,7 @@ def _energy_spec(e: Any, key: str, mapped: set[str], k: _Keys) -> EnergySpec:
         raise k.fail("must be >= 0", f"{key}.resolution")
     res_unit = k.get(e, "resolution_unit", str, None, key)
     if res_unit is not None:
-        res = k.unit(res, res_unit, dim, f"{key}.resolution_unit", interval=True)
+        res = to_si(res, res_unit, f"{key}.resolution_unit", True)
     elif res:
         raise k.fail("resolution needs resolution_unit", f"{key}.resolution_unit")
     prio = k.get(e, "priority", int, _REQUIRED, key)
@@ -633,7 +686,7 @@ def _energy_spec(e: Any, key: str, mapped: set[str], k: _Keys) -> EnergySpec:
     if modulus is not None:
         if kind != "counter" or not modulus > 0:
             raise k.fail("modulus (> 0) applies to counter sources only", f"{key}.modulus")
-        modulus = k.unit(modulus, k.get(e, "modulus_unit", str, _REQUIRED, key), dim, f"{key}.modulus_unit")
+        modulus = to_si(modulus, k.get(e, "modulus_unit", str, _REQUIRED, key), f"{key}.modulus_unit", False)
     accuracy = k.get(e, "accuracy_pct", float, None, key)
     if accuracy is not None and not 0 <= accuracy < 100:
         raise k.fail("must be >= 0 and < 100 (1-sigma systematic uncertainty, % of the value)", f"{key}.accuracy_pct")
