@@ -67,6 +67,17 @@ def warn(message: str) -> None:
     typer.echo(f"cevm: warning: {printable(message)}", err=True)
 
 
+def warn_ambient_unused(vehicles: list[tuple[str, bool]], asked: str) -> None:
+    """For each ``(vehicle label, whether a term of its model depends on the ambient
+    temperature)`` without one: a warning that the temperature ``asked`` for (e.g.
+    "--ambient-c -10") changes nothing for it, so that a winter question does not get a
+    summer answer without a word."""
+    for label, uses in vehicles:
+        if not uses:
+            warn(f"{label}: no term of its model depends on the ambient temperature (heating, A/C, warm-up), so "
+                 f"{asked} changes nothing for it; calibrate it on trips with logged temperatures to add them")
+
+
 def warn_damaged(exc: BaseException) -> None:
     """The warning for a damaged trip that a command skips (and counts: exit 1)."""
     warn(f"skipped: {exc}")

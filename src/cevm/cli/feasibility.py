@@ -30,6 +30,7 @@ from cevm.cli.common import (
     fail,
     load_sources,
     open_out,
+    warn_ambient_unused,
     warn_damaged,
     with_cycle_options,
 )
@@ -169,6 +170,10 @@ def feasibility_cmd(
     except CevmError as exc:
         raise fail(exc) from None
     _warn_outside_calibration(vehicles, seen)
+    if ambient_c is not None:
+        from cevm.core.energy import uses_temperature
+
+        warn_ambient_unused([(v.label, uses_temperature(v)) for v in vehicles], f"--ambient-c {ambient_c:g}")
     for exc in skipped:
         warn_damaged(exc)
     if skipped:

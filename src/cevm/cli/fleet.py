@@ -8,7 +8,7 @@ from typing import Annotated, Optional
 
 import typer
 
-from cevm.cli.common import AmbientOption, StoreOption, fail
+from cevm.cli.common import AmbientOption, StoreOption, fail, warn_ambient_unused
 from cevm.cli.output import OutputFormat, vehicle_legend, write_rows
 from cevm.errors import CevmError
 
@@ -90,3 +90,8 @@ def _warn(report: dict) -> None:
     calibration saw."""
     for w in report["warnings"]:
         typer.echo(f"cevm: warning: {w}", err=True)
+    temps = [t for t in report["ambient_c"].values() if t is not None]
+    if temps:  # asked by --ambient-c or the scenario's days
+        asked = "the days' ambient temperatures" if len(set(temps)) > 1 else f"an ambient of {temps[0]:g} degC"
+        by_file = {v["vehicle_key"]: v["uses_temperature"] for v in report["vehicles"]}
+        warn_ambient_unused(list(by_file.items()), asked)

@@ -59,6 +59,7 @@ from cevm.cli.common import (
     fail,
     load_sources,
     open_out,
+    warn_ambient_unused,
     warn_damaged,
     with_cycle_options,
 )
@@ -666,6 +667,8 @@ def predict_cmd(
         raise fail(exc) from None
     for line in assumed.lines():
         typer.echo(line, err=True)
+    if ambient_c is not None:
+        warn_ambient_unused([(v.label, uses_temperature(v)) for v in vehicles], f"--ambient-c {ambient_c:g}")
     for line in _mass_lines(sources, used):
         typer.echo(line, err=True)
     if over:

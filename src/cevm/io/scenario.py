@@ -17,6 +17,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
+from cevm.core import energy
 from cevm.core.assignment import (
     EV_RESERVE_FRACTION_DEFAULT,
     LEG_KINDS,
@@ -406,7 +407,8 @@ def fleet_report(path: str | Path, days: Sequence[str | int] | None = None, *, m
         "vehicles": [{"id": fv.id, "vehicle_key": fv.vehicle.label, "vehicle": fv.vehicle.name,
                       "powertrain": fv.vehicle.powertrain,
                       "ice_braking": None if fv.vehicle.is_ev else fv.vehicle.ice_braking,
-                      "calibrated": fv.vehicle.calibration is not None} for fv in sc.vehicles],
+                      "calibrated": fv.vehicle.calibration is not None,
+                      "uses_temperature": energy.uses_temperature(fv.vehicle)} for fv in sc.vehicles],
         "warnings": calibration_warnings(sc, plans),
         "table": table4_rows(plans),
         "summary": [
