@@ -179,3 +179,26 @@ def test_ingest_takes_a_manifest_and_reports_a_disagreement_with_the_logger(tmp_
     bad.write_text("vehicle,when,weight\n")
     res = cevm("ingest", log, "--store", tmp_path / "t.sqlite", "--manifest", bad)
     assert res.exit_code == 2 and "no mass column" in res.stderr and not (tmp_path / "t.sqlite").exists()
+
+
+def test_a_trips_gross_mass_applied_to_another_vehicle_is_said(fleet, tmp_path):
+    # HGV-77's odd trips logged 30 t and 40 t gross and measured fuel: an electric bus, or a
+    # 2.5 t van without a max gross, predicted at those masses is told so; the truck itself
+    # is not, nor anyone at a given mass
+    db, ids, hgv, _ = fleet
+    logged = ids["HGV-77"][1]
+    van = tmp_path / "van.toml"
+    van.write_text('name = "Van"\npowertrain = "ice"\nkerb_mass_kg = 2500.0\ncda_m2 = 2.0\ncr = 0.008\neta = 0.3\n'
+                   'fuel_lhv_mj_per_l = 35.8\n')
+    for cmd in ("predict", "feasibility"):
+        res = cevm(cmd, "-v", DIESEL.parent / "electric-bus.toml", "-v", van, "-v", hgv, "--trip", logged,
+                   "--store", db)
+        assert res.exit_code == 0, res.output
+        said = [x for x in res.stderr.splitlines() if "another vehicle drove" in x]
+        assert len(said) == 2, res.stderr
+        bus_line, van_line = said
+        assert bus_line.startswith("cevm: warning: electric-bus: ") and "it measured fuel" in bus_line
+        assert van_line.startswith("cevm: warning: van: ") and "over 3 times this vehicle's kerb mass of 2,500 kg" in van_line
+        assert f"logged {ids['hgv_mass_kg'][logged]:,.0f} kg" in van_line
+        res = cevm(cmd, "-v", van, "--trip", logged, "--store", db, "--mass-kg", "3000")
+        assert "another vehicle drove" not in res.stderr

@@ -30,6 +30,7 @@ from cevm.cli.common import (
     fail,
     load_sources,
     open_out,
+    warn,
     warn_ambient_unused,
     warn_damaged,
     with_cycle_options,
@@ -170,6 +171,11 @@ def feasibility_cmd(
     except CevmError as exc:
         raise fail(exc) from None
     _warn_outside_calibration(vehicles, seen)
+    if mass_kg is None and payload_kg is None:  # stored trips at their own masses
+        from cevm.store.sources import foreign_mass_warnings
+
+        for w in foreign_mass_warnings(sources, vehicles):
+            warn(w)
     if ambient_c is not None:
         from cevm.core.energy import uses_temperature
 

@@ -671,6 +671,11 @@ def predict_cmd(
         warn_ambient_unused([(v.label, uses_temperature(v)) for v in vehicles], f"--ambient-c {ambient_c:g}")
     for line in _mass_lines(sources, used):
         typer.echo(line, err=True)
+    if used and masses is None and payloads is None:  # stored trips at their own masses
+        from cevm.store.sources import foreign_mass_warnings
+
+        for w in foreign_mass_warnings(sources, vehicles):
+            typer.echo(f"cevm: warning: {w}", err=True)
     if over:
         typer.echo(f"cevm: warning: {over} predictions exceed their vehicle's max_gross_kg (column over_max_gross)",
                    err=True)
