@@ -202,3 +202,7 @@ def test_a_trips_gross_mass_applied_to_another_vehicle_is_said(fleet, tmp_path):
         assert f"logged {ids['hgv_mass_kg'][logged]:,.0f} kg" in van_line
         res = cevm(cmd, "-v", van, "--trip", logged, "--store", db, "--mass-kg", "3000")
         assert "another vehicle drove" not in res.stderr
+    res = cevm("simulate", "-v", DIESEL.parent / "electric-bus.toml", "--trip", logged, "--store", db)
+    assert res.exit_code == 0, res.output
+    assert "cevm: warning: electric-bus: simulated at the own gross mass of trip" in res.stderr
+    assert "another vehicle drove" not in cevm("simulate", "-v", hgv, "--trip", logged, "--store", db).stderr

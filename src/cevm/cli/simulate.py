@@ -55,7 +55,7 @@ def simulate(
                 "defaults, which describe " + ("a 10 m electric bus with a 180 kW motor" if veh.is_ev else
                                                "a 235 kW diesel tractor with a 12-speed gearbox")
                 + "; configs/vehicles/*.toml show every key), or use 'cevm predict' (the CE model)")
-        mass_source, measured = "vehicle file", None
+        mass_source, measured, foreign = "vehicle file", None, None
         if payload_kg is not None:
             mass_kg = (veh.kerb_mass_kg if veh.kerb_mass_kg is not None else veh.mass_kg) + float(
                 checks.payloads_kg(payload_kg))
@@ -81,6 +81,9 @@ def simulate(
                                        r["measured_resolution"], r["measured_uncertainty"])
             if mass_kg is None:  # the trip's own mass: given to it, else logged (cevm.store.masses)
                 mass_kg, mass_source = own.gross_kg(veh), own.origin
+                from cevm.store.sources import foreign_mass
+
+                foreign = foreign_mass(own, measured, veh)
                 try:
                     mass_kg = float(checks.masses_for([veh], mass_kg))
                 except CevmError as exc:
@@ -122,6 +125,10 @@ def simulate(
         write_rows([{"quantity": k, "value": v} for k, v in row.items()], fmt, title="cevm simulate (detailed model)")
     else:
         write_rows([row], fmt)
+    if foreign:
+        typer.echo(f"cevm: warning: {veh.label}: simulated at the own gross mass of trip {trip} ({own.describe()} "
+                   f"{mass_kg:,.0f} kg), which another vehicle drove ({foreign}); give --mass-kg or --payload-kg for "
+                   f"what {veh.label} would carry", err=True)
     if res.traction_deficit_j > 0.02 * max(res.wheel_energy_j, 1.0):
         typer.echo(f"cevm: warning: the vehicle could not follow the trace: {row['traction_deficit_kwh']:.2f} kWh "
                    "of wheel work beyond its powertrain's limits", err=True)

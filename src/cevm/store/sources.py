@@ -50,18 +50,17 @@ class StoredTrip(Source):
 FOREIGN_MASS_KERB_RATIO = 3.0
 
 
-def foreign_mass(src: Source, vehicle) -> str | None:
-    """Why a stored trip's own gross mass (logged, or given as a gross) looks like another
-    vehicle's than ``vehicle``'s, or None: the trip measured the other powertrain's
+def foreign_mass(mass: TripMass | None, measured: Measurement | None, vehicle) -> str | None:
+    """Why a stored trip's own gross mass (``mass``: logged, or given as a gross) looks
+    like another vehicle's than ``vehicle``'s, or None (``measured``: what the trip
+    measured): the trip measured the other powertrain's
     energy (fuel for an EV, electricity for an ICE), or the mass is over
     :data:`FOREIGN_MASS_KERB_RATIO` times the vehicle's kerb mass where it has no
     max_gross_kg (above a max_gross_kg a row is flagged ``over_max_gross``). A payload
     given to a trip is the goods it carried, and goes with any vehicle."""
-    mass = getattr(src, "mass", None)
     key = None if mass is None else mass.sweep_key()
     if key is None or key[0] != "gross":
         return None
-    measured = getattr(src, "measured", None)
     if measured is not None and (measured.kind == "fuel_l") == vehicle.is_ev:
         return f"it measured {'fuel' if vehicle.is_ev else 'electric energy'}, so another powertrain drove it"
     if vehicle.max_gross_kg is None and vehicle.kerb_mass_kg and key[1] > FOREIGN_MASS_KERB_RATIO * vehicle.kerb_mass_kg:
@@ -74,7 +73,8 @@ def foreign_mass_warnings(sources: Sequence[Source], vehicles: Sequence) -> list
     another vehicle's (:func:`foreign_mass`), with the first such trip as an example."""
     out = []
     for v in vehicles:
-        hits = [(src, why) for src in sources if isinstance(src, StoredTrip) and (why := foreign_mass(src, v))]
+        hits = [(src, why) for src in sources
+                if isinstance(src, StoredTrip) and (why := foreign_mass(src.mass, src.measured, v))]
         if hits:
             src, why = hits[0]
             out.append(f"{v.label}: predicted at the own gross mass of {len(hits)} stored trip(s) another vehicle "
