@@ -300,3 +300,15 @@ def test_a_temperature_the_model_cannot_use_is_said(root, tmp_path):
     res = runner.invoke(app, ["fleet", "plan", str(root / "configs/fleet/paper-case-study.toml"), "--ambient-c", "30"])
     assert res.exit_code == 0, res.output
     assert "cevm: warning: diesel-hgv-paper: no term of its model depends on the ambient temperature" in res.stderr
+
+
+def test_a_cycle_without_elevation_says_it_is_taken_flat(root, tmp_path):
+    flat = tmp_path / "flat.csv"
+    flat.write_text("time_s,speed_kmh\n" + "".join(f"{i},{min(i, 30)}\n" for i in range(60)))
+    bus, hilly = str(root / "configs/vehicles/electric-bus.toml"), str(root / "configs/cycles/urban-bus.csv")
+    for cmd in ("predict", "feasibility", "simulate"):
+        res = runner.invoke(app, [cmd, "-v", bus, "-c", str(flat)])
+        assert res.exit_code == 0, res.output
+        assert "flat" in res.stderr and "a flat road assumed" in res.stderr
+        res = runner.invoke(app, [cmd, "-v", bus, "-c", hilly])  # urban-bus.csv has elevation_m
+        assert "flat road" not in res.stderr

@@ -67,6 +67,16 @@ def warn(message: str) -> None:
     typer.echo(f"cevm: warning: {printable(message)}", err=True)
 
 
+def note_flat_cycles(sources) -> None:
+    """A note for the cycles that give no elevation or grade: their road is taken as flat
+    (on hilly roads an error of tens of percent), so the number says it."""
+    flat = [s.name for s in sources if s.kind == "cycle" and all(leg.elevation_m is None for leg in s.leg_profiles)]
+    if flat:
+        names = ", ".join(flat[:3]) + (", ..." if len(flat) > 3 else "")
+        typer.echo(f"cevm: note: {len(flat)} cycle(s) without elevation or grade ({printable(names)}): a flat road "
+                   "assumed (add an elevation column, or give --grade-col / --grade-file)", err=True)
+
+
 def warn_ambient_unused(vehicles: list[tuple[str, bool]], asked: str) -> None:
     """For each ``(vehicle label, whether a term of its model depends on the ambient
     temperature)`` without one: a warning that the temperature ``asked`` for (e.g.

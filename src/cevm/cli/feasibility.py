@@ -29,6 +29,7 @@ from cevm.cli.common import (
     check_common,
     fail,
     load_sources,
+    note_flat_cycles,
     open_out,
     warn,
     warn_ambient_unused,
@@ -148,6 +149,7 @@ def feasibility_cmd(
             sources = load_sources(stack, store, cycle or [], trip or [], vehicle_id or [], route or [], cr0,
                                    cycle_fmt, need_profiles=any(v.is_ev for v in vehicles),
                                    on_damaged=skipped.append)
+            note_flat_cycles(sources)
             seen: list[tuple] = []
             for src in sources:
                 src_mass, src_payload, mass_source = _mass_for(src, mass_kg, payload_kg)

@@ -58,6 +58,7 @@ from cevm.cli.common import (
     check_workers,
     fail,
     load_sources,
+    note_flat_cycles,
     open_out,
     warn_ambient_unused,
     warn_damaged,
@@ -637,6 +638,7 @@ def predict_cmd(
             sources = load_sources(stack, store, cycle or [], trip or [], vehicle_id or [], route or [], cr0,
                                    cycle_fmt, need_profiles=any(v.is_ev for v in vehicles),
                                    on_damaged=skipped.append)
+            note_flat_cycles(sources)
             executor = stack.enter_context(make_executor(None if scheduler else (workers or 1), scheduler))
             stream = open_out(stack, out)
             writer = _PredictWriter(fmt, stream, temperature_used=any(uses_temperature(v) for v in vehicles))

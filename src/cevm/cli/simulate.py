@@ -13,6 +13,7 @@ from cevm.cli.common import SocStartOption, StoreOption, check_soc, fail, with_c
 from cevm.core import checks
 from cevm.cli.output import OutputFormat, write_rows
 from cevm.errors import CevmError
+from cevm.text import printable
 from cevm.units import J_PER_KWH
 
 
@@ -66,6 +67,8 @@ def simulate(
         if cycle is not None:
             c = read_cycle_csv(cycle, cycle_fmt)
             name, t, v, h = c.name, c.time_s, c.speed_mps, c.elevation_m
+            if h is None:
+                typer.echo(f"cevm: note: {printable(name)}: no elevation or grade: a flat road assumed", err=True)
         else:
             from cevm.store import TripStore, existing_store_path
 
