@@ -312,3 +312,14 @@ def test_a_cycle_without_elevation_says_it_is_taken_flat(root, tmp_path):
         assert "flat" in res.stderr and "a flat road assumed" in res.stderr
         res = runner.invoke(app, [cmd, "-v", bus, "-c", hilly])  # urban-bus.csv has elevation_m
         assert "flat road" not in res.stderr
+
+
+def test_a_stored_trip_without_elevation_says_it_is_taken_flat(root, tmp_path):
+    # the portal export has no altitude column: without --dsm its trips are stored flat
+    db = tmp_path / "s.sqlite"
+    log = root / "sample_logs/portal/portal_export_2019-10-25_2019-10-28.csv"
+    assert runner.invoke(app, ["ingest", str(log), "--store", str(db), "-q"]).exit_code == 0
+    res = runner.invoke(app, ["predict", "-v", str(root / "configs/vehicles/diesel-hgv.toml"), "--vehicle-id",
+                              "KX19 LMR", "--store", str(db)])
+    assert res.exit_code == 0, res.output
+    assert "stored trip(s) had neither DSM nor GPS elevation at ingest" in res.stderr

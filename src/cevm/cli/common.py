@@ -68,13 +68,19 @@ def warn(message: str) -> None:
 
 
 def note_flat_cycles(sources) -> None:
-    """A note for the cycles that give no elevation or grade: their road is taken as flat
-    (on hilly roads an error of tens of percent), so the number says it."""
+    """A note for the cycles that give no elevation or grade, and the stored trips that
+    had neither DSM nor GPS elevation at ingest: their road is taken as flat (on hilly
+    roads an error of tens of percent), so the number says it."""
     flat = [s.name for s in sources if s.kind == "cycle" and all(leg.elevation_m is None for leg in s.leg_profiles)]
     if flat:
         names = ", ".join(flat[:3]) + (", ..." if len(flat) > 3 else "")
         typer.echo(f"cevm: note: {len(flat)} cycle(s) without elevation or grade ({printable(names)}): a flat road "
                    "assumed (add an elevation column, or give --grade-col / --grade-file)", err=True)
+    flat = [s.name for s in sources if getattr(s, "elevation_source", None) == "flat"]
+    if flat:
+        names = ", ".join(flat[:3]) + (", ..." if len(flat) > 3 else "")
+        typer.echo(f"cevm: note: {len(flat)} stored trip(s) had neither DSM nor GPS elevation at ingest "
+                   f"({printable(names)}): a flat road assumed (re-ingest with --dsm)", err=True)
 
 
 def warn_ambient_unused(vehicles: list[tuple[str, bool]], asked: str) -> None:

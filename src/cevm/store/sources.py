@@ -42,6 +42,7 @@ class StoredTrip(Source):
 
     mass: TripMass | None = None
     measured: Measurement | None = None
+    elevation_source: str | None = None  # cevm.ingest.elevation: "dsm", "gps", "flat", ...
 
 
 #: Without a max_gross_kg, a trip's gross mass above this multiple of a vehicle's kerb
@@ -164,15 +165,16 @@ def load_sources(stack: ExitStack, store: Optional[Path], cycles: Sequence[Path]
             t_c = r.ambient_temp_c
             facts[r.trip_id] = (None if not math.isfinite(t_c) else float(t_c), masses[r.trip_id],
                                 row_measurement(r.measured_kind, r.measured_value, r.measured_source,
-                                                r.measured_resolution, r.measured_uncertainty))
+                                                r.measured_resolution, r.measured_uncertainty),
+                                r.elevation_source)
 
     def trip_legs(tid: str):
         return lambda: (LegProfile.from_profile(st.load_profile(tid)),)
 
     for tid, vec in vectors.items():
-        ambient, mass, measured = facts[tid]
+        ambient, mass, measured, elevation = facts[tid]
         sources.append(StoredTrip(name=tid, kind="trip", vector=vec, legs=trip_legs(tid), ambient_c=ambient,
-                                  mass=mass, measured=measured))
+                                  mass=mass, measured=measured, elevation_source=elevation))
 
     def route_legs(name: str):
         return lambda: [LegProfile.from_profile(p) for p in load_route_profiles(st, name)]
