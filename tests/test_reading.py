@@ -119,6 +119,29 @@ def test_parsers_agree_on_odd_rows(tmp_path_factory, rows, block):
             frames_equal(o, out[0])
 
 
+def test_columns_of_float32_values_are_float32_with_the_values_written(tmp_path, profiles, monkeypatch):
+    """A column in SI as logged whose every value is a float32 (engine speed in 1/8 rpm,
+    a 0/1 switch) is float32 and holds exactly the values written; one other value
+    (1234.56), in a later block, makes it float64 again; a converted column (km/h) is
+    float64 whatever its values."""
+    monkeypatch.setattr(reading, "BLOCK_BYTES", 2000)  # many blocks
+    head = "timestamp_utc,fms_wheel_speed_kmh,fms_engine_speed_rpm,fms_brake_switch"
+    t0 = datetime(2020, 6, 1, 10, 0, 0)
+    rpm = [f"{600 + i / 8:g}" for i in range(300)]
+    rows = [f"{(t0 + timedelta(seconds=i)).strftime('%Y-%m-%dT%H:%M:%S')}Z,{i % 40},{rpm[i]},{i % 2}" for i in range(300)]
+    [log] = read_log(write(tmp_path / "a.csv", srf_text(rows, header=head)), profiles=profiles)
+    fr = log.frame
+    assert fr["engine_speed_rpm"].dtype == np.float32 and fr["brake_switch"].dtype == np.float32
+    assert fr["engine_speed_rpm"].to_numpy(dtype=float).tolist() == [float(x) for x in rpm]
+    assert fr["brake_switch"].tolist() == [float(i % 2) for i in range(300)]
+    assert fr["wheel_speed_mps"].dtype == np.float64  # 36 km/h = 10 m/s, but converted
+    rows[250] = rows[250].replace(f",{rpm[250]},", ",1234.56,")
+    [log] = read_log(write(tmp_path / "b.csv", srf_text(rows, header=head)), profiles=profiles)
+    got = log.frame["engine_speed_rpm"]
+    assert got.dtype == np.float64
+    assert got.tolist() == [float(x) for x in rpm[:250]] + [1234.56] + [float(x) for x in rpm[251:]]
+
+
 def test_errors_in_a_later_block_name_their_line(tmp_path, profiles, monkeypatch):
     monkeypatch.setattr(reading, "BLOCK_BYTES", 2000)
     rows = srf_rows(300)

@@ -9,13 +9,16 @@ human-readable list of every repair made while reading. Bad input raises
 
 A file is streamed, never held whole: its bytes, decompressed and decoded in chunks
 (:mod:`cevm.ingest.textfile`, within :class:`ReadLimits`), are cut into blocks of whole
-lines of about 16 MiB, and each block is parsed on its own into the columns the profile
+lines of about 4 MiB, and each block is parsed on its own into the columns the profile
 maps (the others are dropped by the parser), so the memory of reading a file is that of
-its canonical columns plus one block. Each block is parsed by pyarrow's CSV reader on
-one thread, numbers and ISO 8601 times included; a block that reader refuses (a row
-with fewer or more fields than the header, a value that is not a number, mixed time
-notation, ...) is parsed again by pandas' C parser, which either repairs what it can
-(and says so) or raises the error with its line and column.
+its canonical columns plus one block; the blocks' pieces are returned to the system once
+a column is joined. A column that is in SI as logged and whose every value is exactly a
+float32 (binary steps: 1/8 rpm, whole kg, 1/32 degC, a 0/1 switch) is kept as float32,
+the same values in half the memory; file lines are int32. Each block is parsed by
+pyarrow's CSV reader on one thread, numbers and ISO 8601 times included; a block that
+reader refuses (a row with fewer or more fields than the header, a value that is not a
+number, mixed time notation, ...) is parsed again by pandas' C parser, which either
+repairs what it can (and says so) or raises the error with its line and column.
 
 Everything is vectorised (pyarrow, pandas, numpy); nothing loops over rows in Python.
 
@@ -37,6 +40,7 @@ import numpy as np
 import pandas as pd
 
 from cevm.errors import InputError, has_control
+from cevm.runtime import release_free_memory
 from cevm.ingest.profiles import VIRTUAL_COLUMNS, ColumnMap, EnergySpec, Profile, load_profiles
 from cevm.ingest.textfile import (MAX_LINE_BYTES, ByteStream, ReadLimits, Utf8Stream, _ascii_transparent,
                                   sniff_bom, utf16_hint)
@@ -90,7 +94,7 @@ _TIME_MAX = np.datetime64("2100-01-01T00:00:00", "ns").astype(np.int64)
 _NUMERIC_NA = ["", "NA", "N/A", "n/a", "NaN", "nan", "null", "NULL", "None", "-", "--"]
 
 #: Text parsed at a time: blocks of whole lines of about this many bytes.
-BLOCK_BYTES = 16 << 20
+BLOCK_BYTES = 4 << 20
 
 #: Parsers: "pyarrow" (default; pandas explains or repairs a block it refuses) or
 #: "pandas" (the parser before pyarrow, kept for comparison in benchmarks).
@@ -146,10 +150,12 @@ class ParsedLog:
     """One vehicle's rows of one logger file, in canonical columns.
 
     ``frame`` has ``time_s`` (UTC seconds since the Unix epoch, float64),
-    ``source_line`` (1-based line in the file, int64), ``vehicle_id`` (categorical: one
-    id) and every canonical column the profile maps and the file has (float64, SI,
-    NaN = no value), rows in file order. ``repairs`` lists every repair made while
-    reading the file (file-wide, so shared by the logs of a multi-vehicle file).
+    ``source_line`` (1-based line in the file, int32; int64 past 2**31 lines),
+    ``vehicle_id`` (categorical: one id) and every canonical column the profile maps and
+    the file has (SI, NaN = no value; float64, or float32 where the column is SI as
+    logged and every value is exactly a float32: the same values), rows in file order.
+    ``repairs`` lists every repair made while reading the file (file-wide, so shared by
+    the logs of a multi-vehicle file).
     ``sha256`` is the hex digest of the file's bytes on disk (compressed bytes for a .gz
     file), computed on first use from the file (the ingest pipeline hashes files
     itself, before reading them).
@@ -952,6 +958,8 @@ class _Gather:
         self._vindex: dict[str, int] = {}
         self._blank: list[np.ndarray] = []
         self._fewer: list[np.ndarray] = []
+        # numeric columns that are SI as logged and so far exactly float32 (kept so)
+        self._narrow = {m.source for m in plan.maps if m.value_map is None and m.factor == 1.0 and m.offset == 0.0}
         self.rows = 0
         self.time_utc: bool | None = None  # whether the file's times carry a zone (single ISO column)
         self._time_type_decided = False
@@ -1013,7 +1021,7 @@ class _Gather:
         if n == 0:
             return
         upto = None if last else part.last_line
-        self._lines.append(part.lines)
+        self._lines.append(part.lines.astype(np.int32) if part.last_line < _INT32_LINES else part.lines)
         if self.prof.vehicle_source == "column":
             self._vcodes.append(self._vehicle_part(part, upto))
         self._time_part(part, upto)
@@ -1021,6 +1029,12 @@ class _Gather:
             if m.value_map is not None:
                 self._mapped[m.canonical].append(_map_values(part.text[m.source], m, part.lines, self.path, upto))
         for c, x in part.numbers.items():
+            if c in self._narrow:
+                x32 = _exact_float32(x)
+                if x32 is None:
+                    self._narrow.discard(c)
+                else:
+                    x = x32
             self._numbers[c].append(x)
 
     def _vehicle_part(self, part: _Part, upto: int | None) -> np.ndarray:
@@ -1149,6 +1163,20 @@ class _Gather:
         return out
 
 
+#: File lines below this are kept as int32 (half the memory of int64).
+_INT32_LINES = 2**31 - 1
+
+
+def _exact_float32(x: np.ndarray) -> np.ndarray | None:
+    """``x`` (float64) as float32 if every value is exactly a float32 (NaN included:
+    what a logger writes in binary steps, such as 1/8 rpm, whole kg or 1/32 degC), else
+    None. The values are the same; the column takes half the memory."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        x32 = x.astype(np.float32)
+        exact = bool(((x32 == x) | np.isnan(x)).all())
+    return x32 if exact else None
+
+
 def _writable(x: np.ndarray) -> np.ndarray:
     """``x``, or a copy of it where it is a read-only view (the columns are converted in
     place later)."""
@@ -1156,12 +1184,17 @@ def _writable(x: np.ndarray) -> np.ndarray:
 
 
 def _concat(parts: list[np.ndarray]) -> np.ndarray:
-    """One array of the parts (the part itself if there is one: no copy)."""
+    """One array of the parts (the part itself if there is one: no copy). The parts'
+    memory is returned to the system once they are joined: freed, it would stay
+    resident between the joined columns, and the process would hold a large file's
+    columns twice at its peak (:func:`cevm.runtime.release_free_memory`)."""
     if len(parts) == 1:
         a = parts[0]
-    else:
-        a = np.concatenate(parts)
+        parts.clear()
+        return a
+    a = np.concatenate(parts)
     parts.clear()
+    release_free_memory()
     return a
 
 
@@ -1261,7 +1294,7 @@ def _canonical_columns(columns: dict[str, np.ndarray], maps: list[ColumnMap], ut
     with impossible positions and absurd values handled; a log with neither position nor
     speed values is an error. ``columns`` (numbers by source name, value-map columns by
     canonical name) are converted in place and released from the dict."""
-    out: dict[str, np.ndarray] = {"time_s": utc / 1e9, "source_line": lines}
+    out: dict[str, np.ndarray] = {"time_s": _ns_to_s(utc), "source_line": lines}
     del utc
     for m in maps:
         if m.value_map is not None:
@@ -1282,6 +1315,18 @@ def _canonical_columns(columns: dict[str, np.ndarray], maps: list[ColumnMap], ut
         raise InputError(path, "no position and no speed values: cannot derive a drive cycle "
                                f"(profile {prof.name!r} looks for {', '.join(cands) or 'none'})")
     return out
+
+
+def _ns_to_s(ns: np.ndarray) -> np.ndarray:
+    """Times [ns, int64] in seconds (float64), in the same memory where the array is its
+    own (a chunk at a time: no second array of the file's length)."""
+    if not (ns.flags.writeable and ns.flags.c_contiguous and ns.base is None):
+        return ns / 1e9
+    s = ns.view(np.float64)
+    step = 1 << 16
+    for a in range(0, ns.size, step):
+        s[a:a + step] = ns[a:a + step] / 1e9
+    return s
 
 
 def _split_vehicles(out: dict[str, np.ndarray], codes: np.ndarray, vehicles: list[str], maps: list[ColumnMap],
@@ -1415,7 +1460,7 @@ def _check_absurd(out: dict[str, np.ndarray], m: ColumnMap, lines: np.ndarray, p
     so that a burst of junk in a short file is still repaired, not refused.
     """
     x = out[m.canonical]
-    lo, hi = PLAUSIBLE_RANGE_SI[m.canonical]
+    lo, hi = (np.float64(b) for b in PLAUSIBLE_RANGE_SI[m.canonical])  # compared as float64 for float32 columns too
     with np.errstate(invalid="ignore"):
         bad = (x < lo) | (x > hi)
     if not bad.any():
@@ -1435,8 +1480,8 @@ def _check_position(out: dict[str, np.ndarray], prof: Profile, lines: np.ndarray
     if "lat_deg" not in out:
         return
     lat, lon = out["lat_deg"], out["lon_deg"]
-    with np.errstate(invalid="ignore"):
-        lat_bad, lon_bad = np.abs(lat) > 90.0, np.abs(lon) > 180.0
+    with np.errstate(invalid="ignore"):  # |x| > 90 without an array of |x|
+        lat_bad, lon_bad = (lat > 90.0) | (lat < -90.0), (lon > 180.0) | (lon < -180.0)
     absurd = lat_bad | lon_bad
     zero = ((lat == 0.0) | (lon == 0.0)) & ~absurd if prof.zero_position_is_no_fix else np.zeros(len(lat), bool)
     n_values = int((np.isfinite(lat) & np.isfinite(lon)).sum())
