@@ -335,6 +335,23 @@ def test_small_caches_evict_and_stay_correct(tmp_path):
     np.testing.assert_array_equal(z, z2)
 
 
+def test_a_lookup_of_more_blocks_than_the_cache_holds_stays_within_it(tmp_path):
+    """A long track over a fine DSM touches more blocks than the cache budget: they are
+    looked up a budget's worth at a time (the cache never holds more than about its
+    budget, instead of every block of the track at once), with the same values."""
+    n = 2048
+    data = np.arange(n * n, dtype=np.float32).reshape(n, n) % 997
+    write_tif(tmp_path / "big.tif", data, X0, Y0, 1.0, 1.0, BNG, tiled=True, blockxsize=256, blockysize=256)
+    t = np.linspace(0, 1, 20000)  # a zigzag over all 64 blocks of 256 px
+    x, y = X0 + 10 + 2020 * t, Y0 - 10 - 2020 * np.abs(np.sin(25 * t))
+    slot = 257 * 257 * 4  # a float32 block with its margin
+    with DsmSampler.open(tmp_path / "big.tif", cache_mb=4.5 * slot / 1e6) as s:
+        z = s.sample_xy(x, y, BNG)
+        assert s.stats.windows_read >= 40
+        assert sum(p.data.shape[0] for p in s.windows._pools) <= 5  # slots for 4.5 blocks, never more
+    np.testing.assert_allclose(z, ref_bilinear(data.astype(float), X0, Y0, 1.0, 1.0, x, y), rtol=0, atol=1e-9)
+
+
 def test_scaled_integer_raster(tmp_path):
     """An int16 DSM in centimetres (scale 0.01) with nodata -32768."""
     cm = np.array([[1000, 1010, 1030], [1005, 1011, 1020], [-32768, 1002, 1003]], dtype=np.int16)

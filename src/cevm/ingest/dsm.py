@@ -34,6 +34,10 @@ __all__ = ["DsmHeaders", "DsmSampler", "SamplerStats", "TileIndex", "WindowReade
 
 WGS84 = "EPSG:4326"
 
+#: Points looked up at a time by :meth:`DsmSampler.sample_xy` (its temporaries take
+#: about 150 bytes a point).
+POINTS_AT_A_TIME = 1 << 16
+
 
 @dataclass
 class SamplerStats:
@@ -472,7 +476,8 @@ class WindowReader:
     with a one-pixel margin right and below for the bilinear neighbours, as float
     (float32 for plain float32 rasters) with NaN for nodata and the raster's scale and
     offset applied. Blocks stay in an LRU cache of ``cache_bytes`` across calls (the
-    blocks of one :meth:`gather` stay until it is done); cached blocks of one shape
+    blocks of one :meth:`gather` stay until it is done; a gather that needs more than
+    the budget is done a budget's worth of blocks at a time); cached blocks of one shape
     share one array (:class:`_Pool`), so a gather fetches its pixels with one fancy
     index whatever the number of blocks. At most ``max_open`` datasets stay open.
     """
@@ -494,6 +499,8 @@ class WindowReader:
         self._open: OrderedDict[int, object] = OrderedDict()
         self.failed: dict[int, str] = {}  # tile -> why it cannot be read
         self._blk = np.array([block_px or (t.block if 128 <= t.block <= 1024 else 512) for t in self.tiles], dtype=np.int64)
+        self._h = np.array([t.height for t in self.tiles], dtype=np.int64)
+        self._w = np.array([t.width for t in self.tiles], dtype=np.int64)
 
     def close(self) -> None:
         """Close open datasets and drop the block cache."""
@@ -551,10 +558,12 @@ class WindowReader:
         self.stats.pixels_read += arr.size
         return arr
 
-    def _block_slot(self, key: int) -> tuple[int, int]:
+    def _block_slot(self, key: int, keep: int = 0) -> tuple[int, int]:
         """(pool, slot) of the cached block ``key`` (tile << 42 | brow << 21 | bcol),
-        read on a miss. The cache is trimmed to its budget by :meth:`_trim`, after each
-        lookup, so the blocks of one lookup stay while it gathers."""
+        read on a miss, after older blocks are evicted to make room for it (never the
+        ``keep`` most recently used: the lookup's own). The cache is trimmed to its
+        budget by :meth:`_trim` after each lookup too, so the blocks of one lookup stay
+        while it gathers."""
         hit = self._blocks.get(key)
         if hit is not None:
             self._blocks.move_to_end(key)
@@ -562,6 +571,7 @@ class WindowReader:
             return hit[0], hit[1]
         tile, brow, bcol = key >> 42, (key >> 21) & ((1 << 21) - 1), key & ((1 << 21) - 1)
         arr = self._read_block(tile, brow, bcol)
+        self._trim(arr.nbytes, keep)
         t, b = self.tiles[tile], int(self._blk[tile])
         shape = (min(b + 1, t.height), min(b + 1, t.width))  # every block of the tile fits
         pk = (shape[0], shape[1], arr.dtype.str)
@@ -575,9 +585,10 @@ class WindowReader:
         self._cached_bytes += arr.nbytes
         return pi, slot
 
-    def _trim(self) -> None:
-        """Evict least recently used blocks beyond the cache budget (keeping one)."""
-        while self._cached_bytes > self.cache_bytes and len(self._blocks) > 1:
+    def _trim(self, extra: int = 0, keep: int = 1) -> None:
+        """Evict least recently used blocks until ``extra`` bytes more fit the cache
+        budget, keeping the ``keep`` most recently used."""
+        while self._cached_bytes + extra > self.cache_bytes and len(self._blocks) > keep:
             _, (pi, slot, nbytes) = self._blocks.popitem(last=False)
             self._pools[pi].free.append(slot)
             self._cached_bytes -= nbytes
@@ -585,7 +596,9 @@ class WindowReader:
     def gather(self, tile: np.ndarray, row: np.ndarray, col: np.ndarray, quad: bool) -> np.ndarray:
         """Pixel values at (tile, row, col); with ``quad`` also the right, lower and
         lower-right neighbours (requires row <= height-2, col <= width-2). Returns shape
-        (n,) or (4, n): [z(r,c), z(r,c+1), z(r+1,c), z(r+1,c+1)]."""
+        (n,) or (4, n): [z(r,c), z(r,c+1), z(r+1,c), z(r+1,c+1)]. Points whose blocks
+        are more than the cache budget are done a budget's worth of blocks at a time
+        (a long track on a fine DSM would otherwise hold all its blocks at once)."""
         n = tile.size
         out = np.empty((4, n) if quad else (n,), dtype=np.float64)
         if n == 0:
@@ -593,11 +606,38 @@ class WindowReader:
         blk = self._blk[tile]
         brow, bcol = row // blk, col // blk
         uniq, inv = _unique_inverse((tile << 42) | (brow << 21) | bcol)
+        # the blocks in groups of at most the budget (sizes as float64, margin included)
+        t_u = uniq >> 42
+        b_u = self._blk[t_u] + 1
+        nbytes = np.minimum(b_u, self._h[t_u]) * np.minimum(b_u, self._w[t_u]) * 8
+        if int(nbytes.sum()) <= self.cache_bytes:
+            self._gather_blocks(uniq, inv, tile, row, col, brow, bcol, blk, quad, out)
+            return out
+        bounds, acc = [0], 0
+        for i, nb in enumerate(nbytes.tolist()):  # over blocks, not points
+            if acc + nb > self.cache_bytes and i > bounds[-1]:
+                bounds.append(i)
+                acc = 0
+            acc += nb
+        bounds.append(uniq.size)
+        order = np.argsort(inv, kind="stable")  # points by block, so by group
+        starts = np.searchsorted(inv[order], bounds)
+        for g in range(len(bounds) - 1):
+            lo, hi = bounds[g], bounds[g + 1]
+            pts = order[starts[g]:starts[g + 1]]
+            part = np.empty((4, pts.size) if quad else (pts.size,), dtype=np.float64)
+            self._gather_blocks(uniq[lo:hi], inv[pts] - lo, tile[pts], row[pts], col[pts], brow[pts], bcol[pts],
+                                blk[pts], quad, part)
+            out[..., pts] = part
+        return out
+
+    def _gather_blocks(self, uniq, inv, tile, row, col, brow, bcol, blk, quad: bool, out: np.ndarray) -> None:
+        """:meth:`gather` of points whose blocks are ``uniq`` (``inv``: each point's)."""
         pool_of = np.empty(uniq.size, dtype=np.int64)
         slot_of = np.empty(uniq.size, dtype=np.int64)
         try:
             for i, key in enumerate(uniq.tolist()):
-                pool_of[i], slot_of[i] = self._block_slot(key)
+                pool_of[i], slot_of[i] = self._block_slot(key, keep=i)
         finally:
             self._trim()
         pools = [int(pool_of[0])] if (pool_of == pool_of[0]).all() else np.unique(pool_of).tolist()
@@ -615,7 +655,6 @@ class WindowReader:
                 out[3, sel] = data[flat + stride + 1]
             else:
                 out[sel] = data[flat]
-        return out
 
 
 class DsmSampler:
@@ -756,13 +795,19 @@ class DsmSampler:
 
     def sample_xy(self, x, y, crs: str = WGS84) -> np.ndarray:
         """DSM elevation [m] at coordinates ``x``, ``y`` in ``crs`` (any pyproj CRS
-        string; x is easting or longitude). See :meth:`sample`."""
+        string; x is easting or longitude). See :meth:`sample`. Many points are looked
+        up :data:`POINTS_AT_A_TIME` at a time (bounded temporaries; the same values)."""
         x = np.asarray(x, dtype=np.float64)
         y = np.asarray(y, dtype=np.float64)
         if x.shape != y.shape:
             raise ValueError(f"x and y differ in shape: {x.shape} vs {y.shape}")
         shape = x.shape
         x, y = x.ravel(), y.ravel()
+        if x.size > POINTS_AT_A_TIME:  # bounded temporaries (the values do not depend on it)
+            out = np.empty(x.size)
+            for a in range(0, x.size, POINTS_AT_A_TIME):
+                out[a:a + POINTS_AT_A_TIME] = self.sample_xy(x[a:a + POINTS_AT_A_TIME], y[a:a + POINTS_AT_A_TIME], crs)
+            return out.reshape(shape)
         self.stats.points += x.size
         # Standstill fixes repeat: sample each run of equal consecutive points once.
         if x.size > 1:
