@@ -224,6 +224,19 @@ def _jsonable(x: float) -> float | None:
 # --------------------------------------------------------------------------- samples
 
 
+#: Elements at a time of the elementwise steps over long arrays (interpolation,
+#: distances, jump tests): their temporaries then take a few MB instead of several
+#: arrays of a log's length; the results do not depend on it.
+CHUNK_ROWS = 1 << 16
+
+
+def chunks(n: int, size: int | None = None):
+    """(start, stop) of consecutive slices of ``range(n)`` of at most ``size`` (default
+    :data:`CHUNK_ROWS`)."""
+    size = size or CHUNK_ROWS
+    return ((a, min(a + size, n)) for a in range(0, n, size))
+
+
 def _interp_limited(
     q: np.ndarray, ts: np.ndarray, vs: np.ndarray, max_gap_s: float, *more: np.ndarray,
     right: np.ndarray | None = None,
@@ -233,11 +246,19 @@ def _interp_limited(
     apart (exact sample times always get their value). Further value arrays in
     ``more`` (same sample times) are interpolated too; then a list is returned.
     ``right``: ``np.searchsorted(ts, q, side="left")`` when the caller knows it (for
-    samples at ``q[mask]`` of a strictly increasing ``q``: ``cumsum(mask) - mask``)."""
+    samples at ``q[mask]`` of a strictly increasing ``q``: ``cumsum(mask) - mask``).
+    A long ``q`` is done :data:`CHUNK_ROWS` at a time (bounded temporaries)."""
     n = ts.size
     arrays = (vs, *more)
     if n == 0:
         outs = [np.full(q.shape, np.nan) for _ in arrays]
+        return outs if more else outs[0]
+    if q.ndim == 1 and q.size > CHUNK_ROWS:
+        outs = [np.empty(q.shape) for _ in arrays]
+        for a, b in chunks(q.size):
+            part = _interp_limited(q[a:b], ts, vs, max_gap_s, *more, right=None if right is None else right[a:b])
+            for o, x in zip(outs, part if more else [part]):
+                o[a:b] = x
         return outs if more else outs[0]
     if right is None:
         right = np.searchsorted(ts, q, side="left")
@@ -255,6 +276,12 @@ def _interp_limited(
         val[miss] = np.nan
         outs.append(val)
     return outs if more else outs[0]
+
+
+def columns_read(column: str) -> set[str]:
+    """The canonical columns that the estimate of a source column may read
+    (:func:`source_samples`): the column itself, or a product's factors."""
+    return {column, *_BATTERY_POWER_FACTORS, *(part.strip() for part in column.split("*"))}
 
 
 def source_samples(
@@ -463,9 +490,7 @@ def estimate_source(
     lo = np.searchsorted(time_s, t0 - params.max_gap_s, side="left")
     hi = np.searchsorted(time_s, t1 + params.max_gap_s, side="right")
     window_t = time_s[lo:hi]
-    # only the columns source_samples may read: the source, or a product's factors
-    needed = {name, *_BATTERY_POWER_FACTORS, *(part.strip() for part in name.split("*"))}
-    window = {k: np.asarray(columns[k])[lo:hi] for k in needed if k in columns}
+    window = {k: np.asarray(columns[k])[lo:hi] for k in columns_read(name) if k in columns}
     try:
         ts, vs = source_samples(window_t, window, name, params.max_gap_s)
     except KeyError:
