@@ -486,6 +486,76 @@ def test_adjacent_rows_swapped_give_the_same_trips(n, seed, swaps):
     assert_same_trips(clean_log(frame, SOURCES), clean_log(frame.iloc[order], SOURCES))
 
 
+def _messy_drive(n, seed):
+    """A random drive with what the whole-log steps repair: repeated rows, ticks split
+    over two rows (GPS in one, the rest in the other), a few junk times, rows shuffled
+    in places, GPS fix jumps, and columns that only the tick merge reads."""
+    rng = np.random.default_rng(seed)
+    fr = _random_drive(n, seed)
+    fr["engine_speed_rpm"] = np.round(rng.uniform(600, 2000, n) * 8) / 8
+    fr["gps_hdop"] = np.where(rng.random(n) < 0.05, 50.0, 1.0)
+    fr["gps_alt_m"] = 100 + np.cumsum(rng.normal(0, 0.3, n))
+    jump = rng.random(n) < 0.01
+    fr.loc[jump, "lat_deg"] += 0.05
+    split = rng.random(n) < 0.3  # half the fields in a second row of the same time
+    extra = fr[split].copy()
+    extra[["lat_deg", "lon_deg", "gps_alt_m"]] = np.nan
+    fr.loc[split, ["wheel_speed_mps", "engine_speed_rpm"]] = np.nan
+    dup = fr[rng.random(n) < 0.1]
+    out = pd.concat([fr, extra, dup]).sort_values(["time_s"], kind="stable").reset_index(drop=True)
+    idx = np.arange(out.shape[0])
+    for k in rng.integers(0, out.shape[0] - 2, max(1, n // 50)):  # local swaps
+        idx[[k, k + 1]] = idx[[k + 1, k]]
+    out = out.iloc[idx].reset_index(drop=True)
+    out.loc[rng.integers(10, out.shape[0] - 10, 2), "time_s"] += 86400.0  # junk times
+    out["source_line"] = np.arange(2, out.shape[0] + 2)
+    return out
+
+
+@settings(max_examples=20, deadline=None)
+@given(n=st.integers(150, 400), seed=st.integers(0, 2**32 - 1))
+def test_results_do_not_depend_on_the_chunk_size(n, seed):
+    """The row-wise steps work a chunk of rows at a time; chunks of 7 rows (every
+    boundary inside runs, ticks, jumps and gaps) give the same trips, quality and
+    dropped segments as one chunk."""
+    import cevm.ingest.consumption as consumption
+
+    frame = _messy_drive(n, seed)
+    want = clean_log(frame.copy(), SOURCES)
+    old = consumption.CHUNK_ROWS
+    consumption.CHUNK_ROWS = 7
+    try:
+        got = clean_log(frame.copy(), SOURCES)
+    finally:
+        consumption.CHUNK_ROWS = old
+    assert_same_trips(got, want)
+    assert [t.quality for t in got.trips] == [t.quality for t in want.trips]
+    assert got.quality == want.quality and got.dropped == want.dropped
+
+
+def test_clean_stream_makes_the_trips_one_at_a_time():
+    """CleanStream: errors when made; the trips as they are asked for; the dropped
+    segments and the file's quality complete once the iteration ends; the caller's
+    frame let go of with release_frame; nothing the second time."""
+    from cevm.ingest.cleaning import CleanStream
+
+    with pytest.raises(InputError, match="time"):
+        CleanStream(pd.DataFrame({"wheel_speed_mps": [1.0, 2.0]}), path="a.csv")
+    # three trips: 600 s, a 400 s gap, 600 s, a 400 s gap, 20 s (dropped: too short)
+    tau = np.concatenate((TAU, 1000.0 + TAU, 2000.0 + np.arange(21.0)))
+    frame = drive(tau)
+    stream = CleanStream(frame, release_frame=True)
+    assert list(frame.columns) == []
+    trips = iter(stream)
+    first = next(trips)
+    assert first.duration_s == 600.0 and stream.dropped == []
+    rest = list(trips)
+    assert [t.start_utc_s for t in rest] == [T0 + 1000.0]
+    assert len(stream.dropped) == 1 and stream.dropped[0]["duration_s"] == 20.0
+    assert stream.quality["trips"] == 2 and stream.quality["trips_dropped"] == 1
+    assert list(stream) == []
+
+
 @settings(max_examples=25, deadline=None)
 @given(n=st.integers(70, 300), seed=st.integers(0, 2**32 - 1))
 def test_trip_invariants(n, seed):

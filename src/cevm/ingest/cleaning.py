@@ -79,12 +79,22 @@ The steps, in order (parameters in :class:`CleanParams`):
 Fast distances inside (jump tests, speed from positions) use a local ellipsoidal
 approximation (meridian and prime-vertical radii of curvature of WGS84 at the mid
 latitude), within 4e-8 (relative) of the geodesic for steps under a kilometre.
+
+Memory: a large log's columns are held about once. The frame's own arrays are used
+(with ``release_frame`` the frame lets go of them); steps 1 and 2 select and reorder
+rows through one index and make each column once, in the final order, dropping its
+source as they go, and drop the columns that only step 2 reads (an engine's speed, a
+pedal); the row-wise steps work :data:`~cevm.ingest.consumption.CHUNK_ROWS` rows at a
+time; the GPS fixes are rows of the log's columns, not copies; the speed and GPS
+columns go once the row speeds are made; and :class:`CleanStream` makes the trips one
+at a time (``python benchmarks/bench_memory.py``, 2 M rows: the cleaning's peak 416 MB,
+9 MB above the read's).
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -94,8 +104,11 @@ from pyproj import Geod
 
 from cevm.core.trip import CANONICAL_COLUMNS, Measurement
 from cevm.errors import InputError
-from cevm.ingest.consumption import ConsumptionParams, EnergySourceLike, _interp_limited, measure_trip
+from cevm.ingest import consumption
+from cevm.ingest.consumption import (ConsumptionParams, EnergySourceLike, _interp_limited, chunks, columns_read,
+                                     measure_trip)
 from cevm.ingest.evidence import EVIDENCE_COLUMNS
+from cevm.runtime import MMAP_THRESHOLD_BYTES, release_free_memory
 
 _GEOD = Geod(ellps="WGS84")
 _WGS84_A_M = 6378137.0
@@ -230,9 +243,21 @@ def local_distance_m(lat1, lon1, lat2, lon2) -> np.ndarray:
 
     sqrt((M dphi)^2 + (N cos(phi) dlambda)^2) with M, N the meridian and prime-vertical
     radii of curvature at the mid latitude: within 4e-8 of the geodesic under 1 km,
-    fast (pure numpy). Longitude differences are wrapped to [-180, 180).
+    fast (pure numpy). Longitude differences are wrapped to [-180, 180). Long 1-D
+    arrays are done :data:`~cevm.ingest.consumption.CHUNK_ROWS` at a time (bounded
+    temporaries).
     """
     lat1, lon1, lat2, lon2 = (np.asarray(a, dtype=float) for a in (lat1, lon1, lat2, lon2))
+    n = lat1.size
+    if lat1.ndim == 1 and n > consumption.CHUNK_ROWS and all(a.shape == lat1.shape for a in (lon1, lat2, lon2)):
+        out = np.empty(n)
+        for a, b in chunks(n):
+            out[a:b] = _local_distance_m(lat1[a:b], lon1[a:b], lat2[a:b], lon2[a:b])
+        return out
+    return _local_distance_m(lat1, lon1, lat2, lon2)
+
+
+def _local_distance_m(lat1, lon1, lat2, lon2) -> np.ndarray:
     s = np.sin((0.5 * _RAD) * (lat1 + lat2))
     s2 = s * s
     w2 = 1.0 - _WGS84_E2 * s2
@@ -291,24 +316,47 @@ def _group_median(values: np.ndarray, group: np.ndarray, n_groups: int) -> np.nd
     return med
 
 
+def _let_go(n_rows: int) -> None:
+    """Return freed memory to the system (:func:`cevm.runtime.release_free_memory`) if
+    the log's columns are large (``n_rows`` rows take at least the allocator's mapping
+    threshold a column): glibc serves large arrays from the free memory in its heap and
+    keeps what they free, so a step that makes and drops column after column would hold
+    several times what it uses. A small log's arrays are left to the allocator."""
+    if n_rows * 8 >= MMAP_THRESHOLD_BYTES:
+        release_free_memory()
+
+
+def _nonzero(mask: np.ndarray) -> np.ndarray:
+    """``np.flatnonzero(mask)``, as int32 where the positions fit (half the memory of
+    int64; made a chunk at a time, so no int64 array of them either)."""
+    if mask.size >= 2**31:
+        return np.flatnonzero(mask)
+    out = np.empty(np.count_nonzero(mask), dtype=np.int32)
+    k = 0
+    for a, b in chunks(mask.size):
+        nz = np.flatnonzero(mask[a:b])
+        out[k:k + nz.size] = nz + a
+        k += nz.size
+    return out
+
+
 def _last_valid_index(valid: np.ndarray) -> np.ndarray:
     """Index of the last True at or before each position, -1 if none."""
     idx = np.where(valid, np.arange(valid.size), -1)
     return np.maximum.accumulate(idx) if idx.size else idx
 
 
-def _next_valid_index(valid: np.ndarray) -> np.ndarray:
-    """Index of the first True at or after each position, len(valid) if none."""
-    n = valid.size
-    idx = np.where(valid, np.arange(n), n)
-    return np.minimum.accumulate(idx[::-1])[::-1] if n else idx
-
-
 def _ffill(a: np.ndarray) -> np.ndarray:
-    """Forward fill NaN (leading NaN stay NaN)."""
-    ok = np.isfinite(a)
-    j = _last_valid_index(ok)
-    out = np.where(j >= 0, a[np.maximum(j, 0)], np.nan)
+    """Forward fill NaN (leading NaN stay NaN), a chunk at a time."""
+    out = np.empty(a.size)
+    last = np.nan  # the last finite value before the chunk
+    for s, e in chunks(a.size):
+        c = a[s:e]
+        ok = np.isfinite(c)
+        j = _last_valid_index(ok)
+        out[s:e] = np.where(j >= 0, c[np.maximum(j, 0)], last)
+        if ok.any():
+            last = c[j[-1]]
     return out
 
 
@@ -386,14 +434,72 @@ class _Events:
 # ------------------------------------------------------------------------------ load
 
 
-def _load(frame: pd.DataFrame, path) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray], int]:
+class _Rows:
+    """The log's columns as they came and which of their rows are the current rows, in
+    order. The time repairs, the sort and the duplicates select and reorder rows
+    through one index into the columns (``sel``; None: all of them, in order) instead
+    of copying every column at each step; :meth:`gather` (or the tick merge) then makes
+    each column once, in the final order, dropping its source array as it goes."""
+
+    def __init__(self, cols: dict[str, np.ndarray]) -> None:
+        self.cols = cols
+        self.sel: np.ndarray | None = None
+
+    def __contains__(self, name: str) -> bool:
+        return name in self.cols
+
+    def select(self, idx: np.ndarray) -> None:
+        """Keep the current rows ``idx`` (positions, or a mask), in that order."""
+        if idx.dtype == bool:
+            idx = np.flatnonzero(idx)
+        self.sel = idx if self.sel is None else self.sel[idx]
+
+    def positions(self, idx: np.ndarray | None = None) -> np.ndarray | None:
+        """Where the current rows ``idx`` (positions or a mask; None: all) are in the
+        source arrays (None: all of them, in order)."""
+        if self.sel is None:
+            return idx
+        return self.sel if idx is None else self.sel[idx]
+
+    def at(self, name: str, idx: np.ndarray) -> np.ndarray:
+        """Column ``name`` at the current rows ``idx`` (float64)."""
+        return self.cols[name][self.positions(idx)].astype(np.float64, copy=False)
+
+    def gather(self, keep, wide=()) -> None:
+        """The columns in ``keep`` at the current rows, in their order (a source array
+        itself where nothing was selected), those in ``wide`` as float64 (the others
+        keep their float32 or float64); the columns not in ``keep`` dropped."""
+        names = list(self.cols)
+        out = {}
+        for name in sorted(names, key=lambda c: c in keep):  # the dropped ones first: their memory is free sooner
+            src = self.cols.pop(name)
+            if name in keep:
+                a = src if self.sel is None else src[self.sel]
+                out[name] = a.astype(np.float64) if name in wide and a.dtype != np.float64 else a
+            del src
+            _let_go(len(out[name]) if name in out else 0)
+        self.cols, self.sel = {c: out[c] for c in names if c in out}, None
+
+
+_FLOATS = (np.dtype(np.float64), np.dtype(np.float32))
+
+#: Columns the row speeds and the GPS fixes are made from: float64 from the tick merge
+#: on (the others, read per trip, keep their float32 where they have it).
+_ROW_SPEED_COLUMNS = ("wheel_speed_mps", "gps_speed_mps", "lat_deg", "lon_deg", "gps_hdop", "gps_alt_m")
+
+
+def _load(frame: pd.DataFrame, path, release: bool = False) -> tuple[np.ndarray, np.ndarray, _Rows, int]:
+    """Time, file lines and the other numeric columns of ``frame`` (the frame's own
+    arrays where they are float64 or float32: no copy); rows without a finite time are left out of
+    the current rows. ``release``: the frame's columns are removed once taken, so that
+    the cleaning holds the only reference to its arrays."""
     if "time_s" not in frame.columns:
         raise InputError(path, "no time column (canonical 'time_s')", column="time_s")
     n = len(frame)
     if "source_line" in frame.columns:
         s = frame["source_line"]
-        if isinstance(s.dtype, np.dtype) and s.dtype.kind in "iu":  # the reader's int64 lines
-            line = s.to_numpy(dtype=np.int64)
+        if isinstance(s.dtype, np.dtype) and s.dtype.kind in "iu":  # the reader's integer lines
+            line = s.to_numpy()
         else:
             line = pd.to_numeric(s, errors="coerce").to_numpy(dtype=float)
             line = np.where(np.isfinite(line), line, -1).astype(np.int64)
@@ -406,7 +512,8 @@ def _load(frame: pd.DataFrame, path) -> tuple[np.ndarray, np.ndarray, dict[str, 
             continue
         s = frame[name]
         try:
-            arr = s.to_numpy(dtype=float, na_value=np.nan)
+            # float32 columns (values exactly float32) stay so until they are gathered
+            arr = s.to_numpy() if s.dtype in _FLOATS else s.to_numpy(dtype=float, na_value=np.nan)
         except (TypeError, ValueError):
             num = pd.to_numeric(s, errors="coerce")
             bad = np.flatnonzero((num.isna() & s.notna()).to_numpy())
@@ -415,36 +522,45 @@ def _load(frame: pd.DataFrame, path) -> tuple[np.ndarray, np.ndarray, dict[str, 
                 path, f"not a number: {s.iloc[i]!r}", line=int(line[i]), column=name
             ) from None
         cols[name] = arr
-    t = cols.pop("time_s")
+    if release:
+        for c in list(frame.columns):
+            del frame[c]
+    t = cols.pop("time_s").astype(np.float64, copy=False)
+    rows = _Rows(cols)
     ok = np.isfinite(t)
     dropped = int(n - ok.sum())
     if dropped:
         t = t[ok]
         line = line[ok]
-        cols = {k: v[ok] for k, v in cols.items()}
-    return t, line, cols, dropped
+        rows.select(ok)
+    return t, line, rows, dropped
 
 
 # ------------------------------------------------------------------------------ time
 
 
-def _repair_time(t, line, cols, p: CleanParams, ev: _Events):
-    """File-order time repairs (step 1 of the module docstring). Returns (t, line, cols,
-    info) with rows still in file order, outlier rows removed, times shifted at clock
-    steps; an unordered file is returned as it is (it is simply sorted afterwards)."""
+def _repair_time(t, line, rows: _Rows, p: CleanParams, ev: _Events):
+    """File-order time repairs (step 1 of the module docstring). Returns (t, line,
+    info) with rows still in file order, outlier rows removed (from ``rows`` too), times
+    shifted at clock steps; an unordered file is returned as it is (it is simply sorted
+    afterwards)."""
     n = t.size
     info: dict = {"file_order": "ordered", "clock_step_corrections_s": []}
     if n < 3:
-        return t, line, cols, info
-    d = np.diff(t)
-    backward = int((d < 0).sum())
+        return t, line, info
+    backward, forward = 0, 0
+    for a, b in chunks(n - 1):
+        dd = np.diff(t[a:b + 1])
+        backward += int((dd < 0).sum())
+        forward += int((dd > 0).sum())
     info["backward_steps_in_file"] = backward
     if backward > p.unordered_share * (n - 1):
         info["file_order"] = "unordered"
-        return t, line, cols, info
-    pos = d[d > 0]
-    nominal = float(np.median(pos)) if pos.size else 1.0
+        return t, line, info
+    nominal = _median_positive_step(t, forward)
     info["nominal_dt_s"] = nominal
+    _let_go(n)
+    d = np.diff(t)
 
     drop = _time_outlier_rows(t, d, nominal, p)
     outlier_at = np.empty(0, dtype=np.int64)  # kept row just before each dropped row
@@ -452,24 +568,41 @@ def _repair_time(t, line, cols, p: CleanParams, ev: _Events):
         keep = ~drop
         outlier_at = np.maximum(np.cumsum(keep)[np.flatnonzero(drop)] - 1, 0)
         t, line = t[keep], line[keep]
-        cols = {k: v[keep] for k, v in cols.items()}
+        rows.select(keep)
         n = t.size
         if n < 3:
             ev.add("time_outliers_dropped", t[outlier_at])
-            return t, line, cols, info
+            return t, line, info
         d = np.diff(t)
+    del drop
 
     back_step = _backward_clock_steps(t, d, p)
-    fwd_step = _forward_clock_steps(t, d, cols, nominal, p)
+    fwd_step = _forward_clock_steps(t, d, rows, nominal, p)
+    del d
     step = back_step | fwd_step
     info["clock_steps_backward"] = int(back_step.sum())
     info["clock_steps_forward"] = int(fwd_step.sum())
     if step.any():
-        t, rows, corr = _shift_before_clock_steps(t, step, nominal)
+        t, srows, corr = _shift_before_clock_steps(t, step, nominal)
         info["clock_step_corrections_s"] = [float(c) for c in corr[:20]]
-        ev.add("clock_steps", t[rows])
+        ev.add("clock_steps", t[srows])
     ev.add("time_outliers_dropped", t[outlier_at])
-    return t, line, cols, info
+    return t, line, info
+
+
+def _median_positive_step(t: np.ndarray, n_pos: int) -> float:
+    """The median of the ``n_pos`` positive steps of ``t`` (1.0 without any), their array
+    made a chunk at a time (not beside an array of every step)."""
+    if not n_pos:
+        return 1.0
+    pos = np.empty(n_pos)
+    k = 0
+    for a, b in chunks(t.size - 1):
+        dd = np.diff(t[a:b + 1])
+        dd = dd[dd > 0]
+        pos[k:k + dd.size] = dd
+        k += dd.size
+    return float(np.median(pos, overwrite_input=True))  # pos is ours: no copy
 
 
 def _time_outlier_rows(t: np.ndarray, d: np.ndarray, nominal: float, p: CleanParams) -> np.ndarray:
@@ -478,12 +611,12 @@ def _time_outlier_rows(t: np.ndarray, d: np.ndarray, nominal: float, p: CleanPar
     agree with each other (``d = diff(t)``, ``nominal`` the median positive step)."""
     n = t.size
     drop = np.zeros(n, dtype=bool)
+    jumps = 1 + np.flatnonzero((d > p.clock_step_min_s) | (d < -p.clock_step_min_s))  # a block starts with a jump
     for k in range(1, p.time_outlier_max_rows + 1):
         if n < k + 2:
             break
-        # block i .. i+k-1, neighbours i-1 and i+k; a block starts with a jump
-        i = 1 + np.flatnonzero(np.abs(d) > p.clock_step_min_s)
-        i = i[i < n - k]
+        # block i .. i+k-1, neighbours i-1 and i+k
+        i = jumps[jumps < n - k]
         prev, nxt = t[i - 1], t[i + k]
         width = nxt - prev
         agree = (width >= 0) & (width <= 2 * (k + 1) * nominal + p.clock_step_min_s)
@@ -503,53 +636,68 @@ def _backward_clock_steps(t: np.ndarray, d: np.ndarray, p: CleanParams) -> np.nd
     of more than ``clock_step_min_s`` and at most ``max_clock_step_s`` after which the
     next row is still before the previous one (the log overlaps itself)."""
     nxt_before_prev = np.concatenate((t[2:] < t[:-2], [True]))  # t[i+1] < t[i-1]
-    return (-d > p.clock_step_min_s) & (-d <= p.max_clock_step_s) & nxt_before_prev
+    return (d < -p.clock_step_min_s) & (d >= -p.max_clock_step_s) & nxt_before_prev
 
 
-def _forward_clock_steps(t: np.ndarray, d: np.ndarray, cols: dict, nominal: float, p: CleanParams) -> np.ndarray:
+def _valid_near(ii: np.ndarray, n: int, valid_at) -> tuple[np.ndarray, np.ndarray]:
+    """For each row ``ii`` (0 < ii < n): the last row of ii-4 .. ii-1 and the first of
+    ii .. ii+3 where ``valid_at(rows)`` holds, -1 where there is none."""
+    before = np.full(ii.size, -1, dtype=np.int64)
+    after = np.full(ii.size, -1, dtype=np.int64)
+    for off in range(4):
+        for out, j in ((before, ii - 1 - off), (after, ii + off)):
+            todo = np.flatnonzero((out < 0) & (j >= 0) & (j < n))
+            if todo.size:
+                hit = valid_at(j[todo])
+                out[todo[hit]] = j[todo[hit]]
+    return before, after
+
+
+def _forward_clock_steps(t: np.ndarray, d: np.ndarray, rows: _Rows, nominal: float, p: CleanParams) -> np.ndarray:
     """Steps where the clock jumped forward: a jump of at most ``max_clock_step_s``
     while the vehicle moves at >= ``clock_moving_mps`` on both sides and the positions
-    (or the odometer) across the jump moved by about one tick, not by the jump."""
+    (or the odometer) across the jump moved by about one tick, not by the jump. Only
+    the rows within 3 of a candidate jump are looked at."""
     n = t.size
-    i = np.arange(1, n)
     fwd_cand = (d > max(p.clock_step_min_s, 3 * nominal)) & (d <= p.max_clock_step_s)
     fwd_step = np.zeros(n - 1, dtype=bool)
     if not fwd_cand.any():
         return fwd_step
-    spd = np.full(n, np.nan)
-    for name in ("gps_speed_mps", "wheel_speed_mps"):  # wheel overrides GPS
-        if name in cols:
-            v = cols[name]
-            spd = np.where(np.isfinite(v), v, spd)
-    spd_ok = np.isfinite(spd)
-    sb = _last_valid_index(spd_ok)
-    sa = _next_valid_index(spd_ok)
-    ii = i[fwd_cand]
-    jb_s, ja_s = sb[ii - 1], sa[ii]
-    has_v = (jb_s >= 0) & (ii - 1 - jb_s <= 3) & (ja_s < n) & (ja_s - ii <= 3)
-    vb = np.where(has_v, spd[np.clip(jb_s, 0, n - 1)], np.nan)
-    va = np.where(has_v, spd[np.clip(ja_s, 0, n - 1)], np.nan)
+
+    def speed_at(j):
+        spd = np.full(j.size, np.nan)
+        for name in ("gps_speed_mps", "wheel_speed_mps"):  # wheel overrides GPS
+            if name in rows:
+                v = rows.at(name, j)
+                spd = np.where(np.isfinite(v), v, spd)
+        return spd
+
+    ii = np.flatnonzero(fwd_cand) + 1
+    jb_s, ja_s = _valid_near(ii, n, lambda j: np.isfinite(speed_at(j)))
+    has_v = (jb_s >= 0) & (ja_s >= 0)
+    vb = np.where(has_v, speed_at(np.clip(jb_s, 0, n - 1)), np.nan)
+    va = np.where(has_v, speed_at(np.clip(ja_s, 0, n - 1)), np.nan)
     moving = (np.minimum(vb, va) >= p.clock_moving_mps)
     disp = np.full(ii.size, np.nan)
     extra = np.full(ii.size, np.nan)  # time within the two sides [s]
-    if "lat_deg" in cols and "lon_deg" in cols:
-        lat, lon = cols["lat_deg"], cols["lon_deg"]
-        fix = _valid_fix(lat, lon, cols.get("gps_hdop"), p)
-        fb, fa = _last_valid_index(fix), _next_valid_index(fix)
-        jb, ja = fb[ii - 1], fa[ii]
-        ok = (jb >= 0) & (ii - 1 - jb <= 3) & (ja < n) & (ja - ii <= 3)
+    if "lat_deg" in rows and "lon_deg" in rows:
+        hdop = "gps_hdop" in rows
+
+        def fix_at(j):
+            return _valid_fix(rows.at("lat_deg", j), rows.at("lon_deg", j), rows.at("gps_hdop", j) if hdop else None, p)
+
+        jb, ja = _valid_near(ii, n, fix_at)
+        ok = (jb >= 0) & (ja >= 0)
         jb, ja = np.clip(jb, 0, n - 1), np.clip(ja, 0, n - 1)
-        dd = local_distance_m(lat[jb], lon[jb], lat[ja], lon[ja])
+        dd = local_distance_m(rows.at("lat_deg", jb), rows.at("lon_deg", jb), rows.at("lat_deg", ja),
+                              rows.at("lon_deg", ja))
         disp = np.where(ok, dd, disp)
         extra = np.where(ok, (t[ii - 1] - t[jb]) + (t[ja] - t[ii]), extra)
-    if "odometer_m" in cols:
-        odo = cols["odometer_m"]
-        fo = np.isfinite(odo)
-        ob, oa = _last_valid_index(fo), _next_valid_index(fo)
-        jb, ja = ob[ii - 1], oa[ii]
-        ok = (jb >= 0) & (ii - 1 - jb <= 3) & (ja < n) & (ja - ii <= 3) & ~np.isfinite(disp)
+    if "odometer_m" in rows:
+        jb, ja = _valid_near(ii, n, lambda j: np.isfinite(rows.at("odometer_m", j)))
+        ok = (jb >= 0) & (ja >= 0) & ~np.isfinite(disp)
         jb, ja = np.clip(jb, 0, n - 1), np.clip(ja, 0, n - 1)
-        disp = np.where(ok, np.abs(odo[ja] - odo[jb]), disp)
+        disp = np.where(ok, np.abs(rows.at("odometer_m", ja) - rows.at("odometer_m", jb)), disp)
         extra = np.where(ok, (t[ii - 1] - t[jb]) + (t[ja] - t[ii]), extra)
     vmax, vmin = np.maximum(vb, va), np.minimum(vb, va)
     one_tick = disp <= 2 * vmax * (extra + nominal) + p.gps_jump_tolerance_m
@@ -564,92 +712,173 @@ def _shift_before_clock_steps(t: np.ndarray, step: np.ndarray, nominal: float):
     (the clock after a correction is right; steps compose). Returns the shifted times,
     the rows after each step and each step's correction [s]."""
     n = t.size
-    rows = np.arange(1, n)[step]
-    corr = np.zeros(n)
-    corr[rows] = (t[rows] - nominal) - t[rows - 1]
-    rev = np.cumsum(corr[::-1])[::-1]  # sum over steps at or after each row
-    offset = np.concatenate((rev[1:], [0.0]))  # steps strictly after the row
-    return t + offset, rows, corr[rows]
+    rows = np.flatnonzero(step) + 1
+    corr = (t[rows] - nominal) - t[rows - 1]
+    after = np.cumsum(corr[::-1])[::-1]  # per step: the sum of its and the later corrections
+    # a row moves by the corrections of the steps after it: piecewise constant
+    offset = np.repeat(np.append(after, 0.0), np.diff(np.concatenate(([0], rows, [n]))))
+    return t + offset, rows, corr
 
 
-def _sort_by_time(t, line, cols):
-    """Rows stably sorted by time (file order among equal times)."""
-    order = np.argsort(t, kind="stable")
-    return t[order], line[order], {k: v[order] for k, v in cols.items()}
+def _sort_by_time(t, line, rows: _Rows):
+    """Rows stably sorted by time (file order among equal times); nothing to do for a
+    log in order."""
+    if t.size > 1 and not (t[1:] >= t[:-1]).all():
+        order = np.argsort(t, kind="stable")
+        t, line = t[order], line[order]
+        rows.select(order)
+    return t, line
 
 
 def _dedupe(t, line, cols, ev: _Events):
-    """Sorted frame -> strictly increasing time: exact duplicates dropped, ticks with
-    the same time merged (last non-NaN value per field).
+    """Sorted frame -> strictly increasing time (:func:`_merge_ticks` on columns given
+    as a dict: every column kept). Returns (t, line, cols)."""
+    rows = _Rows(dict(cols))
+    t, line = _merge_ticks(t, line, rows, set(cols), ev, wide=set(cols))
+    return t, line, rows.cols
+
+
+def _merge_ticks(t, line, rows: _Rows, keep, ev: _Events, wide=_ROW_SPEED_COLUMNS):
+    """Time-sorted rows -> strictly increasing time: exact duplicates dropped, ticks
+    with the same time merged (last non-NaN value per field); the columns in ``keep``
+    made in the final row order (:meth:`_Rows.gather`; those in ``wide`` as float64),
+    the others dropped.
 
     Rows equal in time and every field (NaN equal to NaN, -0.0 to 0.0) but the first are
     dropped (``duplicate_rows_dropped``); the remaining rows of one time are merged into
     one (``ticks_merged`` per merged tick): per field the last non-NaN value in file
     order, the lowest ``source_line``; a field with two or more distinct non-NaN values
-    in one tick counts once in ``conflicting_values``. Numpy only: a (rows x fields)
-    matrix of the rows in ticks of more than one row, reduced per tick.
-    """
+    in one tick counts once in ``conflicting_values``. Numpy only, one field and a chunk
+    of ticks at a time, over the rows in ticks of more than one row. Returns (t, line)."""
     same = t[1:] == t[:-1]
     if not same.any():
-        return t, line, cols
-    start = np.concatenate(([True], ~same))
-    gid = np.cumsum(start) - 1
-    size = np.bincount(gid)
-    multi = size[gid] > 1
-    rows = np.flatnonzero(multi)
-    names = list(cols)
-    # (rows x fields) of the rows in multi-row ticks, time first (rows are time-sorted)
-    m = np.empty((rows.size, len(names) + 1))
-    m[:, 0] = t[rows]
-    for j, k in enumerate(names):
-        m[:, j + 1] = cols[k][rows]
-    g = gid[rows]
-    # exact duplicates: sort rows by all fields (stable: file order among equals; NaN
-    # sort last, together), a row equal to its predecessor in every field is a duplicate
-    order = np.lexsort(m.T[::-1])
-    ms = m[order]
-    nan = np.isnan(ms)
-    eq = (ms[1:] == ms[:-1]) | (nan[1:] & nan[:-1])
-    dup_sorted = np.concatenate(([False], eq.all(axis=1)))
-    dup = np.zeros(rows.size, dtype=bool)
-    dup[order] = dup_sorted
+        rows.gather(keep, wide)
+        return t, line
+    cont = _nonzero(same) + 1  # the rows that continue the tick of the row before
+    del same
+    start = np.ones(t.size, dtype=bool)  # a tick's first row
+    start[cont] = False
+    multi = ~start
+    multi[cont - 1] = True
+    rows_m = _nonzero(multi)  # the rows in ticks of more than one row ...
+    del multi
+    g = np.empty(rows_m.size, dtype=rows_m.dtype)  # ... and their tick's place among the ticks
+    for a, b in chunks(rows_m.size):
+        g[a:b] = rows_m[a:b] - np.searchsorted(cont, rows_m[a:b], side="right")
+    del cont
+    names = list(rows.cols)
+    dup = _exact_duplicates(g, rows_m, rows, names)
     if dup.any():
-        ev.add("duplicate_rows_dropped", t[rows[dup]])
-        keep = ~dup
-        m, g, kept_rows = m[keep], g[keep], rows[keep]
+        ev.add("duplicate_rows_dropped", t[rows_m[dup]])
+        keep_m = ~dup
+        g, kept_rows = g[keep_m], rows_m[keep_m]
+        del keep_m
     else:
-        kept_rows = rows
+        kept_rows = rows_m
+    del dup, rows_m
+    _let_go(t.size)
     # per tick: reduceat over runs of the same group id
-    gstart = np.flatnonzero(np.concatenate(([True], g[1:] != g[:-1])))
+    gstart = _nonzero(np.concatenate(([True], g[1:] != g[:-1])))
     ug = g[gstart]
-    n_in = np.diff(np.append(gstart, g.size))
-    gt = m[gstart, 0]
-    merged_ticks = n_in > 1
-    if merged_ticks.any():
-        ev.add("ticks_merged", gt[merged_ticks])
-        if names:
-            vals = m[:, 1:]
-            with np.errstate(invalid="ignore"):
-                lo = np.fmin.reduceat(vals, gstart, axis=0)
-                hi = np.fmax.reduceat(vals, gstart, axis=0)
-            per_group = ((lo != hi) & ~np.isnan(lo)).sum(axis=1)
-            ev.add("conflicting_values", np.repeat(gt, per_group))
-    # one row per tick: its first row, then the merged ticks' values
-    first_rows = np.flatnonzero(start)
-    t_out = t[first_rows]
-    line_out = line[first_rows]
+    gend = np.concatenate((gstart[1:], np.array([g.size], dtype=gstart.dtype)))
+    del g
+    merged = (gend - gstart) > 1
+    if merged.any():
+        ev.add("ticks_merged", t[kept_rows[gstart[merged]]])
+    n_ticks = gstart.size
+    per_group = np.zeros(n_ticks, dtype=np.int32)  # conflicting fields per tick
+    pos_first = rows.positions(start)
+    out = {}
+    for name in sorted(names, key=lambda c: c in keep):  # the dropped ones first: their memory is free sooner
+        src = rows.cols.pop(name)
+        last_val = np.empty(n_ticks) if name in keep else None
+        for ga, gb in chunks(n_ticks):
+            ra, rb = int(gstart[ga]), int(gend[gb - 1])  # the kept rows of these ticks
+            vals = src[rows.positions(kept_rows[ra:rb])].astype(np.float64, copy=False)
+            at = gstart[ga:gb] - ra
+            if merged[ga:gb].any():
+                with np.errstate(invalid="ignore"):
+                    lo = np.fmin.reduceat(vals, at)
+                    hi = np.fmax.reduceat(vals, at)
+                per_group[ga:gb] += (lo != hi) & ~np.isnan(lo)
+            if last_val is not None:
+                # last non-NaN value of the field per tick (NaN if none)
+                last = np.maximum.reduceat(np.where(np.isnan(vals), -1, np.arange(vals.size)), at)
+                last_val[ga:gb] = np.where(last >= 0, vals[np.maximum(last, 0)], np.nan)
+        if last_val is not None:
+            a = src[pos_first]
+            if name in wide:
+                a = a.astype(np.float64, copy=False)
+            a[ug] = last_val  # values of the column itself
+            out[name] = a
+        del src, last_val
+        _let_go(t.size)
+    if merged.any():
+        ev.add("conflicting_values", np.repeat(t[kept_rows[gstart]], per_group))
+    del per_group, merged
+    rows.cols, rows.sel = {c: out[c] for c in names if c in out}, None
+    t_out = t[start]  # made last: the columns above are made while only t and line are held twice
+    line_out = line[start]
     line_out[ug] = np.minimum.reduceat(line[kept_rows], gstart)
-    cols_out = {}
-    if names:
-        # last non-NaN value of each field per tick (NaN if none)
-        pos = np.where(np.isnan(m[:, 1:]), -1, np.arange(g.size)[:, None])
-        last = np.maximum.reduceat(pos, gstart, axis=0)
-        last_val = np.where(last >= 0, m[np.maximum(last, 0), np.arange(1, len(names) + 1)], np.nan)
-    for j, k in enumerate(names):
-        a = cols[k][first_rows]
-        a[ug] = last_val[:, j]
-        cols_out[k] = a
-    return t_out, line_out, cols_out
+    return t_out, line_out
+
+
+def _exact_duplicates(g: np.ndarray, rows_m: np.ndarray, rows: _Rows, names: list[str]) -> np.ndarray:
+    """Per row of ``rows_m`` (the current rows in ticks of more than one row, ``g`` their
+    tick), whether an earlier one of its tick equals it in every field (NaN equal to NaN,
+    -0.0 to 0.0). In a tick of two rows, the second is compared with the first, a field
+    and a chunk at a time; in larger ticks, by :func:`_equal_classes`."""
+    dup = np.zeros(g.size, dtype=bool)
+    first = _nonzero(np.concatenate(([True], g[1:] != g[:-1])))  # each tick's first row in rows_m
+    size = np.diff(np.append(first, g.size))
+    pair = first[size == 2]
+    if pair.size:
+        same = np.ones(pair.size, dtype=bool)
+        for name in names:
+            for a, b in chunks(pair.size):
+                r = rows_m[pair[a:b]]
+                v0, v1 = rows.at(name, r), rows.at(name, r + 1)
+                same[a:b] &= (v0 == v1) | (np.isnan(v0) & np.isnan(v1))
+            if not same.any():
+                break
+        dup[pair[same] + 1] = True
+    larger = size > 2
+    if larger.any():
+        idx = _nonzero(np.repeat(larger, size))
+        dup[idx] = _later_of_equal(g[idx], rows_m[idx], rows, names)
+    return dup
+
+
+def _later_of_equal(g: np.ndarray, rows_m: np.ndarray, rows: _Rows, names: list[str]) -> np.ndarray:
+    """Per row of ``rows_m`` (``g`` its tick), whether an earlier row of the tick equals it
+    in every field: the rows' classes of equal values are refined one field at a time
+    (sorted by class and value, a new class where either changes), so that one field of
+    these rows is held at a time; the first row of each final class is kept."""
+    cls = g
+    n_cls = int(np.count_nonzero(g[1:] != g[:-1])) + 1
+    for name in names:
+        if n_cls == cls.size:  # every row alone in its class: no duplicates
+            return np.zeros(cls.size, dtype=bool)
+        v = rows.at(name, rows_m)
+        order = np.lexsort((v, cls))
+        new = np.empty(cls.size, dtype=bool)  # in sorted order: a class starts here
+        new[0] = True
+        for a, b in chunks(cls.size - 1):
+            o0, o1 = order[a:b], order[a + 1:b + 1]
+            v0, v1 = v[o0], v[o1]
+            new[a + 1:b + 1] = (cls[o1] != cls[o0]) | ~((v1 == v0) | (np.isnan(v1) & np.isnan(v0)))
+        del v
+        sorted_cls = np.cumsum(new, dtype=g.dtype) - 1
+        del new
+        n_cls = int(sorted_cls[-1]) + 1
+        cls = np.empty_like(sorted_cls)
+        cls[order] = sorted_cls
+        del order, sorted_cls
+    if n_cls == cls.size:
+        return np.zeros(cls.size, dtype=bool)
+    dup = np.ones(cls.size, dtype=bool)
+    dup[np.unique(cls, return_index=True)[1]] = False
+    return dup
 
 
 # ------------------------------------------------------------------------- GPS, speed
@@ -668,27 +897,55 @@ def _valid_fix(lat, lon, hdop, p: CleanParams) -> np.ndarray:
 
 @dataclass
 class _Fixes:
+    """The cleaned GPS fixes: the log rows that hold one (``rows``, increasing) and
+    which of them have a plausible altitude (``alt_ok``); their values are the log's
+    ``lat_deg``, ``lon_deg`` and ``gps_alt_m`` columns (no copies). ``step_m``: the
+    distance between consecutive fixes [m] (len - 1), while the row speeds are made."""
+
+    rows: np.ndarray
+    alt_ok: np.ndarray
+    step_m: np.ndarray | None = None
+
+
+@dataclass(frozen=True, eq=False)
+class _FixWindow:
+    """The fixes of a stretch of the log: times [s], positions [deg], and the times and
+    values [m] of those with an altitude."""
+
     t: np.ndarray
     lat: np.ndarray
     lon: np.ndarray
     alt_t: np.ndarray
     alt: np.ndarray
-    step_m: np.ndarray = field(default_factory=lambda: np.empty(0))  # between fixes, len - 1 (len > 1)
+
+
+def _fixes_between(t: np.ndarray, cols: dict, fixes: _Fixes, t0: float, t1: float) -> _FixWindow:
+    """The fixes from ``t0`` to ``t1`` [s] (``t`` the log's row times)."""
+    r = np.array([np.searchsorted(t, t0, "left"), np.searchsorted(t, t1, "right")], dtype=fixes.rows.dtype)
+    a, b = np.searchsorted(fixes.rows, r)  # r in the rows' own dtype: no copy of them to search
+    f = fixes.rows[a:b]
+    fa = f[fixes.alt_ok[a:b]]
+    if not f.size:
+        return _FixWindow(*(np.empty(0) for _ in range(5)))
+    alt = cols["gps_alt_m"][fa] if fa.size else np.empty(0)
+    return _FixWindow(t[f], cols["lat_deg"][f], cols["lon_deg"][f], t[fa], alt)
 
 
 def _clean_gps(t, cols, moving, p: CleanParams, ev: _Events) -> tuple[_Fixes, np.ndarray]:
     """Clean GPS fixes (step 3 of the module docstring): invalid, then stale, then
     jumping fixes rejected. Returns the fixes and a per-row 'stale fix' mask."""
     n = t.size
-    empty = _Fixes(*(np.empty(0) for _ in range(5)))
+    empty = np.empty(0, dtype=np.int64)
     stale_rows = np.zeros(n, dtype=bool)
     if "lat_deg" not in cols or "lon_deg" not in cols:
-        return empty, stale_rows
+        return _Fixes(empty, np.zeros(0, dtype=bool)), stale_rows
     lat, lon = cols["lat_deg"], cols["lon_deg"]
     valid = _valid_fix(lat, lon, cols.get("gps_hdop"), p)
     carried = np.isfinite(lat) | np.isfinite(lon)
     ev.add("gps_rejected_invalid", t[carried & ~valid])
-    f = np.flatnonzero(valid)
+    del carried
+    f = _nonzero(valid)
+    del valid
     if f.size > 1:
         f, stale = _drop_stale_fixes(f, lat, lon, moving)
         stale_rows[stale] = True
@@ -696,12 +953,12 @@ def _clean_gps(t, cols, moving, p: CleanParams, ev: _Events) -> tuple[_Fixes, np
     step_m = np.empty(0)
     if f.size > 1:
         f, step_m = _drop_gps_jumps(f, t, lat, lon, p, ev)
-    fixes = _Fixes(t[f], lat[f], lon[f], np.empty(0), np.empty(0), step_m)
+    alt_ok = np.zeros(f.size, dtype=bool)
     if "gps_alt_m" in cols:
-        alt = cols["gps_alt_m"][f]
-        ok = np.isfinite(alt) & (alt > -500) & (alt < 9000)
-        fixes.alt_t, fixes.alt = fixes.t[ok], alt[ok]
-    return fixes, stale_rows
+        for a, b in chunks(f.size):
+            alt = cols["gps_alt_m"][f[a:b]]
+            alt_ok[a:b] = np.isfinite(alt) & (alt > -500) & (alt < 9000)
+    return _Fixes(f, alt_ok, step_m), stale_rows
 
 
 def _short_runs_between_jumps(jump: np.ndarray, max_len: int) -> np.ndarray | None:
@@ -717,8 +974,29 @@ def _short_runs_between_jumps(jump: np.ndarray, max_len: int) -> np.ndarray | No
 def _drop_stale_fixes(f: np.ndarray, lat, lon, moving) -> tuple[np.ndarray, np.ndarray]:
     """Fix rows ``f`` without the stale ones (exactly the previous fix repeated while
     the vehicle moves: a logger repeating its last value), and the stale rows."""
-    rep = (lat[f[1:]] == lat[f[:-1]]) & (lon[f[1:]] == lon[f[:-1]]) & moving[f[1:]]
+    rep = np.zeros(f.size - 1, dtype=bool)
+    for a, b in chunks(f.size - 1):
+        fa, fb = f[a:b], f[a + 1:b + 1]
+        rep[a:b] = (lat[fb] == lat[fa]) & (lon[fb] == lon[fa]) & moving[fb]
     return f[np.concatenate(([True], ~rep))], f[1:][rep]
+
+
+def _fix_steps_m(f: np.ndarray, lat, lon) -> np.ndarray:
+    """Distance [m] between consecutive fixes ``f`` (rows of ``lat``, ``lon``)."""
+    out = np.empty(f.size - 1)
+    for a, b in chunks(f.size - 1):
+        fa, fb = f[a:b], f[a + 1:b + 1]
+        out[a:b] = local_distance_m(lat[fa], lon[fa], lat[fb], lon[fb])
+    return out
+
+
+def _steps_over(rows: np.ndarray, t: np.ndarray, change: np.ndarray, rate: float, tolerance: float) -> np.ndarray:
+    """Per step between consecutive ``rows``: whether ``change`` (len - 1) exceeds
+    ``rate * dt + tolerance`` (``t`` the row times)."""
+    out = np.empty(change.size, dtype=bool)
+    for a, b in chunks(change.size):
+        out[a:b] = change[a:b] > rate * np.diff(t[rows[a:b + 1]]) + tolerance
+    return out
 
 
 def _drop_gps_jumps(f: np.ndarray, t, lat, lon, p: CleanParams, ev: _Events) -> tuple[np.ndarray, np.ndarray]:
@@ -729,8 +1007,8 @@ def _drop_gps_jumps(f: np.ndarray, t, lat, lon, p: CleanParams, ev: _Events) -> 
     cut the fixes into runs; runs of at most ``gps_outlier_max_fixes`` are rejected
     (``gps_rejected_jump``) unless every run is that short; jumps left between kept
     fixes are counted (``gps_unresolved_jumps``)."""
-    dist = local_distance_m(lat[f[:-1]], lon[f[:-1]], lat[f[1:]], lon[f[1:]])
-    jump = dist > p.max_speed_mps * np.diff(t[f]) + p.gps_jump_tolerance_m
+    dist = _fix_steps_m(f, lat, lon)
+    jump = _steps_over(f, t, dist, p.max_speed_mps, p.gps_jump_tolerance_m)
     if not jump.any():
         return f, dist
     bad = _short_runs_between_jumps(jump, p.gps_outlier_max_fixes)
@@ -738,8 +1016,8 @@ def _drop_gps_jumps(f: np.ndarray, t, lat, lon, p: CleanParams, ev: _Events) -> 
         ev.add("gps_rejected_jump", t[f[bad]])
         f = f[~bad]
         if f.size > 1:
-            dist = local_distance_m(lat[f[:-1]], lon[f[:-1]], lat[f[1:]], lon[f[1:]])
-            jump = dist > p.max_speed_mps * np.diff(t[f]) + p.gps_jump_tolerance_m
+            dist = _fix_steps_m(f, lat, lon)
+            jump = _steps_over(f, t, dist, p.max_speed_mps, p.gps_jump_tolerance_m)
     if f.size > 1:
         ev.add("gps_unresolved_jumps", t[f[1:][jump]])
         return f, dist
@@ -755,6 +1033,7 @@ def _speed_rows(t, cols, name, p: CleanParams, ev: _Events) -> np.ndarray | None
     fin = np.isfinite(v)
     ok = fin & (v >= 0) & (v <= p.max_speed_mps)
     ev.add("speed_values_rejected", t[fin & ~ok])
+    del fin
     return _drop_speed_spikes(t, v, ok, p, ev)
 
 
@@ -763,12 +1042,15 @@ def _drop_speed_spikes(t, v, ok: np.ndarray, p: CleanParams, ev: _Events) -> np.
     ``max_accel_mps2 * dt + speed_jump_tolerance_mps`` are impossible jumps; runs of at
     most ``speed_outlier_max_samples`` readings between them are rejected
     (``speed_spikes_rejected``), jumps left are counted (``speed_unresolved_jumps``)."""
-    idx = np.flatnonzero(ok)
+    idx = _nonzero(ok)
     if idx.size < 2:
         return ok
 
     def jumps(rows):
-        return np.abs(np.diff(v[rows])) > p.max_accel_mps2 * np.diff(t[rows]) + p.speed_jump_tolerance_mps
+        change = np.empty(rows.size - 1)
+        for a, b in chunks(change.size):
+            change[a:b] = np.abs(np.diff(v[rows[a:b + 1]]))
+        return _steps_over(rows, t, change, p.max_accel_mps2, p.speed_jump_tolerance_mps)
 
     jump = jumps(idx)
     if not jump.any():
@@ -784,46 +1066,101 @@ def _drop_speed_spikes(t, v, ok: np.ndarray, p: CleanParams, ev: _Events) -> np.
     return ok
 
 
-def _interp_rows(t: np.ndarray, ok: np.ndarray | None, v: np.ndarray | None, max_fill_s: float) -> np.ndarray:
+def _interp_rows(t: np.ndarray, ok: np.ndarray | None, v: np.ndarray | None, max_fill_s: float,
+                 at: np.ndarray | None = None) -> np.ndarray:
     """``_interp_limited(t, t[ok], v[ok], max_fill_s)`` (all NaN for ``ok`` None) for a
-    strictly increasing ``t``: the rows' own values where ``ok``, interpolated between
-    them elsewhere; cheaper, as the sample positions in ``t`` are known."""
+    strictly increasing ``t``, at the rows ``at`` (None: every row): the rows' own
+    values where ``ok``, interpolated between them elsewhere. Cheaper, as the sample
+    positions in ``t`` are known: only the other rows are interpolated, a chunk of
+    them at a time between the samples around the chunk."""
     if ok is None:
-        return np.full(t.shape, np.nan)
-    if ok.all():  # every row is a sample: its own value (exact times)
-        return v.copy()
-    return _interp_limited(t, t[ok], v[ok], max_fill_s, right=np.cumsum(ok) - ok)
+        return np.full(t.shape if at is None else at.shape, np.nan)
+    if at is None:
+        if ok.all():  # every row is a sample: its own value (exact times)
+            return v.copy()
+        out = v.astype(np.float64, copy=True)
+        fill = _nonzero(~ok)  # rows to interpolate, and their places in out
+        where = fill
+    else:
+        out = v[at].astype(np.float64, copy=False)
+        where = _nonzero(~ok[at])
+        fill = at[where]
+    if not fill.size:
+        return out
+    samples = _nonzero(ok)
+    for a, b in chunks(fill.size):
+        q = fill[a:b]
+        lo = max(int(np.searchsorted(samples, q[0])) - 1, 0)  # the sample before the chunk ...
+        hi = int(np.searchsorted(samples, q[-1])) + 1  # ... to the one after it
+        s = samples[lo:hi]
+        out[where[a:b]] = _interp_limited(t[q], t[s], v[s], max_fill_s)
+    return out
+
+
+def _speed_from_positions(t: np.ndarray, fixes: _Fixes, rows: np.ndarray, p: CleanParams) -> np.ndarray:
+    """Speed [m/s] at the log rows ``rows`` from positions: the distance between
+    consecutive fixes over their time step, at its midpoint time, for steps of at most
+    ``max_fill_s`` and ``max_speed_mps``, interpolated over at most ``max_fill_s``."""
+    m = fixes.rows.size - 1
+    tm, vm = np.empty(m), np.empty(m)
+    k = 0
+    for a, b in chunks(m):
+        ft = t[fixes.rows[a:b + 1]]
+        dt = np.diff(ft)
+        v = fixes.step_m[a:b] / dt
+        ok = (dt <= p.max_fill_s) & (v <= p.max_speed_mps)
+        j = k + int(ok.sum())
+        tm[k:j] = (0.5 * (ft[1:] + ft[:-1]))[ok]
+        vm[k:j] = v[ok]
+        k = j
+    return _interp_limited(t[rows], tm[:k], vm[:k], p.max_fill_s)
 
 
 def _row_speed(t, cols, p: CleanParams, ev: _Events):
-    """Per-row speed [m/s] and source code (0 wheel, 1 GPS speed, 2 positions, -1 none),
-    plus the cleaned GPS fixes."""
+    """Per-row speed [m/s] and source code (int8: 0 wheel, 1 GPS speed, 2 positions, -1
+    none), plus the cleaned GPS fixes. The speed columns and ``gps_hdop`` are removed
+    from ``cols`` once used (nothing after needs them)."""
     ok_w = _speed_rows(t, cols, "wheel_speed_mps", p, ev)
     ok_g = _speed_rows(t, cols, "gps_speed_mps", p, ev)
-    v_w = _interp_rows(t, ok_w, cols.get("wheel_speed_mps"), p.max_fill_s)
-    v_g = _interp_rows(t, ok_g, cols.get("gps_speed_mps"), p.max_fill_s)
-    moving = np.where(np.isfinite(v_w), v_w, v_g) > p.standstill_mps
+    _let_go(t.size)
+    v = _interp_rows(t, ok_w, cols.pop("wheel_speed_mps", None), p.max_fill_s)
+    del ok_w
+    _let_go(t.size)
+    gps = cols.get("gps_speed_mps")
+    moving = v > p.standstill_mps  # the wheel speed, else the GPS speed
+    no_w = _nonzero(~np.isfinite(v))
+    if no_w.size and gps is not None:
+        moving[no_w] = _interp_rows(t, ok_g, gps, p.max_fill_s, at=no_w) > p.standstill_mps
     fixes, stale = _clean_gps(t, cols, moving, p, ev)
-    if ok_g is not None and (ok_g & stale).any():  # GPS speeds of stale fixes dropped too
-        v_g = _interp_rows(t, ok_g & ~stale, cols["gps_speed_mps"], p.max_fill_s)
-    v = v_w.copy()
-    src = np.where(np.isfinite(v), 0, -1)
-    use = ~np.isfinite(v) & np.isfinite(v_g)
-    v[use] = v_g[use]
-    src[use] = 1
-    need = ~np.isfinite(v)
-    if need.any() and fixes.t.size > 1:
-        dt = np.diff(fixes.t)
-        vm = fixes.step_m / dt
-        ok = (dt <= p.max_fill_s) & (vm <= p.max_speed_mps)
-        tm = 0.5 * (fixes.t[1:] + fixes.t[:-1])
-        v_p = _interp_limited(t, tm[ok], vm[ok], p.max_fill_s)
-        use = need & np.isfinite(v_p)
-        v[use] = v_p[use]
-        src[use] = 2
-    noisy = (src >= 1) & (v < p.standstill_mps) & (v > 0)
+    del moving
+    cols.pop("gps_hdop", None)
+    _let_go(t.size)
+    src = np.full(t.size, -1, dtype=np.int8)
+    src[np.isfinite(v)] = 0
+    if no_w.size and gps is not None:
+        if (ok_g & stale).any():  # GPS speeds of stale fixes dropped too
+            ok_g = ok_g & ~stale
+        v_g = _interp_rows(t, ok_g, gps, p.max_fill_s, at=no_w)
+        use = np.isfinite(v_g)
+        v[no_w[use]] = v_g[use]
+        src[no_w[use]] = 1
+        del v_g, use
+    del ok_g, stale, no_w, gps
+    cols.pop("gps_speed_mps", None)
+    _let_go(t.size)
+    need = _nonzero(~np.isfinite(v))
+    if need.size and fixes.rows.size > 1:
+        v_p = _speed_from_positions(t, fixes, need, p)
+        use = np.isfinite(v_p)
+        v[need[use]] = v_p[use]
+        src[need[use]] = 2
+        del v_p, use
+    fixes.step_m = None
+    del need
+    gps_based = src >= 1
+    noisy = gps_based & (v < p.standstill_mps) & (v > 0)
     ev.add("gps_speed_zeroed", t[noisy])
-    v[src >= 1] = np.where(v[src >= 1] < p.standstill_mps, 0.0, v[src >= 1])
+    v[gps_based & (v < p.standstill_mps)] = 0.0
     return v, src, fixes
 
 
@@ -837,36 +1174,46 @@ def _segment(ts, vs, on, p: CleanParams):
     """Split the speed rows (times ts, speeds vs, ignition on) into trips (step 5 of
     the module docstring).
 
-    Returns kept row indices (into ts), trip id per kept row, and the reason each trip
-    started ('start', 'ignition', 'gap', 'speed_gap', 'long_stop')."""
-    prev_on = np.concatenate(([False], on[:-1]))
-    keep = on | prev_on  # the first "off" row ends the trip before it
-    idx = np.flatnonzero(keep)
-    if idx.size == 0:
-        return idx, np.zeros(0, dtype=np.int64), []
-    tt, vv, oo = ts[idx], vs[idx], on[idx]
+    Returns the kept row indices (into ts; None: every row), the position of each
+    trip's first row among the kept rows, and the reason each trip started ('start',
+    'ignition', 'gap', 'speed_gap', 'long_stop')."""
+    if not ts.size:
+        return np.empty(0, dtype=np.int64), np.zeros(0, dtype=np.int64), []
+    keep = on.copy()
+    keep[1:] |= on[:-1]  # the first "off" row ends the trip before it
+    if keep.all():
+        idx, tt, vv, oo = None, ts, vs, on
+    else:
+        idx = _nonzero(keep)
+        if idx.size == 0:
+            return idx, np.zeros(0, dtype=np.int64), []
+        tt, vv, oo = ts[idx], vs[idx], on[idx]
+    del keep
     reason = _split_points(tt, vv, oo, idx, p)
     idx, reason = _split_long_stops(tt, vv, idx, reason, p)
-    trip_id = np.cumsum(reason > 0)
     starts = np.concatenate(([0], np.flatnonzero(reason > 0)))
     start_reasons = [_SPLIT_REASONS[int(reason[s])] if s > 0 else "start" for s in starts]
-    return idx, trip_id, start_reasons
+    return idx, starts, start_reasons
 
 
 def _split_points(tt, vv, oo, idx, p: CleanParams) -> np.ndarray:
     """Per kept row, why a trip starts there (an index into :data:`_SPLIT_REASONS`, 0
-    for none): the ignition turned on (or came back after dropped rows), no speed for
-    more than ``gap_s``, or a hole over ``max_fill_s`` with the vehicle moving at either
-    end (a hole between two standstill rows is a stop)."""
-    k = idx.size
+    for none): the ignition turned on (or came back after dropped rows; ``idx`` the
+    kept rows, None: all), no speed for more than ``gap_s``, or a hole over
+    ``max_fill_s`` with the vehicle moving at either end (a hole between two standstill
+    rows is a stop)."""
+    k = tt.size
     reason = np.zeros(k, dtype=np.int8)
     dt = np.diff(tt)
-    ign = np.concatenate(([False], oo[1:] & (~oo[:-1] | (np.diff(idx) > 1))))
     st = vv <= p.standstill_mps
-    gap = np.concatenate(([False], dt > p.gap_s))
     sgap = np.concatenate(([False], (dt > p.max_fill_s) & ~(st[1:] & st[:-1])))
     reason[sgap] = 3
+    del sgap, st
+    gap = np.concatenate(([False], dt > p.gap_s))
     reason[gap] = 2
+    del gap, dt
+    back = ~oo[:-1] if idx is None else ~oo[:-1] | (np.diff(idx) > 1)
+    ign = np.concatenate(([False], oo[1:] & back))
     reason[ign] = 1
     return reason
 
@@ -874,30 +1221,30 @@ def _split_points(tt, vv, oo, idx, p: CleanParams) -> np.ndarray:
 def _split_long_stops(tt, vv, idx, reason, p: CleanParams):
     """Standstill runs (not crossing a split) lasting more than ``stop_s`` end their
     trip where the stop starts; the next starts where it ends, and the rows inside are
-    dropped. Returns the kept ``idx`` and ``reason``."""
-    k = idx.size
+    dropped. Returns the kept ``idx`` (None: all rows) and ``reason``."""
+    k = tt.size
     st = vv <= p.standstill_mps
     first, last = _runs(st, reason > 0)
+    del st
     long_ = (tt[last] - tt[first]) > p.stop_s
     if not long_.any():
         return idx, reason
     f, l = first[long_], last[long_]
-    diff = np.zeros(k + 1, dtype=np.int64)
+    diff = np.zeros(k + 1, dtype=np.int8)  # runs are disjoint: the sum is 0 or 1
     np.add.at(diff, f + 1, 1)
     np.add.at(diff, l, -1)
-    interior = np.cumsum(diff)[:k] > 0
+    sel = ~(np.cumsum(diff, dtype=np.int8)[:k] > 0)  # not inside a long stop
     reason[l[reason[l] == 0]] = 4
-    sel = ~interior
-    return idx[sel], reason[sel]
+    return (_nonzero(sel) if idx is None else idx[sel]), reason[sel]
 
 
-def _ignition_on(cols: dict, rows: np.ndarray) -> np.ndarray:
-    """Ignition state of ``rows``: the ignition column forward-filled (unknown before its
-    first value = on); all on without the column."""
+def _ignition_on(cols: dict, rows: np.ndarray | None, n: int) -> np.ndarray:
+    """Ignition state of ``rows`` (None: all ``n``): the ignition column forward-filled
+    (unknown before its first value = on); all on without the column."""
     if "ignition" in cols and np.isfinite(cols["ignition"]).any():
         ign = _ffill(cols["ignition"])
-        return ~(ign[rows] < 0.5)  # NaN before the first value = on
-    return np.ones(rows.size, dtype=bool)
+        return ~((ign if rows is None else ign[rows]) < 0.5)  # NaN before the first value = on
+    return np.ones(n if rows is None else rows.size, dtype=bool)
 
 
 # ------------------------------------------------------------------------------ trips
@@ -934,10 +1281,11 @@ def _freeze_standstill(v, arrays, p: CleanParams):
 @dataclass(frozen=True, eq=False)
 class _Log:
     """The cleaned rows of one log that its trips are cut from: strictly increasing
-    times ``t``, file lines, canonical columns, the cleaned GPS fixes and the repairs."""
+    times ``t``, the canonical columns the trips read (float64; those read only per
+    trip stay float32 where the log had them so, and are widened per trip), the cleaned
+    GPS fixes and the repairs."""
 
     t: np.ndarray
-    line: np.ndarray
     cols: dict
     fixes: _Fixes
     ev: _Events
@@ -945,14 +1293,15 @@ class _Log:
 
 @dataclass(frozen=True, eq=False)
 class _Segment:
-    """The speed rows of one trip (times, speeds, speed source codes) and why it starts
-    and ends."""
+    """The speed rows of one trip (times, speeds, speed source codes), why it starts
+    and ends, and the lowest and highest file line of the log's rows it spans."""
 
     t: np.ndarray
     v: np.ndarray
     src: np.ndarray
     split_before: str
     split_after: str
+    lines: tuple[int, int]
 
 
 def _speed_on_grid(q: np.ndarray, seg: _Segment, p: CleanParams) -> tuple[np.ndarray, int]:
@@ -984,11 +1333,13 @@ def _dropped(start_s: float, duration_s: float, distance_m: float, lines: tuple[
     })
 
 
-def _positions_on_grid(q: np.ndarray, v: np.ndarray, fixes: _Fixes, p: CleanParams):
+def _positions_on_grid(q: np.ndarray, v: np.ndarray, fixes: _FixWindow, p: CleanParams):
     """Positions and GPS altitude at the grid times: fixes interpolated over at most
     ``gps_max_fill_s`` (dropouts filled), NaN beyond; each stop frozen at the median of
-    its samples. Returns (lat, lon, alt, frozen samples, the raw GPS steps [m] at
-    standstill before freezing, and their step indices)."""
+    its samples. ``fixes``: the fixes from at least ``gps_max_fill_s`` before the grid
+    to as long after it (the only ones the interpolation may use). Returns (lat, lon,
+    alt, frozen samples, the raw GPS steps [m] at standstill before freezing, and their
+    step indices)."""
     lat, lon = _interp_limited(q, fixes.t, fixes.lat, p.gps_max_fill_s, fixes.lon)
     alt = _interp_limited(q, fixes.alt_t, fixes.alt, p.gps_max_fill_s)
     still = (v[1:] <= p.standstill_mps) & (v[:-1] <= p.standstill_mps)
@@ -1010,9 +1361,10 @@ def _gps_distance_check(lat, lon, dist: np.ndarray, raw_still: np.ndarray, si: n
         "distance_gps_m": gps_dist,
         "distance_ratio_speed_vs_gps": speed_on_gps / gps_dist if gps_dist > 1.0 else None,
     }
-def _gps_fix_stats(q: np.ndarray, fixes: _Fixes, p: CleanParams) -> tuple[int, int]:
-    """Fixes inside the trip's grid span, and the dropouts among them that were filled
-    (steps over twice the nominal fix interval, up to ``gps_max_fill_s``)."""
+def _gps_fix_stats(q: np.ndarray, fixes: _FixWindow, p: CleanParams) -> tuple[int, int]:
+    """Fixes inside the trip's grid span (``fixes``: at least those), and the dropouts
+    among them that were filled (steps over twice the nominal fix interval, up to
+    ``gps_max_fill_s``)."""
     fix_in = (fixes.t >= q[0]) & (fixes.t <= q[-1])
     fdt = np.diff(fixes.t[fix_in])
     if not fdt.size:
@@ -1042,7 +1394,7 @@ def _odometer_ratio(log: _Log, lo: int, hi: int, q: np.ndarray, dist: np.ndarray
     if "odometer_m" not in log.cols:
         return None
     odo_t = log.t[lo:hi]
-    odo = log.cols["odometer_m"][lo:hi]
+    odo = log.cols["odometer_m"][lo:hi].astype(np.float64, copy=False)
     ok = np.isfinite(odo) & (odo_t >= q[0]) & (odo_t <= q[-1])
     if ok.sum() < 2:
         return None
@@ -1056,7 +1408,7 @@ def _gross_weight(log: _Log, lo: int, hi: int) -> float | None:
     """Median of the trip's positive gross-weight readings, or None."""
     if "gross_weight_kg" not in log.cols:
         return None
-    w = log.cols["gross_weight_kg"][lo:hi]
+    w = log.cols["gross_weight_kg"][lo:hi].astype(np.float64, copy=False)
     w = w[np.isfinite(w) & (w > 0)]
     return float(np.median(w)) if w.size else None
 
@@ -1066,8 +1418,7 @@ def _clean_trip(log: _Log, seg: _Segment, sources: Sequence[EnergySourceLike], p
     :class:`CleanTrip`, or the dict of a dropped segment (too short)."""
     lo = int(np.searchsorted(log.t, seg.t[0], "left"))
     hi = int(np.searchsorted(log.t, seg.t[-1], "right"))
-    row_lines = log.line[lo:hi]
-    lines = (int(row_lines.min()), int(row_lines.max()))
+    lines = seg.lines
     q = _grid(seg.t, p.grid_s) if seg.t.size > 1 else np.empty(0)
     if q.size < 2:
         return _dropped(float(seg.t[0]), float(seg.t[-1] - seg.t[0]), 0.0, lines, "shorter than one grid step")
@@ -1077,9 +1428,13 @@ def _clean_trip(log: _Log, seg: _Segment, sources: Sequence[EnergySourceLike], p
     if duration < p.min_duration_s or dist[-1] < p.min_distance_m:
         return _dropped(float(q[0]), duration, float(dist[-1]), lines,
                         f"shorter than {p.min_duration_s:g} s or {p.min_distance_m:g} m")
-    lat, lon, alt, frozen, raw_still, si = _positions_on_grid(q, v, log.fixes, p)
+    # the fixes the grid's positions may use (1 s more each side than the fill allows)
+    fixes = _fixes_between(log.t, log.cols, log.fixes, float(q[0]) - p.gps_max_fill_s - 1.0,
+                           float(q[-1]) + p.gps_max_fill_s + 1.0)
+    lat, lon, alt, frozen, raw_still, si = _positions_on_grid(q, v, fixes, p)
     gps_check = _gps_distance_check(lat, lon, dist, raw_still, si)
-    n_fixes, dropouts = _gps_fix_stats(q, log.fixes, p)
+    n_fixes, dropouts = _gps_fix_stats(q, fixes, p)
+    del fixes
     holes_bridged, hole_s = _speed_holes_bridged(seg, p)
     speed_source, share = _speed_source_share(seg)
     measured, mq = measure_trip(log.t, log.cols, sources, float(q[0]), float(q[-1]), p.consumption)
@@ -1129,14 +1484,14 @@ def _clean_trip(log: _Log, seg: _Segment, sources: Sequence[EnergySourceLike], p
 def _evidence_rows(log: _Log, t0: float, t1: float, p: CleanParams) -> tuple[np.ndarray, dict]:
     """The log's rows from ``consumption.max_gap_s`` before ``t0`` to as long after
     ``t1``: their times and the evidence columns the log has (views of the log's
-    arrays, which nothing writes to)."""
+    arrays, which nothing writes to; float64 copies of its float32 ones)."""
     names = [c for c in EVIDENCE_COLUMNS if c in log.cols]
     if not names:
         return np.empty(0), {}
     w = p.consumption.max_gap_s
     a = int(np.searchsorted(log.t, t0 - w, "left"))
     b = int(np.searchsorted(log.t, t1 + w, "right"))
-    return log.t[a:b], {c: log.cols[c][a:b] for c in names}
+    return log.t[a:b], {c: log.cols[c][a:b].astype(np.float64, copy=False) for c in names}
 
 
 def _require_speed_or_position(cols: dict, path) -> None:
@@ -1144,6 +1499,113 @@ def _require_speed_or_position(cols: dict, path) -> None:
         "lat_deg" in cols and "lon_deg" in cols
     ):
         raise InputError(path, "no speed or position column (wheel_speed_mps, gps_speed_mps or lat_deg+lon_deg)")
+
+
+def _columns_needed(sources: Sequence[EnergySourceLike]) -> set[str]:
+    """The canonical columns that the steps after the tick merge read: those of the row
+    speeds and the GPS fixes, each trip's ignition, odometer, gross weight and evidence
+    columns, and the energy sources' columns. The others (an engine's speed, a pedal)
+    count only in the duplicates and tick merging, and are dropped there."""
+    need = {*_ROW_SPEED_COLUMNS, "ignition", "odometer_m", "gross_weight_kg", *EVIDENCE_COLUMNS}
+    for s in sources:
+        need |= columns_read(str(s.column))
+    return need
+
+
+class CleanStream:
+    """:func:`clean_log` one trip at a time.
+
+    Made, it runs the steps over the whole log (1 to 5 of the module docstring; errors
+    are raised here); iterated, it makes each trip (steps 6 to 9) when it is asked
+    for. Once the iteration has ended, ``dropped`` (the dropped segments) and
+    ``quality`` (the file-level quality) are complete and the log's arrays are
+    released. Iterate it once. The trips of a large log then need not all be held at
+    once: :func:`cevm.ingest.task.process_file` hands each to the next stages and lets
+    it go. Parameters as :func:`clean_log`.
+    """
+
+    def __init__(self, frame: pd.DataFrame, sources: Sequence[EnergySourceLike] = (),
+                 params: CleanParams = CleanParams(), *, path: str | Path | None = None,
+                 release_frame: bool = False) -> None:
+        p = params
+        n_in = len(frame)
+        t, line, rows, no_time = _load(frame, path, release_frame)
+        _require_speed_or_position(rows.cols, path)
+        ev = _Events()
+        # Each step over the whole log returns its temporaries' memory to the system once
+        # done (for a large log, :func:`_let_go`), and so do the steps that make column
+        # after column.
+        t, line, tinfo = _repair_time(t, line, rows, p, ev)
+        _let_go(t.size)
+        t, line = _sort_by_time(t, line, rows)
+        _let_go(t.size)
+        t, line = _merge_ticks(t, line, rows, _columns_needed(sources), ev)
+        _let_go(t.size)
+        cols = rows.cols
+        self.dropped: list[dict] = []
+        self.quality: dict = {"rows_in": n_in, "rows_without_time": no_time, "rows_clean": int(t.size), **tinfo}
+        self._sources, self._params = tuple(sources), p
+        self._work: tuple | None = None
+        if t.size < 2:
+            ev.finish()
+            self.quality.update(ev.totals(), trips=0, trips_dropped=0)
+            self.quality = _jsonable(self.quality)
+            return
+
+        v, src, fixes = _row_speed(t, cols, p, ev)
+        _let_go(t.size)
+        ev.finish()
+        fin = np.isfinite(v)
+        rows_v = None if fin.all() else _nonzero(fin)  # the rows with a speed (None: all)
+        del fin
+        ts, vs = (t, v) if rows_v is None else (t[rows_v], v[rows_v])
+        keep_idx, starts, start_reasons = _segment(ts, vs, _ignition_on(cols, rows_v, t.size), p)
+        del ts, vs
+        # the log rows of the kept speed rows, in trip order (None: every row)
+        if keep_idx is None:
+            rows_k = rows_v
+        else:
+            rows_k = keep_idx if rows_v is None else rows_v[keep_idx]
+        del keep_idx
+        _let_go(t.size)
+        n_kept = t.size if rows_k is None else rows_k.size
+        self.quality.update(ev.totals())
+        self.quality.update(
+            splits={r: start_reasons[1:].count(r) for r in _SPLIT_REASONS[1:]},
+            trips=0,
+            trips_dropped=0,
+            speed_rows=int(t.size if rows_v is None else rows_v.size),
+            gps_fixes_kept=int(fixes.rows.size),
+        )
+        bounds = np.append(starts, n_kept)
+        # each trip's lowest and highest file line (its rows' span), so that the lines
+        # need not be kept while the trips are made
+        first = bounds[:-1] if rows_k is None else rows_k[bounds[:-1]]
+        last = bounds[1:] - 1 if rows_k is None else rows_k[bounds[1:] - 1]
+        lines = [(int(line[a:b + 1].min()), int(line[a:b + 1].max())) for a, b in zip(first.tolist(), last.tolist())]
+        del line
+        self._work = (_Log(t, cols, fixes, ev), v, src, rows_k, bounds, start_reasons, lines)
+
+    def __iter__(self) -> Iterator[CleanTrip]:
+        work, self._work = self._work, None
+        if work is None:
+            return
+        log, v, src, rows_k, bounds, reasons, lines = work
+        del work
+        n_trips = len(reasons)
+        kept = 0
+        for j in range(n_trips):
+            a, b = int(bounds[j]), int(bounds[j + 1])
+            r = slice(a, b) if rows_k is None else rows_k[a:b]
+            seg = _Segment(log.t[r], v[r], src[r], reasons[j], reasons[j + 1] if j + 1 < n_trips else "end", lines[j])
+            out = _clean_trip(log, seg, self._sources, self._params)
+            if isinstance(out, CleanTrip):
+                kept += 1
+                yield out
+            else:
+                self.dropped.append(out)
+        self.quality.update(trips=kept, trips_dropped=len(self.dropped))
+        self.quality = _jsonable(self.quality)
 
 
 def clean_log(
@@ -1154,7 +1616,8 @@ def clean_log(
     path: str | Path | None = None,
     release_frame: bool = False,
 ) -> CleanResult:
-    """Clean a canonical log frame of one vehicle into trips (see the module docstring).
+    """Clean a canonical log frame of one vehicle into trips (see the module docstring;
+    :class:`CleanStream` makes them one at a time).
 
     Parameters
     ----------
@@ -1162,9 +1625,10 @@ def clean_log(
     sources : energy sources for the measured consumption (:class:`EnergySourceLike`).
     params : :class:`CleanParams`.
     path : the source file, for error messages.
-    release_frame : remove the columns from ``frame`` once the rows are sorted (the
-        cleaning works on its own arrays from then on), so that a large log is not held
-        twice; the caller's frame is left without columns (default False).
+    release_frame : remove the columns from ``frame`` as soon as their arrays are taken
+        (the cleaning then holds the only reference to them and drops each once it has
+        made its own), so that a large log is not held twice; the caller's frame is
+        left without columns (default False).
 
     Returns
     -------
@@ -1172,49 +1636,9 @@ def clean_log(
     file-level quality dict. Raises :class:`cevm.errors.InputError` for a frame without
     time, with non-numeric values, or without any speed or position column.
     """
-    p = params
-    n_in = len(frame)
-    t, line, cols, no_time = _load(frame, path)
-    _require_speed_or_position(cols, path)
-    ev = _Events()
-    t, line, cols, tinfo = _repair_time(t, line, cols, p, ev)
-    t, line, cols = _sort_by_time(t, line, cols)
-    if release_frame:  # the frame's arrays are not needed any more: freed here, not after
-        for c in list(frame.columns):
-            del frame[c]
-    t, line, cols = _dedupe(t, line, cols, ev)
-    quality: dict = {"rows_in": n_in, "rows_without_time": no_time, "rows_clean": int(t.size), **tinfo}
-    if t.size < 2:
-        ev.finish()
-        quality.update(ev.totals(), trips=0, trips_dropped=0)
-        return CleanResult((), (), _jsonable(quality))
-
-    v_row, src_row, fixes = _row_speed(t, cols, p, ev)
-    ev.finish()
-    rows_v = np.flatnonzero(np.isfinite(v_row))
-    ts, vs = t[rows_v], v_row[rows_v]
-    keep_idx, trip_id, start_reasons = _segment(ts, vs, _ignition_on(cols, rows_v), p)
-    n_trips = int(trip_id.max()) + 1 if trip_id.size else 0
-    bounds = np.searchsorted(trip_id, np.arange(n_trips + 1))
-    log = _Log(t, line, cols, fixes, ev)
-    trips: list[CleanTrip] = []
-    dropped: list[dict] = []
-    for j in range(n_trips):
-        sel = keep_idx[bounds[j]:bounds[j + 1]]
-        seg = _Segment(ts[sel], vs[sel], src_row[rows_v[sel]], start_reasons[j],
-                       start_reasons[j + 1] if j + 1 < n_trips else "end")
-        out = _clean_trip(log, seg, sources, p)
-        (trips if isinstance(out, CleanTrip) else dropped).append(out)
-    quality.update(ev.totals())
-    splits = {r: start_reasons[1:].count(r) for r in _SPLIT_REASONS[1:]}
-    quality.update(
-        splits=splits,
-        trips=len(trips),
-        trips_dropped=len(dropped),
-        speed_rows=int(rows_v.size),
-        gps_fixes_kept=int(fixes.t.size),
-    )
-    return CleanResult(tuple(trips), tuple(dropped), _jsonable(quality))
+    stream = CleanStream(frame, sources, params, path=path, release_frame=release_frame)
+    trips = tuple(stream)
+    return CleanResult(trips, tuple(stream.dropped), stream.quality)
 
 
 def clean_trips(
