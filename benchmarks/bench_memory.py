@@ -13,9 +13,9 @@ and whether the peak meets the goal. The cases:
   long-haul truck's working day of the benchmark fleet, 15 mapped columns, repeated on
   consecutive days, as one file), ingested with the sample DSM (and ``--max-rows`` at
   least ``--rows``; ``--cases big`` runs this case alone). The peak of each stage of the
-  ingest of this file (read, cleaning, the DSM samples, elevation, the vectors, the
-  stored profiles, the store) is printed too, from the process's high-water mark reset
-  before each stage (``/proc/self/clear_refs``, Linux).
+  ingest of this file (read, cleaning, the DSM samples, elevation, the trip evidence,
+  the vectors, the stored profiles, the store) is printed too, from the process's
+  high-water mark reset before each stage (``/proc/self/clear_refs``, Linux).
 - ``gzip bomb``: about 10 MB of gzip expanding to ``--bomb-gib`` GiB (default 3) of
   valid, identical srf rows: it must fail fast with a clear message.
 - ``no line breaks``: 415 MB of text without a line break: must fail from its first
@@ -135,27 +135,49 @@ def child(argv: list[str], stages: bool) -> None:
     """Run ``cevm ingest ARGV`` in this process; print a JSON line with the peak."""
     peaks: dict[str, float] = {}
     if stages and _reset_hwm():
+        import contextlib
+
         import cevm.ingest.task as task
         from cevm.store import TripStore
 
-        def wrap(owner, name, stage):
+        @contextlib.contextmanager
+        def stage(name):
+            # a reset lowers the high-water mark: keep the peak so far first
+            peaks["_overall"] = max(peaks.get("_overall", 0.0), _hwm_mb())
+            _reset_hwm()
+            try:
+                yield
+            finally:
+                peaks[name] = max(peaks.get(name, 0.0), _hwm_mb())
+
+        def wrap(owner, name, label):
             fn = getattr(owner, name)
 
             def timed(*a, **k):
-                # a reset lowers the high-water mark: keep the peak so far first
-                peaks["_overall"] = max(peaks.get("_overall", 0.0), _hwm_mb())
-                _reset_hwm()
-                try:
+                with stage(label):
                     return fn(*a, **k)
-                finally:
-                    peaks[stage] = max(peaks.get(stage, 0.0), _hwm_mb())
 
             setattr(owner, name, timed)
 
+        class Stream(task.CleanStream):  # the cleaning: made, then one trip at a time
+            def __init__(self, *a, **k):
+                with stage("clean"):
+                    super().__init__(*a, **k)
+
+            def __iter__(self):
+                trips = super().__iter__()
+                while True:
+                    with stage("clean"):
+                        ct = next(trips, None)
+                    if ct is None:
+                        return
+                    yield ct
+
+        task.CleanStream = Stream
         wrap(task, "read_log", "read")
-        wrap(task, "clean_log", "clean")
         wrap(task, "sample_trips", "dsm")
         wrap(task, "trip_elevation", "elevation")
+        wrap(task, "trip_evidence", "evidence")
         wrap(task, "drive_cycle_vector", "vector")
         wrap(task, "trip_profile_blob", "profile")
         wrap(TripStore, "replace_file_trips", "store")

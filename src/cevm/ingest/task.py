@@ -29,7 +29,7 @@ from cevm.core.trip import Trip, TripRecord
 from cevm.errors import CevmError, InputError
 from cevm.text import printable
 from cevm.executors import worker_cache
-from cevm.ingest.cleaning import CleanParams, CleanTrip, clean_log
+from cevm.ingest.cleaning import CleanParams, CleanStream, CleanTrip
 from cevm.ingest.dsm import DsmHeaders, DsmSampler
 from cevm.ingest.elevation import ElevationParams, sample_trips, trip_elevation
 from cevm.ingest.evidence import EvidenceParams, trip_evidence
@@ -127,6 +127,42 @@ def _trip_from_clean(ct: CleanTrip, *, vehicle_id: str, path: Path, sha256: str,
     )
 
 
+#: Samples of trips whose DSM heights are looked up at once (one lookup for many short
+#: trips costs less than one each); past it, the batch is finished and let go.
+TRIP_BATCH_SAMPLES = 1 << 16
+
+
+def _finish_trips(batch: list[CleanTrip], log, path: Path, sha: str, sampler: DsmSampler | None,
+                  options: IngestOptions, stage: dict, trips: list, vectors: list, blobs: list,
+                  warnings: list) -> None:
+    """Elevation, evidence, vector and stored profile of a batch of clean trips of
+    ``log``, appended to ``trips``, ``vectors``, ``blobs`` and ``warnings``; each trip is
+    let go of once done (the batch is emptied)."""
+    t0 = time.perf_counter()
+    raws = (sample_trips(sampler, [ct.lon_deg for ct in batch], [ct.lat_deg for ct in batch])
+            if sampler is not None else [None] * len(batch))
+    stage["elevation"] = stage.get("elevation", 0.0) + time.perf_counter() - t0
+    for i, ct in enumerate(batch):
+        ev0 = stage.setdefault("evidence", 0.0)
+        t0 = time.perf_counter()
+        trip = _trip_from_clean(
+            ct, vehicle_id=log.vehicle_id, path=path, sha256=sha, index=len(trips),
+            sampler=sampler, options=options, repairs=log.repairs, raw_dsm_m=raws[i], stage=stage,
+        )
+        batch[i] = raws[i] = ct = None
+        t1 = time.perf_counter()
+        vec = drive_cycle_vector(trip.time_s, trip.speed_mps, trip.elevation_m, cr0=options.cr0)
+        vectors.append(vec.to_bytes())
+        t2 = time.perf_counter()
+        blobs.append(trip_profile_blob(trip))
+        stage["elevation"] = stage.get("elevation", 0.0) + t1 - t0 - (stage["evidence"] - ev0)
+        stage["vector"] = stage.get("vector", 0.0) + t2 - t1
+        stage["profile"] = stage.get("profile", 0.0) + time.perf_counter() - t2
+        trips.append(trip.record())
+        warnings.extend(trip_warnings(trip))
+    batch.clear()
+
+
 def trip_warnings(trip: Trip) -> list[str]:
     """The warnings of a trip's quality (measured sources that disagree, DSM values
     refused), each naming the trip, for the file's repairs."""
@@ -175,30 +211,23 @@ def process_file(
         for log in logs:
             n_rows += len(log.frame)
             t0 = time.perf_counter()
-            result = clean_log(log.frame, log.energy_sources, options.clean, path=path, release_frame=True)
-            stage["clean"] = stage.get("clean", 0.0) + time.perf_counter() - t0
-            dropped.extend({"vehicle_id": log.vehicle_id, **d} for d in result.dropped)
-            t0 = time.perf_counter()
-            raws = (sample_trips(sampler, [ct.lon_deg for ct in result.trips], [ct.lat_deg for ct in result.trips])
-                    if sampler is not None else [None] * len(result.trips))
-            stage["elevation"] = stage.get("elevation", 0.0) + time.perf_counter() - t0
-            for ct, raw in zip(result.trips, raws):
-                ev0 = stage.setdefault("evidence", 0.0)
+            stream = CleanStream(log.frame, log.energy_sources, options.clean, path=path, release_frame=True)
+            cleaned = iter(stream)
+            batch: list[CleanTrip] = []
+            n_batch = 0
+            while True:  # trips a bounded batch at a time: a large file's trips are never all held
+                ct = next(cleaned, None)
+                stage["clean"] = stage.get("clean", 0.0) + time.perf_counter() - t0
+                if ct is not None:
+                    batch.append(ct)
+                    n_batch += ct.time_s.size
+                if batch and (ct is None or n_batch >= TRIP_BATCH_SAMPLES):
+                    _finish_trips(batch, log, path, sha, sampler, options, stage, trips, vectors, blobs, warnings)
+                    batch, n_batch = [], 0
+                if ct is None:
+                    break
                 t0 = time.perf_counter()
-                trip = _trip_from_clean(
-                    ct, vehicle_id=log.vehicle_id, path=path, sha256=sha, index=len(trips),
-                    sampler=sampler, options=options, repairs=log.repairs, raw_dsm_m=raw, stage=stage,
-                )
-                t1 = time.perf_counter()
-                vec = drive_cycle_vector(trip.time_s, trip.speed_mps, trip.elevation_m, cr0=options.cr0)
-                vectors.append(vec.to_bytes())
-                t2 = time.perf_counter()
-                blobs.append(trip_profile_blob(trip))
-                stage["elevation"] = stage.get("elevation", 0.0) + t1 - t0 - (stage["evidence"] - ev0)
-                stage["vector"] = stage.get("vector", 0.0) + t2 - t1
-                stage["profile"] = stage.get("profile", 0.0) + time.perf_counter() - t2
-                trips.append(trip.record())
-                warnings.extend(trip_warnings(trip))
+            dropped.extend({"vehicle_id": log.vehicle_id, **d} for d in stream.dropped)
         return FileOutcome(
             str(path), sha, size, mtime,
             profile=logs[0].profile if logs else None,
