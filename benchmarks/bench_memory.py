@@ -16,6 +16,9 @@ and whether the peak meets the goal. The cases:
   ingest of this file (read, cleaning, the DSM samples, elevation, the trip evidence,
   the vectors, the stored profiles, the store) is printed too, from the process's
   high-water mark reset before each stage (``/proc/self/clear_refs``, Linux).
+- ``wide``: the sample's bus day with every srf column (20, a hybrid's fuel columns
+  added), at the most rows the default values bound allows it (ingested) and at 2.5 M
+  rows (refused by that bound, at the row past it).
 - ``gzip bomb``: about 10 MB of gzip expanding to ``--bomb-gib`` GiB (default 3) of
   valid, identical srf rows: it must fail fast with a clear message.
 - ``no line breaks``: 415 MB of text without a line break: must fail from its first
@@ -68,6 +71,32 @@ def make_large_srf(out: Path, rows: int, workdir: Path) -> Path:
     import datetime as dt
 
     d0 = dt.date(2019, 5, 13)
+    with open(out, "wb") as fh:
+        fh.write(b"\n".join(head + [header]) + b"\n")
+        k = n = 0
+        while n < rows:
+            date = (d0 + dt.timedelta(days=k)).isoformat().encode()
+            take = tails[: rows - n]
+            fh.write(b"".join(date + t + b"\n" for t in take))
+            n += len(take)
+            k += 1
+    return out
+
+
+def make_wide_srf(out: Path, rows: int, sample: Path) -> Path:
+    """A valid srf log of ``rows`` rows with every srf column (20, time included): the
+    sample's bus day with a hybrid's fuel columns added (fuel counter, fuel rate, flow
+    meter, gross weight), repeated on consecutive days. At the default limits the values
+    bound (rows x columns) decides how many rows it may hold."""
+    import datetime as dt
+
+    lines = (sample / "srf" / "EB-01_2019-01-31.csv").read_bytes().split(b"\n")
+    head = [ln for ln in lines if ln.startswith(b"#")]
+    header = lines[len(head)] + b",fms_total_fuel_used_l,fms_fuel_rate_lph,flowmeter_fuel_lph,fms_gross_weight_kg"
+    body = [ln for ln in lines[len(head) + 1:] if ln]
+    assert all(ln[:10] == b"2019-01-31" for ln in body), "a day that crosses midnight"
+    tails = [ln[10:] + b",1000.0,1.50,1.45,12000" for ln in body]
+    d0 = dt.date(2019, 1, 31)
     with open(out, "wb") as fh:
         fh.write(b"\n".join(head + [header]) + b"\n")
         k = n = 0
@@ -255,7 +284,10 @@ def main() -> None:
     from cevm.ingest.textfile import ReadLimits
 
     lim = ReadLimits()
-    print(f"default limits (cevm ingest): --max-rows {lim.max_rows:,}, --max-file-mb {lim.max_file_mb:g}, "
+    wide_rows = lim.row_limit(20)  # the wide log's 20 columns at the default values bound
+    print(f"default limits (cevm ingest): --max-rows {lim.max_rows:,} and at most {lim.max_values:,} values (rows x "
+          f"columns read: {lim.row_limit(16):,} rows of the 16-column log, {wide_rows:,} of the 20-column one), "
+          f"--max-file-mb {lim.max_file_mb:g}, "
           f"--max-expansion {lim.max_expansion:g}; goal: peak < {GOAL_MB:.0f} MB per worker")
     with tempfile.TemporaryDirectory(prefix="cevm-mem-") as tmp:
         work = args.keep or Path(tmp)
@@ -264,6 +296,10 @@ def main() -> None:
         big, dsm = work / f"big-{args.rows}.csv", work / "sample" / "dsm"
         if not (args.keep and big.exists() and dsm.is_dir()):  # --keep: made once, reused
             make_large_srf(big, args.rows, work)
+        wide, wide_over = work / f"wide-{wide_rows}.csv", work / "wide-2500000.csv"
+        for path, n in ((wide, wide_rows), (wide_over, 2_500_000)):
+            if not (args.keep and path.exists()):
+                make_wide_srf(path, n, work / "sample")
         bomb, lineless, nul = work / "bomb.csv.gz", work / "lineless.csv", work / "nul.csv"
         if not (args.keep and bomb.exists()):
             make_bomb(bomb, args.bomb_gib)
@@ -277,6 +313,8 @@ def main() -> None:
         print(f"{'case':16s} {'peak MB':>8s} {'< ' + format(GOAL_MB, '.0f'):>8s} {'exit':>4s} {'wall s':>7s}  output")
         big_name = f"{args.rows / 1e6:g}M rows"
         todo = [("import only", None, []), (big_name, big, ["--dsm", str(dsm), "--max-rows", str(max(args.rows, lim.max_rows))]),
+                (f"wide {wide_rows / 1e6:g}M", wide, ["--dsm", str(dsm)]),
+                ("wide 2.5M", wide_over, ["--dsm", str(dsm)]),
                 ("gzip bomb", bomb, []),
                 ("no line breaks", lineless, []), ("all NUL", nul, [])]
         cases = []

@@ -163,6 +163,30 @@ def test_row_limit_names_the_first_row_over_it(tmp_path, profiles):
     assert ei.value.line == 2 + 50  # header on line 2, row 50 on line 52
 
 
+def test_value_limit_bounds_a_wide_file_by_its_rows_times_columns(tmp_path, profiles, monkeypatch):
+    # SRF_HEADER's 6 columns are all read by the srf profile: 120 values are 20 rows
+    f = write(tmp_path / "r.csv", srf_text(srf_rows(50)))
+    assert ReadLimits(max_values=120).row_limit(6) == 20 and ReadLimits(max_values=None).row_limit(6) == 2_500_000
+    with pytest.raises(InputError, match=r"more than 20 data rows of 6 columns \(120 values\)") as ei:
+        read_log(f, profiles=profiles, limits=ReadLimits(max_values=120))
+    assert ei.value.line == 2 + 21
+    assert len(read_log(f, profiles=profiles, limits=ReadLimits(max_values=300))[0].frame) == 50
+    # the command line: the default holds the values bound; --max-rows given sets the rows alone
+    from typer.testing import CliRunner
+
+    import cevm.cli.ingest as cli_ingest
+    from cevm.cli import app
+
+    real = cli_ingest.ReadLimits
+    monkeypatch.setattr(cli_ingest, "ReadLimits", lambda **kw: real(**{"max_values": 120, **kw}))
+    store = str(tmp_path / "s.sqlite")
+    res = CliRunner().invoke(app, ["ingest", str(f), "--store", store, "-q"])
+    assert res.exit_code == 1 and "more than 20 data rows of 6 columns" in res.output, res.output
+    res = CliRunner().invoke(app, ["ingest", str(f), "--store", store, "-q", "--max-rows", "40"])
+    assert res.exit_code == 1 and "more than 40 data rows: over" in res.output, res.output
+    res = CliRunner().invoke(app, ["ingest", str(f), "--store", store, "-q", "--max-rows", "100"])
+    assert res.exit_code == 0, res.output
+
 def test_size_limit_plain_before_reading_and_gzip_while_decompressing(tmp_path, profiles):
     text = srf_text(srf_rows(2000))  # about 140 kB
     f = write(tmp_path / "s.csv", text)

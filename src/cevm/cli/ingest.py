@@ -39,8 +39,8 @@ def ingest(
         Optional[str], typer.Option(help="Dask scheduler address (tcp://HOST:8786): run the per-file work on that cluster (pip install 'cevm[dask]'); the workers must read the log files at the same paths, and the DSM.")
     ] = None,
     max_rows: Annotated[
-        int, typer.Option(min=1, metavar="ROWS", help="Refuse a file of more data rows than this (memory grows with the rows; see the README).")
-    ] = _LIMITS.max_rows,
+        Optional[int], typer.Option(min=1, metavar="ROWS", help="Refuse a file of more data rows than this. Default: 2,500,000, and at most 36 million values (rows x columns read), which keeps a worker under 500 MB; given, the rows alone bound a file (memory grows with rows and columns; see the README).")
+    ] = None,
     max_file_mb: Annotated[
         float, typer.Option(min=0.001, metavar="MB", help="Refuse a file of more text than this [MB], after decompression.")
     ] = _LIMITS.max_file_mb,
@@ -84,7 +84,8 @@ def ingest(
         raise fail("give --workers (local processes) or --scheduler (a Dask cluster), not both")
     check_workers(workers)
 
-    limits = ReadLimits(max_file_mb=max_file_mb, max_expansion=max_expansion, max_rows=max_rows)
+    limits = (ReadLimits(max_file_mb=max_file_mb, max_expansion=max_expansion) if max_rows is None else
+              ReadLimits(max_file_mb=max_file_mb, max_expansion=max_expansion, max_rows=max_rows, max_values=None))
     options = IngestOptions(dsm=dsm, profile=profile, profiles_dir=str(profiles_dir) if profiles_dir else None,
                             force=force, limits=limits, allow_remote_dsm=True if allow_remote_dsm else None)
     store_path = resolve_store_path(store)

@@ -1010,9 +1010,14 @@ class _Gather:
     def add(self, part: _Part, last: bool) -> None:
         n = len(part.lines)
         self.rows += n
-        if self.rows > self.limits.max_rows:
-            over = part.lines[n - (self.rows - self.limits.max_rows)]
-            raise InputError(self.path, f"more than {self.limits.max_rows:,} data rows: over the limit per file "
+        limit = self.limits.row_limit(len(self.plan.used))
+        if self.rows > limit:
+            over = part.lines[n - (self.rows - limit)]
+            if limit < self.limits.max_rows:  # the values bound: a wide log
+                raise InputError(self.path, f"more than {limit:,} data rows of {len(self.plan.used)} columns "
+                                            f"({self.limits.max_values:,} values): over the limit per file that keeps "
+                                            "memory bounded (--max-rows N sets the rows alone)", line=int(over))
+            raise InputError(self.path, f"more than {limit:,} data rows: over the limit per file "
                                         "that keeps memory bounded (--max-rows)", line=int(over))
         if len(part.blank):
             self._blank.append(part.blank)

@@ -37,6 +37,12 @@ CHUNK_BYTES = 1 << 20
 MAX_LINE_BYTES = 1 << 20
 
 
+#: Default bound on a log's values (data rows x columns read, time included): 36 M keeps a
+#: worker under 500 MB for a wide log (1.8 M rows of 20 columns), and lets a 16-column srf
+#: log reach 2.25 M rows.
+MAX_VALUES = 36_000_000
+
+
 @dataclass(frozen=True)
 class ReadLimits:
     """Bounds on one log file, so that memory and time stay bounded whatever the input.
@@ -52,21 +58,32 @@ class ReadLimits:
         :data:`EXPANSION_FLOOR_BYTES` are decompressed, so that small files never trip it.
         A gzip bomb is stopped after its first 32 MB.
     max_rows : the most data rows a file may hold (default 2,500,000: a 2 M-row log, 23
-        days of 1 Hz logging in one file, still ingests). This is the bound on memory:
-        a worker's peak grows with the rows of a file (``python
-        benchmarks/bench_memory.py``: about 180 MB + 300 bytes a row for a 15-column
-        srf log, 0.48 GB at 1 M rows, 0.78 GB at 2 M; most of it is the cleaning stage's
-        working arrays), so it is what keeps a worker's memory bounded whatever the
-        input.
+        days of 1 Hz logging in one file, still ingests).
+    max_values : the most values (data rows x the columns the profile reads, time
+        included) a file may hold, or None for no such bound (default
+        :data:`MAX_VALUES`). With ``max_rows`` this bounds a worker's memory whatever the
+        input: the peak grows with a file's rows and its columns (``python
+        benchmarks/bench_memory.py``: 0.42 GB at 2 M rows of a 16-column srf log, 0.47 GB
+        at 2.5 M; 0.51 GB at 2 M rows of a 20-column one, 0.59 GB at 2.5 M), and the
+        values bound keeps a wide log under 500 MB (1.8 M rows of 20 columns). The
+        command line lifts it when ``--max-rows`` is given.
     """
 
     max_file_mb: float = 1000.0
     max_expansion: float = 100.0
     max_rows: int = 2_500_000
+    max_values: int | None = MAX_VALUES
 
     def __post_init__(self) -> None:
-        if not (self.max_file_mb > 0 and self.max_expansion >= 1 and self.max_rows >= 1):
+        if not (self.max_file_mb > 0 and self.max_expansion >= 1 and self.max_rows >= 1
+                and (self.max_values is None or self.max_values >= 1)):
             raise ValueError(f"read limits must be positive (expansion at least 1): {self}")
+
+    def row_limit(self, n_columns: int) -> int:
+        """The most data rows of a file whose profile reads ``n_columns`` columns."""
+        if self.max_values is None:
+            return self.max_rows
+        return max(1, min(self.max_rows, self.max_values // max(1, n_columns)))
 
     @property
     def max_file_bytes(self) -> int:
