@@ -70,7 +70,14 @@ def make_large_srf(out: Path, rows: int, workdir: Path) -> Path:
     tails = [ln[10:] for ln in body]
     import datetime as dt
 
-    d0 = dt.date(2019, 5, 13)
+    return _write_days(out, head, header, tails, dt.date(2019, 5, 13), rows)
+
+
+def _write_days(out: Path, head: list[bytes], header: bytes, tails: list[bytes], d0, rows: int) -> Path:
+    """``rows`` data rows of one day's rows (``tails``: each row after its date) repeated
+    on consecutive days from ``d0``, under the comment lines and the header."""
+    import datetime as dt
+
     with open(out, "wb") as fh:
         fh.write(b"\n".join(head + [header]) + b"\n")
         k = n = 0
@@ -96,17 +103,7 @@ def make_wide_srf(out: Path, rows: int, sample: Path) -> Path:
     body = [ln for ln in lines[len(head) + 1:] if ln]
     assert all(ln[:10] == b"2019-01-31" for ln in body), "a day that crosses midnight"
     tails = [ln[10:] + b",1000.0,1.50,1.45,12000" for ln in body]
-    d0 = dt.date(2019, 1, 31)
-    with open(out, "wb") as fh:
-        fh.write(b"\n".join(head + [header]) + b"\n")
-        k = n = 0
-        while n < rows:
-            date = (d0 + dt.timedelta(days=k)).isoformat().encode()
-            take = tails[: rows - n]
-            fh.write(b"".join(date + t + b"\n" for t in take))
-            n += len(take)
-            k += 1
-    return out
+    return _write_days(out, head, header, tails, dt.date(2019, 1, 31), rows)
 
 
 def make_bomb(out: Path, gib: float) -> Path:
