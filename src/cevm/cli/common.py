@@ -71,16 +71,15 @@ def note_flat_cycles(sources) -> None:
     """A note for the cycles that give no elevation or grade, and the stored trips that
     had neither DSM nor GPS elevation at ingest: their road is taken as flat (on hilly
     roads an error of tens of percent), so the number says it."""
-    flat = [s.name for s in sources if s.kind == "cycle" and all(leg.elevation_m is None for leg in s.leg_profiles)]
-    if flat:
-        names = ", ".join(flat[:3]) + (", ..." if len(flat) > 3 else "")
-        typer.echo(f"cevm: note: {len(flat)} cycle(s) without elevation or grade ({printable(names)}): a flat road "
-                   "assumed (add an elevation column, or give --grade-col / --grade-file)", err=True)
-    flat = [s.name for s in sources if getattr(s, "elevation_source", None) == "flat"]
-    if flat:
-        names = ", ".join(flat[:3]) + (", ..." if len(flat) > 3 else "")
-        typer.echo(f"cevm: note: {len(flat)} stored trip(s) had neither DSM nor GPS elevation at ingest "
-                   f"({printable(names)}): a flat road assumed (re-ingest with --dsm)", err=True)
+    def note(flat: list[str], what: str, remedy: str) -> None:
+        if flat:
+            names = ", ".join(flat[:3]) + (", ..." if len(flat) > 3 else "")
+            typer.echo(f"cevm: note: {len(flat)} {what} ({printable(names)}): a flat road assumed ({remedy})", err=True)
+
+    note([s.name for s in sources if s.kind == "cycle" and all(leg.elevation_m is None for leg in s.leg_profiles)],
+         "cycle(s) without elevation or grade", "add an elevation column, or give --grade-col / --grade-file")
+    note([s.name for s in sources if getattr(s, "elevation_source", None) == "flat"],
+         "stored trip(s) had neither DSM nor GPS elevation at ingest", "re-ingest with --dsm")
 
 
 def warn_ambient_unused(vehicles: list[tuple[str, bool]], asked: str) -> None:
