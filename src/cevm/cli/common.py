@@ -90,7 +90,8 @@ def warn_ambient_unused(vehicles: list[tuple[str, bool]], asked: str) -> None:
     for label, uses in vehicles:
         if not uses:
             warn(f"{label}: no term of its model depends on the ambient temperature (heating, A/C, warm-up), so "
-                 f"{asked} changes nothing for it; calibrate it on trips with logged temperatures to add them")
+                 f"{asked} changes nothing for it; calibrating it on trips whose logged temperatures span heating "
+                 "and A/C weather can add them")
 
 
 def warn_damaged(exc: BaseException) -> None:

@@ -152,8 +152,8 @@ def domain_warnings(vehicle: Vehicle, *, mass_kg=None, ambient_c=None, mean_spee
 
 
 def _span(x: np.ndarray, digits: int) -> str:
-    lo, hi = float(np.min(x)), float(np.max(x))
-    return f"{lo:,.{digits}f}" if lo == hi else f"{lo:,.{digits}f} to {hi:,.{digits}f}"
+    lo, hi = f"{float(np.min(x)):,.{digits}f}", f"{float(np.max(x)):,.{digits}f}"
+    return lo if lo == hi else f"{lo} to {hi}"  # equal as printed: one value
 
 
 @dataclass(frozen=True)
