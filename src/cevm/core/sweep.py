@@ -1276,7 +1276,8 @@ def build_step_table(legs: Sequence[LegProfile], *, cr0: float = CR0_DEFAULT,
         if leg.speed_mps.size:
             vmax = max(vmax, float(np.max(leg.speed_mps)))
     z = np.zeros(0)
-    k, x, a, r, dt = (np.concatenate(v) if v else z for v in (ks, xs, as_, rs, dts))
+    k, x, a, r, dt = (v[0] if len(v) == 1 else np.concatenate(v) if v else z  # one leg: no copy
+                      for v in (ks, xs, as_, rs, dts))
     dd = r / physics.g_mps2
     t0 = np.concatenate([[0.0], np.cumsum(dt)[:-1]]) if dt.size else z
     d0 = np.concatenate([[0.0], np.cumsum(dd)[:-1]]) if dd.size else z
@@ -1515,11 +1516,25 @@ POWER_WINDOW_S = 5.0
 def _window_coefficients(st: StepTable, window_s: float = POWER_WINDOW_S):
     """Per window of consecutive steps lasting at least ``window_s`` (one starting at
     each moving step): the sums of x, r, a over its moving steps and its duration, so
-    that its mean wheel power at mass m is (m (sx + Cr sr) + CdA sa) / T."""
+    that its mean wheel power at mass m is (m (sx + Cr sr) + CdA sa) / T. They depend
+    on the source alone: made once per step table (every vehicle of a sweep asks)."""
+    cache = st.__dict__.setdefault("_power_windows", {})  # goes with the table (Source.release)
+    if window_s not in cache:
+        cache[window_s] = _window_sums(st, window_s)
+    return cache[window_s]
+
+
+def _window_sums(st: StepTable, window_s: float):
     mv = st.moving
     x = np.where(mv, st.x, 0.0)  # standstill: the brakes hold the vehicle, no wheel work
-    cx, cr_, ca = (np.concatenate([[0.0], np.cumsum(v)]) for v in (x, st.r, st.a))
-    ct = np.concatenate([[0.0], np.cumsum(st.dt)])
+
+    def csum(v: np.ndarray) -> np.ndarray:  # [0, cumsum...] without a second copy
+        out = np.empty(v.size + 1)
+        out[0] = 0.0
+        np.cumsum(v, out=out[1:])
+        return out
+
+    cx, cr_, ca, ct = csum(x), csum(st.r), csum(st.a), csum(st.dt)
     starts = np.flatnonzero(mv)
     ends = np.searchsorted(ct, ct[starts] + window_s * (1.0 - 1e-12), side="left")
     ends = np.minimum(np.maximum(ends, starts + 1), st.n)
