@@ -8,15 +8,22 @@ RHO = 1.225
 G = 9.81
 
 
+def step_terms(t, v, h, i):
+    """Step i's terms as the paper prints them: (dt [s], k [J/kg], a [J/m^2], r [J/kg
+    per unit Cr], e [J/kg]); ``h`` None is a flat road."""
+    dt = t[i + 1] - t[i]
+    k = 0.5 * (v[i + 1] ** 2 - v[i] ** 2)
+    a = 0.25 * RHO * (v[i] ** 3 + v[i + 1] ** 3) * dt
+    r = 0.5 * G * (v[i] + v[i + 1]) * dt
+    e = G * (h[i + 1] - h[i]) if h is not None else 0.0
+    return dt, k, a, r, e
+
+
 def reference_wheel_energy_j(t, v, h, m, cda, cr, mode, eta=1.0, cr0=0.004):
     """E_DC [J] summed step by step. mode: 'paper' (eq. 24), 'no-credit', or 'ev' (eq. 27-29)."""
     total = 0.0
     for i in range(len(t) - 1):
-        dt = t[i + 1] - t[i]
-        k = 0.5 * (v[i + 1] ** 2 - v[i] ** 2)
-        a = 0.25 * RHO * (v[i] ** 3 + v[i + 1] ** 3) * dt
-        r = 0.5 * G * (v[i] + v[i + 1]) * dt
-        e = G * (h[i + 1] - h[i]) if h is not None else 0.0
+        dt, k, a, r, e = step_terms(t, v, h, i)
         delta = m * (k + e) + cda * a + cr * m * r
         if k + e + cr0 * r > 0:  # simplified step (criterion 8)
             total += delta
@@ -65,11 +72,7 @@ def reference_consumption(t, v, h, m, veh, ambient_c, cr0=0.004):
         rate_t = veh["heating_fuel_lps_per_k"] * heat + veh["cooling_fuel_lps_per_k"] * cool
         total = veh["warmup_fuel_l_per_k"] * heat
     for i in range(len(t) - 1):
-        dt = t[i + 1] - t[i]
-        k = 0.5 * (v[i + 1] ** 2 - v[i] ** 2)
-        a = 0.25 * RHO * (v[i] ** 3 + v[i + 1] ** 3) * dt
-        r = 0.5 * G * (v[i] + v[i + 1]) * dt
-        e = G * (h[i + 1] - h[i]) if h is not None else 0.0
+        dt, k, a, r, e = step_terms(t, v, h, i)
         delta = m * (k + e) + veh["cda_m2"] * a + veh["cr"] * m * r
         simplified = k + e + cr0 * r > 0
         if ev:
@@ -98,11 +101,7 @@ def reference_step_energy(t, v, h, i, m, cda, cr, *, eta, w, lhv=None, aux=0.0, 
     the time, ``ck`` [l per J/kg] the fuel per unit of positive kinetic energy
     (m (1/eta_k - 1/eta) / U), ``run`` [l/s] on simplified steps, ``idle`` [l/s] at
     standstill."""
-    dt = t[i + 1] - t[i]
-    k = 0.5 * (v[i + 1] ** 2 - v[i] ** 2)
-    a = 0.25 * RHO * (v[i] ** 3 + v[i + 1] ** 3) * dt
-    r = 0.5 * G * (v[i] + v[i + 1]) * dt
-    e = G * (h[i + 1] - h[i]) if h is not None else 0.0
+    dt, k, a, r, e = step_terms(t, v, h, i)
     delta = m * (k + e) + cda * a + cr * m * r
     simplified = k + e + cr0 * r > 0
     wheel = delta if (simplified or delta > 0) else w * delta
