@@ -24,10 +24,38 @@ def test_wheel_ships_every_config_file_where_the_code_looks(tmp_path):
     assert "cevm/configs_dir.py" in names and "cevm/configs/loggers/srf.toml" in names
 
 
-def test_checkout_finds_its_configs():
+def test_installed_cevm_finds_the_checkouts_configs():
+    """Editable or regular install: the configs the code finds are this checkout's,
+    file for file and byte for byte (a regular install carries a copy)."""
     from cevm.configs_dir import shipped_configs_dir
     from cevm.ingest.profiles import builtin_profile_dirs, load_profiles
 
-    assert shipped_configs_dir().resolve() == (ROOT / "configs").resolve()
+    found = shipped_configs_dir()
+
+    def files(d: Path) -> dict[str, bytes]:
+        return {p.relative_to(d).as_posix(): p.read_bytes() for p in d.rglob("*")
+                if p.is_file() and "__pycache__" not in p.parts}
+
+    assert files(found) == files(ROOT / "configs")
     assert builtin_profile_dirs() == [shipped_configs_dir() / "loggers"]
     assert {"srf", "portal", "twizy"} <= set(load_profiles(include_env=False))
+
+
+def test_every_module_of_the_installed_package_imports():
+    """Every module of cevm (and the sample-log generator) imports from the install the
+    tests run against: a module a wheel leaves out, or one that imports what the
+    project does not declare, fails here (CI runs the tests on a regular install)."""
+    import importlib
+    import pkgutil
+
+    import cevm
+    import cevm_samplegen
+
+    names = []
+    for pkg in (cevm, cevm_samplegen):
+        names.append(pkg.__name__)
+        names += [m.name for m in pkgutil.walk_packages(pkg.__path__, pkg.__name__ + ".")
+                  if not m.name.startswith("cevm.configs") and not m.name.endswith(".__main__")]
+    assert "cevm.core.calibration.fitting" in names
+    for name in names:
+        importlib.import_module(name)
