@@ -20,7 +20,7 @@ from cevm.core.detailed import (
     simulate,
 )
 from cevm.core.model import wheel_energy_j
-from cevm.core.vehicle import vehicle_from_mapping
+from cevm.io.vehicles import vehicle_from_mapping
 from cevm.errors import InputError
 from cevm.io import load_vehicle, read_cycle_csv
 

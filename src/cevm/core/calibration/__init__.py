@@ -13,7 +13,8 @@ Modules, in the order a calibration uses them:
 - :mod:`.data`       the trips (:class:`TripData`) and their screening into arrays
 - :mod:`.terms`      the fittable terms and the consumption model linear in them
 - :mod:`.solve`      the weighted fit (relative residuals, Paule-Mandel model error)
-- :mod:`.checks`     identifiability and physical plausibility
+- :mod:`.identifiability`  which terms the trips can tell
+- :mod:`.plausibility`     which fitted values physics refuses; the standstill evidence
 - :mod:`.validation` grouped folds, error statistics, predictions, timing
 - :mod:`.fitting`    :func:`fit`: one term set, pruned of what the data cannot support
 - :mod:`.selection`  :func:`select`: every candidate set, the one-standard-error choice,

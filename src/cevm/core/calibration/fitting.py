@@ -8,7 +8,7 @@ from typing import Sequence
 
 import numpy as np
 
-from cevm.core.calibration import checks
+from cevm.core.calibration import identifiability, plausibility
 from cevm.core.calibration.data import CalibrationError, TripData, TripSet, select_trips
 from cevm.core.calibration.solve import HUBER_C, Fit, bounds, condition_number, fit_terms, start, value_covariance
 from cevm.core.calibration.terms import TERMS_BY_POWERTRAIN, TermModel, neutral, normalise
@@ -41,7 +41,7 @@ class CalibrationResult:
     unit : "l" (ICE fuel) or "J" (EV battery energy)
     warnings : notes on the fit (parameter at a bound, failed folds, ...)
     evidence : the fitted standstill rate against the logs' measured one
-        (:func:`.checks.evidence`), or None
+        (:func:`.plausibility.evidence`), or None
     domain : what the fit saw (:class:`cevm.core.vehicle.FitDomain`)
     """
 
@@ -100,19 +100,19 @@ def _prune(model: TermModel, names: list[str], idx: np.ndarray, tau: float | Non
     warnings: list[str] = []
     active = list(names)
     while True:
-        bad = checks.unsupported(model, active, idx)
+        bad = identifiability.unsupported(model, active, idx)
         if bad is None:
             x0 = start(model, active)
             tau0 = 0.0 if tau is None else tau
             w0 = data.q[idx] / (data.u[idx] ** 2 + tau0**2)
             jw0 = (np.sqrt(w0) / data.y[idx])[:, None] * model.jacobian(active, x0, idx)
-            bad = checks.confounded(jw0, active, max_correlation, model)
+            bad = identifiability.confounded(jw0, active, max_correlation, model)
         if bad is None:
             result = fit_terms(model, active, idx, tau, huber_c=huber_c)
-            bad = (checks.confounded(result.jw, active, max_correlation, model)
-                   or checks.imprecise(model, result, idx, max_rel_se))
+            bad = (identifiability.confounded(result.jw, active, max_correlation, model)
+                   or identifiability.imprecise(model, result, idx, max_rel_se))
             if bad is None:
-                why = checks.implausible(model, result, idx)
+                why = plausibility.implausible(model, result, idx)
                 if why is not None and why[0] == "eta":
                     warnings.append(f"eta: {why[1]}")
                 elif why is not None and refuse_implausible:
@@ -186,7 +186,7 @@ def fit(
         weighted least squares
 
     Extra terms the data cannot identify or whose value physics refuses
-    (:mod:`.checks`) are refused with the reason, and the rest are fitted.
+    (:mod:`.identifiability`, :mod:`.plausibility`) are refused with the reason, and the rest are fitted.
 
     Raises
     ------
@@ -292,7 +292,7 @@ def fit_model(model: TermModel, names: Sequence[str], excluded: dict, *, cv_fold
         unit="J" if vehicle.is_ev else "l",
         warnings=tuple(warnings),
         terms=tuple(active),
-        evidence=checks.evidence(model, result, idx_all),
+        evidence=plausibility.evidence(model, result, idx_all),
         domain=domain,
     )
 

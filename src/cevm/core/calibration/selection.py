@@ -3,8 +3,8 @@
 The candidates are eta with every subset of the powertrain's extra terms
 (:data:`~.terms.EXTRA_TERMS`) that the trips can support. Each candidate is fitted to all
 usable trips and cross-validated on the same grouped folds. A candidate is *refused*,
-with the reason, when a term is not identifiable (:func:`.checks.unsupported`, confounded,
-imprecise) or its value is physically implausible (:func:`.checks.implausible`): such a
+with the reason, when a term is not identifiable (:func:`.identifiability.unsupported`, confounded,
+imprecise) or its value is physically implausible (:func:`.plausibility.implausible`): such a
 candidate is shown, never chosen.
 
 Choice (the one-standard-error rule, on paired errors): let b be the candidate with the
@@ -31,7 +31,7 @@ from typing import Sequence
 
 import numpy as np
 
-from cevm.core.calibration import checks
+from cevm.core.calibration import identifiability, plausibility
 from cevm.core.calibration.data import CalibrationError, TripData, select_trips
 from cevm.core.calibration.fitting import CalibrationResult, fit_model
 from cevm.core.calibration.solve import HUBER_C, fit_terms, value_covariance
@@ -124,7 +124,7 @@ def _balanced(model: TermModel, names, idx, opt: _Options) -> TermModel:
             if h2 > c2:
                 continue
             m = model.with_balance(h2, c2)
-            if checks.unsupported(m, names, idx) is not None:
+            if identifiability.unsupported(m, names, idx) is not None:
                 continue
             f = fit_terms(m, names, idx, opt.tau, huber_c=opt.huber_c)
             trial.append((f.tau, f.s2 if math.isfinite(f.s2) else math.inf, h2, c2))
@@ -153,12 +153,12 @@ def _status(model: TermModel, names, idx, opt: _Options):
     """(the model with its balance temperatures, fit or None, refusal reason or None) of a
     candidate on the trips ``idx``."""
     model = _balanced(model, names, idx, opt)
-    bad = checks.unsupported(model, names, idx)
+    bad = identifiability.unsupported(model, names, idx)
     if bad is not None:
         return model, None, bad
     f = fit_terms(model, names, idx, opt.tau, huber_c=opt.huber_c)
-    bad = (checks.confounded(f.jw, names, opt.max_correlation, model)
-           or checks.imprecise(model, f, idx, opt.max_rel_se) or checks.implausible(model, f, idx))
+    bad = (identifiability.confounded(f.jw, names, opt.max_correlation, model)
+           or identifiability.imprecise(model, f, idx, opt.max_rel_se) or plausibility.implausible(model, f, idx))
     return model, f, bad
 
 
