@@ -25,6 +25,7 @@ import numpy as np
 
 from cevm.core import energy
 from cevm.core.cycle import CycleVector
+from cevm.core.uncertainty import Posterior, Priors
 from cevm.core.model import (
     ICE_BRAKING_DEFAULT,
     ICE_BRAKING_MODES,
@@ -148,6 +149,9 @@ class Vehicle:
     cooling_above_c: float = energy.COOLING_ABOVE_C_DEFAULT
     reference_temp_c: float | None = None  # ambient of predictions that give none [degC]
     calibration: FitDomain | None = field(default=None, compare=False)
+    vehicle_class: str | None = None  # "bus", "truck", "van", "car", "quadricycle" (priors)
+    priors: Priors | None = field(default=None, compare=False)  # the class defaults and the file's [prior]
+    posterior: Posterior | None = field(default=None, compare=False)  # what a calibration learnt
     sources: dict = field(default_factory=dict, compare=False)
     extra: dict = field(default_factory=dict, compare=False)  # tables for other models
 

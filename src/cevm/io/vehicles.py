@@ -87,6 +87,9 @@ _COMMON_KEYS = {
     "cooling_above_c",
     "reference_temp_c",
     "calibration",
+    "class",
+    "prior",
+    "posterior",
 }
 _EV_KEYS = {"battery_kwh", "aux_power_kw", "regen_eta", "aux_heating_kw_per_k", "aux_cooling_kw_per_k",
             "warmup_kwh_per_k"}
@@ -140,6 +143,27 @@ def _number(data: dict, key: str, source: str, *, required: bool, lo: float | No
 
 def vehicle_from_mapping(data: dict[str, Any], source: str = "<vehicle>", *,
                          default_id: str | None = None) -> Vehicle:
+    """Validate a parsed vehicle file and build a :class:`Vehicle`, with its priors (its
+    class's defaults and its ``[prior]`` table) and, for a calibrated file, its
+    posterior (:mod:`cevm.io.priors`).
+
+    The vehicle's ``id`` is the file's ``id`` key, else ``default_id`` (the file's stem,
+    :func:`load_vehicle`), else None (rows then use the name). Raises
+    :class:`~cevm.errors.InputError` naming ``source`` and the key for a missing,
+    unknown, out-of-range or implausible key (:data:`cevm.core.vehicle.PLAUSIBLE`).
+    """
+    from dataclasses import replace
+
+    from cevm.io.priors import posterior_from_mapping, priors_from_mapping
+
+    v = _vehicle_values(data, source, default_id=default_id)
+    priors = priors_from_mapping(data, v.powertrain, v.mass_kg, source)
+    v = replace(v, vehicle_class=priors.vehicle_class, priors=priors)
+    return replace(v, posterior=posterior_from_mapping(data.get("posterior"), v, priors, source))
+
+
+def _vehicle_values(data: dict[str, Any], source: str = "<vehicle>", *,
+                    default_id: str | None = None) -> Vehicle:
     """Validate a parsed vehicle file and build a :class:`Vehicle`.
 
     The vehicle's ``id`` is the file's ``id`` key, else ``default_id`` (the file's stem,

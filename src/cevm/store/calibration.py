@@ -8,6 +8,8 @@ file is :mod:`cevm.io.calibrated`, the paper's figures 5 and 7 :mod:`cevm.io.plo
 
 from __future__ import annotations
 
+import json
+import math
 from collections import Counter
 from dataclasses import dataclass
 
@@ -49,6 +51,23 @@ def elevation_quality(elevation_source: str | None, dsm_coverage_pct: float | No
 def _opt(x) -> float | None:
     """A stored REAL (NaN for NULL) as the fit's optional float."""
     return None if x is None or not np.isfinite(x) else float(x)
+
+
+def systematic_uncertainty(quality_json: str | None) -> float | None:
+    """The chosen consumption source's systematic (meter calibration) uncertainty, from a
+    trip's stored quality (:mod:`cevm.ingest.consumption`); None when it does not say."""
+    if not quality_json:
+        return None
+    try:
+        cons = json.loads(quality_json).get("consumption") or {}
+    except (ValueError, AttributeError):
+        return None
+    chosen = cons.get("source")
+    for src in cons.get("sources") or ():
+        if isinstance(src, dict) and src.get("source") == chosen:
+            v = src.get("systematic_uncertainty")
+            return float(v) if isinstance(v, (int, float)) and math.isfinite(v) and v >= 0 else None
+    return None
 
 
 def trips_for_calibration(store: TripStore, vehicle_id: str, vehicle: Vehicle) -> TripSelection:
@@ -96,6 +115,7 @@ def trips_for_calibration(store: TripStore, vehicle_id: str, vehicle: Vehicle) -
             start_utc_s=float(r.start_utc_s),
             standstill_s=_opt(r.standstill_s),
             standstill_rate=_opt(getattr(r, rate_column)),
+            systematic_uncertainty=systematic_uncertainty(r.quality_json),
         ))
     if not out:
         raise CevmError(f"vehicle id {vehicle_id!r}: every stored trip is damaged ({damaged[0]}); "

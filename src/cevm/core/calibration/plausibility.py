@@ -17,7 +17,7 @@ import math
 
 import numpy as np
 
-from cevm.core.calibration.solve import Fit, bounds, value_covariance
+from cevm.core.calibration.solve import Fit, bounds, value_covariance  # noqa: F401 (Fit: the type of fits)
 from cevm.core.calibration.terms import TERMS_BY_POWERTRAIN, TermModel
 
 #: A fitted standstill rate more than this factor above (or below 1 / this) the
@@ -37,13 +37,17 @@ def _fmt(model: TermModel, name: str, value: float) -> str:
     return f"{value * scale:.3g} {unit}".strip()
 
 
-def implausible(model: TermModel, fit: Fit, idx: np.ndarray) -> tuple[str, str] | None:
+def implausible(model: TermModel, fit, idx: np.ndarray, lb: np.ndarray | None = None,
+                ub: np.ndarray | None = None) -> tuple[str, str] | None:
     """The first term whose fitted value physics refuses, with the reason (see the module
-    docstring); eta included."""
+    docstring); eta included. ``fit`` has ``names``, ``theta`` (coefficients), ``cov``
+    (their covariance) and ``free`` (the estimate without bounds); ``lb``, ``ub`` the
+    coefficients' bounds in the fit (default :func:`.solve.bounds`)."""
     pt = model.vehicle.powertrain
-    values, cov = value_covariance(model, fit)
-    sd = np.sqrt(np.maximum(np.diag(cov), 0.0))
-    lb, _ = bounds(model, fit.names)
+    values, _ = value_covariance(model, fit)
+    csd = np.sqrt(np.maximum(np.diag(fit.cov), 0.0))
+    if lb is None or ub is None:
+        lb, ub = bounds(model, fit.names)
     for j, name in enumerate(fit.names):
         t = TERMS_BY_POWERTRAIN[(pt, name)]
         v = float(values[name])
@@ -58,17 +62,31 @@ def implausible(model: TermModel, fit: Fit, idx: np.ndarray) -> tuple[str, str] 
                     why += f" for {'an EV' if model.ev else 'a combustion engine'}"
             return name, f"implausible: {t.label} {_fmt(model, name, v)} is {why}"
         # a bound that binds where the free estimate is clearly beyond it: the data want
-        # a negative power or rate, or (eta's coefficient 1/eta below 1) an efficiency
-        # above 1; the coefficient's standard error is sd_eta / eta^2
+        # a negative power or rate, or (eta's coefficient 1/eta at its lower bound) an
+        # efficiency above what the powertrain reaches
         free = float(fit.free[j])
-        sd_coef = sd[j] * (fit.theta[j] ** 2 if name == "eta" else 1.0)
-        if fit.theta[j] <= lb[j] + 1e-12 and math.isfinite(sd_coef) and free < lb[j] - 2 * sd_coef:
-            if name == "eta":
-                want = 1.0 / free if free > 0 else math.inf
-                return name, f"implausible: the data want a drive efficiency of {want:.3g}: {_LESS_THAN_THE_WHEELS}"
+        if not math.isfinite(csd[j]):
+            continue
+        low_bind = fit.theta[j] <= lb[j] + 1e-12 * max(1.0, abs(lb[j])) and free < lb[j] - 2 * csd[j]
+        high_bind = fit.theta[j] >= ub[j] - 1e-12 * max(1.0, abs(ub[j])) and free > ub[j] + 2 * csd[j]
+        if name == "eta" and low_bind:
+            want = 1.0 / free if free > 0 else math.inf
+            return name, (f"implausible: the data want a drive efficiency of {want:.3g}, above the "
+                          f"{_fmt(model, name, hi)} a {'battery-electric drive' if model.ev else 'combustion engine'}"
+                          f" reaches: {_LESS_THAN_THE_WHEELS}")
+        if name == "eta" and high_bind:
+            return name, (f"implausible: the data want a drive efficiency of {1.0 / free:.3g}, below the "
+                          f"{_fmt(model, name, lo)} of any {'EV' if model.ev else 'combustion engine'} (masses too "
+                          "low, or a consumption column in the wrong unit?)")
+        if name == "kin":
+            continue
+        if low_bind:
             return name, (f"implausible: the data want {t.label} = {_fmt(model, name, free)}, below "
                           f"{_fmt(model, name, lb[j])} by more than 2 standard errors: the term does not describe "
                           "these trips")
+        if high_bind:
+            return name, (f"implausible: the data want {t.label} = {_fmt(model, name, free)}, above the plausible "
+                          f"{_fmt(model, name, ub[j])} by more than 2 standard errors")
     share = model.nontraction(fit.names, fit.theta)[idx] / model.data.y[idx]
     if share.size and float(share.max()) > MAX_NONTRACTION_SHARE:
         i = int(np.argmax(share))
@@ -77,16 +95,19 @@ def implausible(model: TermModel, fit: Fit, idx: np.ndarray) -> tuple[str, str] 
             f"implausible: {', '.join(extra)} would take {100 * share[i]:.0f} % of trip "
             f"{model.data.ids[idx[i]]}'s measured consumption")
     ev = evidence(model, fit, idx)
-    # the term meant to be the standstill rate: an EV's auxiliary power, an ICE's idle
-    # rate (without it, a standstill load is absorbed by eta and comparing says nothing)
+    # the model's standstill rate against the logs' (issue 27: also for a model without an
+    # auxiliary or idle term, which draws nothing standing still)
     base = "aux" if model.ev else "idle"
-    if ev is not None and ev["ratio"] is not None and base in fit.names:
+    if ev is not None and ev["ratio"] is not None:
         r = ev["ratio"]
         if r > EVIDENCE_RATIO or r < 1.0 / EVIDENCE_RATIO:
             what = "battery power" if model.ev else "fuel flow"
-            return base, (f"implausible: the fitted standstill rate {ev['fitted_text']} is {r:.1f} times the "
-                          f"{what} the logs measured standing still ({ev['measured_text']} over "
-                          f"{ev['seconds'] / 60:.0f} min)")
+            has = base in fit.names or (model.vehicle_values().get(base, 0.0) or 0.0) > 0
+            model_text = (f"the fitted standstill rate {ev['fitted_text']} is {r:.1f} times" if has else
+                          f"the model draws {ev['fitted_text']} standing still (it has no "
+                          f"{'auxiliary-power' if model.ev else 'idle'} term), against")
+            return base, (f"implausible: {model_text} the {what} the logs measured standing still "
+                          f"({ev['measured_text']} over {ev['seconds'] / 60:.0f} min)")
     return None
 
 

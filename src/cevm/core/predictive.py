@@ -1,0 +1,279 @@
+"""The predictive distribution of a vehicle's consumption: mean, standard deviation,
+quantiles, and the probability of staying within a budget (pure, vectorised).
+
+A prediction's features (:class:`Features`, one element per prediction) are what the CE
+model multiplies its coefficients by (:mod:`cevm.core.calibration.terms`): the wheel
+energy's parts P >= 0 and N <= 0 [J], the duration, time at standstill and traction
+time [s], the positive kinetic energy m k_pos [J], the ambient temperature [degC] and the
+trip starts. The mean is :func:`cevm.core.vehicle.predict`'s, to the last bit; the
+variance, for a prediction of the true consumption [J^2 or l^2]::
+
+    Var = g Sigma g^T  +  (s_aux D)^2 + (s_share mu)^2  +  (meter mu)^2   [+ sigma_meas^2]
+
+g the gradient of the mean in the coefficients, Sigma their covariance
+(:class:`cevm.core.uncertainty.Posterior`), s_aux and s_share the trips' scatter, meter
+the calibration meter's systematic share (every prediction shares it), and sigma_meas a
+measurement's own uncertainty when the prediction is compared with one. Predictive
+distributions are Gaussian: :meth:`Predictive.quantile`, :meth:`Predictive.interval`,
+:meth:`Predictive.prob_at_most`.
+
+A vehicle file never calibrated predicts with its priors (:func:`posterior_of`): its
+coefficients at the file's values, their uncertainty the vehicle class's prior ranges,
+its scatter the class's typical one; the rows say "prior". A day's or a route's total
+(:func:`total`) adds its legs' means and gets the variance of a sum: the parameters'
+part and the meter's are common to every leg, the scatter's is shared within a group
+(a day) at the posterior's day correlation rho and independent across groups.
+
+Interface for commands (predict, feasibility, fleet plan, replay)::
+
+    f = Features.of(vector, vehicle, mass_kg, ambient_c)     # or Features(...) from arrays
+    p = predictive(vehicle, f)                                # .mean, .sd, .source
+    low, high = p.interval(0.9)
+    p_ok = p.prob_at_most(budget)                             # P(consumption <= budget)
+    day = total(vehicle, f, groups)                          # one Predictive per group
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.special import ndtr, ndtri
+
+from cevm.core import energy
+from cevm.core.cycle import CycleVector
+from cevm.core.model import braking_weight, wheel_energy_parts_j
+from cevm.core.uncertainty import (Posterior, Scatter, coefficient_prior, extrapolation_variance,
+                                   slope_prior_sd)
+from cevm.core.vehicle import Vehicle, default_ambient_c
+
+#: The terms a never-calibrated vehicle's prior interval spans: every vehicle's physical
+#: terms (the others only where its file sets them: they change what eta means).
+PRIOR_TERMS = {"ev": ("eta", "aux", "heat", "cool"), "ice": ("eta", "idle", "heat", "cool")}
+
+
+@dataclass(frozen=True, eq=False)
+class Features:
+    """What the CE model needs of n predictions (arrays of one length, or scalars):
+    ``positive_j`` P and ``negative_j`` N (<= 0) of the wheel energy [J], ``duration_s``,
+    ``idle_s`` (standstill), ``traction_s`` [s], ``kinetic_j`` the positive kinetic
+    energy m k_pos [J], ``ambient_c`` [degC], ``starts`` (trip starts, 1 per trip)."""
+
+    positive_j: np.ndarray
+    negative_j: np.ndarray
+    duration_s: np.ndarray
+    idle_s: np.ndarray
+    traction_s: np.ndarray
+    kinetic_j: np.ndarray
+    ambient_c: np.ndarray
+    starts: np.ndarray | float = 1.0
+
+    @classmethod
+    def of(cls, vector: CycleVector, vehicle: Vehicle, mass_kg=None, ambient_c=None, *, starts=1.0) -> Features:
+        """The features of ``vector`` driven by ``vehicle`` at ``mass_kg`` (default its
+        own) and ``ambient_c`` (default :func:`cevm.core.vehicle.default_ambient_c`),
+        which broadcast together."""
+        m = vehicle.mass_kg if mass_kg is None else mass_kg
+        t = default_ambient_c(vehicle)[0] if ambient_c is None else ambient_c
+        t = energy.check_ambient_c(t)
+        m, t = np.broadcast_arrays(np.asarray(m, dtype=np.float64), np.asarray(t, dtype=np.float64))
+        P, N = wheel_energy_parts_j(vector, m, vehicle.cda_m2, vehicle.cr)
+        kin = m * vector.k_pos if math.isfinite(vector.k_pos) else np.zeros_like(m)
+        trac = vector.traction_s if math.isfinite(vector.traction_s) else 0.0
+        full = np.ones_like(m)
+        return cls(P, N, vector.duration_s * full, vector.idle_s * full, trac * full, kin, t, starts)
+
+    @property
+    def n(self) -> int:
+        return int(np.broadcast(self.positive_j, self.duration_s, self.ambient_c).size)
+
+
+@dataclass(frozen=True, eq=False)
+class Predictive:
+    """Gaussian predictive distributions: ``mean`` and ``sd`` [J (EV) or l (ICE)] per
+    prediction, ``source`` "posterior" (a calibration's) or "prior" (the class's: a file
+    never calibrated) or "none" (a vehicle without priors: no interval), and ``note``
+    the sentence behind it."""
+
+    mean: np.ndarray
+    sd: np.ndarray
+    source: str = "posterior"
+    note: str = ""
+
+    def quantile(self, q) -> np.ndarray:
+        """The q-quantile(s), q in (0, 1)."""
+        return self.mean + self.sd * ndtri(np.asarray(q, dtype=np.float64))
+
+    def interval(self, level: float = 0.9) -> tuple[np.ndarray, np.ndarray]:
+        """The central interval holding the consumption with probability ``level``."""
+        z = float(ndtri(0.5 + 0.5 * level))
+        return self.mean - z * self.sd, self.mean + z * self.sd
+
+    def prob_at_most(self, budget) -> np.ndarray:
+        """P(consumption <= budget), budget in the unit of ``mean`` (broadcast)."""
+        b = np.asarray(budget, dtype=np.float64)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            z = (b - self.mean) / self.sd
+        z = np.where(self.sd > 0, z, np.where(b >= self.mean, np.inf, -np.inf))
+        return ndtr(z)
+
+
+def _prior_posterior(vehicle: Vehicle) -> Posterior | None:
+    """A never-calibrated vehicle's Posterior: its file's values, the class's prior
+    spread of their coefficients, the class's scatter, rho = 1."""
+    pr = vehicle.priors
+    if pr is None:
+        return None
+    pt = vehicle.powertrain
+    terms = list(PRIOR_TERMS[pt])
+    if pt == "ev" and vehicle.regen_eta is not None:
+        terms.insert(1, "regen")
+    if pt == "ev" and vehicle.warmup_j_per_k:
+        terms.append("warm")
+    if pt == "ice":
+        for name, on in (("kin", vehicle.kinetic_eta is not None), ("run", bool(vehicle.running_fuel_lps)),
+                         ("warm", bool(vehicle.warmup_fuel_l_per_k))):
+            if on:
+                terms.append(name)
+    terms = [t for t in terms if pr.get(t) is not None]
+    cp = coefficient_prior(pt, terms, pr, vehicle.eta)
+    sd = np.where(np.isfinite(cp.sd), cp.sd, 0.0)
+    scatter = Scatter(pr.scatter.aux, pr.scatter.share, 1.0,
+                      "assumed 1 (fully correlated within a day): never calibrated")
+    return Posterior(terms=tuple(terms), cov=np.diag(sd * sd), scatter=scatter,
+                     source=f"prior only: class defaults ({pr.vehicle_class}, {pr.class_from})", n_trips=0,
+                     priors=pr)
+
+
+def posterior_of(vehicle: Vehicle) -> Posterior | None:
+    """The vehicle's posterior (a calibrated file's), else its prior (module notes),
+    else None (a vehicle built without priors: no interval)."""
+    return vehicle.posterior if vehicle.posterior is not None else _prior_posterior(vehicle)
+
+
+def _temperature_parts(vehicle: Vehicle, f: Features):
+    h = energy.heating_k(f.ambient_c, vehicle.heating_below_c)
+    c = energy.cooling_k(f.ambient_c, vehicle.cooling_above_c)
+    return h, c
+
+
+def mean(vehicle: Vehicle, f: Features, ice_braking: str | None = None) -> np.ndarray:
+    """The predicted consumption [J or l], exactly as :func:`cevm.core.vehicle.predict`."""
+    if vehicle.is_ev:
+        w = energy.ev_negative_weight(vehicle)
+        return energy.ev_battery_energy_j(vehicle, f.positive_j + w * f.negative_j, duration_s=f.duration_s,
+                                          ambient_c=f.ambient_c, starts=f.starts)
+    w = braking_weight(ice_braking or vehicle.ice_braking)
+    return energy.ice_fuel_l(vehicle, f.positive_j + w * f.negative_j, mass_kg=1.0, k_pos=f.kinetic_j,
+                             traction_s=f.traction_s, duration_s=f.duration_s, idle_s=f.idle_s,
+                             ambient_c=f.ambient_c, starts=f.starts)
+
+
+def gradient(vehicle: Vehicle, f: Features, terms, ice_braking: str | None = None) -> np.ndarray:
+    """d mean / d coefficient of ``terms`` (n x k; :mod:`cevm.core.uncertainty`)."""
+    h, c = _temperature_parts(vehicle, f)
+    n = f.n
+    cols = []
+    ev = vehicle.is_ev
+    for t in terms:
+        if t == "eta":
+            if ev:
+                col = f.positive_j - (vehicle.eta ** 2 * f.negative_j if vehicle.regen_eta is None else 0.0)
+            else:
+                w = braking_weight(ice_braking or vehicle.ice_braking)
+                col = (f.positive_j + w * f.negative_j) / vehicle.fuel_lhv_j_per_l
+                if "kin" not in terms and vehicle.kinetic_eta is not None:
+                    col = col - f.kinetic_j / vehicle.fuel_lhv_j_per_l  # a fixed eta_k: its coefficient moves with eta
+        elif t == "regen":
+            col = f.negative_j
+        elif t == "kin":
+            col = f.kinetic_j / vehicle.fuel_lhv_j_per_l
+        elif t in ("aux",):
+            col = f.duration_s
+        elif t == "idle":
+            col = f.idle_s
+        elif t == "run":
+            col = f.traction_s
+        elif t == "heat":
+            col = f.duration_s * h
+        elif t == "cool":
+            col = f.duration_s * c
+        elif t == "warm":
+            col = f.starts * h
+        else:
+            raise KeyError(t)
+        cols.append(np.broadcast_to(np.asarray(col, dtype=np.float64), (n,)))
+    return np.stack(cols, axis=1) if cols else np.zeros((n, 0))
+
+
+def _extrapolation(vehicle: Vehicle, post: Posterior, f: Features) -> np.ndarray:
+    """What a prediction gains beyond the temperatures the calibration saw
+    (:func:`cevm.core.uncertainty.extrapolation_variance`); nothing for a file never
+    calibrated (its prior is all it knows anyway)."""
+    d = vehicle.calibration
+    if post.prior_only or d is None or d.ambient_c is None:
+        return np.zeros(np.broadcast(f.ambient_c, f.duration_s).shape)
+    sd = slope_prior_sd(vehicle.powertrain, post.terms, post.priors)
+    return extrapolation_variance(sd, d.ambient_c, vehicle.heating_below_c, vehicle.cooling_above_c, f.ambient_c,
+                                  f.duration_s, f.starts)
+
+
+def _param_var(post: Posterior, G: np.ndarray) -> np.ndarray:
+    """diag(G Sigma G^T), through a square root of Sigma (n k^2 multiply-adds)."""
+    if G.shape[1] == 0:
+        return np.zeros(G.shape[0])
+    w, V = np.linalg.eigh(post.cov)
+    L = V * np.sqrt(np.maximum(w, 0.0))
+    A = G @ L
+    return np.einsum("ij,ij->i", A, A)
+
+
+def predictive(vehicle: Vehicle, f: Features, *, measurement_sd=None,
+               ice_braking: str | None = None) -> Predictive:
+    """The predictive distribution of each prediction of ``f`` (module notes);
+    ``measurement_sd`` [J or l] a measurement's own random uncertainty, added when the
+    prediction is compared with one."""
+    mu = np.asarray(mean(vehicle, f, ice_braking), dtype=np.float64)
+    post = posterior_of(vehicle)
+    if post is None:
+        return Predictive(mu, np.zeros_like(mu), "none", "no priors: the vehicle was built without a class")
+    G = gradient(vehicle, f, post.terms, ice_braking)
+    var = _param_var(post, G)
+    var = var + post.scatter.trip_variance(f.duration_s, np.maximum(mu, 0.0)) + (post.meter_share * mu) ** 2
+    var = var + _extrapolation(vehicle, post, f)
+    if measurement_sd is not None:
+        var = var + np.asarray(measurement_sd, dtype=np.float64) ** 2
+    return Predictive(mu, np.sqrt(var), post.label, post.source)
+
+
+def total(vehicle: Vehicle, f: Features, groups=None, *, ice_braking: str | None = None) -> Predictive:
+    """The predictive distribution of the sum of all predictions of ``f`` (one
+    element), or of each group's sum (``groups``: a label per prediction, e.g. its
+    day; the result in the order of ``np.unique(groups)``). Within a group the scatter
+    is shared at the posterior's day correlation rho; across groups it is independent;
+    the parameters' and the meter's parts are common to all."""
+    mu = np.asarray(mean(vehicle, f, ice_braking), dtype=np.float64)
+    mu = np.broadcast_to(mu, (f.n,))
+    if groups is None:
+        codes, k = np.zeros(f.n, dtype=np.intp), 1
+    else:
+        _, codes = np.unique(np.asarray(groups), return_inverse=True)
+        k = int(codes.max()) + 1 if codes.size else 0
+    sums = np.bincount(codes, weights=mu, minlength=k)
+    post = posterior_of(vehicle)
+    if post is None:
+        return Predictive(sums, np.zeros(k), "none", "no priors: the vehicle was built without a class")
+    G = gradient(vehicle, f, post.terms, ice_braking)
+    Gs = np.stack([np.bincount(codes, weights=G[:, j], minlength=k) for j in range(G.shape[1])], axis=1) \
+        if G.shape[1] else np.zeros((k, 0))
+    var = _param_var(post, Gs) + (post.meter_share * sums) ** 2
+    sc = post.scatter
+    d = np.broadcast_to(np.asarray(f.duration_s, dtype=np.float64), (f.n,))
+    m = np.maximum(mu, 0.0)
+    own = np.bincount(codes, weights=(sc.aux * d) ** 2 + (sc.share * m) ** 2, minlength=k)
+    sd_sum = np.bincount(codes, weights=d, minlength=k)
+    m_sum = np.bincount(codes, weights=m, minlength=k)
+    shared = (sc.aux * sd_sum) ** 2 + (sc.share * m_sum) ** 2
+    var = var + sc.day_corr * shared + (1.0 - sc.day_corr) * own
+    return Predictive(sums, np.sqrt(var), post.label, post.source)
