@@ -65,6 +65,7 @@ from cevm.cli.common import (
     with_cycle_options,
 )
 from cevm.cli.output import OutputFormat, csv_writer, vehicle_legend, write_rows
+from cevm.cli.values import parse_value_options
 from cevm.core.cycle import CR0_DEFAULT
 from cevm.core.sweep import (
     AMBIENT_ORIGINS,
@@ -72,7 +73,6 @@ from cevm.core.sweep import (
     DEFAULT_SOC_START_PCT,
     PredictionSet,
     SweepBlock,
-    parse_values,
     sweep,
 )
 from cevm.errors import CevmError
@@ -128,12 +128,6 @@ PREDICT_DIGITS = {"mass_kg": 0, "payload_kg": 0, "duration_s": 0, "distance_km":
                   "energy_kwh": 2, "energy_kwh_per_km": 3, "fuel_l": 2, "fuel_l_per_100km": 1, "soc_end_pct": 1,
                   "soc_min_pct": 1, "ambient_c": 1, "range_km": 1, "measured_fuel_l": 2, "measured_energy_kwh": 2,
                   "error_pct": 1}
-
-
-def _values(specs: Optional[list[str]], option: str) -> np.ndarray | None:
-    if not specs:
-        return None
-    return np.concatenate([parse_values(s, option) for s in specs])
 
 
 # ------------------------------------------------------------------- predict columns
@@ -623,8 +617,8 @@ def predict_cmd(
     check_workers(workers)
     check_common(ice_braking, soc_start, reserve_pct)
     try:
-        masses = _values(mass_kg, "--mass-kg")
-        payloads = _values(payload_kg, "--payload-kg")
+        masses = parse_value_options(mass_kg, "--mass-kg")
+        payloads = parse_value_options(payload_kg, "--payload-kg")
         from cevm.io import load_vehicles
 
         vehicles = load_vehicles(vehicle)
