@@ -93,7 +93,13 @@ from cevm.executors.cluster import (
     local_dask_cluster,
 )
 from cevm.executors.lifelines import WATCHDOG_POLL_S
-from cevm.executors.pool import POOL_START_S, PARALLEL_EFFICIENCY, WORKER_ENV, ProcessExecutor, workers_for
+from cevm.executors.pool import (
+    PARALLEL_EFFICIENCY,
+    POOL_START_S,
+    WORKER_ENV,
+    ProcessExecutor,
+    workers_for,
+)
 from cevm.executors.serial import SerialExecutor
 from cevm.executors.worker import WORKER_CACHE_SIZE, worker_cache
 

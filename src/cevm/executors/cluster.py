@@ -20,7 +20,14 @@ import uuid
 from typing import Any
 
 from cevm.errors import CevmError
-from cevm.executors.base import MAX_ATTEMPTS, TASK_S, Executor, TaskResult, error_text, unpack
+from cevm.executors.base import (
+    MAX_ATTEMPTS,
+    TASK_S,
+    Executor,
+    TaskResult,
+    error_text,
+    unpack,
+)
 from cevm.executors.worker import execute, execute_group
 
 #: Recurring task arguments a :class:`DaskExecutor` keeps on the cluster (oldest dropped).

@@ -31,7 +31,16 @@ from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor
 from concurrent.futures import wait as cf_wait
 from concurrent.futures.process import BrokenProcessPool
 
-from cevm.executors.base import MAX_ATTEMPTS, TASK_S, Entry, Executor, RunState, TaskResult, error_text, unpack
+from cevm.executors.base import (
+    MAX_ATTEMPTS,
+    TASK_S,
+    Entry,
+    Executor,
+    RunState,
+    TaskResult,
+    error_text,
+    unpack,
+)
 from cevm.executors.lifelines import start_forkserver, worker_lifelines
 from cevm.executors.serial import SerialExecutor
 from cevm.executors.worker import execute, execute_group
