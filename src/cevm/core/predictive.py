@@ -152,12 +152,6 @@ def posterior_of(vehicle: Vehicle) -> Posterior | None:
     return vehicle.posterior if vehicle.posterior is not None else _prior_posterior(vehicle)
 
 
-def _temperature_parts(vehicle: Vehicle, f: Features):
-    h = energy.heating_k(f.ambient_c, vehicle.heating_below_c)
-    c = energy.cooling_k(f.ambient_c, vehicle.cooling_above_c)
-    return h, c
-
-
 def mean(vehicle: Vehicle, f: Features, ice_braking: str | None = None) -> np.ndarray:
     """The predicted consumption [J or l], exactly as :func:`cevm.core.vehicle.predict`."""
     if vehicle.is_ev:
@@ -172,61 +166,90 @@ def mean(vehicle: Vehicle, f: Features, ice_braking: str | None = None) -> np.nd
 
 def gradient(vehicle: Vehicle, f: Features, terms, ice_braking: str | None = None) -> np.ndarray:
     """d mean / d coefficient of ``terms`` (n x k; :mod:`cevm.core.uncertainty`)."""
-    h, c = _temperature_parts(vehicle, f)
+    return _gradient_rows(vehicle, f, terms, ice_braking).T
+
+
+def _gradient_rows(vehicle: Vehicle, f: Features, terms, ice_braking: str | None = None,
+                   extra: int = 0) -> np.ndarray:
+    """The gradient as k rows of n (+ ``extra`` rows left for the caller): the layout
+    whose products with a k x k matrix and row-wise sums of squares numpy does fast (a
+    tall n x k matrix times k x k is an order of magnitude slower)."""
     n = f.n
-    cols = []
+    k = len(terms)
+    out = np.empty((k + extra, n))
+    needs_h = any(t in ("heat", "warm") for t in terms)
+    h = energy.heating_k(f.ambient_c, vehicle.heating_below_c) if needs_h else None
+    c = energy.cooling_k(f.ambient_c, vehicle.cooling_above_c) if "cool" in terms else None
     ev = vehicle.is_ev
-    for t in terms:
+    for j, t in enumerate(terms):
+        row = out[j]
         if t == "eta":
             if ev:
-                col = f.positive_j - (vehicle.eta ** 2 * f.negative_j if vehicle.regen_eta is None else 0.0)
+                if vehicle.regen_eta is None:
+                    np.multiply(f.negative_j, -vehicle.eta ** 2, out=row)
+                    row += f.positive_j
+                else:
+                    row[:] = f.positive_j
             else:
                 w = braking_weight(ice_braking or vehicle.ice_braking)
-                col = (f.positive_j + w * f.negative_j) / vehicle.fuel_lhv_j_per_l
+                np.multiply(f.negative_j, w, out=row)
+                row += f.positive_j
+                row /= vehicle.fuel_lhv_j_per_l
                 if "kin" not in terms and vehicle.kinetic_eta is not None:
-                    col = col - f.kinetic_j / vehicle.fuel_lhv_j_per_l  # a fixed eta_k: its coefficient moves with eta
+                    row -= np.asarray(f.kinetic_j) / vehicle.fuel_lhv_j_per_l  # a fixed eta_k moves with eta
         elif t == "regen":
-            col = f.negative_j
+            row[:] = f.negative_j
         elif t == "kin":
-            col = f.kinetic_j / vehicle.fuel_lhv_j_per_l
-        elif t in ("aux",):
-            col = f.duration_s
+            np.divide(f.kinetic_j, vehicle.fuel_lhv_j_per_l, out=row)
+        elif t == "aux":
+            row[:] = f.duration_s
         elif t == "idle":
-            col = f.idle_s
+            row[:] = f.idle_s
         elif t == "run":
-            col = f.traction_s
+            row[:] = f.traction_s
         elif t == "heat":
-            col = f.duration_s * h
+            np.multiply(f.duration_s, h, out=row)
         elif t == "cool":
-            col = f.duration_s * c
+            np.multiply(f.duration_s, c, out=row)
         elif t == "warm":
-            col = f.starts * h
+            np.multiply(f.starts, h, out=row)
         else:
             raise KeyError(t)
-        cols.append(np.broadcast_to(np.asarray(col, dtype=np.float64), (n,)))
-    return np.stack(cols, axis=1) if cols else np.zeros((n, 0))
+    return out
 
 
-def _extrapolation(vehicle: Vehicle, post: Posterior, f: Features) -> np.ndarray:
+def _extrapolation(vehicle: Vehicle, post: Posterior, f: Features) -> np.ndarray | None:
     """What a prediction gains beyond the temperatures the calibration saw
     (:func:`cevm.core.uncertainty.extrapolation_variance`); nothing for a file never
-    calibrated (its prior is all it knows anyway)."""
+    calibrated (its prior is all it knows anyway): None."""
     d = vehicle.calibration
     if post.prior_only or d is None or d.ambient_c is None:
-        return np.zeros(np.broadcast(f.ambient_c, f.duration_s).shape)
+        return None
     sd = slope_prior_sd(vehicle.powertrain, post.terms, post.priors)
+    if not sd:
+        return None
     return extrapolation_variance(sd, d.ambient_c, vehicle.heating_below_c, vehicle.cooling_above_c, f.ambient_c,
                                   f.duration_s, f.starts)
 
 
-def _param_var(post: Posterior, G: np.ndarray) -> np.ndarray:
-    """diag(G Sigma G^T), through a square root of Sigma (n k^2 multiply-adds)."""
-    if G.shape[1] == 0:
-        return np.zeros(G.shape[0])
-    w, V = np.linalg.eigh(post.cov)
-    L = V * np.sqrt(np.maximum(w, 0.0))
-    A = G @ L
-    return np.einsum("ij,ij->i", A, A)
+def _sqrt_cov(cov: np.ndarray) -> np.ndarray:
+    """A square root R of a covariance, R^T R = cov (eigen-decomposition: semi-definite
+    covariances too)."""
+    w, V = np.linalg.eigh(cov)
+    return (V * np.sqrt(np.maximum(w, 0.0))).T
+
+
+def _variance(post: Posterior, rows: np.ndarray, k: int) -> np.ndarray:
+    """Sum of squares over the rows of [R G ; the rest]: the parameters' variance
+    g Sigma g^T (G the first k rows) plus the squares of the rows after them."""
+    var = np.zeros(rows.shape[1])
+    if k:
+        A = np.empty((k, rows.shape[1]))
+        np.matmul(_sqrt_cov(post.cov), rows[:k], out=A)
+        var = np.einsum("ij,ij->j", A, A)
+    if rows.shape[0] > k:
+        var += np.einsum("ij,ij->j", rows[k:], rows[k:])
+    return var
 
 
 def predictive(vehicle: Vehicle, f: Features, *, measurement_sd=None,
@@ -238,13 +261,22 @@ def predictive(vehicle: Vehicle, f: Features, *, measurement_sd=None,
     post = posterior_of(vehicle)
     if post is None:
         return Predictive(mu, np.zeros_like(mu), "none", "no priors: the vehicle was built without a class")
-    G = gradient(vehicle, f, post.terms, ice_braking)
-    var = _param_var(post, G)
-    var = var + post.scatter.trip_variance(f.duration_s, np.maximum(mu, 0.0)) + (post.meter_share * mu) ** 2
-    var = var + _extrapolation(vehicle, post, f)
+    k = len(post.terms)
+    rows = _gradient_rows(vehicle, f, post.terms, ice_braking, extra=2)
+    sc = post.scatter
+    np.multiply(f.duration_s, sc.aux, out=rows[k])
+    # the energy-proportional scatter and the meter's share, at the prediction
+    np.maximum(np.broadcast_to(mu, (f.n,)), 0.0, out=rows[k + 1])
+    rows[k + 1] *= math.hypot(sc.share, post.meter_share)
+    var = _variance(post, rows, k)
+    extra = _extrapolation(vehicle, post, f)
+    if extra is not None:
+        var += extra
     if measurement_sd is not None:
         var = var + np.asarray(measurement_sd, dtype=np.float64) ** 2
-    return Predictive(mu, np.sqrt(var), post.label, post.source)
+    var = var.reshape(mu.shape) if var.size == mu.size else var
+    shape = np.broadcast(mu, var).shape
+    return Predictive(np.broadcast_to(mu, shape), np.sqrt(np.broadcast_to(var, shape)), post.label, post.source)
 
 
 def total(vehicle: Vehicle, f: Features, groups=None, *, ice_braking: str | None = None) -> Predictive:
@@ -264,10 +296,10 @@ def total(vehicle: Vehicle, f: Features, groups=None, *, ice_braking: str | None
     post = posterior_of(vehicle)
     if post is None:
         return Predictive(sums, np.zeros(k), "none", "no priors: the vehicle was built without a class")
-    G = gradient(vehicle, f, post.terms, ice_braking)
-    Gs = np.stack([np.bincount(codes, weights=G[:, j], minlength=k) for j in range(G.shape[1])], axis=1) \
-        if G.shape[1] else np.zeros((k, 0))
-    var = _param_var(post, Gs) + (post.meter_share * sums) ** 2
+    G = _gradient_rows(vehicle, f, post.terms, ice_braking)
+    Gs = np.stack([np.bincount(codes, weights=G[j], minlength=k) for j in range(G.shape[0])]) \
+        if G.shape[0] else np.zeros((0, k))
+    var = _variance(post, Gs, Gs.shape[0]) + (post.meter_share * sums) ** 2
     sc = post.scatter
     d = np.broadcast_to(np.asarray(f.duration_s, dtype=np.float64), (f.n,))
     m = np.maximum(mu, 0.0)

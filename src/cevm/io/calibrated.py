@@ -40,9 +40,10 @@ def fitted_keys(result: CalibrationResult) -> dict[str, float | str]:
             continue
         key, factor = t.file
         keys[key] = getattr(v, name) * factor
-    if any(fields[n].temperature for n in result.fitted if n in fields) and result.rows:
-        temps = np.array([r.ambient_c for r in result.rows])
-        keys["reference_temp_c"] = round(float(np.median(temps[np.isfinite(temps)])), 1)
+    temps = np.array([r.ambient_c for r in result.rows])
+    temps = temps[np.isfinite(temps)]
+    if any(fields[n].temperature for n in result.fitted if n in fields) and temps.size:
+        keys["reference_temp_c"] = round(float(np.median(temps)), 1)
         keys["heating_below_c"] = v.heating_below_c
         keys["cooling_above_c"] = v.cooling_above_c
     return keys
@@ -200,11 +201,12 @@ def changed_sources(result: CalibrationResult, vehicle_id: str | None) -> dict[s
             continue
         key, f = t.file
         unit = t.display[0] if t.display[1] == f else ""
-        text = f"cevm calibrate, {base}: {value * f:.4g} +- {sd * f:.2g}{(' ' + unit) if unit else ''} (posterior)"
+        u = f" {unit}" if unit else ""
+        text = f"cevm calibrate, {base}: {value * f:.4g} +- {sd * f:.2g}{u} (posterior)"
         p = priors.get(t.name) if priors is not None else None
         if p is not None:
             kept = result.prior_kept.get(field)
-            text += (f"; prior {p.low * f:.4g}-{p.high * f:.4g} ({p.source})" + (f"; {kept}" if kept else ""))
+            text += (f"; prior {p.low * f:.4g} to {p.high * f:.4g}{u} ({p.source})" + (f"; {kept}" if kept else ""))
         out[key] = text
     for key, value in neutral_keys(result).items():
         out[key] = f"cevm calibrate, {base}: not in the calibrated model"

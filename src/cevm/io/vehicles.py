@@ -47,8 +47,17 @@ Vehicle files (TOML), units in the key names::
     [sources]                                  # optional: where each number comes from
     cda_m2 = "paper, section 5.1"
 
+    class = "bus"                              # optional: bus, truck, van, car, quadricycle:
+                                               #   whose priors the terms start from (default:
+                                               #   inferred from the mass, and said so)
+    [prior]                                    # optional: ranges [low, high] that override
+    eta = [0.75, 0.85]                         #   the class's (:mod:`cevm.io.priors`)
+
     [calibration]                              # written by cevm calibrate: what the fit saw
     terms = ["eta", "aux", "heat"]             #   (see :class:`FitDomain`)
+    [posterior]                                # written by cevm calibrate: what it learnt
+    terms = ["eta", "aux", "heat"]             #   (standard deviations, correlations, the
+                                               #   trips' scatter: :mod:`cevm.io.priors`)
 
 Every number is checked against :data:`cevm.core.vehicle.PLAUSIBLE` (bounds no road
 vehicle leaves); the error names the file and the key.

@@ -325,6 +325,7 @@ def fit_model(cf: CandidateFit, excluded: dict, settings: Settings, *, priors: P
     domain = fit_domain(data, active, vehicle_id)
     calibrated = replace(vehicle, **model.fields_of(active, result.theta))
     pred_in = predict_set(calibrated, data)
+    _, var_in = result.predictive_var(model, idx_all)
     mean_cv, var_cv = cross_validated(cf, settings, fold_of)
     z = norm.ppf(0.5 + 0.5 * interval)
     sd_cv = np.sqrt(var_cv)
@@ -351,7 +352,7 @@ def fit_model(cf: CandidateFit, excluded: dict, settings: Settings, *, priors: P
             error_pct_in_sample=float(err_in[i]), error_pct_cv=float(err_cv[i]), fold=int(fold_of[i]),
             ambient_c=float(data.ambient_c[i]), mass_source=data.mass_sources[i],
             predicted_low=float(low[i]), predicted_high=float(high[i]), sd_cv=float(sd_cv[i]),
-            flags=tuple(data.flags[i]),
+            flags=tuple(data.flags[i]), sd_in_sample=float(math.sqrt(var_in[i])),
         )
         for i in range(data.n)
     )

@@ -57,6 +57,7 @@ class TripRow:
     predicted_low / predicted_high the held-out prediction's interval (at the
     calibration's ``interval`` level; NaN without CV) and sd_cv its standard deviation,
     against the measurement (the measurement's own random uncertainty included);
+    sd_in_sample the same of the in-sample prediction (the posterior of all trips);
     flags notes on the trip (a splice the cleaner could not repair ...).
     """
 
@@ -79,6 +80,7 @@ class TripRow:
     predicted_high: float = math.nan
     sd_cv: float = math.nan
     flags: tuple = ()
+    sd_in_sample: float = math.nan
 
     @property
     def inside(self) -> bool | None:
