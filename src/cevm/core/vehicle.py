@@ -46,6 +46,7 @@ class FitDomain:
     Ranges are (low, high) over the trips the fit used, SI: ``ambient_c`` [degC, trip
     means], ``mean_speed_mps`` [m/s, distance / duration], ``mass_kg`` [kg],
     ``distance_m`` [m]; None where the trips did not say (no temperature logged).
+    ``idle_share`` [-] the trips' time at standstill over their duration (their duty);
     ``terms`` the model's terms, ``cv_mean_pct`` / ``cv_std_pct`` its cross-validated
     error [%], ``first_utc`` / ``last_utc`` the first and last trip start (ISO 8601).
     """
@@ -63,6 +64,7 @@ class FitDomain:
     cv_mean_pct: float | None = None
     cv_std_pct: float | None = None
     mass_sources: str | None = None
+    idle_share: tuple[float, float] | None = None
 
 
 #: How far outside a calibration's range a prediction may go before it is warned about:
@@ -71,9 +73,55 @@ class FitDomain:
 DOMAIN_MARGIN_K = 3.0
 DOMAIN_MARGIN_MASS = 0.10
 DOMAIN_MARGIN_SPEED = 0.25
+#: ... and an absolute margin on the share of time at standstill (a duty with many more
+#: stops, or none, than the trips had).
+DOMAIN_MARGIN_IDLE_SHARE = 0.10
+
+#: What a prediction can lie outside of (:func:`extrapolation_mask`), in column order.
+EXTRAPOLATION_AXES = ("temperature", "mass", "speed", "duty")
 
 
-def domain_warnings(vehicle: Vehicle, *, mass_kg=None, ambient_c=None, mean_speed_mps=None) -> list[str]:
+def extrapolation_mask(domain: FitDomain | None, *, mass_kg=None, ambient_c=None, mean_speed_mps=None,
+                       idle_share=None) -> np.ndarray:
+    """Per prediction, a bit per axis of :data:`EXTRAPOLATION_AXES` set where it lies
+    outside what the calibration ``domain`` saw (with the margins of
+    :func:`domain_warnings`); 0 everywhere without a domain. Arguments broadcast."""
+    args = [np.asarray(x, dtype=np.float64) for x in (mass_kg, ambient_c, mean_speed_mps, idle_share)
+            if x is not None]
+    shape = np.broadcast(*args).shape if args else ()
+    out = np.zeros(shape, dtype=np.int64)
+    if domain is None:
+        return out
+    if ambient_c is not None and domain.ambient_c is not None:
+        lo, hi = domain.ambient_c
+        t = np.asarray(ambient_c, dtype=np.float64)
+        out |= np.broadcast_to(((t < lo - DOMAIN_MARGIN_K) | (t > hi + DOMAIN_MARGIN_K)), shape).astype(np.int64)
+    if mass_kg is not None and domain.mass_kg is not None:
+        lo, hi = domain.mass_kg
+        m = np.asarray(mass_kg, dtype=np.float64)
+        bad = (m < lo * (1 - DOMAIN_MARGIN_MASS)) | (m > hi * (1 + DOMAIN_MARGIN_MASS))
+        out |= np.broadcast_to(bad, shape).astype(np.int64) << 1
+    if mean_speed_mps is not None and domain.mean_speed_mps is not None:
+        lo, hi = domain.mean_speed_mps
+        v = np.asarray(mean_speed_mps, dtype=np.float64)
+        bad = (v < lo * (1 - DOMAIN_MARGIN_SPEED)) | (v > hi * (1 + DOMAIN_MARGIN_SPEED))
+        out |= np.broadcast_to(bad, shape).astype(np.int64) << 2
+    if idle_share is not None and domain.idle_share is not None:
+        lo, hi = domain.idle_share
+        x = np.asarray(idle_share, dtype=np.float64)
+        bad = (x < lo - DOMAIN_MARGIN_IDLE_SHARE) | (x > hi + DOMAIN_MARGIN_IDLE_SHARE)
+        out |= np.broadcast_to(bad, shape).astype(np.int64) << 3
+    return out
+
+
+def extrapolation_text(mask: int) -> str:
+    """"none", or the axes of :data:`EXTRAPOLATION_AXES` a mask sets, joined by "+"."""
+    names = [a for i, a in enumerate(EXTRAPOLATION_AXES) if int(mask) >> i & 1]
+    return "+".join(names) if names else "none"
+
+
+def domain_warnings(vehicle: Vehicle, *, mass_kg=None, ambient_c=None, mean_speed_mps=None,
+                    idle_share=None) -> list[str]:
     """Warnings for a prediction outside what the vehicle's calibration saw (none for a
     vehicle file that was not calibrated). Arguments are scalars or arrays (the extremes
     are checked); margins :data:`DOMAIN_MARGIN_K`, :data:`DOMAIN_MARGIN_MASS`,
@@ -103,6 +151,12 @@ def domain_warnings(vehicle: Vehicle, *, mass_kg=None, ambient_c=None, mean_spee
         if v.size and (float(v.min()) < lo * (1 - DOMAIN_MARGIN_SPEED) or float(v.max()) > hi * (1 + DOMAIN_MARGIN_SPEED)):
             out.append(f"{label} at mean speeds of {3.6 * lo:.1f} to {3.6 * hi:.1f} km/h; asked at "
                        f"{_span(3.6 * v, 1)} km/h: a different duty")
+    if idle_share is not None and d.idle_share is not None:
+        x = np.asarray(idle_share, dtype=np.float64)
+        lo, hi = d.idle_share
+        if x.size and (float(x.min()) < lo - DOMAIN_MARGIN_IDLE_SHARE or float(x.max()) > hi + DOMAIN_MARGIN_IDLE_SHARE):
+            out.append(f"{label} standing still {100 * lo:.0f} to {100 * hi:.0f} % of the time; asked at "
+                       f"{_span(100 * x, 0)} %: a different duty")
     return out
 
 

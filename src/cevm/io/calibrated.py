@@ -176,6 +176,7 @@ def calibration_table(result: CalibrationResult, *, store: str | None = None, se
         "first_trip_utc": d.first_utc, "last_trip_utc": d.last_utc,
         "ambient_c": pair(d.ambient_c, 1.0, 1), "mean_speed_kmh": pair(d.mean_speed_mps, 3.6, 2),
         "mass_kg": pair(d.mass_kg, 1.0, 0), "distance_km": pair(d.distance_m, 1e-3, 2),
+        "idle_share": pair(d.idle_share, 1.0, 3),
         "mass_sources": d.mass_sources, "cv_scheme": d.cv_scheme, "cv_mean_pct": num(d.cv_mean_pct),
         "cv_std_pct": num(d.cv_std_pct), "nested_cv_std_pct": num(nested_std_pct),
         "candidates": selected_from, "candidates_compared": compared,

@@ -324,7 +324,7 @@ def fit_domain_from_mapping(table: Any, source: str = "<vehicle>") -> FitDomain 
         ambient_c=_pair(table, "ambient_c", source), mean_speed_mps=_pair(table, "mean_speed_kmh", source, 1 / 3.6),
         mass_kg=_pair(table, "mass_kg", source), distance_m=_pair(table, "distance_km", source, 1e3),
         cv_scheme=opt_str("cv_scheme"), cv_mean_pct=opt_num("cv_mean_pct"), cv_std_pct=opt_num("cv_std_pct"),
-        mass_sources=opt_str("mass_sources"),
+        mass_sources=opt_str("mass_sources"), idle_share=_pair(table, "idle_share", source),
     )
 
 

@@ -117,6 +117,7 @@ def fit_domain(data: TripSet, terms: Sequence[str], vehicle_id: str | None = Non
         ambient_c=span(data.ambient_c) if np.all(np.isfinite(data.ambient_c)) and data.n else None,
         mean_speed_mps=span(data.distance / data.duration), mass_kg=span(data.mass), distance_m=span(data.distance),
         mass_sources=", ".join(sources) if sources else None,
+        idle_share=span(data.idle / data.duration) if data.n else None,
     )
 
 
