@@ -37,6 +37,7 @@ from cevm.cli.common import (
     CycleOption,
     FormatOption,
     IceBrakingOption,
+    IntervalOption,
     OutOption,
     ReserveOption,
     RouteOption,
@@ -56,7 +57,7 @@ from cevm.cli.common import (
     with_cycle_options,
 )
 from cevm.cli.output import OutputFormat, vehicle_legend, write_rows
-from cevm.cli.prediction_columns import PREDICT, PREDICT_TABLE, STATUS, BlockRows
+from cevm.cli.prediction_columns import PREDICT, PREDICT_TABLE, STATUS, BlockRows, RangeOptions
 from cevm.cli.values import parse_value_options
 from cevm.core.cycle import CR0_DEFAULT
 from cevm.core.sweep import (
@@ -83,9 +84,11 @@ class PredictWriter:
     """Streams predict blocks as CSV, JSON or a (bounded) table, with the columns of
     :data:`~cevm.cli.prediction_columns.PREDICT`."""
 
-    def __init__(self, fmt: OutputFormat, stream: IO[str], temperature_used: bool = False):
+    def __init__(self, fmt: OutputFormat, stream: IO[str], temperature_used: bool = False,
+                 options: RangeOptions | None = None):
         self.fmt = fmt
         self.stream = stream
+        self.options = options or RangeOptions()
         self.temperature_used = temperature_used
         self.pending: list[tuple[SweepBlock, str]] = []
         self.pending_rows = 0
@@ -108,7 +111,7 @@ class PredictWriter:
     def _flush(self) -> None:
         if not self.pending:
             return
-        cols = concat_columns([PREDICT.values(BlockRows(b, m)) for b, m in self.pending])
+        cols = concat_columns([PREDICT.values(BlockRows(b, m, self.options)) for b, m in self.pending])
         is_ev = np.concatenate([b.pset.is_ev for b, _ in self.pending])
         self.pending, self.pending_rows = [], 0
         for lo in range(0, is_ev.size, WRITE_BATCH_ROWS):  # bounded memory for huge blocks
@@ -124,7 +127,7 @@ class PredictWriter:
             self.started = True
 
     def _table_add(self, block: SweepBlock, mass_source: str) -> None:
-        cols = PREDICT.values(BlockRows(block, mass_source))
+        cols = PREDICT.values(BlockRows(block, mass_source, self.options))
         n = min(block.n, TABLE_MAX_ROWS - len(self.table_rows))
         for i in range(n):
             row = {}
@@ -237,6 +240,9 @@ def with_status(row: dict) -> dict:
     ev = row["powertrain"] == "ev"
     ok = row["reserve_ok"] if ev else row["tank_ok"]
     status = "?" if ok is None else "yes" if ok else "NO"
+    p = row.get("p_reserve_ok" if ev else "p_tank_ok")
+    if p is not None and row.get("interval_from") in ("posterior", "prior"):
+        status += f", P {p:.2f}"
     if row.get("empty_at_km") is not None:
         status += f" (empty at {row['empty_at_km']:,.1f} km)"
     elif ev and row.get("reserve_at_km") is not None:
@@ -306,6 +312,7 @@ def predict_cmd(
     ] = None,
     soc_start: SocStartOption = DEFAULT_SOC_START_PCT,
     reserve_pct: ReserveOption = DEFAULT_RESERVE_PCT,
+    interval: IntervalOption = 0.9,
     fmt: FormatOption = OutputFormat.table,
     out: OutOption = None,
     plot: Annotated[
@@ -353,7 +360,7 @@ def predict_cmd(
     if workers is not None and scheduler is not None:
         raise fail("give --workers (local processes) or --scheduler (a Dask cluster), not both")
     check_workers(workers)
-    check_common(ice_braking, soc_start, reserve_pct)
+    check_common(ice_braking, soc_start, reserve_pct, interval)
     try:
         masses = parse_value_options(mass_kg, "--mass-kg")
         payloads = parse_value_options(payload_kg, "--payload-kg")
@@ -373,7 +380,8 @@ def predict_cmd(
             note_flat_cycles(sources)
             executor = stack.enter_context(make_executor(None if scheduler else (workers or 1), scheduler))
             stream = open_out(stack, out)
-            writer = PredictWriter(fmt, stream, temperature_used=any(uses_temperature(v) for v in vehicles))
+            writer = PredictWriter(fmt, stream, temperature_used=any(uses_temperature(v) for v in vehicles),
+                                   options=RangeOptions(interval, soc_start, reserve_pct))
             keep_for_plot = plot is not None and np.bincount(pset.vehicle_index).max() > 1
             flagged = np.zeros(3, dtype=np.int64)
             plot_data, psets = [], []

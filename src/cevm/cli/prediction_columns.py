@@ -31,7 +31,8 @@ from typing import Any
 import numpy as np
 
 from cevm.cli.columns import Column, ColumnSpec
-from cevm.core.sweep import AMBIENT_ORIGINS, SweepBlock
+from cevm.core.intervals import EXTRAPOLATION_TEXTS, INTERVAL_SOURCES, RowRanges, block_ranges, p_reserve_ok, p_tank_ok
+from cevm.core.sweep import AMBIENT_ORIGINS, DEFAULT_RESERVE_PCT, DEFAULT_SOC_START_PCT, SweepBlock
 from cevm.units import J_PER_KWH
 
 EV, ICE = ("ev",), ("ice",)
@@ -40,18 +41,53 @@ EV, ICE = ("ev",), ("ice",)
 # ------------------------------------------------------------------------------ predict
 
 
+class RangeOptions:
+    """What the interval columns need beside a block: the interval's ``level`` and the
+    state of charge at the start and the reserve [%] (predict's options)."""
+
+    def __init__(self, level: float = 0.9, soc_start_pct: float = DEFAULT_SOC_START_PCT,
+                 reserve_pct: float = DEFAULT_RESERVE_PCT):
+        self.level = level
+        self.soc_start_pct = soc_start_pct
+        self.reserve_pct = reserve_pct
+
+
 class BlockRows:
     """What a predict column reads: one block of rows (:class:`~cevm.core.sweep.SweepBlock`)
     and where its masses come from (``mass_source``), with helpers that give arrays of
     the block's rows in output units: numbers and booleans as floats (NaN: no value),
-    text as (codes, categories)."""
+    text as (codes, categories); ``options`` the level of its intervals and the state of
+    charge they are measured against (:class:`RangeOptions`)."""
 
-    def __init__(self, block: SweepBlock, mass_source: str = "vehicle file"):
+    def __init__(self, block: SweepBlock, mass_source: str = "vehicle file", options: RangeOptions | None = None):
         self.block = block
         self.mass_source = mass_source
         self.pset = block.pset
         self.source = block.source
         self.n = block.pset.n
+        self.options = options or RangeOptions()
+
+    @cached_property
+    def ranges(self) -> RowRanges:
+        """Each row's predictive distribution (:func:`cevm.core.intervals.block_ranges`)."""
+        return block_ranges(self.block)
+
+    @cached_property
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """The rows' interval [J (EV) or l (ICE)] at the options' level."""
+        return self.ranges.bounds(self.options.level)
+
+    def soc_at(self, bound: np.ndarray) -> np.ndarray:
+        """The state of charge at the end [%] with ``bound`` [J] drawn instead of the
+        row's energy: where the row reaches its end, never below 0 (an EV that may run
+        empty: p_reserve_ok says how likely)."""
+        with np.errstate(invalid="ignore"):
+            soc = self.block.soc_end_pct + 100.0 * (self.block.energy_j - bound) / self.pset.battery_j
+            return np.where(np.isfinite(self.block.soc_end_pct), np.maximum(soc, 0.0), np.nan)
+
+    def fuel_left(self, bound: np.ndarray) -> np.ndarray:
+        """tank_l less ``bound`` [l], never below 0 (NaN without tank_l)."""
+        return np.maximum(self.pset.tank_l - bound, 0.0)
 
     @cached_property
     def km(self) -> float:
@@ -170,6 +206,35 @@ PREDICT = ColumnSpec((
            digits=2, value=lambda r: r.truth["measured_energy_kwh"]),
     Column("error_pct", "(modelled - measured) / measured [%], at a stored trip's own mass", header="error %",
            digits=1, value=lambda r: r.truth["error_pct"]),
+    Column("interval", "the level of the row's interval (--interval: 0.9 is the central 90 %)", digits=3,
+           value=lambda r: r.same(r.options.level)),
+    Column("energy_kwh_low", "the interval's low end of the battery energy [kWh]", EV, header="kWh low", digits=2,
+           value=lambda r: r.bounds[0] / J_PER_KWH),
+    Column("energy_kwh_high", "the interval's high end of the battery energy [kWh]", EV, header="kWh high", digits=2,
+           value=lambda r: r.bounds[1] / J_PER_KWH),
+    Column("soc_end_pct_low", "state of charge at the end with the interval's high energy [%] (never below 0)", EV,
+           header="SoC end % low", digits=1, value=lambda r: r.soc_at(r.bounds[1])),
+    Column("soc_end_pct_high", "state of charge at the end with the interval's low energy [%]", EV,
+           header="SoC end % high", digits=1, value=lambda r: r.soc_at(r.bounds[0])),
+    Column("p_reserve_ok", "the probability of completing the source with --reserve-pct kept all along", EV,
+           header="P reserve ok", digits=3, decimals=6,
+           value=lambda r: p_reserve_ok(r.block, r.ranges, r.options.soc_start_pct, r.options.reserve_pct)),
+    Column("fuel_l_low", "the interval's low end of the fuel [l]", ICE, header="fuel l low", digits=2,
+           value=lambda r: r.bounds[0]),
+    Column("fuel_l_high", "the interval's high end of the fuel [l]", ICE, header="fuel l high", digits=2,
+           value=lambda r: r.bounds[1]),
+    Column("fuel_left_l_low", "fuel left in tank_l with the interval's high fuel [l] (never below 0)", ICE,
+           value=lambda r: r.fuel_left(r.bounds[1])),
+    Column("fuel_left_l_high", "fuel left in tank_l with the interval's low fuel [l]", ICE,
+           value=lambda r: r.fuel_left(r.bounds[0])),
+    Column("p_tank_ok", "the probability that the fuel fits tank_l (empty without tank_l)", ICE, header="P tank ok",
+           digits=3, decimals=6, value=lambda r: p_tank_ok(r.block, r.ranges)),
+    Column("interval_from", "what the interval comes from: posterior (the vehicle's calibration), prior (its "
+           "class's ranges: a file never calibrated) or none (a vehicle without priors)", kind="text",
+           value=lambda r: (r.ranges.source, list(INTERVAL_SOURCES))),
+    Column("extrapolation", "none, or which of temperature, mass, speed (mean), duty (share of time standing) lie "
+           "outside what the vehicle's calibration saw (never calibrated: none)", kind="text",
+           value=lambda r: (r.ranges.extrapolation, list(EXTRAPOLATION_TEXTS))),
 ), json_lead=("cycle", "vehicle", "powertrain", "mass_kg", "distance_km", "duration_s", "wheel_energy_kwh", "energy_kwh",
               "energy_kwh_per_km", "fuel_l", "fuel_l_per_100km", "ice_braking"))
 
