@@ -27,36 +27,36 @@ from cevm.io.cycles import (
     read_cycles,
 )
 from cevm.io.numeric_csv import read_numeric_columns, sniff_csv
-
 from conftest import DATA, SHARED, shared_or_skip
 
 runner = CliRunner()
 VECTO_STANDIN = DATA / "cycles" / "vecto-standin"
 VECTO = SHARED / "cycles" / "vecto-carculator"
 
-#: What the VECTO-layout files hold, counted with the csv module (the stand-in's by
-#: construction, see tests/data/cycles/README.md): the truck file's mission columns that
-#: read, those refused (line, column, words of the message), the rows of 'Regional
-#: delivery, 7.5t', the line where the bus file's Time column has stopped, the bus rows.
-VECTO_FACTS = {
-    VECTO_STANDIN: {
-        "missions_read": 3,
+
+def vecto_facts(splice_line: int, missions_read: int, regional_rows: int, bus_time_stop_line: int,
+                bus_rows: int) -> dict:
+    """What a folder of VECTO-layout files holds, counted with the csv module (the stand-in's
+    by construction, see tests/data/cycles/README.md): the truck file's mission columns that
+    read, those refused (line, column, words of the message), the rows of 'Regional
+    delivery, 7.5t', the line where the bus file's Time column has stopped, the bus rows."""
+    return {
+        "missions_read": missions_read,
         "refusals": {
             # 0 -> 59.9 km/h in one second, spliced into the trace
-            "Long haul, 7.5t": (122, "Long haul, 7.5t", "acceleration 16.6 m/s^2"),
+            "Long haul, 7.5t": (splice_line, "Long haul, 7.5t", "acceleration 16.6 m/s^2"),
             # the gradient file names this column 'Regional delivery, 8.5t'
             "Regional delivery, 7.5t": (1, None, "did you mean 'Regional delivery, 8.5t'"),
         },
-        "regional_rows": 290, "bus_time_stop_line": 122, "bus_rows": 483,
-    },
-    VECTO: {
-        "missions_read": 19,
-        "refusals": {
-            "Long haul, 7.5t": (5202, "Long haul, 7.5t", "acceleration 16.6 m/s^2"),
-            "Regional delivery, 7.5t": (1, None, "did you mean 'Regional delivery, 8.5t'"),
-        },
-        "regional_rows": 1676, "bus_time_stop_line": 5827, "bus_rows": 17918,
-    },
+        "regional_rows": regional_rows, "bus_time_stop_line": bus_time_stop_line, "bus_rows": bus_rows,
+    }
+
+
+VECTO_FACTS = {
+    VECTO_STANDIN: vecto_facts(splice_line=122, missions_read=3, regional_rows=290, bus_time_stop_line=122,
+                               bus_rows=483),
+    VECTO: vecto_facts(splice_line=5202, missions_read=19, regional_rows=1676, bus_time_stop_line=5827,
+                       bus_rows=17918),
 }
 
 
