@@ -252,3 +252,31 @@ def test_property_any_bytes_give_a_clear_error_or_trips_never_a_crash(tmp_path, 
 
 
 PROFILES = load_profiles()
+
+
+def test_an_unreadable_subfolder_is_reported_and_fails_the_run(tmp_path, fleet, monkeypatch):
+    """A subfolder that cannot be listed (here: os.scandir refused for it, as for a
+    folder without read permission, which root's tests cannot make) is named in one
+    line, in --log-json too, and the run exits 1, not 0: a cron job learns it missed
+    logs. The readable logs are ingested."""
+    import os
+
+    logs, _ = fleet
+    locked = Path(logs) / "locked"
+    locked.mkdir()
+    real_scandir = os.scandir
+
+    def scandir(path="."):
+        if Path(path) == locked:
+            raise PermissionError(13, "Permission denied", str(path))
+        return real_scandir(path)
+
+    monkeypatch.setattr(os, "scandir", scandir)
+    res = run("ingest", logs, "--store", tmp_path / "s.sqlite", "--log-json")
+    assert res.exit_code == 1, res.output
+    events = [json.loads(line) for line in res.stdout.splitlines()]
+    failed = [e for e in events if e["event"] == "file" and e["status"] == "failed"]
+    assert len(failed) == 1 and str(locked) in failed[0]["error"] and "Permission denied" in failed[0]["error"]
+    assert events[-1]["event"] == "summary" and events[-1]["ingested"] == 3 and events[-1]["failed"] == 1
+    res = run("ingest", logs, "--store", tmp_path / "t.sqlite", "-q")
+    assert res.exit_code == 1 and str(locked) in res.output
