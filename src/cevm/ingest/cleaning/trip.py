@@ -95,6 +95,9 @@ def _clean_trip(log: CleanedLog, seg: TripSpeedRows, sources: Sequence[EnergySou
         "distance_ratio_speed_vs_odometer": _odometer_ratio(log, lo, hi, grid_t, dist),
         "consumption": mq,
     }
+    jumps = log.ev.jumps_between(float(seg.t[0]), float(seg.t[-1]))
+    if jumps:  # a splice the cleaning kept as logged: for calibrate to flag or down-weight the trip
+        tq["speed_jumps"] = jumps
     return CleanTrip(
         start_utc_s=float(grid_t[0]),
         time_s=grid_t - grid_t[0],
