@@ -172,17 +172,17 @@ def ingest(
             progress.stop()
     # The run is finished and stored: a stop signal from here on stops nothing, and turns
     # neither the summary nor the exit code into an interrupted run's; it is said in a line.
-    late = interrupts.note_late_signals()
-    summary = report.summary()
-    if log_json:
-        typer.echo(json.dumps({"event": "summary", "store": str(store_path), **summary}))
-    elif quiet:
-        typer.echo(_summary_line(summary, store_path))
-    else:
-        _print_ingest_table(report, summary, store_path)
-    if late:
-        typer.echo(f"cevm ingest: {interrupts.signal_name(interrupts.Interrupted(late[0]))} arrived after the run "
-                   "had finished: it stopped nothing, the summary above stands", err=True)
+    with interrupts.late_signals_noted() as late:
+        summary = report.summary()
+        if log_json:
+            typer.echo(json.dumps({"event": "summary", "store": str(store_path), **summary}))
+        elif quiet:
+            typer.echo(_summary_line(summary, store_path))
+        else:
+            _print_ingest_table(report, summary, store_path)
+        if late:
+            typer.echo(f"cevm ingest: {interrupts.signal_name(interrupts.Interrupted(late[0]))} arrived after the "
+                       "run had finished: it stopped nothing, the summary above stands", err=True)
     raise typer.Exit(EXIT_PARTIAL if report.failed or not_applied else EXIT_OK)
 
 

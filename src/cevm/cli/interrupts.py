@@ -71,16 +71,21 @@ def interrupts_raise() -> Iterator[None]:
             signal.signal(s, handler)
 
 
-def note_late_signals() -> list[int]:
-    """From now on, in the main thread, SIGINT and SIGTERM are only noted in the list
-    returned (in the order they arrive), no longer raised: for a command whose work is
-    finished and stored, so that a late signal neither cuts its report nor turns its
-    exit code into an interrupted run's (the command says that it arrived). The
-    handlers of :func:`interrupts_raise` come back when its block ends."""
+@contextmanager
+def late_signals_noted() -> Iterator[list[int]]:
+    """Within the block, in the main thread, SIGINT and SIGTERM are only noted in the list
+    yielded (in the order they arrive), not raised: for a command whose work is finished
+    and stored, so that a late signal neither cuts its report nor turns its exit code
+    into an interrupted run's (the command says that it arrived). The handlers before
+    the block come back after it."""
     noted: list[int] = []
     try:
-        for s in STOP_SIGNALS:
-            signal.signal(s, lambda signum, frame: noted.append(signum))
+        saved = {s: signal.signal(s, lambda signum, frame: noted.append(signum)) for s in STOP_SIGNALS}
     except ValueError:  # not the main thread
-        pass
-    return noted
+        yield noted
+        return
+    try:
+        yield noted
+    finally:
+        for s, handler in saved.items():
+            signal.signal(s, handler)
