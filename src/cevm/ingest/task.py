@@ -123,6 +123,7 @@ def _trip_from_clean(ct: CleanTrip, *, vehicle_id: str, path: Path, sha256: str,
         measured=ct.measured,
         gross_weight_kg=ct.gross_weight_kg,
         quality=quality,
+        start_soc_pct=ct.start_soc_pct,
         **evidence,
     )
 
