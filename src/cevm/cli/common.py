@@ -143,6 +143,17 @@ IntervalOption = Annotated[
                         "vehicle's calibration, or for a file never calibrated from its class's priors "
                         "(column interval_from).")
 ]
+#: The default confidence of feasibility's verdict and largest payload: the verdict
+#: then fails only where the energy (fuel) may land above the default 90 % interval's
+#: upper end (energy_kwh_high), which happens 1 time in 20: a planner's "almost surely",
+#: and the same number predict shows.
+DEFAULT_CONFIDENCE = 0.95
+ConfidenceOption = Annotated[
+    float, typer.Option("--confidence", metavar="P", help="The probability with which the verdict (feasible) and "
+                        "the largest payload keep the reserve or fit the tank. Default 0.95: they fail only where "
+                        "the energy or fuel lands above the default 90 % interval's upper end (1 time in 20); 0.5 "
+                        "is the point prediction's verdict.")
+]
 IceBrakingOption = Annotated[
     Optional[str],
     typer.Option(help=f"Override ICE braking mode: {' or '.join(ICE_BRAKING_MODES)}. Default: the vehicle file's."),

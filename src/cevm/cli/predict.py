@@ -240,9 +240,6 @@ def with_status(row: dict) -> dict:
     ev = row["powertrain"] == "ev"
     ok = row["reserve_ok"] if ev else row["tank_ok"]
     status = "?" if ok is None else "yes" if ok else "NO"
-    p = row.get("p_reserve_ok" if ev else "p_tank_ok")
-    if p is not None and row.get("interval_from") in ("posterior", "prior"):
-        status += f", P {p:.2f}"
     if row.get("empty_at_km") is not None:
         status += f" (empty at {row['empty_at_km']:,.1f} km)"
     elif ev and row.get("reserve_at_km") is not None:
@@ -252,6 +249,9 @@ def with_status(row: dict) -> dict:
     cannot = [what for what, key in (("power", "over_power"), ("speed", "over_speed")) if row.get(key)]
     if cannot:
         status += f" (cannot follow: {', '.join(cannot)})"
+    p = row.get("p_reserve_ok" if ev else "p_tank_ok")
+    if p is not None and row.get("interval_from") in ("posterior", "prior") and 0.005 <= p < 0.995:
+        status += f", P {p:.2f}"  # where the verdict is not sure (column p_reserve_ok / p_tank_ok)
     row["status"] = status
     return row
 
