@@ -192,3 +192,62 @@ def test_a_vehicle_without_priors_has_no_interval(root):
     rr = block_ranges(block)
     assert np.all(rr.sd == 0) and rr.source.tolist() == [2]
     assert p_tank_ok(block, rr).tolist() == [pytest.approx(np.nan, nan_ok=True)]
+
+
+def test_fleet_plan_with_a_chance_constraint_is_the_optimum_of_plain_enumeration():
+    """Random EV fleets whose batteries make some assignments unsure: with
+    min_p_complete, the enumeration's and the MILP's (no-good cuts) plans equal the
+    cheapest assignment whose every day completes with that probability, found by
+    trying them all with the exact evaluation; and every plan reports p_complete."""
+    import itertools
+    import math
+    import random
+
+    from test_fleet import ebus, random_scenario, small_vectors
+
+    from cevm.core.assignment import evaluate, plan
+    from cevm.core.assignment.chance import p_complete
+    from cevm.core.uncertainty import Priors, ScatterPrior, TermPrior
+    from cevm.errors import InputError
+
+    priors = Priors("bus", "test", (TermPrior("eta", 0.72, 0.86), TermPrior("aux", 0.0, 3000.0),
+                                    TermPrior("heat", 0.0, 400.0), TermPrior("cool", 0.0, 300.0)),
+                    ScatterPrior(800.0, 0.04))
+    vectors = small_vectors.__wrapped__() if hasattr(small_vectors, "__wrapped__") else small_vectors()
+    rng = random.Random("chance")
+    tested = 0
+    for _ in range(20):
+        sc = random_scenario(rng, vectors, "ev", "carried")
+        sc = dataclasses.replace(sc, vehicles=tuple(dataclasses.replace(v, vehicle=dataclasses.replace(
+            v.vehicle, priors=priors)) for v in sc.vehicles))
+        free = [s for s in sc.stops() if len(sc.options(s)) > 1]
+        best, best_total = None, math.inf
+        for combo in itertools.product(*(sc.options(s) for s in free)):
+            ev = evaluate(sc, 0, dict(zip(free, combo)))
+            ps = p_complete(sc, 0, ev)
+            if ev.feasible and all(p is None or p >= 0.85 for p in ps.values()) and ev.total < best_total:
+                best, best_total = combo, ev.total
+        for method in ("enumerate", "milp"):
+            if best is None:
+                with pytest.raises(InputError):
+                    plan(sc, 0, method=method, min_p_complete=0.85)
+                continue
+            p = plan(sc, 0, method=method, min_p_complete=0.85)
+            assert p.total == pytest.approx(best_total, rel=1e-9)
+            assert all(x is None or x >= 0.85 for x in p.p_complete.values())
+        plain = plan(sc, 0) if plan_feasible(sc) else None
+        if plain is not None and best is not None:
+            tested += plain.total < best_total - 1e-9  # the constraint changed the plan
+            assert set(plain.p_complete) == {v.id for v in sc.vehicles}
+    assert tested >= 1  # at least one fleet where the chance constraint moved a stop
+
+
+def plan_feasible(sc) -> bool:
+    from cevm.core.assignment import plan
+    from cevm.errors import InputError
+
+    try:
+        plan(sc, 0)
+        return True
+    except InputError:
+        return False

@@ -25,6 +25,7 @@ def fleet_plan(
     store: StoreOption = None,
     ambient_c: AmbientOption = None,
     fmt: Annotated[OutputFormat, typer.Option("--format", "-f", help="Output format.")] = OutputFormat.table,
+    min_p_complete: Annotated[Optional[float], typer.Option("--min-p-complete", metavar="P", help="Require every vehicle with a budget (an EV's battery above its reserve, an ICE's tank_l) to complete its day with at least this probability (0.5 to 1, e.g. 0.95), from its calibration or its class's priors; still proven optimal. Every plan reports each vehicle's probability (p_complete).")] = None,
 ) -> None:
     """The assignment of shared stops that minimises total fuel (or energy, or cost),
     within gross-weight limits and EV reserves: proven optimal (enumeration or MILP).
@@ -40,15 +41,19 @@ def fleet_plan(
 
     if method not in ("auto", "enumerate", "milp"):
         raise fail("--method must be auto, enumerate or milp")
+    if min_p_complete is not None and not 0.5 <= min_p_complete < 1.0:
+        raise fail(f"--min-p-complete must be at least 0.5 and below 1 (0.95: 19 days in 20), got {min_p_complete:g}")
     days = list(day) if day else None  # names or 1-based numbers (cevm.io.scenario.resolve_day)
     try:
         store_path = resolve_store_path(store)
         if store_path.exists():  # legs may be stored trips or routes: opened read-only when one is
             with ExitStack() as stack:
                 resolver = store_resolver(lambda: stack.enter_context(TripStore.open(store_path, readonly=True)))
-                report = fleet_report(scenario, days, method=method, resolve_leg=resolver, ambient_c=ambient_c)
+                report = fleet_report(scenario, days, method=method, resolve_leg=resolver, ambient_c=ambient_c,
+                                      min_p_complete=min_p_complete)
         else:
-            report = fleet_report(scenario, days, method=method, resolve_leg=default_resolver, ambient_c=ambient_c)
+            report = fleet_report(scenario, days, method=method, resolve_leg=default_resolver, ambient_c=ambient_c,
+                                  min_p_complete=min_p_complete)
     except CevmError as exc:
         raise fail(exc) from None
     if fmt == OutputFormat.json:
@@ -56,8 +61,8 @@ def fleet_plan(
         return _warn(report)
     unit = report["unit"]
     if fmt == OutputFormat.csv:
-        rows = [{"day": p["day"], "vehicle": v["vehicle"], "stops": " ".join(v["stops"]), f"consumption_{unit}": v["value"]}
-                for p in report["plans"] for v in p["vehicles"]]
+        rows = [{"day": p["day"], "vehicle": v["vehicle"], "stops": " ".join(v["stops"]), f"consumption_{unit}": v["value"],
+                 "p_complete": v.get("p_complete")} for p in report["plans"] for v in p["vehicles"]]
         write_rows(rows, fmt)
         return _warn(report)
     day_cols = [k for k in report["table"][0] if k != "vehicle"] if report["table"] else []
@@ -75,8 +80,14 @@ def fleet_plan(
     rows = []
     for p in report["plans"]:
         for v in p["vehicles"]:
-            rows.append({"day": p["day"], "vehicle": v["vehicle"], unit: v["value"], "max gross kg": v["max_gross_used_kg"]})
-    write_rows(rows, OutputFormat.table, title=f"consumption per vehicle [{unit}]", digits={unit: 2, "max gross kg": 0})
+            rows.append({"day": p["day"], "vehicle": v["vehicle"], unit: v["value"], "max gross kg": v["max_gross_used_kg"],
+                         "P complete": v.get("p_complete")})
+    if not any(r["P complete"] is not None for r in rows):
+        for r in rows:
+            del r["P complete"]
+    write_rows(rows, OutputFormat.table, title=f"consumption per vehicle [{unit}]"
+               + ("; P complete: the probability of completing the day within its battery reserve or tank"
+                  if rows and "P complete" in rows[0] else ""), digits={unit: 2, "max gross kg": 0, "P complete": 3})
     summary = [{"day": s["day"], f"total {unit}": s["total"], f"default {unit}": s["default_total"],
                 "saving %": s["saving_pct"], "method": s["method"], "status": s["status"],
                 "solve ms": s["solve_time_s"] * 1e3} for s in report["summary"]]

@@ -166,11 +166,11 @@ def mean(vehicle: Vehicle, f: Features, ice_braking: str | None = None) -> np.nd
 
 def gradient(vehicle: Vehicle, f: Features, terms, ice_braking: str | None = None) -> np.ndarray:
     """d mean / d coefficient of ``terms`` (n x k; :mod:`cevm.core.uncertainty`)."""
-    return _gradient_rows(vehicle, f, terms, ice_braking).T
+    return gradient_rows(vehicle, f, terms, ice_braking).T
 
 
-def _gradient_rows(vehicle: Vehicle, f: Features, terms, ice_braking: str | None = None,
-                   extra: int = 0) -> np.ndarray:
+def gradient_rows(vehicle: Vehicle, f: Features, terms, ice_braking: str | None = None,
+                  extra: int = 0) -> np.ndarray:
     """The gradient as k rows of n (+ ``extra`` rows left for the caller): the layout
     whose products with a k x k matrix and row-wise sums of squares numpy does fast (a
     tall n x k matrix times k x k is an order of magnitude slower)."""
@@ -232,7 +232,7 @@ def _extrapolation(vehicle: Vehicle, post: Posterior, f: Features) -> np.ndarray
                                   f.duration_s, f.starts)
 
 
-def _sqrt_cov(cov: np.ndarray) -> np.ndarray:
+def sqrt_cov(cov: np.ndarray) -> np.ndarray:
     """A square root R of a covariance, R^T R = cov (eigen-decomposition: semi-definite
     covariances too)."""
     w, V = np.linalg.eigh(cov)
@@ -245,7 +245,7 @@ def _variance(post: Posterior, rows: np.ndarray, k: int) -> np.ndarray:
     var = np.zeros(rows.shape[1])
     if k:
         A = np.empty((k, rows.shape[1]))
-        np.matmul(_sqrt_cov(post.cov), rows[:k], out=A)
+        np.matmul(sqrt_cov(post.cov), rows[:k], out=A)
         var = np.einsum("ij,ij->j", A, A)
     if rows.shape[0] > k:
         var += np.einsum("ij,ij->j", rows[k:], rows[k:])
@@ -262,7 +262,7 @@ def predictive(vehicle: Vehicle, f: Features, *, measurement_sd=None,
     if post is None:
         return Predictive(mu, np.zeros_like(mu), "none", "no priors: the vehicle was built without a class")
     k = len(post.terms)
-    rows = _gradient_rows(vehicle, f, post.terms, ice_braking, extra=2)
+    rows = gradient_rows(vehicle, f, post.terms, ice_braking, extra=2)
     sc = post.scatter
     np.multiply(f.duration_s, sc.aux, out=rows[k])
     # the energy-proportional scatter and the meter's share, at the prediction
@@ -296,7 +296,7 @@ def total(vehicle: Vehicle, f: Features, groups=None, *, ice_braking: str | None
     post = posterior_of(vehicle)
     if post is None:
         return Predictive(sums, np.zeros(k), "none", "no priors: the vehicle was built without a class")
-    G = _gradient_rows(vehicle, f, post.terms, ice_braking)
+    G = gradient_rows(vehicle, f, post.terms, ice_braking)
     Gs = np.stack([np.bincount(codes, weights=G[j], minlength=k) for j in range(G.shape[0])]) \
         if G.shape[0] else np.zeros((0, k))
     var = _variance(post, Gs, Gs.shape[0]) + (post.meter_share * sums) ** 2
