@@ -91,7 +91,7 @@ def test_predict_rows_carry_ordered_intervals_in_csv_json_and_the_table(root, tm
             assert r["fuel_l_low"] < r["fuel_l"] < r["fuel_l_high"]
             assert r["fuel_left_l_low"] < r["fuel_left_l_high"] and 0.0 <= r["p_tank_ok"] <= 1.0
     wide = runner.invoke(app, [*args, "-f", "json", "--interval", "0.99"])
-    for a, b in zip(rows, json.loads(wide.stdout)):
+    for a, b in zip(rows, json.loads(wide.stdout), strict=True):
         key = "energy_kwh" if a["powertrain"] == "ev" else "fuel_l"
         assert b[f"{key}_low"] < a[f"{key}_low"] and b[f"{key}_high"] > a[f"{key}_high"]
     text = runner.invoke(app, [*args, "-f", "csv"]).stdout
@@ -203,12 +203,11 @@ def test_fleet_plan_with_a_chance_constraint_is_the_optimum_of_plain_enumeration
     import math
     import random
 
-    from test_fleet import ebus, random_scenario, small_vectors
-
     from cevm.core.assignment import evaluate, plan
     from cevm.core.assignment.chance import p_complete
     from cevm.core.uncertainty import Priors, ScatterPrior, TermPrior
     from cevm.errors import InputError
+    from test_fleet import random_scenario, small_vectors
 
     priors = Priors("bus", "test", (TermPrior("eta", 0.72, 0.86), TermPrior("aux", 0.0, 3000.0),
                                     TermPrior("heat", 0.0, 400.0), TermPrior("cool", 0.0, 300.0)),
@@ -223,7 +222,7 @@ def test_fleet_plan_with_a_chance_constraint_is_the_optimum_of_plain_enumeration
         free = [s for s in sc.stops() if len(sc.options(s)) > 1]
         best, best_total = None, math.inf
         for combo in itertools.product(*(sc.options(s) for s in free)):
-            ev = evaluate(sc, 0, dict(zip(free, combo)))
+            ev = evaluate(sc, 0, dict(zip(free, combo, strict=True)))
             ps = p_complete(sc, 0, ev)
             if ev.feasible and all(p is None or p >= 0.85 for p in ps.values()) and ev.total < best_total:
                 best, best_total = combo, ev.total

@@ -134,7 +134,8 @@ def feasibility_cmd(
                 rows.extend(feasibility_row(res, i, ice_braking, mass_source, interval)
                             for i in range(len(res.vehicles)))
                 speed = src.distance_m / src.duration_s if src.duration_s > 0 else float("nan")
-                seen += [(i, res.mass_kg[i], res.ambient_c[i], speed) for i in range(len(vehicles))]
+                idle = src.vector.idle_s / src.duration_s if src.duration_s > 0 else float("nan")
+                seen += [(i, res.mass_kg[i], res.ambient_c[i], speed, idle) for i in range(len(vehicles))]
                 src.release()
             stream = open_out(stack, out)
             if fmt == OutputFormat.table:
@@ -166,12 +167,14 @@ def _warn_outside_calibration(vehicles, seen: list[tuple]) -> None:
     from cevm.core.vehicle import domain_warnings
 
     for i, veh in enumerate(vehicles):
-        pts = np.array([(m, t, v) for j, m, t, v in seen if j == i], dtype=float).reshape(-1, 3)
+        pts = np.array([(m, t, v, s) for j, m, t, v, s in seen if j == i], dtype=float).reshape(-1, 4)
         if pts.size == 0:
             continue
         speeds = pts[:, 2][np.isfinite(pts[:, 2])]
+        idle = pts[:, 3][np.isfinite(pts[:, 3])]
         for w in domain_warnings(veh, mass_kg=pts[:, 0], ambient_c=pts[:, 1],
-                                 mean_speed_mps=speeds if speeds.size else None):
+                                 mean_speed_mps=speeds if speeds.size else None,
+                                 idle_share=idle if idle.size else None):
             typer.echo(f"cevm: warning: {w}", err=True)
 
 

@@ -188,6 +188,8 @@ class Assumptions:
         self.t_hi = np.full(nv, -np.inf)
         self.v_lo = np.inf
         self.v_hi = -np.inf
+        self.i_lo = np.inf  # the sources' share of time at standstill (their duty)
+        self.i_hi = -np.inf
         self.origins: list[set] = [set() for _ in range(nv)]
         self.m_lo = np.full(nv, np.inf)
         self.m_hi = np.full(nv, -np.inf)
@@ -204,6 +206,8 @@ class Assumptions:
         if src.duration_s > 0:
             speed = src.distance_m / src.duration_s
             self.v_lo, self.v_hi = min(self.v_lo, speed), max(self.v_hi, speed)
+            idle = src.vector.idle_s / src.duration_s
+            self.i_lo, self.i_hi = min(self.i_lo, idle), max(self.i_hi, idle)
 
     def lines(self) -> list[str]:
         from cevm.core.energy import uses_temperature
@@ -219,7 +223,9 @@ class Assumptions:
                 out.append(f"cevm: note: {veh.name}: ambient {span} degC ({', '.join(sorted(self.origins[v]))})")
             masses = np.array([self.m_lo[v], self.m_hi[v]])
             speeds = np.array([self.v_lo, self.v_hi]) if np.isfinite(self.v_lo) else None
-            for w in domain_warnings(veh, mass_kg=masses, ambient_c=np.array([lo, hi]), mean_speed_mps=speeds):
+            idle = np.array([self.i_lo, self.i_hi]) if np.isfinite(self.i_lo) else None
+            for w in domain_warnings(veh, mass_kg=masses, ambient_c=np.array([lo, hi]), mean_speed_mps=speeds,
+                                     idle_share=idle):
                 out.append(f"cevm: warning: {w}")
         return out
 

@@ -44,8 +44,7 @@ from scipy.special import ndtr, ndtri
 from cevm.core import energy
 from cevm.core.cycle import CycleVector
 from cevm.core.model import braking_weight, wheel_energy_parts_j
-from cevm.core.uncertainty import (Posterior, Scatter, coefficient_prior, extrapolation_variance,
-                                   slope_prior_sd)
+from cevm.core.uncertainty import Posterior, Scatter, coefficient_prior, extrapolation_variance, slope_prior_sd
 from cevm.core.vehicle import Vehicle, default_ambient_c
 
 #: The terms a never-calibrated vehicle's prior interval spans: every vehicle's physical

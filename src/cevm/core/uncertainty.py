@@ -25,8 +25,8 @@ predictive distribution of a trip or a day is :mod:`cevm.core.predictive`.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Sequence
 
 import numpy as np
 
@@ -318,4 +318,4 @@ def slope_prior_sd(powertrain: str, terms: Sequence[str], priors: Priors | None)
         return {}
     names = [t for t in ("heat", "cool", "warm") if t in terms and priors.get(t) is not None]
     cp = coefficient_prior(powertrain, names, priors, math.nan)
-    return {n: float(s) for n, s in zip(names, cp.sd) if math.isfinite(s)}
+    return {n: float(s) for n, s in zip(names, cp.sd, strict=True) if math.isfinite(s)}

@@ -209,7 +209,7 @@ def changed_sources(result: CalibrationResult, vehicle_id: str | None) -> dict[s
             kept = result.prior_kept.get(field)
             text += (f"; prior {p.low * f:.4g} to {p.high * f:.4g}{u} ({p.source})" + (f"; {kept}" if kept else ""))
         out[key] = text
-    for key, value in neutral_keys(result).items():
+    for key in neutral_keys(result):
         out[key] = f"cevm calibrate, {base}: not in the calibrated model"
     if "heating_below_c" in result.fitted or "cooling_above_c" in result.fitted:
         out["heating_below_c"] = f"cevm calibrate, {base}: balance temperature chosen on a grid by the evidence"
@@ -239,5 +239,10 @@ def write_calibrated_vehicle(source: Path, out: Path, result: CalibrationResult,
                            neutral=neutral_keys(result), calibration=calibration,
                            sources=changed_sources(result, v.id), prior=prior, posterior=posterior)
     tmp = out.with_name(out.name + ".tmp")
-    tmp.write_text(text, encoding="utf-8")
-    tmp.replace(out)  # atomic: never a half-written vehicle file
+    try:
+        tmp.write_text(text, encoding="utf-8")
+        tmp.replace(out)  # atomic: never a half-written vehicle file
+    except OSError as exc:  # a full disk, a folder that is not there or not writable
+        tmp.unlink(missing_ok=True)
+        raise CevmError(f"{out}: the calibrated vehicle file cannot be written: "
+                        f"{exc.strerror or exc}") from None

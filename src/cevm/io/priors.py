@@ -40,8 +40,16 @@ import numpy as np
 
 from cevm.configs_dir import shipped_configs_dir
 from cevm.core.terms import EXTRA_TERMS, TERMS_BY_POWERTRAIN
-from cevm.core.uncertainty import (VEHICLE_CLASSES, Posterior, Priors, Scatter, ScatterPrior, TermPrior,
-                                   coefficient_covariance, coefficients)
+from cevm.core.uncertainty import (
+    VEHICLE_CLASSES,
+    Posterior,
+    Priors,
+    Scatter,
+    ScatterPrior,
+    TermPrior,
+    coefficient_covariance,
+    coefficients,
+)
 from cevm.errors import InputError
 from cevm.io.toml import read_toml
 
@@ -71,7 +79,8 @@ def _range(value: Any, where: str, source: str | Path) -> tuple[float, float]:
     if (not isinstance(value, list) or len(value) != 2
             or not all(isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) for x in value)
             or value[0] > value[1]):
-        raise InputError(source, f"key '{where}' must be a range [low, high] of two numbers, low <= high; got {value!r}")
+        raise InputError(source, f"key '{where}' must be a range [low, high] of two numbers, low <= high; "
+                                 f"got {value!r}")
     return float(value[0]), float(value[1])
 
 
@@ -250,7 +259,7 @@ def posterior_table(posterior: Posterior, vehicle) -> dict:
         scatter["standstill_" + sc_key] = _round(sc.standstill * sc_f)
     return {
         "source": posterior.source, "n_trips": int(posterior.n_trips), "terms": list(terms),
-        "std": [_round(s * f) for s, f in zip(sd, factors)],
+        "std": [_round(s * f) for s, f in zip(sd, factors, strict=True)],
         "correlation": [[round(float(x), 6) for x in row] for row in corr],
         "meter_share": _round(posterior.meter_share),
         "scatter": scatter,
@@ -292,7 +301,7 @@ def posterior_from_mapping(table: Any, vehicle, priors: Priors | None, source: s
                                  "(not positive semi-definite)")
     coef = coefficients(vehicle, terms)
     if not np.all(np.isfinite(coef)):
-        bad = [t for t, c in zip(terms, coef) if not math.isfinite(c)]
+        bad = [t for t, c in zip(terms, coef, strict=True) if not math.isfinite(c)]
         raise InputError(source, f"key 'posterior.terms' names {', '.join(bad)}, which the file's values leave out")
     cov = coefficient_covariance(terms, coef, vcov)
     sc_t = table.get("scatter")

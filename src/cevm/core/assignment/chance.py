@@ -70,7 +70,7 @@ def p_complete(sc: Scenario, d: int, evaluation) -> dict[str, float | None]:
     for vu in evaluation.vehicles:
         v = sc.vehicle_by_id[vu.vehicle_id]
         budget = budget_of(v)
-        legs = [(rid[ru.route_id], j, m) for ru in vu.routes for j, m in zip(ru.leg_index, ru.leg_mass_kg)]
+        legs = [(rid[ru.route_id], j, m) for ru in vu.routes for j, m in zip(ru.leg_index, ru.leg_mass_kg, strict=True)]
         f = _leg_features(sc, d, v, legs)
         if budget is None or f is None or posterior_of(v.vehicle) is None:
             out[vu.vehicle_id] = None

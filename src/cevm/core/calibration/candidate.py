@@ -19,9 +19,10 @@ fit on trips ``idx`` (:func:`fit_candidate`):
 
 from __future__ import annotations
 
+import contextlib
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Sequence
 
 import numpy as np
 
@@ -115,11 +116,9 @@ def balanced(model: TermModel, names: Sequence[str], idx: np.ndarray, priors: Pr
     # from the trips' (the class's typical one), the evidence hardly tells the grid
     # points apart
     centre = None if priors is None else priors.scatter
-    try:
+    with contextlib.suppress(np.linalg.LinAlgError):
         noise = post.solve(model, names, idx, prior_for(model, names, priors), noise, huber_c=settings.huber_c,
                            fit_noise=True, scatter_prior=centre, noise_rounds=2).noise
-    except np.linalg.LinAlgError:
-        pass
     for axis, grid in (("heat", HEATING_GRID_C if heats else ()), ("cool", COOLING_GRID_C if cools else ())):
         best = None
         for g in grid:

@@ -4,8 +4,8 @@ intervals, and what the fit saw (pure)."""
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
-from typing import Sequence
 
 import numpy as np
 from scipy.stats import norm
@@ -336,9 +336,8 @@ def fit_model(cf: CandidateFit, excluded: dict, settings: Settings, *, priors: P
                 for lvl in COVERAGE_LEVELS} if np.any(np.isfinite(zs)) else {}
     ok = np.isfinite(sd_cv)
     width = float(np.mean((high - low)[ok] / data.y[ok]) * 100.0) if np.any(ok) else math.nan
-    for f in np.unique(fold_of[fold_of >= 0]):
-        if not np.all(np.isfinite(mean_cv[fold_of == f])):
-            warnings.append(f"fold {f}: its training trips could not be fitted")
+    warnings += [f"fold {f}: its training trips could not be fitted" for f in np.unique(fold_of[fold_of >= 0])
+                 if not np.all(np.isfinite(mean_cv[fold_of == f]))]
 
     err_in = (pred_in - data.y) / data.y * 100.0
     err_cv = (mean_cv - data.y) / data.y * 100.0

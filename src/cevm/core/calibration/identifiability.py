@@ -23,7 +23,7 @@ its prior, and these functions say why the data could not tell.
 from __future__ import annotations
 
 import math
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -78,7 +78,8 @@ def unsupported(model: TermModel, names: Sequence[str], idx: np.ndarray) -> tupl
     return None
 
 
-def confounded(jw: np.ndarray, names: Sequence[str], max_correlation: float, model: TermModel) -> tuple[str, str] | None:
+def confounded(jw: np.ndarray, names: Sequence[str], max_correlation: float,
+               model: TermModel) -> tuple[str, str] | None:
     """The extra term (never eta) to refuse for a weak or confounded Jacobian column."""
     norms = np.linalg.norm(jw, axis=0)
     for j in reversed(range(len(names))):
@@ -129,7 +130,8 @@ def imprecise(model: TermModel, fit: Fit, idx: np.ndarray, max_rel_se: float) ->
         return None
     name = fit.names[worst]
     value = float(values[name])
-    of = f"its value {value:.3g}" if abs(value) >= worst_ref else f"the reference {worst_ref:.3g} (10 % of the median consumption rate)"
+    of = (f"its value {value:.3g}" if abs(value) >= worst_ref
+          else f"the reference {worst_ref:.3g} (10 % of the median consumption rate)")
     return name, (
         f"not identifiable: {value:.3g} +- {sd[worst]:.3g}, a standard error of {100 * worst_ratio:.0f} % of "
         f"{of} (limit {100 * max_rel_se:.0f} %); {_hint(model, name)}"

@@ -17,7 +17,7 @@ import math
 
 import numpy as np
 
-from cevm.core.calibration.solve import Fit, bounds, value_covariance  # noqa: F401 (Fit: the type of fits)
+from cevm.core.calibration.solve import Fit, bounds, value_covariance
 from cevm.core.calibration.terms import TERMS_BY_POWERTRAIN, TermModel
 
 #: A fitted standstill rate more than this factor above (or below 1 / this) the

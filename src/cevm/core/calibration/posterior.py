@@ -48,8 +48,8 @@ serves the variance of sums (:mod:`cevm.core.predictive`).
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
-from typing import Sequence
 
 import numpy as np
 from scipy.linalg import cho_factor, cho_solve
@@ -140,7 +140,7 @@ def _quality_ratio(q: np.ndarray, ref_idx: np.ndarray) -> np.ndarray:
 
 
 def _groups(model: TermModel, idx: np.ndarray) -> tuple[np.ndarray, int]:
-    keys = [g if g is not None else f"\0{t}" for g, t in zip(model.data.groups, model.data.ids)]
+    keys = [g if g is not None else f"\0{t}" for g, t in zip(model.data.groups, model.data.ids, strict=True)]
     sub = [keys[i] for i in idx]
     uniq = {k: j for j, k in enumerate(dict.fromkeys(sub))}
     return np.array([uniq[k] for k in sub], dtype=np.intp), len(uniq)
@@ -270,7 +270,7 @@ class _System:
 
     def logml(self, noise: Noise, w: np.ndarray, parts) -> float:
         """Laplace log marginal likelihood at the mode ``w`` (Huber weights as fixed)."""
-        A, b, (n, n_ss, n_pr, n_re), ind, rho = parts
+        A, b, (_n, n_ss, _n_pr, n_re), ind, rho = parts
         r = A @ w - b
         quad = float(r @ r)
         out = -0.5 * quad
@@ -284,7 +284,7 @@ class _System:
                                    + math.log(2.0 * math.pi * rho * noise.share ** 2))
         H = A.T @ A
         try:
-            c, low = cho_factor(H)
+            c, _ = cho_factor(H)
             logdet = 2.0 * float(np.sum(np.log(np.diag(c))))
         except np.linalg.LinAlgError:
             sign, logdet = np.linalg.slogdet(H)
@@ -315,7 +315,8 @@ class _System:
         v = self.sig2 + self.ratio * ((noise.aux * self.D) ** 2 + (noise.share * self.mu) ** 2)
         V = v / self.h
         X, t = self.J, self.target
-        dV = [2.0 * self.ratio * (noise.aux * self.D) ** 2 / self.h, 2.0 * self.ratio * (noise.share * self.mu) ** 2 / self.h]
+        dV = [2.0 * self.ratio * (noise.aux * self.D) ** 2 / self.h,
+              2.0 * self.ratio * (noise.share * self.mu) ** 2 / self.h]
         if self.ss is not None and noise.standstill is not None:
             pos, z, A_ss, off = self.ss
             Vs = noise.standstill ** 2 / self.h_ss
