@@ -223,11 +223,13 @@ def process_file(
         blobs: list[bytes] = []
         dropped: list[dict] = []
         warnings: list[str] = []
-        n_rows = 0
+        n_rows = planned = 0
         for log in logs:
             n_rows += len(log.frame)
             t0 = time.perf_counter()
             stream = CleanStream(log.frame, log.energy_sources, options.clean, path=path, release_frame=True)
+            planned += stream.planned_samples
+            _check_samples(path, planned, options.limits.max_samples)
             cleaned = iter(stream)
             batch: list[CleanTrip] = []
             n_batch = 0
@@ -264,6 +266,15 @@ def process_file(
             error=printable(f"{path}: internal error (a cevm bug, please report): {type(exc).__name__}: {exc} "
                                  f"at {Path(where.filename).name}:{where.lineno}"),
         )
+
+
+def _check_samples(path: Path, planned: int, limit: int | None) -> None:
+    """Refuse a file whose trips would hold more than ``limit`` samples (known once its
+    trips are cut, before any is made)."""
+    if limit is not None and planned > limit:
+        raise InputError(path, f"its trips would hold {planned:,} samples on the 1 s grid: more than the {limit:,} a "
+                               "file may give (--max-samples), which keeps a worker's memory bounded (the stored trips "
+                               "are held until written); split the file (by day or by vehicle)")
 
 
 def open_sampler(dsm: str | None, allow_remote: bool | None = None) -> DsmSampler | None:
