@@ -225,9 +225,9 @@ def process_file(
         warnings: list[str] = []
         n_rows = planned = 0
         for log in logs:
-            n_rows += len(log.frame)
+            n_rows += len(log)
             t0 = time.perf_counter()
-            stream = CleanStream(log.frame, log.energy_sources, options.clean, path=path, release_frame=True)
+            stream = CleanStream(log.columns, log.energy_sources, options.clean, path=path, release_frame=True)
             planned += stream.planned_samples
             _check_samples(path, planned, options.limits.max_samples)
             cleaned = iter(stream)

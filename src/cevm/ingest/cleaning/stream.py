@@ -3,7 +3,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -54,11 +54,11 @@ class CleanStream:
     it go. Parameters as :func:`clean_log`.
     """
 
-    def __init__(self, frame: pd.DataFrame, sources: Sequence[EnergySourceLike] = (),
+    def __init__(self, frame: pd.DataFrame | Mapping[str, np.ndarray], sources: Sequence[EnergySourceLike] = (),
                  params: CleanParams = CleanParams(), *, path: str | Path | None = None,
                  release_frame: bool = False) -> None:
         p = params
-        n_in = len(frame)
+        n_in = len(frame) if isinstance(frame, pd.DataFrame) else len(frame.get("time_s", ()))
         t, line, rows, no_time = _load(frame, path, release_frame)
         _require_speed_or_position(rows.cols, path)
         ev = RepairEvents()
@@ -155,7 +155,8 @@ def clean_log(
 
     Parameters
     ----------
-    frame : canonical columns (``time_s`` [s, UTC epoch] required), rows in file order.
+    frame : canonical columns (``time_s`` [s, UTC epoch] required), rows in file order:
+        a DataFrame, or a dict of arrays (:attr:`cevm.ingest.reading.ParsedLog.columns`).
     sources : energy sources for the measured consumption (:class:`EnergySourceLike`).
     params : :class:`CleanParams`.
     path : the source file, for error messages.
