@@ -1,4 +1,4 @@
-"""The layout stays true to the architecture (README, "Layout"), checked on the source.
+"""The layout stays true to the architecture (docs/layout.md), checked on the source.
 
 - cevm.core is pure: no module of it imports the I/O packages (cevm.io, cevm.ingest,
   cevm.store, cevm.cli), the sample generator, sqlite3, rasterio, matplotlib or typer,
@@ -284,7 +284,7 @@ def test_strongly_connected_finds_a_cycle():
 
 def test_the_import_graph_has_no_cycle():
     graph = import_graph()
-    assert "cevm.cli.predict" in graph and "cevm.core.cycle" in graph["cevm.core.sweep"]
+    assert "cevm.cli.predict" in graph and "cevm.core.cycle" in graph["cevm.core.sweep.profiles"]
     cycles = [c for c in strongly_connected(graph) if len(c) > 1]
     assert cycles == []
 

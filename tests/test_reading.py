@@ -127,11 +127,9 @@ def test_both_parse_engines_agree_on_the_same_bytes(path, profiles):
             assert arrow.time_utc == pandas.time_utc
 
 
-def test_real_twizy_logs_same_with_both_parsers(profiles):
-    real = Path("/work/shared/real-logs/twizy")
-    files = sorted(real.glob("*.csv")) if real.is_dir() else sorted((ROOT.parent / "shared/real-logs/twizy").glob("*.csv"))
-    if not files:
-        pytest.skip("real logs not beside this checkout")
+def test_real_twizy_logs_same_with_both_parsers(profiles, twizy_logs):
+    files = sorted(twizy_logs[0].glob("*.csv*"))
+    assert files
     for f in files[:5]:
         frames_equal(read_log(f, profiles=profiles), read_log(f, profiles=profiles, engine="pandas"))
 
