@@ -11,7 +11,7 @@ import typer
 from cevm.cli.common import EXIT_OK, EXIT_PARTIAL, StoreOption, apply_manifest, check_workers, fail
 from cevm.cli.output import OutputFormat, write_rows
 from cevm.errors import CevmError
-from cevm.ingest.textfile import ReadLimits
+from cevm.ingest.textfile import MAX_SAMPLES, ReadLimits
 from cevm.text import printable
 
 #: The defaults of the per-file limits (the flags show them in --help).
@@ -43,7 +43,7 @@ def ingest(
     ] = None,
     max_samples: Annotated[
         int, typer.Option(min=1, metavar="SAMPLES", help="Refuse a file whose trips would hold more samples than this on the 1 s grid (a log every 5 s gives 5 a row): the stored trips are held until written, so this keeps a worker under 500 MB.")
-    ] = _LIMITS.max_samples,
+    ] = MAX_SAMPLES,
     max_file_mb: Annotated[
         float, typer.Option(min=0.001, metavar="MB", help="Refuse a file of more text than this [MB], after decompression.")
     ] = _LIMITS.max_file_mb,
@@ -146,7 +146,7 @@ def ingest(
         with make_executor(workers, scheduler) as executor, TripStore.open(store_path) as st:
             st.require_intact()  # never write into a damaged database
             report = run_ingest(paths, st, options, on_file=on_file, on_start=on_start, executor=executor)
-            if masses is not None:
+            if masses is not None and manifest is not None:
                 with signals_deferred():  # the masses written are the masses reported
                     _, not_applied = apply_manifest(st, manifest, masses)
                     manifest_applied = True

@@ -27,7 +27,6 @@ import numpy as np
 from cevm.core.cycle import CR0_DEFAULT, drive_cycle_vector
 from cevm.core.trip import Trip, TripRecord
 from cevm.errors import CevmError, InputError
-from cevm.text import printable
 from cevm.executors import worker_cache
 from cevm.ingest.cleaning import CleanParams, CleanStream, CleanTrip
 from cevm.ingest.dsm import DsmHeaders, DsmSampler
@@ -36,6 +35,7 @@ from cevm.ingest.evidence import EvidenceParams, trip_evidence
 from cevm.ingest.profiles import Profile
 from cevm.ingest.reading import ReadLimits, read_log
 from cevm.store import trip_profile_blob
+from cevm.text import printable
 
 
 @dataclass(frozen=True)
@@ -180,7 +180,7 @@ def speed_jump_warning(jumps: list[dict], n: int) -> str:
     import datetime as dt
 
     j = jumps[0]
-    when = dt.datetime.fromtimestamp(j["utc_s"], dt.timezone.utc).strftime("%Y-%m-%d %H:%M:%S")
+    when = dt.datetime.fromtimestamp(j["utc_s"], dt.UTC).strftime("%Y-%m-%d %H:%M:%S")
     return (f"speed: {max(n, len(jumps))} lasting speed jump(s) the cleaning could not repair, the largest "
             f"{3.6 * (j['to_mps'] - j['from_mps']):+.0f} km/h in {j['dt_s']:g} s at {when} UTC in "
             f"{j['source']} (a spliced recording?); kept as logged, and listed in the trip's quality "

@@ -84,7 +84,7 @@ def _has_energy_data(e: EnergySpec, arrays: dict[str, np.ndarray]) -> bool:
     if e.column in VIRTUAL_COLUMNS:
         a, b = VIRTUAL_COLUMNS[e.column][0]
         return a in arrays and b in arrays and bool(
-            (np.isfinite(arrays[a]).any() and np.isfinite(arrays[b]).any()))
+            np.isfinite(arrays[a]).any() and np.isfinite(arrays[b]).any())
     return e.column in arrays and bool(np.isfinite(arrays[e.column]).any())
 
 
