@@ -27,7 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from cevm.core import checks
+from cevm.core import physical_inputs
 from cevm.core.sweep import (
     RANGE_FIELDS,
     DEFAULT_RESERVE_PCT,
@@ -215,11 +215,11 @@ def feasibility(
     base = np.array([v.kerb_mass_kg if v.kerb_mass_kg is not None else v.mass_kg for v in vehicles])
     if payload_kg is not None and mass_kg is not None:
         raise CevmError("give a payload or a gross mass, not both")
-    checks.soc_pct(soc_start_pct, reserve_pct)
+    physical_inputs.soc_pct(soc_start_pct, reserve_pct)
     if payload_kg is not None:
-        mass = base + float(checks.payloads_kg(payload_kg))
+        mass = base + float(physical_inputs.payloads_kg(payload_kg))
     elif mass_kg is not None:
-        mass = np.full(nv, float(checks.masses_for(vehicles, mass_kg)))
+        mass = np.full(nv, float(physical_inputs.masses_for(vehicles, mass_kg)))
     else:
         mass = np.array([v.mass_kg for v in vehicles], dtype=np.float64)
     f = _LoadFunction(source, vehicles, base, soc_start_pct, reserve_pct, ice_braking, ambient_c)
