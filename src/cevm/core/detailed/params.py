@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from cevm.units import RAD_S_PER_RPM
+from cevm.units import MPS_TO_KMH, RAD_S_PER_RPM
 
 RPM = RAD_S_PER_RPM  # rad/s per rpm
 
@@ -73,8 +73,8 @@ class EvParams:
     constant_loss_frac: float = 0.003
     regen_max_power_w: float = 120e3
     regen_max_torque_nm: float | None = None
-    regen_fade_low_mps: float = 4.0 / 3.6
-    regen_fade_high_mps: float = 10.0 / 3.6
+    regen_fade_low_mps: float = 4.0 / MPS_TO_KMH
+    regen_fade_high_mps: float = 10.0 / MPS_TO_KMH
     cells_in_series: float = 180.0
     ocv_soc: tuple[float, ...] = (0.0, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 1.0)
     ocv_cell_v: tuple[float, ...] = (3.40, 3.55, 3.61, 3.65, 3.69, 3.74, 3.80, 3.87, 3.94, 4.02, 4.10)
