@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Optional
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -93,7 +93,7 @@ def vehicle_label(vehicle) -> str:
 
 
 def plot_predictions(path: Path, sources: list[Source], pset: PredictionSet | Sequence[PredictionSet],
-                     sweep_data: list, soc_start: float, reserve_pct: float, ice_braking: Optional[str],
+                     sweep_data: list, soc_start: float, reserve_pct: float, ice_braking: str | None,
                      warn: Callable[[str], None] | None = None) -> None:
     """SoC (EV) or fuel (ICE) along each source for each vehicle (one mass each: the
     paper's figure 4), or energy / fuel against payload when vehicles have several
@@ -135,7 +135,8 @@ def plot_predictions(path: Path, sources: list[Source], pset: PredictionSet | Se
                 ax = ax_ev if veh.is_ev else ax_ice
                 ax.plot(x[over], (ys["energy_kwh"] if veh.is_ev else ys["fuel_l"])[sel][over], "x", color="red")
         if ax_ev is not None:
-            ax_ev.set(xlabel=xname, ylabel="battery energy [kWh]", title="EV energy against load (x: over max_gross_kg)")
+            ax_ev.set(xlabel=xname, ylabel="battery energy [kWh]",
+                      title="EV energy against load (x: over max_gross_kg)")
         if ax_ice is not None:
             ax_ice.set(xlabel=xname, ylabel="fuel [l]", title="ICE fuel against load (x: over max_gross_kg)")
     else:  # state of charge along the route (the paper's figure 4)

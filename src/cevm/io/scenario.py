@@ -42,7 +42,6 @@ from cevm.io.cycles import CycleFormat, read_cycle_csv
 from cevm.io.toml import read_toml
 from cevm.io.vehicles import load_vehicle
 
-
 #: A leg resolver: (one copy of a leg source, directory of the scenario file) -> vector.
 LegResolver = Callable[[LegSource, Path], CycleVector]
 
@@ -358,9 +357,8 @@ def _route(path: Path, i: int, r: Any, depots: list[str], ret_default: bool, vec
                 f"{where}.legs must list {n_legs} legs ({len(stops)} stops"
                 f"{' + the return to the depot' if ret else ''})",
             )
-        legs = tuple(
-            vectors.leg(_leg_source(path, f"{where}.legs[{j}]", t), f"{where}.legs[{j}]") for j, t in enumerate(r["legs"])
-        )
+        legs = tuple(vectors.leg(_leg_source(path, f"{where}.legs[{j}]", t), f"{where}.legs[{j}]")
+                     for j, t in enumerate(r["legs"]))
     return Route(id=rid, vehicle_id=_str(path, f"{where}.vehicle", r.get("vehicle")), stops=tuple(stops), legs=legs,
                  depot=depot, return_to_depot=ret)
 
@@ -432,7 +430,8 @@ def resolve_day(sc: Scenario, spec: str) -> str:
         n = int(text)
         if 1 <= n <= len(sc.days):
             return sc.days[n - 1]
-        why = "days are numbered from 1, as the paper numbers them" if n == 0 else f"the scenario has {len(sc.days)} days"
+        why = ("days are numbered from 1, as the paper numbers them" if n == 0
+               else f"the scenario has {len(sc.days)} days")
         raise InputError(sc.path, f"no day {n}: {why}; days: {listing}")
     raise InputError(sc.path, f"unknown day {spec!r}: give a day's name or its number from 1; days: {listing}")
 

@@ -128,7 +128,7 @@ def _rows(key: str, trips: Sequence[Trip | TripRecord], vectors: Sequence[bytes]
     if len(set(indices)) != len(indices):
         raise ValueError(f"repeated trip_index in the trips of {key}")
     trip_rows, blob_rows, ids = [], [], []
-    for t, vec, prof in zip(trips, vectors, profile_blobs):
+    for t, vec, prof in zip(trips, vectors, profile_blobs, strict=True):
         trip_rows.append(trip_row(t, key))
         vec, prof = bytes(vec), bytes(prof)
         blob_rows.append((t.trip_id, vec, prof, blob_crc32(vec), blob_crc32(prof)))
