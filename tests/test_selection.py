@@ -123,7 +123,8 @@ def test_efficiency_above_one_is_refused():
     low = [dataclasses.replace(t, measured=t.measured * 0.5, uncertainty=t.uncertainty * 0.5) for t in trips]
     with pytest.raises(CalibrationError, match="implausible"):
         select(BUS, low, time_repeats=0, nested=False)
-    with pytest.raises(CalibrationError, match="eta: implausible: the data want a drive efficiency of .*, above the 0.89"):
+    with pytest.raises(CalibrationError,
+                       match=r"eta: implausible: the data want a drive efficiency of .*, above the 0\.89"):
         fit(BUS, low, time_repeats=0)
 
 

@@ -7,7 +7,7 @@ from __future__ import annotations
 import dataclasses
 import json
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated, Optional
+from typing import TYPE_CHECKING, Annotated
 
 import numpy as np
 import typer
@@ -26,29 +26,31 @@ def calibrate(
     vehicle_id: Annotated[str, typer.Option("--vehicle-id", help="Whose stored trips to fit (see 'cevm trips').")],
     store: StoreOption = None,
     fit: Annotated[
-        Optional[list[str]],
+        list[str] | None,
         typer.Option("--fit", metavar="NAMES", help="Force a term set instead of choosing one: eta (always) plus any of regen, aux, "
                                    "heat, cool, warm (EV); idle, run, kin, heat, cool, warm (ICE); cda, cr. "
                                    "Repeatable or comma-separated."),
     ] = None,
     terms: Annotated[
-        Optional[list[str]],
+        list[str] | None,
         typer.Option("--terms", metavar="NAMES", help="Choose only among these extra terms (default: all of the powertrain's). "
                                      "Repeatable or comma-separated."),
     ] = None,
     nested: Annotated[bool, typer.Option("--nested/--no-nested", help="Also cross-validate the choice itself "
                                                                         "(nested cross-validation).")] = True,
-    out: Annotated[Optional[Path], typer.Option("--out", "-o", metavar="FILE", help="Write the calibrated vehicle file here.")] = None,
+    out: Annotated[Path | None, typer.Option("--out", "-o", metavar="FILE", help="Write the calibrated vehicle file here.")] = None,
     force: Annotated[bool, typer.Option(help="Allow --out to overwrite an existing file.")] = False,
     cv_folds: Annotated[int, typer.Option(help="Cross-validation folds over days; with fewer than 10 days, or no more days than folds, each day is its own fold (leave-one-day-out).")] = 5,
     max_rel_uncertainty: Annotated[float, typer.Option(help="Exclude trips measured worse than this (relative 1-sigma).")] = 0.10,
-    plot: Annotated[Optional[Path], typer.Option(metavar="FILE.png", help="Write predicted-vs-measured and error-vs-distance plots (PNG).")] = None,
+    plot: Annotated[Path | None, typer.Option(metavar="FILE.png", help="Write predicted-vs-measured and error-vs-distance plots (PNG).")] = None,
     ice_braking: Annotated[
-        Optional[str],
+        str | None,
         typer.Option(help="ICE: fit under this braking mode (no-credit or paper) and write it to --out. Default: the vehicle file's."),
     ] = None,
     fmt: Annotated[OutputFormat, typer.Option("--format", "-f", help="table; csv (the per-trip rows); or json (figures plus per-trip rows).")] = OutputFormat.table,
-    interval: Annotated[float, typer.Option(metavar="LEVEL", help="Level of the per-trip intervals (predicted_low, predicted_high) and of the coverage reported: the share of held-out trips inside their interval.")] = 0.9,
+    interval: Annotated[float, typer.Option(
+        metavar="LEVEL", help="Level of the per-trip intervals (predicted_low, predicted_high) and of the coverage "
+                              "reported: the share of held-out trips inside their interval.")] = 0.9,
 ) -> None:
     """Fit the vehicle's model to its measured trips: a posterior from the vehicle class's
     priors, with every answer's range.
@@ -140,7 +142,7 @@ def _pct(x, sign=True) -> str:
     return f"{x:+.2f} %" if sign else f"{x:.2f} %"
 
 
-def _print_calibration(r: dict, is_ev: bool) -> None:  # noqa: C901 (one report, top to bottom)
+def _print_calibration(r: dict, is_ev: bool) -> None:
     name, mu, sd, tmu, tsd = PAPER_CE[is_ev]
     ins, cv, t, nested = r["in_sample"], r["cross_validated"], r["time_per_prediction_s"], r["nested_cross_validated"]
     rows = [

@@ -4,14 +4,13 @@ scenario files :mod:`cevm.io.scenario`)."""
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import Annotated
 
 import typer
 
 from cevm.cli.common import AmbientOption, StoreOption, fail, warn_ambient_unused
 from cevm.cli.output import OutputFormat, vehicle_legend, write_rows
 from cevm.errors import CevmError
-
 
 app = typer.Typer(help="Fleet assignment: which vehicle serves the shared stops (the paper's section 6).",
                   no_args_is_help=True, rich_markup_mode=None)
@@ -20,12 +19,16 @@ app = typer.Typer(help="Fleet assignment: which vehicle serves the shared stops 
 @app.command("plan")
 def fleet_plan(
     scenario: Annotated[Path, typer.Argument(metavar="SCENARIO", help="Scenario TOML (see configs/fleet/paper-case-study.toml).")],
-    day: Annotated[Optional[list[str]], typer.Option("--day", "-d", metavar="DAY", help="A day by name, or by its number counted from 1 as the paper numbers days (1 is the first day; 0 is refused). Repeatable. Default: every day.")] = None,
+    day: Annotated[list[str] | None, typer.Option("--day", "-d", metavar="DAY", help="A day by name, or by its number counted from 1 as the paper numbers days (1 is the first day; 0 is refused). Repeatable. Default: every day.")] = None,
     method: Annotated[str, typer.Option(help="auto (enumerate when small, else MILP), enumerate, or milp.")] = "auto",
     store: StoreOption = None,
     ambient_c: AmbientOption = None,
     fmt: Annotated[OutputFormat, typer.Option("--format", "-f", help="Output format.")] = OutputFormat.table,
-    min_p_complete: Annotated[Optional[float], typer.Option("--min-p-complete", metavar="P", help="Require every vehicle with a budget (an EV's battery above its reserve, an ICE's tank_l) to complete its day with at least this probability (0.5 to 1, e.g. 0.95), from its calibration or its class's priors; still proven optimal. Every plan reports each vehicle's probability (p_complete).")] = None,
+    min_p_complete: Annotated[float | None, typer.Option(
+        "--min-p-complete", metavar="P",
+        help="Require every vehicle with a budget (an EV's battery above its reserve, an ICE's tank_l) to complete "
+             "its day with at least this probability (0.5 to 1, e.g. 0.95), from its calibration or its class's "
+             "priors; still proven optimal. Every plan reports each vehicle's probability (p_complete).")] = None,
 ) -> None:
     """The assignment of shared stops that minimises total fuel (or energy, or cost),
     within gross-weight limits and EV reserves: proven optimal (enumeration or MILP).
@@ -36,8 +39,8 @@ def fleet_plan(
     from contextlib import ExitStack
 
     from cevm.io.scenario import default_resolver, fleet_report
-    from cevm.store.sources import store_resolver
     from cevm.store import TripStore, resolve_store_path
+    from cevm.store.sources import store_resolver
 
     if method not in ("auto", "enumerate", "milp"):
         raise fail("--method must be auto, enumerate or milp")

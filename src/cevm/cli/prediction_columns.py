@@ -306,8 +306,9 @@ class VehicleRow:
         speed = vec.distance_m / vec.duration_s if vec.duration_s > 0 else None
         idle = vec.idle_s / vec.duration_s if vec.duration_s > 0 else None
         t = None if self.res.ambient_c is None else float(self.res.ambient_c[self.i])
-        return extrapolation_text(int(extrapolation_mask(self.vehicle.calibration, mass_kg=float(self.res.mass_kg[self.i]),
-                                                         ambient_c=t, mean_speed_mps=speed, idle_share=idle)))
+        mask = extrapolation_mask(self.vehicle.calibration, mass_kg=float(self.res.mass_kg[self.i]),
+                                  ambient_c=t, mean_speed_mps=speed, idle_share=idle)
+        return extrapolation_text(int(mask))
 
     def range_km(self, range_m: np.ndarray) -> float | None:
         """A range in km; None where unknown, and where unlimited (a source that gives back

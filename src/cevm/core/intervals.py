@@ -16,12 +16,16 @@ source's energy. An ICE completes its source within its tank with P(fuel <= tank
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy.special import ndtr
 
 from cevm.core.predictive import Features, predictive
 from cevm.core.vehicle import EXTRAPOLATION_AXES, extrapolation_mask, extrapolation_text
+
+if TYPE_CHECKING:
+    from cevm.core.sweep.block import SweepBlock
 
 #: Where a row's interval comes from: a calibration's posterior, the vehicle class's
 #: priors (a file never calibrated), or nothing (a vehicle built without priors).
@@ -55,7 +59,7 @@ class RowRanges:
         return np.where(self.sd > 0, ndtr(z), np.where(budget >= self.mean, 1.0, 0.0))
 
 
-def block_ranges(block) -> RowRanges:
+def block_ranges(block: SweepBlock) -> RowRanges:
     """The :class:`RowRanges` of a :class:`cevm.core.sweep.SweepBlock`: its rows' vehicles
     at their masses and temperatures on its source."""
     pset, src = block.pset, block.source
@@ -80,7 +84,7 @@ def block_ranges(block) -> RowRanges:
     return RowRanges(mean, sd, code, mask)
 
 
-def p_reserve_ok(block, ranges: RowRanges, soc_start_pct: float, reserve_pct: float) -> np.ndarray:
+def p_reserve_ok(block: SweepBlock, ranges: RowRanges, soc_start_pct: float, reserve_pct: float) -> np.ndarray:
     """P(an EV row completes its source with its lowest state of charge at or above the
     reserve) (module notes); NaN for ICE rows."""
     pset = block.pset
@@ -98,7 +102,7 @@ def p_reserve_ok(block, ranges: RowRanges, soc_start_pct: float, reserve_pct: fl
     return np.where(pset.is_ev, p, np.nan)
 
 
-def p_tank_ok(block, ranges: RowRanges) -> np.ndarray:
+def p_tank_ok(block: SweepBlock, ranges: RowRanges) -> np.ndarray:
     """P(an ICE row's fuel fits its tank); NaN for EV rows and tanks not known."""
     pset = block.pset
     p = ranges.prob_at_most(pset.tank_l)

@@ -36,14 +36,17 @@ Interface for commands (predict, feasibility, fleet plan, replay)::
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import cast
 
 import numpy as np
+from numpy.typing import ArrayLike
 from scipy.special import ndtr, ndtri
 
 from cevm.core import energy
 from cevm.core.cycle import CycleVector
-from cevm.core.model import braking_weight, wheel_energy_parts_j
+from cevm.core.model import IceBraking, braking_weight, wheel_energy_parts_j
 from cevm.core.uncertainty import Posterior, Scatter, coefficient_prior, extrapolation_variance, slope_prior_sd
 from cevm.core.vehicle import Vehicle, default_ambient_c
 
@@ -69,7 +72,8 @@ class Features:
     starts: np.ndarray | float = 1.0
 
     @classmethod
-    def of(cls, vector: CycleVector, vehicle: Vehicle, mass_kg=None, ambient_c=None, *, starts=1.0) -> Features:
+    def of(cls, vector: CycleVector, vehicle: Vehicle, mass_kg: ArrayLike | None = None,
+           ambient_c: ArrayLike | None = None, *, starts: np.ndarray | float = 1.0) -> Features:
         """The features of ``vector`` driven by ``vehicle`` at ``mass_kg`` (default its
         own) and ``ambient_c`` (default :func:`cevm.core.vehicle.default_ambient_c`),
         which broadcast together."""
@@ -100,22 +104,22 @@ class Predictive:
     source: str = "posterior"
     note: str = ""
 
-    def quantile(self, q) -> np.ndarray:
+    def quantile(self, q: ArrayLike) -> np.ndarray:
         """The q-quantile(s), q in (0, 1)."""
-        return self.mean + self.sd * ndtri(np.asarray(q, dtype=np.float64))
+        return np.asarray(self.mean + self.sd * ndtri(np.asarray(q, dtype=np.float64)))
 
     def interval(self, level: float = 0.9) -> tuple[np.ndarray, np.ndarray]:
         """The central interval holding the consumption with probability ``level``."""
         z = float(ndtri(0.5 + 0.5 * level))
         return self.mean - z * self.sd, self.mean + z * self.sd
 
-    def prob_at_most(self, budget) -> np.ndarray:
+    def prob_at_most(self, budget: ArrayLike) -> np.ndarray:
         """P(consumption <= budget), budget in the unit of ``mean`` (broadcast)."""
         b = np.asarray(budget, dtype=np.float64)
         with np.errstate(divide="ignore", invalid="ignore"):
             z = (b - self.mean) / self.sd
         z = np.where(self.sd > 0, z, np.where(b >= self.mean, np.inf, -np.inf))
-        return ndtr(z)
+        return np.asarray(ndtr(z))
 
 
 def _prior_posterior(vehicle: Vehicle) -> Posterior | None:
@@ -157,18 +161,18 @@ def mean(vehicle: Vehicle, f: Features, ice_braking: str | None = None) -> np.nd
         w = energy.ev_negative_weight(vehicle)
         return energy.ev_battery_energy_j(vehicle, f.positive_j + w * f.negative_j, duration_s=f.duration_s,
                                           ambient_c=f.ambient_c, starts=f.starts)
-    w = braking_weight(ice_braking or vehicle.ice_braking)
+    w = braking_weight(cast(IceBraking, ice_braking or vehicle.ice_braking))
     return energy.ice_fuel_l(vehicle, f.positive_j + w * f.negative_j, mass_kg=1.0, k_pos=f.kinetic_j,
                              traction_s=f.traction_s, duration_s=f.duration_s, idle_s=f.idle_s,
                              ambient_c=f.ambient_c, starts=f.starts)
 
 
-def gradient(vehicle: Vehicle, f: Features, terms, ice_braking: str | None = None) -> np.ndarray:
+def gradient(vehicle: Vehicle, f: Features, terms: Sequence[str], ice_braking: str | None = None) -> np.ndarray:
     """d mean / d coefficient of ``terms`` (n x k; :mod:`cevm.core.uncertainty`)."""
     return gradient_rows(vehicle, f, terms, ice_braking).T
 
 
-def gradient_rows(vehicle: Vehicle, f: Features, terms, ice_braking: str | None = None,
+def gradient_rows(vehicle: Vehicle, f: Features, terms: Sequence[str], ice_braking: str | None = None,
                   extra: int = 0) -> np.ndarray:
     """The gradient as k rows of n (+ ``extra`` rows left for the caller): the layout
     whose products with a k x k matrix and row-wise sums of squares numpy does fast (a
@@ -190,7 +194,7 @@ def gradient_rows(vehicle: Vehicle, f: Features, terms, ice_braking: str | None 
                 else:
                     row[:] = f.positive_j
             else:
-                w = braking_weight(ice_braking or vehicle.ice_braking)
+                w = braking_weight(cast(IceBraking, ice_braking or vehicle.ice_braking))
                 np.multiply(f.negative_j, w, out=row)
                 row += f.positive_j
                 row /= vehicle.fuel_lhv_j_per_l
@@ -199,7 +203,7 @@ def gradient_rows(vehicle: Vehicle, f: Features, terms, ice_braking: str | None 
         elif t == "regen":
             row[:] = f.negative_j
         elif t == "kin":
-            np.divide(f.kinetic_j, vehicle.fuel_lhv_j_per_l, out=row)
+            np.divide(f.kinetic_j, float(vehicle.fuel_lhv_j_per_l or math.nan), out=row)
         elif t == "aux":
             row[:] = f.duration_s
         elif t == "idle":
@@ -207,11 +211,11 @@ def gradient_rows(vehicle: Vehicle, f: Features, terms, ice_braking: str | None 
         elif t == "run":
             row[:] = f.traction_s
         elif t == "heat":
-            np.multiply(f.duration_s, h, out=row)
+            np.multiply(f.duration_s, cast(np.ndarray, h), out=row)
         elif t == "cool":
-            np.multiply(f.duration_s, c, out=row)
+            np.multiply(f.duration_s, cast(np.ndarray, c), out=row)
         elif t == "warm":
-            np.multiply(f.starts, h, out=row)
+            np.multiply(f.starts, cast(np.ndarray, h), out=row)
         else:
             raise KeyError(t)
     return out
@@ -235,7 +239,7 @@ def sqrt_cov(cov: np.ndarray) -> np.ndarray:
     """A square root R of a covariance, R^T R = cov (eigen-decomposition: semi-definite
     covariances too)."""
     w, V = np.linalg.eigh(cov)
-    return (V * np.sqrt(np.maximum(w, 0.0))).T
+    return np.asarray((V * np.sqrt(np.maximum(w, 0.0))).T)
 
 
 def _variance(post: Posterior, rows: np.ndarray, k: int) -> np.ndarray:
@@ -251,7 +255,7 @@ def _variance(post: Posterior, rows: np.ndarray, k: int) -> np.ndarray:
     return var
 
 
-def predictive(vehicle: Vehicle, f: Features, *, measurement_sd=None,
+def predictive(vehicle: Vehicle, f: Features, *, measurement_sd: ArrayLike | None = None,
                ice_braking: str | None = None) -> Predictive:
     """The predictive distribution of each prediction of ``f`` (module notes);
     ``measurement_sd`` [J or l] a measurement's own random uncertainty, added when the
@@ -278,7 +282,7 @@ def predictive(vehicle: Vehicle, f: Features, *, measurement_sd=None,
     return Predictive(np.broadcast_to(mu, shape), np.sqrt(np.broadcast_to(var, shape)), post.label, post.source)
 
 
-def total(vehicle: Vehicle, f: Features, groups=None, *, ice_braking: str | None = None) -> Predictive:
+def total(vehicle: Vehicle, f: Features, groups: ArrayLike | None = None, *, ice_braking: str | None = None) -> Predictive:
     """The predictive distribution of the sum of all predictions of ``f`` (one
     element), or of each group's sum (``groups``: a label per prediction, e.g. its
     day; the result in the order of ``np.unique(groups)``). Within a group the scatter

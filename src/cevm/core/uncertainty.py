@@ -27,10 +27,15 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from cevm.core.terms import TERMS_BY_POWERTRAIN
+
+if TYPE_CHECKING:
+    from cevm.core.vehicle import Vehicle
 
 #: z of a two-sided 95 % range: a prior range [low, high] is mean +- Z95 standard deviations.
 Z95 = 1.959963984540054
@@ -111,7 +116,7 @@ class Scatter:
     day_corr_note: str = "assumed 1 (fully correlated within a day): no estimate"
     standstill: float | None = None
 
-    def trip_variance(self, duration_s, mean) -> np.ndarray:
+    def trip_variance(self, duration_s: ArrayLike, mean: ArrayLike) -> np.ndarray:
         """(aux D)^2 + (share mu)^2 per trip."""
         d = np.asarray(duration_s, dtype=np.float64)
         m = np.asarray(mean, dtype=np.float64)
@@ -157,11 +162,11 @@ class Posterior:
 # ----------------------------------------------------------------- coefficients
 
 
-def coefficient(vehicle, term: str) -> float:
+def coefficient(vehicle: Vehicle, term: str) -> float:
     """The coefficient of ``term`` at the vehicle's values (module notes); NaN for an EV's
     regeneration tied to eta."""
     if term == "eta":
-        return 1.0 / vehicle.eta
+        return 1.0 / float(vehicle.eta)
     if term == "kin":
         return 0.0 if vehicle.kinetic_eta is None else 1.0 / vehicle.kinetic_eta - 1.0 / vehicle.eta
     if term == "regen":
@@ -169,7 +174,7 @@ def coefficient(vehicle, term: str) -> float:
     return float(getattr(vehicle, TERMS_BY_POWERTRAIN[(vehicle.powertrain, term)].field))
 
 
-def coefficients(vehicle, terms: Sequence[str]) -> np.ndarray:
+def coefficients(vehicle: Vehicle, terms: Sequence[str]) -> np.ndarray:
     return np.array([coefficient(vehicle, t) for t in terms], dtype=np.float64)
 
 
@@ -195,14 +200,14 @@ def value_covariance(terms: Sequence[str], coef: np.ndarray, cov: np.ndarray) ->
     """The covariance of the terms' values (vehicle-field meaning) from the coefficients'
     by the delta method (:func:`value_jacobian`)."""
     G = value_jacobian(terms, coef)
-    return G @ cov @ G.T
+    return np.asarray(G @ cov @ G.T, dtype=np.float64)
 
 
 def coefficient_covariance(terms: Sequence[str], coef: np.ndarray, value_cov: np.ndarray) -> np.ndarray:
     """The inverse of :func:`value_covariance` (a vehicle file stores values' standard
     deviations and correlations)."""
     Gi = np.linalg.inv(value_jacobian(terms, coef))
-    return Gi @ value_cov @ Gi.T
+    return np.asarray(Gi @ value_cov @ Gi.T, dtype=np.float64)
 
 
 # ----------------------------------------------------------------- priors as Gaussians
@@ -277,7 +282,8 @@ def coefficient_prior(powertrain: str, terms: Sequence[str], priors: Priors | No
 
 
 def extrapolation_variance(slope_sd: dict, ambient_range: tuple[float, float] | None, heating_below_c: float,
-                           cooling_above_c: float, ambient_c, duration_s, starts=1.0) -> np.ndarray:
+                           cooling_above_c: float, ambient_c: ArrayLike, duration_s: ArrayLike,
+                           starts: ArrayLike = 1.0) -> np.ndarray:
     """The variance a prediction gains beyond the temperatures a calibration saw [J^2 or
     l^2]: a straight heating (cooling) line fitted between the trips' temperatures says
     nothing of how it bends beyond them (a heat pump's power grows faster than the

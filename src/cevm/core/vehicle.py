@@ -17,7 +17,6 @@ power up to 200 kW, fuel rates up to 50-100 l/h, rated power 0.1-5,000 kW, top s
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field, replace
 from typing import Literal
 
@@ -25,14 +24,13 @@ import numpy as np
 
 from cevm.core import energy
 from cevm.core.cycle import CycleVector
-from cevm.core.uncertainty import Posterior, Priors
 from cevm.core.model import (
     ICE_BRAKING_DEFAULT,
-    ICE_BRAKING_MODES,
     Prediction,
     braking_weight,
     wheel_energy_j,
 )
+from cevm.core.uncertainty import Posterior, Priors
 
 Powertrain = Literal["ev", "ice"]
 

@@ -28,12 +28,17 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy.special import ndtr
 
 from cevm.core.assignment.scenario import FleetVehicle, Scenario
+from cevm.core.cycle import CycleVector
 from cevm.core.predictive import Features, gradient_rows, posterior_of, sqrt_cov, total
+
+if TYPE_CHECKING:
+    from cevm.core.assignment.evaluation import Evaluation
 
 #: The MILP's no-good cuts at most before a chance-constrained plan is given up as not
 #: proven (each is one more solve).
@@ -61,7 +66,7 @@ def _leg_features(sc: Scenario, d: int, v: FleetVehicle, legs: Sequence[tuple[in
     return Features(*(np.concatenate([np.atleast_1d(getattr(f, k)) for f in parts]) for k in names))
 
 
-def p_complete(sc: Scenario, d: int, evaluation) -> dict[str, float | None]:
+def p_complete(sc: Scenario, d: int, evaluation: Evaluation) -> dict[str, float | None]:
     """Each vehicle's probability of completing its day under ``evaluation`` (a
     :class:`cevm.core.assignment.Evaluation`) within its budget (:func:`budget_of`);
     None where it has no budget, or no uncertainty is known (no priors)."""
@@ -94,7 +99,7 @@ class DayMoments:
         self.dur = np.zeros(n_comb)
         self.own = np.zeros(n_comb)
 
-    def add(self, vec, masses: np.ndarray, driven: np.ndarray, t_day) -> None:
+    def add(self, vec: CycleVector, masses: np.ndarray, driven: np.ndarray, t_day: float | None) -> None:
         """Legs of one vector at ``masses`` (n_comb x legs), counted where ``driven``."""
         if self.post is None:
             return
@@ -121,7 +126,7 @@ class DayMoments:
         var = np.einsum("kc,kc->c", A, A) + (self.post.meter_share * self.mu) ** 2
         m = np.maximum(self.mu, 0.0)
         var += sc_.day_corr * ((sc_.aux * self.dur) ** 2 + (sc_.share * m) ** 2) + (1.0 - sc_.day_corr) * self.own
-        return np.sqrt(var)
+        return np.asarray(np.sqrt(var))
 
 
 def z_of(p: float) -> float:

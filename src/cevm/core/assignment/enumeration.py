@@ -56,7 +56,8 @@ def solve_enumerate(sc: Scenario, prob: DayProblem, min_p_complete: float | None
         for vec, cols in vector_groups(r.legs):
             m = mass[:, cols]
             uniq, inv = np.unique(m, return_inverse=True)
-            use = quantity(predict(vec, v.vehicle, uniq, ambient_c=sc.ambient_of(prob.d)), v.vehicle)[inv].reshape(m.shape)
+            pred = predict(vec, v.vehicle, uniq, ambient_c=sc.ambient_of(prob.d))
+            use = quantity(pred, v.vehicle)[inv].reshape(m.shape)
             q += np.sum(use * driven[:, cols], axis=1)
             if v.id in moments:
                 moments[v.id].add(vec, m, driven[:, cols], sc.ambient_of(prob.d))
@@ -66,7 +67,8 @@ def solve_enumerate(sc: Scenario, prob: DayProblem, min_p_complete: float | None
         if v.energy_budget_j is not None:
             feasible &= vehicle_q[v.id] <= v.energy_budget_j * (1 + BUDGET_RTOL)
         if v.id in moments:
-            from cevm.core.assignment.chance import budget_of, prob as p_within
+            from cevm.core.assignment.chance import budget_of
+            from cevm.core.assignment.chance import prob as p_within
 
             feasible &= p_within(vehicle_q[v.id], moments[v.id].sd(), budget_of(v)) >= min_p_complete
     info = {"method": f"enumeration ({n_comb} combinations)", "n_variables": len(prob.free),

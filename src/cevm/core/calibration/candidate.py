@@ -81,7 +81,7 @@ class CandidateFit:
         if self.heldout is None:
             return np.full(self.fit.idx.size, math.nan)
         y = self.model.data.y[self.heldout.idx]
-        return (self.heldout.mean - y) / y * 100.0
+        return np.asarray((self.heldout.mean - y) / y * 100.0)
 
 
 def prior_for(model: TermModel, names: Sequence[str], priors: Priors | None) -> CoefficientPrior:

@@ -27,7 +27,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from cevm.core.calibration.solve import Fit, value_covariance
+from cevm.core.calibration.solve import FitLike, value_covariance
 from cevm.core.calibration.terms import TERMS_BY_POWERTRAIN, TermModel
 
 #: A temperature term needs at least this many trips on the side of its balance
@@ -111,7 +111,7 @@ def confounded(jw: np.ndarray, names: Sequence[str], max_correlation: float,
     )
 
 
-def imprecise(model: TermModel, fit: Fit, idx: np.ndarray, max_rel_se: float) -> tuple[str, str] | None:
+def imprecise(model: TermModel, fit: FitLike, idx: np.ndarray, max_rel_se: float) -> tuple[str, str] | None:
     """The extra term whose standard error is too large for it to mean anything."""
     data = model.data
     values, cov = value_covariance(model, fit)

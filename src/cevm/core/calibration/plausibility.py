@@ -17,7 +17,7 @@ import math
 
 import numpy as np
 
-from cevm.core.calibration.solve import Fit, bounds, value_covariance
+from cevm.core.calibration.solve import FitLike, bounds, value_covariance
 from cevm.core.calibration.terms import TERMS_BY_POWERTRAIN, TermModel
 
 #: A fitted standstill rate more than this factor above (or below 1 / this) the
@@ -37,7 +37,7 @@ def _fmt(model: TermModel, name: str, value: float) -> str:
     return f"{value * scale:.3g} {unit}".strip()
 
 
-def implausible(model: TermModel, fit, idx: np.ndarray, lb: np.ndarray | None = None,
+def implausible(model: TermModel, fit: FitLike, idx: np.ndarray, lb: np.ndarray | None = None,
                 ub: np.ndarray | None = None) -> tuple[str, str] | None:
     """The first term whose fitted value physics refuses, with the reason (see the module
     docstring); eta included. ``fit`` has ``names``, ``theta`` (coefficients), ``cov``
@@ -111,7 +111,7 @@ def implausible(model: TermModel, fit, idx: np.ndarray, lb: np.ndarray | None = 
     return None
 
 
-def evidence(model: TermModel, fit: Fit, idx: np.ndarray) -> dict | None:
+def evidence(model: TermModel, fit: FitLike, idx: np.ndarray) -> dict | None:
     """The modelled standstill rate against the one the logs measured (EV: battery power
     while standing still; ICE: fuel flow at idle), standstill-time weighted over the
     trips ``idx`` that measured it; None when less than :data:`EVIDENCE_MIN_S` was
@@ -126,10 +126,10 @@ def evidence(model: TermModel, fit: Fit, idx: np.ndarray) -> dict | None:
     measured = float(np.sum(s[ok] * r[ok]) / total)
     fitted = float(np.sum(s[ok] * model.standstill_rate(fit.names, fit.theta)[idx][ok]) / total)
     if model.ev:
-        def text(x):
+        def text(x: float) -> str:
             return f"{x / 1e3:.2f} kW"
     else:
-        def text(x):
+        def text(x: float) -> str:
             return f"{x * 3600:.2f} l/h"
     return {"seconds": total, "trips": int(ok.sum()), "measured": measured, "fitted": fitted,
             "ratio": fitted / measured if measured > 0 else None, "measured_text": text(measured),

@@ -50,11 +50,14 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 from scipy.linalg import cho_factor, cho_solve
 from scipy.optimize import lsq_linear, minimize
 
+from cevm.core.calibration.data import TripSet
 from cevm.core.calibration.terms import TermModel
 from cevm.core.uncertainty import CoefficientPrior, ScatterPrior, extrapolation_variance
 
@@ -117,7 +120,7 @@ class PosteriorFit:
     def sd(self) -> np.ndarray:
         return np.sqrt(np.maximum(np.diag(self.cov), 0.0))
 
-    def predictive_var(self, model: TermModel, idx, measurement: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    def predictive_var(self, model: TermModel, idx: ArrayLike, measurement: bool = True) -> tuple[np.ndarray, np.ndarray]:
         """(mean, variance) of trips ``idx`` of ``model`` under this posterior: the
         parameters' part, the scatter (a new day: both its parts), and the measurement's
         own uncertainty when ``measurement``."""
@@ -129,8 +132,13 @@ class PosteriorFit:
         r = _quality_ratio(d.q, self.idx)[idx]
         var = var + r * ((self.noise.aux * d.duration[idx]) ** 2 + (self.noise.share * np.maximum(mu, 0.0)) ** 2)
         if measurement:
-            var = var + (d.u_random[idx] * d.y[idx]) ** 2
+            var = var + (_u_random(d)[idx] * d.y[idx]) ** 2
         return mu, var
+
+
+def _u_random(d: TripSet) -> np.ndarray:
+    """The measurement's random relative uncertainty (its total where not split)."""
+    return d.u if d.u_random is None else d.u_random
 
 
 def _quality_ratio(q: np.ndarray, ref_idx: np.ndarray) -> np.ndarray:
@@ -146,7 +154,15 @@ def _groups(model: TermModel, idx: np.ndarray) -> tuple[np.ndarray, int]:
     return np.array([uniq[k] for k in sub], dtype=np.intp), len(uniq)
 
 
-def _standstill_design(model: TermModel, names: Sequence[str], theta: np.ndarray, idx: np.ndarray):
+#: The standstill observations of a fit: (positions in idx, rates, design rows, offset).
+StandstillRows = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+#: A built system: (A, b, block sizes (data, standstill, prior, day effects), the
+#: trips' independent variances, rho).
+Parts = tuple[np.ndarray, np.ndarray, tuple[int, int, int, int], np.ndarray, float]
+
+
+def _standstill_design(model: TermModel, names: Sequence[str], theta: np.ndarray,
+                      idx: np.ndarray) -> StandstillRows:
     """Rows of the standstill observations among trips ``idx``: (positions in idx, the
     observed rates, A (rows x k), offset of the fixed terms)."""
     d = model.data
@@ -183,23 +199,24 @@ def _lstsq(A: np.ndarray, b: np.ndarray) -> np.ndarray:
         c = cho_factor(As.T @ As)
         x = cho_solve(c, As.T @ b)
         if np.all(np.isfinite(x)) and float(np.min(np.abs(np.diag(c[0])))) > 1e-7:
-            return x / norms
+            return np.asarray(x / norms)
     except np.linalg.LinAlgError:
         pass
-    return np.linalg.lstsq(A, b, rcond=None)[0]
+    return np.asarray(np.linalg.lstsq(A, b, rcond=None)[0])
 
 
 class _System:
     """The weighted least-squares system of one linearisation (theta, day effects)."""
 
-    def __init__(self, model: TermModel, names: tuple, idx: np.ndarray, prior: CoefficientPrior, x: np.ndarray,
+    def __init__(self, model: TermModel, names: tuple[str, ...], idx: np.ndarray, prior: CoefficientPrior,
+                 x: np.ndarray,
                  mu: np.ndarray, h: np.ndarray, h_ss: np.ndarray, groups: np.ndarray, n_groups: int,
-                 ratio: np.ndarray, standstill):
+                 ratio: np.ndarray, standstill: StandstillRows | None):
         d = model.data
         self.k = len(names)
         self.n = idx.size
         self.y = d.y[idx]
-        self.sig2 = (d.u_random[idx] * self.y) ** 2
+        self.sig2 = (_u_random(d)[idx] * self.y) ** 2
         self.D = d.duration[idx]
         self.mu = np.maximum(mu, 0.0)
         self.ratio = ratio
@@ -214,7 +231,7 @@ class _System:
         self.ss = standstill  # (pos, z, A, off) or None
         self.h_ss = h_ss
 
-    def build(self, noise: Noise):
+    def build(self, noise: Noise) -> Parts:
         """(A, b, blocks) for ``noise``: blocks = (data rows, standstill rows, prior rows)."""
         k, n, G = self.k, self.n, self.G
         rho = noise.rho if G and n > G and noise.aux > 0 and noise.share > 0 else 0.0
@@ -253,7 +270,7 @@ class _System:
         b = np.concatenate(blocks_b)
         return A, b, (n, n_ss, inf.size, n_re), ind, rho
 
-    def solve(self, noise: Noise, lb: np.ndarray, ub: np.ndarray):
+    def solve(self, noise: Noise, lb: np.ndarray, ub: np.ndarray) -> tuple[np.ndarray, np.ndarray, Parts]:
         """The mode (bounded on theta), the unbounded one, and what :meth:`logml` needs."""
         A, b, blocks, ind, rho = self.build(noise)
         ncol = A.shape[1]
@@ -268,14 +285,14 @@ class _System:
             w[: self.k] = np.clip(w[: self.k], lb, ub)
         return w, free, (A, b, blocks, ind, rho)
 
-    def logml(self, noise: Noise, w: np.ndarray, parts) -> float:
+    def logml(self, noise: Noise, w: np.ndarray, parts: Parts) -> float:
         """Laplace log marginal likelihood at the mode ``w`` (Huber weights as fixed)."""
         A, b, (_n, n_ss, _n_pr, n_re), ind, rho = parts
         r = A @ w - b
         quad = float(r @ r)
         out = -0.5 * quad
         out -= 0.5 * float(np.sum(np.log(2.0 * math.pi * ind / self.h)))
-        if n_ss:
+        if n_ss and noise.standstill is not None:
             out -= 0.5 * float(np.sum(np.log(2.0 * math.pi * noise.standstill ** 2 / self.h_ss)))
         inf = np.flatnonzero(self.inf)
         out -= 0.5 * float(np.sum(np.log(2.0 * math.pi * self.prior.sd[inf] ** 2)))
@@ -287,13 +304,14 @@ class _System:
             c, _ = cho_factor(H)
             logdet = 2.0 * float(np.sum(np.log(np.diag(c))))
         except np.linalg.LinAlgError:
-            sign, logdet = np.linalg.slogdet(H)
+            sign, ld = np.linalg.slogdet(H)
+            logdet = float(ld)
             if sign <= 0:
                 return -math.inf
         out += 0.5 * H.shape[0] * math.log(2.0 * math.pi) - 0.5 * logdet
-        return out
+        return float(out)
 
-    def covariance(self, parts) -> np.ndarray:
+    def covariance(self, parts: Parts) -> np.ndarray:
         """The theta block of the inverse normal matrix (day effects marginalised)."""
         A = parts[0]
         H = A.T @ A
@@ -301,11 +319,11 @@ class _System:
             inv = cho_solve(cho_factor(H), np.eye(H.shape[0]))
         except np.linalg.LinAlgError:
             inv = np.linalg.pinv(H)
-        return inv[: self.k, : self.k]
+        return np.asarray(inv[: self.k, : self.k])
 
 
 
-    def logml_grad(self, noise: Noise, fisher: bool = False):
+    def logml_grad(self, noise: Noise, fisher: bool = False) -> tuple[Any, ...]:
         """The log marginal likelihood without the bounds and without day effects
         (``noise.rho`` ignored), its gradient in (log s_aux, log s_share[, log
         s_stand]): d/dV_i = ((w r)_i^2 - P_ii) / 2 with P = W - W X H^-1 X^T W, the
@@ -364,7 +382,7 @@ def _scatter_logprior(noise: Noise, centre: ScatterPrior | None) -> tuple[float,
     if centre is None:
         return 0.0, np.zeros(3 if use_ss else 2)
     pairs = [(noise.aux, centre.aux, SCATTER_LOG_SD), (noise.share, centre.share, SCATTER_LOG_SD)]
-    if use_ss:
+    if noise.standstill is not None:
         pairs.append((noise.standstill, centre.aux, 1.5 * SCATTER_LOG_SD))
     val, grad = 0.0, []
     for x, c, sd in pairs:
@@ -384,13 +402,14 @@ def _start(model: TermModel, names: Sequence[str], prior: CoefficientPrior) -> n
 
     x0 = start(model, names)
     x0 = np.where(np.isfinite(prior.sd), prior.mean, x0)
-    return np.clip(x0, prior.lb, prior.ub)
+    return np.asarray(np.clip(x0, prior.lb, prior.ub))
 
 
 class _State:
     """The iteration state of :func:`solve`: coefficients, prediction, Huber weights."""
 
-    def __init__(self, model, names, idx, prior, ss, huber_c, x):
+    def __init__(self, model: TermModel, names: tuple[str, ...], idx: np.ndarray, prior: CoefficientPrior,
+                 ss: StandstillRows | None, huber_c: float | None, x: np.ndarray):
         self.model, self.names, self.idx, self.prior, self.ss, self.huber_c = model, names, idx, prior, ss, huber_c
         self.groups, self.G = _groups(model, idx)
         self.ratio = _quality_ratio(model.data.q, idx)[idx]
@@ -408,7 +427,7 @@ class _State:
         for the tied regeneration and CdA / Cr, iteratively reweighted for Huber)."""
         d = self.model.data
         y = d.y[self.idx]
-        sig2 = (d.u_random[self.idx] * y) ** 2
+        sig2 = (_u_random(d)[self.idx] * y) ** 2
         D = d.duration[self.idx]
         for _ in range(max_iter):
             w, _, _ = self.system().solve(noise, self.prior.lb, self.prior.ub)
@@ -453,7 +472,8 @@ def solve(model: TermModel, names: Sequence[str], idx: np.ndarray, prior: Coeffi
         for _ in range(noise_rounds):
             new = fit_noise_in_sample(state.system(), noise, scatter_prior)
             moved = max(abs(math.log(new.aux / noise.aux)), abs(math.log(new.share / noise.share)),
-                        abs(math.log(new.standstill / noise.standstill)) if new.standstill is not None else 0.0)
+                        abs(math.log(new.standstill / noise.standstill))
+                        if new.standstill is not None and noise.standstill is not None else 0.0)
             noise = new
             converged = state.iterate(noise, max_iter)
             if moved < NOISE_TOL:
@@ -461,7 +481,7 @@ def solve(model: TermModel, names: Sequence[str], idx: np.ndarray, prior: Coeffi
     return _result(state, noise, scatter_prior, converged)
 
 
-def _result(state: _State, noise: Noise, scatter_prior, converged: bool) -> PosteriorFit:
+def _result(state: _State, noise: Noise, scatter_prior: ScatterPrior | None, converged: bool) -> PosteriorFit:
     sysm = state.system()
     prior = state.prior
     w, free_w, parts = sysm.solve(noise, prior.lb, prior.ub)
@@ -481,15 +501,18 @@ def fit_noise_in_sample(sysm: _System, noise: Noise, centre: ScatterPrior | None
     linearisation (Fisher scoring on the logs, halving a step that does not climb; day
     effects not modelled)."""
     use_ss = noise.standstill is not None and sysm.ss is not None
-    x0 = np.array([math.log(noise.aux), math.log(noise.share)] + ([math.log(noise.standstill)] if use_ss else []))
+    logs = [math.log(noise.aux), math.log(noise.share)]
+    if noise.standstill is not None and sysm.ss is not None:
+        logs.append(math.log(noise.standstill))
+    x0 = np.array(logs)
 
-    floor = STANDSTILL_FLOOR * float(np.median(np.abs(sysm.ss[1]))) if use_ss else 0.0
+    floor = STANDSTILL_FLOOR * float(np.median(np.abs(sysm.ss[1]))) if sysm.ss is not None and use_ss else 0.0
 
-    def make(v):
+    def make(v: np.ndarray) -> Noise:
         v = np.clip(v, x0 - 25.0, x0 + 25.0)
         return Noise(math.exp(v[0]), math.exp(v[1]), noise.rho, max(math.exp(v[2]), floor) if use_ss else None)
 
-    def evaluate(v, fisher):
+    def evaluate(v: np.ndarray, fisher: bool) -> tuple[Any, ...]:
         nz = make(v)
         out = sysm.logml_grad(nz, fisher=fisher)
         pv, pg = _scatter_logprior(nz, centre)
@@ -549,13 +572,14 @@ class HeldOut:
     extra_var: np.ndarray | None = None
     fold_noise: dict | None = None  # fold -> the Noise its training trips fitted
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         if self.extra_var is None:
             object.__setattr__(self, "extra_var", np.zeros_like(self.param_var))
 
 
 def held_out(model: TermModel, names: Sequence[str], idx: np.ndarray, prior: CoefficientPrior, noise: Noise, *,
-             huber_c: float | None, fold_of: np.ndarray | None = None, theta0=None, fit_noise: bool = True,
+             huber_c: float | None, fold_of: np.ndarray | None = None, theta0: np.ndarray | None = None,
+             fit_noise: bool = True,
              scatter_prior: ScatterPrior | None = None) -> HeldOut:
     """Every trip of ``idx`` predicted by the posterior of the other folds; each fold
     fits its own scatter in sample from ``noise`` (``fit_noise``, so that no trip's
@@ -620,14 +644,15 @@ def heldout_scatter(model: TermModel, ho: HeldOut, centre: ScatterPrior | None, 
     if idx.size < 3:
         return start
     r = d.y[idx] - ho.mean[ok]
-    base = (ho.param_var[ok] if with_param_var else 0.0) + ho.extra_var[ok] + (d.u_random[idx] * d.y[idx]) ** 2
+    extra = np.zeros(idx.size) if ho.extra_var is None else ho.extra_var[ok]
+    base = (ho.param_var[ok] if with_param_var else 0.0) + extra + (_u_random(d)[idx] * d.y[idx]) ** 2
     ratio = _quality_ratio(d.q, ho.idx)[idx]
     A = ratio * d.duration[idx] ** 2
     M = ratio * np.maximum(ho.mean[ok], 0.0) ** 2
     h = np.ones(idx.size)
     x0 = np.array([math.log(start.aux), math.log(start.share)])
 
-    def obj(v):
+    def obj(v: np.ndarray) -> tuple[float, np.ndarray]:
         v = np.clip(v, x0 - 25.0, x0 + 25.0)
         a2, s2 = math.exp(2 * v[0]), math.exp(2 * v[1])
         V = base + a2 * A + s2 * M
@@ -652,7 +677,7 @@ def heldout_scatter(model: TermModel, ho: HeldOut, centre: ScatterPrior | None, 
 
 
 def day_correlation(model: TermModel, names: Sequence[str], idx: np.ndarray, prior: CoefficientPrior, noise: Noise,
-                    *, huber_c: float | None, theta0=None) -> tuple[float, str, tuple]:
+                    *, huber_c: float | None, theta0: np.ndarray | None = None) -> tuple[float, str, tuple]:
     """rho for the variance of a day's total (module notes): (rho, how it was decided,
     the profile ((rho, log-likelihood), ...)). The trip scatter's total is kept at
     ``noise`` (its split between days and trips is what is estimated)."""

@@ -57,7 +57,7 @@ import numpy as np
 
 from cevm.core.calibration import plausibility
 from cevm.core.calibration.candidate import COOLING_GRID_C, HEATING_GRID_C, CandidateFit, Settings, fit_candidate  # noqa: F401 (the grids: part of the interface)
-from cevm.core.calibration.data import CalibrationError, TripData, select_trips
+from cevm.core.calibration.data import CalibrationError, TripData, TripSet, select_trips
 from cevm.core.calibration.fitting import CalibrationResult, _check_interval, fit_model
 from cevm.core.calibration.solve import HUBER_C, value_covariance
 from cevm.core.calibration.terms import EXTRA_TERMS, TERMS_BY_POWERTRAIN, TermModel, neutral
@@ -174,7 +174,11 @@ def _evidence_seconds(model: TermModel, idx: np.ndarray) -> float:
     return float(s[ok].sum())
 
 
-def _keys(model: TermModel, sets, idx) -> list[tuple[tuple, bool]]:
+#: A candidate: (its terms, whether the standstill observations are used).
+Key = tuple[tuple[str, ...], bool]
+
+
+def _keys(model: TermModel, sets: Sequence[tuple[str, ...]], idx: np.ndarray) -> list[Key]:
     """Every (terms, standstill) candidate: with the standstill observations too where the
     trips measured enough and the set has the term they observe."""
     base = "aux" if model.ev else "idle"
@@ -187,7 +191,8 @@ def _keys(model: TermModel, sets, idx) -> list[tuple[tuple, bool]]:
     return out
 
 
-def _select_on(model: TermModel, keys, idx, priors, settings: Settings):
+def _select_on(model: TermModel, keys: Sequence[Key], idx: np.ndarray, priors: Priors | None,
+               settings: Settings) -> tuple[Key, Key, dict, dict, dict, dict, dict]:
     """The selection on the trips ``idx``: (best, chosen, errors, fits, reasons, loss, se),
     keyed by (terms, standstill)."""
     data = model.data
@@ -298,7 +303,8 @@ def select(
                      chosen_standstill=chosen[1])
 
 
-def _nested(model: TermModel, keys, fold_of: np.ndarray, priors, settings: Settings) -> ErrorStats:
+def _nested(model: TermModel, keys: Sequence[Key], fold_of: np.ndarray, priors: Priors | None,
+            settings: Settings) -> ErrorStats:
     """The selection's own cross-validated error: each outer fold predicted by the model
     the selection picks on the other folds."""
     data = model.data
@@ -322,7 +328,8 @@ def _nested(model: TermModel, keys, fold_of: np.ndarray, priors, settings: Setti
 TEMPERATURE_QUORUM = 0.5
 
 
-def _trips_with_temperature(vehicle: Vehicle, data, excluded: dict, terms) -> tuple:
+def _trips_with_temperature(vehicle: Vehicle, data: TripSet, excluded: dict,
+                            terms: Sequence[str] | None) -> tuple:
     """``data`` without its trips that logged no temperature, when most did (a sensor
     that dropped out on some days); else unchanged. Returns (data, excluded, note)."""
     wanted = EXTRA_TERMS[vehicle.powertrain] if terms is None else tuple(terms)
@@ -340,7 +347,7 @@ def _trips_with_temperature(vehicle: Vehicle, data, excluded: dict, terms) -> tu
     return data.subset(np.flatnonzero(has_t)), excluded, note
 
 
-def _balance_fields(model: TermModel, names) -> dict:
+def _balance_fields(model: TermModel, names: Sequence[str]) -> dict:
     """The balance temperatures a candidate with temperature terms was fitted with, as
     fitted fields (value, standard error NaN: chosen on a grid)."""
     out = {}
@@ -361,7 +368,7 @@ def _possible_terms(model: TermModel, extras: Sequence[str],
     vals = model.vehicle_values()
     pt = model.vehicle.powertrain
 
-    def has_prior(n):
+    def has_prior(n: str) -> bool:
         return priors is not None and priors.get(n) is not None
 
     no_temp = [n for n in extras if TERMS_BY_POWERTRAIN[(pt, n)].temperature and not has_prior(n)]
