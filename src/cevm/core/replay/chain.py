@@ -1,0 +1,208 @@
+"""The state of charge (or the fuel in the tank) carried from trip to trip, with charging
+in the stops (pure, vectorised over chains and draws).
+
+Levels are energies in the battery [J] (EV) or fuel in the tank [l] (ICE), from 0
+(empty) to the capacity C (the usable battery, the tank). Trip by trip, in time order,
+with L the level at the trip's start, E the trip's energy and x its excess (the most it
+draws inside the trip beyond E, :mod:`cevm.core.replay.trips`):
+
+- the lowest level inside the trip is L - E - x;
+- after the trip the level is min(L - E, C): a full battery takes no regenerated energy;
+- in the stop after it the vehicle gains min(eta_c P dt, C - level): a charger of power
+  P [W] (0 where the stop does not charge; infinite for refuelling to full) for the
+  stop's whole dwell dt [s] at charging efficiency eta_c, never beyond full;
+- at the end of a duty whose level fell below empty the level is taken as empty (the
+  duty failed; the next starts from what the rest between them gives).
+
+A *chain* is a run of trips whose level carries over: one duty when every duty starts
+from the same level (the default: a full depot charge overnight), or all of a vehicle's
+duties when the level carries across the rests. Chains are laid side by side in
+:class:`Lanes` (slot t of lane l is the chain's t-th trip, padded with nothing), so that
+one loop over slots serves every chain, and a last axis of draws (the Monte Carlo of
+:mod:`cevm.core.replay.montecarlo`) or of trial capacities (:mod:`cevm.core.replay.sizing`)
+costs no Python loop.
+
+Every operation above is non-decreasing in L, C and P: a bigger battery or a stronger
+charger never lowers a level, so whether a duty keeps its reserve (its lowest level at or
+above a share r of C, starting from a share s of C with s > r) is monotone in both (the
+sizing relies on it).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True, eq=False)
+class Lanes:
+    """Chains side by side: ``index`` (T, L) the trip at slot t of lane l (-1: past the
+    chain's end). Chains are runs of consecutive trips of one trip array."""
+
+    index: np.ndarray
+
+    @classmethod
+    def of(cls, starts, stops) -> Lanes:
+        """Lanes of the chains ``starts[l]:stops[l]`` (trip indices)."""
+        starts = np.asarray(starts, dtype=np.int64)
+        sizes = np.asarray(stops, dtype=np.int64) - starts
+        t = int(sizes.max()) if sizes.size else 0
+        slot = np.arange(t)[:, None]
+        index = np.where(slot < sizes[None, :], starts[None, :] + slot, -1)
+        return cls(index)
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return self.index.shape  # type: ignore[return-value]
+
+    @property
+    def valid(self) -> np.ndarray:
+        return self.index >= 0
+
+    def take(self, values, fill=0.0) -> np.ndarray:
+        """Per-trip ``values`` (n, ...) at each slot (T, L, ...); ``fill`` where none."""
+        v = np.asarray(values)
+        out = v[np.maximum(self.index, 0)]
+        if self.index.size and not self.valid.all():
+            mask = ~self.valid
+            out = out.copy()
+            out[mask] = fill
+        return out
+
+    def put(self, slots: np.ndarray, n: int) -> np.ndarray:
+        """Slot values (T, L, ...) back to one per trip (n, ...)."""
+        out = np.zeros((n,) + slots.shape[2:], dtype=slots.dtype)
+        ok = self.valid
+        out[self.index[ok]] = slots[ok]
+        return out
+
+
+@dataclass(frozen=True, eq=False)
+class Stops:
+    """The stop after each trip (n,): ``dwell_s`` [s] (NaN after the last), ``power_w``
+    the charger there [W] (0: no charging; inf: refuelled to full), ``sizable`` whether a
+    charger sizing sets its power (the stops of a duty that charge; not the rests
+    between duties), ``duty_end`` whether the trip ends a duty."""
+
+    dwell_s: np.ndarray
+    power_w: np.ndarray
+    sizable: np.ndarray
+    duty_end: np.ndarray
+
+    def with_power(self, power_w) -> np.ndarray:
+        """The stops' powers with the sizable ones at ``power_w`` (broadcast over a last
+        axis of trial powers: (n, K))."""
+        p = np.asarray(power_w, dtype=np.float64)
+        base = self.power_w if p.ndim == 0 else self.power_w[:, None]
+        return np.where((self.sizable if p.ndim == 0 else self.sizable[:, None]), p, base)
+
+
+def stop_gain(level, capacity, power_w, dwell_s, efficiency) -> np.ndarray:
+    """What a stop adds [J or l]: min(eta_c P dt, C - level), all of C - level for an
+    infinite P (refuelling), nothing for P = 0 or a NaN dwell."""
+    room = np.maximum(capacity - level, 0.0)
+    with np.errstate(invalid="ignore"):
+        raw = np.where(np.isinf(power_w), np.inf, efficiency * power_w * np.nan_to_num(dwell_s, nan=0.0))
+    raw = np.where(power_w > 0, raw, 0.0)
+    return np.minimum(raw, room)
+
+
+@dataclass(frozen=True, eq=False)
+class ChainRun:
+    """Per slot (T, L, ...): ``before`` the level at the trip's start, ``low`` the lowest
+    inside it, ``after`` the level after it (capped at full), ``gain`` what the stop
+    after it added."""
+
+    before: np.ndarray
+    low: np.ndarray
+    after: np.ndarray
+    gain: np.ndarray
+
+
+def run_chains(lanes: Lanes, energy, excess, stops: Stops, *, capacity, start, efficiency: float,
+               power_w=None) -> ChainRun:
+    """The levels along each lane (module notes). ``energy`` and ``excess`` per trip (n,)
+    or (n, K) (K draws or trials along a last axis); ``capacity`` and ``start`` per lane
+    (L,) or (L, K), or scalars; ``power_w`` per trip (n,) or (n, K) (default the stops')."""
+    e = lanes.take(energy)
+    x = lanes.take(excess)
+    power = lanes.take(stops.power_w if power_w is None else power_w)
+    dwell = lanes.take(stops.dwell_s, fill=np.nan)
+    end = lanes.take(stops.duty_end, fill=False)
+    t_count, l_count = lanes.shape
+    extra = np.broadcast_shapes(e.shape[2:], power.shape[2:], np.shape(capacity)[1:], np.shape(start)[1:])
+    shape = (l_count,) + extra
+    cap = np.broadcast_to(np.asarray(capacity, dtype=np.float64).reshape(_lane_shape(capacity, l_count, extra)), shape)
+    level = np.broadcast_to(np.asarray(start, dtype=np.float64).reshape(_lane_shape(start, l_count, extra)),
+                            shape).copy()
+    before = np.empty((t_count,) + shape)
+    low = np.empty_like(before)
+    after = np.empty_like(before)
+    gain = np.empty_like(before)
+    pad = (slice(None),) + (None,) * (len(shape) - 1)
+    for t in range(t_count):
+        et = _lane_slot(e[t], shape)
+        before[t] = level
+        low[t] = level - et - _lane_slot(x[t], shape)
+        level = np.minimum(level - et, cap)
+        after[t] = level
+        level = np.where(end[t][pad], np.maximum(level, 0.0), level)
+        g = stop_gain(level, cap, _lane_slot(power[t], shape), dwell[t][pad], efficiency)
+        gain[t] = g
+        level = level + g
+    return ChainRun(before, low, after, gain)
+
+
+def _lane_shape(value, lanes: int, extra: tuple) -> tuple:
+    """A per-lane value's shape for broadcasting against (L, *extra)."""
+    s = np.shape(value)
+    if not s:
+        return (1,) * (1 + len(extra))
+    return s + (1,) * (1 + len(extra) - len(s))
+
+
+def _lane_slot(v: np.ndarray, shape: tuple) -> np.ndarray:
+    """One slot's per-lane values (L,) or (L, K) against the state's ``shape``."""
+    return v.reshape(v.shape + (1,) * (len(shape) - v.ndim))
+
+
+# ----------------------------------------------------------------------- per duty
+
+
+@dataclass(frozen=True, eq=False)
+class DutyLevels:
+    """Per duty (D,) [J or l]: the level at its start (``start``), its lowest inside any of
+    its trips (``low``), at its end (``end``, after its last trip), what its stops added
+    (``gained``: the stops between its trips, not the rest after it), how many stops
+    charged (``charges``); ``first_below`` the first trip (global index) whose lowest
+    level is below the duty's ``threshold`` (-1: none)."""
+
+    start: np.ndarray
+    low: np.ndarray
+    end: np.ndarray
+    gained: np.ndarray
+    charges: np.ndarray
+    first_below: np.ndarray
+
+
+def duty_levels(bounds: np.ndarray, before: np.ndarray, low: np.ndarray, after: np.ndarray, gain: np.ndarray,
+                threshold) -> DutyLevels:
+    """:class:`DutyLevels` from per-trip levels (n,) (:meth:`Lanes.put` of a
+    :class:`ChainRun`), duties ``bounds`` (D+1) over the trips; ``threshold`` (D,) or a
+    scalar: the level (the reserve) whose first crossing is looked for."""
+    first, last = bounds[:-1], bounds[1:] - 1
+    n = before.size
+    if first.size == 0:
+        z = np.zeros(0)
+        return DutyLevels(z, z, z, z, z.astype(np.int64), z.astype(np.int64))
+    inner = np.ones(n, dtype=bool)
+    inner[last] = False  # the stop after a duty's last trip is the rest between duties
+    duty = np.repeat(np.arange(first.size), np.diff(bounds))
+    thr = np.broadcast_to(np.asarray(threshold, dtype=np.float64), first.shape)[duty]
+    below = np.where(low < thr, np.arange(n), n)
+    fb = np.minimum.reduceat(below, first)
+    return DutyLevels(start=before[first], low=np.minimum.reduceat(low, first), end=after[last],
+                      gained=np.add.reduceat(np.where(inner, gain, 0.0), first),
+                      charges=np.add.reduceat((inner & (gain > 0)).astype(np.int64), first),
+                      first_below=np.where(fb < n, fb, -1))

@@ -1,0 +1,200 @@
+"""The fleet's duties summed up (pure): how many complete, at what confidence, and the
+battery and charger that would complete a share of them; and what a duty asks beyond
+what the candidate's calibration saw.
+
+Sizes for a share q of the duties: where each duty starts from the same level (a full
+charge overnight) a duty's need does not depend on the others, and the fleet's size is
+the q-quantile of the duties' needs (:func:`~cevm.core.replay.sizing.size_for_share`).
+Where the level carries across duties (one chain per vehicle), the share of duties a
+battery completes is itself monotone in its size (every level is, :mod:`~cevm.core.replay.chain`),
+so the fleet's size is bisected directly on it (:func:`chained_sizes`), every vehicle's
+chain at once.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from cevm.core.replay.chain import Lanes, Stops, run_chains
+from cevm.core.replay.plan import Excess, VehiclePlan
+from cevm.core.replay.sizing import charger_upper, smallest_passing, undecided_trips
+from cevm.core.vehicle import DOMAIN_MARGIN_K, DOMAIN_MARGIN_MASS, DOMAIN_MARGIN_SPEED, Vehicle
+
+
+def trip_extrapolation(vehicle: Vehicle, mass_kg, ambient_c, mean_speed_mps) -> np.ndarray:
+    """Per trip, what the candidate's calibration did not see (bit flags: 1 temperature,
+    2 mass, 4 speed), with the margins of :func:`cevm.core.vehicle.domain_warnings`;
+    -1 for a file never calibrated."""
+    d = vehicle.calibration
+    m = np.asarray(mass_kg, dtype=np.float64)
+    if d is None:
+        return np.full(m.shape, -1, dtype=np.int64)
+    flags = np.zeros(m.shape, dtype=np.int64)
+    if d.ambient_c is not None:
+        lo, hi = d.ambient_c
+        t = np.asarray(ambient_c, dtype=np.float64)
+        flags |= np.where((t < lo - DOMAIN_MARGIN_K) | (t > hi + DOMAIN_MARGIN_K), 1, 0)
+    if d.mass_kg is not None:
+        lo, hi = d.mass_kg
+        flags |= np.where((m < lo * (1 - DOMAIN_MARGIN_MASS)) | (m > hi * (1 + DOMAIN_MARGIN_MASS)), 2, 0)
+    if d.mean_speed_mps is not None:
+        lo, hi = d.mean_speed_mps
+        v = np.asarray(mean_speed_mps, dtype=np.float64)
+        flags |= np.where((v < lo * (1 - DOMAIN_MARGIN_SPEED)) | (v > hi * (1 + DOMAIN_MARGIN_SPEED)), 4, 0)
+    return flags
+
+
+def duty_extrapolation(plan: VehiclePlan) -> list[str]:
+    """Per duty: "none", what its trips ask beyond the calibration ("temperature, mass"),
+    or "not calibrated"."""
+    t = plan.trips
+    with np.errstate(divide="ignore", invalid="ignore"):
+        speed = t.distance_m / (t.end_s - t.start_s)
+    flags = trip_extrapolation(plan.vehicle, plan.energies.mass_kg, plan.energies.ambient_c, speed)
+    if flags.size and flags[0] < 0:
+        return ["not calibrated"] * plan.duties.n
+    per = np.bitwise_or.reduceat(flags, plan.duties.first) if flags.size else flags
+    words = ((1, "temperature"), (2, "mass"), (4, "speed"))
+    return [", ".join(w for b, w in words if f & b) or "none" for f in per.tolist()]
+
+
+@dataclass
+class Fleet:
+    """The duties of a replay, gathered vehicle by vehicle (:meth:`add`): per duty its
+    vehicle, start [s], energy and its interval [J or l], whether it completes at the
+    mean, its probability, and its battery and charger needs."""
+
+    vehicle: list
+    start_s: list
+    energy: list
+    low: list
+    high: list
+    completes: list
+    p: list
+    battery: list
+    charger: list
+
+    @classmethod
+    def empty(cls) -> Fleet:
+        return cls(*([] for _ in range(9)))
+
+    def add(self, plan: VehiclePlan, p: np.ndarray, low: np.ndarray, high: np.ndarray) -> None:
+        first = plan.duties.first
+        self.vehicle += [plan.trips.vehicle_id] * plan.duties.n
+        self.start_s.append(plan.trips.start_s[first])
+        self.energy.append(np.add.reduceat(plan.energies.energy, first) if first.size else np.zeros(0))
+        self.low.append(low)
+        self.high.append(high)
+        self.completes.append(plan.levels.low >= plan.reserve)
+        self.p.append(np.asarray(p, dtype=np.float64))
+        self.battery.append(plan.battery_needed)
+        self.charger.append(plan.charger_needed_w)
+
+    def array(self, name: str) -> np.ndarray:
+        parts = getattr(self, name)
+        return np.concatenate(parts) if parts else np.zeros(0)
+
+    @property
+    def n(self) -> int:
+        return len(self.vehicle)
+
+
+# ------------------------------------------------------------ levels carried across duties
+
+
+@dataclass(frozen=True, eq=False)
+class Chain:
+    """One vehicle's chain of duties for the fleet's sizing: its trips' energies, excess
+    (:class:`~cevm.core.replay.plan.Excess`, and ``exact`` to learn more), stops and
+    duty bounds."""
+
+    energy: np.ndarray
+    excess: Excess
+    exact: Callable[[int], float | None]
+    stops: Stops
+    bounds: np.ndarray
+
+
+def _joined(chains: Sequence[Chain]):
+    sizes = np.array([c.energy.size for c in chains], dtype=np.int64)
+    offsets = np.concatenate([[0], np.cumsum(sizes)])
+    energy = np.concatenate([c.energy for c in chains])
+    stops = Stops(*(np.concatenate([getattr(c.stops, f) for c in chains])
+                    for f in ("dwell_s", "power_w", "sizable", "duty_end")))
+    bounds = np.concatenate([c.bounds[:-1] + o for c, o in zip(chains, offsets)] + [offsets[-1:]])
+    lanes = Lanes.of(offsets[:-1], offsets[1:])
+    return energy, stops, bounds, lanes, offsets
+
+
+def chained_sizes(chains: Sequence[Chain], share: float, *, soc_start: float, reserve: float, efficiency: float,
+                  capacity: float, battery_step: float, charger_step: float) -> tuple[float, float]:
+    """The smallest battery (a multiple of ``battery_step``) and, at ``capacity``, the
+    smallest charger (of ``charger_step`` [W]) with which at least ``share`` of the
+    duties of ``chains`` keep their reserve, levels carried across duties (module notes;
+    ``soc_start`` and ``reserve`` are shares of the capacity); inf where none does, NaN
+    without duties. The trips' excess is refined as for one duty's sizes."""
+    if not chains:
+        return float("nan"), float("nan")
+    energy, stops, bounds, lanes, offsets = _joined(chains)
+    n_duties = bounds.size - 1
+
+    def excess(which: str) -> np.ndarray:
+        return np.concatenate([getattr(c.excess, which) for c in chains])
+
+    def share_at(x, cap, start, power=None) -> float:
+        run = run_chains(lanes, energy, x, stops, capacity=cap, start=start, efficiency=efficiency, power_w=power)
+        low = lanes.put(run.low, energy.size)
+        return float(np.count_nonzero(np.minimum.reduceat(low, bounds[:-1]) >= reserve * cap)) / n_duties
+
+    def learn(trips: np.ndarray) -> None:
+        for i in trips.tolist():
+            v = int(np.searchsorted(offsets, i, side="right") - 1)
+            chains[v].excess.learn(np.array([i - offsets[v]]), chains[v].exact)
+
+    def refined(need, undecided) -> float:
+        while True:
+            hi, lo = need(excess("bound")), need(excess("value"))
+            if hi == lo:
+                return hi
+            trips = undecided(lo)
+            if not trips.size:
+                return hi
+            learn(trips)
+
+    battery = float("nan")
+    if soc_start > reserve:
+        top = np.concatenate([np.maximum(c.energy, 0.0) for c in chains]).sum()
+        top += excess("bound").max(initial=0.0)
+        k_top = max(1, int(np.ceil(top / (soc_start - reserve) / battery_step)))
+
+        def need_c(x) -> float:
+            k = smallest_passing(lambda k: np.array([share_at(x, float(k[0]) * battery_step,
+                                                              soc_start * float(k[0]) * battery_step) >= share]),
+                                 np.array([1]), np.array([k_top]))[0]
+            return float(k) * battery_step if k <= k_top else float("inf")
+
+        def undecided_c(lo: float) -> np.ndarray:
+            return undecided_trips(lanes, bounds, energy, excess("value"), excess("bound"), excess("known"), stops,
+                                   capacity=lo, start=soc_start * lo, reserve=reserve * lo, efficiency=efficiency)
+
+        battery = refined(need_c, undecided_c)
+    charger = float("nan")
+    if stops.sizable.any():
+        k_top = int(np.ceil(charger_upper(stops, capacity, efficiency) / charger_step))
+
+        def need_p(x) -> float:
+            k = smallest_passing(lambda k: np.array([share_at(x, capacity, soc_start * capacity,
+                                                              stops.with_power(float(k[0]) * charger_step)) >= share]),
+                                 np.array([0]), np.array([k_top]))[0]
+            return float(k) * charger_step if k <= k_top else float("inf")
+
+        def undecided_p(lo: float) -> np.ndarray:
+            return undecided_trips(lanes, bounds, energy, excess("value"), excess("bound"), excess("known"), stops,
+                                   capacity=capacity, start=soc_start * capacity, reserve=reserve * capacity,
+                                   efficiency=efficiency, power_w=stops.with_power(lo))
+
+        charger = refined(need_p, undecided_p)
+    return battery, charger
