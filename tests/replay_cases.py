@@ -143,3 +143,53 @@ def reference_ev_peak(cyc, mass_kg: float, veh, ambient_c: float) -> tuple[float
         e += g
         peak = max(peak, e)
     return peak, e
+
+
+# ------------------------------------------------------------------------ a store
+
+DEPOT = (52.0600, -0.7040)
+CUSTOMER = (52.2000, -0.9000)
+
+
+def _stored_trip(vehicle_id, sha, k, start, cyc, gross_kg, temp_c, frm, to, source):
+    from cevm.core.trip import Trip
+
+    t, v, h = cyc
+    dist = np.concatenate([[0.0], np.cumsum((v[1:] + v[:-1]) / 2 * np.diff(t))])
+    frac = dist / dist[-1]
+    lat = frm[0] + (to[0] - frm[0]) * frac
+    lon = frm[1] + (to[1] - frm[1]) * frac
+    return Trip(vehicle_id=vehicle_id, source_file=str(source), source_sha256=sha, trip_index=k, start_utc_s=start,
+                time_s=t, speed_mps=v, distance_m=dist, lat_deg=lat, lon_deg=lon, elevation_m=h,
+                elevation_source="dsm", dsm_coverage_pct=100.0, measured=None, gross_weight_kg=gross_kg,
+                ambient_temp_c=temp_c)
+
+
+def make_replay_store(path: Path, logs_dir: Path) -> dict:
+    """A store of two logged trucks: ``TRK-1`` works three days 07:00 to about 13:00 from
+    its depot (out to a customer, a 45 min stop there, back, a 40 min stop at the depot,
+    a last round trip), ``TRK-2`` a night shift from 23:30 across midnight on two nights.
+    Returns each vehicle's trips' (cycle, start, gross mass, temperature) in order."""
+    from cevm.store import TripStore
+
+    plan = {"TRK-1": [], "TRK-2": []}
+    day0 = 1.6e9 - (1.6e9 % 86400)  # a midnight, UTC
+    with TripStore(path) as st:
+        for vid, days, first_h, legs in (("TRK-1", 3, 7.0, [(DEPOT, CUSTOMER, 45), (CUSTOMER, DEPOT, 40),
+                                                             (DEPOT, DEPOT, 0)]),
+                                         ("TRK-2", 2, 23.5, [(DEPOT, CUSTOMER, 35), (CUSTOMER, DEPOT, 0)])):
+            for d in range(days):
+                sha = f"{(d + 1) * (2 if vid == 'TRK-2' else 1):02x}" * 32
+                t = day0 + d * 86400 + first_h * 3600
+                trips, vectors = [], []
+                for k, (frm, to, stop_min) in enumerate(legs):
+                    cyc = cycle(200 + 10 * d + k + (50 if vid == "TRK-2" else 0), n_trips=12)
+                    mass, temp = 30e3 + 4e3 * k, 4.0 + 3 * d
+                    trip = _stored_trip(vid, sha, k, t, cyc, mass, temp, frm, to, logs_dir / f"{vid}-{d}.csv")
+                    trips.append(trip)
+                    vectors.append(drive_cycle_vector(*cyc).to_bytes())
+                    plan[vid].append((cyc, t, mass, temp))
+                    t += cyc[0][-1] + stop_min * 60
+                st.replace_file_trips(logs_dir / f"{vid}-{d}.csv", trips, vectors, sha256=sha, size_bytes=1,
+                                      mtime_s=0.0, profile="test")
+    return plan

@@ -308,13 +308,16 @@ def test_p_complete_matches_a_simulation_with_known_scatter():
     assert abs(got - want) < 4.5 * math.sqrt(want * (1 - want) * (1 / draws + 1 / sims))
 
 
-def test_a_duty_draws_the_same_whatever_else_is_replayed():
+def test_draws_do_not_depend_on_how_they_are_chunked(monkeypatch):
+    from cevm.core.replay import montecarlo
+
     mean = np.array([60.0, 50.0, 55.0, 45.0, 70.0])
     sp = _spread(5, 6.0, 0.05, 0.5)
-    both = _draw_plan(mean, sp, [0.2, np.nan, 1.0, 0.2, np.nan], [0.0] * 5, 150.0, 150.0, 22.5, bounds=[0, 2, 5])
-    alone = _draw_plan(mean[2:], sp.take(np.arange(2, 5)), [1.0, 0.2, np.nan], [0.0] * 3, 150.0, 150.0, 22.5)
-    alone = dataclasses.replace(alone, duty_start_s=np.array([86400.0]))
-    assert p_complete(both, draws=3000)[1] == p_complete(alone, draws=3000)[0]
+    plan = _draw_plan(mean, sp, [0.2, np.nan, 1.0, 0.2, np.nan], [0.0] * 5, 150.0, 150.0, 22.5, bounds=[0, 2, 5])
+    whole = p_complete(plan, draws=3000)
+    monkeypatch.setattr(montecarlo, "DRAW_CHUNK_CELLS", 64)  # 64 cells: many small chunks
+    assert np.array_equal(p_complete(plan, draws=3000), whole)
+    assert not np.array_equal(p_complete(plan, draws=3000, seed=24), whole)
 
 
 # --------------------------------------------------------------------- places

@@ -267,14 +267,12 @@ def _plans(st, vehicle, settings: ReplaySettings, ids: list[str], *, positions: 
 
 
 def _excess_reader(plan, read):
-    from cevm.core.replay import trip_excess
+    from cevm.core.replay import trips_excess
 
-    def exact(i: int):
-        st = read(i)
-        if st is None:
-            return None
-        return trip_excess(st, plan.vehicle, float(plan.energies.mass_kg[i]), float(plan.energies.ambient_c[i]),
-                           ice_braking=plan.settings.ice_braking)
+    def exact(indices: np.ndarray) -> np.ndarray:
+        e = plan.energies
+        return trips_excess([read(int(i)) for i in indices], plan.vehicle, e.mass_kg[indices], e.ambient_c[indices],
+                            ice_braking=plan.settings.ice_braking)
     return exact
 
 

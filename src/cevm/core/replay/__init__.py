@@ -19,7 +19,7 @@ Inputs are arrays and frozen dataclasses (:class:`ReplaySettings`, :class:`Charg
 :class:`LoggedTrips`); SI units inside (J, l, s, m, kg, W).
 """
 
-from cevm.core.replay.chain import ChainRun, DutyLevels, Lanes, Stops, duty_levels, run_chains, stop_gain
+from cevm.core.replay.chain import ChainRun, DutyLevels, Lanes, Stops, duty_levels, duty_minima, run_chains, stop_gain
 from cevm.core.replay.duties import DEFAULT_DUTY_GAP_H, DUTY_RULES, Duties, group_duties, stop_dwell_s
 from cevm.core.replay.montecarlo import DEFAULT_DRAWS, DEFAULT_SEED, DrawPlan, p_complete, standard_error
 from cevm.core.replay.places import DEFAULT_PLACE_RADIUS_M, Depot, Place, distance_m, find_depot, stops_at
@@ -43,7 +43,7 @@ from cevm.core.replay.sizing import (
     smallest_passing,
 )
 from cevm.core.replay.spread import TripSpread, central_interval, trip_spread
-from cevm.core.replay.trips import TripEnergies, trip_crossing, trip_energies, trip_excess
+from cevm.core.replay.trips import TripEnergies, trip_crossing, trip_energies, trips_excess
 
 __all__ = [
     "BATTERY_STEP_KWH", "CHARGER_STEP_KW", "DEFAULT_CHARGE_EFFICIENCY", "DEFAULT_CONFIDENCE", "DEFAULT_DRAWS",
@@ -51,7 +51,7 @@ __all__ = [
     "DEFAULT_TARGET_SHARE", "DUTY_RULES", "OVERNIGHT_MODES", "ChainRun", "Charging", "Depot", "DrawPlan", "Duties",
     "DutyLevels", "Lanes", "LoggedTrips", "Place", "ReplaySettings", "Stops", "TripEnergies", "TripSpread",
     "VehiclePlan", "battery_needed", "candidate_masses", "capacity_of", "central_interval", "charger_needed",
-    "distance_m", "duty_levels", "find_depot", "group_duties", "p_complete", "plan_vehicle", "run_chains",
+    "distance_m", "duty_levels", "duty_minima", "find_depot", "group_duties", "p_complete", "plan_vehicle", "run_chains",
     "size_for_share", "smallest_passing", "standard_error", "stop_dwell_s", "stop_gain", "stops_at",
-    "trip_crossing", "trip_energies", "trip_excess", "trip_spread",
+    "trip_crossing", "trip_energies", "trip_spread", "trips_excess",
 ]

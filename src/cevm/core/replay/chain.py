@@ -101,18 +101,24 @@ class Stops:
 def stop_gain(level, capacity, power_w, dwell_s, efficiency) -> np.ndarray:
     """What a stop adds [J or l]: min(eta_c P dt, C - level), all of C - level for an
     infinite P (refuelling), nothing for P = 0 or a NaN dwell."""
-    room = np.maximum(capacity - level, 0.0)
+    return np.minimum(stop_potential(power_w, dwell_s, efficiency), np.maximum(capacity - level, 0.0))
+
+
+def stop_potential(power_w, dwell_s, efficiency) -> np.ndarray:
+    """What a stop could add to an empty battery or tank: eta_c P dt (inf for an infinite P,
+    0 for P = 0 or a NaN dwell)."""
+    p = np.asarray(power_w, dtype=np.float64)
+    dwell = np.nan_to_num(np.asarray(dwell_s, dtype=np.float64), nan=0.0)
     with np.errstate(invalid="ignore"):
-        raw = np.where(np.isinf(power_w), np.inf, efficiency * power_w * np.nan_to_num(dwell_s, nan=0.0))
-    raw = np.where(power_w > 0, raw, 0.0)
-    return np.minimum(raw, room)
+        raw = np.where(np.isinf(p), np.inf, efficiency * p * dwell)
+    return np.where(p > 0, raw, 0.0)
 
 
 @dataclass(frozen=True, eq=False)
 class ChainRun:
     """Per slot (T, L, ...): ``before`` the level at the trip's start, ``low`` the lowest
-    inside it, ``after`` the level after it (capped at full), ``gain`` what the stop
-    after it added."""
+    inside it (+inf past a lane's end), ``after`` the level after it (capped at full),
+    ``gain`` what the stop after it added."""
 
     before: np.ndarray
     low: np.ndarray
@@ -120,41 +126,75 @@ class ChainRun:
     gain: np.ndarray
 
 
+class _Slots:
+    """What one loop over a lanes' slots reads: energies, excess, stop potentials and
+    duty ends laid out (T, L, ...), the capacity and the start level per lane."""
+
+    def __init__(self, lanes: Lanes, energy, excess, stops: Stops, capacity, start, efficiency: float, power_w):
+        self.e = lanes.take(energy)
+        self.x = lanes.take(excess)
+        power = stops.power_w if power_w is None else power_w
+        self.pot = lanes.take(stop_potential(power, stops.dwell_s if np.ndim(power) == 1 else stops.dwell_s[:, None],
+                                             efficiency))
+        self.end = lanes.take(stops.duty_end, fill=False)
+        self.valid = lanes.valid
+        t_count, l_count = lanes.shape
+        extra = np.broadcast_shapes(self.e.shape[2:], self.x.shape[2:], self.pot.shape[2:], np.shape(capacity)[1:],
+                                    np.shape(start)[1:])
+        self.shape = (l_count,) + extra
+        self.t_count = t_count
+        self.cap = np.broadcast_to(np.asarray(capacity, dtype=np.float64).reshape(_lane_shape(capacity, extra)),
+                                   self.shape)
+        self.start = np.broadcast_to(np.asarray(start, dtype=np.float64).reshape(_lane_shape(start, extra)),
+                                     self.shape).copy()
+        self.pad = (slice(None),) + (None,) * (len(self.shape) - 1)
+
+    def step(self, t: int, level: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Slot t from ``level``: (low, after, gain, the next level)."""
+        et = _lane_slot(self.e[t], self.shape)
+        low = level - et - _lane_slot(self.x[t], self.shape)
+        low = np.where(self.valid[t][self.pad], low, np.inf)
+        after = np.minimum(level - et, self.cap)
+        level = np.where(self.end[t][self.pad], np.maximum(after, 0.0), after) if self.end[t].any() else after
+        gain = np.minimum(_lane_slot(self.pot[t], self.shape), np.maximum(self.cap - level, 0.0))
+        return low, after, gain, level + gain
+
+
 def run_chains(lanes: Lanes, energy, excess, stops: Stops, *, capacity, start, efficiency: float,
                power_w=None) -> ChainRun:
     """The levels along each lane (module notes). ``energy`` and ``excess`` per trip (n,)
     or (n, K) (K draws or trials along a last axis); ``capacity`` and ``start`` per lane
     (L,) or (L, K), or scalars; ``power_w`` per trip (n,) or (n, K) (default the stops')."""
-    e = lanes.take(energy)
-    x = lanes.take(excess)
-    power = lanes.take(stops.power_w if power_w is None else power_w)
-    dwell = lanes.take(stops.dwell_s, fill=np.nan)
-    end = lanes.take(stops.duty_end, fill=False)
-    t_count, l_count = lanes.shape
-    extra = np.broadcast_shapes(e.shape[2:], power.shape[2:], np.shape(capacity)[1:], np.shape(start)[1:])
-    shape = (l_count,) + extra
-    cap = np.broadcast_to(np.asarray(capacity, dtype=np.float64).reshape(_lane_shape(capacity, l_count, extra)), shape)
-    level = np.broadcast_to(np.asarray(start, dtype=np.float64).reshape(_lane_shape(start, l_count, extra)),
-                            shape).copy()
-    before = np.empty((t_count,) + shape)
-    low = np.empty_like(before)
-    after = np.empty_like(before)
-    gain = np.empty_like(before)
-    pad = (slice(None),) + (None,) * (len(shape) - 1)
-    for t in range(t_count):
-        et = _lane_slot(e[t], shape)
+    sl = _Slots(lanes, energy, excess, stops, capacity, start, efficiency, power_w)
+    before = np.empty((sl.t_count,) + sl.shape)
+    low, after, gain = np.empty_like(before), np.empty_like(before), np.empty_like(before)
+    level = sl.start
+    for t in range(sl.t_count):
         before[t] = level
-        low[t] = level - et - _lane_slot(x[t], shape)
-        level = np.minimum(level - et, cap)
-        after[t] = level
-        level = np.where(end[t][pad], np.maximum(level, 0.0), level)
-        g = stop_gain(level, cap, _lane_slot(power[t], shape), dwell[t][pad], efficiency)
-        gain[t] = g
-        level = level + g
+        low[t], after[t], gain[t], level = sl.step(t, level)
     return ChainRun(before, low, after, gain)
 
 
-def _lane_shape(value, lanes: int, extra: tuple) -> tuple:
+def duty_minima(lanes: Lanes, duty_of_slot: np.ndarray, last_of_duty: np.ndarray, n_duties: int, energy, excess,
+                stops: Stops, *, capacity, start, efficiency: float) -> np.ndarray:
+    """Each duty's lowest level (D, ...) along the lanes, without keeping every slot:
+    ``duty_of_slot`` (T, L) the duty of each slot, ``last_of_duty`` (T, L) whether the
+    slot's trip is its duty's last (:func:`run_chains` otherwise)."""
+    sl = _Slots(lanes, energy, excess, stops, capacity, start, efficiency, None)
+    out = np.empty((n_duties,) + sl.shape[1:])
+    running = np.full(sl.shape, np.inf)
+    level = sl.start
+    for t in range(sl.t_count):
+        low, _, _, level = sl.step(t, level)
+        np.minimum(running, low, out=running)
+        ends = last_of_duty[t] & sl.valid[t]
+        if ends.any():
+            out[duty_of_slot[t, ends]] = running[ends]
+            running[ends] = np.inf
+    return out
+
+
+def _lane_shape(value, extra: tuple) -> tuple:
     """A per-lane value's shape for broadcasting against (L, *extra)."""
     s = np.shape(value)
     if not s:

@@ -113,7 +113,7 @@ class Chain:
 
     energy: np.ndarray
     excess: Excess
-    exact: Callable[[int], float | None]
+    exact: Callable[[np.ndarray], np.ndarray]
     stops: Stops
     bounds: np.ndarray
 
@@ -150,9 +150,9 @@ def chained_sizes(chains: Sequence[Chain], share: float, *, soc_start: float, re
         return float(np.count_nonzero(np.minimum.reduceat(low, bounds[:-1]) >= reserve * cap)) / n_duties
 
     def learn(trips: np.ndarray) -> None:
-        for i in trips.tolist():
-            v = int(np.searchsorted(offsets, i, side="right") - 1)
-            chains[v].excess.learn(np.array([i - offsets[v]]), chains[v].exact)
+        owner = np.searchsorted(offsets, trips, side="right") - 1
+        for v in np.unique(owner).tolist():
+            chains[v].excess.learn(trips[owner == v] - offsets[v], chains[v].exact)
 
     def refined(need, undecided) -> float:
         while True:

@@ -10,11 +10,10 @@ p_complete is the share of draws whose lowest level stays at or above the reserv
 Monte Carlo standard error is sqrt(p (1 - p) / N) (a share of 0 or 1 out of N draws
 holds the truth below 3 / N, or above 1 - 3 / N, at 95 %: the rule of three).
 
-Draws are reproducible and do not depend on how the work is split: each duty draws from
-its own generator, seeded from the run's seed, the vehicle id and the duty's start
-(:func:`duty_generator`), so a duty's probability is the same in a serial run, on any
-number of workers, and whichever other duties or vehicles are replayed with it (when
-duties are independent).
+Draws are reproducible and do not depend on how the work is split: each vehicle draws
+from its own generator, seeded from the run's seed and the vehicle id
+(:func:`vehicle_generator`), so its duties' probabilities are the same in a serial run, on
+any number of workers, and whichever other vehicles are replayed with it.
 """
 
 from __future__ import annotations
@@ -24,7 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from cevm.core.replay.chain import Lanes, Stops, run_chains
+from cevm.core.replay.chain import Lanes, Stops, duty_minima
 from cevm.core.replay.spread import TripSpread
 
 #: Default number of draws: a probability of 0.5 to +-0.011 (one standard error), 0.95 to
@@ -36,10 +35,10 @@ DEFAULT_SEED = 23
 DRAW_CHUNK_CELLS = 1 << 19
 
 
-def duty_generator(seed: int, key: str, start_s: float) -> np.random.Generator:
-    """The generator of one duty's draws: from the run's ``seed``, the vehicle ``key`` and
-    the duty's start [s since the epoch]."""
-    digest = hashlib.blake2b(f"{key}\x00{float(start_s)!r}".encode(), digest_size=16).digest()
+def vehicle_generator(seed: int, key: str) -> np.random.Generator:
+    """The generator of one vehicle's draws: from the run's ``seed`` and the vehicle id
+    ``key``."""
+    digest = hashlib.blake2b(key.encode(), digest_size=16).digest()
     words = np.frombuffer(digest, dtype=np.uint32)
     return np.random.default_rng([int(seed) & 0xFFFFFFFF, *words.tolist()])
 
@@ -50,7 +49,7 @@ class DrawPlan:
     [J or l], ``spread`` (:class:`TripSpread`), ``stops``; duties ``bounds`` (D+1);
     ``chained`` whether the level carries across duties (else each duty starts at
     ``start``); ``capacity``, ``start``, ``reserve`` levels [J or l]; ``efficiency`` of
-    charging; ``key`` (vehicle id) and ``duty_start_s`` (D,) for the generators."""
+    charging; ``key`` (the vehicle id: its generator) and ``duty_start_s`` (D,)."""
 
     mean: np.ndarray
     excess: np.ndarray
@@ -66,63 +65,93 @@ class DrawPlan:
     duty_start_s: np.ndarray
 
 
-def _draw_energies(plan: DrawPlan, gens: list[np.random.Generator], common: np.random.Generator | None,
-                   count: int) -> np.ndarray:
-    """(n, count) trip energies drawn (module notes of :mod:`cevm.core.replay.spread`)."""
+#: A duty whose reserve holds by more than this many standard deviations of its energy
+#: even without any charge is given p = 1 without drawing: its chance to fail is below
+#: 1e-9 (:func:`sure_duties`).
+SURE_SD = 6.0
+
+
+def sure_duties(plan: DrawPlan) -> np.ndarray:
+    """The duties (D,) that keep their reserve with a probability above 1 - 1e-9 whatever
+    the draws of their charges: with every trip's mean at least :data:`SURE_SD` standard
+    deviations above 0 (so that no trip gives energy back), the level never falls below
+    start - (sum of the trips' energies) - (largest excess), a Gaussian with the duty's
+    total's standard deviation (:meth:`~cevm.core.replay.spread.TripSpread.duty_sd`), and it
+    keeps the reserve by :data:`SURE_SD` of them."""
+    bounds = plan.bounds
+    first = bounds[:-1]
+    if first.size == 0:
+        return np.zeros(0, dtype=bool)
+    sp = plan.spread
+    positive = np.minimum.reduceat(plan.mean - SURE_SD * sp.trip_sd(plan.mean), first) > 0
+    total = np.add.reduceat(plan.mean, first) + np.maximum.reduceat(plan.excess, first)
+    if plan.chained:  # a duty's start depends on the ones before: only the first is known
+        positive[1:] = False
+    return positive & (plan.start - total - plan.reserve >= SURE_SD * sp.duty_sd(plan.mean, bounds))
+
+
+def _draw_energies(plan: DrawPlan, z_duty: np.ndarray, z_trip: np.ndarray) -> np.ndarray:
+    """(n, count) trip energies from standard normals: ``z_duty`` (groups x (k + 2) + 2 D,
+    count), per duty (per vehicle when chained: one group) the coefficients', the meter's
+    and the extrapolation's, then per duty the scatter's two shared parts; ``z_trip`` (n,
+    count) the trips' own scatter (its two parts are independent: one normal of their
+    combined variance). Module notes of :mod:`cevm.core.replay.spread`."""
     sp = plan.spread
     k = sp.k
-    bounds = plan.bounds
+    sizes = np.diff(plan.bounds)
+    d_count = sizes.size
     n = plan.mean.size
+    groups = 1 if plan.chained else d_count
+    common = z_duty[:groups * (k + 2)].reshape(groups, k + 2, -1)
+    day = z_duty[groups * (k + 2):].reshape(d_count, 2, -1)
+
+    def per_trip(z: np.ndarray, by_duty: bool = True) -> np.ndarray:  # (groups or D, count) -> (n, count)
+        return np.broadcast_to(z, (n, z.shape[1])) if (plan.chained and not by_duty) else np.repeat(z, sizes, axis=0)
+
+    mu = plan.mean[:, None]
     cp = sp.coef_part
+    e = mu + sp.meter_share * mu * per_trip(common[:, k], False) + sp.extra_sd[:, None] * per_trip(common[:, k + 1],
+                                                                                                  False)
+    for j in range(k):
+        e += cp[:, j:j + 1] * per_trip(common[:, j], False)
     rho = sp.day_corr
-    out = np.empty((n, count))
-    shared = None
-    if common is not None:  # chained: coefficients, meter and extrapolation once per vehicle
-        shared = common.standard_normal((count, k + 2))
-    for d, g in enumerate(gens):
-        lo, hi = int(bounds[d]), int(bounds[d + 1])
-        m = hi - lo
-        z = g.standard_normal((count, k + 4 + 2 * m))
-        zc = shared if shared is not None else z[:, :k + 2]
-        z_par, z_meter, z_extra = zc[:, :k], zc[:, k], zc[:, k + 1]
-        z_day_a, z_day_s = z[:, k + 2], z[:, k + 3]
-        z_own = z[:, k + 4:].reshape(count, 2, m)
-        mu = plan.mean[lo:hi, None]
-        e = mu + cp[lo:hi] @ z_par.T if k else np.broadcast_to(mu, (m, count)).copy()
-        e += sp.meter_share * mu * z_meter[None, :]
-        a, s = sp.aux_sd[lo:hi, None], sp.share_sd[lo:hi, None]
-        e += np.sqrt(rho) * (a * z_day_a[None, :] + s * z_day_s[None, :])
-        e += np.sqrt(1.0 - rho) * (a * z_own[:, 0, :].T + s * z_own[:, 1, :].T)
-        e += sp.extra_sd[lo:hi, None] * z_extra[None, :]
-        out[lo:hi] = e
-    return out
+    e += np.sqrt(rho) * (sp.aux_sd[:, None] * per_trip(day[:, 0]) + sp.share_sd[:, None] * per_trip(day[:, 1]))
+    e += np.sqrt((1.0 - rho) * (sp.aux_sd ** 2 + sp.share_sd ** 2))[:, None] * z_trip
+    return e
 
 
 def p_complete(plan: DrawPlan, draws: int = DEFAULT_DRAWS, seed: int = DEFAULT_SEED) -> np.ndarray:
     """Each duty's probability of keeping its reserve (D,), from ``draws`` draws (module
-    notes)."""
+    notes); 1 without drawing for the duties :func:`sure_duties` finds."""
     bounds = plan.bounds
     d_count = bounds.size - 1
     n = plan.mean.size
     if d_count == 0:
         return np.zeros(0)
-    gens = [duty_generator(seed, plan.key, s) for s in plan.duty_start_s]
-    common = duty_generator(seed, plan.key + "\x00vehicle", float(plan.duty_start_s[0])) if plan.chained else None
+    sure = sure_duties(plan)
+    if sure.all():
+        return np.ones(d_count)
+    k = plan.spread.k
+    n_duty_cols = (1 if plan.chained else d_count) * (k + 2) + 2 * d_count
+    gen = vehicle_generator(seed, plan.key)
     lanes = Lanes.of([0], [n]) if plan.chained else Lanes.of(bounds[:-1], bounds[1:])
+    duty = np.repeat(np.arange(d_count), np.diff(bounds))
+    last = np.zeros(n, dtype=bool)
+    last[bounds[1:] - 1] = True
+    slot_duty, slot_last = lanes.take(duty, fill=0), lanes.take(last, fill=False)
     t_count, l_count = lanes.shape
-    chunk = max(1, DRAW_CHUNK_CELLS // max(1, t_count * l_count))
+    chunk = max(1, DRAW_CHUNK_CELLS // max(1, t_count * l_count, n_duty_cols + n))
     ok = np.zeros(d_count)
-    first = bounds[:-1]
     done = 0
     while done < draws:
         count = min(chunk, draws - done)
-        e = _draw_energies(plan, gens, common, count)
-        run = run_chains(lanes, e, plan.excess[:, None], plan.stops, capacity=plan.capacity, start=plan.start,
-                         efficiency=plan.efficiency)
-        low = lanes.put(run.low, n)  # (n, count)
-        ok += np.count_nonzero(np.minimum.reduceat(low, first, axis=0) >= plan.reserve, axis=1)
+        z = np.ascontiguousarray(gen.standard_normal((count, n_duty_cols + n)).T)  # a draw: one row of the stream
+        e = _draw_energies(plan, z[:n_duty_cols], z[n_duty_cols:])
+        low = duty_minima(lanes, slot_duty, slot_last, d_count, e, plan.excess[:, None], plan.stops,
+                          capacity=plan.capacity, start=plan.start, efficiency=plan.efficiency)
+        ok += np.count_nonzero(low >= plan.reserve, axis=1)
         done += count
-    return ok / draws
+    return np.where(sure, 1.0, ok / draws)
 
 
 def standard_error(p, draws: int) -> np.ndarray:

@@ -25,7 +25,7 @@ from cevm.core.replay.places import Depot, find_depot, rest_positions, stops_at
 from cevm.core.replay.settings import ReplaySettings
 from cevm.core.replay.sizing import battery_needed, charger_needed, undecided_trips
 from cevm.core.replay.spread import TripSpread, trip_spread
-from cevm.core.replay.trips import TripEnergies, trip_crossing, trip_energies, trip_excess
+from cevm.core.replay.trips import TripEnergies, trip_crossing, trip_energies, trips_excess
 from cevm.core.sweep import StepTable
 from cevm.core.vehicle import Vehicle
 from cevm.errors import CevmError
@@ -95,17 +95,18 @@ class Excess:
     known: np.ndarray
     unreadable: int = 0
 
-    def learn(self, trips: np.ndarray, exact: Callable[[int], float | None]) -> None:
-        for i in np.asarray(trips).tolist():
-            if self.known[i]:
-                continue
-            x = exact(i)
-            self.known[i] = True
-            if x is None:
-                self.value[i] = self.bound[i]  # unreadable: the bound, both ways
-                self.unreadable += 1
-            else:
-                self.value[i] = self.bound[i] = x
+    def learn(self, trips: np.ndarray, exact: Callable[[np.ndarray], np.ndarray]) -> None:
+        """Learn the exact excess of ``trips`` (``exact(indices)``: NaN where unreadable)."""
+        todo = np.asarray(trips, dtype=np.int64)
+        todo = np.unique(todo[~self.known[todo]])
+        if not todo.size:
+            return
+        x = np.asarray(exact(todo), dtype=np.float64)
+        self.known[todo] = True
+        bad = ~np.isfinite(x)
+        self.unreadable += int(bad.sum())
+        self.value[todo] = np.where(bad, self.bound[todo], x)  # unreadable: the bound, both ways
+        self.bound[todo] = self.value[todo]
 
 
 @dataclass(frozen=True, eq=False)
@@ -238,17 +239,23 @@ def _learn_lowest(plan_args, ex: Excess, exact, relevant: np.ndarray) -> None:
         ex.learn(np.flatnonzero(need), exact)
 
 
+def _no_table(i: int) -> None:
+    return None
+
+
 def _crossing_m(trips: LoggedTrips, energies: TripEnergies, bounds: np.ndarray, before: np.ndarray,
                 first: np.ndarray, threshold: float, vehicle: Vehicle, step_table, ice_braking) -> np.ndarray:
     """Per duty, the distance from its start [m] where its level first falls below
     ``threshold`` (trip ``first[d]``, -1: never): the trips before it whole, then inside it
-    from its step table (its end where none can be read)."""
+    from its step table, or where none is read, in proportion to the trip's energy."""
     out = np.full(first.size, np.nan)
     cum = np.concatenate([[0.0], np.cumsum(trips.distance_m)])
     for d in np.flatnonzero(first >= 0).tolist():
         i = int(first[d])
         st = step_table(i)
-        inside = trips.distance_m[i]
+        e = energies.energy[i]
+        share = (before[i] - threshold) / e if e > 0 else 1.0
+        inside = trips.distance_m[i] * min(max(share, 0.0), 1.0)
         if st is not None:
             _, dist = trip_crossing(st, vehicle, float(energies.mass_kg[i]), float(energies.ambient_c[i]),
                                     float(before[i] - threshold), ice_braking=ice_braking)
@@ -292,15 +299,14 @@ def plan_vehicle(trips: LoggedTrips, vehicle: Vehicle, settings: ReplaySettings,
     energy = energies.energy
     bounds = duties.bounds
     energy_sd = spread.duty_sd(energy, bounds)
-    bound = energies.regen_bound.copy()
+    bound = energies.regen_bound.copy() if settings.within_trips else np.zeros(trips.n)
     ex = Excess(value=np.zeros(trips.n), bound=bound, known=bound == 0.0)
+    if not settings.within_trips:
+        step_table = _no_table
 
-    def exact(i: int) -> float | None:
-        st = step_table(i)
-        if st is None:
-            return None
-        return trip_excess(st, vehicle, float(energies.mass_kg[i]), float(energies.ambient_c[i]),
-                           ice_braking=settings.ice_braking)
+    def exact(indices: np.ndarray) -> np.ndarray:
+        return trips_excess([step_table(int(i)) for i in indices], vehicle, energies.mass_kg[indices],
+                            energies.ambient_c[indices], ice_braking=settings.ice_braking)
 
     lanes = Lanes.of([0], [trips.n]) if settings.charging.chained else Lanes.of(bounds[:-1], bounds[1:])
     _learn_lowest((lanes, trips.n, energy, stops, cap, start, eff, bounds), ex, exact,

@@ -93,7 +93,10 @@ class ReplaySettings:
     ``battery_step`` [J or l] and ``charger_step_w`` of the sizing (0: no sizing),
     ``ice_braking`` (None: the file's), and ``logged_kerb_kg``: the logged vehicles' own
     kerb mass (None: each trip's gross mass is the candidate's; else the candidate
-    carries the trip's payload, gross less this, on its own kerb mass)."""
+    carries the trip's payload, gross less this, on its own kerb mass); ``within_trips``:
+    look for the lowest level inside the trips where it could decide something (their step
+    tables read), else at the trips' ends only (no step table read: a crossing is placed
+    in its trip in proportion to the energy)."""
 
     rule: str = "gap"
     gap_s: float = DEFAULT_DUTY_GAP_H * 3600.0
@@ -107,6 +110,7 @@ class ReplaySettings:
     charger_step_w: float = CHARGER_STEP_KW * 1e3
     ice_braking: str | None = None
     logged_kerb_kg: float | None = None
+    within_trips: bool = True
 
     def __post_init__(self) -> None:
         if self.rule not in DUTY_RULES:

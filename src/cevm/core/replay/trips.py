@@ -159,16 +159,61 @@ def _coefficients(vehicle: Vehicle, mass_kg: float, ambient_c: float, ice_brakin
     return step_coefficients(pset, np.array([ambient_c]))
 
 
-def trip_excess(st: StepTable, vehicle: Vehicle, mass_kg: float, ambient_c: float, *,
-                ice_braking: str | None = None) -> float:
-    """The most ``vehicle`` draws inside the trip of step table ``st`` beyond what it has
-    drawn at its end, x = max_j E_j - E_n >= 0 [J or l] (module notes), step by step
-    with every term of :mod:`cevm.core.energy` (:func:`cevm.core.sweep.step_energies`)."""
-    if not vehicle.is_ev or st.n == 0:
-        return 0.0
-    c = _coefficients(vehicle, mass_kg, ambient_c, ice_braking)
-    cum = np.cumsum(step_energies(st, c)[0])
-    return float(max(0.0, cum.max()) - cum[-1])  # the start's warm-up comes first: it cancels
+#: Steps summed together by :func:`trips_excess` (8 MB per work array).
+EXCESS_CHUNK_STEPS = 1 << 20
+
+
+def trips_excess(tables: Sequence[StepTable | None], vehicle: Vehicle, mass_kg, ambient_c, *,
+                 ice_braking: str | None = None) -> np.ndarray:
+    """For each trip of step table ``tables[i]`` at ``mass_kg[i]`` and ``ambient_c[i]``:
+    the most ``vehicle`` draws inside it beyond what it has drawn at its end,
+    x = max_j E_j - E_n >= 0 [J or l] (module notes), step by step with every term of
+    :mod:`cevm.core.energy` (:func:`cevm.core.sweep.step_coefficients`); NaN where the
+    table is None (unreadable). All trips at once, in chunks of
+    :data:`EXCESS_CHUNK_STEPS` steps."""
+    n = len(tables)
+    out = np.full(n, np.nan)
+    ok = [i for i, t in enumerate(tables) if t is not None]
+    if not vehicle.is_ev:
+        out[ok] = 0.0
+        return out
+    mass = np.asarray(mass_kg, dtype=np.float64)
+    temp = np.asarray(ambient_c, dtype=np.float64)
+    k = 0
+    while k < len(ok):
+        chunk, steps = [], 0
+        while k < len(ok) and (not chunk or steps + tables[ok[k]].n <= EXCESS_CHUNK_STEPS):
+            chunk.append(ok[k])
+            steps += tables[ok[k]].n
+            k += 1
+        out[chunk] = _excess_chunk([tables[i] for i in chunk], vehicle, mass[chunk], temp[chunk], ice_braking)
+    return out
+
+
+def _excess_chunk(tables: list[StepTable], vehicle: Vehicle, mass: np.ndarray, temp: np.ndarray,
+                  ice_braking: str | None) -> np.ndarray:
+    sizes = np.array([t.n for t in tables], dtype=np.int64)
+    out = np.zeros(len(tables))
+    has = sizes > 0
+    if not has.any():
+        return out
+    c = step_coefficients(PredictionSet.build([vehicle], mass_kg=mass, ice_braking=ice_braking), temp)
+    seg = np.repeat(np.arange(len(tables)), sizes)
+
+    def cat(name: str) -> np.ndarray:
+        return np.concatenate([getattr(t, name) for t in tables])
+
+    g = c.kx[seg] * cat("x") + c.kr[seg] * cat("r") + c.ka[seg] * cat("a")
+    neg = ~cat("simplified") & (g < 0)
+    g[neg] *= c.w[seg][neg]  # a negative non-simplified step: regenerated at w
+    g += c.aux[seg] * cat("dt")
+    starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])[has]
+    cum = np.cumsum(g)
+    before = np.concatenate([[0.0], cum])[starts]
+    ends = (starts + sizes[has] - 1)
+    run = cum - np.repeat(before, sizes[has])
+    out[has] = np.maximum(np.maximum.reduceat(run, starts), 0.0) - run[ends]
+    return np.maximum(out, 0.0)
 
 
 def trip_crossing(st: StepTable, vehicle: Vehicle, mass_kg: float, ambient_c: float, level: float, *,

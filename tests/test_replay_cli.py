@@ -1,0 +1,149 @@
+"""``cevm replay`` end to end on a small store: rows in CSV, JSON and the table, the same
+duties as ``cevm predict``'s trips summed, charging at the depot only, the night shift as
+one duty, the summary and the plot, a parallel run writing the bytes of a serial one, and
+one clear message for each wrong input."""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from cevm.cli import app
+from replay_cases import make_replay_store
+
+runner = CliRunner()
+ROOT = Path(__file__).resolve().parents[1]
+TRUCK = str(ROOT / "configs/vehicles/electric-truck.toml")
+DIESEL = str(ROOT / "configs/vehicles/diesel-hgv.toml")
+
+
+@pytest.fixture(scope="module")
+def store(tmp_path_factory) -> Path:
+    d = tmp_path_factory.mktemp("replay")
+    make_replay_store(d / "s.sqlite", d / "logs")
+    return d / "s.sqlite"
+
+
+def replay(store: Path, *args: str):
+    return runner.invoke(app, ["replay", "--store", str(store), "--vehicle-id", "TRK-1", "--vehicle-id", "TRK-2",
+                               *args])
+
+
+def test_rows_in_csv_json_and_table_say_the_same(store):
+    args = ["-v", TRUCK, "--battery-kwh", "40", "--charger-kw", "50"]
+    res = replay(store, *args, "-f", "json")
+    assert res.exit_code == 0, res.output
+    rows = json.loads(res.stdout)
+    assert [(r["vehicle_id"], r["trips"]) for r in rows] == [("TRK-1", 3)] * 3 + [("TRK-2", 2)] * 2
+    assert "fuel_l" not in rows[0] and rows[0]["energy_kwh_low"] <= rows[0]["energy_kwh"] <= rows[0]["energy_kwh_high"]
+    res = replay(store, *args, "-f", "csv")
+    assert res.exit_code == 0, res.output
+    table = list(csv.DictReader(io.StringIO(res.stdout)))
+    assert len(table) == len(rows)
+    for j, c in zip(rows, table):
+        for key in ("energy_kwh", "soc_min_pct", "soc_end_pct", "charged_kwh", "p_complete", "battery_needed_kwh"):
+            assert (c[key] == "") if j[key] is None else float(c[key]) == pytest.approx(j[key], abs=2e-6)
+        assert c["completes"] == ("true" if j["completes"] else "false") and c["fuel_l"] == ""
+        assert c["vehicle_key"] == "electric-truck" and c["charge_places"] == "anywhere"
+    res = replay(store, *args)
+    assert res.exit_code == 0 and "TRK-2" in res.stdout and "keep the 15 % reserve" in res.stdout
+
+
+def test_a_duty_is_the_sum_of_the_trips_cevm_predict_gives(store):
+    res = runner.invoke(app, ["predict", "--store", str(store), "-v", TRUCK, "--vehicle-id", "TRK-1", "-f", "json"])
+    assert res.exit_code == 0, res.output
+    trips = json.loads(res.stdout)
+    days = json.loads(replay(store, "-v", TRUCK, "-f", "json").stdout)
+    per_day = np.add.reduceat([t["energy_kwh"] for t in trips], [0, 3, 6])
+    # predict sums an EV's steps from the stored profile (its float32 speeds and heights),
+    # replay takes the trip's vector (its samples' float64): the same model to 1e-7
+    np.testing.assert_allclose([d["energy_kwh"] for d in days if d["vehicle_id"] == "TRK-1"], per_day, rtol=1e-7)
+    assert [d["mass_sources"] for d in days][0] == "3 logged"
+
+
+def test_the_night_shift_is_one_duty_and_two_calendar_days(store):
+    gap = json.loads(replay(store, "-v", TRUCK, "-f", "json").stdout)
+    assert [r["day"] for r in gap if r["vehicle_id"] == "TRK-2"] == ["2020-09-13", "2020-09-14"]
+    res = replay(store, "-v", TRUCK, "-f", "json", "--duty", "day")
+    days = json.loads(res.stdout)
+    # cut at midnight: the second "day" holds the end of one night and the start of the next
+    assert [r["trips"] for r in days if r["vehicle_id"] == "TRK-2"] == [1, 2, 1]
+    assert days[-1]["duty_rule"] == "calendar day in UTC"
+    local = json.loads(replay(store, "-v", TRUCK, "-f", "json", "--tz", "Asia/Tokyo").stdout)
+    assert local[0]["start_time"].endswith("+09:00")
+
+
+def test_charging_at_the_depot_only(store):
+    anywhere = json.loads(replay(store, "-v", TRUCK, "--battery-kwh", "40", "--charger-kw", "50", "-f", "json").stdout)
+    depot = json.loads(replay(store, "-v", TRUCK, "--battery-kwh", "40", "--charger-kw", "50", "--charge-at", "depot",
+                              "-f", "json").stdout)
+    a1 = [r for r in anywhere if r["vehicle_id"] == "TRK-1"]
+    d1 = [r for r in depot if r["vehicle_id"] == "TRK-1"]
+    assert all(r["charges"] == 2 for r in a1) and all(r["charges"] == 1 for r in d1)  # not at the customer
+    assert d1[0]["charge_places"].startswith("depot 52.06")
+    d2 = [r for r in depot if r["vehicle_id"] == "TRK-2"]
+    assert all(r["charges"] == 0 for r in d2)  # its one stop is at the customer
+
+
+def test_summary_plot_and_a_diesel_candidate(store, tmp_path):
+    png, summary = tmp_path / "days.png", tmp_path / "summary.json"
+    res = replay(store, "-v", TRUCK, "--battery-kwh", "30", "--plot", str(png), "--summary", str(summary), "-f", "csv",
+                 "-o", str(tmp_path / "rows.csv"))
+    assert res.exit_code == 0, res.output
+    sm = json.loads(summary.read_text())
+    assert sm["duties"] == 5 and sm["battery_step_kWh"] == 1.0 and sm["completes"] < 5
+    assert sm["battery_for_target_kWh"] > 30 and png.stat().st_size > 10_000
+    res = replay(store, "-v", DIESEL, "-f", "json")
+    assert res.exit_code == 0, res.output
+    rows = json.loads(res.stdout)
+    assert "energy_kwh" not in rows[0] and rows[0]["fuel_l"] > 0 and rows[0]["tank_l"] == 400.0
+
+
+def test_a_parallel_run_writes_the_bytes_of_a_serial_one(store, monkeypatch):
+    from cevm.core.replay import TripSpread, plan
+
+    def stated(vehicle, trips, *, ice_braking=None):  # a spread, as a calibrated file gives
+        n = trips.n
+        return TripSpread(np.zeros((n, 0)), np.zeros((0, 0)), 0.02, 2000.0 * trips.duration_s,
+                          0.05 * trips.energy, np.zeros(n), 0.5, "posterior", "stated")
+
+    monkeypatch.setattr(plan, "trip_spread", stated)
+    args = ["-v", TRUCK, "--battery-kwh", "36", "-f", "csv", "--draws", "400"]
+    serial = replay(store, *args)
+    par = replay(store, *args, "--workers", "2")
+    assert serial.exit_code == par.exit_code == 0, serial.output + par.output
+    assert serial.stdout == par.stdout
+    p = [float(r["p_complete"]) for r in csv.DictReader(io.StringIO(serial.stdout))]
+    assert any(0 < x < 1 for x in p) and "Monte Carlo, 400 draws" in serial.output
+
+
+@pytest.mark.parametrize("extra, words", [
+    (["--charge-at", "52.1"], "--charge-at '52.1': give LAT,LON,RADIUS_M"),
+    (["--charge-at", "95,0,100"], "latitude 95 is not in [-90, 90]"),
+    (["--refuel-at", "depot"], "--refuel-at is for a diesel candidate"),
+    (["--overnight", "none", "--overnight-kw", "11"], "not both"),
+    (["--overnight", "sometimes"], "--overnight 'sometimes'"),
+    (["--tz", "Mars/Olympus"], "--tz 'Mars/Olympus': not a time zone"),
+    (["--duty", "week"], "--duty 'week'"),
+    (["--confidence", "1.5"], "--confidence 1.5 must be in (0, 1]"),
+    (["--charge-efficiency", "1.2"], "charging efficiency 1.2 must be in (0, 1]"),
+])
+def test_wrong_inputs_get_one_line(store, extra, words):
+    res = replay(store, "-v", TRUCK, *extra)
+    assert res.exit_code == 2 and words in res.output, res.output
+    assert "Traceback" not in res.output
+
+
+def test_unknown_vehicles_and_candidates_that_do_not_fit(store):
+    res = runner.invoke(app, ["replay", "--store", str(store), "-v", TRUCK, "--vehicle-id", "NOPE"])
+    assert res.exit_code == 2 and "no stored trips of vehicle id(s) 'NOPE'" in res.output
+    res = replay(store, "-v", DIESEL, "--charger-kw", "50")
+    assert res.exit_code == 2 and "for an electric candidate" in res.output
+    res = replay(store, "-v", TRUCK, "-v", DIESEL)
+    assert res.exit_code == 2 and "one candidate vehicle file" in res.output
