@@ -44,7 +44,7 @@ from pathlib import Path
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-import numpy as np  # noqa: E402
+import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
@@ -52,7 +52,6 @@ sys.path.insert(0, str(ROOT / "src"))
 from cevm.core.cycle import drive_cycle_vector  # noqa: E402
 from cevm.core.replay import (  # noqa: E402
     Charging,
-    Lanes,
     LoggedTrips,
     ReplaySettings,
     TripSpread,
@@ -217,12 +216,13 @@ def main() -> None:
     print(f"fleet-year on one core: {t_plan + t_mc:.1f} s ({n_duties:,} duties with sizes and p_complete)")
 
     sample = fleet[:2]
-    t_base, d_base = baseline_today(sample, veh, settings)
+    t_base, _ = baseline_today(sample, veh, settings)
     n_sample_trips = sum(tr.n for tr, _ in sample)
     base_per_trip = t_base / n_sample_trips
     print(f"baseline (a): each trip predicted alone, levels in a Python loop: {n_sample_trips:,} trips in "
           f"{t_base:.2f} s, {1e3 * base_per_trip:.2f} ms a trip -> the fleet-year in {base_per_trip * n_trips:.0f} s "
-          f"(extrapolated; without sizes nor p): the replay's duties run {base_per_trip * n_trips / t_plan:.1f}x faster")
+          f"(extrapolated; without sizes nor p): the replay's duties run "
+          f"{base_per_trip * n_trips / t_plan:.1f}x faster")
     sample_plans = plans[:2]
     t = time.perf_counter()
     brute = brute_sizes(sample_plans, s, r, 0.9)
@@ -232,7 +232,7 @@ def main() -> None:
     bis = [battery_needed(p.lanes(), p.energies.energy, p.excess.bound, p.stops, soc_start=s, reserve=r,
                           efficiency=0.9, step=KWH) for p in sample_plans]
     t_bis = time.perf_counter() - t
-    same = all(np.array_equal(a, b) for a, b in zip(brute, bis))
+    same = all(np.array_equal(a, b) for a, b in zip(brute, bis, strict=True))
     print(f"baseline (b): battery sizes by brute force over every kWh: {1e6 * t_brute / d_s:.0f} us a duty vs "
           f"bisection {1e6 * t_bis / d_s:.1f} us a duty ({t_brute / t_bis:.0f}x); same sizes: {same}")
 
@@ -241,7 +241,7 @@ def main() -> None:
         tasks = (Task(p.trips.vehicle_id, (p.draw_plan(), draws, 23), cost_s=2e-7 * draws * p.trips.n) for p in plans)
         p_par = [res.value for res in ex.run(p_complete, tasks)]
         t_par = time.perf_counter() - t
-    same = all(np.array_equal(a, b) for a, b in zip(p_serial, p_par))
+    same = all(np.array_equal(a, b) for a, b in zip(p_serial, p_par, strict=True))
     print(f"Monte Carlo on 2 worker processes: {t_par:.2f} s ({t_mc / t_par:.2f}x the serial run); identical to "
           f"serial: {same}")
 

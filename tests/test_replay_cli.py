@@ -46,7 +46,7 @@ def test_rows_in_csv_json_and_table_say_the_same(store):
     assert res.exit_code == 0, res.output
     table = list(csv.DictReader(io.StringIO(res.stdout)))
     assert len(table) == len(rows)
-    for j, c in zip(rows, table):
+    for j, c in zip(rows, table, strict=True):
         for key in ("energy_kwh", "soc_min_pct", "soc_end_pct", "charged_kwh", "p_complete", "battery_needed_kwh"):
             assert (c[key] == "") if j[key] is None else float(c[key]) == pytest.approx(j[key], abs=2e-6)
         assert c["completes"] == ("true" if j["completes"] else "false") and c["fuel_l"] == ""
@@ -64,7 +64,7 @@ def test_a_duty_is_the_sum_of_the_trips_cevm_predict_gives(store):
     # predict sums an EV's steps from the stored profile (its float32 speeds and heights),
     # replay takes the trip's vector (its samples' float64): the same model to 1e-7
     np.testing.assert_allclose([d["energy_kwh"] for d in days if d["vehicle_id"] == "TRK-1"], per_day, rtol=1e-7)
-    assert [d["mass_sources"] for d in days][0] == "3 logged"
+    assert days[0]["mass_sources"] == "3 logged"
 
 
 def test_the_night_shift_is_one_duty_and_two_calendar_days(store):

@@ -17,10 +17,10 @@ import json
 import math
 from collections.abc import Iterator
 from contextlib import ExitStack
-from datetime import datetime, timezone, tzinfo
+from datetime import UTC, datetime, tzinfo
 from pathlib import Path
 from types import SimpleNamespace
-from typing import IO, Annotated, Optional
+from typing import IO, Annotated
 
 import numpy as np
 import typer
@@ -93,7 +93,7 @@ def parse_place(text: str, option: str) -> Place | str:
 def time_zone(name: str) -> tzinfo:
     """``--tz``: UTC or an IANA zone name (Europe/London)."""
     if name.upper() == "UTC":
-        return timezone.utc
+        return UTC
     from zoneinfo import ZoneInfo, ZoneInfoNotFoundError
 
     try:
@@ -105,7 +105,7 @@ def time_zone(name: str) -> tzinfo:
 def day_numbers(tz: tzinfo):
     """Each trip's calendar day in ``tz`` (an ordinal) from its start [s]."""
     def of(start_s: np.ndarray) -> np.ndarray:
-        return np.array([datetime.fromtimestamp(float(s), timezone.utc).astimezone(tz).date().toordinal()
+        return np.array([datetime.fromtimestamp(float(s), UTC).astimezone(tz).date().toordinal()
                          for s in start_s], dtype=np.int64)
     return of
 
@@ -144,7 +144,8 @@ def describe_run(vehicle, settings: ReplaySettings, tz_name: str) -> dict[str, s
     overnight = {"full": "full", "none": "none"}.get(ch.overnight, f"{ch.overnight_w / 1e3:g} kW")
     rule = (f"a stop of at least {settings.gap_s / 3600:g} h ends a duty" if settings.rule == "gap"
             else f"calendar day in {tz_name}")
-    return {"charge_places": places, "overnight": overnight, "duty_rule": rule}
+    lowest = "inside the trips" if settings.within_trips else "at the trips' ends"
+    return {"charge_places": places, "overnight": overnight, "duty_rule": rule, "lowest_at": lowest}
 
 
 # ----------------------------------------------------------------------- writing
@@ -237,6 +238,8 @@ class Run:
     skipped: list = dataclasses.field(default_factory=list)
     sources: set = dataclasses.field(default_factory=set)
     extrapolating: int = 0
+    read: int = 0
+    trips: int = 0
 
 
 def _plans(st, vehicle, settings: ReplaySettings, ids: list[str], *, positions: bool, day_of, run: Run
@@ -253,6 +256,8 @@ def _plans(st, vehicle, settings: ReplaySettings, ids: list[str], *, positions: 
         if plan.excess.unreadable:
             run.notes.append(f"{vid}: {plan.excess.unreadable} trip(s) with a damaged profile: their lowest point "
                              "inside the trip is bounded by what they regenerate, not exact")
+        run.read += plan.excess.read
+        run.trips += plan.trips.n
         if plan.unplaced:
             run.notes.append(f"{vid}: {plan.unplaced} stop(s) long enough to charge have no known position: not "
                              "charged")
@@ -373,39 +378,46 @@ def replay_cmd(
     store: StoreOption = None,
     duty: Annotated[str, typer.Option(help="How trips form duties: 'gap' (a stop of at least --duty-gap-h ends a duty: "
                                            "a night shift stays one duty) or 'day' (calendar days in --tz).")] = "gap",
-    duty_gap_h: Annotated[float, typer.Option(help="The stop [h] that ends a duty (default 6: longer than a day's breaks "
-                                                   "and split shifts, shorter than the 9 h daily rest of EU drivers' "
-                                                   "hours).")] = DEFAULT_DUTY_GAP_H,
+    duty_gap_h: Annotated[float, typer.Option(help="The stop [h] that ends a duty (default 6: longer than a day's "
+                                                   "breaks and split shifts, shorter than the 9 h daily rest of EU "
+                                                   "drivers' hours).")] = DEFAULT_DUTY_GAP_H,
     tz: Annotated[str, typer.Option(help="Time zone of the rows' days and times and of --duty day: UTC or an IANA "
                                          "name (Europe/London).")] = "UTC",
-    soc_start: Annotated[float, typer.Option("--soc-start", help="Level at the start [% of the battery or tank]: of "
-                                             "every duty with --overnight full, else of each vehicle's first.")] = 100.0,
+    soc_start: Annotated[float, typer.Option("--soc-start", help="Level at the start [% of the battery or tank]: "
+                                             "of every duty with --overnight full, else of each vehicle's "
+                                             "first.")] = 100.0,
     reserve_pct: ReserveOption = DEFAULT_RESERVE_PCT,
-    charger_kw: Annotated[Optional[float], typer.Option(help="Charger power at the stops inside a duty [kW] (EV; "
+    charger_kw: Annotated[float | None, typer.Option(help="Charger power at the stops inside a duty [kW] (EV; "
                                                         "default none).")] = None,
     min_dwell_min: Annotated[float, typer.Option(help="Shortest stop that charges or refuels [min] (default 30: a "
                                                       "driver's break, plugging in and out).")] = DEFAULT_MIN_DWELL_MIN,
     charge_efficiency: Annotated[float, typer.Option(help="Grid to battery (default 0.90: DC charging, 85-93 % "
                                                           "measured).")] = DEFAULT_CHARGE_EFFICIENCY,
-    charge_at: Annotated[Optional[list[str]], typer.Option(metavar="LAT,LON,RADIUS_M|depot", help="Charge only at "
+    charge_at: Annotated[list[str] | None, typer.Option(metavar="LAT,LON,RADIUS_M|depot", help="Charge only at "
                          "stops here (where the trip before ended and the next began); 'depot': where the vehicle "
                          "most often stands between duties. Repeatable. Default: any stop.")] = None,
-    refuel_at: Annotated[Optional[list[str]], typer.Option(metavar="LAT,LON,RADIUS_M|depot", help="Diesel candidate: "
+    refuel_at: Annotated[list[str] | None, typer.Option(metavar="LAT,LON,RADIUS_M|depot", help="Diesel candidate: "
                          "refuel to full at stops here. Repeatable. Default: only overnight.")] = None,
     depot_radius_m: Annotated[float, typer.Option(help="Radius of the depot found [m].")] = DEFAULT_PLACE_RADIUS_M,
-    overnight: Annotated[Optional[str], typer.Option(help="The rests between duties: 'full' (default: each duty "
+    overnight: Annotated[str | None, typer.Option(help="The rests between duties: 'full' (default: each duty "
                                                           "starts at --soc-start, a depot charge) or 'none' (levels "
                                                           "carried).")] = None,
-    overnight_kw: Annotated[Optional[float], typer.Option(help="Instead: a charger of this power [kW] for the whole "
+    overnight_kw: Annotated[float | None, typer.Option(help="Instead: a charger of this power [kW] for the whole "
                                                           "rest between duties, levels carried.")] = None,
-    logged_kerb_kg: Annotated[Optional[float], typer.Option(help="The logged vehicles' kerb mass [kg]: the candidate "
+    logged_kerb_kg: Annotated[float | None, typer.Option(help="The logged vehicles' kerb mass [kg]: the candidate "
                                                             "carries each trip's payload (gross less this) on its own "
-                                                            "kerb mass. Default: each trip's gross mass as it is.")] = None,
-    battery_kwh: Annotated[Optional[float], typer.Option(help="Replay with this usable battery [kWh] instead of the "
+                                                            "kerb mass. Default: each trip's gross mass as it "
+                                                            "is.")] = None,
+    battery_kwh: Annotated[float | None, typer.Option(help="Replay with this usable battery [kWh] instead of the "
                                                          "candidate file's.")] = None,
+    within_trips: Annotated[str, typer.Option(help="Where the lowest level is looked for: 'exact' (inside the trips "
+                                                   "that could decide anything: their stored profiles read) or 'ends' "
+                                                   "(at the trips' ends only: no profile read, for a large fleet "
+                                                   "fast).")] = "exact",
     interval: Annotated[float, typer.Option(help="Interval of the duties' energy.")] = DEFAULT_INTERVAL,
     confidence: Annotated[float, typer.Option(help="A duty counts as completed in the summary at this probability "
-                                                   "(default 0.95: the high end of the 90 % interval).")] = DEFAULT_CONFIDENCE,
+                                                   "(default 0.95: the high end of the 90 % "
+                                                   "interval).")] = DEFAULT_CONFIDENCE,
     target_share: Annotated[float, typer.Option(help="Share of duties the sized battery and charger must "
                                                      "complete.")] = DEFAULT_TARGET_SHARE,
     draws: Annotated[int, typer.Option(min=1, help="Monte Carlo draws per duty.")] = DEFAULT_DRAWS,
@@ -413,13 +425,13 @@ def replay_cmd(
     ice_braking: IceBrakingOption = None,
     fmt: FormatOption = OutputFormat.table,
     out: OutOption = None,
-    plot: Annotated[Optional[Path], typer.Option(metavar="FILE.png", help="Write a PNG: each duty's energy against "
+    plot: Annotated[Path | None, typer.Option(metavar="FILE.png", help="Write a PNG: each duty's energy against "
                                                  "the usable battery and the reserve.")] = None,
-    summary: Annotated[Optional[Path], typer.Option(metavar="FILE.json", help="Also write the fleet's summary as "
+    summary: Annotated[Path | None, typer.Option(metavar="FILE.json", help="Also write the fleet's summary as "
                                                     "JSON.")] = None,
-    workers: Annotated[Optional[int], typer.Option("--workers", "-w", min=1, metavar="N", help="Worker processes for "
+    workers: Annotated[int | None, typer.Option("--workers", "-w", min=1, metavar="N", help="Worker processes for "
                                                    "the Monte Carlo (default 1: in this process).")] = None,
-    scheduler: Annotated[Optional[str], typer.Option(help="Dask scheduler address (tcp://HOST:8786) for the Monte "
+    scheduler: Annotated[str | None, typer.Option(help="Dask scheduler address (tcp://HOST:8786) for the Monte "
                                                      "Carlo (pip install 'cevm[dask]').")] = None,
 ) -> None:
     """Run the logged vehicles' duties again with a candidate vehicle, charging included.
@@ -445,14 +457,16 @@ def replay_cmd(
         raise fail(f"--duty-gap-h {duty_gap_h:g} must be > 0")
     if duty not in ("gap", "day"):
         raise fail(f"--duty {duty!r}: give gap or day")
+    if within_trips not in ("exact", "ends"):
+        raise fail(f"--within-trips {within_trips!r}: give exact or ends")
     if battery_kwh is not None and not battery_kwh > 0:
         raise fail(f"--battery-kwh {battery_kwh:g} must be > 0")
     try:
         skipped = _replay(opts)
     except CevmError as exc:
         raise fail(exc) from None
-    for exc in skipped:
-        warn_damaged(exc)
+    for damaged in skipped:
+        warn_damaged(damaged)
     if skipped:
         raise typer.Exit(EXIT_PARTIAL)
 
@@ -464,7 +478,8 @@ def _settings(o: SimpleNamespace, vehicle) -> ReplaySettings:
         return ReplaySettings(rule=o.duty, gap_s=3600.0 * o.duty_gap_h, soc_start_pct=o.soc_start,
                               reserve_pct=o.reserve_pct, charging=charging, interval=o.interval, draws=o.draws,
                               seed=o.seed, battery_step=J_PER_KWH if vehicle.is_ev else 1.0,
-                              ice_braking=o.ice_braking, logged_kerb_kg=o.logged_kerb_kg)
+                              ice_braking=o.ice_braking, logged_kerb_kg=o.logged_kerb_kg,
+                              within_trips=o.within_trips == "exact")
     except ValueError as exc:
         raise CevmError(str(exc)) from None
 
@@ -534,6 +549,10 @@ def _say(o: SimpleNamespace, sm: dict, settings: ReplaySettings, run: Run, vehic
         typer.echo(f"cevm replay: {line}", err=o.fmt != OutputFormat.table or o.out is not None)
     for note in run.notes:
         typer.echo(f"cevm: note: {note}", err=True)
+    if settings.within_trips and vehicle.is_ev:
+        typer.echo(f"cevm: note: the lowest level inside the trips: stored profiles read for {run.read} of "
+                   f"{run.trips} trips (those that could hold a duty's lowest point or decide it; --within-trips "
+                   "ends reads none)", err=True)
     if run.extrapolating:
         warn(f"{run.extrapolating} duties ask what {vehicle.label}'s calibration did not see (column extrapolation)")
     if o.summary is not None:

@@ -17,7 +17,7 @@ comes from.
 
 from __future__ import annotations
 
-from datetime import datetime, timezone, tzinfo
+from datetime import UTC, datetime, tzinfo
 from functools import cached_property
 
 import numpy as np
@@ -86,12 +86,12 @@ class DutyRows:
     def times(self, which: str) -> tuple[np.ndarray, list[str]]:
         t = self.plan.trips
         s = t.start_s[self.d.first] if which == "start" else t.end_s[self.d.last]
-        return self.texts([datetime.fromtimestamp(float(x), timezone.utc).astimezone(self.tz).isoformat(timespec="seconds")
+        return self.texts([datetime.fromtimestamp(float(x), UTC).astimezone(self.tz).isoformat(timespec="seconds")
                            for x in s])
 
     def days(self) -> tuple[np.ndarray, list[str]]:
         t = self.plan.trips
-        return self.texts([datetime.fromtimestamp(float(x), timezone.utc).astimezone(self.tz).date().isoformat()
+        return self.texts([datetime.fromtimestamp(float(x), UTC).astimezone(self.tz).date().isoformat()
                            for x in t.start_s[self.d.first]])
 
     def trip_id(self, index: np.ndarray) -> tuple[np.ndarray, list[str]]:
@@ -101,7 +101,7 @@ class DutyRows:
     def mass_sources(self) -> tuple[np.ndarray, list[str]]:
         src = self.plan.trips.mass_source
         out = []
-        for a, b in zip(self.d.first.tolist(), (self.d.last + 1).tolist()):
+        for a, b in zip(self.d.first.tolist(), (self.d.last + 1).tolist(), strict=True):
             counts: dict[str, int] = {}
             for s in src[a:b]:
                 counts[s] = counts.get(s, 0) + 1
@@ -111,7 +111,7 @@ class DutyRows:
     def ambient_from(self) -> tuple[np.ndarray, list[str]]:
         codes = self.plan.energies.ambient_from
         out = []
-        for a, b in zip(self.d.first.tolist(), (self.d.last + 1).tolist()):
+        for a, b in zip(self.d.first.tolist(), (self.d.last + 1).tolist(), strict=True):
             out.append(", ".join(AMBIENT_ORIGINS[c] for c in sorted(set(codes[a:b].tolist()))))
         return self.texts(out)
 
@@ -178,7 +178,8 @@ REPLAY = ColumnSpec((
            header="tank end %", digits=1, value=lambda r: _level_pct(r, "end")),
     Column("charged_kwh", "energy charged into the battery in the duty's stops [kWh] (not the rest after it)", EV,
            header="charged kWh", digits=1, value=lambda r: r.out(r.plan.levels.gained)),
-    Column("refuelled_l", "fuel taken in the duty's stops [l]", ICE, digits=1, value=lambda r: r.out(r.plan.levels.gained)),
+    Column("refuelled_l", "fuel taken in the duty's stops [l]", ICE, digits=1,
+           value=lambda r: r.out(r.plan.levels.gained)),
     Column("charges", "stops of the duty that charged (EV) or refuelled (ICE)", decimals=0, digits=0,
            value=lambda r: r.plan.levels.charges.astype(np.float64)),
     Column("completes", "the duty keeps the reserve all along, at the mean energies", kind="bool", header="completes",
@@ -211,7 +212,8 @@ REPLAY = ColumnSpec((
            value=lambda r: r.text(r.plan.vehicle.powertrain)),
     Column("battery_kwh", "the candidate's usable battery [kWh]", EV, value=_capacity),
     Column("tank_l", "the candidate's tank [l]", ICE, value=_capacity),
-    Column("reserve_pct", "the reserve kept [% of the battery or tank]", value=lambda r: r.same(r.plan.settings.reserve_pct)),
+    Column("reserve_pct", "the reserve kept [% of the battery or tank]",
+           value=lambda r: r.same(r.plan.settings.reserve_pct)),
     Column("charger_kw", "the charger at the duty's stops [kW] (0: none)", EV,
            value=lambda r: r.same(r.plan.settings.charging.power_w / 1e3)),
     Column("min_dwell_min", "the shortest stop that charges or refuels [min]",
@@ -221,7 +223,10 @@ REPLAY = ColumnSpec((
            "none found)", kind="text", value=lambda r: r.text(r.context["charge_places"])),
     Column("overnight", "the rests between duties: full (each duty starts at --soc-start), none (levels carried) or "
            "a charger's power", kind="text", value=lambda r: r.text(r.context["overnight"])),
-    Column("duty_rule", "how trips were grouped into duties", kind="text", value=lambda r: r.text(r.context["duty_rule"])),
+    Column("duty_rule", "how trips were grouped into duties", kind="text",
+           value=lambda r: r.text(r.context["duty_rule"])),
+    Column("lowest_at", "where the lowest level is looked for: inside the trips (--within-trips exact) or at their "
+           "ends", kind="text", value=lambda r: r.text(r.context["lowest_at"])),
     Column("mass_min_kg", "the lightest trip's gross mass with the candidate [kg]", decimals=3,
            value=lambda r: r.per_duty(r.plan.energies.mass_kg, np.minimum)),
     Column("mass_max_kg", "the heaviest trip's gross mass with the candidate [kg]", decimals=3,

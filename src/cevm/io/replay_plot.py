@@ -4,7 +4,7 @@ object API (a Figure on its own Agg canvas: no pyplot state, no backend switched
 
 from __future__ import annotations
 
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
 
 import numpy as np
@@ -28,7 +28,7 @@ def plot_duties(path: Path, *, vehicle: list[str], start_s: np.ndarray, energy: 
     fig = Figure(figsize=(10, 5))
     FigureCanvasAgg(fig)
     ax = fig.subplots()
-    when = np.array([datetime.fromtimestamp(float(s), timezone.utc) for s in start_s], dtype=object)
+    when = np.array([datetime.fromtimestamp(float(s), UTC) for s in start_s], dtype=object)
     names = list(dict.fromkeys(vehicle))
     own = names[:PLOT_MAX_VEHICLES]
     vid = np.array(vehicle, dtype=object)

@@ -51,7 +51,8 @@ __all__ = [
     "DEFAULT_TARGET_SHARE", "DUTY_RULES", "OVERNIGHT_MODES", "ChainRun", "Charging", "Depot", "DrawPlan", "Duties",
     "DutyLevels", "Lanes", "LoggedTrips", "Place", "ReplaySettings", "Stops", "TripEnergies", "TripSpread",
     "VehiclePlan", "battery_needed", "candidate_masses", "capacity_of", "central_interval", "charger_needed",
-    "distance_m", "duty_levels", "duty_minima", "find_depot", "group_duties", "p_complete", "plan_vehicle", "run_chains",
+    "distance_m", "duty_levels", "duty_minima", "find_depot", "group_duties", "p_complete", "plan_vehicle",
+    "run_chains",
     "size_for_share", "smallest_passing", "standard_error", "stop_dwell_s", "stop_gain", "stops_at",
     "trip_crossing", "trip_energies", "trip_spread", "trips_excess",
 ]

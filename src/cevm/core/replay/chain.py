@@ -33,6 +33,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 
 @dataclass(frozen=True, eq=False)
@@ -43,7 +44,7 @@ class Lanes:
     index: np.ndarray
 
     @classmethod
-    def of(cls, starts, stops) -> Lanes:
+    def of(cls, starts: ArrayLike, stops: ArrayLike) -> Lanes:
         """Lanes of the chains ``starts[l]:stops[l]`` (trip indices)."""
         starts = np.asarray(starts, dtype=np.int64)
         sizes = np.asarray(stops, dtype=np.int64) - starts
@@ -54,13 +55,14 @@ class Lanes:
 
     @property
     def shape(self) -> tuple[int, int]:
-        return self.index.shape  # type: ignore[return-value]
+        t, lanes = self.index.shape
+        return int(t), int(lanes)
 
     @property
     def valid(self) -> np.ndarray:
         return self.index >= 0
 
-    def take(self, values, fill=0.0) -> np.ndarray:
+    def take(self, values: ArrayLike, fill: float | bool = 0.0) -> np.ndarray:
         """Per-trip ``values`` (n, ...) at each slot (T, L, ...); ``fill`` where none."""
         v = np.asarray(values)
         out = v[np.maximum(self.index, 0)]
@@ -68,7 +70,7 @@ class Lanes:
             mask = ~self.valid
             out = out.copy()
             out[mask] = fill
-        return out
+        return np.asarray(out)
 
     def put(self, slots: np.ndarray, n: int) -> np.ndarray:
         """Slot values (T, L, ...) back to one per trip (n, ...)."""
@@ -90,7 +92,7 @@ class Stops:
     sizable: np.ndarray
     duty_end: np.ndarray
 
-    def with_power(self, power_w) -> np.ndarray:
+    def with_power(self, power_w: ArrayLike) -> np.ndarray:
         """The stops' powers with the sizable ones at ``power_w`` (broadcast over a last
         axis of trial powers: (n, K))."""
         p = np.asarray(power_w, dtype=np.float64)
@@ -98,13 +100,15 @@ class Stops:
         return np.where((self.sizable if p.ndim == 0 else self.sizable[:, None]), p, base)
 
 
-def stop_gain(level, capacity, power_w, dwell_s, efficiency) -> np.ndarray:
+def stop_gain(level: ArrayLike, capacity: ArrayLike, power_w: ArrayLike, dwell_s: ArrayLike,
+              efficiency: float) -> np.ndarray:
     """What a stop adds [J or l]: min(eta_c P dt, C - level), all of C - level for an
     infinite P (refuelling), nothing for P = 0 or a NaN dwell."""
-    return np.minimum(stop_potential(power_w, dwell_s, efficiency), np.maximum(capacity - level, 0.0))
+    room = np.maximum(np.asarray(capacity, dtype=np.float64) - np.asarray(level, dtype=np.float64), 0.0)
+    return np.asarray(np.minimum(stop_potential(power_w, dwell_s, efficiency), room), dtype=np.float64)
 
 
-def stop_potential(power_w, dwell_s, efficiency) -> np.ndarray:
+def stop_potential(power_w: ArrayLike, dwell_s: ArrayLike, efficiency: float) -> np.ndarray:
     """What a stop could add to an empty battery or tank: eta_c P dt (inf for an infinite P,
     0 for P = 0 or a NaN dwell)."""
     p = np.asarray(power_w, dtype=np.float64)
@@ -130,7 +134,8 @@ class _Slots:
     """What one loop over a lanes' slots reads: energies, excess, stop potentials and
     duty ends laid out (T, L, ...), the capacity and the start level per lane."""
 
-    def __init__(self, lanes: Lanes, energy, excess, stops: Stops, capacity, start, efficiency: float, power_w):
+    def __init__(self, lanes: Lanes, energy: ArrayLike, excess: ArrayLike, stops: Stops, capacity: ArrayLike,
+                 start: ArrayLike, efficiency: float, power_w: ArrayLike | None):
         self.e = lanes.take(energy)
         self.x = lanes.take(excess)
         power = stops.power_w if power_w is None else power_w
@@ -160,8 +165,8 @@ class _Slots:
         return low, after, gain, level + gain
 
 
-def run_chains(lanes: Lanes, energy, excess, stops: Stops, *, capacity, start, efficiency: float,
-               power_w=None) -> ChainRun:
+def run_chains(lanes: Lanes, energy: ArrayLike, excess: ArrayLike, stops: Stops, *, capacity: ArrayLike,
+               start: ArrayLike, efficiency: float, power_w: ArrayLike | None = None) -> ChainRun:
     """The levels along each lane (module notes). ``energy`` and ``excess`` per trip (n,)
     or (n, K) (K draws or trials along a last axis); ``capacity`` and ``start`` per lane
     (L,) or (L, K), or scalars; ``power_w`` per trip (n,) or (n, K) (default the stops')."""
@@ -175,8 +180,9 @@ def run_chains(lanes: Lanes, energy, excess, stops: Stops, *, capacity, start, e
     return ChainRun(before, low, after, gain)
 
 
-def duty_minima(lanes: Lanes, duty_of_slot: np.ndarray, last_of_duty: np.ndarray, n_duties: int, energy, excess,
-                stops: Stops, *, capacity, start, efficiency: float) -> np.ndarray:
+def duty_minima(lanes: Lanes, duty_of_slot: np.ndarray, last_of_duty: np.ndarray, n_duties: int, energy: ArrayLike,
+                excess: ArrayLike, stops: Stops, *, capacity: ArrayLike, start: ArrayLike,
+                efficiency: float) -> np.ndarray:
     """Each duty's lowest level (D, ...) along the lanes, without keeping every slot:
     ``duty_of_slot`` (T, L) the duty of each slot, ``last_of_duty`` (T, L) whether the
     slot's trip is its duty's last (:func:`run_chains` otherwise)."""
@@ -194,15 +200,15 @@ def duty_minima(lanes: Lanes, duty_of_slot: np.ndarray, last_of_duty: np.ndarray
     return out
 
 
-def _lane_shape(value, extra: tuple) -> tuple:
+def _lane_shape(value: ArrayLike, extra: tuple[int, ...]) -> tuple[int, ...]:
     """A per-lane value's shape for broadcasting against (L, *extra)."""
-    s = np.shape(value)
+    s = tuple(int(x) for x in np.shape(value))
     if not s:
         return (1,) * (1 + len(extra))
     return s + (1,) * (1 + len(extra) - len(s))
 
 
-def _lane_slot(v: np.ndarray, shape: tuple) -> np.ndarray:
+def _lane_slot(v: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
     """One slot's per-lane values (L,) or (L, K) against the state's ``shape``."""
     return v.reshape(v.shape + (1,) * (len(shape) - v.ndim))
 
@@ -227,7 +233,7 @@ class DutyLevels:
 
 
 def duty_levels(bounds: np.ndarray, before: np.ndarray, low: np.ndarray, after: np.ndarray, gain: np.ndarray,
-                threshold) -> DutyLevels:
+                threshold: ArrayLike) -> DutyLevels:
     """:class:`DutyLevels` from per-trip levels (n,) (:meth:`Lanes.put` of a
     :class:`ChainRun`), duties ``bounds`` (D+1) over the trips; ``threshold`` (D,) or a
     scalar: the level (the reserve) whose first crossing is looked for."""

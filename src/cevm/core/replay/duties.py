@@ -20,6 +20,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 #: The rules of :func:`group_duties`.
 DUTY_RULES = ("gap", "day")
@@ -83,7 +84,7 @@ class Duties:
         return out
 
 
-def stop_dwell_s(start_s: np.ndarray, end_s: np.ndarray) -> np.ndarray:
+def stop_dwell_s(start_s: ArrayLike, end_s: ArrayLike) -> np.ndarray:
     """The stop after each trip [s] (trips sorted by start): the next trip's start less
     the latest end so far, never negative; NaN after the last trip."""
     start = np.asarray(start_s, dtype=np.float64)
@@ -94,8 +95,8 @@ def stop_dwell_s(start_s: np.ndarray, end_s: np.ndarray) -> np.ndarray:
     return dwell
 
 
-def group_duties(start_s, end_s, *, rule: str = "gap", gap_s: float = DEFAULT_DUTY_GAP_H * 3600.0,
-                 day=None) -> Duties:
+def group_duties(start_s: ArrayLike, end_s: ArrayLike, *, rule: str = "gap", gap_s: float = DEFAULT_DUTY_GAP_H * 3600.0,
+                 day: ArrayLike | None = None) -> Duties:
     """Group trips sorted by ``start_s`` [s] (ending at ``end_s``) into duties by
     ``rule`` (:data:`DUTY_RULES`): ``"gap"``, a new duty after a stop of at least
     ``gap_s`` [s]; ``"day"``, a new duty at each change of ``day`` (an integer per

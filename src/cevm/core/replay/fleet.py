@@ -17,6 +17,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from cevm.core.replay.chain import Lanes, Stops, run_chains
 from cevm.core.replay.plan import Excess, VehiclePlan
@@ -24,7 +25,8 @@ from cevm.core.replay.sizing import charger_upper, smallest_passing, undecided_t
 from cevm.core.vehicle import DOMAIN_MARGIN_K, DOMAIN_MARGIN_MASS, DOMAIN_MARGIN_SPEED, Vehicle
 
 
-def trip_extrapolation(vehicle: Vehicle, mass_kg, ambient_c, mean_speed_mps) -> np.ndarray:
+def trip_extrapolation(vehicle: Vehicle, mass_kg: ArrayLike, ambient_c: ArrayLike, mean_speed_mps: ArrayLike
+                       ) -> np.ndarray:
     """Per trip, what the candidate's calibration did not see (bit flags: 1 temperature,
     2 mass, 4 speed), with the margins of :func:`cevm.core.vehicle.domain_warnings`;
     -1 for a file never calibrated."""
@@ -118,13 +120,13 @@ class Chain:
     bounds: np.ndarray
 
 
-def _joined(chains: Sequence[Chain]):
+def _joined(chains: Sequence[Chain]) -> tuple[np.ndarray, Stops, np.ndarray, Lanes, np.ndarray]:
     sizes = np.array([c.energy.size for c in chains], dtype=np.int64)
     offsets = np.concatenate([[0], np.cumsum(sizes)])
     energy = np.concatenate([c.energy for c in chains])
     stops = Stops(*(np.concatenate([getattr(c.stops, f) for c in chains])
                     for f in ("dwell_s", "power_w", "sizable", "duty_end")))
-    bounds = np.concatenate([c.bounds[:-1] + o for c, o in zip(chains, offsets)] + [offsets[-1:]])
+    bounds = np.concatenate([c.bounds[:-1] + o for c, o in zip(chains, offsets[:-1], strict=True)] + [offsets[-1:]])
     lanes = Lanes.of(offsets[:-1], offsets[1:])
     return energy, stops, bounds, lanes, offsets
 
@@ -144,7 +146,7 @@ def chained_sizes(chains: Sequence[Chain], share: float, *, soc_start: float, re
     def excess(which: str) -> np.ndarray:
         return np.concatenate([getattr(c.excess, which) for c in chains])
 
-    def share_at(x, cap, start, power=None) -> float:
+    def share_at(x: np.ndarray, cap: float, start: float, power: np.ndarray | None = None) -> float:
         run = run_chains(lanes, energy, x, stops, capacity=cap, start=start, efficiency=efficiency, power_w=power)
         low = lanes.put(run.low, energy.size)
         return float(np.count_nonzero(np.minimum.reduceat(low, bounds[:-1]) >= reserve * cap)) / n_duties
@@ -154,7 +156,7 @@ def chained_sizes(chains: Sequence[Chain], share: float, *, soc_start: float, re
         for v in np.unique(owner).tolist():
             chains[v].excess.learn(trips[owner == v] - offsets[v], chains[v].exact)
 
-    def refined(need, undecided) -> float:
+    def refined(need: Callable[[np.ndarray], float], undecided: Callable[[float], np.ndarray]) -> float:
         while True:
             hi, lo = need(excess("bound")), need(excess("value"))
             if hi == lo:
@@ -170,7 +172,7 @@ def chained_sizes(chains: Sequence[Chain], share: float, *, soc_start: float, re
         top += excess("bound").max(initial=0.0)
         k_top = max(1, int(np.ceil(top / (soc_start - reserve) / battery_step)))
 
-        def need_c(x) -> float:
+        def need_c(x: np.ndarray) -> float:
             k = smallest_passing(lambda k: np.array([share_at(x, float(k[0]) * battery_step,
                                                               soc_start * float(k[0]) * battery_step) >= share]),
                                  np.array([1]), np.array([k_top]))[0]
@@ -185,7 +187,7 @@ def chained_sizes(chains: Sequence[Chain], share: float, *, soc_start: float, re
     if stops.sizable.any():
         k_top = int(np.ceil(charger_upper(stops, capacity, efficiency) / charger_step))
 
-        def need_p(x) -> float:
+        def need_p(x: np.ndarray) -> float:
             k = smallest_passing(lambda k: np.array([share_at(x, capacity, soc_start * capacity,
                                                               stops.with_power(float(k[0]) * charger_step)) >= share]),
                                  np.array([0]), np.array([k_top]))[0]

@@ -22,6 +22,7 @@ import hashlib
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from cevm.core.replay.chain import Lanes, Stops, duty_minima
 from cevm.core.replay.spread import TripSpread
@@ -117,7 +118,7 @@ def _draw_energies(plan: DrawPlan, z_duty: np.ndarray, z_trip: np.ndarray) -> np
     rho = sp.day_corr
     e += np.sqrt(rho) * (sp.aux_sd[:, None] * per_trip(day[:, 0]) + sp.share_sd[:, None] * per_trip(day[:, 1]))
     e += np.sqrt((1.0 - rho) * (sp.aux_sd ** 2 + sp.share_sd ** 2))[:, None] * z_trip
-    return e
+    return np.asarray(e, dtype=np.float64)
 
 
 def p_complete(plan: DrawPlan, draws: int = DEFAULT_DRAWS, seed: int = DEFAULT_SEED) -> np.ndarray:
@@ -154,7 +155,7 @@ def p_complete(plan: DrawPlan, draws: int = DEFAULT_DRAWS, seed: int = DEFAULT_S
     return np.where(sure, 1.0, ok / draws)
 
 
-def standard_error(p, draws: int) -> np.ndarray:
+def standard_error(p: ArrayLike, draws: int) -> np.ndarray:
     """The Monte Carlo standard error of shares ``p`` of ``draws`` draws."""
     p = np.asarray(p, dtype=np.float64)
-    return np.sqrt(p * (1.0 - p) / draws)
+    return np.asarray(np.sqrt(p * (1.0 - p) / draws), dtype=np.float64)

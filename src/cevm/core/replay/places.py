@@ -18,9 +18,11 @@ depot to charge at.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 #: Mean Earth radius [m] (IUGG): distances of a few hundred metres to 0.5 %.
 EARTH_RADIUS_M = 6_371_008.8
@@ -58,16 +60,17 @@ class Place:
         return f"{self.name} {self.lat_deg:.5f},{self.lon_deg:.5f} r {self.radius_m:g} m"
 
 
-def distance_m(lat1, lon1, lat2, lon2) -> np.ndarray:
+def distance_m(lat1: ArrayLike, lon1: ArrayLike, lat2: ArrayLike, lon2: ArrayLike) -> np.ndarray:
     """Great-circle distance [m] between points [deg] (haversine; arrays broadcast; NaN
     where a position is unknown)."""
     p1, p2 = np.radians(lat1), np.radians(lat2)
     dl = np.radians(np.asarray(lon2, dtype=np.float64) - np.asarray(lon1, dtype=np.float64))
     h = np.sin(0.5 * (p2 - p1)) ** 2 + np.cos(p1) * np.cos(p2) * np.sin(0.5 * dl) ** 2
-    return 2.0 * EARTH_RADIUS_M * np.arcsin(np.sqrt(np.clip(h, 0.0, 1.0)))
+    return np.asarray(2.0 * EARTH_RADIUS_M * np.arcsin(np.sqrt(np.clip(h, 0.0, 1.0))), dtype=np.float64)
 
 
-def stops_at(places, end_lat, end_lon, next_lat, next_lon) -> np.ndarray:
+def stops_at(places: Sequence[Place], end_lat: ArrayLike, end_lon: ArrayLike, next_lat: ArrayLike,
+             next_lon: ArrayLike) -> np.ndarray:
     """Whether each stop is at one of ``places`` (module notes): the trip before it ended
     at (``end_lat``, ``end_lon``), the trip after it started at (``next_lat``,
     ``next_lon``) [deg], NaN where unknown. Arrays of one length."""
@@ -97,7 +100,7 @@ class Depot:
                 f"({self.rests_there} of {self.rests_known} rests)")
 
 
-def find_depot(lat_deg, lon_deg, radius_m: float = DEFAULT_PLACE_RADIUS_M, *,
+def find_depot(lat_deg: ArrayLike, lon_deg: ArrayLike, radius_m: float = DEFAULT_PLACE_RADIUS_M, *,
                min_share: float = DEPOT_MIN_SHARE) -> Depot | None:
     """The depot among the positions [deg] where a vehicle stood between duties (module
     notes), or None: no known position, or its largest group holds less than
@@ -122,7 +125,8 @@ def find_depot(lat_deg, lon_deg, radius_m: float = DEFAULT_PLACE_RADIUS_M, *,
     return Depot(Place(float(lat[near].mean()), float(lon[near].mean()), radius_m, "depot"), there, n)
 
 
-def rest_positions(first, last, start_lat, start_lon, end_lat, end_lon) -> tuple[np.ndarray, np.ndarray]:
+def rest_positions(first: ArrayLike, last: ArrayLike, start_lat: ArrayLike, start_lon: ArrayLike, end_lat: ArrayLike,
+                   end_lon: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
     """One position [deg] per rest of a vehicle between its duties (``first``, ``last``:
     each duty's first and last trip, as :class:`~cevm.core.replay.duties.Duties` gives
     them; trip start and end positions, NaN where unknown): where it stood before its

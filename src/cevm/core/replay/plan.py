@@ -12,13 +12,13 @@ own error), where it is crossed, and the sizes (:mod:`cevm.core.replay.sizing`).
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from cevm.core.cycle import CycleVector
-from cevm.core.replay.chain import Lanes, Stops, duty_levels, run_chains
+from cevm.core.replay.chain import DutyLevels, Lanes, Stops, duty_levels, run_chains
 from cevm.core.replay.duties import Duties, group_duties
 from cevm.core.replay.montecarlo import DrawPlan
 from cevm.core.replay.places import Depot, find_depot, rest_positions, stops_at
@@ -88,12 +88,14 @@ def candidate_masses(trips: LoggedTrips, vehicle: Vehicle, logged_kerb_kg: float
 class Excess:
     """The trips' in-trip excess as far as known: ``value`` (exact where ``known``, else
     0) and ``bound`` (exact where known, else the regeneration bound); ``unreadable``
-    counts the trips whose step table could not be read (their bound stays)."""
+    counts the trips whose step table could not be read (their bound stays), ``read`` the
+    trips whose step table was asked for."""
 
     value: np.ndarray
     bound: np.ndarray
     known: np.ndarray
     unreadable: int = 0
+    read: int = 0
 
     def learn(self, trips: np.ndarray, exact: Callable[[np.ndarray], np.ndarray]) -> None:
         """Learn the exact excess of ``trips`` (``exact(indices)``: NaN where unreadable)."""
@@ -102,6 +104,7 @@ class Excess:
         if not todo.size:
             return
         x = np.asarray(exact(todo), dtype=np.float64)
+        self.read += int(todo.size)
         self.known[todo] = True
         bad = ~np.isfinite(x)
         self.unreadable += int(bad.sum())
@@ -133,7 +136,7 @@ class VehiclePlan:
     low: np.ndarray
     after: np.ndarray
     gain: np.ndarray
-    levels: object
+    levels: DutyLevels
     capacity: float
     start: float
     reserve: float
@@ -194,7 +197,7 @@ def make_stops(trips: LoggedTrips, duties: Duties, vehicle: Vehicle, settings: R
     if ch.anywhere:
         allowed = long_enough if vehicle.is_ev else np.zeros(n, dtype=bool)
     else:
-        if trips.end_lat is None or trips.start_lat is None:
+        if trips.end_lat is None or trips.start_lat is None or trips.end_lon is None or trips.start_lon is None:
             raise CevmError("charging at named places or the depot needs the trips' positions")
         places = list(ch.places)
         if ch.depot:
@@ -219,12 +222,16 @@ def make_stops(trips: LoggedTrips, duties: Duties, vehicle: Vehicle, settings: R
     return Stops(dwell_s=dwell, power_w=power, sizable=sizable, duty_end=end), depot, unplaced
 
 
-def _levels(lanes: Lanes, n: int, energy, excess, stops: Stops, capacity: float, start: float, efficiency: float):
+def _levels(lanes: Lanes, n: int, energy: np.ndarray, excess: np.ndarray, stops: Stops, capacity: float,
+            start: float, efficiency: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     run = run_chains(lanes, energy, excess, stops, capacity=capacity, start=start, efficiency=efficiency)
-    return tuple(lanes.put(a, n) for a in (run.before, run.low, run.after, run.gain))
+    return lanes.put(run.before, n), lanes.put(run.low, n), lanes.put(run.after, n), lanes.put(run.gain, n)
 
 
-def _learn_lowest(plan_args, ex: Excess, exact, relevant: np.ndarray) -> None:
+Exact = Callable[[np.ndarray], np.ndarray]
+
+
+def _learn_lowest(plan_args: tuple, ex: Excess, exact: Exact, relevant: np.ndarray) -> None:
     """Read the excess of every trip that could hold its duty's lowest point, or could
     bring it within ``relevant`` (per duty, a level) of the reserve, until none is left."""
     lanes, n, energy, stops, cap, start, eff, bounds = plan_args
@@ -244,7 +251,8 @@ def _no_table(i: int) -> None:
 
 
 def _crossing_m(trips: LoggedTrips, energies: TripEnergies, bounds: np.ndarray, before: np.ndarray,
-                first: np.ndarray, threshold: float, vehicle: Vehicle, step_table, ice_braking) -> np.ndarray:
+                first: np.ndarray, threshold: float, vehicle: Vehicle,
+                step_table: Callable[[int], StepTable | None], ice_braking: str | None) -> np.ndarray:
     """Per duty, the distance from its start [m] where its level first falls below
     ``threshold`` (trip ``first[d]``, -1: never): the trips before it whole, then inside it
     from its step table, or where none is read, in proportion to the trip's energy."""
@@ -265,7 +273,7 @@ def _crossing_m(trips: LoggedTrips, energies: TripEnergies, bounds: np.ndarray, 
     return out
 
 
-def _sized(lanes: Lanes, energy, ex: Excess, exact, need: Callable[[np.ndarray], np.ndarray],
+def _sized(lanes: Lanes, energy: np.ndarray, ex: Excess, exact: Exact, need: Callable[[np.ndarray], np.ndarray],
            undecided: Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]) -> np.ndarray:
     """Sizes found with the excess bounded and with it at its known value, refined by
     reading the trips that decide between them until both agree (:mod:`cevm.core.replay.sizing`)."""
@@ -328,7 +336,8 @@ def plan_vehicle(trips: LoggedTrips, vehicle: Vehicle, settings: ReplaySettings,
                        battery_needed=battery, charger_needed_w=charger, depot=depot, unplaced=unplaced)
 
 
-def _duty_sizes(lanes: Lanes, bounds: np.ndarray, energy, ex: Excess, exact, stops: Stops, settings: ReplaySettings,
+def _duty_sizes(lanes: Lanes, bounds: np.ndarray, energy: np.ndarray, ex: Excess, exact: Exact, stops: Stops,
+                settings: ReplaySettings,
                 cap: float, vehicle: Vehicle) -> tuple[np.ndarray, np.ndarray]:
     """Each duty's battery need [J or l] (NaN when it starts at or below its reserve, or
     without a step) and, for an EV with stops that may charge, its charger need [W] at
@@ -339,22 +348,22 @@ def _duty_sizes(lanes: Lanes, bounds: np.ndarray, energy, ex: Excess, exact, sto
     battery = np.full(d_count, np.nan)
     charger = np.full(d_count, np.nan)
     if s > r and settings.battery_step > 0:
-        def need(x):
+        def need(x: np.ndarray) -> np.ndarray:
             return battery_needed(lanes, energy, x, stops, soc_start=s, reserve=r, efficiency=eff,
                                   step=settings.battery_step)
 
-        def undecided(lo, rows, known):
+        def undecided(lo: np.ndarray, rows: np.ndarray, known: np.ndarray) -> np.ndarray:
             cap_lane = lo  # where the sizes agree both pass there: nothing undecided
             return undecided_trips(lanes, bounds, energy, ex.value, ex.bound, known, stops, capacity=cap_lane,
                                    start=s * cap_lane, reserve=r * cap_lane, efficiency=eff)
 
         battery = _sized(lanes, energy, ex, exact, need, undecided)
     if vehicle.is_ev and stops.sizable.any() and settings.charger_step_w > 0:
-        def need_p(x):
+        def need_p(x: np.ndarray) -> np.ndarray:
             return charger_needed(lanes, energy, x, stops, capacity=cap, start=s * cap, reserve=r * cap,
                                   efficiency=eff, step=settings.charger_step_w)
 
-        def undecided_p(lo, rows, known):
+        def undecided_p(lo: np.ndarray, rows: np.ndarray, known: np.ndarray) -> np.ndarray:
             slots = lanes.index
             trip_lane = np.zeros(stops.power_w.size, dtype=np.int64)
             trip_lane[slots[slots >= 0]] = np.broadcast_to(np.arange(d_count), slots.shape)[slots >= 0]

@@ -20,6 +20,7 @@ from __future__ import annotations
 from collections.abc import Callable
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from cevm.core.replay.chain import Lanes, Stops, run_chains
 
@@ -28,7 +29,7 @@ BATTERY_STEP_KWH = 1.0
 CHARGER_STEP_KW = 1.0
 
 
-def smallest_passing(passes: Callable[[np.ndarray], np.ndarray], lo, hi) -> np.ndarray:
+def smallest_passing(passes: Callable[[np.ndarray], np.ndarray], lo: ArrayLike, hi: ArrayLike) -> np.ndarray:
     """Per row, the smallest integer k in [lo, hi] with ``passes(k)`` (k: an integer per
     row; True where the row passes), given that passing is monotone in k; hi + 1 where
     even hi does not pass."""
@@ -44,18 +45,18 @@ def smallest_passing(passes: Callable[[np.ndarray], np.ndarray], lo, hi) -> np.n
         b = np.where(active & p, mid, b)
         a = np.where(active & ~p, mid, a)
         active = b - a > 1
-    return b
+    return np.asarray(b, dtype=np.int64)
 
 
-def lane_lows(lanes: Lanes, energy, excess, stops: Stops, *, capacity, start, efficiency: float, power_w=None
-              ) -> np.ndarray:
+def lane_lows(lanes: Lanes, energy: ArrayLike, excess: ArrayLike, stops: Stops, *, capacity: ArrayLike,
+              start: ArrayLike, efficiency: float, power_w: ArrayLike | None = None) -> np.ndarray:
     """The lowest level of each lane (L, ...) (:func:`cevm.core.replay.chain.run_chains`)."""
     run = run_chains(lanes, energy, excess, stops, capacity=capacity, start=start, efficiency=efficiency,
                      power_w=power_w)
     return run.low.min(axis=0) if run.low.shape[0] else np.full(run.low.shape[1:], np.inf)
 
 
-def battery_upper(lanes: Lanes, energy, excess, soc_start: float, reserve: float) -> np.ndarray:
+def battery_upper(lanes: Lanes, energy: ArrayLike, excess: ArrayLike, soc_start: float, reserve: float) -> np.ndarray:
     """A capacity per lane with which it surely keeps its reserve, without any charge
     [J or l]: its largest energy drawn counting only what trips take, (max_t sum_{u<t}
     max(E_u, 0) + max(E_t, 0) + x_t) / (s - r), s and r the start and the reserve as
@@ -65,8 +66,8 @@ def battery_upper(lanes: Lanes, energy, excess, soc_start: float, reserve: float
     return drawn.max(axis=0) / (soc_start - reserve) if drawn.shape[0] else np.zeros(lanes.shape[1])
 
 
-def battery_needed(lanes: Lanes, energy, excess, stops: Stops, *, soc_start: float, reserve: float,
-                   efficiency: float, step: float) -> np.ndarray:
+def battery_needed(lanes: Lanes, energy: ArrayLike, excess: ArrayLike, stops: Stops, *, soc_start: float,
+                   reserve: float, efficiency: float, step: float) -> np.ndarray:
     """The smallest capacity (a multiple of ``step``, [J or l]) with which each lane keeps
     its reserve, starting at ``soc_start`` of it and keeping ``reserve`` of it (shares in
     [0, 1], soc_start > reserve)."""
@@ -74,7 +75,7 @@ def battery_needed(lanes: Lanes, energy, excess, stops: Stops, *, soc_start: flo
         raise ValueError("a duty that starts at or below its reserve has no battery size")
     hi = np.maximum(np.ceil(battery_upper(lanes, energy, excess, soc_start, reserve) / step), 1).astype(np.int64)
 
-    def passes(k):
+    def passes(k: np.ndarray) -> np.ndarray:
         c = k * step
         return lane_lows(lanes, energy, excess, stops, capacity=c, start=soc_start * c,
                          efficiency=efficiency) >= reserve * c
@@ -89,8 +90,8 @@ def charger_upper(stops: Stops, capacity: float, efficiency: float) -> float:
     return float(capacity / (efficiency * dwell.min())) if dwell.size else 0.0
 
 
-def charger_needed(lanes: Lanes, energy, excess, stops: Stops, *, capacity: float, start: float, reserve: float,
-                   efficiency: float, step: float) -> np.ndarray:
+def charger_needed(lanes: Lanes, energy: ArrayLike, excess: ArrayLike, stops: Stops, *, capacity: float, start: float,
+                   reserve: float, efficiency: float, step: float) -> np.ndarray:
     """The smallest charger power (a multiple of ``step``, [W]) at the sizable stops with
     which each lane keeps its reserve; inf where none does."""
     top = int(np.ceil(charger_upper(stops, capacity, efficiency) / step))
@@ -99,7 +100,7 @@ def charger_needed(lanes: Lanes, energy, excess, stops: Stops, *, capacity: floa
     trip_lane = np.zeros(stops.power_w.size, dtype=np.int64)
     trip_lane[slots[slots >= 0]] = np.broadcast_to(np.arange(lanes_n), slots.shape)[slots >= 0]
 
-    def passes(k):
+    def passes(k: np.ndarray) -> np.ndarray:
         power = np.where(stops.sizable, (k * step)[trip_lane], stops.power_w)
         return lane_lows(lanes, energy, excess, stops, capacity=capacity, start=start, efficiency=efficiency,
                          power_w=power) >= reserve
@@ -108,7 +109,7 @@ def charger_needed(lanes: Lanes, energy, excess, stops: Stops, *, capacity: floa
     return np.where(k > top, np.inf, k * step)
 
 
-def size_for_share(needed, share: float) -> float:
+def size_for_share(needed: ArrayLike, share: float) -> float:
     """The smallest value of ``needed`` (one per duty; inf: none suffices) that covers at
     least ``share`` of the duties; inf if no value does, NaN without duties."""
     v = np.sort(np.asarray(needed, dtype=np.float64))
@@ -118,8 +119,9 @@ def size_for_share(needed, share: float) -> float:
     return float(v[i])
 
 
-def undecided_trips(lanes: Lanes, bounds: np.ndarray, energy, x_known, x_bound, known, stops: Stops, *, capacity,
-                    start, reserve, efficiency: float, power_w=None) -> np.ndarray:
+def undecided_trips(lanes: Lanes, bounds: np.ndarray, energy: ArrayLike, x_known: ArrayLike, x_bound: ArrayLike,
+                    known: ArrayLike, stops: Stops, *, capacity: ArrayLike, start: ArrayLike, reserve: ArrayLike,
+                    efficiency: float, power_w: ArrayLike | None = None) -> np.ndarray:
     """The trips (indices) whose unknown excess decides whether their duty (``bounds``
     over the trips) keeps its ``reserve`` (per duty, or one level) at ``capacity`` (per
     lane): the duty does with the known excess (0 where unknown, ``x_known``) but not with

@@ -30,8 +30,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike
 from scipy.special import ndtri
 
+from cevm.core.replay.trips import TripEnergies
 from cevm.core.vehicle import Vehicle
 
 
@@ -71,19 +73,19 @@ class TripSpread:
         """(n, k): each trip's energy per standard normal of the coefficients."""
         return self.grad @ self.chol if self.k else np.zeros((self.n, 0))
 
-    def take(self, rows) -> TripSpread:
+    def take(self, rows: np.ndarray) -> TripSpread:
         """The spread of the trips ``rows``."""
         return TripSpread(self.grad[rows], self.chol, self.meter_share, self.aux_sd[rows], self.share_sd[rows],
                           self.extra_sd[rows], self.day_corr, self.source, self.note)
 
-    def trip_sd(self, mean) -> np.ndarray:
+    def trip_sd(self, mean: ArrayLike) -> np.ndarray:
         """Each trip's standard deviation [J or l]."""
         cp = self.coef_part
         var = np.einsum("ij,ij->i", cp, cp) + (self.meter_share * np.asarray(mean)) ** 2
         var = var + self.aux_sd ** 2 + self.share_sd ** 2 + self.extra_sd ** 2
-        return np.sqrt(var)
+        return np.asarray(np.sqrt(var), dtype=np.float64)
 
-    def duty_sd(self, mean, bounds) -> np.ndarray:
+    def duty_sd(self, mean: ArrayLike, bounds: np.ndarray) -> np.ndarray:
         """The standard deviation of each duty's total (duties ``bounds`` over the trips):
         coefficients, meter and extrapolation common to its trips, the scatter shared at
         rho (module notes)."""
@@ -98,23 +100,24 @@ class TripSpread:
         shared = np.add.reduceat(a, first) ** 2 + np.add.reduceat(s, first) ** 2
         own = np.add.reduceat(a * a + s * s, first)
         var = var + rho * shared + (1.0 - rho) * own + np.add.reduceat(self.extra_sd, first) ** 2
-        return np.sqrt(var)
+        return np.asarray(np.sqrt(var), dtype=np.float64)
 
 
-def central_interval(mean, sd, level: float) -> tuple[np.ndarray, np.ndarray]:
+def central_interval(mean: ArrayLike, sd: ArrayLike, level: float) -> tuple[np.ndarray, np.ndarray]:
     """The central interval holding a Gaussian with probability ``level``."""
     z = float(ndtri(0.5 + 0.5 * level))
-    return mean - z * sd, mean + z * sd
+    m, s = np.asarray(mean, dtype=np.float64), np.asarray(sd, dtype=np.float64)
+    return m - z * s, m + z * s
 
 
-def trip_spread(vehicle: Vehicle, trips, *, ice_braking: str | None = None) -> TripSpread:
+def trip_spread(vehicle: Vehicle, trips: TripEnergies, *, ice_braking: str | None = None) -> TripSpread:
     """The spread of ``vehicle`` on the trips of ``trips`` (a
     :class:`~cevm.core.replay.trips.TripEnergies`), from the predictive distribution of
     issue 22 (:mod:`cevm.core.predictive`: the vehicle's posterior, else its class's
     prior); :meth:`TripSpread.none` where there is none (module notes)."""
     n = trips.n
     try:
-        from cevm.core import predictive as pr
+        from cevm.core import predictive as pr  # type: ignore[attr-defined,unused-ignore]
     except ImportError:
         return TripSpread.none(n, "this cevm has no predictive distribution (issue 22): the duty's probability is "
                                   "that of its mean, 0 or 1")

@@ -24,13 +24,16 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import cast
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from cevm.core import energy
 from cevm.core.cycle import CycleVector
-from cevm.core.model import braking_weight
-from cevm.core.sweep import AMBIENT_ORIGINS, PredictionSet, StepTable, crossings, step_coefficients, step_energies
+from cevm.core.model import IceBraking, braking_weight
+from cevm.core.sweep import AMBIENT_ORIGINS, PredictionSet, StepTable, crossings, step_coefficients
+from cevm.core.sweep.stepenergy import StepCoefficients
 from cevm.core.vehicle import Vehicle
 from cevm.errors import CevmError
 
@@ -88,7 +91,7 @@ def _positive_parts(vectors: Sequence[CycleVector], mass_kg: np.ndarray, cda: fl
     return out
 
 
-def trip_ambient_c(vehicle: Vehicle, own_c) -> tuple[np.ndarray, np.ndarray]:
+def trip_ambient_c(vehicle: Vehicle, own_c: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
     """Each trip's ambient temperature [degC] and its origin code: its own logged mean
     (``own_c``, NaN where not logged), else the vehicle's ``reference_temp_c``, else
     :data:`cevm.core.energy.AMBIENT_DEFAULT_C` (as a sweep does)."""
@@ -101,7 +104,7 @@ def trip_ambient_c(vehicle: Vehicle, own_c) -> tuple[np.ndarray, np.ndarray]:
     return np.where(has, own, default), np.where(has, AMBIENT_SOURCE, code).astype(np.int8)
 
 
-def trip_energies(vectors: Sequence[CycleVector], vehicle: Vehicle, mass_kg, ambient_c, *,
+def trip_energies(vectors: Sequence[CycleVector], vehicle: Vehicle, mass_kg: ArrayLike, ambient_c: ArrayLike, *,
                   ice_braking: str | None = None) -> TripEnergies:
     """``vehicle`` on each of ``vectors``, trip i at ``mass_kg[i]`` [kg] and its own
     temperature ``ambient_c[i]`` [degC] (NaN: the vehicle's default; see
@@ -118,8 +121,8 @@ def trip_energies(vectors: Sequence[CycleVector], vehicle: Vehicle, mass_kg, amb
         raise CevmError(str(exc)) from None
     for v in vectors:
         if vehicle.cr < v.cr0:
-            raise CevmError(f"vehicle {vehicle.name!r}: cr {vehicle.cr:g} is below a trip's Cr0 {v.cr0:g}; the CE split "
-                            "is only exact for Cr >= Cr0")
+            raise CevmError(f"vehicle {vehicle.name!r}: cr {vehicle.cr:g} is below a trip's Cr0 {v.cr0:g}; the CE "
+                            "split is only exact for Cr >= Cr0")
 
     def field(name: str) -> np.ndarray:
         return np.array([getattr(v, name) for v in vectors], dtype=np.float64)
@@ -137,7 +140,7 @@ def trip_energies(vectors: Sequence[CycleVector], vehicle: Vehicle, mass_kg, amb
         e = energy.ev_battery_energy_j(vehicle, e1 + pos + w * neg, duration_s=duration, ambient_c=t)
         bound = -w * neg / vehicle.eta
     else:
-        w = braking_weight(ice_braking or vehicle.ice_braking)
+        w = braking_weight(cast(IceBraking, ice_braking or vehicle.ice_braking))
         try:
             e = energy.ice_fuel_l(vehicle, e1 + pos + w * neg, mass_kg=m, k_pos=k_pos, traction_s=traction,
                                   duration_s=duration, idle_s=idle, ambient_c=t)
@@ -154,7 +157,7 @@ def trip_energies(vectors: Sequence[CycleVector], vehicle: Vehicle, mass_kg, amb
 # ------------------------------------------------------------------ inside one trip
 
 
-def _coefficients(vehicle: Vehicle, mass_kg: float, ambient_c: float, ice_braking: str | None):
+def _coefficients(vehicle: Vehicle, mass_kg: float, ambient_c: float, ice_braking: str | None) -> StepCoefficients:
     pset = PredictionSet.build([vehicle], mass_kg=[mass_kg], ice_braking=ice_braking)
     return step_coefficients(pset, np.array([ambient_c]))
 
@@ -163,7 +166,7 @@ def _coefficients(vehicle: Vehicle, mass_kg: float, ambient_c: float, ice_brakin
 EXCESS_CHUNK_STEPS = 1 << 20
 
 
-def trips_excess(tables: Sequence[StepTable | None], vehicle: Vehicle, mass_kg, ambient_c, *,
+def trips_excess(tables: Sequence[StepTable | None], vehicle: Vehicle, mass_kg: ArrayLike, ambient_c: ArrayLike, *,
                  ice_braking: str | None = None) -> np.ndarray:
     """For each trip of step table ``tables[i]`` at ``mass_kg[i]`` and ``ambient_c[i]``:
     the most ``vehicle`` draws inside it beyond what it has drawn at its end,
@@ -173,6 +176,7 @@ def trips_excess(tables: Sequence[StepTable | None], vehicle: Vehicle, mass_kg, 
     :data:`EXCESS_CHUNK_STEPS` steps."""
     n = len(tables)
     out = np.full(n, np.nan)
+    present = [t for t in tables if t is not None]
     ok = [i for i, t in enumerate(tables) if t is not None]
     if not vehicle.is_ev:
         out[ok] = 0.0
@@ -181,12 +185,14 @@ def trips_excess(tables: Sequence[StepTable | None], vehicle: Vehicle, mass_kg, 
     temp = np.asarray(ambient_c, dtype=np.float64)
     k = 0
     while k < len(ok):
-        chunk, steps = [], 0
-        while k < len(ok) and (not chunk or steps + tables[ok[k]].n <= EXCESS_CHUNK_STEPS):
+        chunk: list[int] = []
+        steps = 0
+        first = k
+        while k < len(ok) and (not chunk or steps + present[k].n <= EXCESS_CHUNK_STEPS):
             chunk.append(ok[k])
-            steps += tables[ok[k]].n
+            steps += present[k].n
             k += 1
-        out[chunk] = _excess_chunk([tables[i] for i in chunk], vehicle, mass[chunk], temp[chunk], ice_braking)
+        out[chunk] = _excess_chunk(present[first:k], vehicle, mass[chunk], temp[chunk], ice_braking)
     return out
 
 
