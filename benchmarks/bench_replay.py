@@ -20,8 +20,9 @@ Timed, on one core (OMP/BLAS threads 1):
 1. the duties run (cevm.core.replay.plan_vehicle, vehicle by vehicle): the trips'
    energies from their vectors, the levels carried with charging, the lowest points exact,
    where failing duties cross the reserve, and every duty's battery and charger needs to
-   1 kWh / 1 kW (the battery-size sweep); then the battery-size sweep again on its own
-   (sizing.battery_needed over all duties), in microseconds per duty;
+   1 kWh / 1 kW (the battery-size sweep); the same with the lowest level at the trips'
+   ends only (``--within-trips ends``: no step table); then the battery-size sweep again
+   on its own (sizing.battery_needed over all duties), in microseconds per duty;
 2. the Monte Carlo of p_complete, 2000 draws per duty (--quick: 500);
 3. baselines in the same run: (a) today's cevm path, each trip predicted alone at its own
    mass (cevm.core.sweep.predict_source with a one-row prediction set, as ``cevm predict
@@ -199,6 +200,12 @@ def main() -> None:
     print(f"duties run and sized: {n_duties:,} duties ({fails:,} below the reserve at the mean) in {t_plan:.2f} s = "
           f"{n_duties / t_plan:,.0f} duties/s, {1e6 * t_plan / n_duties:.0f} us a duty; step tables read for "
           f"{reads:,} of {n_trips:,} trips ({100 * reads / n_trips:.1f} %)")
+    t = time.perf_counter()
+    ends, _ = run_plans(fleet, veh, dataclasses.replace(settings, within_trips=False))
+    t_ends = time.perf_counter() - t
+    print(f"  the same at the trips' ends only (--within-trips ends, no step table): {t_ends:.2f} s = "
+          f"{n_duties / t_ends:,.0f} duties/s; duties below the reserve: "
+          f"{sum(int(np.count_nonzero(p.levels.low < p.reserve)) for p in ends):,}")
     s, r = settings.soc_start_pct / 100, settings.reserve_pct / 100
     t = time.perf_counter()
     for p in plans:

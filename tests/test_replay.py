@@ -388,3 +388,51 @@ def test_a_diesel_candidate_refuels_at_the_places_named(tmp_path):
     plan = plan_vehicle(trips, veh, s, tables(cycles, trips))
     np.testing.assert_allclose(plan.gain[:2], fuel[:2], rtol=1e-9)  # back to full at both stops
     assert plan.levels.end[0] == pytest.approx(30.0 - fuel[2], rel=1e-9)
+
+
+def test_the_fleets_battery_with_levels_carried_is_exact_to_its_step(tmp_path):
+    from cevm.core.replay.fleet import Chain, chained_sizes
+
+    veh = ev(tmp_path, 300.0)
+    cycles = [cycle(80 + k) for k in range(6)]
+    starts = [0.0, 3600.0, 86400.0, 90000.0, 172800.0, 176400.0]  # three duties of two trips, a day apart
+    trips = logged(cycles, starts, masses=[30e3] * 6)
+    s = ReplaySettings(charging=Charging(overnight="power", overnight_w=3e3))
+    plan = plan_vehicle(trips, veh, s, tables(cycles, trips))
+    exact = tables(cycles, trips)
+
+    def learn(idx):
+        from cevm.core.replay import trips_excess
+        return trips_excess([exact(int(i)) for i in idx], veh, plan.energies.mass_kg[idx], plan.energies.ambient_c[idx])
+
+    chain = Chain(plan.energies.energy, plan.excess, learn, plan.stops, plan.duties.bounds)
+    battery, _ = chained_sizes([chain], 1.0, soc_start=1.0, reserve=0.15, efficiency=0.9, capacity=veh.battery_j,
+                               battery_step=KWH, charger_step=1e3)
+    kwh = battery / KWH
+    assert kwh == round(kwh)
+    for size, ok in ((kwh, True), (kwh - 1, False)):
+        p = plan_vehicle(trips, dataclasses.replace(veh, battery_j=size * KWH), s, tables(cycles, trips), size=False)
+        assert bool((p.levels.low >= p.reserve).all()) is ok, size
+
+
+def test_duties_sure_by_six_sd_are_not_drawn(monkeypatch):
+    from cevm.core.replay import montecarlo
+
+    mean = np.array([30.0, 25.0])
+    sp = _spread(2, 1.0, 0.01, 0.5)
+    plan = _draw_plan(mean, sp, [0.5, np.nan], [0.0, 0.0], 400.0, 400.0, 60.0)
+    assert montecarlo.sure_duties(plan).all() and p_complete(plan, draws=100)[0] == 1.0
+    monkeypatch.setattr(montecarlo, "SURE_SD", 1e9)  # now drawn: every draw keeps the reserve too
+    assert not montecarlo.sure_duties(plan).any() and p_complete(plan, draws=2000)[0] == 1.0
+
+
+def test_levels_at_the_trips_ends_only_read_no_profile(tmp_path):
+    cycles, trips, e, veh = _failing_case(tmp_path)
+    read = tables(cycles, trips)
+    plan = plan_vehicle(trips, veh, ReplaySettings(within_trips=False, battery_step=0.0, charger_step_w=0.0), read)
+    assert read.calls == []
+    ends = np.cumsum(e)
+    assert plan.levels.low[0] == pytest.approx(veh.battery_j - ends[-1], rel=1e-9)
+    assert plan.reserve_trip[0] == 1  # where: in proportion to the trip's energy
+    share = (plan.before[1] - plan.reserve) / e[1]
+    assert plan.reserve_at_m[0] == pytest.approx(trips.distance_m[0] + share * trips.distance_m[1], rel=1e-9)

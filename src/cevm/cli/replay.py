@@ -211,16 +211,16 @@ class ReplayWriter:
 
 
 def with_status(row: dict) -> dict:
-    """A table row with its 'status': the reserve kept, or where it is crossed (or the
-    battery or tank runs empty) and what the duty lacks."""
+    """A table row with its 'status': the reserve kept, or where it is first crossed (or
+    the battery or tank runs empty) [km into the duty]."""
     if row.get("completes"):
         row["status"] = "yes"
-        return row
-    unit = "kWh" if row.get("powertrain") == "ev" else "l"
-    lacks = row.get("extra_kwh") if unit == "kWh" else row.get("extra_l")
-    where = (f"empty at {row['empty_at_km']:,.1f} km" if row.get("empty_at_km") is not None
-             else f"reserve at {row['reserve_at_km']:,.1f} km" if row.get("reserve_at_km") is not None else "reserve")
-    row["status"] = f"NO: {where}, lacks {lacks:,.1f} {unit}" if lacks is not None else f"NO: {where}"
+    elif row.get("empty_at_km") is not None:
+        row["status"] = f"NO: empty at {row['empty_at_km']:,.1f} km"
+    elif row.get("reserve_at_km") is not None:
+        row["status"] = f"NO: reserve at {row['reserve_at_km']:,.1f} km"
+    else:
+        row["status"] = "NO"
     return row
 
 

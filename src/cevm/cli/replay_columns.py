@@ -260,12 +260,12 @@ def replay_values(ctx: DutyRows) -> dict:
     return cols
 
 
-#: The replay table's status: keeps the reserve, and where not, where it fails and what
-#: it lacks; for people only.
-STATUS = Column("status", "reserve kept, and where not, where and by how much", kind="text", header="completes",
+#: The replay table's status: keeps the reserve, and where not, where it fails; for
+#: people only.
+STATUS = Column("status", "reserve kept, and where not, where it is crossed", kind="text", header="completes",
                 layout="wrap")
 
 #: What the table shows (those without a value in any row left out), and "status".
 REPLAY_TABLE = ("vehicle_id", "day", "trips", "distance_km", "energy_kwh", "fuel_l", "soc_min_pct", "tank_min_pct",
-                "soc_end_pct", "tank_end_pct", "charged_kwh", "refuelled_l", "p_complete", "battery_needed_kwh",
-                "status")
+                "charged_kwh", "refuelled_l", "p_complete", "extra_kwh", "extra_l", "battery_needed_kwh",
+                "tank_needed_l", "status")

@@ -18,13 +18,14 @@ any number of workers, and whichever other vehicles are replayed with it.
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike
 
-from cevm.core.replay.chain import Lanes, Stops, duty_minima
+from cevm.core.replay.chain import Lanes, Stops, duty_minima, stop_potential
 from cevm.core.replay.spread import TripSpread
 
 #: Default number of draws: a probability of 0.5 to +-0.011 (one standard error), 0.95 to
@@ -121,27 +122,71 @@ def _draw_energies(plan: DrawPlan, z_duty: np.ndarray, z_trip: np.ndarray) -> np
     return np.asarray(e, dtype=np.float64)
 
 
-def p_complete(plan: DrawPlan, draws: int = DEFAULT_DRAWS, seed: int = DEFAULT_SEED) -> np.ndarray:
-    """Each duty's probability of keeping its reserve (D,), from ``draws`` draws (module
-    notes); 1 without drawing for the duties :func:`sure_duties` finds."""
+def _weights(plan: DrawPlan) -> tuple[np.ndarray, np.ndarray]:
+    """Per trip, the weights of its duty's k + 4 shared normals (the coefficients', the
+    meter's, the extrapolation's, the scatter's two shared parts) and of its own one."""
+    sp = plan.spread
+    rho = sp.day_corr
+    w = np.column_stack([sp.coef_part, sp.meter_share * plan.mean, sp.extra_sd, np.sqrt(rho) * sp.aux_sd,
+                         np.sqrt(rho) * sp.share_sd])
+    return w, np.sqrt((1.0 - rho) * (sp.aux_sd ** 2 + sp.share_sd ** 2))
+
+
+def _independent_ok(plan: DrawPlan, gen: np.random.Generator, draws: int) -> np.ndarray:
+    """Draws keeping the reserve, per duty (D,), duties starting at the same level: one
+    lane per duty, each slot's energies drawn as the slot comes (no per-trip array of
+    draws), chunks of draws of :data:`DRAW_CHUNK_CELLS`."""
+    bounds = plan.bounds
+    d_count = bounds.size - 1
+    lanes = Lanes.of(bounds[:-1], bounds[1:])
+    t_count = lanes.shape[0]
+    w, own = _weights(plan)
+    cols = w.shape[1]
+    w_s, own_s = lanes.take(w), lanes.take(own)
+    mu_s, x_s = lanes.take(plan.mean), lanes.take(plan.excess)
+    pot_s = lanes.take(stop_potential(plan.stops.power_w, plan.stops.dwell_s, plan.efficiency))
+    charges = [bool(np.any(pot_s[t] > 0)) for t in range(t_count)]
+    trip_of = np.maximum(lanes.index, 0)
+    n = plan.mean.size
+    chunk = max(1, DRAW_CHUNK_CELLS // max(1, d_count * (cols + t_count)))
+    ok = np.zeros(d_count)
+    cap = plan.capacity
+    done = 0
+    while done < draws:
+        count = min(chunk, draws - done)
+        z = np.ascontiguousarray(gen.standard_normal((count, d_count * cols + n)).T)  # a draw: one row of the stream
+        shared = z[:d_count * cols].reshape(d_count, cols, count)
+        z_own = z[d_count * cols:]
+        level = np.full((d_count, count), plan.start)
+        lowest = np.full((d_count, count), np.inf)
+        for t in range(t_count):
+            e = np.einsum("lj,ljc->lc", w_s[t], shared)
+            e += mu_s[t][:, None]
+            e += own_s[t][:, None] * z_own[trip_of[t]]
+            np.minimum(lowest, level - e - x_s[t][:, None], out=lowest)
+            level -= e
+            np.minimum(level, cap, out=level)
+            if charges[t]:
+                level += np.minimum(pot_s[t][:, None], cap - level)
+        ok += np.count_nonzero(lowest >= plan.reserve, axis=1)
+        done += count
+    return ok
+
+
+def _chained_ok(plan: DrawPlan, gen: np.random.Generator, draws: int) -> np.ndarray:
+    """Draws keeping the reserve, per duty (D,), the level carried across duties: the
+    vehicle's trips in one lane, the energies of a chunk of draws drawn first."""
     bounds = plan.bounds
     d_count = bounds.size - 1
     n = plan.mean.size
-    if d_count == 0:
-        return np.zeros(0)
-    sure = sure_duties(plan)
-    if sure.all():
-        return np.ones(d_count)
     k = plan.spread.k
-    n_duty_cols = (1 if plan.chained else d_count) * (k + 2) + 2 * d_count
-    gen = vehicle_generator(seed, plan.key)
-    lanes = Lanes.of([0], [n]) if plan.chained else Lanes.of(bounds[:-1], bounds[1:])
+    n_duty_cols = (k + 2) + 2 * d_count
+    lanes = Lanes.of([0], [n])
     duty = np.repeat(np.arange(d_count), np.diff(bounds))
     last = np.zeros(n, dtype=bool)
     last[bounds[1:] - 1] = True
     slot_duty, slot_last = lanes.take(duty, fill=0), lanes.take(last, fill=False)
-    t_count, l_count = lanes.shape
-    chunk = max(1, DRAW_CHUNK_CELLS // max(1, t_count * l_count, n_duty_cols + n))
+    chunk = max(1, DRAW_CHUNK_CELLS // max(1, n, n_duty_cols + n))
     ok = np.zeros(d_count)
     done = 0
     while done < draws:
@@ -152,7 +197,36 @@ def p_complete(plan: DrawPlan, draws: int = DEFAULT_DRAWS, seed: int = DEFAULT_S
                           capacity=plan.capacity, start=plan.start, efficiency=plan.efficiency)
         ok += np.count_nonzero(low >= plan.reserve, axis=1)
         done += count
-    return np.where(sure, 1.0, ok / draws)
+    return ok
+
+
+def _duties_of(plan: DrawPlan, keep: np.ndarray) -> DrawPlan:
+    """The plan of the duties ``keep`` only (their trips, their stops)."""
+    bounds = plan.bounds
+    trips = np.concatenate([np.arange(bounds[d], bounds[d + 1]) for d in np.flatnonzero(keep)])
+    sizes = np.diff(bounds)[keep]
+    st = plan.stops
+    stops = Stops(st.dwell_s[trips], st.power_w[trips], st.sizable[trips], st.duty_end[trips])
+    return dataclasses.replace(plan, mean=plan.mean[trips], excess=plan.excess[trips], spread=plan.spread.take(trips),
+                               stops=stops, bounds=np.concatenate([[0], np.cumsum(sizes)]),
+                               duty_start_s=plan.duty_start_s[keep])
+
+
+def p_complete(plan: DrawPlan, draws: int = DEFAULT_DRAWS, seed: int = DEFAULT_SEED) -> np.ndarray:
+    """Each duty's probability of keeping its reserve (D,), from ``draws`` draws (module
+    notes); 1 without drawing for the duties :func:`sure_duties` finds."""
+    d_count = plan.bounds.size - 1
+    if d_count == 0:
+        return np.zeros(0)
+    sure = sure_duties(plan)
+    if sure.all():
+        return np.ones(d_count)
+    gen = vehicle_generator(seed, plan.key)
+    if plan.chained:
+        return np.where(sure, 1.0, _chained_ok(plan, gen, draws) / draws)
+    out = np.ones(d_count)
+    out[~sure] = _independent_ok(_duties_of(plan, ~sure), gen, draws) / draws
+    return out
 
 
 def standard_error(p: ArrayLike, draws: int) -> np.ndarray:
