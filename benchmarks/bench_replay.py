@@ -220,7 +220,8 @@ def main() -> None:
     draw_trips = draws * n_trips
     print(f"Monte Carlo of p_complete ({draws} draws a duty): {t_mc:.2f} s = {n_duties / t_mc:,.0f} duties/s "
           f"({draw_trips / t_mc / 1e6:.1f} M trip draws/s)")
-    print(f"fleet-year on one core: {t_plan + t_mc:.1f} s ({n_duties:,} duties with sizes and p_complete)")
+    print(f"fleet-year on one core: {t_plan + t_mc:.1f} s ({n_duties:,} duties with sizes and p_complete), "
+          f"{t_ends + t_mc:.1f} s at the trips' ends only")
 
     sample = fleet[:2]
     t_base, _ = baseline_today(sample, veh, settings)
