@@ -436,3 +436,25 @@ def test_levels_at_the_trips_ends_only_read_no_profile(tmp_path):
     assert plan.reserve_trip[0] == 1  # where: in proportion to the trip's energy
     share = (plan.before[1] - plan.reserve) / e[1]
     assert plan.reserve_at_m[0] == pytest.approx(trips.distance_m[0] + share * trips.distance_m[1], rel=1e-9)
+
+
+def test_the_spread_taken_apart_gives_the_predictive_distributions_back(tmp_path):
+    """Issue 22's API (cevm.core.predictive) gives each trip's spread and each day's
+    total: the parts replay draws from add up to the same (a vehicle never calibrated: its
+    class's prior, no extrapolation)."""
+    pr = pytest.importorskip("cevm.core.predictive")
+    from cevm.core.replay import trip_spread
+
+    veh = ev(tmp_path)
+    cycles = [cycle(90 + k) for k in range(5)]
+    trips = logged(cycles, [0.0, 3600.0, 7200.0, 86400.0, 90000.0], masses=[30e3, 35e3, 25e3, 40e3, 30e3],
+                   temps=[-3.0, 0.0, 2.0, 15.0, 18.0])
+    te = trip_energies(trips.vectors, veh, trips.gross_kg, trips.ambient_c)
+    sp = trip_spread(veh, te)
+    if sp.source == "none":
+        pytest.skip("the test vehicle has no priors")
+    f = pr.Features(te.positive_j, te.negative_j, te.duration_s, te.idle_s, te.traction_s, te.kinetic_j,
+                    te.ambient_c, np.ones(te.n))
+    np.testing.assert_allclose(sp.trip_sd(te.energy), pr.predictive(veh, f).sd, rtol=1e-9)
+    bounds = np.array([0, 3, 5])
+    np.testing.assert_allclose(sp.duty_sd(te.energy, bounds), pr.total(veh, f, groups=[0, 0, 0, 1, 1]).sd, rtol=1e-9)
