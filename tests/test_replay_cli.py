@@ -147,3 +147,28 @@ def test_unknown_vehicles_and_candidates_that_do_not_fit(store):
     assert res.exit_code == 2 and "for an electric candidate" in res.output
     res = replay(store, "-v", TRUCK, "-v", DIESEL)
     assert res.exit_code == 2 and "one candidate vehicle file" in res.output
+
+
+def test_a_damaged_trip_is_left_out_said_and_counted(store, tmp_path):
+    import shutil
+    import sqlite3
+
+    db = tmp_path / "damaged.sqlite"
+    shutil.copy(store, db)
+    con = sqlite3.connect(db)
+    with con:
+        tid = con.execute("SELECT trip_id FROM trips WHERE vehicle_id = 'TRK-1' ORDER BY start_utc_s LIMIT 1 OFFSET 4"
+                          ).fetchone()[0]
+        con.execute("UPDATE trip_blobs SET vector = randomblob(400) WHERE trip_id = ?", (tid,))
+        damaged = con.execute("SELECT trip_id FROM trips WHERE vehicle_id = 'TRK-2' ORDER BY start_utc_s LIMIT 1"
+                              ).fetchone()[0]
+        con.execute("UPDATE trip_blobs SET profile = randomblob(900) WHERE trip_id = ?", (damaged,))
+    con.close()
+    res = runner.invoke(app, ["replay", "--store", str(db), "-v", TRUCK, "--vehicle-id", "TRK-1", "--vehicle-id",
+                              "TRK-2", "--charge-at", "depot", "--battery-kwh", "36", "-f", "json"])
+    assert res.exit_code == 1, res.output
+    assert f"skipped: trip {tid!r} is damaged" in res.output  # its vector: left out
+    assert f"trip {damaged!r} is damaged" in res.output and "its start and end positions are unknown" in res.output
+    rows = json.loads(res.stdout)
+    trk1 = [r for r in rows if r["vehicle_id"] == "TRK-1"]
+    assert [r["trips"] for r in trk1] == [3, 2, 3] and all(r["missing_trips"] == 1 for r in trk1)

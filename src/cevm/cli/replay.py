@@ -236,6 +236,7 @@ class Run:
     chains: list = dataclasses.field(default_factory=list)
     notes: list = dataclasses.field(default_factory=list)
     skipped: list = dataclasses.field(default_factory=list)
+    damaged_profiles: dict = dataclasses.field(default_factory=dict)
     sources: set = dataclasses.field(default_factory=set)
     extrapolating: int = 0
     read: int = 0
@@ -249,13 +250,14 @@ def _plans(st, vehicle, settings: ReplaySettings, ids: list[str], *, positions: 
     from cevm.store.replay_trips import logged_trips, step_table_reader
 
     for vid in ids:
-        trips = logged_trips(st, vid, positions=positions, day_of=day_of, on_damaged=run.skipped.append)
-        read = step_table_reader(st, trips)
+        def profile(exc) -> None:
+            run.damaged_profiles.setdefault(exc.trip_id, exc)
+
+        trips = logged_trips(st, vid, positions=positions, day_of=day_of, on_damaged=run.skipped.append,
+                             on_damaged_profile=profile)
+        read = step_table_reader(st, trips, profile)
         plan = plan_vehicle(trips, vehicle, settings, read)
         plan = dataclasses.replace(plan, trips=dataclasses.replace(trips, vectors=()))  # free the vectors
-        if plan.excess.unreadable:
-            run.notes.append(f"{vid}: {plan.excess.unreadable} trip(s) with a damaged profile: their lowest point "
-                             "inside the trip is bounded by what they regenerate, not exact")
         run.read += plan.excess.read
         run.trips += plan.trips.n
         if plan.unplaced:
@@ -462,12 +464,12 @@ def replay_cmd(
     if battery_kwh is not None and not battery_kwh > 0:
         raise fail(f"--battery-kwh {battery_kwh:g} must be > 0")
     try:
-        skipped = _replay(opts)
+        run = _replay(opts)
     except CevmError as exc:
         raise fail(exc) from None
-    for damaged in skipped:
+    for damaged in run.skipped:
         warn_damaged(damaged)
-    if skipped:
+    if run.skipped or run.damaged_profiles:
         raise typer.Exit(EXIT_PARTIAL)
 
 
@@ -498,9 +500,9 @@ def _candidate(o: SimpleNamespace):
     return v
 
 
-def _replay(o: SimpleNamespace) -> list:
-    """The run (the command's body): rows written, summary said; returns the damaged trips
-    skipped."""
+def _replay(o: SimpleNamespace) -> Run:
+    """The run (the command's body): rows written, summary said, damaged profiles warned
+    about; returns the run (its damaged trips: exit 1)."""
     from cevm.store import TripStore, existing_store_path
 
     vehicle = _candidate(o)
@@ -539,7 +541,10 @@ def _replay(o: SimpleNamespace) -> list:
         writer.close()
         sm = fleet_summary(run, vehicle, settings, o.confidence, o.target_share)
     _say(o, sm, settings, run, vehicle)
-    return run.skipped
+    for exc in run.damaged_profiles.values():
+        warn(f"{exc}: its start and end positions are unknown (its stops do not charge at named places or the "
+             "depot) and its lowest point inside the trip is bounded by what it regenerates, not exact")
+    return run
 
 
 def _say(o: SimpleNamespace, sm: dict, settings: ReplaySettings, run: Run, vehicle) -> None:

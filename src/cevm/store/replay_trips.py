@@ -40,11 +40,12 @@ def _fix(lat: np.ndarray, lon: np.ndarray, last: bool) -> tuple[float, float]:
     return float(lat[i]), float(lon[i])
 
 
-def trip_positions(st: TripStore, rows: pd.DataFrame) -> tuple[np.ndarray, ...]:
+def trip_positions(st: TripStore, rows: pd.DataFrame,
+                   on_damaged: Callable[[DamagedTripError], None] | None = None) -> tuple[np.ndarray, ...]:
     """(start_lat, start_lon, end_lat, end_lon) [deg] of the trips of ``rows`` (a
     :meth:`~cevm.store.TripStore.list_trips` frame), NaN where unknown: the store's
     position columns if it has them, else each profile's first and last valid fix (a
-    damaged profile: unknown)."""
+    damaged profile: unknown, and passed to ``on_damaged``)."""
     if all(c in rows.columns for c in POSITION_COLUMNS):
         return tuple(rows[c].to_numpy(dtype=np.float64) for c in POSITION_COLUMNS)
     n = len(rows)
@@ -52,7 +53,9 @@ def trip_positions(st: TripStore, rows: pd.DataFrame) -> tuple[np.ndarray, ...]:
     for j, tid in enumerate(rows["trip_id"]):
         try:
             p = st.load_profile(tid)
-        except DamagedTripError:
+        except DamagedTripError as exc:
+            if on_damaged is not None:
+                on_damaged(exc)
             continue
         lat, lon = p.get("lat_deg"), p.get("lon_deg")
         if lat is None or lon is None:
@@ -64,12 +67,14 @@ def trip_positions(st: TripStore, rows: pd.DataFrame) -> tuple[np.ndarray, ...]:
 
 def logged_trips(st: TripStore, vehicle_id: str, *, positions: bool = False,
                  day_of: Callable[[np.ndarray], np.ndarray] | None = None,
-                 on_damaged: Callable[[DamagedTripError], None] | None = None) -> LoggedTrips:
+                 on_damaged: Callable[[DamagedTripError], None] | None = None,
+                 on_damaged_profile: Callable[[DamagedTripError], None] | None = None) -> LoggedTrips:
     """The stored trips of ``vehicle_id`` sorted by start, with their masses (a mass given
     to the trip, else its logged gross weight; :mod:`cevm.store.masses`), temperatures,
     and with ``positions`` their start and end positions; ``day_of`` gives each trip's
     day number from its start [s] (for duties by calendar day). Damaged trips go to
-    ``on_damaged`` and are left out (counted in ``missing``)."""
+    ``on_damaged`` and are left out (counted in ``missing``); a trip whose profile alone is
+    damaged stays (its positions unknown) and goes to ``on_damaged_profile``."""
     missing: list[DamagedTripError] = []
 
     def damaged(exc: DamagedTripError) -> None:
@@ -94,7 +99,7 @@ def logged_trips(st: TripStore, vehicle_id: str, *, positions: bool = False,
             (gross if key[0] == "gross" else payload)[j] = key[1]
         sources.append(m.origin)
     start = rows["start_utc_s"].to_numpy(dtype=np.float64)
-    pos = trip_positions(st, rows) if positions else (None,) * 4
+    pos = trip_positions(st, rows, on_damaged_profile) if positions else (None,) * 4
     return LoggedTrips(vehicle_id=vehicle_id, trip_ids=tuple(rows["trip_id"]), start_s=start,
                        end_s=start + rows["duration_s"].to_numpy(dtype=np.float64),
                        distance_m=rows["distance_m"].to_numpy(dtype=np.float64),
@@ -104,17 +109,24 @@ def logged_trips(st: TripStore, vehicle_id: str, *, positions: bool = False,
                        day=None if day_of is None else day_of(start), missing=len(missing))
 
 
-def step_table_reader(st: TripStore, trips: LoggedTrips) -> Callable[[int], StepTable | None]:
+def step_table_reader(st: TripStore, trips: LoggedTrips,
+                      on_damaged: Callable[[DamagedTripError], None] | None = None
+                      ) -> Callable[[int], StepTable | None]:
     """``read(i)``: the step table of trip i of ``trips`` (its stored profile with its
-    vector's Cr0 and physics), None when the profile is damaged; the last few kept."""
+    vector's Cr0 and physics), None when the profile is damaged (passed to
+    ``on_damaged``); the last few kept."""
+
+    terms = [(v.cr0, v.physics) for v in trips.vectors]  # not the vectors: the caller may free them
 
     @lru_cache(maxsize=STEP_TABLES_KEPT)
     def read(i: int) -> StepTable | None:
-        vec = trips.vectors[i]
+        cr0, physics = terms[i]
         try:
             profile = st.load_profile(trips.trip_ids[i])
-        except DamagedTripError:
+        except DamagedTripError as exc:
+            if on_damaged is not None:
+                on_damaged(exc)
             return None
-        return build_step_table([LegProfile.from_profile(profile)], cr0=vec.cr0, physics=vec.physics)
+        return build_step_table([LegProfile.from_profile(profile)], cr0=cr0, physics=physics)
 
     return read
