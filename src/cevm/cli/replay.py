@@ -330,7 +330,7 @@ def fleet_summary(run: Run, vehicle, settings: ReplaySettings, confidence: float
         "p_method": (f"Monte Carlo, {settings.draws} draws per duty, seed {settings.seed}"
                      if run.sources - {"none"} else "none: no predictive distribution, p is 0 or 1 at the mean"),
         "p_standard_error_max": 0.5 / math.sqrt(settings.draws) if run.sources - {"none"} else 0.0,
-        "interval_source": ", ".join(sorted(run.sources)), "target_share": target,
+        "interval_from": ", ".join(sorted(run.sources)), "target_share": target,
         f"battery_for_target_{per}": battery / scale, f"battery_step_{per}": settings.battery_step / scale,
         f"capacity_{per}": cap / scale,
     }
@@ -368,7 +368,7 @@ def summary_lines(sm: dict, settings: ReplaySettings) -> list[str]:
                      if math.isfinite(c) else "no charger at the stops that may charge completes "
                      f"{pct(sm['target_share'])} of the duties with the candidate's battery")
     lines.append(f"p_complete: {sm['p_method']}" + (f" (standard error at most {sm['p_standard_error_max']:.3f}; "
-                                                     f"from the {sm['interval_source']} distribution)"
+                                                     f"from the {sm['interval_from']} distribution)"
                                                      if sm["p_standard_error_max"] else ""))
     return lines
 
@@ -532,7 +532,7 @@ def _replay(o: SimpleNamespace) -> Run:
                     run.notes.append(f"{plan.trips.vehicle_id}: no depot found (no place holds half of its rests "
                                      "between duties): it charges nowhere but at the places named")
             extrapolation = duty_extrapolation(plan)
-            run.extrapolating += sum(x not in ("none", "not calibrated") for x in extrapolation)
+            run.extrapolating += sum(x != "none" for x in extrapolation)
             writer.add(DutyRows(plan, p, settings.draws, zone, ctx, extrapolation))
             low, high = central_interval(np.add.reduceat(plan.energies.energy, plan.duties.first), plan.energy_sd,
                                          settings.interval)

@@ -238,9 +238,9 @@ REPLAY = ColumnSpec((
     Column("ambient_max_c", "the warmest trip's ambient temperature [degC]", decimals=3,
            value=lambda r: r.per_duty(r.plan.energies.ambient_c, np.maximum)),
     Column("ambient_from", "where the trips' temperatures come from", kind="text", value=lambda r: r.ambient_from()),
-    Column("extrapolation", "what the candidate's calibration did not see: none, or temperature, mass, speed "
-           "(not calibrated: its file's values)", kind="text", value=lambda r: r.texts(r.extrapolation)),
-    Column("interval_source", "where the interval and the probability come from: posterior (a calibration), "
+    Column("extrapolation", "what the duty's trips ask beyond the candidate's calibration: none, or which of "
+           "temperature, mass, speed, duty (as predict)", kind="text", value=lambda r: r.texts(r.extrapolation)),
+    Column("interval_from", "where the interval and the probability come from: posterior (a calibration), "
            "prior (the class's, a file never calibrated) or none", kind="text",
            value=lambda r: r.text(r.plan.spread.source)),
     Column("draws", "Monte Carlo draws of p_complete", decimals=0, value=lambda r: r.same(float(r.draws))),

@@ -17,50 +17,28 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.typing import ArrayLike
 
 from cevm.core.replay.chain import Lanes, Stops, run_chains
 from cevm.core.replay.plan import Excess, VehiclePlan
 from cevm.core.replay.sizing import charger_upper, smallest_passing, undecided_trips
-from cevm.core.vehicle import DOMAIN_MARGIN_K, DOMAIN_MARGIN_MASS, DOMAIN_MARGIN_SPEED, Vehicle
-
-
-def trip_extrapolation(vehicle: Vehicle, mass_kg: ArrayLike, ambient_c: ArrayLike, mean_speed_mps: ArrayLike
-                       ) -> np.ndarray:
-    """Per trip, what the candidate's calibration did not see (bit flags: 1 temperature,
-    2 mass, 4 speed), with the margins of :func:`cevm.core.vehicle.domain_warnings`;
-    -1 for a file never calibrated."""
-    d = vehicle.calibration
-    m = np.asarray(mass_kg, dtype=np.float64)
-    if d is None:
-        return np.full(m.shape, -1, dtype=np.int64)
-    flags = np.zeros(m.shape, dtype=np.int64)
-    if d.ambient_c is not None:
-        lo, hi = d.ambient_c
-        t = np.asarray(ambient_c, dtype=np.float64)
-        flags |= np.where((t < lo - DOMAIN_MARGIN_K) | (t > hi + DOMAIN_MARGIN_K), 1, 0)
-    if d.mass_kg is not None:
-        lo, hi = d.mass_kg
-        flags |= np.where((m < lo * (1 - DOMAIN_MARGIN_MASS)) | (m > hi * (1 + DOMAIN_MARGIN_MASS)), 2, 0)
-    if d.mean_speed_mps is not None:
-        lo, hi = d.mean_speed_mps
-        v = np.asarray(mean_speed_mps, dtype=np.float64)
-        flags |= np.where((v < lo * (1 - DOMAIN_MARGIN_SPEED)) | (v > hi * (1 + DOMAIN_MARGIN_SPEED)), 4, 0)
-    return flags
+from cevm.core.vehicle import extrapolation_mask, extrapolation_text
 
 
 def duty_extrapolation(plan: VehiclePlan) -> list[str]:
-    """Per duty: "none", what its trips ask beyond the calibration ("temperature, mass"),
-    or "not calibrated"."""
+    """Per duty, what its trips ask beyond what the candidate's calibration saw: "none",
+    or the axes of :data:`cevm.core.vehicle.EXTRAPOLATION_AXES` (temperature, mass, speed,
+    duty) joined by "+", as ``cevm predict`` says them (:func:`cevm.core.vehicle.extrapolation_mask`)."""
     t = plan.trips
+    e = plan.energies
     with np.errstate(divide="ignore", invalid="ignore"):
-        speed = t.distance_m / (t.end_s - t.start_s)
-    flags = trip_extrapolation(plan.vehicle, plan.energies.mass_kg, plan.energies.ambient_c, speed)
-    if flags.size and flags[0] < 0:
-        return ["not calibrated"] * plan.duties.n
-    per = np.bitwise_or.reduceat(flags, plan.duties.first) if flags.size else flags
-    words = ((1, "temperature"), (2, "mass"), (4, "speed"))
-    return [", ".join(w for b, w in words if f & b) or "none" for f in per.tolist()]
+        speed = t.distance_m / e.duration_s
+        idle = np.where(e.duration_s > 0, e.idle_s / e.duration_s, np.nan)
+    mask = extrapolation_mask(plan.vehicle.calibration, mass_kg=e.mass_kg, ambient_c=e.ambient_c,
+                              mean_speed_mps=speed, idle_share=idle)
+    if not mask.size:
+        return []
+    per = np.bitwise_or.reduceat(np.broadcast_to(mask, (t.n,)), plan.duties.first)
+    return [extrapolation_text(int(m)) for m in per.tolist()]
 
 
 @dataclass

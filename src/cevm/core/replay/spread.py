@@ -20,9 +20,9 @@ deviation. Each trip's variance is that of :func:`cevm.core.predictive.predictiv
 duty's total has the variance of :func:`cevm.core.predictive.total` (plus the
 extrapolation's, which that function leaves out, taken as fully correlated).
 
-:func:`trip_spread` is the one place that reads the ranges API: without it (a cevm
-before issue 22) or for a vehicle without priors, every part is zero and the source is
-"none": a duty then completes with probability 0 or 1, as its mean says.
+:func:`trip_spread` is the one place that reads that API; for a vehicle without priors
+(built without a class) every part is zero and the source is "none": a duty then
+completes with probability 0 or 1, as its mean says.
 """
 
 from __future__ import annotations
@@ -33,6 +33,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 from scipy.special import ndtri
 
+from cevm.core import predictive as pr
 from cevm.core.replay.trips import TripEnergies
 from cevm.core.vehicle import Vehicle
 
@@ -116,11 +117,6 @@ def trip_spread(vehicle: Vehicle, trips: TripEnergies, *, ice_braking: str | Non
     issue 22 (:mod:`cevm.core.predictive`: the vehicle's posterior, else its class's
     prior); :meth:`TripSpread.none` where there is none (module notes)."""
     n = trips.n
-    try:
-        from cevm.core import predictive as pr  # type: ignore[attr-defined,unused-ignore]
-    except ImportError:
-        return TripSpread.none(n, "this cevm has no predictive distribution (issue 22): the duty's probability is "
-                                  "that of its mean, 0 or 1")
     post = pr.posterior_of(vehicle)
     if post is None:
         return TripSpread.none(n, "no priors: the vehicle was built without a class")
