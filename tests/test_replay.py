@@ -458,3 +458,14 @@ def test_the_spread_taken_apart_gives_the_predictive_distributions_back(tmp_path
     np.testing.assert_allclose(sp.trip_sd(te.energy), pr.predictive(veh, f).sd, rtol=1e-9)
     bounds = np.array([0, 3, 5])
     np.testing.assert_allclose(sp.duty_sd(te.energy, bounds), pr.total(veh, f, groups=[0, 0, 0, 1, 1]).sd, rtol=1e-9)
+
+
+def test_the_candidates_mass_on_each_trip(tmp_path):
+    from cevm.core.replay import candidate_masses
+
+    veh = ev(tmp_path)  # kerb 18 t, mass_kg 28 t
+    trips = logged([cycle(1)] * 4, [0.0, 1e4, 2e4, 3e4], masses=[30e3, np.nan, 40e3, np.nan])
+    trips = dataclasses.replace(trips, payload_kg=np.array([np.nan, np.nan, np.nan, 5e3]))
+    np.testing.assert_array_equal(candidate_masses(trips, veh, None), [30e3, 28e3, 40e3, 23e3])
+    # the logged trucks weigh 16 t empty: the candidate carries their payloads on its 18 t
+    np.testing.assert_array_equal(candidate_masses(trips, veh, 16e3), [32e3, 28e3, 42e3, 23e3])

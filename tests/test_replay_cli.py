@@ -172,3 +172,13 @@ def test_a_damaged_trip_is_left_out_said_and_counted(store, tmp_path):
     rows = json.loads(res.stdout)
     trk1 = [r for r in rows if r["vehicle_id"] == "TRK-1"]
     assert [r["trips"] for r in trk1] == [3, 2, 3] and all(r["missing_trips"] == 1 for r in trk1)
+
+
+def test_levels_carried_overnight_and_the_logged_trucks_kerb(store):
+    res = replay(store, "-v", TRUCK, "--battery-kwh", "60", "--overnight-kw", "11", "--logged-kerb-kg", "15000",
+                 "-f", "json")
+    assert res.exit_code == 0, res.output
+    rows = [r for r in json.loads(res.stdout) if r["vehicle_id"] == "TRK-1"]
+    assert rows[0]["soc_start_pct"] == 100.0 and all(r["overnight"] == "11 kW" for r in rows)
+    assert rows[1]["soc_start_pct"] <= 100.0 and rows[0]["battery_needed_kwh"] is None  # sized for the fleet
+    assert rows[0]["mass_min_kg"] == 33000.0  # 30 t logged, 15 t of it the logged truck: 15 t on the candidate's 18
