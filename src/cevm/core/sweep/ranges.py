@@ -27,7 +27,6 @@ from cevm.core.sweep.block import DEFAULT_RESERVE_PCT, DEFAULT_SOC_START_PCT, Sw
 from cevm.core.sweep.profiles import StepTable
 from cevm.core.sweep.stepenergy import StepCoefficients, step_coefficients, step_energies
 
-
 #: Cells (rows x steps) of one chunk of :func:`crossings` (8 MB of float64).
 _RANGE_CHUNK_CELLS = 1 << 20
 #: Rows evaluated together by :func:`crossings`.
