@@ -68,7 +68,6 @@ from cevm.core.sweep import (
     sweep,
 )
 from cevm.errors import CevmError
-from cevm.executors import make_executor
 from cevm.io.plots import PLOT_MAX_LINES, plot_predictions
 from cevm.units import J_PER_KWH
 
@@ -371,7 +370,11 @@ def predict_cmd(
                                    cycle_fmt, need_profiles=any(v.is_ev for v in vehicles),
                                    on_damaged=skipped.append)
             note_flat_cycles(sources)
-            executor = stack.enter_context(make_executor(None if scheduler else (workers or 1), scheduler))
+            executor = None  # in this process: the executors are not even imported
+            if scheduler is not None or (workers or 1) > 1:
+                from cevm.executors import make_executor
+
+                executor = stack.enter_context(make_executor(None if scheduler else workers, scheduler))
             stream = open_out(stack, out)
             writer = PredictWriter(fmt, stream, temperature_used=any(uses_temperature(v) for v in vehicles))
             keep_for_plot = plot is not None and np.bincount(pset.vehicle_index).max() > 1
