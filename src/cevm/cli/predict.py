@@ -68,6 +68,7 @@ from cevm.core.sweep import (
     sweep,
 )
 from cevm.errors import CevmError
+from cevm.runtime import WHOLE_CYCLE_MMAP_THRESHOLD_BYTES, tune_allocator
 from cevm.io.plots import PLOT_MAX_LINES, plot_predictions
 from cevm.units import J_PER_KWH
 
@@ -347,6 +348,7 @@ def predict_cmd(
     calibrated vehicle was fitted on (temperature, mass, duty) is warned about."""
     if not (cycle or trip or vehicle_id or route):
         raise fail("give at least one source: --cycle, --trip, --vehicle-id or --route")
+    tune_allocator(WHOLE_CYCLE_MMAP_THRESHOLD_BYTES)  # arrays of a cycle's length reused, not mapped anew
     if mass_kg and payload_kg:
         raise fail("give --mass-kg or --payload-kg, not both")
     if workers is not None and scheduler is not None:
