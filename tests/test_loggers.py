@@ -27,7 +27,6 @@ from cevm.ingest.reading import PLAUSIBLE_RANGE_SI, EnergySource, detect_profile
 from cevm.ingest.timestamps import parse_datetimes
 
 DATA = Path(__file__).parent / "data"
-REAL_TWIZY = Path("/work/shared/real-logs/twizy")
 KMH = 1 / 3.6  # m/s per km/h
 MPH = 0.44704  # m/s per mph (exact by definition)
 MILE = 1609.344  # m per mile (exact)
@@ -480,16 +479,17 @@ def test_date_repair_disabled_reports_line(tmp_path, profiles):
         read_log(bad_time, profiles=profiles)
 
 
-@pytest.mark.skipif(not REAL_TWIZY.is_dir(), reason="real Twizy logs not available")
-def test_all_real_twizy_files(profiles):
-    files = sorted(REAL_TWIZY.glob("*.csv"))
-    assert len(files) >= 17
+def test_all_real_twizy_files(profiles, twizy_logs):
+    folder, n_files = twizy_logs
+    files = sorted(folder.glob("*.csv*"))
+    assert len(files) == n_files
     report = []
     for f in files:
         [log] = read_log(f, profiles=profiles)
         assert log.profile == "twizy"
         t = log.frame["time_s"].to_numpy()
-        assert len(t) == len(f.read_text().splitlines()) - 1  # every data row kept
+        text = gzip.decompress(f.read_bytes()).decode() if f.suffix == ".gz" else f.read_text()
+        assert len(t) == len(text.splitlines()) - 1  # every data row kept
         assert (np.diff(t) > 0).all(), f.name
         # the local date of every row equals the session date in the file name (M_D_Y)
         m, d, y = (int(x) for x in re.search(r"_(\d\d)_(\d\d)_(\d{4})", f.name).groups())
@@ -641,10 +641,55 @@ def test_absurd_values_whole_column_is_error(tmp_path, profiles):
         read_log(srf_file(tmp_path, rows), profiles=profiles)
 
 
-def test_not_a_number(tmp_path, profiles):
+def _requiring(prof, source: str):
+    """``prof`` with the column ``source`` required (every cell a number)."""
+    from dataclasses import replace
+
+    return replace(prof, columns=tuple(replace(m, required=True) if m.source == source else m for m in prof.columns))
+
+
+def test_not_a_number_in_a_required_column_is_an_error(tmp_path, profiles):
     rows = srf_rows(5)
     rows[3] = rows[3].rsplit(",", 1)[0] + ",abc"
     with raises_at("not a number: 'abc'", line=6, column="fms_total_energy_used_kwh"):
+        read_log(srf_file(tmp_path, rows), _requiring(profiles["srf"], "fms_total_energy_used_kwh"))
+
+
+@pytest.mark.parametrize("cell", ["ERR", "abc", "---", "#N/A", "#VALUE!", "error"])
+def test_a_bad_cell_in_a_measured_column_is_a_missing_value_with_a_note(tmp_path, profiles, cell):
+    """Issue 27: one 'ERR' in a measured column (an energy counter here, a flow meter on a
+    truck) cost the whole day's log. Now it is a missing value, as 'N/A' is, and the
+    repair names the line and the column; the other rows are read as written."""
+    rows = srf_rows(6)
+    rows[3] = rows[3].rsplit(",", 1)[0] + "," + cell  # line 2 + 4 = 6
+    [log] = read_log(srf_file(tmp_path, rows), profiles=profiles)
+    e = log.frame["total_energy_j"].to_numpy()
+    assert np.isnan(e[3]) and e[2] == pytest.approx(100.2 * 3.6e6) and e[4] == pytest.approx(100.4 * 3.6e6)
+    notes = [r for r in log.repairs if "not numbers" in r]
+    assert len(notes) == 1 and "'fms_total_energy_used_kwh'" in notes[0] and notes[0].endswith("line 6")
+    assert repr(cell) in notes[0]
+
+
+def test_a_value_written_with_its_unit_is_read_as_that_number(tmp_path, profiles):
+    """'36.5 km/h' in a km/h column is 36.5 km/h (any case and spacing), reported; '36.5 mph'
+    there is not a km/h value: a missing one, reported."""
+    rows = srf_rows(6)
+    rows[2] = rows[2].replace(",36.0,36.0,", ",36.0,36.5 km/h,", 1)  # line 5: the wheel speed
+    rows[3] = rows[3].replace(",36.0,36.0,", ",36.0,36.5KM/H,", 1)  # line 6
+    rows[4] = rows[4].replace(",36.0,36.0,", ",36.0,36.5 mph,", 1)  # line 7
+    [log] = read_log(srf_file(tmp_path, rows), profiles=profiles)
+    v = log.frame["wheel_speed_mps"].to_numpy()
+    assert v[2] == pytest.approx(36.5 / 3.6) and v[3] == pytest.approx(36.5 / 3.6) and np.isnan(v[4])
+    assert any("2 values written with their unit ('km/h')" in r and r.endswith("lines 5-6") for r in log.repairs)
+    assert any("'36.5 mph'" in r and r.endswith("line 7") for r in log.repairs)
+
+
+def test_a_column_of_mostly_bad_cells_is_refused(tmp_path, profiles):
+    """More than the profile's absurd_error_share of a column not numbers: not what the
+    profile says the column is (a wrong decimal mark, a wrong column), an error at the
+    first such cell."""
+    rows = [r.rsplit(",", 1)[0] + ",12;5" for r in srf_rows(6)]
+    with raises_at("6 of 6 cells are not numbers", line=3, column="fms_total_energy_used_kwh"):
         read_log(srf_file(tmp_path, rows), profiles=profiles)
 
 
@@ -734,7 +779,7 @@ def test_iso_offsets_converted_to_utc(tmp_path):
 @settings(max_examples=80, deadline=None)
 @given(st.text(alphabet="ab,\n\r", max_size=60), st.integers(1, 7))
 def test_line_stats_match_plain_python(text, chunk):
-    import cevm.ingest.reading as loggers
+    import cevm.ingest.reading.lines as loggers
 
     data = text.encode()
     old = loggers._CHUNK_BYTES
@@ -755,7 +800,7 @@ def test_line_stats_match_plain_python(text, chunk):
 def test_ascii_heads_skip_re_encoding_only_for_ascii_compatible_codecs(tmp_path, profiles):
     import pandas as pd
 
-    from cevm.ingest.reading import _ascii_transparent
+    from cevm.ingest.textfile import _ascii_transparent
 
     assert all(_ascii_transparent(e) for e in ("utf-8", "utf-8-sig", "cp1252", "latin-1", "ascii"))
     assert not any(_ascii_transparent(e) for e in ("utf-16", "utf-32", "utf-7", "cp500", "no-such-codec"))

@@ -26,6 +26,7 @@ from functools import lru_cache
 
 import numpy as np
 
+from cevm.units import J_PER_KWH
 from cevm_samplegen.auxiliaries import BUS_CABIN, DIESEL_WARMUP, TRUCK_CAB, CabinLoad, cabin_load
 from cevm_samplegen.common import G_MPS2, RHO_AIR_KG_M3
 
@@ -39,9 +40,10 @@ class StandInParams:
     ``drive_eff`` (battery -> wheel, marginal), ``drive_loss_w`` (constant loss while
     driving), ``regen_eff`` (wheel -> battery), ``regen_max_w`` (regenerative braking
     limit at the wheel; friction brakes do the rest), ``aux_w`` (air compressor,
-    steering, 24 V: always on; heating and A/C come from the cabin model). Diesel: ``idle_fuel_w`` (fuel power at idle, about 2.5 l/h for a 13 l engine),
-    ``marginal_eff`` (Willans slope: wheel power per fuel power above idle, transmission
-    included), ``fuel_lhv_j_per_l`` (EN 590 diesel), ``aux_w`` (alternator, compressor).
+    steering, 24 V: always on; heating and A/C come from the cabin model). Diesel:
+    ``idle_fuel_w`` (fuel power at idle, about 2.5 l/h for a 13 l engine), ``marginal_eff``
+    (Willans slope: wheel power per fuel power above idle, transmission included),
+    ``fuel_lhv_j_per_l`` (EN 590 diesel), ``aux_w`` (alternator, compressor).
     Values are plausible for the paper's vehicles, not calibrated.
     """
 
@@ -226,9 +228,8 @@ MAX_DEFICIT_SHARE = 0.02
 
 @lru_cache(maxsize=8)
 def _project_vehicle(kind: str):
-    from cevm.io import load_vehicle
-
     from cevm.configs_dir import shipped_configs_dir
+    from cevm.io import load_vehicle
 
     path = shipped_configs_dir() / "vehicles" / f"{kind}.toml"
     return load_vehicle(path)
@@ -256,14 +257,17 @@ def logged_consumption(kind: str, time_s, speed_mps, elevation_m, mass_kg: float
     model's module, because it reads the project's vehicle files.
     """
     from cevm.core.detailed import simulate
+    from cevm.io.detailed import detailed_params
 
     t = np.asarray(time_s, dtype=float)
     _check_kind(kind, t.size, conditions)
     vehicle = _project_vehicle(kind)
+    params = detailed_params(vehicle)
     cab = _cabin(kind, t, speed_mps, conditions)
 
     def run(**series):
-        return simulate(vehicle, t, speed_mps, elevation_m, mass_kg=mass_kg, time_step_s=None, **series)
+        return simulate(vehicle, t, speed_mps, elevation_m, mass_kg=mass_kg, time_step_s=None, params=params,
+                        **series)
 
     if vehicle.is_ev:
         res = run(aux_power_w=cab.electric_w)
@@ -283,7 +287,7 @@ def logged_consumption(kind: str, time_s, speed_mps, elevation_m, mass_kg: float
     positive = float(np.sum(np.maximum(res.steps["wheel_power_w"] * res.steps["dt_s"], 0.0)))
     if res.traction_deficit_j > MAX_DEFICIT_SHARE * max(positive, 1.0):
         raise ValueError(
-            f"{kind} at {mass_kg:.0f} kg cannot follow the trace: {res.traction_deficit_j / 3.6e6:.2f} kWh "
+            f"{kind} at {mass_kg:.0f} kg cannot follow the trace: {res.traction_deficit_j / J_PER_KWH:.2f} kWh "
             f"beyond its powertrain ({100 * res.traction_deficit_j / positive:.1f} % of the wheel work)"
         )
     key = "energy_cum_j" if vehicle.is_ev else "fuel_cum_l"

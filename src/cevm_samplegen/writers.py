@@ -4,16 +4,16 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 
 import numpy as np
 
+from cevm.units import J_PER_KWH, M_PER_MILE, MPH_TO_MPS, MPS_TO_KMH, RAD_S_PER_RPM, S_PER_H
 from cevm_samplegen.common import BNG, GEOID_UNDULATION_M, WGS84, _rng
 from cevm_samplegen.consumption import STANDIN, _wheel_power_w
 from cevm_samplegen.csvfmt import assemble, iso_utc_ms, num_field, text_field, uk_local
 from cevm_samplegen.fleet import FleetSpec, TruthTrip, VehicleSpec
 from cevm_samplegen.world import World
-
 
 SRF_BUS_COLUMNS = (
     "timestamp_utc", "gps_lat_deg", "gps_lon_deg", "gps_alt_m", "gps_speed_kmh", "gps_hdop",
@@ -48,7 +48,7 @@ SENSOR_TAU_S = 60.0
 #: Truck gearbox (12-speed AMT) and axle ratio of the plausible engine-speed model.
 _GEARS = np.array([14.9, 11.7, 9.0, 7.1, 5.6, 4.4, 3.5, 2.7, 2.1, 1.7, 1.3, 1.0])
 _AXLE = 2.8
-_EV_USABLE_J = 124.0 * 3.6e6  # configs/vehicles/electric-bus.toml battery_kwh
+_EV_USABLE_J = 124.0 * J_PER_KWH  # configs/vehicles/electric-bus.toml battery_kwh
 
 
 def _arrivals(tk: np.ndarray, period_s: tuple[float, float], rng: np.random.Generator) -> np.ndarray:
@@ -118,7 +118,7 @@ def _fms_common(veh: VehicleSpec, tr: TruthTrip, at: dict, rng: np.random.Genera
     v = at["speed"]
     n = v.size
     out = {}
-    out["fms_wheel_speed_kmh"] = np.round(v * veh.wheel_speed_scale * 3.6 * 256.0) / 256.0
+    out["fms_wheel_speed_kmh"] = np.round(v * veh.wheel_speed_scale * MPS_TO_KMH * 256.0) / 256.0
     out["fms_accel_pedal_pct"] = _round_q(np.clip(100.0 * pw / p.max_power_w, 0.0, 100.0) * (pw > 0), 0.4)
     out["fms_brake_switch"] = ((acc < -0.3) | (v < 0.05)).astype(float)
     omega_w = v / p.wheel_radius_m  # wheel rad/s
@@ -132,7 +132,7 @@ def _fms_common(veh: VehicleSpec, tr: TruthTrip, at: dict, rng: np.random.Genera
         gear = np.maximum((rpm_all >= 1000.0).sum(axis=1) - 1, 0)
         rpm = np.clip(rpm_all[np.arange(n), gear], 600.0, 1900.0) + rng.normal(0.0, 4.0, n)
         pe = pw + p.aux_w
-        torque = np.where(pe > 0, pe / (rpm * 2 * np.pi / 60.0), -0.08 * p.ref_torque_nm)
+        torque = np.where(pe > 0, pe / (rpm * RAD_S_PER_RPM), -0.08 * p.ref_torque_nm)
         torque = np.where(v < 0.1, 0.05 * p.ref_torque_nm, torque)
     out["fms_engine_speed_rpm"] = _round_q(np.maximum(rpm, 0.0), 0.125)
     out["fms_engine_torque_pct"] = np.clip(np.round(100.0 * torque / p.ref_torque_nm), -125, 125)
@@ -174,16 +174,17 @@ class _Counters:
     reset_offset: float | None = None  # ECU counter after a reset = offset + bias x consumption
 
 
-def _srf_file(world: World, veh: VehicleSpec, trips: list[TruthTrip], date: str, state: _Counters, fleet: FleetSpec, seed: int, transformer) -> tuple[bytes, list[dict], dict]:
+def _srf_file(world: World, veh: VehicleSpec, trips: list[TruthTrip], date: str, state: _Counters, fleet: FleetSpec,
+              seed: int, transformer) -> tuple[bytes, list[dict], dict]:
     """One srf session file: (bytes, truth records of its trips, file record)."""
     rng = _rng(seed, "srf", veh.vehicle_id, date)
     is_bus = veh.vehicle_type == "electric-bus"
-    cols = SRF_BUS_COLUMNS if is_bus else SRF_TRUCK_COLUMNS
+    cols: tuple[str, ...] = SRF_BUS_COLUMNS if is_bus else SRF_TRUCK_COLUMNS
     if not is_bus and not veh.flowmeter:
         cols = tuple(c for c in cols if c != "flowmeter_fuel_lph")
     day_index = trips[0].day_index
     faults: list[dict] = []
-    blocks: list[dict[str, np.ndarray]] = []
+    blocks: list[dict] = []
     records: list[dict] = []
     soc0 = float(rng.uniform(92.0, 100.0))
     day_energy0 = state.consumption
@@ -218,19 +219,22 @@ def _srf_file(world: World, veh: VehicleSpec, trips: list[TruthTrip], date: str,
         ny = _ar1(n, 40.0, 2.5, rng) * scale + rng.normal(0.0, 0.7, n)
         lon, lat = transformer.transform(at["x"] + ex, at["y"] + ny)
         alt = at["elev"] + GEOID_UNDULATION_M + alt_bias + _ar1(n, 200.0, 12.0, rng) + rng.normal(0.0, 2.0, n)
-        gspeed = np.abs(at["speed"] + rng.normal(0.0, 0.15, n)) * 3.6
+        gspeed = np.abs(at["speed"] + rng.normal(0.0, 0.15, n)) * MPS_TO_KMH
         nan = np.where(fix, 1.0, np.nan)
         cols_v["gps_lat_deg"], cols_v["gps_lon_deg"] = lat * nan, lon * nan
-        cols_v["gps_alt_m"], cols_v["gps_speed_kmh"], cols_v["gps_hdop"] = alt * nan, gspeed * nan, _round_q(hdop, 0.1) * nan
+        cols_v["gps_alt_m"], cols_v["gps_speed_kmh"] = alt * nan, gspeed * nan
+        cols_v["gps_hdop"] = _round_q(hdop, 0.1) * nan
         # ---- FMS common (three broadcast groups, each missing in 0.5 % of ticks)
         fms = _fms_common(veh, tr, at, rng)
-        groups = (("fms_wheel_speed_kmh", "fms_brake_switch"), ("fms_accel_pedal_pct",), ("fms_engine_speed_rpm", "fms_engine_torque_pct"))
+        groups = (("fms_wheel_speed_kmh", "fms_brake_switch"), ("fms_accel_pedal_pct",),
+                  ("fms_engine_speed_rpm", "fms_engine_torque_pct"))
         for g in groups:
             m = np.where(rng.random(n) > 0.005, 1.0, np.nan)
             for c in g:
                 cols_v[c] = fms[c] * m
         sensed = np.interp(tk, tr.time_s, ambient_sensor_c(tr))
-        cols_v["fms_ambient_air_temp_c"] = np.where(_arrivals(tk, (4.0, 6.0), rng), _round_q(sensed, AMBIENT_RESOLUTION_C), np.nan)
+        cols_v["fms_ambient_air_temp_c"] = np.where(_arrivals(tk, (4.0, 6.0), rng),
+                                                    _round_q(sensed, AMBIENT_RESOLUTION_C), np.nan)
         cons = state.consumption + at["cons"]
         rate = np.diff(tr.consumption)[at["k"]]  # per 1 s step: l/s or W
         if is_bus:
@@ -244,20 +248,21 @@ def _srf_file(world: World, veh: VehicleSpec, trips: list[TruthTrip], date: str,
             cols_v["fms_battery_voltage_v"] = _round_q(volt, 0.1) * m
             cols_v["fms_battery_current_a"] = _round_q(cur, 0.1) * m
             cols_v["fms_battery_soc_pct"] = np.where(_arrivals(tk, (9.0, 11.0), rng), _round_q(soc_true, 0.4), np.nan)
-            kwh = veh.energy_counter_start_kwh + cons / 3.6e6
+            kwh = veh.energy_counter_start_kwh + cons / J_PER_KWH
             cols_v["fms_total_energy_used_kwh"] = np.where(_arrivals(tk, (4.0, 6.0), rng), _floor_q(kwh, 0.1), np.nan)
         else:
             ecu = veh.fuel_counter_start_l + veh.ecu_fuel_bias * cons
             if fleet.fuel_reset and fleet.fuel_reset[:3] == (veh.vehicle_id, day_index, tr.trip_index):
                 i_reset = n // 2
                 state.reset_offset = fleet.fuel_reset[3] - veh.ecu_fuel_bias * cons[i_reset]
-                faults.append({"kind": "fuel_counter_reset", "trip_index": tr.trip_index, "tick": sum(b["n"] for b in blocks) + i_reset,
+                faults.append({"kind": "fuel_counter_reset", "trip_index": tr.trip_index,
+                               "tick": sum(b["n"] for b in blocks) + i_reset,
                                "from_l": float(_floor_q(ecu[i_reset - 1], 0.5)), "to_l": fleet.fuel_reset[3]})
                 ecu = np.where(np.arange(n) >= i_reset, state.reset_offset + veh.ecu_fuel_bias * cons, ecu)
             elif state.reset_offset is not None:
                 ecu = state.reset_offset + veh.ecu_fuel_bias * cons
             cols_v["fms_total_fuel_used_l"] = np.where(_arrivals(tk, (5.0, 10.0), rng), _floor_q(ecu, 0.5), np.nan)
-            lph = np.maximum(0.0, veh.ecu_fuel_bias * rate * 3600.0 * (1.0 + rng.normal(0.0, 0.02, n)))
+            lph = np.maximum(0.0, veh.ecu_fuel_bias * rate * S_PER_H * (1.0 + rng.normal(0.0, 0.02, n)))
             cols_v["fms_fuel_rate_lph"] = np.where(rng.random(n) > 0.03, _round_q(lph, 0.05), np.nan)
             if veh.flowmeter:
                 m = _arrivals(tk, (1.8, 2.2), rng)
@@ -265,12 +270,13 @@ def _srf_file(world: World, veh: VehicleSpec, trips: list[TruthTrip], date: str,
                 c_at = at["cons"][idx]
                 prev_t = np.concatenate(([tk[idx[0]] - 2.0], tk[idx[:-1]])) if idx.size else idx
                 prev_c = np.interp(prev_t, tr.time_s, tr.consumption) if idx.size else idx
-                mean_lph = (c_at - prev_c) / np.maximum(tk[idx] - prev_t, 1e-3) * 3600.0
+                mean_lph = (c_at - prev_c) / np.maximum(tk[idx] - prev_t, 1e-3) * S_PER_H
                 flow = np.full(n, np.nan)
                 flow[idx] = _round_q(np.maximum(0.0, mean_lph * (1.0 + rng.normal(0.0, 0.015, idx.size))), 0.01)
                 cols_v["flowmeter_fuel_lph"] = flow
             moved = np.cumsum(np.concatenate(([0.0], np.diff(tk))) * (at["speed"] > 0.5)) > 30.0
-            cols_v["fms_gross_weight_kg"] = np.where(_arrivals(tk, (9.0, 11.0), rng) & moved, _round_q(tr.mass_kg, 10.0), np.nan)
+            cols_v["fms_gross_weight_kg"] = np.where(_arrivals(tk, (9.0, 11.0), rng) & moved,
+                                                     _round_q(tr.mass_kg, 10.0), np.nan)
         # ---- clock: the phone clock ran ahead until a mid-trip correction
         clock = np.zeros(n)
         cs = fleet.clock_step
@@ -280,7 +286,8 @@ def _srf_file(world: World, veh: VehicleSpec, trips: list[TruthTrip], date: str,
             elif tr.trip_index == cs[2]:
                 i_step = n // 2
                 clock[:i_step] = cs[3]
-                faults.append({"kind": "clock_step_backwards", "trip_index": tr.trip_index, "tick": sum(b["n"] for b in blocks) + i_step, "seconds": cs[3]})
+                faults.append({"kind": "clock_step_backwards", "trip_index": tr.trip_index,
+                               "tick": sum(b["n"] for b in blocks) + i_step, "seconds": cs[3]})
         true_ms = np.round((tr.start_utc_s + tk) * 1000.0).astype(np.int64)
         cols_v["timestamp_ms"] = true_ms + np.round(clock * 1000.0).astype(np.int64)
         blocks.append({"n": n, "cols": cols_v})
@@ -288,8 +295,9 @@ def _srf_file(world: World, veh: VehicleSpec, trips: list[TruthTrip], date: str,
         c_first, c_last = at["cons"][0], at["cons"][-1]
         records.append({
             "vehicle_id": veh.vehicle_id, "vehicle_type": veh.vehicle_type, "dialect": "srf", "day_index": day_index,
-            "trip_index": tr.trip_index, "start_utc_s": round(tr.start_utc_s + t_first, 3), "end_utc_s": round(tr.start_utc_s + t_last, 3),
-            "duration_s": round(t_last - t_first, 3), "distance_m": round(float(at["distance"][-1] - at["distance"][0]), 2),
+            "trip_index": tr.trip_index, "start_utc_s": round(tr.start_utc_s + t_first, 3),
+            "end_utc_s": round(tr.start_utc_s + t_last, 3), "duration_s": round(t_last - t_first, 3),
+            "distance_m": round(float(at["distance"][-1] - at["distance"][0]), 2),
             "mass_kg": tr.mass_kg, "consumption": float(c_last - c_first),
             "route_from_m": round(tr.route_from_m + float(at["distance"][0]), 2),
             "load": tr.load, "dsm_covered_share": round(float(world.in_tiles(tr.x_m, tr.y_m).mean()), 4),
@@ -303,9 +311,10 @@ def _srf_file(world: World, veh: VehicleSpec, trips: list[TruthTrip], date: str,
     order = np.repeat(np.arange(ntot), 1 + rep.astype(int))
     first_row = np.concatenate(([0], np.cumsum([b["n"] for b in blocks])))
     # line of row i of the original = header lines + position in `order`
-    started = datetime.fromtimestamp(int(allc["timestamp_ms"][0] // 1000) - int(rng.integers(2, 9)), timezone.utc)
+    started = datetime.fromtimestamp(int(allc["timestamp_ms"][0] // 1000) - int(rng.integers(2, 9)), UTC)
     header = (
-        f"# vehicle_id={veh.vehicle_id}\n# logger=SRF Logger 2.4.1\n# started={started.strftime('%Y-%m-%dT%H:%M:%SZ')}\n"
+        f"# vehicle_id={veh.vehicle_id}\n# logger=SRF Logger 2.4.1\n"
+        f"# started={started.strftime('%Y-%m-%dT%H:%M:%SZ')}\n"
         f"# fms_dongle=FMS-BT 1.7\n{','.join(cols)}\n"
     ).encode()
     n_head = header.count(b"\n")
@@ -322,7 +331,8 @@ def _srf_file(world: World, veh: VehicleSpec, trips: list[TruthTrip], date: str,
         dec, strip = SRF_FORMAT[c]
         fields.append(num_field(allc[c][order], dec, strip=strip))
     data = header + assemble(fields, b",", b"\n")
-    info = {"vehicle_id": veh.vehicle_id, "dialect": "srf", "rows": int(order.size), "repeated_ticks": int(rep.sum()), "faults": faults}
+    info = {"vehicle_id": veh.vehicle_id, "dialect": "srf", "rows": int(order.size), "repeated_ticks": int(rep.sum()),
+            "faults": faults}
     return data, records, info
 
 
@@ -330,12 +340,12 @@ def _srf_file(world: World, veh: VehicleSpec, trips: list[TruthTrip], date: str,
 # Sensors: portal
 # ======================================================================================
 
-PORTAL_COLUMNS = ("Registration", "Date/Time", "Latitude", "Longitude", "Speed (mph)", "Odometer (mi)", "Fuel Used (l)", "Ignition", "Event")
-MPH = 0.44704
-MILE_M = 1609.344
+PORTAL_COLUMNS = ("Registration", "Date/Time", "Latitude", "Longitude", "Speed (mph)", "Odometer (mi)", "Fuel Used (l)",
+                  "Ignition", "Event")
 
 
-def _portal_vehicle(world: World, veh: VehicleSpec, days: list[list[TruthTrip]], state: _Counters, seed: int, transformer) -> tuple[dict[str, np.ndarray], list[dict]]:
+def _portal_vehicle(world: World, veh: VehicleSpec, days: list[list[TruthTrip]], state: _Counters, seed: int,
+                    transformer) -> tuple[dict[str, np.ndarray], list[dict]]:
     """Rows of one vehicle (time order) and truth records of its trips."""
     rng = _rng(seed, "portal", veh.vehicle_id)
     rows: dict[str, list[np.ndarray]] = {k: [] for k in ("t", "x", "y", "speed_mph", "odo", "fuel", "ign", "event")}
@@ -358,8 +368,9 @@ def _portal_vehicle(world: World, veh: VehicleSpec, days: list[list[TruthTrip]],
         ex = _ar1(n, 8.0, 3.0, rng)
         ny = _ar1(n, 8.0, 3.0, rng)
         rows["t"].append(tr.start_utc_s + ts)
-        rows["x"].append(at["x"] + ex), rows["y"].append(at["y"] + ny)
-        rows["speed_mph"].append(np.abs(at["speed"] + rng.normal(0.0, 0.2, n) * (at["speed"] > 0.3)) / MPH)
+        rows["x"].append(at["x"] + ex)
+        rows["y"].append(at["y"] + ny)
+        rows["speed_mph"].append(np.abs(at["speed"] + rng.normal(0.0, 0.2, n) * (at["speed"] > 0.3)) / MPH_TO_MPS)
         rows["odo"].append(state.odometer_m + at["distance"])
         rows["fuel"].append(veh.fuel_counter_start_l + state.consumption + at["cons"])
         ign = np.ones(n)
@@ -378,9 +389,11 @@ def _portal_vehicle(world: World, veh: VehicleSpec, days: list[list[TruthTrip]],
             ev[-1] = "Fuel card: £152,40 at Shell Newport Pagnell"
         rows["event"].append(ev)
         records.append({
-            "vehicle_id": veh.vehicle_id, "vehicle_type": veh.vehicle_type, "dialect": "portal", "day_index": tr.day_index,
-            "trip_index": j, "start_utc_s": float(tr.start_utc_s), "end_utc_s": float(tr.start_utc_s + T), "duration_s": float(T),
-            "distance_m": round(float(tr.distance_m[-1]), 2), "mass_kg": tr.mass_kg, "consumption": float(tr.consumption[-1]),
+            "vehicle_id": veh.vehicle_id, "vehicle_type": veh.vehicle_type, "dialect": "portal",
+            "day_index": tr.day_index, "trip_index": j, "start_utc_s": float(tr.start_utc_s),
+            "end_utc_s": float(tr.start_utc_s + T), "duration_s": float(T),
+            "distance_m": round(float(tr.distance_m[-1]), 2), "mass_kg": tr.mass_kg,
+            "consumption": float(tr.consumption[-1]),
             "route_from_m": round(tr.route_from_m, 2), "load": tr.load, **conditions_record(tr, 0.0, float(T)),
             "dsm_covered_share": round(float(world.in_tiles(tr.x_m, tr.y_m).mean()), 4),
         })
@@ -394,9 +407,12 @@ def _portal_vehicle(world: World, veh: VehicleSpec, days: list[list[TruthTrip]],
             m = hb.size
             if m:
                 rows["t"].append(hb)
-                rows["x"].append(np.full(m, at["x"][-1]) + rng.normal(0, 2.0, m)), rows["y"].append(np.full(m, at["y"][-1]) + rng.normal(0, 2.0, m))
-                rows["speed_mph"].append(np.zeros(m)), rows["odo"].append(np.full(m, state.odometer_m))
-                rows["fuel"].append(np.full(m, veh.fuel_counter_start_l + state.consumption)), rows["ign"].append(np.zeros(m))
+                rows["x"].append(np.full(m, at["x"][-1]) + rng.normal(0, 2.0, m))
+                rows["y"].append(np.full(m, at["y"][-1]) + rng.normal(0, 2.0, m))
+                rows["speed_mph"].append(np.zeros(m))
+                rows["odo"].append(np.full(m, state.odometer_m))
+                rows["fuel"].append(np.full(m, veh.fuel_counter_start_l + state.consumption))
+                rows["ign"].append(np.zeros(m))
                 rows["event"].append(np.full(m, "", dtype=object))
     out = {k: np.concatenate(vv) for k, vv in rows.items()}
     o = np.argsort(out["t"], kind="stable")
@@ -407,12 +423,14 @@ def _portal_vehicle(world: World, veh: VehicleSpec, days: list[list[TruthTrip]],
     return out, records
 
 
-def _portal_file(world: World, fleet: FleetSpec, truth: dict[str, list[list[TruthTrip]]], seed: int, transformer) -> tuple[bytes, list[dict], dict]:
+def _portal_file(world: World, fleet: FleetSpec, truth: dict[str, list[list[TruthTrip]]], seed: int,
+                 transformer) -> tuple[bytes, list[dict], dict]:
     """The portal export of all portal vehicles: (cp1252 bytes, truth records, file record)."""
     per = []
     records = []
     for veh in sorted(fleet.portal_vehicles, key=lambda v: v.vehicle_id):
-        rows, recs = _portal_vehicle(world, veh, truth[veh.vehicle_id], _Counters(odometer_m=veh.odometer_start_m), seed, transformer)
+        rows, recs = _portal_vehicle(world, veh, truth[veh.vehicle_id], _Counters(odometer_m=veh.odometer_start_m),
+                                     seed, transformer)
         per.append((veh, rows))
         records.extend(recs)
     reg = np.concatenate([np.full(r["t"].size, v.vehicle_id.encode("cp1252")) for v, r in per])
@@ -423,7 +441,7 @@ def _portal_file(world: World, fleet: FleetSpec, truth: dict[str, list[list[Trut
     fields = [
         text_field(reg), uk_local(t),
         num_field(allr["lat"], 5, dec=b","), num_field(allr["lon"], 5, dec=b","),
-        num_field(allr["speed_mph"], 1, dec=b","), num_field(_floor_q(allr["odo"] / MILE_M, 0.1), 1, dec=b","),
+        num_field(allr["speed_mph"], 1, dec=b","), num_field(_floor_q(allr["odo"] / M_PER_MILE, 0.1), 1, dec=b","),
         num_field(_floor_q(allr["fuel"], 0.5), 1, dec=b","),
         text_field(np.where(allr["ign"] > 0, b"On", b"Off")),
         text_field(events),

@@ -75,7 +75,7 @@ the drop is reported); timezone UTC; ``date_repair = "none"`` (repairing is opt-
 keeps the next day's date); vehicle id from the file name stem; zero latitude or
 longitude means no fix (GPS modules write 0 without one; a real fix exactly on the
 equator or the Greenwich meridian, to the logged precision, is rare and losing it is
-harmless); ``absurd_error_share = 0.5`` (see :func:`cevm.ingest.reading._check_absurd`). Energy ``priority``
+harmless); ``absurd_error_share = 0.5`` (see :func:`cevm.ingest.reading.plausibility._check_absurd`). Energy ``priority``
 has no default: trust is the profile author's statement.
 """
 
@@ -93,16 +93,31 @@ import pandas as pd
 from cevm.configs_dir import shipped_configs_dir
 from cevm.errors import InputError
 from cevm.ingest.timestamps import EPOCH_FORMATS
+from cevm.units import (
+    FT_TO_M,
+    J_PER_KWH,
+    J_PER_MJ,
+    J_PER_WH,
+    KG_PER_LB,
+    KMH_TO_MPS,
+    KNOT_TO_MPS,
+    L_PER_GAL_IMP,
+    L_PER_GAL_US,
+    M_PER_MILE,
+    MPH_TO_MPS,
+    S_PER_H,
+    W_PER_KW,
+)
 
 __all__ = [
-    "UNITS",
-    "Unit",
     "CANONICAL_DIMENSIONS",
+    "UNITS",
     "VIRTUAL_COLUMNS",
     "ColumnMap",
     "EnergySpec",
-    "TimeSpec",
     "Profile",
+    "TimeSpec",
+    "Unit",
     "builtin_profile_dirs",
     "load_profile",
     "load_profiles",
@@ -131,35 +146,35 @@ UNITS: dict[str, Unit] = {
     "deg": Unit("angle", 1.0),
     "m": Unit("length", 1.0),
     "km": Unit("length", 1000.0),
-    "mi": Unit("length", 1609.344),
-    "ft": Unit("length", 0.3048),
+    "mi": Unit("length", M_PER_MILE),
+    "ft": Unit("length", FT_TO_M),
     "m/s": Unit("speed", 1.0),
-    "km/h": Unit("speed", 1.0 / 3.6),
-    "mph": Unit("speed", 0.44704),
-    "kn": Unit("speed", 1852.0 / 3600.0),
+    "km/h": Unit("speed", KMH_TO_MPS),
+    "mph": Unit("speed", MPH_TO_MPS),
+    "kn": Unit("speed", KNOT_TO_MPS),
     "l": Unit("volume", 1.0),
     "ml": Unit("volume", 1e-3),
-    "gal_us": Unit("volume", 3.785411784),
-    "gal_imp": Unit("volume", 4.54609),
+    "gal_us": Unit("volume", L_PER_GAL_US),
+    "gal_imp": Unit("volume", L_PER_GAL_IMP),
     "l/s": Unit("volume_rate", 1.0),
-    "l/h": Unit("volume_rate", 1.0 / 3600.0),
+    "l/h": Unit("volume_rate", 1.0 / S_PER_H),
     "ml/s": Unit("volume_rate", 1e-3),
-    "gal_us/h": Unit("volume_rate", 3.785411784 / 3600.0),
+    "gal_us/h": Unit("volume_rate", L_PER_GAL_US / S_PER_H),
     "J": Unit("energy", 1.0),
     "kJ": Unit("energy", 1e3),
-    "MJ": Unit("energy", 1e6),
-    "Wh": Unit("energy", 3600.0),
-    "kWh": Unit("energy", 3.6e6),
+    "MJ": Unit("energy", J_PER_MJ),
+    "Wh": Unit("energy", J_PER_WH),
+    "kWh": Unit("energy", J_PER_KWH),
     "W": Unit("power", 1.0),
-    "kW": Unit("power", 1e3),
+    "kW": Unit("power", W_PER_KW),
     "kg": Unit("mass", 1.0),
     "t": Unit("mass", 1000.0),
-    "lb": Unit("mass", 0.45359237),
+    "lb": Unit("mass", KG_PER_LB),
     "g": Unit("mass", 1e-3),
     "kg/s": Unit("mass_rate", 1.0),
-    "kg/h": Unit("mass_rate", 1.0 / 3600.0),
+    "kg/h": Unit("mass_rate", 1.0 / S_PER_H),
     "g/s": Unit("mass_rate", 1e-3),
-    "g/h": Unit("mass_rate", 1e-3 / 3600.0),
+    "g/h": Unit("mass_rate", 1e-3 / S_PER_H),
     "V": Unit("voltage", 1.0),
     "A": Unit("current", 1.0),
     "%": Unit("percent", 1.0),
@@ -505,7 +520,7 @@ def _time_section(t: dict, k: _Keys) -> TimeSpec:
 def _check_timezone(tz: str, k: _Keys) -> str:
     try:
         pd.Timestamp("2020-01-01").tz_localize(tz)
-    except Exception:  # noqa: BLE001 - any failure means an unknown zone
+    except Exception:
         raise k.fail(f"unknown time zone {tz!r} (use an IANA name such as 'Europe/London')", "time.timezone") from None
     return tz
 
