@@ -23,7 +23,7 @@ from __future__ import annotations
 from collections import Counter
 from contextlib import ExitStack
 from pathlib import Path
-from typing import IO, Annotated, Optional
+from typing import IO, Annotated
 
 import numpy as np
 import typer
@@ -68,8 +68,8 @@ from cevm.core.sweep import (
     sweep,
 )
 from cevm.errors import CevmError
-from cevm.runtime import WHOLE_CYCLE_MMAP_THRESHOLD_BYTES, tune_allocator
 from cevm.io.plots import PLOT_MAX_LINES, plot_predictions
+from cevm.runtime import WHOLE_CYCLE_MMAP_THRESHOLD_BYTES, tune_allocator
 from cevm.units import J_PER_KWH
 
 #: Rows formatted at once when writing CSV or JSON.
@@ -295,12 +295,12 @@ def predict_cmd(
     route: RouteOption = None,
     store: StoreOption = None,
     mass_kg: Annotated[
-        Optional[list[str]],
+        list[str] | None,
         typer.Option("--mass-kg", "-m", metavar="KG", help="Gross mass in kg: a value, a list a,b or a range start:stop:step "
                                              "(stop included). Repeatable. Default: each vehicle's mass_kg."),
     ] = None,
     payload_kg: Annotated[
-        Optional[list[str]],
+        list[str] | None,
         typer.Option("--payload-kg", "-p", metavar="KG", help="Payload in kg on each vehicle's kerb mass: a value, a list or a "
                                                 "range such as 0:26000:2000 (14 values, stop included). Repeatable."),
     ] = None,
@@ -309,7 +309,7 @@ def predict_cmd(
     fmt: FormatOption = OutputFormat.table,
     out: OutOption = None,
     plot: Annotated[
-        Optional[Path],
+        Path | None,
         typer.Option(metavar="FILE.png", help="Write a PNG: state of charge along each source (one mass per vehicle), or energy "
                           "against payload (a mass sweep)."),
     ] = None,
@@ -323,12 +323,12 @@ def predict_cmd(
                                            "(about 10x the time of a sweep without it).")
     ] = False,
     workers: Annotated[
-        Optional[int], typer.Option("--workers", "-w", min=1, metavar="N", help="Worker processes, a batch of sources per task "
+        int | None, typer.Option("--workers", "-w", min=1, metavar="N", help="Worker processes, a batch of sources per task "
                                     "(default 1: in this process; a large sweep of many routes runs ~1.3x faster "
                                     "on 2 cores, a small one is slower for the processes' start).")
     ] = None,
     scheduler: Annotated[
-        Optional[str], typer.Option(help="Dask scheduler address (tcp://HOST:8786): evaluate the batches on that "
+        str | None, typer.Option(help="Dask scheduler address (tcp://HOST:8786): evaluate the batches on that "
                                          "cluster (pip install 'cevm[dask]'). Sources are read here and sent.")
     ] = None,
     cycle_fmt=None,

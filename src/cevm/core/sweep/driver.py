@@ -82,7 +82,8 @@ def sweep(
         for i, j in _batches(sources, pset, lowest_soc):
             spans.append((i, j))
             batch = tuple(_portable(src, use_steps) for src in sources[i:j])
-            yield Task(f"sources {i + 1}-{j} ({sources[i].name})", (batch, pset, soc_start_pct, reserve_pct, lowest_soc))
+            yield Task(f"sources {i + 1}-{j} ({sources[i].name})",
+                       (batch, pset, soc_start_pct, reserve_pct, lowest_soc))
 
     for k, res in enumerate(executor.run(predict_arrays, tasks())):
         i, j = spans[k]

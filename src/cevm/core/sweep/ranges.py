@@ -93,7 +93,7 @@ def _first_crossings(st: StepTable, c: StepCoefficients, targets: np.ndarray, to
             found[rows, jl] = True
             j_at[rows, jl] = lo + j
             search[rows, jl] = False
-        if totals:
+        if peak is not None:
             np.maximum(peak, cum.max(axis=1), out=peak)
         carry = cum[:, -1].copy()
     return _Crossings(found, j_at, frac, carry if totals else None, peak)
@@ -142,6 +142,7 @@ def crossings(st: StepTable, c: StepCoefficients, levels: np.ndarray, *, repeat:
         rest &= s > 0
         if not rest.any():
             continue
+        assert first.peak is not None  # made whole: the pass was summed to its end (repeat)
         peak = first.peak[:, None]
         with np.errstate(invalid="ignore", divide="ignore"):
             k = np.maximum(1.0, np.ceil((target - peak) / s))
