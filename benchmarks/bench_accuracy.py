@@ -37,6 +37,7 @@ choice of who serves the shared stops move?). Nothing is tuned to table 4.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
 import sys
 
@@ -198,7 +199,11 @@ def _baseline_split(src: Path | None, r: dict, train, test) -> str:
     import subprocess
 
     ids = ({t.trip_id for t in train}, {t.trip_id for t in test})
-    payload = pickle.dumps((str(r["vehicle_path"]), r["braking"], r["store"], r["vehicle"], ids))
+    path = Path(r["vehicle_path"]).resolve()
+    with contextlib.suppress(ValueError):  # the baseline's own copy of a shipped file (its format may be older)
+        own = src.resolve().parent / path.relative_to(ROOT.resolve())
+        path = own if own.is_file() else path
+    payload = pickle.dumps((str(path), r["braking"], r["store"], r["vehicle"], ids))
     code = """
 import pickle, sys, dataclasses
 import numpy as np

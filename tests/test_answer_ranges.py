@@ -98,7 +98,12 @@ def test_predict_rows_carry_ordered_intervals_in_csv_json_and_the_table(root, tm
     got = list(csv.DictReader(io.StringIO(text)))
     assert [float(r["energy_kwh_low"] or r["fuel_l_low"]) for r in got] == pytest.approx(
         [r.get("energy_kwh_low", r.get("fuel_l_low")) for r in rows], rel=1e-6)
-    assert runner.invoke(app, args).exit_code == 0
+    table = runner.invoke(app, args)
+    assert table.exit_code == 0
+    for r in rows:  # the table's interval column: half its width, from the JSON's ends
+        key, unit = ("energy_kwh", "kWh") if r["powertrain"] == "ev" else ("fuel_l", "l")
+        assert f"+-{(r[f'{key}_high'] - r[f'{key}_low']) / 2:,.2f} {unit}" in table.stdout
+    assert "+- (90 %)" in table.stdout
     # the table's status says the probability where the verdict is not sure
     from cevm.cli.predict import with_status
 

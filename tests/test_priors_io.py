@@ -155,6 +155,16 @@ def test_calibrate_writes_what_reads_back_and_reports_its_intervals(tmp_path, ro
     back = load_vehicle(out)
     assert back.posterior is not None and back.posterior.n_trips == r["n_trips"]
     assert back.posterior.terms == tuple(r["terms"]) and math.isclose(back.eta, r["eta"], rel_tol=1e-5)
+    # the template's comment that introduces [[reference]] still does (new sources go before it)
+    lines = text.splitlines()
+    at = next(i for i, line in enumerate(lines) if line.startswith("# Published real-world consumption"))
+    assert next(line for line in lines[at:] if not line.startswith("#")) == "[[reference]]"
+    # vehicle show says where its intervals come from
+    shown = json.loads(CliRunner().invoke(app, ["vehicle", "show", str(out), "-f", "json"]).stdout)
+    assert shown["uncertainty"]["interval_from"] == "posterior"
+    assert shown["uncertainty"]["source"].startswith(f"calibrated on {r['n_trips']} trips of HGV-11")
+    shipped = CliRunner().invoke(app, ["vehicle", "show", str(root / "configs/vehicles/diesel-hgv.toml"), "-f", "json"])
+    assert json.loads(shipped.stdout)["uncertainty"]["interval_from"] == "prior"
     # the table says the same counts
     res = CliRunner().invoke(app, args[:-2])
     assert res.exit_code == 0, res.output

@@ -224,3 +224,14 @@ def test_the_heating_balance_temperature_is_fitted():
     assert sel.result.vehicle.heating_below_c == 10.0
     held = select(BUS, trips, time_repeats=0, nested=False, fit_balance=False)
     assert sel.result.cv.std_pct < held.result.cv.std_pct
+
+
+def test_a_research_fit_may_widen_the_physical_ranges():
+    """A model that is no real vehicle (a lossless drive behind a 0.95 transmission, as
+    benchmarks/bench_tables.py's detailed variant with every loss off) is refused under
+    the real-vehicle bound 0.89 and fitted, to its true eta, with ``plausible`` widened."""
+    trips = _trips(dataclasses.replace(BUS, eta=0.95, regen_eta=None), temps=np.full(60, 19.0), noise=0.002)
+    with pytest.raises(CalibrationError, match=r"above the 0\.89"):
+        fit(BUS, trips, time_repeats=0)
+    res = fit(dataclasses.replace(BUS, priors=None), trips, time_repeats=0, plausible={"eta": (0.05, 1.0)})
+    assert res.vehicle.eta == pytest.approx(0.95, abs=0.005)

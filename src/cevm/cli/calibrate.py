@@ -235,9 +235,10 @@ def _print_candidates(cands: list[dict]) -> None:
              "CV mu": _pct(c["cv"]["mean_pct"]), "CV sigma": _pct(c["cv"]["std_pct"], False),
              "CV rms": _pct(c["cv"]["rms_pct"], False), "": "<- chosen" if c["status"] == "chosen" else "",
              "parameters": ", ".join(p["short"] for p in c["parameters"])} for c in shown]
+    more = f"; the {len(shown)} best shown (all: --format json)" if len(shown) < len(ok) else ""
     write_rows(rows, OutputFormat.table, title=f"model selection: {len(cands)} candidates, {len(ok)} compared by "
                                                f"grouped cross-validation ({len(refused)} refused), the simplest "
-                                               "within 1 SE of the best chosen")
+                                               f"within 1 SE of the best chosen{more}")
     if refused:
         reasons: dict[str, int] = {}
         for c in refused:

@@ -131,18 +131,30 @@ def write_rows(
             if c.table_layout == "id":
                 longest = max([len(header)] + [len(row[j]) for row in cells])
                 table.add_column(header, justify="left", no_wrap=True, min_width=longest)
-            elif c.table_layout == "wrap":
-                table.add_column(header, justify="left", overflow="fold")
-            else:
-                table.add_column(header, justify="right", no_wrap=True)
+            elif c.table_layout == "wrap":  # never a letter a line: its longest cell up to WRAP_MIN_WIDTH,
+                # and its longest word up to that
+                word = max([len(w) for w in header.split()] + [len(w) for row in cells for w in row[j].split()])
+                whole = max([len(row[j]) for row in cells], default=0)
+                table.add_column(header, justify="left", overflow="fold",
+                                 min_width=min(max(word, whole), WRAP_MIN_WIDTH))
+            else:  # numbers, never cut, nor their header (no_wrap holds for it too, which rich's
+                # measure, by the header's words, does not count: a piped table came out cropped)
+                table.add_column(header, justify="right", no_wrap=True,
+                                 min_width=max([len(header)] + [len(row[j]) for row in cells]))
         for row in cells:
             table.add_row(*row)
         console = Console(file=stream, markup=False, highlight=False)
         if not console.is_terminal:  # piped or logged: wide enough for every unwrapped column
             wide = Console(file=stream, width=10_000, markup=False, highlight=False)
             need = Measurement.get(wide, wide.options, table).minimum
-            console = Console(file=stream, width=max(console.width, 120, need), markup=False, highlight=False)
+            # + 1: rendered at exactly its measured minimum, a table with wrapped columns came out
+            # one character too wide and was cropped (rich 15, measured)
+            console = Console(file=stream, width=max(console.width, 120, need + 1), markup=False, highlight=False)
         console.print(table)
+
+
+#: The widest a free-text column's longest word makes its minimum width (``write_rows``).
+WRAP_MIN_WIDTH = 12
 
 
 def _as_column(c: str | Column, digits: dict[str, int], headers: dict[str, str]) -> Column:

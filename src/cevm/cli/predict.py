@@ -22,6 +22,7 @@ from __future__ import annotations
 
 from collections import Counter
 from contextlib import ExitStack
+from dataclasses import replace
 from pathlib import Path
 from typing import IO, Annotated
 
@@ -57,7 +58,15 @@ from cevm.cli.common import (
     with_cycle_options,
 )
 from cevm.cli.output import OutputFormat, vehicle_legend, write_rows
-from cevm.cli.prediction_columns import PREDICT, PREDICT_TABLE, STATUS, BlockRows, RangeOptions
+from cevm.cli.prediction_columns import (
+    INTERVAL_TEXT,
+    PREDICT,
+    PREDICT_TABLE,
+    STATUS,
+    BlockRows,
+    RangeOptions,
+    interval_text,
+)
 from cevm.cli.values import parse_value_options
 from cevm.core.cycle import CR0_DEFAULT
 from cevm.core.sweep import (
@@ -150,10 +159,14 @@ class PredictWriter:
                 columns = [c for c in columns if c not in ("energy_kwh_per_km", "fuel_l_per_100km")]
             else:  # at masses given for every source the measurement is no comparison: csv and json only
                 columns = [c for c in columns if c not in ("measured_energy_kwh", "measured_fuel_l")]
+            if "energy_kwh" in columns and "fuel_l" in columns:  # EV and ICE rows: room for the intervals
+                columns = [c for c in columns if c not in ("energy_kwh_per_km", "fuel_l_per_100km")]
             if self.temperature_used:
                 columns.insert(3, "ambient_c")
             title = "cevm predict" + (f" (first {len(rows)} of {self.rows} rows)" if self.rows > len(rows) else "")
-            write_rows(rows, OutputFormat.table, columns=PREDICT.table(columns, STATUS), title=title,
+            level = next((r["interval"] for r in rows if r.get("interval") is not None), None)
+            shown = replace(INTERVAL_TEXT, header=f"+- ({100 * level:g} %)") if level else INTERVAL_TEXT
+            write_rows(rows, OutputFormat.table, columns=PREDICT.table(columns, STATUS, shown), title=title,
                        stream=self.stream)
             legend = vehicle_legend(self.names)
             if legend:
@@ -259,6 +272,7 @@ def with_status(row: dict) -> dict:
     if p is not None and row.get("interval_from") in ("posterior", "prior") and 0.005 <= p < 0.995:
         status += f", P {p:.2f}"  # where the verdict is not sure (column p_reserve_ok / p_tank_ok)
     row["status"] = status
+    row["interval_text"] = interval_text(row)
     return row
 
 

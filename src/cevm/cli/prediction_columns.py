@@ -252,12 +252,31 @@ STATUS = Column("status", "reserve kept (EV) or tank enough (ICE), where not why
                 "probability rounds to neither 0 nor 1) its probability", kind="text",
                 header="reserve / tank ok", layout="wrap")
 
+#: The row's interval as one short text, for people only (:func:`interval_text`: the
+#: interval is central, so its half-width says it); its header says the level.
+INTERVAL_TEXT = Column("interval_text", "half the width of the row's central interval of the battery energy (EV, "
+                       "kWh) or the fuel (ICE, l) at --interval", kind="text", header="+-", layout="wrap")
+
+
+def interval_text(row: dict) -> str | None:
+    """'+-half-width unit' of a row's energy (EV) or fuel (ICE) interval (central, so
+    the value plus and minus it); None without one."""
+    ev = row.get("powertrain") == "ev"
+    key, unit = ("energy_kwh", "kWh") if ev else ("fuel_l", "l")
+    lo, hi = row.get(f"{key}_low"), row.get(f"{key}_high")
+    if lo is None or hi is None:
+        return None
+    half = 0.5 * (hi - lo)
+    d = 2 if half < 100 else 1 if half < 1000 else 0
+    return f"+-{half:,.{d}f} {unit}"
+
+
 #: The columns predict's table may show, in order (those without a value in any row are
 #: left out, and ambient_c comes in where a vehicle uses the temperature; see
 #: :class:`cevm.cli.predict.PredictWriter`): names of :data:`PREDICT`, and "status".
 PREDICT_TABLE = ("cycle", "vehicle_key", "mass_kg", "mass_source", "distance_km", "energy_kwh", "measured_energy_kwh",
                  "energy_kwh_per_km", "soc_min_pct", "fuel_l", "measured_fuel_l", "error_pct", "fuel_l_per_100km",
-                 "range_km", "status")
+                 "range_km", "status", "interval_text")
 
 
 # -------------------------------------------------------------------------- feasibility

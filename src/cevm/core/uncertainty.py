@@ -25,7 +25,7 @@ predictive distribution of a trip or a day is :mod:`cevm.core.predictive`.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
@@ -242,10 +242,22 @@ def _coefficient_range(term: str, low: float, high: float, eta_mid: float) -> tu
     return low, high
 
 
-def coefficient_bounds(powertrain: str, term: str, eta_mid: float = math.nan) -> tuple[float, float]:
-    """The physical range of the term's value (``plausible``) as a coefficient range."""
-    t = TERMS_BY_POWERTRAIN[(powertrain, term)]
-    lo, hi = t.plausible
+def plausible_range(powertrain: str, term: str,
+                    plausible: Mapping[str, tuple[float, float]] | None = None) -> tuple[float, float]:
+    """The physical range of a term's value (SI): ``plausible[term]`` where given (a
+    research fit on a model that is no real vehicle, e.g. a lossless drive), else the
+    term's own (:data:`cevm.core.terms` ``plausible``)."""
+    if plausible is not None and term in plausible:
+        lo, hi = plausible[term]
+        return float(lo), float(hi)
+    return TERMS_BY_POWERTRAIN[(powertrain, term)].plausible
+
+
+def coefficient_bounds(powertrain: str, term: str, eta_mid: float = math.nan,
+                       plausible: Mapping[str, tuple[float, float]] | None = None) -> tuple[float, float]:
+    """The physical range of the term's value (:func:`plausible_range`) as a coefficient
+    range."""
+    lo, hi = plausible_range(powertrain, term, plausible)
     if term == "eta":
         return 1.0 / hi, 1.0 / lo
     if term == "kin":
@@ -256,15 +268,17 @@ def coefficient_bounds(powertrain: str, term: str, eta_mid: float = math.nan) ->
 
 
 def coefficient_prior(powertrain: str, terms: Sequence[str], priors: Priors | None,
-                      eta_ref: float) -> CoefficientPrior:
+                      eta_ref: float, plausible: Mapping[str, tuple[float, float]] | None = None
+                      ) -> CoefficientPrior:
     """The Gaussian (truncated) prior of the coefficients of ``terms`` from ``priors``
     (None, or a term without a range: flat within its physical range); ``eta_ref`` the
-    eta that the kinetic coefficient is taken relative to when eta has no prior."""
+    eta that the kinetic coefficient is taken relative to when eta has no prior;
+    ``plausible`` physical ranges that replace the terms' own (:func:`plausible_range`)."""
     eta_p = priors.get("eta") if priors is not None else None
     eta_mid = eta_p.mean if eta_p is not None else eta_ref
     mean, sd, lb, ub = [], [], [], []
     for term in terms:
-        lo, hi = coefficient_bounds(powertrain, term, eta_mid)
+        lo, hi = coefficient_bounds(powertrain, term, eta_mid, plausible)
         p = priors.get(term) if priors is not None else None
         if p is None or term in ("cda", "cr"):
             m, s = math.nan, math.inf

@@ -11,6 +11,7 @@ from __future__ import annotations
 import math
 import re
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import tomlkit
@@ -134,8 +135,7 @@ def calibrated_toml(text: str, values: dict[str, float | str], header: str,
     if sources:
         if "sources" not in doc:
             doc.add("sources", tomlkit.table())
-        for key, why in sources.items():
-            doc["sources"][key] = why
+        _set_keeping_trailing_comments(doc["sources"], sources)
     for name, table, comment in (
             ("calibration", calibration, "What the calibration saw (cevm calibrate): predictions outside it are "
                                          "warned about."),
@@ -183,6 +183,19 @@ def calibration_table(result: CalibrationResult, *, store: str | None = None, se
         "interval": num(result.interval, 3), "cv_coverage": num(cov, 3),
         "cv_mean_rel_width_pct": num(result.mean_rel_width_pct, 2),
     }
+
+
+def _set_keeping_trailing_comments(table: Any, values: dict[str, str]) -> None:
+    """Set ``values`` in a tomlkit table, new keys after its last key: the comments
+    that end the table (in TOML they introduce the next one) stay at its end."""
+    body = table.value.body
+    last = max((i for i, (k, _) in enumerate(body) if k is not None), default=-1)
+    trailing = body[last + 1:]
+    del body[last + 1:]
+    for key, why in values.items():
+        table[key] = why
+    for _, item in trailing:
+        table.value.append(None, item)
 
 
 def changed_sources(result: CalibrationResult, vehicle_id: str | None) -> dict[str, str]:

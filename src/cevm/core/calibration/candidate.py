@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import contextlib
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -45,8 +45,10 @@ COOLING_GRID_C = (16.0, 18.0, 20.0, 22.0, 24.0, 26.0, 28.0)
 class Settings:
     """How candidates are fitted: ``huber_c`` (None: least squares), the grouped folds
     (``cv_folds``, leave-one-day-out below ``loo_below`` days, ``seed``), whether the
-    balance temperatures are searched (``fit_balance``), and the identifiability limits
-    of terms without a prior (``max_correlation``, ``max_rel_se``)."""
+    balance temperatures are searched (``fit_balance``), the identifiability limits of
+    terms without a prior (``max_correlation``, ``max_rel_se``), and physical ranges that
+    replace the terms' own (``plausible``: research fits only,
+    :func:`cevm.core.uncertainty.plausible_range`)."""
 
     huber_c: float | None = HUBER_C
     cv_folds: int = 5
@@ -55,6 +57,7 @@ class Settings:
     fit_balance: bool = True
     max_correlation: float = 0.98
     max_rel_se: float = 0.5
+    plausible: Mapping[str, tuple[float, float]] | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -84,10 +87,11 @@ class CandidateFit:
         return np.asarray((self.heldout.mean - y) / y * 100.0)
 
 
-def prior_for(model: TermModel, names: Sequence[str], priors: Priors | None) -> CoefficientPrior:
+def prior_for(model: TermModel, names: Sequence[str], priors: Priors | None,
+              plausible: Mapping[str, tuple[float, float]] | None = None) -> CoefficientPrior:
     """The coefficients' prior of ``names`` for ``model``'s vehicle (Cr bounded below by
     the trips' vectors' Cr0: their split is exact only above it)."""
-    cp = coefficient_prior(model.vehicle.powertrain, names, priors, model.vehicle.eta)
+    cp = coefficient_prior(model.vehicle.powertrain, names, priors, model.vehicle.eta, plausible)
     if "cr" in names:
         j = list(names).index("cr")
         cp.lb[j] = max(cp.lb[j], max((v.cr0 for v in model.data.vectors), default=0.0))
@@ -117,7 +121,7 @@ def balanced(model: TermModel, names: Sequence[str], idx: np.ndarray, priors: Pr
     # points apart
     centre = None if priors is None else priors.scatter
     with contextlib.suppress(np.linalg.LinAlgError):
-        noise = post.solve(model, names, idx, prior_for(model, names, priors), noise, huber_c=settings.huber_c,
+        noise = post.solve(model, names, idx, prior_for(model, names, priors, settings.plausible), noise, huber_c=settings.huber_c,
                            fit_noise=True, scatter_prior=centre, noise_rounds=2).noise
     for axis, grid in (("heat", HEATING_GRID_C if heats else ()), ("cool", COOLING_GRID_C if cools else ())):
         best = None
@@ -126,7 +130,7 @@ def balanced(model: TermModel, names: Sequence[str], idx: np.ndarray, priors: Pr
             if h2 > c2:
                 continue
             m = model.with_balance(h2, c2)
-            cp = prior_for(m, names, priors)
+            cp = prior_for(m, names, priors, settings.plausible)
             # a balance temperature the trips cannot place (too few trips on the side it
             # drives) is not chosen: the vehicle's stays (a summer-only trial keeps
             # 16 degC for heating, instead of a grid end no trip reaches)
@@ -162,7 +166,7 @@ def fit_candidate(model: TermModel, names: Sequence[str], idx: np.ndarray, prior
     refused: dict = {}
     while True:
         m = balanced(model, active, idx, priors, noise0, settings) if balance else model
-        cp = prior_for(m, active, priors)
+        cp = prior_for(m, active, priors, settings.plausible)
         # a term with a prior keeps it where the trips cannot tell: only the others must
         # earn their place
         bad = identifiability.unsupported(m, ["eta"] + [n for n in active if _flat(cp, n)], idx)

@@ -4,7 +4,7 @@ intervals, and what the fit saw (pure)."""
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -151,6 +151,7 @@ def fit(
     standstill: bool = False,
     fit_balance: bool = False,
     scatter: tuple[float, float] | None = None,
+    plausible: Mapping[str, tuple[float, float]] | None = None,
 ) -> CalibrationResult:
     """Fit a vehicle's terms to measured trip consumption and validate the fit.
 
@@ -197,6 +198,11 @@ def fit(
     scatter : (s_aux [W or l/s], s_share [-]) to hold the trips' scatter at instead of
         fitting it (:class:`cevm.core.uncertainty.Scatter`); (0, 0): the measurement
         uncertainties alone weigh the trips
+    plausible : physical ranges {term: (low, high)} of the values (SI, vehicle-field
+        meaning: eta as an efficiency) that replace the terms' own, for research fits on
+        models that are no real vehicle (benchmarks/bench_tables.py fits the detailed
+        model with every loss switched off: eta 0.95, above any real EV's 0.89); a fit
+        on real trips keeps the defaults
 
     A forced term set is held to the same physical bounds as a chosen one: a value the
     data want beyond them refuses the fit (:class:`CalibrationError`, with the reason).
@@ -221,12 +227,12 @@ def fit(
         )
     model = TermModel(vehicle, data)
     settings = Settings(HUBER_C if robust else None, cv_folds, loo_below, seed, fit_balance, max_correlation,
-                        max_rel_se)
+                        max_rel_se, plausible)
     cf = fit_candidate(model, names, np.arange(data.n), priors, settings, standstill=standstill,
                        heldout=cv_folds >= 2, scatter=scatter)
-    why = plausibility.implausible(cf.model, cf.fit, np.arange(data.n), cf.prior.lb, cf.prior.ub)
-    if why is not None:
-        raise CalibrationError(f"{why[0]}: {why[1]}")
+    refused = plausibility.implausible(cf.model, cf.fit, np.arange(data.n), cf.prior.lb, cf.prior.ub, plausible)
+    if refused is not None:
+        raise CalibrationError(f"{refused[0]}: {refused[1]}")
     return fit_model(cf, excluded, settings, priors=priors, interval=interval, time_repeats=time_repeats,
                      vehicle_id=vehicle_id)
 
@@ -307,7 +313,7 @@ def fit_model(cf: CandidateFit, excluded: dict, settings: Settings, *, priors: P
             corr[(fields[active[a]], fields[active[b]])] = float(vcov[a, b] / dd) if dd > 0 else math.nan
     if not result.converged:
         warnings.append("the fit did not converge to the requested tolerance")
-    why = plausibility.implausible(model, result, idx_all, cf.prior.lb, cf.prior.ub)
+    why = plausibility.implausible(model, result, idx_all, cf.prior.lb, cf.prior.ub, settings.plausible)
     if why is not None and why[0] == "eta":
         warnings.append(f"eta: {why[1]}")
     csd = result.sd

@@ -14,11 +14,13 @@ fuel flow), or a fraction of it, whether or not the model has an auxiliary or id
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 
 import numpy as np
 
 from cevm.core.calibration.solve import FitLike, bounds, value_covariance
 from cevm.core.calibration.terms import TERMS_BY_POWERTRAIN, TermModel
+from cevm.core.uncertainty import plausible_range
 
 #: A fitted standstill rate more than this factor above (or below 1 / this) the
 #: measured one is refused.
@@ -38,11 +40,13 @@ def _fmt(model: TermModel, name: str, value: float) -> str:
 
 
 def implausible(model: TermModel, fit: FitLike, idx: np.ndarray, lb: np.ndarray | None = None,
-                ub: np.ndarray | None = None) -> tuple[str, str] | None:
+                ub: np.ndarray | None = None,
+                plausible: Mapping[str, tuple[float, float]] | None = None) -> tuple[str, str] | None:
     """The first term whose fitted value physics refuses, with the reason (see the module
     docstring); eta included. ``fit`` has ``names``, ``theta`` (coefficients), ``cov``
     (their covariance) and ``free`` (the estimate without bounds); ``lb``, ``ub`` the
-    coefficients' bounds in the fit (default :func:`.solve.bounds`)."""
+    coefficients' bounds in the fit (default :func:`.solve.bounds`); ``plausible`` ranges
+    that replace the terms' own (:func:`cevm.core.uncertainty.plausible_range`)."""
     pt = model.vehicle.powertrain
     values, _ = value_covariance(model, fit)
     csd = np.sqrt(np.maximum(np.diag(fit.cov), 0.0))
@@ -51,7 +55,7 @@ def implausible(model: TermModel, fit: FitLike, idx: np.ndarray, lb: np.ndarray 
     for j, name in enumerate(fit.names):
         t = TERMS_BY_POWERTRAIN[(pt, name)]
         v = float(values[name])
-        lo, hi = t.plausible
+        lo, hi = plausible_range(pt, name, plausible)
         if not math.isfinite(v) or v < lo or v > hi:
             if name in ("eta", "regen", "kin") and v > 1:
                 why = f"above 1: {_LESS_THAN_THE_WHEELS}"

@@ -210,7 +210,7 @@ def _select_on(model: TermModel, keys: Sequence[Key], idx: np.ndarray, priors: P
             term, why = next(iter(cf.refused.items()))
             reasons[key] = (term, why)
             continue
-        bad = plausibility.implausible(cf.model, cf.fit, idx, cf.prior.lb, cf.prior.ub)
+        bad = plausibility.implausible(cf.model, cf.fit, idx, cf.prior.lb, cf.prior.ub, settings.plausible)
         if bad is not None:
             reasons[key] = bad
             continue
