@@ -56,7 +56,14 @@ from cevm.cli.common import (
     with_cycle_options,
 )
 from cevm.cli.output import OutputFormat, vehicle_legend, write_rows
-from cevm.cli.prediction_columns import PREDICT, PREDICT_TABLE, STATUS, BlockRows
+from cevm.cli.prediction_columns import (
+    PREDICT,
+    PREDICT_TABLE,
+    PREDICT_TABLE_DROP,
+    PREDICT_TABLE_KEEP,
+    STATUS,
+    BlockRows,
+)
 from cevm.cli.values import parse_value_options
 from cevm.core.cycle import CR0_DEFAULT
 from cevm.core.sweep import (
@@ -151,7 +158,7 @@ class PredictWriter:
                 columns.insert(3, "ambient_c")
             title = "cevm predict" + (f" (first {len(rows)} of {self.rows} rows)" if self.rows > len(rows) else "")
             write_rows(rows, OutputFormat.table, columns=PREDICT.table(columns, STATUS), title=title,
-                       stream=self.stream)
+                       stream=self.stream, keep=PREDICT_TABLE_KEEP, drop_order=PREDICT_TABLE_DROP)
             legend = vehicle_legend(self.names)
             if legend:
                 self.stream.write(legend + "\n")

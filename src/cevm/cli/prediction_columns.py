@@ -187,6 +187,11 @@ STATUS = Column("status", "reserve kept (EV) or tank enough (ICE), and where not
 PREDICT_TABLE = ("cycle", "vehicle_key", "mass_kg", "mass_source", "distance_km", "energy_kwh", "measured_energy_kwh",
                  "energy_kwh_per_km", "soc_min_pct", "fuel_l", "measured_fuel_l", "error_pct", "fuel_l_per_100km",
                  "range_km", "status")
+#: What predict's table keeps on a narrow terminal (never left out) and what it leaves
+#: out first, in order (:func:`cevm.cli.output.print_table`; the rest go from the right).
+PREDICT_TABLE_KEEP = ("cycle", "energy_kwh", "fuel_l", "status")
+PREDICT_TABLE_DROP = ("ambient_c", "mass_source", "distance_km", "energy_kwh_per_km", "fuel_l_per_100km", "range_km",
+                      "soc_min_pct", "measured_energy_kwh", "measured_fuel_l")
 
 
 # -------------------------------------------------------------------------- feasibility
