@@ -132,8 +132,26 @@ RouteOption = Annotated[
     typer.Option("--route", "-r", metavar="NAME", help="A stored route (see 'cevm route list'), or a glob such as 'block-*'. Repeatable."),
 ]
 SocStartOption = Annotated[
-    float, typer.Option("--soc-start", help="EV state of charge at the start [%] (default: full).")
+    Optional[float], typer.Option("--soc-start", help="EV state of charge at the start [%]. Default: a stored trip's "
+                                  "own logged start, else full (100); column soc_start_from says which.")
 ]
+
+#: Where a row's start state of charge comes from (column ``soc_start_from``).
+SOC_FROM_GIVEN, SOC_FROM_LOGGED, SOC_FROM_DEFAULT = "--soc-start", "logged", "default"
+
+
+def start_soc(source, given: float | None) -> tuple[float, str]:
+    """(start state of charge [%], where it comes from) of an EV row on ``source``:
+    ``--soc-start`` when given, else a stored trip's own logged start state of charge
+    (its ``start_soc_pct``), else full (:data:`cevm.core.sweep.DEFAULT_SOC_START_PCT`)."""
+    from cevm.core.sweep import DEFAULT_SOC_START_PCT
+
+    if given is not None:
+        return float(given), SOC_FROM_GIVEN
+    logged = getattr(source, "start_soc_pct", None)
+    if logged is not None and math.isfinite(logged) and 0.0 < logged <= 100.0:
+        return float(logged), SOC_FROM_LOGGED
+    return DEFAULT_SOC_START_PCT, SOC_FROM_DEFAULT
 ReserveOption = Annotated[
     float, typer.Option("--reserve-pct", help="EV state of charge to keep all along [%] (default 15, the paper's warning level).")
 ]
@@ -270,19 +288,19 @@ def check_workers(workers: Optional[int]) -> None:
                    "processes only add memory)")
 
 
-def check_common(ice_braking: Optional[str], soc_start: float, reserve_pct: float) -> None:
+def check_common(ice_braking: Optional[str], soc_start: float | None, reserve_pct: float) -> None:
     if ice_braking is not None and ice_braking not in ICE_BRAKING_MODES:
         raise fail(f"--ice-braking must be one of: {', '.join(ICE_BRAKING_MODES)}")
     check_soc(soc_start, reserve_pct)
 
 
-def check_soc(soc_start: float, reserve_pct: float | None = None) -> None:
-    """--soc-start and --reserve-pct, with the words of :func:`cevm.core.checks.soc_pct`
-    (the same message from every command)."""
+def check_soc(soc_start: float | None, reserve_pct: float | None = None) -> None:
+    """--soc-start (None: not given) and --reserve-pct, with the words of
+    :func:`cevm.core.checks.soc_pct` (the same message from every command)."""
     from cevm.core import checks
 
     try:
-        checks.soc_pct(soc_start)
+        checks.soc_pct(100.0 if soc_start is None else soc_start)
     except CevmError as exc:
         raise fail(f"--soc-start: {exc}") from None
     if reserve_pct is not None:

@@ -8,7 +8,7 @@ from typing import Annotated, Optional
 
 import typer
 
-from cevm.cli.common import AmbientOption, StoreOption, fail, warn_ambient_unused
+from cevm.cli.common import EXIT_INPUT, EXIT_PARTIAL, AmbientOption, StoreOption, fail, warn_ambient_unused
 from cevm.cli.output import OutputFormat, vehicle_legend, write_rows
 from cevm.errors import CevmError
 
@@ -35,7 +35,7 @@ def fleet_plan(
     from contextlib import ExitStack
 
     from cevm.io.scenario import default_resolver, fleet_report
-    from cevm.store.sources import store_resolver
+    from cevm.store.sources import store_leg_demand, store_resolver
     from cevm.store import TripStore, resolve_store_path
 
     if method not in ("auto", "enumerate", "milp"):
@@ -45,8 +45,15 @@ def fleet_plan(
         store_path = resolve_store_path(store)
         if store_path.exists():  # legs may be stored trips or routes: opened read-only when one is
             with ExitStack() as stack:
-                resolver = store_resolver(lambda: stack.enter_context(TripStore.open(store_path, readonly=True)))
-                report = fleet_report(scenario, days, method=method, resolve_leg=resolver, ambient_c=ambient_c)
+                opened: list = []
+
+                def opener():
+                    if not opened:
+                        opened.append(stack.enter_context(TripStore.open(store_path, readonly=True)))
+                    return opened[0]
+
+                report = fleet_report(scenario, days, method=method, resolve_leg=store_resolver(opener),
+                                      ambient_c=ambient_c, leg_demand=store_leg_demand(opener, scenario.parent))
         else:
             report = fleet_report(scenario, days, method=method, resolve_leg=default_resolver, ambient_c=ambient_c)
     except CevmError as exc:
@@ -56,13 +63,19 @@ def fleet_plan(
         return _warn(report)
     unit = report["unit"]
     if fmt == OutputFormat.csv:
-        rows = [{"day": p["day"], "vehicle": v["vehicle"], "stops": " ".join(v["stops"]), f"consumption_{unit}": v["value"]}
+        rows = [{"day": p["day"], "vehicle": v["vehicle"], "stops": " ".join(v["stops"]), f"consumption_{unit}": v["value"],
+                 "feasible": v["verdict"]["feasible"], "why": "; ".join(_why_not(v["verdict"]))}
                 for p in report["plans"] for v in p["vehicles"]]
+        rows += [{"day": d["day"], "vehicle": None, "stops": None, f"consumption_{unit}": None, "feasible": False,
+                  "why": f"not planned: {d['why']}"} for d in report["infeasible_days"]]
         write_rows(rows, fmt)
         return _warn(report)
     day_cols = [k for k in report["table"][0] if k != "vehicle"] if report["table"] else []
-    write_rows(report["table"], OutputFormat.table, columns=["vehicle", *day_cols],
-               title=f"{report['scenario']}: stops per vehicle (the paper's table 4)")
+    if report["table"]:
+        write_rows(report["table"], OutputFormat.table, columns=["vehicle", *day_cols],
+                   title=f"{report['scenario']}: stops per vehicle")
+    for line in _reference_lines(report):
+        typer.echo(line)
     files: dict[tuple, list[str]] = {}  # the fleet's ids per vehicle file: what the litres assumed
     for v in report["vehicles"]:
         files.setdefault((v["vehicle_key"], v["vehicle"], v["ice_braking"]), []).append(v["id"])
@@ -75,19 +88,62 @@ def fleet_plan(
     rows = []
     for p in report["plans"]:
         for v in p["vehicles"]:
-            rows.append({"day": p["day"], "vehicle": v["vehicle"], unit: v["value"], "max gross kg": v["max_gross_used_kg"]})
-    write_rows(rows, OutputFormat.table, title=f"consumption per vehicle [{unit}]", digits={unit: 2, "max gross kg": 0})
+            vd = v["verdict"]
+            mark = "?" if vd["feasible"] is None else "yes" if vd["feasible"] else "NO"
+            why = _why_not(vd)
+            rows.append({"day": p["day"], "vehicle": v["vehicle"], unit: v["value"], "max gross kg": v["max_gross_used_kg"],
+                         "feasible": mark + (f" ({'; '.join(why)})" if why else "")})
+    if rows:
+        write_rows(rows, OutputFormat.table, title=f"consumption per vehicle [{unit}]",
+                   digits={unit: 2, "max gross kg": 0}, keep=("day", "vehicle", unit, "feasible"))
     summary = [{"day": s["day"], f"total {unit}": s["total"], f"default {unit}": s["default_total"],
                 "saving %": s["saving_pct"], "method": s["method"], "status": s["status"],
                 "solve ms": s["solve_time_s"] * 1e3} for s in report["summary"]]
-    write_rows(summary, OutputFormat.table, title="optimum against the default assignment",
-               digits={f"total {unit}": 2, f"default {unit}": 2, "saving %": 2, "solve ms": 2})
+    if summary:
+        write_rows(summary, OutputFormat.table, title="optimum against the default assignment",
+                   digits={f"total {unit}": 2, f"default {unit}": 2, "saving %": 2, "solve ms": 2},
+                   keep=("day", f"total {unit}", "saving %"), drop_order=("solve ms", "method", "status"))
     _warn(report)
+
+
+def _why_not(verdict: dict) -> list[str]:
+    """Why a vehicle's planned day is not a plain yes (its verdict), in words."""
+    out = []
+    if verdict["over_max_gross"]:
+        out.append("over max gross")
+    if verdict["energy_ok"] is False:
+        out.append("over its energy budget or tank")
+    cannot = [f"{what} on {len(verdict[key])} leg(s)" for what, key in (("power", "over_power"), ("speed", "over_speed"))
+              if verdict.get(key)]
+    if cannot:
+        out.append("cannot follow: " + ", ".join(cannot))
+    return out
+
+
+def _reference_lines(report: dict) -> list[str]:
+    """Lines that compare the plans' choices with the scenario's [reference] (the
+    paper's table 4): the same, or where they differ and why they may."""
+    ref = report.get("reference")
+    if not ref:
+        return []
+    diffs = ref["differences"]
+    if not diffs:
+        return [f"the same choices as {ref['source']}"]
+    days: dict[str, list[str]] = {}
+    for d in diffs:
+        days.setdefault(d["day"], []).append(f"{d['stop']}: {d['planned']} here, {d['reference']} there")
+    text = f"differs from {ref['source']} on " + "; ".join(f"{day} ({', '.join(what)})" for day, what in days.items())
+    why = [ref["why"]] if ref.get("why") else []
+    calibrated = sorted({v["id"] for v in report["vehicles"] if v["calibrated"]})
+    if calibrated:
+        why.append(f"vehicles {', '.join(calibrated)} are calibrated on logs, not the paper's model")
+    return [text + (": " + "; ".join(why) if why else "")]
 
 
 def _warn(report: dict) -> None:
     """After the output, in every format: each vehicle planned outside what its
-    calibration saw."""
+    calibration saw or on legs it cannot follow; the days not planned (exit 1 when
+    others were, 2 when none was)."""
     for w in report["warnings"]:
         typer.echo(f"cevm: warning: {w}", err=True)
     temps = [t for t in report["ambient_c"].values() if t is not None]
@@ -95,3 +151,8 @@ def _warn(report: dict) -> None:
         asked = "the days' ambient temperatures" if len(set(temps)) > 1 else f"an ambient of {temps[0]:g} degC"
         by_file = {v["vehicle_key"]: v["uses_temperature"] for v in report["vehicles"]}
         warn_ambient_unused(list(by_file.items()), asked)
+    bad = report["infeasible_days"]
+    if bad:
+        for d in bad:
+            typer.echo(f"cevm: error: not planned: {d['why']}", err=True)
+        raise typer.Exit(EXIT_PARTIAL if report["plans"] else EXIT_INPUT)
