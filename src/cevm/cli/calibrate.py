@@ -12,7 +12,16 @@ from typing import TYPE_CHECKING, Annotated, Optional
 import numpy as np
 import typer
 
-from cevm.cli.common import EXIT_PARTIAL, StoreOption, existing_store, fail, warn_damaged
+from cevm.cli.common import (
+    EXIT_PARTIAL,
+    PNG,
+    TOML,
+    StoreOption,
+    check_output_path,
+    existing_store,
+    fail,
+    warn_damaged,
+)
 from cevm.cli.output import OutputFormat, write_rows
 from cevm.core.model import ICE_BRAKING_MODES
 from cevm.errors import CevmError
@@ -71,6 +80,11 @@ def calibrate(
         raise fail("give --fit (a forced term set) or --terms (the terms to choose among), not both")
     if cv_folds < 2:
         raise fail("--cv-folds must be at least 2")
+    check_output_path(out, "--out", TOML)
+    check_output_path(plot, "--plot", PNG)
+    if out is not None and out.exists() and not force:  # said before the fit, not after it
+        what = "the vehicle file it calibrates" if out.resolve() == vehicle.resolve() else "an existing file"
+        raise fail(f"--out {out}: would overwrite {what}; give another --out or --force")
     path = existing_store(store)
     if ice_braking is not None and ice_braking not in ICE_BRAKING_MODES:
         raise fail(f"--ice-braking must be one of: {', '.join(ICE_BRAKING_MODES)}")

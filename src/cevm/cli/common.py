@@ -333,6 +333,37 @@ class OutFile:
             self.tmp.unlink(missing_ok=True)
 
 
+#: What the output options write, by file name ending: the check of
+#: :func:`check_output_path`.
+PNG, TOML = (".png", "a PNG image"), (".toml", "a vehicle file")
+
+
+def check_output_path(path: Optional[Path], option: str, kind: tuple[str, str] | None = None) -> None:
+    """An output file's path checked before any work, the same for every command's
+    ``--out`` and ``--plot``: a mistake is one line and exit 2 (bad usage). Refused: a
+    folder given as the file, a file in a folder that does not exist (or is not a
+    folder, or cannot be written into), and for ``kind`` ((ending, what), e.g.
+    :data:`PNG`) a name without that ending (``--plot out.txt``: the image format is
+    the ending's). None (the option not given) passes."""
+    if path is None:
+        return
+    p = Path(path)
+    shown = printable(str(p))
+    if p.is_dir():
+        raise fail(f"{option} {shown}: is a folder; give a file name (e.g. {printable(str(p / 'out'))}"
+                   f"{kind[0] if kind else ''})")
+    if kind is not None and p.suffix.lower() != kind[0]:
+        raise fail(f"{option} {shown}: {kind[1]} is written here, so the name must end in {kind[0]}"
+                   + (f" (not {printable(p.suffix)})" if p.suffix else ""))
+    parent = p.parent
+    if not parent.exists():
+        raise fail(f"{option} {shown}: the folder {printable(str(parent))} does not exist (make it first)")
+    if not parent.is_dir():
+        raise fail(f"{option} {shown}: {printable(str(parent))} is not a folder")
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise fail(f"{option} {shown}: cannot write in the folder {printable(str(parent))} (permission denied)")
+
+
 def open_out(stack: ExitStack, out: Optional[Path]) -> IO[str]:
     return sys.stdout if out is None else stack.enter_context(OutFile(out))
 

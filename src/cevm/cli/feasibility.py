@@ -29,6 +29,7 @@ from cevm.cli.common import (
     VehicleIdOption,
     VehicleOption,
     check_common,
+    check_output_path,
     fail,
     load_sources,
     note_flat_cycles,
@@ -100,6 +101,7 @@ def feasibility_cmd(
     if payload_kg is not None and mass_kg is not None:
         raise fail("give --mass-kg or --payload-kg, not both")
     check_common(ice_braking, soc_start, reserve_pct)
+    check_output_path(out, "--out")
     try:
         from cevm.io import load_vehicles
 

@@ -8,9 +8,20 @@ from typing import Annotated, Optional
 
 import typer
 
-from cevm.cli.common import EXIT_INPUT, EXIT_PARTIAL, AmbientOption, StoreOption, fail, warn_ambient_unused
+from cevm.cli.common import (
+    EXIT_INPUT,
+    EXIT_PARTIAL,
+    AmbientOption,
+    OutOption,
+    StoreOption,
+    check_output_path,
+    fail,
+    open_out,
+    warn_ambient_unused,
+)
 from cevm.cli.output import OutputFormat, vehicle_legend, write_rows
 from cevm.errors import CevmError
+from cevm.text import printable
 
 
 app = typer.Typer(help="Fleet assignment: which vehicle serves the shared stops (the paper's section 6).",
@@ -25,13 +36,17 @@ def fleet_plan(
     store: StoreOption = None,
     ambient_c: AmbientOption = None,
     fmt: Annotated[OutputFormat, typer.Option("--format", "-f", help="Output format.")] = OutputFormat.table,
+    out: OutOption = None,
 ) -> None:
     """The assignment of shared stops that minimises total fuel (or energy, or cost),
     within gross-weight limits and EV reserves: proven optimal (enumeration or MILP).
 
     Each day's ambient temperature: --ambient-c for every day, else the scenario's
-    ambient_c per day, else each vehicle's reference."""
-    import json
+    ambient_c per day, else each vehicle's reference. Each vehicle's day gets the verdict
+    every command gives (within max_gross_kg, max_power_kw and max_speed_kmh on every leg,
+    the energy budget or the tank); a day without a feasible assignment is named with
+    why and the others are planned (exit 1). A scenario's [reference] (the paper's table
+    4) is compared with the choices."""
     from contextlib import ExitStack
 
     from cevm.io.scenario import default_resolver, fleet_report
@@ -40,6 +55,7 @@ def fleet_plan(
 
     if method not in ("auto", "enumerate", "milp"):
         raise fail("--method must be auto, enumerate or milp")
+    check_output_path(out, "--out")
     days = list(day) if day else None  # names or 1-based numbers (cevm.io.scenario.resolve_day)
     try:
         store_path = resolve_store_path(store)
@@ -58,9 +74,27 @@ def fleet_plan(
             report = fleet_report(scenario, days, method=method, resolve_leg=default_resolver, ambient_c=ambient_c)
     except CevmError as exc:
         raise fail(exc) from None
+    try:
+        with ExitStack() as stack:
+            _write_report(report, fmt, open_out(stack, out))
+    except CevmError as exc:
+        raise fail(exc) from None
+    if out is not None:
+        typer.echo(f"cevm fleet plan: {len(report['plans'])} day(s) planned -> {printable(str(out))}", err=True)
+    _warn(report)
+
+
+def _write_report(report: dict, fmt: OutputFormat, stream) -> None:
+    """The plan in ``fmt`` on ``stream``."""
+    import json
+
+    def echo(line: str) -> None:
+        stream.write(line + "\n")
+
     if fmt == OutputFormat.json:
-        typer.echo(json.dumps(report, indent=2))
-        return _warn(report)
+        json.dump(report, stream, indent=2)
+        stream.write("\n")
+        return
     unit = report["unit"]
     if fmt == OutputFormat.csv:
         rows = [{"day": p["day"], "vehicle": v["vehicle"], "stops": " ".join(v["stops"]), f"consumption_{unit}": v["value"],
@@ -68,23 +102,23 @@ def fleet_plan(
                 for p in report["plans"] for v in p["vehicles"]]
         rows += [{"day": d["day"], "vehicle": None, "stops": None, f"consumption_{unit}": None, "feasible": False,
                   "why": f"not planned: {d['why']}"} for d in report["infeasible_days"]]
-        write_rows(rows, fmt)
-        return _warn(report)
+        write_rows(rows, fmt, stream=stream)
+        return
     day_cols = [k for k in report["table"][0] if k != "vehicle"] if report["table"] else []
     if report["table"]:
         write_rows(report["table"], OutputFormat.table, columns=["vehicle", *day_cols],
-                   title=f"{report['scenario']}: stops per vehicle")
+                   title=f"{report['scenario']}: stops per vehicle", stream=stream)
     for line in _reference_lines(report):
-        typer.echo(line)
+        echo(line)
     files: dict[tuple, list[str]] = {}  # the fleet's ids per vehicle file: what the litres assumed
     for v in report["vehicles"]:
         files.setdefault((v["vehicle_key"], v["vehicle"], v["ice_braking"]), []).append(v["id"])
     legend = vehicle_legend({", ".join(ids): (f"{key}: {name}", braking) for (key, name, braking), ids in files.items()})
     if legend:
-        typer.echo(legend)
+        echo(legend)
     temps = {d: t for d, t in report.get("ambient_c", {}).items() if t is not None}
     if temps:
-        typer.echo("ambient: " + ", ".join(f"{d} {t:g} degC" for d, t in temps.items()))
+        echo("ambient: " + ", ".join(f"{d} {t:g} degC" for d, t in temps.items()))
     rows = []
     for p in report["plans"]:
         for v in p["vehicles"]:
@@ -95,15 +129,14 @@ def fleet_plan(
                          "feasible": mark + (f" ({'; '.join(why)})" if why else "")})
     if rows:
         write_rows(rows, OutputFormat.table, title=f"consumption per vehicle [{unit}]",
-                   digits={unit: 2, "max gross kg": 0}, keep=("day", "vehicle", unit, "feasible"))
+                   digits={unit: 2, "max gross kg": 0}, keep=("day", "vehicle", unit, "feasible"), stream=stream)
     summary = [{"day": s["day"], f"total {unit}": s["total"], f"default {unit}": s["default_total"],
                 "saving %": s["saving_pct"], "method": s["method"], "status": s["status"],
-                "solve ms": s["solve_time_s"] * 1e3} for s in report["summary"]]
+                "solve ms": None if s["solve_time_s"] is None else s["solve_time_s"] * 1e3} for s in report["summary"]]
     if summary:
         write_rows(summary, OutputFormat.table, title="optimum against the default assignment",
                    digits={f"total {unit}": 2, f"default {unit}": 2, "saving %": 2, "solve ms": 2},
-                   keep=("day", f"total {unit}", "saving %"), drop_order=("solve ms", "method", "status"))
-    _warn(report)
+                   keep=("day", f"total {unit}", "saving %"), drop_order=("solve ms", "method", "status"), stream=stream)
 
 
 def _why_not(verdict: dict) -> list[str]:
@@ -124,7 +157,7 @@ def _reference_lines(report: dict) -> list[str]:
     """Lines that compare the plans' choices with the scenario's [reference] (the
     paper's table 4): the same, or where they differ and why they may."""
     ref = report.get("reference")
-    if not ref:
+    if not ref or not report["plans"]:
         return []
     diffs = ref["differences"]
     if not diffs:

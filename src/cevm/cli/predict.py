@@ -46,7 +46,9 @@ from cevm.cli.common import (
     TripOption,
     VehicleIdOption,
     VehicleOption,
+    PNG,
     check_common,
+    check_output_path,
     check_workers,
     fail,
     load_sources,
@@ -369,6 +371,8 @@ def predict_cmd(
         raise fail("give --workers (local processes) or --scheduler (a Dask cluster), not both")
     check_workers(workers)
     check_common(ice_braking, soc_start, reserve_pct)
+    check_output_path(out, "--out")
+    check_output_path(plot, "--plot", PNG)
     try:
         masses = parse_value_options(mass_kg, "--mass-kg")
         payloads = parse_value_options(payload_kg, "--payload-kg")

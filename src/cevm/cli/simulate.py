@@ -10,10 +10,11 @@ import numpy as np
 import typer
 
 from cevm.cli.common import (
-    SOC_FROM_DEFAULT,
+    PNG,
     ReserveOption,
     SocStartOption,
     StoreOption,
+    check_output_path,
     check_soc,
     fail,
     start_soc,
@@ -57,6 +58,8 @@ def simulate(
     if mass_kg is not None and payload_kg is not None:
         raise fail("give --mass-kg or --payload-kg, not both")
     check_soc(soc_start_pct, reserve_pct)
+    check_output_path(out, "--out")
+    check_output_path(plot, "--plot", PNG)
     try:
         veh = load_vehicle(vehicle)
         if "detailed" not in veh.extra:

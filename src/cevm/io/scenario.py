@@ -489,7 +489,7 @@ def fleet_report(path: str | Path, days: Sequence[str | int] | None = None, *, m
         "reference": None if reference is None else {
             "source": reference["source"], "why": reference["why"], "differences": differences},
         "table": table4_rows(plans),
-        "summary": [
+        "summary": sorted([
             {
                 "day": p.day,
                 "total": p.total,
@@ -501,7 +501,9 @@ def fleet_report(path: str | Path, days: Sequence[str | int] | None = None, *, m
                 "solve_time_s": p.solve_time_s,
             }
             for p in plans
-        ],
+        ] + [{"day": d["day"], "total": None, "default_total": None, "saving": None, "saving_pct": None,
+              "method": None, "status": "infeasible", "solve_time_s": None} for d in infeasible],
+            key=lambda row: sc.day_index(row["day"])),
         "plans": [_with_verdicts(p.to_dict(), vd) for p, vd in zip(plans, verdicts)],
     }
 
