@@ -19,6 +19,14 @@ and whether the peak meets the goal. The cases:
 - ``wide``: the sample's bus day with every srf column (20, a hybrid's fuel columns
   added), at the most rows the default values bound allows it (ingested) and at 2.5 M
   rows (refused by that bound, at the row past it).
+- ``portal 2.5M``, ``portal 1.2M``: the sample portal log's first day (``;``, decimal
+  commas, cp1252, local times) repeated on consecutive days from 1 November 2019 to 2.5
+  million rows (the default row limit: 12 M trip samples on the 1 s grid, a row every
+  5 s; refused by the samples bound, ``--max-samples``) and to 1.2 million (5.8 M
+  samples, under it: ingested).
+- ``DSM one strip``, ``DSM 16k tiles``: a sample srf log with a DSM of one 40,000 x
+  40,000 float32 deflate strip (sparse: kilobytes on disk, 6.4 GB decoded), or of
+  16,384-pixel tiles (1.07 GB each decoded): refused from the raster's header.
 - ``gzip bomb``: about 10 MB of gzip expanding to ``--bomb-gib`` GiB (default 3) of
   valid, identical srf rows: it must fail fast with a clear message.
 - ``no line breaks``: 415 MB of text without a line break: must fail from its first
@@ -104,6 +112,40 @@ def make_wide_srf(out: Path, rows: int, sample: Path) -> Path:
     assert all(ln[:10] == b"2019-01-31" for ln in body), "a day that crosses midnight"
     tails = [ln[10:] + b",1000.0,1.50,1.45,12000" for ln in body]
     return _write_days(out, head, header, tails, dt.date(2019, 1, 31), rows)
+
+
+def make_portal(out: Path, rows: int, sample: Path) -> Path:
+    """A portal export of ``rows`` rows: the sample portal log's first day repeated on
+    consecutive days from 2019-11-01 (no clock change), in the export's own bytes."""
+    import datetime as dt
+
+    src = next((sample / "portal").glob("*.csv")).read_bytes().split(b"\n")
+    header, body = src[0], [ln for ln in src[1:] if ln.strip()]
+    first = body[0].split(b";")[1][:10]
+    day = [ln for ln in body if ln.split(b";")[1][:10] == first]
+    with open(out, "wb") as fh:
+        fh.write(header + b"\n")
+        n, d = 0, dt.date(2019, 11, 1)
+        while n < rows:
+            stamp = d.strftime("%d/%m/%Y").encode()
+            chunk = day[: rows - n]
+            fh.write(b"\n".join(ln.replace(first, stamp, 1) for ln in chunk) + b"\n")
+            n += len(chunk)
+            d += dt.timedelta(days=1)
+    return out
+
+
+def make_huge_block_dsm(out: Path, **layout) -> Path:
+    """A 40,000 x 40,000 float32 GeoTIFF (over the sample's area) with ``layout``'s
+    blocks, written sparse (no block written: kilobytes on disk)."""
+    import rasterio
+    from rasterio.transform import from_origin
+
+    with rasterio.open(out, "w", driver="GTiff", width=40_000, height=40_000, count=1, dtype="float32",
+                       crs="EPSG:27700", transform=from_origin(470_000, 250_000, 2.0, 2.0), compress="deflate",
+                       sparse_ok=True, **layout):
+        pass
+    return out
 
 
 def make_bomb(out: Path, gib: float) -> Path:
@@ -297,6 +339,14 @@ def main() -> None:
         for path, n in ((wide, wide_rows), (wide_over, 2_500_000)):
             if not (args.keep and path.exists()):
                 make_wide_srf(path, n, work / "sample")
+        portal, portal_half = work / "portal-2500000.csv", work / "portal-1200000.csv"
+        for path, n in ((portal, 2_500_000), (portal_half, 1_200_000)):
+            if not (args.keep and path.exists()):
+                make_portal(path, n, work / "sample")
+        strip_dsm, tiles_dsm = work / "dsm-strip.tif", work / "dsm-16k.tif"
+        make_huge_block_dsm(strip_dsm, tiled=False, blockysize=40_000)
+        make_huge_block_dsm(tiles_dsm, tiled=True, blockxsize=16_384, blockysize=16_384)
+        bus_day = work / "sample" / "srf" / "EB-01_2019-01-31.csv"
         bomb, lineless, nul = work / "bomb.csv.gz", work / "lineless.csv", work / "nul.csv"
         if not (args.keep and bomb.exists()):
             make_bomb(bomb, args.bomb_gib)
@@ -312,6 +362,10 @@ def main() -> None:
         todo = [("import only", None, []), (big_name, big, ["--dsm", str(dsm), "--max-rows", str(max(args.rows, lim.max_rows))]),
                 (f"wide {wide_rows / 1e6:g}M", wide, ["--dsm", str(dsm)]),
                 ("wide 2.5M", wide_over, ["--dsm", str(dsm)]),
+                ("portal 2.5M", portal, ["--dsm", str(dsm)]),
+                ("portal 1.2M", portal_half, ["--dsm", str(dsm)]),
+                ("DSM one strip", bus_day, ["--dsm", str(strip_dsm)]),
+                ("DSM 16k tiles", bus_day, ["--dsm", str(tiles_dsm)]),
                 ("gzip bomb", bomb, []),
                 ("no line breaks", lineless, []), ("all NUL", nul, [])]
         cases = []

@@ -296,16 +296,16 @@ def check_common(ice_braking: Optional[str], soc_start: float | None, reserve_pc
 
 def check_soc(soc_start: float | None, reserve_pct: float | None = None) -> None:
     """--soc-start (None: not given) and --reserve-pct, with the words of
-    :func:`cevm.core.checks.soc_pct` (the same message from every command)."""
-    from cevm.core import checks
+    :func:`cevm.core.physical_inputs.soc_pct` (the same message from every command)."""
+    from cevm.core import physical_inputs
 
     try:
-        checks.soc_pct(100.0 if soc_start is None else soc_start)
+        physical_inputs.soc_pct(100.0 if soc_start is None else soc_start)
     except CevmError as exc:
         raise fail(f"--soc-start: {exc}") from None
     if reserve_pct is not None:
         try:
-            checks.soc_pct(100.0, reserve_pct)
+            physical_inputs.soc_pct(100.0, reserve_pct)
         except CevmError as exc:
             raise fail(f"--reserve-pct: {exc}") from None
 

@@ -11,7 +11,7 @@ import typer
 from cevm.cli.common import EXIT_OK, EXIT_PARTIAL, StoreOption, apply_manifest, check_workers, fail
 from cevm.cli.output import OutputFormat, write_rows
 from cevm.errors import CevmError
-from cevm.ingest.textfile import ReadLimits
+from cevm.ingest.textfile import MAX_SAMPLES, ReadLimits
 from cevm.text import printable
 
 #: The defaults of the per-file limits (the flags show them in --help).
@@ -41,6 +41,9 @@ def ingest(
     max_rows: Annotated[
         Optional[int], typer.Option(min=1, metavar="ROWS", help="Refuse a file of more data rows than this. Default: 2,500,000, and at most 36 million values (rows x columns read), which keeps a worker under 500 MB; given, the rows alone bound a file (memory grows with rows and columns; see the README).")
     ] = None,
+    max_samples: Annotated[
+        int, typer.Option(min=1, metavar="SAMPLES", help="Refuse a file whose trips would hold more samples than this on the 1 s grid (a log every 5 s gives 5 a row): the stored trips are held until written, so this keeps a worker under 500 MB.")
+    ] = MAX_SAMPLES,
     max_file_mb: Annotated[
         float, typer.Option(min=0.001, metavar="MB", help="Refuse a file of more text than this [MB], after decompression.")
     ] = _LIMITS.max_file_mb,
@@ -74,6 +77,7 @@ def ingest(
 
     from cevm.cli import interrupts
     from cevm.ingest import IngestOptions
+    from cevm.runtime import signals_deferred
     from cevm.ingest.pipeline import discover
     from cevm.ingest import ingest as run_ingest
     from cevm.executors import make_executor
@@ -84,8 +88,10 @@ def ingest(
         raise fail("give --workers (local processes) or --scheduler (a Dask cluster), not both")
     check_workers(workers)
 
-    limits = (ReadLimits(max_file_mb=max_file_mb, max_expansion=max_expansion) if max_rows is None else
-              ReadLimits(max_file_mb=max_file_mb, max_expansion=max_expansion, max_rows=max_rows, max_values=None))
+    limits = (ReadLimits(max_file_mb=max_file_mb, max_expansion=max_expansion, max_samples=max_samples)
+              if max_rows is None else
+              ReadLimits(max_file_mb=max_file_mb, max_expansion=max_expansion, max_rows=max_rows, max_values=None,
+                         max_samples=max_samples))
     options = IngestOptions(dsm=dsm, profile=profile, profiles_dir=str(profiles_dir) if profiles_dir else None,
                             force=force, limits=limits, allow_remote_dsm=True if allow_remote_dsm else None)
     store_path = resolve_store_path(store)
@@ -134,13 +140,16 @@ def ingest(
         except CevmError as exc:
             raise fail(exc) from None
     not_applied = 0
+    manifest_applied = False  # said in the line of an interrupted run: the masses wait for the next one
     new_store = not store_path.exists()
     try:
         with make_executor(workers, scheduler) as executor, TripStore.open(store_path) as st:
             st.require_intact()  # never write into a damaged database
             report = run_ingest(paths, st, options, on_file=on_file, on_start=on_start, executor=executor)
-            if masses is not None:
-                _, not_applied = apply_manifest(st, manifest, masses)
+            if masses is not None and manifest is not None:
+                with signals_deferred():  # the masses written are the masses reported
+                    _, not_applied = apply_manifest(st, manifest, masses)
+                    manifest_applied = True
     except StoreAccessError as exc:
         stop = fail(exc)
         typer.echo("cevm: note: the files written before the failure are stored, the one being written was rolled "
@@ -153,22 +162,32 @@ def ingest(
     except KeyboardInterrupt as exc:  # SIGINT, or SIGTERM under cevm.cli.main: what is stored, what is not
         if progress is not None:
             progress.stop()
-        typer.echo(_interrupted_line(exc, done, n_files, store_path), err=True)
+        pending = manifest if masses is not None and not manifest_applied else None
+        typer.echo(_interrupted_line(exc, done, n_files, store_path, pending), err=True)
         if log_json:
-            typer.echo(json.dumps({"event": "interrupted", "signal": interrupts.signal_name(exc),
-                                   "store": str(store_path), "files": n_files[0] if n_files else None,
-                                   "done": len(done), "not_done": n_files[0] - len(done) if n_files else None}))
+            event = {"event": "interrupted", "signal": interrupts.signal_name(exc), "store": str(store_path),
+                     "files": n_files[0] if n_files else None, "done": len(done),
+                     "not_done": n_files[0] - len(done) if n_files else None}
+            if masses is not None:
+                event["manifest"] = "applied" if manifest_applied else "not applied"
+            typer.echo(json.dumps(event))
         raise typer.Exit(interrupts.exit_code(exc)) from None
     finally:
         if progress is not None:
             progress.stop()
-    summary = report.summary()
-    if log_json:
-        typer.echo(json.dumps({"event": "summary", "store": str(store_path), **summary}))
-    elif quiet:
-        typer.echo(_summary_line(summary, store_path))
-    else:
-        _print_ingest_table(report, summary, store_path)
+    # The run is finished and stored: a stop signal from here on stops nothing, and turns
+    # neither the summary nor the exit code into an interrupted run's; it is said in a line.
+    with interrupts.late_signals_noted() as late:
+        summary = report.summary()
+        if log_json:
+            typer.echo(json.dumps({"event": "summary", "store": str(store_path), **summary}))
+        elif quiet:
+            typer.echo(_summary_line(summary, store_path))
+        else:
+            _print_ingest_table(report, summary, store_path)
+        if late:
+            typer.echo(f"cevm ingest: {interrupts.signal_name(interrupts.Interrupted(late[0]))} arrived after the "
+                       "run had finished: it stopped nothing, the summary above stands", err=True)
     raise typer.Exit(EXIT_PARTIAL if report.failed or not_applied else EXIT_OK)
 
 
@@ -190,18 +209,23 @@ def _summary_line(s: dict, store_path: Path) -> str:
             f"in {s['seconds']:.2f} s -> {store_path}")
 
 
-def _interrupted_line(exc: BaseException, done: list, n_files: list[int], store_path: Path) -> str:
+def _interrupted_line(exc: BaseException, done: list, n_files: list[int], store_path: Path,
+                      manifest_pending: Path | None = None) -> str:
     """One line after an interrupt: the files done (each stored as reported), the files
-    not done (left as the store had them)."""
+    not done (left as the store had them), and a manifest whose masses were not applied."""
     from cevm.cli.interrupts import signal_name
 
     head = f"cevm ingest: interrupted by {signal_name(exc)}"
+    masses = ""
+    if manifest_pending is not None:
+        masses = (f"; the manifest {printable(str(manifest_pending))} was not applied: no trip has its mass from it "
+                  "(run again: the stored files are skipped, then the manifest is applied)")
     if not n_files:
-        return f"{head} before any file was read; nothing stored -> {store_path}"
+        return f"{head} before any file was read; nothing stored{masses} -> {store_path}"
     counts = {k: sum(1 for f in done if f.status == k) for k in ("ingested", "unchanged", "failed")}
     return (f"{head}: {len(done)} of {n_files[0]} files done ({counts['ingested']} ingested, "
             f"{counts['unchanged']} unchanged, {counts['failed']} failed) and stored as reported; "
-            f"{n_files[0] - len(done)} not done, left as they were (run again to ingest them) -> {store_path}")
+            f"{n_files[0] - len(done)} not done, left as they were (run again to ingest them){masses} -> {store_path}")
 
 
 def _print_ingest_table(report, summary: dict, store_path: Path) -> None:

@@ -20,7 +20,7 @@ from cevm.cli.common import (
     start_soc,
     with_cycle_options,
 )
-from cevm.core import checks
+from cevm.core import physical_inputs
 from cevm.cli.output import OutputFormat, write_rows
 from cevm.core.sweep import DEFAULT_RESERVE_PCT
 from cevm.errors import CevmError
@@ -67,10 +67,10 @@ def simulate(
         mass_source, measured, foreign = "vehicle file", None, None
         if payload_kg is not None:
             mass_kg = (veh.kerb_mass_kg if veh.kerb_mass_kg is not None else veh.mass_kg) + float(
-                checks.payloads_kg(payload_kg))
+                physical_inputs.payloads_kg(payload_kg))
             mass_source = "--payload-kg"
         elif mass_kg is not None:
-            mass_kg = float(checks.masses_for([veh], mass_kg))
+            mass_kg = float(physical_inputs.masses_for([veh], mass_kg))
             mass_source = "--mass-kg"
         soc0, soc_from, elevation = start_soc(None, soc_start_pct) + (None,)
         if cycle is not None:
@@ -97,7 +97,7 @@ def simulate(
 
                 foreign = foreign_mass(own, measured, veh)
                 try:
-                    mass_kg = float(checks.masses_for([veh], mass_kg))
+                    mass_kg = float(physical_inputs.masses_for([veh], mass_kg))
                 except CevmError as exc:
                     raise CevmError(f"trip {trip!r} ({own.describe()} mass): {exc}") from None
             name, t, v, h = trip, prof["time_s"], prof["speed_mps"], prof["elevation_m"]

@@ -8,6 +8,7 @@ import json
 import struct
 import zlib
 from collections.abc import Mapping
+from functools import lru_cache
 
 import numpy as np
 
@@ -29,16 +30,26 @@ PROFILE_DTYPES: dict[str, str] = {
 }
 
 
-_PROFILE_MAGIC = b"CEVMPRF1"
+_PROFILE_MAGIC = b"CEVMPRF2"
+_PROFILE_CODEC = "delta+shuffle+zstd"
+_ZSTD_LEVEL = 1
+
+# Format 1 (read, no longer written): every array byte-shuffled and zlib-compressed.
+_PROFILE_MAGIC_V1 = b"CEVMPRF1"
+_PROFILE_CODEC_V1 = "shuffle+zlib"
+
+#: The most samples a stored profile may hold: checked from its header before anything
+#: is decompressed, so that a damaged (or forged) header cannot make a reader allocate
+#: gigabytes (a trip of 10 million 1-s samples lasts 16 weeks).
+MAX_PROFILE_SAMPLES = 10_000_000
 
 
-_PROFILE_CODEC = "shuffle+zlib"
+@lru_cache(maxsize=1)
+def _zstd():
+    """pyarrow's zstd codec (pyarrow is imported by pandas anyway)."""
+    import pyarrow as pa
 
-
-# zlib level 1: on 1 Hz trips the byte-shuffled arrays compress to ~0.3 of raw at every
-# level, and level 1 runs at ~4 million samples/s (level 6: ~3, np.savez_compressed:
-# ~0.6, too slow for the ingest's budget of 1 million samples/s for everything).
-_PROFILE_ZLIB_LEVEL = 1
+    return pa.Codec("zstd", compression_level=_ZSTD_LEVEL)
 
 
 def encode_profile(arrays: Mapping[str, np.ndarray]) -> bytes:
@@ -48,24 +59,30 @@ def encode_profile(arrays: Mapping[str, np.ndarray]) -> bytes:
     ``arrays`` must hold every key of :data:`PROFILE_DTYPES` with one common length.
     Each array is cast to its storage dtype (float64 for time, distance, latitude,
     longitude; float32 for speed and elevation, where values beyond +-3.4e38 become
-    +-inf), its bytes are shuffled (all first
-    bytes, then all second bytes, ..., which groups the slowly varying exponent bytes)
-    and zlib-compressed at level 1. Layout: ``b"CEVMPRF1"``, a little-endian uint32
-    header length, a UTF-8 JSON header ``{"n", "codec", "arrays": [[name, dtype,
-    nbytes], ...]}``, then the compressed arrays in header order.
+    +-inf); the integers of its bit patterns are differenced (wrapping: exactly
+    reversible, whatever the values, NaN included), which turns the slowly changing
+    values of a trip into small numbers, and their bytes shuffled (all first bytes, then
+    all second bytes, ...), then zstd-compressed at level 1 (pyarrow's codec). Layout:
+    ``b"CEVMPRF2"``, a little-endian uint32 header length, a UTF-8 JSON header ``{"n",
+    "codec", "arrays": [[name, dtype, nbytes], ...]}``, then the compressed arrays in
+    header order. Measured on the sample and Twizy trips against format 1 (shuffle and
+    zlib level 1): 14.1 bytes a sample instead of 18.0, in 225 ns instead of 380-445 ns.
     """
     missing = [k for k in PROFILE_DTYPES if k not in arrays]
     if missing:
         raise ValueError(f"profile lacks arrays {missing}")
     n = int(np.asarray(arrays["time_s"]).shape[0])
+    zstd = _zstd()
     entries, payloads = [], []
     for name, dtype in PROFILE_DTYPES.items():
         with np.errstate(over="ignore"):  # beyond float32's range is +-inf, as it should
             a = np.ascontiguousarray(arrays[name], dtype=dtype)
         if a.shape != (n,):
             raise ValueError(f"profile array {name} has shape {a.shape}, expected ({n},)")
-        shuffled = a.view(np.uint8).reshape(n, a.itemsize).T.tobytes()
-        payload = zlib.compress(shuffled, _PROFILE_ZLIB_LEVEL)
+        bits = a.view(np.uint64 if a.itemsize == 8 else np.uint32)
+        delta = np.diff(bits, prepend=bits.dtype.type(0))  # unsigned: wraps, exactly reversible
+        shuffled = delta.view(np.uint8).reshape(n, a.itemsize).T.tobytes()
+        payload = zstd.compress(shuffled, asbytes=True)
         entries.append([name, dtype, len(payload)])
         payloads.append(payload)
     header = json.dumps({"n": n, "codec": _PROFILE_CODEC, "arrays": entries}).encode()
@@ -79,24 +96,37 @@ def trip_profile_blob(trip: Trip) -> bytes:
 
 
 def decode_profile(blob: bytes) -> dict[str, np.ndarray]:
-    """Unpack :func:`encode_profile`'s BLOB into float64 arrays (speed and elevation
-    carry the float32 rounding of their storage)."""
+    """Unpack :func:`encode_profile`'s BLOB (or one of format 1) into float64 arrays
+    (speed and elevation carry the float32 rounding of their storage). The header's
+    sample count is checked against :data:`MAX_PROFILE_SAMPLES` before anything is
+    decompressed."""
     blob = bytes(blob)
-    if blob[: len(_PROFILE_MAGIC)] != _PROFILE_MAGIC:
+    magic = blob[: len(_PROFILE_MAGIC)]
+    if magic not in (_PROFILE_MAGIC, _PROFILE_MAGIC_V1):
         raise CevmError("corrupt profile in the store (bad magic); re-ingest the file")
     pos = len(_PROFILE_MAGIC)
     (hlen,) = struct.unpack_from("<I", blob, pos)
     pos += 4
     header = json.loads(blob[pos : pos + hlen])
     pos += hlen
-    if header.get("codec") != _PROFILE_CODEC:
-        raise CevmError(f"profile codec {header.get('codec')!r} unknown to this cevm")
+    codec = header.get("codec")
+    if (magic, codec) not in ((_PROFILE_MAGIC, _PROFILE_CODEC), (_PROFILE_MAGIC_V1, _PROFILE_CODEC_V1)):
+        raise CevmError(f"profile codec {codec!r} unknown to this cevm")
     n = int(header["n"])
+    if not 0 <= n <= MAX_PROFILE_SAMPLES:
+        raise CevmError(f"corrupt profile in the store: its header says {n:,} samples (at most "
+                        f"{MAX_PROFILE_SAMPLES:,}); re-ingest the file")
     out: dict[str, np.ndarray] = {}
     for name, dtype, nbytes in header["arrays"]:
         dt = np.dtype(dtype)
-        raw = zlib.decompress(blob[pos : pos + nbytes])
+        if magic == _PROFILE_MAGIC_V1:
+            raw = zlib.decompress(blob[pos : pos + nbytes])
+            a = np.frombuffer(raw, np.uint8).reshape(dt.itemsize, n).T.copy().view(dt).reshape(n)
+        else:
+            raw = _zstd().decompress(blob[pos : pos + nbytes], decompressed_size=n * dt.itemsize, asbytes=True)
+            delta = np.frombuffer(raw, np.uint8).reshape(dt.itemsize, n).T.copy().view(
+                np.uint64 if dt.itemsize == 8 else np.uint32).reshape(n)
+            a = np.cumsum(delta, dtype=delta.dtype).view(dt)
         pos += nbytes
-        a = np.frombuffer(raw, np.uint8).reshape(dt.itemsize, n).T.copy().view(dt).reshape(n)
         out[name] = a.astype(np.float64)
     return out
