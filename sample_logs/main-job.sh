@@ -28,8 +28,18 @@ $CEVM calibrate -v configs/vehicles/diesel-hgv.toml --vehicle-id "KX19 LMR" \
 
 echo "== 3. predict: the calibrated vehicles on the other bus's and the other truck's trips (at their own masses"
 echo "      and temperatures, measured beside modelled), then a winter cycle and the bus's range"
-$CEVM predict -v "$OUT"/electric-bus-EB-01.toml --vehicle-id EB-02
-$CEVM predict -v "$OUT"/diesel-hgv-HGV-11.toml --vehicle-id HGV-21
-$CEVM predict -v "$OUT"/electric-bus-EB-01.toml --cycle configs/cycles/urban-bus.csv --payload-kg 0:5000:2500 \
+# each prediction twice: a table for this log, and every column in a CSV file for the record
+predict() {
+    local name=$1; shift
+    $CEVM predict "$@"
+    $CEVM predict "$@" --format csv --out "$OUT/predict-$name.csv" 2>/dev/null
+}
+predict EB-02 -v "$OUT"/electric-bus-EB-01.toml --vehicle-id EB-02
+predict HGV-21 -v "$OUT"/diesel-hgv-HGV-11.toml --vehicle-id HGV-21
+predict winter -v "$OUT"/electric-bus-EB-01.toml --cycle configs/cycles/urban-bus.csv --payload-kg 0:5000:2500 \
       --ambient-c -5 --range
-echo "results: $OUT/ (calibrated vehicle files, plots); store: $CEVM_STORE"
+echo "results: $OUT/ (calibrated vehicle files, plots, predictions' CSV); store: $CEVM_STORE"
+# the summary, by the Python cevm runs on (3.11+: tomllib)
+PYTHON=${PYTHON:-$(dirname "$(command -v "$CEVM")")/python}
+[ -x "$PYTHON" ] || PYTHON=python3
+"$PYTHON" sample_logs/job_summary.py "$OUT"

@@ -40,7 +40,7 @@ from cevm.cli.common import (
     warn_damaged,
     with_cycle_options,
 )
-from cevm.cli.output import OutputFormat, vehicle_legend, write_rows
+from cevm.cli.output import OutputFormat, vehicle_legend, write_lines, write_rows
 from cevm.cli.prediction_columns import assumptions_line, feasibility_row, verdict_text
 from cevm.core.cycle import CR0_DEFAULT
 from cevm.core.feasibility import feasibility
@@ -213,10 +213,8 @@ def _print_feasibility(rows: list[dict], stream: IO[str]) -> None:
     title = "cevm feasibility" + (f" (first {len(table)} of {len(rows)})" if len(rows) > len(table) else "")
     write_rows(table, OutputFormat.table, title=title, columns=FEASIBILITY_TABLE, stream=stream,
                keep=("route", "feasible"), drop_order=("range km", "state", "limited by", "payload kg", "vehicle"))
-    for line in (vehicle_legend(names), assumptions_line(rows, "source")[0]):
-        if line:
-            stream.write(line + "\n")
     origins = Counter({r["source"]: r["mass_source"] for r in rows}.values())
-    stream.write("mass from: " + ", ".join(f"{what} ({n} source{'s' if n > 1 else ''})" for what, n in
+    mass_line = ("mass from: " + ", ".join(f"{what} ({n} source{'s' if n > 1 else ''})" for what, n in
                                            sorted(origins.items(), key=lambda kv: (-kv[1], kv[0])))
-                 + " (column mass_source in --format csv or json)\n")
+                 + " (column mass_source in --format csv or json)")
+    write_lines([vehicle_legend(names), assumptions_line(rows, "source")[0], mass_line], stream)

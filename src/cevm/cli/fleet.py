@@ -19,7 +19,7 @@ from cevm.cli.common import (
     open_out,
     warn_ambient_unused,
 )
-from cevm.cli.output import OutputFormat, vehicle_legend, write_rows
+from cevm.cli.output import OutputFormat, vehicle_legend, write_lines, write_rows
 from cevm.errors import CevmError
 from cevm.text import printable
 
@@ -89,7 +89,7 @@ def _write_report(report: dict, fmt: OutputFormat, stream) -> None:
     import json
 
     def echo(line: str) -> None:
-        stream.write(line + "\n")
+        write_lines([line], stream)
 
     if fmt == OutputFormat.json:
         json.dump(report, stream, indent=2)

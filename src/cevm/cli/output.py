@@ -283,14 +283,32 @@ def print_table(specs: Sequence[Column], cells: list[list[str]], stream: IO[str]
     total = _table_width(widths)
     Console(file=stream, width=total, markup=False, highlight=False).print(table)
     notes = []
-    if folded:
-        notes.append("every row: " + "; ".join(f"{f.header} = {f.cells[0]}" for f in folded))
+    if folded:  # each "name = value" kept on one line
+        notes.append("every row: " + "; ".join(f"{f.header} = {f.cells[0]}".replace(" ", _KEEP) for f in folded))
     if dropped:
         notes.append(f"not shown at {width} columns: {', '.join(f.name for f in dropped)} (every column: "
                      "--format csv or json, or a wider terminal)")
-    for note in notes:
-        stream.write("\n".join(textwrap.wrap(note, max(width or 80, 20), break_long_words=False,
-                                             break_on_hyphens=False)) + "\n")
+    write_lines(notes, stream, width)
+
+
+#: A space that :func:`write_lines` does not break a line at.
+_KEEP = "\xa0"
+
+
+def write_lines(lines: Sequence[str | None], stream: IO[str], width: int | None = None) -> None:
+    """Lines of text under a table (legends, notes), each wrapped between words to
+    ``width`` (default the terminal's: :func:`terminal_width`; not wrapped when the
+    output is not a terminal); None entries are skipped. A word is never cut."""
+    import textwrap
+
+    if width is None:
+        width = terminal_width(stream)
+    for line in lines:
+        if not line:
+            continue
+        parts = [line] if width is None else textwrap.wrap(line, max(width, 20), break_long_words=False,
+                                                           break_on_hyphens=False, subsequent_indent="  ")
+        stream.write("\n".join(parts).replace(_KEEP, " ") + "\n")
 
 
 def _print_vertical(fits: list[_Fit], stream: IO[str], title: str | None, width: int) -> None:

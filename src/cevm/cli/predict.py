@@ -59,7 +59,7 @@ from cevm.cli.common import (
     warn_damaged,
     with_cycle_options,
 )
-from cevm.cli.output import OutputFormat, vehicle_legend, write_rows
+from cevm.cli.output import OutputFormat, vehicle_legend, write_lines, write_rows
 from cevm.cli.prediction_columns import (
     PREDICT,
     PREDICT_TABLE,
@@ -168,9 +168,7 @@ class PredictWriter:
             title = "cevm predict" + (f" (first {len(rows)} of {self.rows} rows)" if self.rows > len(rows) else "")
             write_rows(rows, OutputFormat.table, columns=PREDICT.table(columns, STATUS), title=title,
                        stream=self.stream, keep=PREDICT_TABLE_KEEP, drop_order=PREDICT_TABLE_DROP)
-            for line in (vehicle_legend(self.names), assumed):
-                if line:
-                    self.stream.write(line + "\n")
+            write_lines([vehicle_legend(self.names), assumed], self.stream)
             self.stream.flush()
             if self.rows > len(rows):
                 typer.echo(f"cevm: {self.rows - len(rows)} more rows not shown; use --format csv or json "
