@@ -283,8 +283,10 @@ def print_table(specs: Sequence[Column], cells: list[list[str]], stream: IO[str]
     total = _table_width(widths)
     Console(file=stream, width=total, markup=False, highlight=False).print(table)
     notes = []
-    if folded:  # each "name = value" kept on one line
-        notes.append("every row: " + "; ".join(f"{f.header} = {f.cells[0]}".replace(" ", _KEEP) for f in folded))
+    if folded:  # each "name = value" kept on one line where it fits one
+        items = [f"{f.header} = {f.cells[0]}" for f in folded]
+        notes.append("every row: " + "; ".join(i.replace(" ", _KEEP) if len(i) < (width or 80) - 4 else i
+                                               for i in items))
     if dropped:
         notes.append(f"not shown at {width} columns: {', '.join(f.name for f in dropped)} (every column: "
                      "--format csv or json, or a wider terminal)")

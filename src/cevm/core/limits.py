@@ -139,7 +139,8 @@ def _median3(x: np.ndarray) -> np.ndarray:
 @dataclass(frozen=True, eq=False)
 class Demand:
     """What a source asks of a vehicle, for any vehicle: its held top speed and, per
-    window of :data:`POWER_WINDOW_S` starting at each moving step, the sums over its
+    window of :data:`POWER_WINDOW_S` starting at each moving step (the windows that fit
+    in the source; a source shorter than a window is one), the sums over its
     moving steps of the (de-spiked) kinetic ``sk`` and potential ``se`` energy per kg
     [J/kg], of the rolling term ``sr`` [J/kg per unit Cr] and the aerodynamic term ``sa``
     [J/m^2], and its duration ``dur`` [s]: the window's mean wheel power at mass m is
@@ -222,7 +223,11 @@ def source_demand(st: StepTable, legs: Sequence[LegProfile], *, logged: bool = F
     ct = edges(st.dt)
     starts = np.flatnonzero(mv)
     ends = np.searchsorted(ct, ct[starts] + window_s * (1.0 - 1e-12), side="left")
-    ends = np.minimum(np.maximum(ends, starts + 1), st.n)
+    full = ends <= st.n  # windows that last window_s within the source
+    if full.any():
+        starts, ends = starts[full], ends[full]
+    else:  # a source shorter than a window: itself, whole
+        starts, ends = starts[:1], np.array([st.n])
     sums = []
     for v in (k, e, st.r, st.a):
         c = edges(v)
