@@ -15,7 +15,6 @@ from typer.testing import CliRunner
 from cevm.cli import app
 from cevm.core import limits
 from cevm.core.sweep import LegProfile, build_step_table
-from cevm.core.vehicle import Vehicle
 
 runner = CliRunner()
 
@@ -137,9 +136,11 @@ def test_first_below_interpolates_between_samples():
 
 @pytest.fixture()
 def files(root):
-    return {"bus": str(root / "configs/vehicles/electric-bus.toml"), "hgv": str(root / "configs/vehicles/diesel-hgv.toml"),
+    return {"bus": str(root / "configs/vehicles/electric-bus.toml"),
+            "hgv": str(root / "configs/vehicles/diesel-hgv.toml"),
             "regional": str(root / "configs/cycles/regional-delivery.csv"),
-            "urban": str(root / "configs/cycles/urban-bus.csv"), "scenario": root / "configs/fleet/paper-case-study.toml"}
+            "urban": str(root / "configs/cycles/urban-bus.csv"),
+            "scenario": root / "configs/fleet/paper-case-study.toml"}
 
 
 def _json(args):

@@ -153,8 +153,8 @@ def test_too_narrow_for_the_kept_columns_is_a_vertical_layout():
 @pytest.fixture(scope="module")
 def twizy_store(tmp_path_factory):
     store = tmp_path_factory.mktemp("twizy") / "s.sqlite"
-    res = subprocess.run([sys.executable, "-m", "cevm", "ingest", str(ROOT / "tests/data/twizy"), "--store", str(store)],
-                         capture_output=True, text=True, timeout=600)
+    res = subprocess.run([sys.executable, "-m", "cevm", "ingest", str(ROOT / "tests/data/twizy"), "--store",
+                          str(store)], capture_output=True, text=True, timeout=600)
     assert res.returncode == 0, res.stderr
     return store
 

@@ -22,7 +22,7 @@ from cevm.cli.common import (
     fail,
     warn_damaged,
 )
-from cevm.cli.output import OutputFormat, write_rows
+from cevm.cli.output import OutputFormat, write_lines, write_rows
 from cevm.core.model import ICE_BRAKING_MODES
 from cevm.errors import CevmError
 
@@ -83,7 +83,7 @@ def calibrate(
     check_output_path(out, "--out", TOML)
     check_output_path(plot, "--plot", PNG)
     if out is not None and out.exists() and not force:  # said before the fit, not after it
-        what = "the vehicle file it calibrates" if out.resolve() == vehicle.resolve() else "an existing file"
+        what = "the input vehicle file" if out.resolve() == vehicle.resolve() else "an existing file"
         raise fail(f"--out {out}: would overwrite {what}; give another --out or --force")
     path = existing_store(store)
     if ice_braking is not None and ice_braking not in ICE_BRAKING_MODES:
@@ -172,7 +172,7 @@ def _print_calibration(r: dict, is_ev: bool) -> None:
     write_rows(fitted, OutputFormat.table, title="fitted parameters (1-sigma)")
     if r["evidence"]:
         e = r["evidence"]
-        typer.echo(f"standing still: the model draws {e['fitted_text']}, the logs measured {e['measured_text']} "
+        _say(f"standing still: the model draws {e['fitted_text']}, the logs measured {e['measured_text']} "
                    f"({e['seconds'] / 60:.0f} min over {e['trips']} trips)")
     d = r["domain"]
     if d:
@@ -187,15 +187,23 @@ def _print_calibration(r: dict, is_ev: bool) -> None:
             parts.append("{:.0f} to {:.0f} km/h mean".format(*d["mean_speed_kmh"]))
         if d.get("mass_kg"):
             parts.append("{:,.0f} to {:,.0f} kg".format(*d["mass_kg"]))
-        typer.echo("fitted on: " + ", ".join(parts) + " (predictions outside are warned about)")
+        _say("fitted on: " + ", ".join(parts) + " (predictions outside are warned about)")
     for note in r["notes"]:
-        typer.echo(f"note: {note}")
+        _say(f"note: {note}")
     if r["excluded"]:
-        typer.echo(f"excluded {len(r['excluded'])} trips:")
+        _say(f"excluded {len(r['excluded'])} trips:")
         for tid, why in list(r["excluded"].items())[:20]:
-            typer.echo(f"  {tid}: {why}")
+            _say(f"  {tid}: {why}")
         if len(r["excluded"]) > 20:
-            typer.echo(f"  ... and {len(r['excluded']) - 20} more (see --format json)")
+            _say(f"  ... and {len(r['excluded']) - 20} more (see --format json)")
+
+
+def _say(text: str) -> None:
+    """A line of calibrate's report, wrapped between words on a terminal
+    (:func:`cevm.cli.output.write_lines`)."""
+    import sys
+
+    write_lines([text], sys.stdout)
 
 
 #: Candidates listed in the table at most (the rest: --format json).
@@ -218,9 +226,9 @@ def _print_candidates(cands: list[dict]) -> None:
         reasons: dict[str, int] = {}
         for c in refused:
             reasons[c["reason"]] = reasons.get(c["reason"], 0) + 1
-        typer.echo(f"refused: {len(refused)} candidates (a term the data cannot identify, or an implausible value):")
+        _say(f"refused: {len(refused)} candidates (a term the data cannot identify, or an implausible value):")
         for why, n in sorted(reasons.items(), key=lambda kv: -kv[1])[:8]:
-            typer.echo(f"  {n} x {why}")
+            _say(f"  {n} x {why}")
 
 
 def _parameters(fitted: dict, powertrain: str) -> list[dict]:

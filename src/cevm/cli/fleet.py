@@ -97,8 +97,9 @@ def _write_report(report: dict, fmt: OutputFormat, stream) -> None:
         return
     unit = report["unit"]
     if fmt == OutputFormat.csv:
-        rows = [{"day": p["day"], "vehicle": v["vehicle"], "stops": " ".join(v["stops"]), f"consumption_{unit}": v["value"],
-                 "feasible": v["verdict"]["feasible"], "why": "; ".join(_why_not(v["verdict"]))}
+        rows = [{"day": p["day"], "vehicle": v["vehicle"], "stops": " ".join(v["stops"]),
+                 f"consumption_{unit}": v["value"], "feasible": v["verdict"]["feasible"],
+                 "why": "; ".join(_why_not(v["verdict"]))}
                 for p in report["plans"] for v in p["vehicles"]]
         rows += [{"day": d["day"], "vehicle": None, "stops": None, f"consumption_{unit}": None, "feasible": False,
                   "why": f"not planned: {d['why']}"} for d in report["infeasible_days"]]
@@ -125,8 +126,8 @@ def _write_report(report: dict, fmt: OutputFormat, stream) -> None:
             vd = v["verdict"]
             mark = "?" if vd["feasible"] is None else "yes" if vd["feasible"] else "NO"
             why = _why_not(vd)
-            rows.append({"day": p["day"], "vehicle": v["vehicle"], unit: v["value"], "max gross kg": v["max_gross_used_kg"],
-                         "feasible": mark + (f" ({'; '.join(why)})" if why else "")})
+            rows.append({"day": p["day"], "vehicle": v["vehicle"], unit: v["value"],
+                         "max gross kg": v["max_gross_used_kg"], "feasible": mark + (f" ({'; '.join(why)})" if why else "")})
     if rows:
         write_rows(rows, OutputFormat.table, title=f"consumption per vehicle [{unit}]",
                    digits={unit: 2, "max gross kg": 0}, keep=("day", "vehicle", unit, "feasible"), stream=stream)
@@ -136,7 +137,8 @@ def _write_report(report: dict, fmt: OutputFormat, stream) -> None:
     if summary:
         write_rows(summary, OutputFormat.table, title="optimum against the default assignment",
                    digits={f"total {unit}": 2, f"default {unit}": 2, "saving %": 2, "solve ms": 2},
-                   keep=("day", f"total {unit}", "saving %"), drop_order=("solve ms", "method", "status"), stream=stream)
+                   keep=("day", f"total {unit}", "saving %"), drop_order=("solve ms", "method", "status"),
+                   stream=stream)
 
 
 def _why_not(verdict: dict) -> list[str]:
@@ -146,8 +148,8 @@ def _why_not(verdict: dict) -> list[str]:
         out.append("over max gross")
     if verdict["energy_ok"] is False:
         out.append("over its energy budget or tank")
-    cannot = [f"{what} on {len(verdict[key])} leg(s)" for what, key in (("power", "over_power"), ("speed", "over_speed"))
-              if verdict.get(key)]
+    cannot = [f"{what} on {len(verdict[key])} leg(s)"
+              for what, key in (("power", "over_power"), ("speed", "over_speed")) if verdict.get(key)]
     if cannot:
         out.append("cannot follow: " + ", ".join(cannot))
     return out

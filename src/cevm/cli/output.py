@@ -221,13 +221,13 @@ def fit_columns(fits: list[_Fit], width: int | None, keep: Sequence[str] = (), d
     layout)."""
     if width is None or _table_width([f.natural for f in fits]) <= width:
         return fits, [], [], [f.natural for f in fits]
-    keep = set(keep) or {fits[0].name}
-    order = [n for n in drop_order if n not in keep]
-    order += [f.name for f in reversed(fits) if f.name not in keep and f.name not in order]
+    kept = set(keep) or {fits[0].name}
+    order = [n for n in drop_order if n not in kept]
+    order += [f.name for f in reversed(fits) if f.name not in kept and f.name not in order]
     # fold (nothing is lost) the same-on-every-row columns, the least important first and
     # the kept ones last (never the first column), then leave out what must go
-    fold_order = order + [f.name for f in reversed(fits[1:]) if f.name in keep]
-    shown, folded, dropped = list(fits), [], []
+    fold_order = order + [f.name for f in reversed(fits[1:]) if f.name in kept]
+    shown, folded, dropped = list(fits), [], []  # type: list[_Fit], list[_Fit], list[_Fit]
     for name, into in [(n, folded) for n in fold_order] + [(n, dropped) for n in order]:
         if _table_width([f.least for f in shown]) <= width:
             break
@@ -308,8 +308,10 @@ def write_lines(lines: Sequence[str | None], stream: IO[str], width: int | None 
     for line in lines:
         if not line:
             continue
+        lead = " " * (len(line) - len(line.lstrip(" ")) + 2)  # continuation lines indented under the first
         parts = [line] if width is None else textwrap.wrap(line, max(width, 20), break_long_words=False,
-                                                           break_on_hyphens=False, subsequent_indent="  ")
+                                                           break_on_hyphens=False, initial_indent="",
+                                                           subsequent_indent=lead)
         stream.write("\n".join(parts).replace(_KEEP, " ") + "\n")
 
 

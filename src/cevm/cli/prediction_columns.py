@@ -294,7 +294,7 @@ def assumptions_line(rows: list[dict[str, Any]], source_key: str = "cycle") -> t
     reserves = sorted({r["reserve_pct"] for r in ev if r.get("reserve_pct") is not None})
     if reserves:
         parts.append("reserve " + ", ".join(f"{x:g}" for x in reserves) + " %")
-    roads = Counter({r.get(source_key): r.get("road") for r in rows if r.get("road")}.values())
+    roads = Counter(str(road) for road in {r.get(source_key): r.get("road") for r in rows if r.get("road")}.values())
     if roads:
         parts.append("road " + ", ".join(f"{what} ({n})" if len(roads) > 1 else what for what, n in
                                           sorted(roads.items(), key=lambda kv: (-kv[1], kv[0]))))
@@ -437,4 +437,4 @@ def feasibility_row(res: Any, i: int, ice_braking: str | None, mass_source: str,
     """The output row of vehicle ``i`` of a feasibility result: the columns its powertrain
     has, in order."""
     ctx = VehicleRow(res, i, ice_braking, mass_source, soc_from)
-    return {c.name: c.value(ctx) for c in FEASIBILITY.for_powertrain(ctx.vehicle.powertrain)}
+    return {c.name: c.value(ctx) for c in FEASIBILITY.for_powertrain(ctx.vehicle.powertrain) if c.value is not None}

@@ -218,7 +218,8 @@ def simulation_verdict(veh, res, *, mass_kg: float, soc_start_pct: float, reserv
     out["reserve_ok" if veh.is_ev else "tank_ok"] = flag(flags["reserve_ok" if veh.is_ev else "tank_ok"])
     out["feasible"] = flag(flags["feasible"])
     if veh.is_ev:
-        out["reserve_at_km"], out["reserve_at_s"] = (value(crossings["reserve"][1] / 1e3), value(crossings["reserve"][0]))
+        out["reserve_at_km"] = value(crossings["reserve"][1] / 1e3)
+        out["reserve_at_s"] = value(crossings["reserve"][0])
     out["empty_at_km"], out["empty_at_s"] = value(crossings["empty"][1] / 1e3), value(crossings["empty"][0])
     has_limits = veh.max_power_w is not None or veh.max_speed_mps is not None
     out["power_demand_kw"] = float(need_w[0]) / 1e3 if has_limits else None

@@ -59,6 +59,7 @@ from cevm.units import KMH_TO_MPS
 
 if TYPE_CHECKING:  # the sweep imports this module: no import back at run time
     from cevm.core.sweep.profiles import LegProfile, StepTable
+    from cevm.core.vehicle import Vehicle
 
 #: The window over which the power a source asks is averaged [s]: a drivetrain delivers
 #: its rated power for seconds, and one-second steps of a logged trace carry speed and
@@ -169,7 +170,8 @@ class Demand:
         se = self.se - ELEVATION_SIGMAS * math.sqrt(2.0) * 9.81 * self.elevation_sd_m
         return (sk + se + cr * self.sr / s) / self.dur, cda_m2 * self.sa / s**3 / self.dur
 
-    def peak_power_w(self, mass_kg, cda_m2: float, cr: float, least: bool = False) -> np.ndarray:
+    def peak_power_w(self, mass_kg: float | np.ndarray, cda_m2: float, cr: float, least: bool = False
+                     ) -> np.ndarray:
         """The largest mean wheel power [W] over any window at each mass (0 for a source
         that never moves)."""
         m = np.atleast_1d(np.asarray(mass_kg, dtype=np.float64))
@@ -232,13 +234,15 @@ def source_demand(st: StepTable, legs: Sequence[LegProfile], *, logged: bool = F
     for v in (k, e, st.r, st.a):
         c = edges(v)
         sums.append(c[ends] - c[starts])
-    return Demand(top, *sums, ct[ends] - ct[starts], logged=logged, elevation_sd_m=elevation_sd)
+    return Demand(top, sums[0], sums[1], sums[2], sums[3], ct[ends] - ct[starts], logged=logged,
+                  elevation_sd_m=elevation_sd)
 
 
 # ----------------------------------------------------------------------------- flags
 
 
-def follow_flags(demand: Demand, vehicle, mass_kg) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def follow_flags(demand: Demand, vehicle: Vehicle, mass_kg: float | np.ndarray
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(over_power, over_speed, power_demand_w) of one vehicle at each gross mass
     ``mass_kg`` on the source of ``demand``: flags 1.0 / 0.0, NaN where the vehicle has
     no ``max_power_kw`` / ``max_speed_kmh``; the power the source asks [W] (its peak
@@ -254,7 +258,7 @@ def follow_flags(demand: Demand, vehicle, mass_kg) -> tuple[np.ndarray, np.ndarr
     return over_p, over_v, demand.peak_power_w(m, vehicle.cda_m2, vehicle.cr)
 
 
-def reserve_ok(soc_min_pct, reserve_pct: float) -> np.ndarray:
+def reserve_ok(soc_min_pct: float | np.ndarray, reserve_pct: float) -> np.ndarray:
     """1.0 where the lowest state of charge [%] keeps the reserve [%], 0.0 where not,
     NaN where the lowest state of charge is unknown (NaN)."""
     soc = np.asarray(soc_min_pct, dtype=np.float64)
@@ -262,7 +266,8 @@ def reserve_ok(soc_min_pct, reserve_pct: float) -> np.ndarray:
         return np.where(np.isfinite(soc), (soc >= reserve_pct).astype(float), np.nan)
 
 
-def tank_ok(fuel_l, tank_l, is_ice=True) -> np.ndarray:
+def tank_ok(fuel_l: float | np.ndarray, tank_l: float | np.ndarray, is_ice: bool | np.ndarray = True
+            ) -> np.ndarray:
     """1.0 where the fuel [l] fits the tank [l], 0.0 where not, NaN for rows that are not
     ``is_ice`` and where the tank (a vehicle without ``tank_l``) or the fuel is unknown.
     Fuel burnt never falls along a route, so the total is what the tank must hold."""
@@ -272,8 +277,10 @@ def tank_ok(fuel_l, tank_l, is_ice=True) -> np.ndarray:
         return np.where(np.asarray(is_ice) & np.isfinite(tank), (fuel <= tank).astype(float), np.nan)
 
 
-def verdict(*, is_ev, over_max_gross, over_power, over_speed, soc_min_pct=None, reserve_pct: float = 0.0,
-            fuel_l=None, tank_l=None, energy_ok=None) -> dict[str, np.ndarray]:
+def verdict(*, is_ev: bool | np.ndarray, over_max_gross: float | np.ndarray, over_power: float | np.ndarray,
+            over_speed: float | np.ndarray, soc_min_pct: float | np.ndarray | None = None, reserve_pct: float = 0.0,
+            fuel_l: float | np.ndarray | None = None, tank_l: float | np.ndarray | None = None,
+            energy_ok: float | np.ndarray | None = None) -> dict[str, np.ndarray]:
     """The flags of :data:`FLAGS` of rows (arrays broadcast): ``over_max_gross``,
     ``over_power``, ``over_speed`` as given (1.0 / 0.0, NaN: not checked);
     ``reserve_ok`` for EV rows (lowest SoC ``soc_min_pct`` >= ``reserve_pct``; NaN where

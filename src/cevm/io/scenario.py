@@ -538,7 +538,7 @@ def fleet_report(path: str | Path, days: Sequence[str | int] | None = None, *, m
                       "ice_braking": None if fv.vehicle.is_ev else fv.vehicle.ice_braking,
                       "calibrated": fv.vehicle.calibration is not None,
                       "uses_temperature": energy.uses_temperature(fv.vehicle)} for fv in sc.vehicles],
-        "warnings": calibration_warnings(sc, plans) + [w for p, vd in zip(plans, verdicts)
+        "warnings": calibration_warnings(sc, plans) + [w for p, vd in zip(plans, verdicts, strict=True)
                                                          for w in verdict_warnings(p.day, vd, fleet)],
         "infeasible_days": infeasible,
         "reference": None if reference is None else {
@@ -559,7 +559,7 @@ def fleet_report(path: str | Path, days: Sequence[str | int] | None = None, *, m
         ] + [{"day": d["day"], "total": None, "default_total": None, "saving": None, "saving_pct": None,
               "method": None, "status": "infeasible", "solve_time_s": None} for d in infeasible],
             key=lambda row: sc.day_index(row["day"])),
-        "plans": [_with_verdicts(p.to_dict(), vd) for p, vd in zip(plans, verdicts)],
+        "plans": [_with_verdicts(p.to_dict(), vd) for p, vd in zip(plans, verdicts, strict=True)],
     }
 
 

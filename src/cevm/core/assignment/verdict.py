@@ -22,6 +22,7 @@ from cevm.core.assignment.scenario import BUDGET_RTOL, Leg, Scenario
 if TYPE_CHECKING:
     from cevm.core.assignment.planning import Plan
     from cevm.core.limits import Demand
+    from cevm.core.vehicle import Vehicle
 
 #: What a plan asks of its legs: the :class:`~cevm.core.limits.Demand` of a leg (None:
 #: its profile is not known, so power and speed are not checked).
@@ -45,7 +46,7 @@ def vehicle_verdicts(sc: Scenario, plan: Plan, demand_of: LegDemand | None) -> d
         for ru in vu.routes:
             route = routes[ru.route_id]
             names = leg_names(route)
-            for name, mass in zip(ru.leg_names, ru.leg_mass_kg):
+            for name, mass in zip(ru.leg_names, ru.leg_mass_kg, strict=True):
                 demand = None if demand_of is None else demand_of(route.legs[names.index(name)])
                 if demand is None or (veh.max_power_w is None and veh.max_speed_mps is None):
                     continue
@@ -58,10 +59,11 @@ def vehicle_verdicts(sc: Scenario, plan: Plan, demand_of: LegDemand | None) -> d
                 if v[0] == 1.0:
                     over_v.append(entry)
         gross = vu.max_gross_kg is not None and vu.max_gross_used_kg > vu.max_gross_kg * (1 + 1e-12)
-        if veh.is_ev:
-            energy_ok = None if vu.energy_budget_j is None else vu.energy_j <= vu.energy_budget_j * (1 + BUDGET_RTOL)
-        else:
-            energy_ok = None if veh.tank_l is None else vu.fuel_l <= veh.tank_l
+        energy_ok: bool | None = None  # the day's energy against the budget (EV) or the tank (ICE)
+        if veh.is_ev and vu.energy_budget_j is not None and vu.energy_j is not None:
+            energy_ok = vu.energy_j <= vu.energy_budget_j * (1 + BUDGET_RTOL)
+        elif not veh.is_ev and veh.tank_l is not None and vu.fuel_l is not None:
+            energy_ok = vu.fuel_l <= veh.tank_l
         flags = limits.verdict(is_ev=veh.is_ev, over_max_gross=float(gross),
                                over_power=float(bool(over_p)) if checked_p else np.nan,
                                over_speed=float(bool(over_v)) if checked_v else np.nan,
@@ -77,17 +79,18 @@ def vehicle_verdicts(sc: Scenario, plan: Plan, demand_of: LegDemand | None) -> d
     return out
 
 
-def verdict_warnings(day: str, verdicts: Mapping[str, dict], vehicles: Mapping[str, object]) -> list[str]:
+def verdict_warnings(day: str, verdicts: Mapping[str, dict], vehicles: Mapping[str, Vehicle]) -> list[str]:
     """One warning per vehicle of a day that cannot follow a leg it is planned on."""
     out = []
     for vid, vd in verdicts.items():
         veh = vehicles[vid]
-        for key, what, limit in (("over_power", "wheel power", "max_power_kw"), ("over_speed", "speed", "max_speed_kmh")):
+        for key, what, limit in (("over_power", "wheel power", "max_power_kw"),
+                                 ("over_speed", "speed", "max_speed_kmh")):
             legs = vd.get(key) or []
             if legs:
                 worst = max(legs, key=lambda e: e["mass_kg"])
-                value = (f"{getattr(veh, 'max_power_w') / 1e3:g} kW" if key == "over_power"
-                         else f"{getattr(veh, 'max_speed_mps') * 3.6:g} km/h")
+                value = (f"{(veh.max_power_w or 0.0) / 1e3:g} kW" if key == "over_power"
+                         else f"{(veh.max_speed_mps or 0.0) * 3.6:g} km/h")
                 out.append(f"{day}: {vid} is planned on {len(legs)} leg(s) asking more {what} than its {limit} "
                            f"({value}), e.g. {worst['route']} '{worst['leg']}' at {worst['mass_kg']:,.0f} kg "
                            f"(asks {worst['power_demand_kw']:,.0f} kW over 5 s); the plan keeps the gross and energy "
@@ -96,7 +99,7 @@ def verdict_warnings(day: str, verdicts: Mapping[str, dict], vehicles: Mapping[s
 
 
 def reference_differences(plans: Sequence[Plan], reference: Mapping[str, Mapping[str, str]]
-                          ) -> list[dict[str, str]]:
+                          ) -> list[dict[str, str | None]]:
     """Where the plans' choices differ from a reference (day -> stop -> vehicle id, e.g.
     the paper's table 4): one {day, stop, planned, reference} per difference, in order."""
     out = []
