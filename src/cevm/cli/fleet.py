@@ -4,7 +4,7 @@ scenario files :mod:`cevm.io.scenario`)."""
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import Annotated
 
 import typer
 
@@ -23,7 +23,6 @@ from cevm.cli.output import OutputFormat, vehicle_legend, write_lines, write_row
 from cevm.errors import CevmError
 from cevm.text import printable
 
-
 app = typer.Typer(help="Fleet assignment: which vehicle serves the shared stops (the paper's section 6).",
                   no_args_is_help=True, rich_markup_mode=None)
 
@@ -31,12 +30,17 @@ app = typer.Typer(help="Fleet assignment: which vehicle serves the shared stops 
 @app.command("plan")
 def fleet_plan(
     scenario: Annotated[Path, typer.Argument(metavar="SCENARIO", help="Scenario TOML (see configs/fleet/paper-case-study.toml).")],
-    day: Annotated[Optional[list[str]], typer.Option("--day", "-d", metavar="DAY", help="A day by name, or by its number counted from 1 as the paper numbers days (1 is the first day; 0 is refused). Repeatable. Default: every day.")] = None,
+    day: Annotated[list[str] | None, typer.Option("--day", "-d", metavar="DAY", help="A day by name, or by its number counted from 1 as the paper numbers days (1 is the first day; 0 is refused). Repeatable. Default: every day.")] = None,
     method: Annotated[str, typer.Option(help="auto (enumerate when small, else MILP), enumerate, or milp.")] = "auto",
     store: StoreOption = None,
     ambient_c: AmbientOption = None,
     fmt: Annotated[OutputFormat, typer.Option("--format", "-f", help="Output format.")] = OutputFormat.table,
     out: OutOption = None,
+    min_p_complete: Annotated[float | None, typer.Option(
+        "--min-p-complete", metavar="P",
+        help="Require every vehicle with a budget (an EV's battery above its reserve, an ICE's tank_l) to complete "
+             "its day with at least this probability (0.5 to 1, e.g. 0.95), from its calibration or its class's "
+             "priors; still proven optimal. Every plan reports each vehicle's probability (p_complete).")] = None,
 ) -> None:
     """The assignment of shared stops that minimises total fuel (or energy, or cost),
     within gross-weight limits and EV reserves: proven optimal (enumeration or MILP).
@@ -56,6 +60,8 @@ def fleet_plan(
     if method not in ("auto", "enumerate", "milp"):
         raise fail("--method must be auto, enumerate or milp")
     check_output_path(out, "--out")
+    if min_p_complete is not None and not 0.5 <= min_p_complete < 1.0:
+        raise fail(f"--min-p-complete must be at least 0.5 and below 1 (0.95: 19 days in 20), got {min_p_complete:g}")
     days = list(day) if day else None  # names or 1-based numbers (cevm.io.scenario.resolve_day)
     try:
         store_path = resolve_store_path(store)
@@ -69,9 +75,11 @@ def fleet_plan(
                     return opened[0]
 
                 report = fleet_report(scenario, days, method=method, resolve_leg=store_resolver(opener),
-                                      ambient_c=ambient_c, leg_demand=store_leg_demand(opener, scenario.parent))
+                                      ambient_c=ambient_c, leg_demand=store_leg_demand(opener, scenario.parent),
+                                      min_p_complete=min_p_complete)
         else:
-            report = fleet_report(scenario, days, method=method, resolve_leg=default_resolver, ambient_c=ambient_c)
+            report = fleet_report(scenario, days, method=method, resolve_leg=default_resolver, ambient_c=ambient_c,
+                                  min_p_complete=min_p_complete)
     except CevmError as exc:
         raise fail(exc) from None
     try:
@@ -98,11 +106,11 @@ def _write_report(report: dict, fmt: OutputFormat, stream) -> None:
     unit = report["unit"]
     if fmt == OutputFormat.csv:
         rows = [{"day": p["day"], "vehicle": v["vehicle"], "stops": " ".join(v["stops"]),
-                 f"consumption_{unit}": v["value"], "feasible": v["verdict"]["feasible"],
-                 "why": "; ".join(_why_not(v["verdict"]))}
+                 f"consumption_{unit}": v["value"], "p_complete": v.get("p_complete"),
+                 "feasible": v["verdict"]["feasible"], "why": "; ".join(_why_not(v["verdict"]))}
                 for p in report["plans"] for v in p["vehicles"]]
-        rows += [{"day": d["day"], "vehicle": None, "stops": None, f"consumption_{unit}": None, "feasible": False,
-                  "why": f"not planned: {d['why']}"} for d in report["infeasible_days"]]
+        rows += [{"day": d["day"], "vehicle": None, "stops": None, f"consumption_{unit}": None, "p_complete": None,
+                  "feasible": False, "why": f"not planned: {d['why']}"} for d in report["infeasible_days"]]
         write_rows(rows, fmt, stream=stream)
         return
     day_cols = [k for k in report["table"][0] if k != "vehicle"] if report["table"] else []
@@ -127,10 +135,16 @@ def _write_report(report: dict, fmt: OutputFormat, stream) -> None:
             mark = "?" if vd["feasible"] is None else "yes" if vd["feasible"] else "NO"
             why = _why_not(vd)
             rows.append({"day": p["day"], "vehicle": v["vehicle"], unit: v["value"],
-                         "max gross kg": v["max_gross_used_kg"], "feasible": mark + (f" ({'; '.join(why)})" if why else "")})
+                         "max gross kg": v["max_gross_used_kg"], "P complete": v.get("p_complete"),
+                         "feasible": mark + (f" ({'; '.join(why)})" if why else "")})
+    if not any(r["P complete"] is not None for r in rows):
+        for r in rows:
+            del r["P complete"]
     if rows:
-        write_rows(rows, OutputFormat.table, title=f"consumption per vehicle [{unit}]",
-                   digits={unit: 2, "max gross kg": 0}, keep=("day", "vehicle", unit, "feasible"), stream=stream)
+        write_rows(rows, OutputFormat.table, title=f"consumption per vehicle [{unit}]"
+                   + ("; P complete: the probability of completing the day within its battery reserve or tank"
+                      if "P complete" in rows[0] else ""), digits={unit: 2, "max gross kg": 0, "P complete": 3},
+                   keep=("day", "vehicle", unit, "feasible"), stream=stream)
     summary = [{"day": s["day"], f"total {unit}": s["total"], f"default {unit}": s["default_total"],
                 "saving %": s["saving_pct"], "method": s["method"], "status": s["status"],
                 "solve ms": None if s["solve_time_s"] is None else s["solve_time_s"] * 1e3} for s in report["summary"]]

@@ -492,9 +492,17 @@ def read_reference(path: Path, sc: Scenario) -> dict | None:
             "assignment": assignment}
 
 
+def _interval_from(vehicle: Vehicle) -> str:
+    """posterior, prior or none: what a vehicle's probabilities come from."""
+    from cevm.core.predictive import posterior_of
+
+    post = posterior_of(vehicle)
+    return "none" if post is None else post.label
+
+
 def fleet_report(path: str | Path, days: Sequence[str | int] | None = None, *, method: str = "auto",
                  resolve_leg: LegResolver = default_resolver, ambient_c: float | None = None,
-                 leg_demand: LegDemand | None = None) -> dict:
+                 leg_demand: LegDemand | None = None, min_p_complete: float | None = None) -> dict:
     """Everything ``cevm fleet SCENARIO`` shows, JSON-ready: the scenario, one plan per
     day (all days by default), the table-4 rows and a summary row per day
     (total, default, saving, method, status, time). ``ambient_c`` [degC] overrides every
@@ -504,6 +512,9 @@ def fleet_report(path: str | Path, days: Sequence[str | int] | None = None, *, m
     flags of every command, the legs it cannot follow; ``leg_demand`` says what each leg
     asks, default :func:`cycle_leg_demand` for cycle files), warned about; ``reference``
     compares the choices with the scenario's ``[reference]`` (the paper's table 4).
+
+    ``min_p_complete``: require every vehicle with a budget to complete its day with at
+    least this probability (:func:`cevm.core.assignment.plan`).
 
     ``days``: names, or strings holding a day's 1-based number as the paper numbers days
     (``"3"`` is the third day; see :func:`resolve_day`), or ints (0-based indices, as
@@ -515,7 +526,7 @@ def fleet_report(path: str | Path, days: Sequence[str | int] | None = None, *, m
     plans, infeasible = [], []
     for d in chosen:  # a day without a feasible assignment is named, the others planned
         try:
-            plans.append(plan(sc, d, method=method))
+            plans.append(plan(sc, d, method=method, min_p_complete=min_p_complete))
         except InputError as exc:
             if not str(exc.message).startswith("day "):
                 raise
@@ -537,6 +548,7 @@ def fleet_report(path: str | Path, days: Sequence[str | int] | None = None, *, m
                       "powertrain": fv.vehicle.powertrain,
                       "ice_braking": None if fv.vehicle.is_ev else fv.vehicle.ice_braking,
                       "calibrated": fv.vehicle.calibration is not None,
+                      "interval_from": _interval_from(fv.vehicle),
                       "uses_temperature": energy.uses_temperature(fv.vehicle)} for fv in sc.vehicles],
         "warnings": calibration_warnings(sc, plans) + [w for p, vd in zip(plans, verdicts, strict=True)
                                                          for w in verdict_warnings(p.day, vd, fleet)],
@@ -554,10 +566,13 @@ def fleet_report(path: str | Path, days: Sequence[str | int] | None = None, *, m
                 "method": p.method,
                 "status": p.status,
                 "solve_time_s": p.solve_time_s,
+                "min_p_complete": p.min_p_complete,
+                "lowest_p_complete": min((x for x in (p.p_complete or {}).values() if x is not None), default=None),
             }
             for p in plans
         ] + [{"day": d["day"], "total": None, "default_total": None, "saving": None, "saving_pct": None,
-              "method": None, "status": "infeasible", "solve_time_s": None} for d in infeasible],
+              "method": None, "status": "infeasible", "solve_time_s": None, "min_p_complete": min_p_complete,
+              "lowest_p_complete": None} for d in infeasible],
             key=lambda row: sc.day_index(row["day"])),
         "plans": [_with_verdicts(p.to_dict(), vd) for p, vd in zip(plans, verdicts, strict=True)],
     }
