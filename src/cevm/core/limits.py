@@ -137,6 +137,34 @@ def _median3(x: np.ndarray) -> np.ndarray:
     return out
 
 
+#: Masses x windows of one chunk of :func:`affine_peak` (8 MB of float64).
+_PEAK_CHUNK_CELLS = 1 << 20
+
+
+def affine_peak(slope: np.ndarray, icpt: np.ndarray, mass_kg: float | np.ndarray) -> np.ndarray:
+    """The largest over windows of ``mass * slope + icpt`` at each mass (a window's mean
+    wheel power is affine in the mass), a chunk of masses at a time."""
+    m = np.atleast_1d(np.asarray(mass_kg, dtype=np.float64))
+    out = np.empty(m.shape)
+    step = max(1, _PEAK_CHUNK_CELLS // max(slope.size, 1))
+    for lo in range(0, m.size, step):
+        out[lo:lo + step] = (m[lo:lo + step, None] * slope[None, :] + icpt[None, :]).max(axis=1)
+    return out
+
+
+def affine_mass_window(slope: np.ndarray, icpt: np.ndarray, limit: float) -> tuple[float, float]:
+    """The masses (low, high) between which every window's ``mass * slope + icpt`` stays
+    within ``limit`` (each is affine in the mass, so the set is an interval); (nan, nan)
+    when no mass does."""
+    if np.any((slope == 0) & (icpt > limit)):
+        return math.nan, math.nan
+    with np.errstate(divide="ignore", invalid="ignore"):
+        bound = (limit - icpt) / slope
+    hi = float(np.min(bound[slope > 0], initial=math.inf))
+    lo = float(np.max(bound[slope < 0], initial=0.0))
+    return (math.nan, math.nan) if lo > hi else (lo, hi)
+
+
 @dataclass(frozen=True, eq=False)
 class Demand:
     """What a source asks of a vehicle, for any vehicle: its held top speed and, per
@@ -174,29 +202,16 @@ class Demand:
                      ) -> np.ndarray:
         """The largest mean wheel power [W] over any window at each mass (0 for a source
         that never moves)."""
-        m = np.atleast_1d(np.asarray(mass_kg, dtype=np.float64))
         if self.dur.size == 0:
-            return np.zeros(m.shape)
-        slope, icpt = self.coefficients(cda_m2, cr, least)
-        out = np.empty(m.shape)
-        step = max(1, (1 << 20) // slope.size)
-        for lo in range(0, m.size, step):
-            out[lo:lo + step] = (m[lo:lo + step, None] * slope[None, :] + icpt[None, :]).max(axis=1)
-        return out
+            return np.zeros(np.shape(np.atleast_1d(mass_kg)))
+        return affine_peak(*self.coefficients(cda_m2, cr, least), mass_kg)
 
     def power_mass_window(self, max_power_w: float, cda_m2: float, cr: float) -> tuple[float, float]:
         """The masses [kg] (low, high) between which the vehicle's ``max_power_w`` is not
         exceeded (the least power for a logged trace); (nan, nan) when no mass is."""
         if self.dur.size == 0:
             return 0.0, math.inf
-        slope, icpt = self.coefficients(cda_m2, cr, least=True)
-        if np.any((slope == 0) & (icpt > max_power_w)):
-            return math.nan, math.nan
-        with np.errstate(divide="ignore", invalid="ignore"):
-            bound = (max_power_w - icpt) / slope
-        hi = float(np.min(bound[slope > 0], initial=math.inf))
-        lo = float(np.max(bound[slope < 0], initial=0.0))
-        return (math.nan, math.nan) if lo > hi else (lo, hi)
+        return affine_mass_window(*self.coefficients(cda_m2, cr, least=True), max_power_w)
 
     def over_speed(self, max_speed_mps: float) -> bool:
         """Whether the source is faster than ``max_speed_mps`` (beyond a logged speed's

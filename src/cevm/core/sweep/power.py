@@ -14,9 +14,6 @@ from cevm.core.limits import POWER_WINDOW_S
 from cevm.core.sweep.block import SweepBlock
 from cevm.core.sweep.profiles import StepTable
 
-#: Masses x windows of one chunk of :func:`peak_wheel_power_w` (8 MB of float64).
-_POWER_CHUNK_CELLS = 1 << 20
-
 
 def _window_coefficients(st: StepTable, window_s: float = POWER_WINDOW_S):
     """Per window of consecutive steps lasting at least ``window_s`` (one starting at
@@ -52,17 +49,10 @@ def peak_wheel_power_w(st: StepTable, mass_kg, cda_m2: float, cr: float, window_
     """The largest mean wheel power [W] a source asks of a vehicle at each mass, over
     any ``window_s`` of driving (eq. 28 summed over the window, no rotating inertia);
     0 for a source that never moves."""
-    m = np.atleast_1d(np.asarray(mass_kg, dtype=np.float64))
     if not st.moving.any():
-        return np.zeros(m.shape)
+        return np.zeros(np.shape(np.atleast_1d(mass_kg)))
     sx, sr, sa, dur = _window_coefficients(st, window_s)
-    slope = (sx + cr * sr) / dur
-    icpt = cda_m2 * sa / dur
-    out = np.empty(m.shape)
-    step = max(1, _POWER_CHUNK_CELLS // slope.size)
-    for lo in range(0, m.size, step):
-        out[lo:lo + step] = (m[lo:lo + step, None] * slope[None, :] + icpt[None, :]).max(axis=1)
-    return out
+    return limits.affine_peak((sx + cr * sr) / dur, cda_m2 * sa / dur, mass_kg)
 
 
 def power_mass_window(st: StepTable, max_power_w: float, cda_m2: float, cr: float,
@@ -74,17 +64,7 @@ def power_mass_window(st: StepTable, max_power_w: float, cda_m2: float, cr: floa
     if not st.moving.any():
         return 0.0, math.inf
     sx, sr, sa, dur = _window_coefficients(st, window_s)
-    slope = (sx + cr * sr) / dur
-    icpt = cda_m2 * sa / dur
-    if np.any((slope == 0) & (icpt > max_power_w)):
-        return math.nan, math.nan
-    with np.errstate(divide="ignore", invalid="ignore"):
-        bound = (max_power_w - icpt) / slope
-    hi = float(np.min(bound[slope > 0], initial=math.inf))
-    lo = float(np.max(bound[slope < 0], initial=0.0))
-    if lo > hi:
-        return math.nan, math.nan
-    return lo, hi
+    return limits.affine_mass_window((sx + cr * sr) / dur, cda_m2 * sa / dur, max_power_w)
 
 
 def follow_flags(block: SweepBlock) -> SweepBlock:
