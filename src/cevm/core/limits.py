@@ -237,7 +237,7 @@ def source_demand(st: StepTable, legs: Sequence[LegProfile], *, logged: bool = F
         np.cumsum(v, out=out[1:])
         return out
 
-    ct = edges(st.dt)
+    ct = st.t_edges  # the table's own, kept with it
     starts = np.flatnonzero(mv)
     ends = np.searchsorted(ct, ct[starts] + window_s * (1.0 - 1e-12), side="left")
     full = ends <= st.n  # windows that last window_s within the source
