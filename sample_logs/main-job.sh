@@ -43,23 +43,20 @@ predict EB-02 -v "$OUT"/electric-bus-EB-01.toml --vehicle-id EB-02
 predict HGV-21 -v "$OUT"/diesel-hgv-HGV-11.toml --vehicle-id HGV-21
 predict winter -v "$OUT"/electric-bus-EB-01.toml --cycle configs/cycles/urban-bus.csv --payload-kg 0:5000:2500 \
       --ambient-c -5 --range
-<<<<<<< HEAD
-echo "results: $OUT/ (calibrated vehicle files, plots, predictions' CSV)"
-echo "store: $CEVM_STORE"
-# the summary, by the Python cevm runs on (3.11+: tomllib)
-PYTHON=${PYTHON:-$(dirname "$(command -v "$CEVM")")/python}
-[ -x "$PYTHON" ] || PYTHON=python3
-"$PYTHON" sample_logs/job_summary.py "$OUT"
-=======
 
-echo "== 4. replay: the diesel trucks' logged days with a candidate battery-electric tractor (590 kWh usable),"
-echo "      charged full at the depot overnight; then without any depot charge (the level carried from day to day);"
-echo "      then with a 120 kWh battery, and with it a 150 kW charger at any stop of 30 min or more"
+echo "== 4. replay: the diesel trucks' logged days with a candidate battery-electric"
+echo "      tractor (590 kWh usable), charged full at the depot overnight; then"
+echo "      without any depot charge (the level carried from day to day); then with"
+echo "      a 120 kWh battery, and with it a 150 kW charger at any stop of 30 min+"
 TRUCKS=(--vehicle-id HGV-11 --vehicle-id HGV-21 --vehicle-id "KX19 LMR" --vehicle-id "KX19 LMT")
 $CEVM replay -v configs/vehicles/electric-truck.toml "${TRUCKS[@]}" --plot "$OUT"/replay-electric-truck.png \
       --summary "$OUT"/replay-electric-truck.json
 $CEVM replay -v configs/vehicles/electric-truck.toml "${TRUCKS[@]}" --overnight none
 $CEVM replay -v configs/vehicles/electric-truck.toml "${TRUCKS[@]}" --battery-kwh 120
 $CEVM replay -v configs/vehicles/electric-truck.toml "${TRUCKS[@]}" --battery-kwh 120 --charger-kw 150
-echo "results: $OUT/ (calibrated vehicle files, plots); store: $CEVM_STORE"
->>>>>>> main
+echo "results: $OUT/ (calibrated vehicle files, plots, predictions' CSV)"
+echo "store: $CEVM_STORE"
+# the summary, by the Python cevm runs on (3.11+: tomllib)
+PYTHON=${PYTHON:-$(dirname "$(command -v "$CEVM")")/python}
+[ -x "$PYTHON" ] || PYTHON=python3
+"$PYTHON" sample_logs/job_summary.py "$OUT"

@@ -28,6 +28,7 @@ import typer
 from cevm.cli.columnar import concat_columns, csv_text, json_objects
 from cevm.cli.common import (
     EXIT_PARTIAL,
+    PNG,
     TABLE_MAX_ROWS,
     FormatOption,
     IceBrakingOption,
@@ -36,6 +37,7 @@ from cevm.cli.common import (
     StoreOption,
     VehicleOption,
     check_common,
+    check_output_path,
     check_workers,
     fail,
     open_out,
@@ -451,6 +453,9 @@ def replay_cmd(
         raise fail("give --workers (local processes) or --scheduler (a Dask cluster), not both")
     check_workers(workers)
     check_common(ice_braking, soc_start, reserve_pct)
+    check_output_path(out, "--out")
+    check_output_path(plot, "--plot", PNG)
+    check_output_path(summary, "--summary", (".json", "the fleet's summary (JSON)"))
     for name, value, lo, hi in (("--interval", interval, 0.0, 1.0), ("--confidence", confidence, 0.0, 1.0),
                                 ("--target-share", target_share, 0.0, 1.0)):
         if not lo < value < hi if name == "--interval" else not lo < value <= hi:

@@ -117,23 +117,28 @@ def held_top_speed_mps(legs: Sequence[LegProfile], hold_s: float = SPEED_HOLD_S)
         if v.size == 0:
             continue
         ends = np.searchsorted(t, t + hold_s * (1.0 - 1e-12), side="left")
-        k = int(np.max(ends - np.arange(t.size))) + 1 if t.size else 1
-        k = min(max(k, 1), v.size)
+        k = min(max(int(np.max(ends - np.arange(t.size))) + 1, 1), v.size)
         # the minimum over each run of k samples (k covers hold_s on the leg's widest
-        # sampling; on a uniform grid, exactly the samples of hold_s)
-        lows = np.lib.stride_tricks.sliding_window_view(v, k).min(axis=1)
-        best = max(best, float(lows.max()))
+        # sampling; on a uniform grid, exactly the samples of hold_s): k - 1 passes
+        low = v[: v.size - k + 1].copy()
+        for j in range(1, k):
+            np.minimum(low, v[j: v.size - k + 1 + j], out=low)
+        best = max(best, float(low.max()))
     return best
 
 
 def _median3(x: np.ndarray) -> np.ndarray:
     """Each element replaced by the median of itself and its two neighbours (the ends
-    kept): one-sample spikes go, steps and ramps stay."""
-    if x.size < 3:
-        return x.copy()
-    a, b, c = x[:-2], x[1:-1], x[2:]
+    kept): one-sample spikes go, steps and ramps stay. A new array, with two temporary
+    ones (a long source's memory)."""
     out = x.copy()
-    out[1:-1] = np.maximum(np.minimum(a, b), np.minimum(np.maximum(a, b), c))
+    if x.size < 3:
+        return out
+    a, b, c = x[:-2], x[1:-1], x[2:]
+    lo = np.minimum(a, b)
+    hi = np.maximum(a, b)
+    np.minimum(hi, c, out=hi)
+    np.maximum(lo, hi, out=out[1:-1])
     return out
 
 
@@ -169,34 +174,35 @@ def affine_mass_window(slope: np.ndarray, icpt: np.ndarray, limit: float) -> tup
 class Demand:
     """What a source asks of a vehicle, for any vehicle: its held top speed and, per
     window of :data:`POWER_WINDOW_S` starting at each moving step (the windows that fit
-    in the source; a source shorter than a window is one), the sums over its
-    moving steps of the (de-spiked) kinetic ``sk`` and potential ``se`` energy per kg
-    [J/kg], of the rolling term ``sr`` [J/kg per unit Cr] and the aerodynamic term ``sa``
-    [J/m^2], and its duration ``dur`` [s]: the window's mean wheel power at mass m is
-    (m (sk + se + Cr sr) + CdA sa) / dur. ``logged``: a measured trace, held to the
-    limits with the tolerance of its measurement (module notes), ``elevation_sd_m`` its
-    elevation's uncertainty."""
+    in the source; a source shorter than a window is one), the sums over its moving
+    steps of the (de-spiked) kinetic and potential energy per kg ``sx`` [J/kg], of the
+    rolling term ``sr`` [J/kg per unit Cr] and the aerodynamic term ``sa`` [J/m^2], and
+    its duration ``dur`` [s]: the window's mean wheel power at mass m is
+    (m (sx + Cr sr) + CdA sa) / dur. ``logged``: a measured trace, held to the limits
+    with the tolerance of its measurement (module notes), ``elevation_sd_m`` its
+    elevation's uncertainty, and ``sk`` the kinetic part of ``sx`` (a logged trace only:
+    its speed reading's tolerance scales it; None for a cycle, to spare the memory)."""
 
     top_speed_mps: float
-    sk: np.ndarray
-    se: np.ndarray
+    sx: np.ndarray
     sr: np.ndarray
     sa: np.ndarray
     dur: np.ndarray
     logged: bool = False
     elevation_sd_m: float = 0.0
+    sk: np.ndarray | None = None
 
     def coefficients(self, cda_m2: float, cr: float, least: bool = False) -> tuple[np.ndarray, np.ndarray]:
         """(slope [W/kg], intercept [W]) of each window's mean wheel power, affine in the
         mass. ``least``: the least power a logged trace can mean (its speeds read up to
         :data:`SPEED_READING_HIGH_FRACTION` high, its elevation uncertain); a cycle's
         exact power otherwise."""
-        if not (least and self.logged):
-            return (self.sk + self.se + cr * self.sr) / self.dur, cda_m2 * self.sa / self.dur
+        if not (least and self.logged and self.sk is not None):
+            return (self.sx + cr * self.sr) / self.dur, cda_m2 * self.sa / self.dur
         s = 1.0 + SPEED_READING_HIGH_FRACTION
-        sk = np.where(self.sk > 0, self.sk / s**2, self.sk)
-        se = self.se - ELEVATION_SIGMAS * math.sqrt(2.0) * 9.81 * self.elevation_sd_m
-        return (sk + se + cr * self.sr / s) / self.dur, cda_m2 * self.sa / s**3 / self.dur
+        sk = self.sk
+        se = self.sx - sk - ELEVATION_SIGMAS * math.sqrt(2.0) * 9.81 * self.elevation_sd_m
+        return (np.where(sk > 0, sk / s**2, sk) + se + cr * self.sr / s) / self.dur, cda_m2 * self.sa / s**3 / self.dur
 
     def peak_power_w(self, mass_kg: float | np.ndarray, cda_m2: float, cr: float, least: bool = False
                      ) -> np.ndarray:
@@ -227,30 +233,43 @@ def source_demand(st: StepTable, legs: Sequence[LegProfile], *, logged: bool = F
     mv = st.moving
     if not mv.any():
         z = np.zeros(0)
-        return Demand(top, z, z, z, z, z, logged, elevation_sd)
-    k = np.where(mv, _median3(st.k), 0.0)  # standstill: the brakes hold the vehicle
-    e = np.where(mv, _median3(st.x - st.k), 0.0)
-
-    def edges(v: np.ndarray) -> np.ndarray:
-        out = np.empty(v.size + 1)
-        out[0] = 0.0
-        np.cumsum(v, out=out[1:])
-        return out
-
+        return Demand(top, z, z, z, z, logged, elevation_sd)
     ct = st.t_edges  # the table's own, kept with it
     starts = np.flatnonzero(mv)
-    ends = np.searchsorted(ct, ct[starts] + window_s * (1.0 - 1e-12), side="left")
+    span = window_s * (1.0 - 1e-12)
+    dt0 = float(st.dt[0])
+    w = max(1, math.ceil(span / dt0)) if dt0 > 0 else 1
+    if np.all(st.dt == dt0) and (w - 1) * dt0 < span:  # a uniform grid: each window is w steps
+        ends = starts + w
+    else:
+        ends = np.searchsorted(ct, ct[starts] + span, side="left")
     full = ends <= st.n  # windows that last window_s within the source
     if full.any():
         starts, ends = starts[full], ends[full]
     else:  # a source shorter than a window: itself, whole
         starts, ends = starts[:1], np.array([st.n])
-    sums = []
-    for v in (k, e, st.r, st.a):
-        c = edges(v)
-        sums.append(c[ends] - c[starts])
-    return Demand(top, sums[0], sums[1], sums[2], sums[3], ct[ends] - ct[starts], logged=logged,
-                  elevation_sd_m=elevation_sd)
+
+    def window_sums(values: np.ndarray) -> np.ndarray:
+        c = np.empty(values.size + 1)  # one running sum at a time: a long source's peak memory
+        c[0] = 0.0
+        np.cumsum(values, out=c[1:])
+        return c[ends] - c[starts]
+
+    # de-spiked kinetic and potential energies; standstill: the brakes hold the vehicle
+    still = ~mv
+    k = _median3(st.k)
+    k[still] = 0.0
+    sk = window_sums(k) if logged else None
+    e = st.x - st.k
+    x = _median3(e)
+    del e
+    x[still] = 0.0
+    x += k
+    del k
+    sx = window_sums(x)
+    del x
+    return Demand(top, sx, window_sums(st.r), window_sums(st.a), ct[ends] - ct[starts], logged=logged,
+                  elevation_sd_m=elevation_sd, sk=sk)
 
 
 # ----------------------------------------------------------------------------- flags
