@@ -4,14 +4,15 @@ what the predictions say, in lines of at most 80 characters.
 
     python sample_logs/job_summary.py OUT_DIR
 
-Reads the calibrated vehicle files (their [calibration] table) and the predictions'
-CSV files (predict-*.csv, cevm predict -f csv) the job wrote into OUT_DIR; the standard
-library only.
+Reads the calibrated vehicle files (their [calibration] table), the predictions' CSV
+files (predict-*.csv, cevm predict -f csv) and the replays' summaries (replay-*.json,
+cevm replay --summary) the job wrote into OUT_DIR; the standard library only.
 """
 
 from __future__ import annotations
 
 import csv
+import json
 import math
 import statistics
 import sys
@@ -86,6 +87,19 @@ def predicted(path: Path) -> None:
     say(text)
 
 
+def replayed(path: Path) -> None:
+    sm = json.loads(path.read_text(encoding="utf-8"))
+    unit = sm.get("unit", "kWh")
+    text = (f"{sm.get('candidate', '?')} on {sm.get('vehicles', '?')} logged vehicles' {sm.get('duties', '?')} duties: "
+            f"{sm.get('completes', '?')} complete with the reserve kept, {sm.get('completes_at_confidence', '?')} at "
+            f"probability {sm.get('confidence', float('nan')):g}")
+    need = sm.get(f"battery_for_target_{unit}")
+    if need is not None:
+        text += (f"; {100 * sm.get('target_share', 0):.0f} % of them need a {need:,.0f} {unit} battery "
+                 f"(it has {sm.get(f'capacity_{unit}', float('nan')):,.0f})")
+    say(text)
+
+
 def main(out: Path) -> None:
     print("== summary")
     files = sorted(out.glob("*.toml"))
@@ -98,6 +112,11 @@ def main(out: Path) -> None:
         print("predictions:")
         for path in preds:
             predicted(path)
+    replays = sorted(out.glob("replay-*.json"))
+    if replays:
+        print("replayed (a candidate vehicle on the logged days):")
+        for path in replays:
+            replayed(path)
 
 
 if __name__ == "__main__":

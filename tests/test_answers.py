@@ -242,6 +242,10 @@ def test_the_main_jobs_summary_reads_its_outputs(tmp_path):
                                             "T2,bus,trip,9500,6,,-4,,false,true,true\n")
     (tmp_path / "predict-b.csv").write_text(header + "\nurban,bus,cycle,9000,11.1,,,150,true,false,true\n"
                                             "urban,bus,cycle,13500,14.4,,,120,true,false,true\n")
+    (tmp_path / "replay-t.json").write_text(json.dumps({
+        "candidate": "etruck", "vehicles": 2, "duties": 12, "completes": 11, "completes_at_confidence": 10,
+        "confidence": 0.95, "target_share": 0.95, "battery_for_target_kWh": 172.0, "capacity_kWh": 590.0,
+        "unit": "kWh"}))
     res = subprocess.run([sys.executable, str(ROOT / "sample_logs/job_summary.py"), str(tmp_path)], capture_output=True,
                          text=True, check=True)
     out = res.stdout
@@ -251,6 +255,8 @@ def test_the_main_jobs_summary_reads_its_outputs(tmp_path):
     assert "90% intervals held 88% of the held-out trips" in flat
     assert "error against the measured -1.0 % mean" in flat and "feasible 1 of 2 (not: 1 power)" in flat
     assert "bus on urban at 9,000-13,500 kg: 11.10-14.40 kWh, range 120-150 km; feasible 2 of 2" in flat
+    assert ("etruck on 2 logged vehicles' 12 duties: 11 complete with the reserve kept, 10 at probability 0.95; "
+            "95 % of them need a 172 kWh battery (it has 590)") in flat
 
 
 def test_the_main_job_ends_with_its_summary():
