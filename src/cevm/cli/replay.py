@@ -15,6 +15,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import sys
 from collections.abc import Iterator
 from contextlib import ExitStack
 from datetime import UTC, datetime, tzinfo
@@ -44,7 +45,7 @@ from cevm.cli.common import (
     warn,
     warn_damaged,
 )
-from cevm.cli.output import OutputFormat, write_rows
+from cevm.cli.output import OutputFormat, write_lines, write_rows
 from cevm.cli.replay_columns import REPLAY, REPLAY_TABLE, STATUS, DutyRows, replay_values
 from cevm.core.replay import (
     DEFAULT_CHARGE_EFFICIENCY,
@@ -555,8 +556,12 @@ def _replay(o: SimpleNamespace) -> Run:
 def _say(o: SimpleNamespace, sm: dict, settings: ReplaySettings, run: Run, vehicle) -> None:
     """The summary (stdout under a table, else stderr), its JSON, the notes, the plot."""
     lines = summary_lines(sm, settings)
+    to_stderr = o.fmt != OutputFormat.table or o.out is not None
     for line in lines:
-        typer.echo(f"cevm replay: {line}", err=o.fmt != OutputFormat.table or o.out is not None)
+        if to_stderr:
+            typer.echo(f"cevm replay: {line}", err=True)
+        else:  # under the table: wrapped between words on a terminal, as the table fits it
+            write_lines([f"cevm replay: {line}"], sys.stdout)
     for note in run.notes:
         typer.echo(f"cevm: note: {note}", err=True)
     if settings.within_trips and vehicle.is_ev:
