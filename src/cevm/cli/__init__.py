@@ -49,6 +49,28 @@ def _root(
     ] = False,
 ) -> None:
     """cevm: how much diesel or electricity a vehicle uses on a route."""
+    _warnings_as_lines()
+
+
+def _warnings_as_lines() -> None:
+    """Print the library's input warnings (:class:`cevm.io.cycles.CycleWarning`: a file
+    that reads, but probably not as meant) as one ``cevm: warning:`` line each, every
+    time they occur."""
+    import warnings
+
+    from cevm.cli.common import warn
+    from cevm.io.cycles import CycleWarning
+
+    previous = warnings.showwarning
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        if issubclass(category, CycleWarning):
+            warn(str(message))
+        else:
+            previous(message, category, filename, lineno, file, line)
+
+    warnings.showwarning = show
+    warnings.simplefilter("always", CycleWarning)
 
 
 # In the order of 'cevm --help'.

@@ -12,8 +12,17 @@ from typing import TYPE_CHECKING, Annotated
 import numpy as np
 import typer
 
-from cevm.cli.common import EXIT_PARTIAL, StoreOption, existing_store, fail, warn_damaged
-from cevm.cli.output import OutputFormat, write_rows
+from cevm.cli.common import (
+    EXIT_PARTIAL,
+    PNG,
+    TOML,
+    StoreOption,
+    check_output_path,
+    existing_store,
+    fail,
+    warn_damaged,
+)
+from cevm.cli.output import OutputFormat, write_lines, write_rows
 from cevm.core.model import ICE_BRAKING_MODES
 from cevm.errors import CevmError
 
@@ -82,6 +91,11 @@ def calibrate(
         raise fail("--cv-folds must be at least 2")
     if not 0.0 < interval < 1.0:
         raise fail(f"--interval must be a level between 0 and 1 (0.9: 90 %), got {interval:g}")
+    check_output_path(out, "--out", TOML)
+    check_output_path(plot, "--plot", PNG)
+    if out is not None and out.exists() and not force:  # said before the fit, not after it
+        what = "the input vehicle file" if out.resolve() == vehicle.resolve() else "an existing file"
+        raise fail(f"--out {out}: would overwrite {what}; give another --out or --force")
     path = existing_store(store)
     if ice_braking is not None and ice_braking not in ICE_BRAKING_MODES:
         raise fail(f"--ice-braking must be one of: {', '.join(ICE_BRAKING_MODES)}")
@@ -184,17 +198,17 @@ def _print_calibration(r: dict, is_ev: bool) -> None:
                title="fitted parameters (posterior mean, 1-sigma)" + (f"; priors of {pri['describe']}" if pri else ""))
     labels = {p["field"]: p["label"] for p in r["parameters"]}
     for k, why in r["prior_kept"].items():
-        typer.echo(f"prior kept: {labels.get(k, k)}: {why.removeprefix('kept its prior: ')}")
+        _say(f"prior kept: {labels.get(k, k)}: {why.removeprefix('kept its prior: ')}")
     sc = r["scatter"]
     if sc:
-        typer.echo(f"scatter of a trip around the model: {sc['aux_text']} x its duration and {100 * sc['share']:.1f} % "
+        _say(f"scatter of a trip around the model: {sc['aux_text']} x its duration and {100 * sc['share']:.1f} % "
                    f"of its energy (from the held-out trips); within a day, correlation {sc['day_correlation_note']}")
     if cov.get("by_level"):
-        typer.echo("held-out coverage at other levels: " + ", ".join(
+        _say("held-out coverage at other levels: " + ", ".join(
             f"{100 * float(lv):g} %: {100 * sh:.0f} %" for lv, sh in cov["by_level"].items() if float(lv) != iv))
     if r["evidence"]:
         e = r["evidence"]
-        typer.echo(f"standing still: the model draws {e['fitted_text']}, the logs measured {e['measured_text']} "
+        _say(f"standing still: the model draws {e['fitted_text']}, the logs measured {e['measured_text']} "
                    f"({e['seconds'] / 60:.0f} min over {e['trips']} trips)")
     d = r["domain"]
     if d:
@@ -209,15 +223,23 @@ def _print_calibration(r: dict, is_ev: bool) -> None:
             parts.append("{:.0f} to {:.0f} km/h mean".format(*d["mean_speed_kmh"]))
         if d.get("mass_kg"):
             parts.append("{:,.0f} to {:,.0f} kg".format(*d["mass_kg"]))
-        typer.echo("fitted on: " + ", ".join(parts) + " (predictions outside are warned about)")
+        _say("fitted on: " + ", ".join(parts) + " (predictions outside are warned about)")
     for note in r["notes"]:
-        typer.echo(f"note: {note}")
+        _say(f"note: {note}")
     if r["excluded"]:
-        typer.echo(f"excluded {len(r['excluded'])} trips:")
+        _say(f"excluded {len(r['excluded'])} trips:")
         for tid, why in list(r["excluded"].items())[:20]:
-            typer.echo(f"  {tid}: {why}")
+            _say(f"  {tid}: {why}")
         if len(r["excluded"]) > 20:
-            typer.echo(f"  ... and {len(r['excluded']) - 20} more (see --format json)")
+            _say(f"  ... and {len(r['excluded']) - 20} more (see --format json)")
+
+
+def _say(text: str) -> None:
+    """A line of calibrate's report, wrapped between words on a terminal
+    (:func:`cevm.cli.output.write_lines`)."""
+    import sys
+
+    write_lines([text], sys.stdout)
 
 
 #: Candidates listed in the table at most (the rest: --format json).
@@ -243,9 +265,9 @@ def _print_candidates(cands: list[dict]) -> None:
         reasons: dict[str, int] = {}
         for c in refused:
             reasons[c["reason"]] = reasons.get(c["reason"], 0) + 1
-        typer.echo(f"refused: {len(refused)} candidates (a term the data cannot identify, or an implausible value):")
+        _say(f"refused: {len(refused)} candidates (a term the data cannot identify, or an implausible value):")
         for why, n in sorted(reasons.items(), key=lambda kv: -kv[1])[:8]:
-            typer.echo(f"  {n} x {why}")
+            _say(f"  {n} x {why}")
 
 
 def _parameters(fitted: dict, powertrain: str, priors=None) -> list[dict]:

@@ -15,6 +15,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import sys
 from collections.abc import Iterator
 from contextlib import ExitStack
 from datetime import UTC, datetime, tzinfo
@@ -28,6 +29,7 @@ import typer
 from cevm.cli.columnar import concat_columns, csv_text, json_objects
 from cevm.cli.common import (
     EXIT_PARTIAL,
+    PNG,
     TABLE_MAX_ROWS,
     FormatOption,
     IceBrakingOption,
@@ -36,13 +38,14 @@ from cevm.cli.common import (
     StoreOption,
     VehicleOption,
     check_common,
+    check_output_path,
     check_workers,
     fail,
     open_out,
     warn,
     warn_damaged,
 )
-from cevm.cli.output import OutputFormat, write_rows
+from cevm.cli.output import OutputFormat, write_lines, write_rows
 from cevm.cli.replay_columns import REPLAY, REPLAY_TABLE, STATUS, DutyRows, replay_values
 from cevm.core.replay import (
     DEFAULT_CHARGE_EFFICIENCY,
@@ -451,6 +454,9 @@ def replay_cmd(
         raise fail("give --workers (local processes) or --scheduler (a Dask cluster), not both")
     check_workers(workers)
     check_common(ice_braking, soc_start, reserve_pct)
+    check_output_path(out, "--out")
+    check_output_path(plot, "--plot", PNG)
+    check_output_path(summary, "--summary", (".json", "the fleet's summary (JSON)"))
     for name, value, lo, hi in (("--interval", interval, 0.0, 1.0), ("--confidence", confidence, 0.0, 1.0),
                                 ("--target-share", target_share, 0.0, 1.0)):
         if not lo < value < hi if name == "--interval" else not lo < value <= hi:
@@ -550,8 +556,12 @@ def _replay(o: SimpleNamespace) -> Run:
 def _say(o: SimpleNamespace, sm: dict, settings: ReplaySettings, run: Run, vehicle) -> None:
     """The summary (stdout under a table, else stderr), its JSON, the notes, the plot."""
     lines = summary_lines(sm, settings)
+    to_stderr = o.fmt != OutputFormat.table or o.out is not None
     for line in lines:
-        typer.echo(f"cevm replay: {line}", err=o.fmt != OutputFormat.table or o.out is not None)
+        if to_stderr:
+            typer.echo(f"cevm replay: {line}", err=True)
+        else:  # under the table: wrapped between words on a terminal, as the table fits it
+            write_lines([f"cevm replay: {line}"], sys.stdout)
     for note in run.notes:
         typer.echo(f"cevm: note: {note}", err=True)
     if settings.within_trips and vehicle.is_ev:

@@ -70,6 +70,20 @@ class DutyRows:
         return 100.0 * np.asarray(level, dtype=np.float64) / self.plan.capacity
 
     @cached_property
+    def verdict(self) -> dict[str, np.ndarray]:
+        """Each duty's flags by the one verdict of :func:`cevm.core.limits.verdict`: the
+        reserve (column completes), the gross mass; power and speed not checked (NaN)."""
+        from cevm.core import limits
+
+        limit = self.plan.vehicle.max_gross_kg
+        heaviest = self.per_duty(self.plan.energies.mass_kg, np.maximum)
+        over = np.full(self.n, np.nan) if limit is None else (heaviest > limit).astype(np.float64)
+        completes = (self.plan.levels.low >= self.plan.reserve).astype(np.float64)
+        nan = np.full(self.n, np.nan)
+        return limits.verdict(is_ev=np.full(self.n, self.ev), over_max_gross=np.nan_to_num(over, nan=0.0),
+                              over_power=nan, over_speed=nan, energy_ok=completes) | {"over_max_gross": over}
+
+    @cached_property
     def energy(self) -> np.ndarray:
         return self.per_duty(self.plan.energies.energy)
 
@@ -184,6 +198,12 @@ REPLAY = ColumnSpec((
            value=lambda r: r.plan.levels.charges.astype(np.float64)),
     Column("completes", "the duty keeps the reserve all along, at the mean energies", kind="bool", header="completes",
            value=lambda r: (r.plan.levels.low >= r.plan.reserve).astype(np.float64)),
+    Column("over_max_gross", "a trip of the duty is heavier than the candidate's max_gross_kg (empty without it)",
+           kind="bool", value=lambda r: r.verdict["over_max_gross"]),
+    Column("feasible", "the verdict every command gives (cevm.core.limits): the duty completes (the reserve kept at "
+           "the mean energies) within max_gross_kg; max_power_kw and max_speed_kmh are not checked here (replay reads "
+           "the trips' vectors, not their samples: cevm predict -v CANDIDATE --vehicle-id ID checks them per trip)",
+           kind="bool", value=lambda r: r.verdict["feasible"]),
     Column("p_complete", "probability that the duty keeps the reserve all along (Monte Carlo over the candidate's "
            "predictive distribution; 0 or 1 without one)", header="p", digits=3, value=lambda r: r.p),
     Column("p_complete_se", "Monte Carlo standard error of p_complete", decimals=6, value=lambda r: r.se()),

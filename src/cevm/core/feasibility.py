@@ -36,7 +36,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.special import ndtr, ndtri
 
-from cevm.core import physical_inputs
+from cevm.core import limits, physical_inputs
 from cevm.core.predictive import Features, predictive
 from cevm.core.sweep import (
     AMBIENT_ORIGINS,
@@ -63,12 +63,17 @@ class Feasibility:
     Arrays (V,), one per vehicle, at the evaluated load (``mass_kg``, ``payload_kg``):
     ``over_max_gross``; EV: ``soc_end_pct``, ``soc_min_pct``, ``reserve_margin_pct``
     (SoC_min - reserve, percentage points); ICE: ``fuel_l``, ``tank_margin_l`` (tank -
-    fuel, NaN without ``tank_l``); ``feasible`` 1.0 / 0.0 (NaN: ICE without tank_l).
+    fuel, NaN without ``tank_l``); ``feasible`` 1.0 / 0.0 (NaN: ICE without tank_l), the
+    one verdict of every command (:func:`cevm.core.limits.verdict`: the reserve or the
+    tank, max_gross_kg, max_power_kw and max_speed_kmh), with its flags ``over_power``,
+    ``over_speed``, ``reserve_ok``, ``tank_ok``.
     Payload search: ``max_payload_kg`` (largest whole-kg payload keeping the reserve /
-    fitting the tank, within max_gross_kg or the search cap; NaN when none does),
+    fitting the tank, within max_gross_kg or the search cap, and at masses the vehicle
+    can follow the source at (max_power_kw, max_speed_kmh); NaN when none does),
     ``min_payload_kg`` (0 unless the empty vehicle fails and a heavier one passes,
     which convexity allows on descents), ``limited_by``: ``"reserve"``, ``"tank"``,
-    ``"max_gross_kg"``, ``"payload_cap"`` or ``"infeasible"``. Payloads count from
+    ``"max_gross_kg"``, ``"payload_cap"``, ``"max_power_kw"``, ``"max_speed_kmh"`` or
+    ``"infeasible"``. Payloads count from
     ``kerb_mass_kg`` (from ``mass_kg`` for a vehicle without one). ``ambient_c`` the
     temperature each vehicle was evaluated at [degC], ``ambient_from`` its origin. The
     state of charge never goes below 0: an EV that runs empty on the way has
@@ -103,6 +108,18 @@ class Feasibility:
     empty_at_s: np.ndarray | None = None
     range_m: np.ndarray | None = None
     range_reserve_m: np.ndarray | None = None
+    # at the evaluated load (cevm.core.limits): can it follow the source (1.0 / 0.0, NaN:
+    # the vehicle file has no max_power_kw / max_speed_kmh), the power the source asks [W],
+    # and the reserve and the tank at the confidence (1.0 / 0.0, NaN for the other
+    # powertrain or unknown)
+    over_power: np.ndarray | None = None
+    over_speed: np.ndarray | None = None
+    power_demand_w: np.ndarray | None = None
+    reserve_ok: np.ndarray | None = None
+    tank_ok: np.ndarray | None = None
+    # what it assumed of the battery [%]
+    soc_start_pct: float = DEFAULT_SOC_START_PCT
+    reserve_pct: float = DEFAULT_RESERVE_PCT
     # the verdict's and the payload's confidence, and at the evaluated load: the energy's
     # (EV, J) or fuel's (ICE, l) standard deviation, P(reserve kept / tank enough), and
     # where the uncertainty comes from (:data:`cevm.core.intervals.INTERVAL_SOURCES`)
@@ -302,9 +319,14 @@ def feasibility(
         ok_load = (np.where(ev, soc_min >= reserve_pct, tank_margin >= 0) if z == 0.0
                    else p_ok >= confidence)
     known = ev | np.isfinite(ps.tank_l)
-    feasible = np.where(known, (ok_load & ~over).astype(float), np.nan)
 
     max_p, min_p, limited = _payload_range(f, known, max_gross, base, payload_cap_kg)
+    follow = _follow(source, vehicles, mass)
+    max_p, min_p, limited = _within_follow_limits(source, vehicles, base, max_p, min_p, limited)
+    # the reserve or the tank at the confidence (the point estimate at 0.5), then every flag
+    flags = limits.verdict(is_ev=ev, over_max_gross=over, over_power=follow[0], over_speed=follow[1],
+                           energy_ok=np.where(known, ok_load.astype(float), np.nan))
+    feasible = flags["feasible"]
     at = load_ranges(source, vehicles, mass, soc_start_pct=soc_start_pct, reserve_pct=reserve_pct,
                      ice_braking=ice_braking, ambient_c=ambient_c)
     empty = np.isfinite(at["empty_at_m"]) & ev
@@ -313,6 +335,13 @@ def feasibility(
         soc_min[empty | (soc_min < 0)] = 0.0
     return Feasibility(
         **at,
+        over_power=follow[0],
+        over_speed=follow[1],
+        power_demand_w=follow[2],
+        reserve_ok=flags["reserve_ok"],
+        tank_ok=flags["tank_ok"],
+        soc_start_pct=soc_start_pct,
+        reserve_pct=reserve_pct,
         source=source,
         vehicles=vehicles,
         mass_kg=mass,
@@ -397,6 +426,45 @@ def _payload_range(f: _LoadFunction, known: np.ndarray, max_gross: np.ndarray, b
                     vl = vd[lo_ok]
                     max_p[vl] = _last_true(f.ok, vl, pstar[d][lo_ok], plim[vl])
                     limited[vl] = kind[c][d][lo_ok]
+    return max_p, min_p, limited
+
+
+def _follow(source: Source, vehicles: Sequence[Vehicle], mass_kg: np.ndarray
+            ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(over_power, over_speed, power_demand_w) of each vehicle at its mass (arrays (V,):
+    :func:`cevm.core.limits.follow_flags`)."""
+    out = np.full((3, len(vehicles)), np.nan)
+    for i, v in enumerate(vehicles):
+        if v.max_power_w is not None or v.max_speed_mps is not None:
+            out[:, i] = [a[0] for a in limits.follow_flags(source.demand, v, mass_kg[i])]
+    return out[0], out[1], out[2]
+
+
+def _within_follow_limits(source: Source, vehicles: Sequence[Vehicle], base: np.ndarray, max_p: np.ndarray,
+                          min_p: np.ndarray, limited: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The payload range [min_p, max_p] of each vehicle narrowed to the masses at which it
+    can follow the source: within ``max_power_kw`` (an interval of masses,
+    :meth:`cevm.core.limits.Demand.power_mass_window`) and, at any mass, within
+    ``max_speed_kmh``; ``limited`` says ``"max_power_kw"`` or ``"max_speed_kmh"`` where
+    that is what limits the largest payload."""
+    max_p, min_p, limited = max_p.copy(), min_p.copy(), np.array(limited, dtype=object)
+    for i, v in enumerate(vehicles):
+        if not np.isfinite(max_p[i]):
+            continue
+        if v.max_speed_mps is not None and source.demand.over_speed(v.max_speed_mps):
+            max_p[i], min_p[i], limited[i] = np.nan, np.nan, "max_speed_kmh"
+            continue
+        if v.max_power_w is None:
+            continue
+        lo, hi = source.demand.power_mass_window(v.max_power_w, v.cda_m2, v.cr)
+        top = math.floor(hi - base[i] + 1e-9) if math.isfinite(hi) else math.inf
+        bottom = max(0.0, math.ceil(lo - base[i] - 1e-9)) if math.isfinite(lo) else math.inf
+        if math.isnan(lo) or top < max(min_p[i], bottom):
+            max_p[i], min_p[i], limited[i] = np.nan, np.nan, "max_power_kw"
+            continue
+        if top < max_p[i]:
+            max_p[i], limited[i] = top, "max_power_kw"
+        min_p[i] = max(min_p[i], bottom)
     return max_p, min_p, limited
 
 

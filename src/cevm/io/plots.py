@@ -120,12 +120,14 @@ def vehicle_label(vehicle) -> str:
 
 
 def plot_predictions(path: Path, sources: list[Source], pset: PredictionSet | Sequence[PredictionSet],
-                     sweep_data: list, soc_start: float, reserve_pct: float, ice_braking: str | None,
+                     sweep_data: list, soc_start: float | Sequence[float], reserve_pct: float,
+                     ice_braking: str | None,
                      warn: Callable[[str], None] | None = None) -> None:
     """SoC (EV) or fuel (ICE) along each source for each vehicle (one mass each: the
     paper's figure 4), or energy / fuel against payload when vehicles have several
     masses. ``pset``: one prediction set for every source, or one per source (each
-    stored trip at its own mass). ``warn`` is called with a message when only the first
+    stored trip at its own mass); ``soc_start`` [%]: one for every source, or one per
+    source (a stored trip's logged start). ``warn`` is called with a message when only the first
     :data:`PLOT_MAX_LINES` (source, vehicle) pairs are drawn."""
     per_source = list(pset) if isinstance(pset, (list, tuple)) else None
     pset = per_source[0] if per_source else pset
@@ -174,7 +176,7 @@ def plot_predictions(path: Path, sources: list[Source], pset: PredictionSet | Se
             _, dist, e = energy_trajectory(sources[s], veh, m, ice_braking=ice_braking)
             label = f"{vehicle_label(veh)} on {printable(sources[s].name)} ({m:,.0f} kg)"
             if veh.is_ev:
-                soc = soc_start - 100.0 * e / veh.battery_j
+                soc = (soc_start[s] if isinstance(soc_start, (list, tuple)) else soc_start) - 100.0 * e / veh.battery_j
                 empty = np.flatnonzero(soc < 0)
                 if empty.size:  # the line ends where the battery runs empty: no charge below 0
                     soc = soc.copy()
