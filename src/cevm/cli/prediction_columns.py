@@ -381,7 +381,7 @@ def assumptions_line(rows: list[dict[str, Any]], source_key: str = "cycle") -> t
 #: The row's interval as one short text, for people only (:func:`interval_text`: the
 #: interval is central, so its half-width says it); its header says the level.
 INTERVAL_TEXT = Column("interval_text", "half the width of the row's central interval of the battery energy (EV, "
-                       "kWh) or the fuel (ICE, l) at --interval", kind="text", header="+-", layout="wrap")
+                       "kWh) or the fuel (ICE, l) at --interval", kind="text", header="+-", layout="right")
 
 
 def interval_text(row: dict) -> str | None:
