@@ -4,13 +4,15 @@ Exit codes: 0 success; 1 some inputs of a batch failed (the rest was done: faile
 manifest rows that matched no trip, damaged trips skipped); 2 bad usage or bad input
 (nothing was done); 3 the store could not be written (or read): disk full, read-only,
 locked by another process past the busy timeout, an I/O error; the store is as it was
-before the write that failed; 4 the store is damaged (a damaged database file, or a
-damaged trip or route asked for by name): restore a backup or re-ingest, 'cevm store
-check' says where.
+before the write that failed; likewise an output that could not be written (stdout, an
+--out or --plot file: a full disk, an I/O error; :func:`os_error_exit`); 4 the store is
+damaged (a damaged database file, or a damaged trip or route asked for by name): restore
+a backup or re-ingest, 'cevm store check' says where.
 """
 
 from __future__ import annotations
 
+import errno
 import functools
 import inspect
 import math
@@ -32,6 +34,9 @@ EXIT_PARTIAL = 1
 EXIT_INPUT = 2
 EXIT_STORE_ACCESS = 3
 EXIT_STORE_DAMAGED = 4
+#: The reader of the output went away (``cevm trips | head``): nothing is said, and the
+#: code is the one a shell gives a process that SIGPIPE ended (128 + 13).
+EXIT_BROKEN_PIPE = 141
 
 
 StoreOption = Annotated[
@@ -45,7 +50,7 @@ def exit_code_for(exc: BaseException) -> int:
     :data:`EXIT_STORE_DAMAGED` for the store's failures, else :data:`EXIT_INPUT`."""
     from cevm.store.failures import DamagedRowError, StoreAccessError, StoreDamagedError
 
-    if isinstance(exc, StoreAccessError):
+    if isinstance(exc, (StoreAccessError, OutputError)):
         return EXIT_STORE_ACCESS
     if isinstance(exc, (StoreDamagedError, DamagedRowError)):
         return EXIT_STORE_DAMAGED
@@ -292,13 +297,83 @@ def check_soc(soc_start: float, reserve_pct: float | None = None) -> None:
             raise fail(f"--reserve-pct: {exc}") from None
 
 
+class OutputError(CevmError):
+    """An output (stdout, an --out or --plot file) that could not be written: exit 3."""
+
+
+#: errno values that say a write found no room or no write access: the disk (or quota,
+#: or file-size limit) is full, the file system is read-only.
+_NO_ROOM = {errno.ENOSPC: "the disk is full", errno.EDQUOT: "the disk quota is exhausted",
+            errno.EFBIG: "the file-size limit is reached", errno.EROFS: "a read-only file system"}
+
+
+def os_error_text(exc: OSError, what: str | None = None) -> str:
+    """One line for an OSError of writing or reading ``what`` (default: its file name, or
+    the output): ``FILE: could not be written: the disk is full (No space left on
+    device)``."""
+    where = what or (str(exc.filename) if exc.filename else "the output (stdout)")
+    reason = exc.strerror or str(exc)
+    if exc.errno in _NO_ROOM:
+        return f"{where}: could not be written: {_NO_ROOM[exc.errno]} ({reason})"
+    return f"{where}: could not be written or read: {reason} (an I/O error)"
+
+
+def os_error_exit(exc: OSError, what: str | None = None) -> int:
+    """Print :func:`os_error_text` as the one error line; returns exit code 3 (the
+    environment's failure, like a store that could not be written). A broken pipe (the
+    reader went away: ``cevm trips | head``) is no error: nothing is printed, and the code
+    is 141, as a shell reports a process ended by SIGPIPE."""
+    if exc.errno == errno.EPIPE:
+        _quiet_stdout()
+        return EXIT_BROKEN_PIPE
+    fail(os_error_text(exc, what), EXIT_STORE_ACCESS)
+    return EXIT_STORE_ACCESS
+
+
+def _quiet_stdout() -> None:
+    """Point stdout at /dev/null, so that Python's last flush of what could not be
+    written cannot fail again at exit ("Exception ignored ...")."""
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        os.close(devnull)
+    except (OSError, ValueError, AttributeError):
+        pass
+
+
+def flush_stdout(code):
+    """Flush stdout before the exit: output still buffered (a short table) meets a full
+    device only here. Returns ``code``, or :func:`os_error_exit`'s when the flush
+    fails."""
+    if code == 1 and type(sys.stdout).__name__ == "PacifyFlushWrapper":  # typer's quiet exit 1 after EPIPE
+        _quiet_stdout()
+        return EXIT_BROKEN_PIPE
+    try:
+        sys.stdout.flush()
+    except OSError as exc:
+        new = os_error_exit(exc)
+        _quiet_stdout()
+        return new if code in (0, None) else code
+    except (ValueError, AttributeError):  # closed or replaced
+        pass
+    return code
+
+
 class OutFile:
     """``--out`` as a context manager: written to ``PATH.partial``, renamed to PATH when
-    the command succeeds, deleted when it fails (no truncated output left behind)."""
+    the command succeeds, deleted when it fails (no truncated output left behind). A
+    write that fails (a full disk) is :class:`OutputError` naming PATH (exit 3).
+
+    PATH that exists and is not a regular file (``/dev/stdout``, a FIFO, a device) is
+    written directly: a rename would replace the device node itself. A symlink is
+    followed: the file it names is replaced, not the link."""
 
     def __init__(self, path: Path):
         self.path = Path(path)
-        self.tmp = self.path.with_name(self.path.name + ".partial")
+        target = Path(os.path.realpath(self.path))
+        self.direct = target.exists() and not target.is_file()
+        self.target = target
+        self.tmp = target if self.direct else target.with_name(target.name + ".partial")
 
     def __enter__(self) -> IO[str]:
         try:
@@ -307,12 +382,37 @@ class OutFile:
             raise CevmError(f"{self.path}: cannot write: {exc.strerror or exc}") from None
         return self.fh
 
-    def __exit__(self, exc_type, exc, tb) -> None:
-        self.fh.close()
-        if exc_type is None:
-            os.replace(self.tmp, self.path)
-        else:
-            self.tmp.unlink(missing_ok=True)
+    def __exit__(self, exc_type, exc, tb) -> bool:
+        if self.direct:
+            try:
+                self.fh.close()
+            except OSError as err:
+                if exc_type is None or issubclass(exc_type, OSError):
+                    raise OutputError(os_error_text(err, str(self.path))) from None
+            if exc_type is not None and issubclass(exc_type, OSError):
+                raise OutputError(os_error_text(exc, str(self.path))) from None
+            return False
+        try:
+            self.fh.close()  # the last buffered bytes are written here
+            if exc_type is None:
+                os.replace(self.tmp, self.target)
+        except OSError as err:
+            _unlink_quietly(self.tmp)
+            if exc_type is None or issubclass(exc_type, OSError):
+                raise OutputError(os_error_text(err, str(self.path))) from None
+            return False
+        if exc_type is not None:
+            _unlink_quietly(self.tmp)
+            if issubclass(exc_type, OSError):  # a write in the block failed: named as this file's
+                raise OutputError(os_error_text(exc, str(self.path))) from None
+        return False
+
+
+def _unlink_quietly(path: Path) -> None:
+    try:
+        path.unlink(missing_ok=True)
+    except OSError:
+        pass
 
 
 def open_out(stack: ExitStack, out: Optional[Path]) -> IO[str]:

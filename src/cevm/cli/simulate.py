@@ -9,7 +9,7 @@ from typing import Annotated, Optional
 import numpy as np
 import typer
 
-from cevm.cli.common import SocStartOption, StoreOption, check_soc, fail, with_cycle_options
+from cevm.cli.common import OutFile, SocStartOption, StoreOption, check_soc, fail, with_cycle_options
 from cevm.core import checks
 from cevm.cli.output import OutputFormat, write_rows
 from cevm.errors import CevmError
@@ -99,7 +99,11 @@ def simulate(
         raise fail(f"{vehicle}: {exc}") from None
     frame = res.to_frame()
     if out is not None:
-        frame.to_csv(out, index=False, float_format="%.6g")
+        try:
+            with OutFile(out) as fh:  # written whole or not at all (a full disk: one line, exit 3)
+                frame.to_csv(fh, index=False, float_format="%.6g")
+        except CevmError as exc:
+            raise fail(exc) from None
     if plot is not None:
         plot_simulation(frame, res, plot, f"{veh.name}: {name}")
     row = {"cycle": name, "vehicle": veh.name, "mass_kg": res.mass_kg, "mass_source": mass_source,

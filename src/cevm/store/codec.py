@@ -1,18 +1,36 @@
 """The stored form of a trip's profile arrays: one compact BLOB per trip
 (:func:`encode_profile`, :func:`decode_profile`), made by ingest's workers
-(:func:`trip_profile_blob`) so that the store's single writer does not."""
+(:func:`trip_profile_blob`) so that the store's single writer does not.
+
+Decoding is bounded before any decompression: a profile's header says how many samples
+it holds, and a header above :data:`MAX_STORED_SAMPLES` (or, where the caller knows it,
+other than the trip's stored ``n_samples``) is damage, refused before anything is
+inflated; each array is then inflated to exactly the size its header gives and no more
+(a compressed stream that would grow further is damage too), so a blob whose checksum is
+valid but whose content is a zip bomb costs at most the memory of the trip it claims to
+be. A vector in the zip format of version 1 (:func:`decode_vector`) is bounded by the
+sizes its zip directory declares.
+"""
 
 from __future__ import annotations
 
+import io
 import json
 import struct
+import zipfile
 import zlib
 from collections.abc import Mapping
 
 import numpy as np
 
+from cevm.core.cycle import CycleVector
 from cevm.core.trip import Trip
 from cevm.errors import CevmError
+
+#: Most samples a stored profile (a trip's, a route's cycle leg's) may decode to: 10
+#: million, 116 days at 1 Hz (a trip ends at any stop over 30 minutes; a cycle file holds
+#: at most 10 million samples). A trip's profile decodes to about 48 bytes a sample.
+MAX_STORED_SAMPLES = 10_000_000
 
 # Profile arrays and the dtype each is stored with. Degrees need float64 (float32 steps
 # are ~1e-6 deg = 0.1 m at 45 deg, and worse in the sums of a cumulated track), time and
@@ -78,9 +96,14 @@ def trip_profile_blob(trip: Trip) -> bytes:
     return encode_profile({name: getattr(trip, name) for name in PROFILE_DTYPES})
 
 
-def decode_profile(blob: bytes) -> dict[str, np.ndarray]:
+def decode_profile(blob: bytes, n_samples: int | None = None) -> dict[str, np.ndarray]:
     """Unpack :func:`encode_profile`'s BLOB into float64 arrays (speed and elevation
-    carry the float32 rounding of their storage)."""
+    carry the float32 rounding of their storage).
+
+    ``n_samples``: the trip's stored sample count, if known: a header that says another
+    is damage. Any header above :data:`MAX_STORED_SAMPLES`, an array's stream that does
+    not inflate to exactly its size, raise :class:`CevmError` before more memory is
+    taken (see the module notes)."""
     blob = bytes(blob)
     if blob[: len(_PROFILE_MAGIC)] != _PROFILE_MAGIC:
         raise CevmError("corrupt profile in the store (bad magic); re-ingest the file")
@@ -92,11 +115,63 @@ def decode_profile(blob: bytes) -> dict[str, np.ndarray]:
     if header.get("codec") != _PROFILE_CODEC:
         raise CevmError(f"profile codec {header.get('codec')!r} unknown to this cevm")
     n = int(header["n"])
+    check_samples(n, n_samples)
     out: dict[str, np.ndarray] = {}
     for name, dtype, nbytes in header["arrays"]:
         dt = np.dtype(dtype)
-        raw = zlib.decompress(blob[pos : pos + nbytes])
-        pos += nbytes
+        if dt.kind != "f" or dt.itemsize > 8:
+            raise CevmError(f"profile array {name!r} of dtype {dtype!r}: not a stored profile's")
+        raw = inflate_exactly(blob[pos : pos + int(nbytes)], n * dt.itemsize)
+        pos += int(nbytes)
         a = np.frombuffer(raw, np.uint8).reshape(dt.itemsize, n).T.copy().view(dt).reshape(n)
+        del raw
         out[name] = a.astype(np.float64)
     return out
+
+
+def check_samples(n: int, expected: int | None = None) -> None:
+    """Refuse (:class:`CevmError`) a stored blob's sample count ``n`` from its header:
+    negative, above :data:`MAX_STORED_SAMPLES`, or other than ``expected`` (the trip's
+    stored count) when given; before anything is inflated."""
+    if n < 0 or n > MAX_STORED_SAMPLES:
+        raise CevmError(f"its header says {n:,} samples (at most {MAX_STORED_SAMPLES:,} are stored): not inflated")
+    if expected is not None and n != int(expected):
+        raise CevmError(f"its header says {n:,} samples, the trip {int(expected):,}: not inflated")
+
+
+def inflate_exactly(data: bytes, size: int) -> bytes:
+    """``data`` (a zlib stream) inflated to exactly ``size`` bytes: never more (a stream
+    that would grow past it is refused once ``size`` bytes are out), and refused if it
+    ends short (:class:`CevmError`)."""
+    d = zlib.decompressobj()
+    try:
+        out = d.decompress(data, max(size, 1))  # (a max_length of 0 would be no limit)
+        more = len(out) > size or bool(d.unconsumed_tail) or (not d.eof and bool(d.decompress(b"", 1)))
+    except zlib.error as exc:
+        raise CevmError(f"does not inflate: {exc}") from None
+    if len(out) != size or more:
+        raise CevmError(f"inflates to {'more' if more else len(out)} bytes, not the {size:,} of its header")
+    return out
+
+
+#: Most bytes the arrays of a vector in the zip format of version 1 may declare.
+_MAX_NPZ_BYTES = 3 * 8 * MAX_STORED_SAMPLES + (1 << 16)
+
+
+def decode_vector(blob: bytes) -> CycleVector:
+    """A stored vector blob as a :class:`~cevm.core.cycle.CycleVector`. The current
+    layout is read as it is (its size is the blob's); one in the zip format of version 1
+    only if its zip directory declares at most :data:`_MAX_NPZ_BYTES` of arrays (else
+    :class:`CevmError`, before anything is inflated; the zip reader inflates no member
+    past its declared size)."""
+    blob = bytes(blob)
+    if blob[:2] == b"PK":
+        try:
+            with zipfile.ZipFile(io.BytesIO(blob)) as z:
+                declared = sum(i.file_size for i in z.infolist())
+        except (zipfile.BadZipFile, ValueError, OSError) as exc:
+            raise CevmError(f"not a readable zip: {exc}") from None
+        if declared > _MAX_NPZ_BYTES:
+            raise CevmError(f"its zip directory declares {declared:,} bytes of arrays (at most "
+                            f"{_MAX_NPZ_BYTES:,}): not inflated")
+    return CycleVector.from_bytes(blob)

@@ -41,6 +41,7 @@ import numpy as np
 from cevm.core.cycle import CR0_DEFAULT, CycleVector, DriveCycle, cycle_vector
 from cevm.errors import CevmError, InputError
 from cevm.store import TripStore
+from cevm.store.codec import check_samples, decode_vector, inflate_exactly
 from cevm.store.failures import DamagedRouteError
 from cevm.store.schema import blob_crc32
 
@@ -151,9 +152,10 @@ def decode_cycle_profile(blob: bytes) -> dict[str, np.ndarray]:
     if not blob.startswith(_PROFILE_MAGIC):
         raise CevmError("corrupt cycle profile in a route (bad magic); re-create the route")
     n, has_h = struct.unpack_from("<II", blob, len(_PROFILE_MAGIC))
-    raw = np.frombuffer(zlib.decompress(blob[len(_PROFILE_MAGIC) + 8 :]), dtype="<f8")
-    if raw.size != n * (3 if has_h else 2):
-        raise CevmError("corrupt cycle profile in a route (bad length); re-create the route")
+    check_samples(n)  # before inflating: a bomb's header is refused (cevm.store.codec)
+    if has_h not in (0, 1):
+        raise CevmError("corrupt cycle profile in a route (bad flag); re-create the route")
+    raw = np.frombuffer(inflate_exactly(blob[len(_PROFILE_MAGIC) + 8 :], 8 * n * (3 if has_h else 2)), dtype="<f8")
     t = raw[:n].astype(np.float64)
     v = raw[n : 2 * n].astype(np.float64)
     h = raw[2 * n :].astype(np.float64) if has_h else np.zeros(n)
@@ -163,9 +165,14 @@ def decode_cycle_profile(blob: bytes) -> dict[str, np.ndarray]:
 
 
 def _checked_blob(route: str, part: str, blob: bytes, crc: int | None) -> bytes:
-    """A cycle leg's ``blob`` if it matches its checksum, else :class:`DamagedRouteError`."""
+    """A cycle leg's ``blob`` if it matches its checksum, else :class:`DamagedRouteError`
+    (also for a missing blob or checksum: every cycle leg is stored with both)."""
+    if blob is None:
+        raise DamagedRouteError(route, part, "missing")
+    if crc is None:
+        raise DamagedRouteError(route, part, "its checksum is missing (NULL)")
     blob = bytes(blob)
-    if crc is not None and blob_crc32(blob) != crc:
+    if blob_crc32(blob) != crc:
         raise DamagedRouteError(route, part, "checksum mismatch")
     return blob
 
@@ -324,7 +331,7 @@ def load_route_legs(store: TripStore, name: str, *, profiles: bool = True) -> li
             vec = store.load_cycle_vectors(trip_ids=[ref])[ref]
             prof = store.load_profile(ref) if profiles else {}
         else:
-            vec = _decoded(name, "vector", CycleVector.from_bytes, _checked_blob(name, "vector", vblob, vcrc))
+            vec = _decoded(name, "vector", decode_vector, _checked_blob(name, "vector", vblob, vcrc))
             prof = _cycle_profile(name, pblob, pcrc) if profiles else {}
         out.append(StoredLeg(info, vec, prof))
     return out
@@ -346,11 +353,11 @@ def check_route_profiles(store: TripStore, name: str) -> None:
     if a profile of route ``name``'s legs fails its checksum; reads the blobs one at a
     time and keeps none (for a reader that will load them later and must not fail
     half-way)."""
-    rows = _leg_rows(store, name, ", crc32(profile) IS NOT profile_crc32 AND profile_crc32 IS NOT NULL")
-    for _, kind, _, _, bad in rows:
-        if kind == "cycle" and bad:
-            raise DamagedRouteError(name, "profile", "checksum mismatch")
-    trip_ids = [ref for _, kind, ref, _, _ in rows if kind == "trip"]
+    rows = _leg_rows(store, name, ", profile_crc32 IS NULL, crc32(profile) IS NOT profile_crc32")
+    for _, kind, _, _, no_crc, bad in rows:
+        if kind == "cycle" and (no_crc or bad):
+            raise DamagedRouteError(name, "profile", "its checksum is missing (NULL)" if no_crc else "checksum mismatch")
+    trip_ids = [ref for _, kind, ref, *_ in rows if kind == "trip"]
     for exc in store.damaged_profiles(trip_ids) if trip_ids else []:
         raise exc
 
