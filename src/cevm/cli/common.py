@@ -420,25 +420,25 @@ def open_out(stack: ExitStack, out: Optional[Path]) -> IO[str]:
 
 
 def apply_manifest(st, path: Path, manifest, *, dry_run: bool = False) -> tuple[int, int]:
-    """Match the manifest read from ``path`` (:func:`cevm.io.manifest.read_manifest`) to
-    the trips of the open store ``st`` and give them their masses (unless ``dry_run``);
-    print one warning per row not applied (file and line), one note per mass that
+    """Match the manifest read from ``path`` to the trips of the open store ``st`` and
+    give them their masses (unless ``dry_run``): ``manifest`` read whole
+    (:func:`cevm.io.manifest.read_manifest`) or streamed
+    (:func:`~cevm.io.manifest.open_manifest`, whose rows are never all held). Prints one
+    warning per row not applied (file and line) as it is found, one note per mass that
     disagrees with a logged gross weight, and a summary line. Returns (rows applied, rows
     not applied)."""
     from cevm.store.masses import match_manifest, set_masses
 
-    match = match_manifest(st, manifest)
+    match = match_manifest(st, manifest, on_problem=lambda line, why: warn(f"{path}:{line}: not applied: {why}"))
     new = replaced = 0
     if match.masses and not dry_run:
         new, replaced = set_masses(st, match.masses)
-    for line, why in match.problems:
-        warn(f"{path}:{line}: not applied: {why}")
     for text in match.disagreements:
         typer.echo(f"cevm: note: {path}: {printable(text)}", err=True)
     cols = ", ".join(f"{role} {col!r}" for role, col in manifest.columns.items())
     done = (f"would give {len(match.masses)} trips their masses" if dry_run else
             f"{len(match.masses)} trips given their masses ({new} new, {replaced} replaced)")
-    typer.echo(printable(f"cevm: manifest {path}: {len(manifest.rows) + len(manifest.problems)} rows; {done}; "
-                         f"{len(match.problems)} rows not applied (columns: {cols}; mass in {manifest.mass_unit}, "
+    typer.echo(printable(f"cevm: manifest {path}: {manifest.n_rows} rows; {done}; "
+                         f"{match.n_problems} rows not applied (columns: {cols}; mass in {manifest.mass_unit}, "
                          f"decimal mark {manifest.decimal!r})"), err=True)
-    return len(match.masses), len(match.problems)
+    return len(match.masses), match.n_problems
