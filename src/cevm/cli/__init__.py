@@ -78,6 +78,7 @@ def main() -> None:
     tune_allocator()
     with interrupts.interrupts_raise():  # SIGTERM stops a command as SIGINT does
         try:
+            said = False
             try:
                 app()
                 code: int | str | None = 0
@@ -89,8 +90,8 @@ def main() -> None:
             except KeyboardInterrupt as exc:  # one that escaped typer's own handling
                 code = interrupts.stopped(exc, sys.argv[1:])
             except OSError as exc:  # of the environment (a full disk, an I/O error), not of cevm
-                code = os_error_exit(exc)
-            code = flush_stdout(code)
+                code, said = os_error_exit(exc), True
+            code = flush_stdout(code, said=said)
         except KeyboardInterrupt as exc:  # a signal while the above was reporting another end
             code = interrupts.stopped(exc, sys.argv[1:])
     sys.exit(code)

@@ -311,7 +311,7 @@ def os_error_text(exc: OSError, what: str | None = None) -> str:
     """One line for an OSError of writing or reading ``what`` (default: its file name, or
     the output): ``FILE: could not be written: the disk is full (No space left on
     device)``."""
-    where = what or (str(exc.filename) if exc.filename else "the output (stdout)")
+    where = what or (str(exc.filename) if exc.filename else "the output")
     reason = exc.strerror or str(exc)
     if exc.errno in _NO_ROOM:
         return f"{where}: could not be written: {_NO_ROOM[exc.errno]} ({reason})"
@@ -326,6 +326,13 @@ def os_error_exit(exc: OSError, what: str | None = None) -> int:
     if exc.errno == errno.EPIPE:
         _quiet_stdout()
         return EXIT_BROKEN_PIPE
+    if what is None and not exc.filename:  # no file named: was it stdout? (it fails again if so)
+        try:
+            sys.stdout.flush()
+        except OSError:
+            what = "the output (stdout)"
+        except (ValueError, AttributeError):
+            pass
     fail(os_error_text(exc, what), EXIT_STORE_ACCESS)
     return EXIT_STORE_ACCESS
 
@@ -341,17 +348,21 @@ def _quiet_stdout() -> None:
         pass
 
 
-def flush_stdout(code):
+def flush_stdout(code, *, said: bool = False):
     """Flush stdout before the exit: output still buffered (a short table) meets a full
     device only here. Returns ``code``, or :func:`os_error_exit`'s when the flush
-    fails."""
+    fails; ``said``: an output error was printed already (the flush meets the same full
+    device: nothing more is said)."""
     if code == 1 and type(sys.stdout).__name__ == "PacifyFlushWrapper":  # typer's quiet exit 1 after EPIPE
         _quiet_stdout()
         return EXIT_BROKEN_PIPE
     try:
         sys.stdout.flush()
     except OSError as exc:
-        new = os_error_exit(exc)
+        if said:
+            _quiet_stdout()
+            return code
+        new = os_error_exit(exc, "the output (stdout)")
         _quiet_stdout()
         return new if code in (0, None) else code
     except (ValueError, AttributeError):  # closed or replaced

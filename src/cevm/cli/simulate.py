@@ -9,7 +9,16 @@ from typing import Annotated, Optional
 import numpy as np
 import typer
 
-from cevm.cli.common import OutFile, SocStartOption, StoreOption, check_soc, fail, with_cycle_options
+from cevm.cli.common import (
+    EXIT_STORE_ACCESS,
+    OutFile,
+    SocStartOption,
+    StoreOption,
+    check_soc,
+    fail,
+    os_error_text,
+    with_cycle_options,
+)
 from cevm.core import checks
 from cevm.cli.output import OutputFormat, write_rows
 from cevm.errors import CevmError
@@ -105,7 +114,11 @@ def simulate(
         except CevmError as exc:
             raise fail(exc) from None
     if plot is not None:
-        plot_simulation(frame, res, plot, f"{veh.name}: {name}")
+        try:
+            plot_simulation(frame, res, plot, f"{veh.name}: {name}")
+        except OSError as exc:  # a full disk, an I/O error: the plot's, exit 3, and no half-written file
+            Path(plot).unlink(missing_ok=True)
+            raise fail(os_error_text(exc, str(plot)), EXIT_STORE_ACCESS) from None
     row = {"cycle": name, "vehicle": veh.name, "mass_kg": res.mass_kg, "mass_source": mass_source,
            "distance_km": res.distance_m / 1e3,
            "duration_s": res.duration_s, "wheel_energy_kwh": res.wheel_energy_j / J_PER_KWH,

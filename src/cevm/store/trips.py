@@ -110,8 +110,10 @@ class TripStore(TripWriting, TripQueries):
             return
         try:
             self.path.parent.mkdir(parents=True, exist_ok=True)
-        except OSError as exc:
-            raise CevmError(f"{self.path}: cannot create the store's directory: {exc}") from exc
+        except OSError as exc:  # a read-only file system, no permission, a full disk: the store's, exit 3
+            raise StoreAccessError(f"{self.path}: the store could not be created: its directory could not be made "
+                                   f"({exc.strerror or exc}: {exc.filename or self.path.parent}); nothing was "
+                                   "changed. Give a --store on a writable disk", "cantopen") from None
         try:
             self._con = self._connect(str(self.path))
             if intact:
