@@ -51,7 +51,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
 from cevm.core.cycle import step_terms  # noqa: E402
-from cevm.core.sweep import PredictionSet, Source, parse_values, predict_source, sweep  # noqa: E402
+from cevm.cli.values import parse_values  # noqa: E402
+from cevm.core.sweep import PredictionSet, Source, predict_source, sweep  # noqa: E402
 from cevm.core.feasibility import feasibility  # noqa: E402
 from cevm.executors import ProcessExecutor  # noqa: E402
 from cevm.runtime import tune_allocator  # noqa: E402

@@ -82,15 +82,9 @@ sys.path.insert(0, str(ROOT / "src"))
 
 from cevm.core.calibration import CalibrationError, TripData, fit  # noqa: E402
 from cevm.core.cycle import G_MPS2, RHO_AIR_KG_M3, CycleVector, drive_cycle_vector  # noqa: E402
-from cevm.core.detailed import (
-    DieselParams,
-    EvParams,
-    decimate_indices,
-    diesel_params_from_vehicle,
-    ev_params_from_vehicle,
-    simulate,
-)
+from cevm.core.detailed import DieselParams, EvParams, decimate_indices, simulate  # noqa: E402
 from cevm.io import load_vehicle, read_cycle_csv  # noqa: E402
+from cevm.io.detailed import diesel_params_from_vehicle, ev_params_from_vehicle  # noqa: E402
 from cevm.io.cycles import elevation_from_grade  # noqa: E402
 from cevm.core.model import (
     battery_energy_from_wheel_j,

@@ -197,8 +197,8 @@ def _curve(node) -> list[float]:
 
 @functools.lru_cache(maxsize=1)
 def _bus_dict_cached() -> dict:
-    from cevm.core.detailed import ev_params_from_vehicle
     from cevm.io import load_vehicle
+    from cevm.io.detailed import ev_params_from_vehicle
 
     fsm = require_fastsim()
     bus = load_vehicle(BUS_TOML)
@@ -453,8 +453,8 @@ def base_ev_params(fv: FsVehicle) -> EvParams:
     ...) or, for :data:`BUS_KEY`, the bus's [detailed] table.
     """
     if fv.resource == BUS_KEY:
-        from cevm.core.detailed import ev_params_from_vehicle
         from cevm.io import load_vehicle
+        from cevm.io.detailed import ev_params_from_vehicle
 
         own = ev_params_from_vehicle(load_vehicle(BUS_TOML))
         # peak torque scaled with the power: the bus's base speed (1,560 rpm) is kept
@@ -770,8 +770,10 @@ def main(argv=None) -> int:
     traces = training_traces()
     models = {kind: matched_model(kind, traces) for kind in ("ev", "ice", "bus")}
     from cevm.io import load_vehicle
+    from cevm.io.detailed import detailed_params
 
     own_bus = load_vehicle(BUS_TOML)
+    own_bus_params = detailed_params(own_bus)
 
     print(f"# cevm detailed model vs FASTSim {fsm.__version__}: output of crosscheck_fastsim.py")
     cmd = "python benchmarks/crosscheck_fastsim.py" + (f" --reps {args.reps}" if args.reps != 5 else "")
@@ -789,7 +791,7 @@ def main(argv=None) -> int:
             r = compare(m, t, v)
             used = r.pop("speed_used_mps")
             if kind == "bus":  # the project's bus as configured, same trace and physics
-                own = simulate(own_bus, t, used, time_step_s=None, physics=m.physics)
+                own = simulate(own_bus, t, used, params=own_bus_params, time_step_s=None, physics=m.physics)
                 r.update(own_energy_j=own.energy_j, own_deficit_j=own.traction_deficit_j,
                          own_diff=(own.energy_j - r["fs_energy_j"]) / r["fs_energy_j"])
             r.update(time_fastsim(m.fv.resource, t, v, args.reps))

@@ -592,7 +592,8 @@ def _dedupe_reference(t, line, cols):
 @settings(max_examples=60, deadline=None)
 @given(n=st.integers(1, 40), n_cols=st.integers(0, 3), seed=st.integers(0, 2**32 - 1))
 def test_tick_merging_matches_a_pandas_statement_of_the_rules(n, n_cols, seed):
-    from cevm.ingest.cleaning import _dedupe, _Events
+    from cevm.ingest.cleaning.duplicates import _dedupe
+    from cevm.ingest.cleaning.events import RepairEvents
 
     rng = np.random.default_rng(seed)
     t = np.sort(rng.integers(0, max(2, n // 2), n)).astype(float)  # many shared times
@@ -600,7 +601,7 @@ def test_tick_merging_matches_a_pandas_statement_of_the_rules(n, n_cols, seed):
     # few distinct values (duplicates and conflicts), NaN often, signed zeros
     pool = np.array([np.nan, np.nan, 0.0, -0.0, 1.5, 2.0])
     cols = {f"c{j}": pool[rng.integers(0, pool.size, n)] for j in range(n_cols)}
-    ev = _Events()
+    ev = RepairEvents()
     t_out, line_out, cols_out = _dedupe(t, line, dict(cols), ev)
     ev.finish()
     want_t, want_line, want_cols, n_dup, n_merged, n_conf = _dedupe_reference(t, line, cols)
@@ -619,7 +620,7 @@ def test_tick_merging_matches_a_pandas_statement_of_the_rules(n, n_cols, seed):
 @settings(max_examples=60, deadline=None)
 @given(n=st.integers(1, 60), seed=st.integers(0, 2**32 - 1), share=st.floats(0.0, 1.0))
 def test_row_interpolation_shortcut_equals_general_interpolation(n, seed, share):
-    from cevm.ingest.cleaning import _interp_rows
+    from cevm.ingest.cleaning.speed import _interp_rows
     from cevm.ingest.consumption import _interp_limited
 
     rng = np.random.default_rng(seed)

@@ -11,18 +11,12 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from cevm.core.cycle import drive_cycle_vector
-from cevm.core.detailed import (
-    DieselParams,
-    EvParams,
-    decimate_indices,
-    diesel_params_from_vehicle,
-    ev_params_from_vehicle,
-    simulate,
-)
+from cevm.core.detailed import DieselParams, EvParams, decimate_indices, simulate
 from cevm.core.model import wheel_energy_j
 from cevm.core.vehicle import vehicle_from_mapping
 from cevm.errors import InputError
 from cevm.io import load_vehicle, read_cycle_csv
+from cevm.io.detailed import diesel_params_from_vehicle, ev_params_from_vehicle
 
 RHO, G = 1.225, 9.81
 RPM = 2 * math.pi / 60
@@ -415,3 +409,19 @@ def test_consumption_is_realistic_on_public_cycles(shared_cycles):
     c = read_cycle_csv(shared_cycles / "CYC_CBDTRUCK.csv")
     res_town = simulate(hgv, c.time_s, c.speed_mps, None)
     assert res_town.fuel_l / (res_town.distance_m / 1e5) > 45
+
+
+def test_a_table_is_read_by_io_and_a_vehicle_whose_table_was_not_read_is_refused():
+    """The core reads no vehicle file: a vehicle with a [detailed] table needs its
+    parameters passed (cevm.io.detailed), else it is refused, not simulated with the
+    defaults; an empty table is the defaults."""
+    from cevm.io.detailed import detailed_params
+
+    t, v, h = random_trace(2, n=50, irregular=False)
+    weak = bus_vehicle({"motor_peak_power_kw": 20})
+    with pytest.raises(TypeError, match="detailed_params"):
+        simulate(weak, t, v, h)
+    assert detailed_params(weak) == ev_params_from_vehicle(weak)
+    assert detailed_params(hgv_vehicle({"axle_ratio": 3.0})) == diesel_params_from_vehicle(hgv_vehicle({"axle_ratio": 3.0}))
+    assert detailed_params(weak).motor_peak_power_w == 20e3
+    assert simulate(bus_vehicle({}), t, v, h).energy_j == simulate(bus_vehicle(), t, v, h).energy_j

@@ -642,7 +642,8 @@ def test_degenerate_trips():
 def test_tile_index_finds_the_first_tile_holding_each_point(seed, n_tiles):
     """The bucket index (more than 8 tiles) against a loop over the tiles in order:
     x in [xmin, xmax), y in (ymin, ymax], overlapping tiles of mixed sizes."""
-    from cevm.ingest.dsm import _CrsGroup, _Tile
+    from cevm.ingest.dsm.headers import TileHeader as _Tile
+    from cevm.ingest.dsm.tiles import CrsTileGroup as _CrsGroup
 
     rng = np.random.default_rng(seed)
     tiles = []
@@ -724,7 +725,7 @@ def test_odd_pad_is_point_reflection(n, r, seed):
 @settings(max_examples=60, deadline=None)
 @given(keys=st.lists(st.integers(0, 2**50), min_size=1, max_size=300), runs=st.integers(1, 5))
 def test_unique_inverse_equals_numpy_unique(keys, runs):
-    from cevm.ingest.dsm import _unique_inverse
+    from cevm.ingest.dsm.tiles import _unique_inverse
 
     k = np.repeat(np.array(keys, dtype=np.int64), runs)  # runs of equal keys, and not
     uniq, inv = _unique_inverse(k)
@@ -733,29 +734,14 @@ def test_unique_inverse_equals_numpy_unique(keys, runs):
     np.testing.assert_array_equal(inv, want_inv)
 
 
-def test_fft_size_is_the_next_5_smooth_number():
-    from cevm.ingest.elevation import _fft_size
-
-    def smooth(m):
-        for p in (2, 3, 5):
-            while m % p == 0:
-                m //= p
-        return m == 1
-
-    for n in list(range(1, 600)) + [4097, 65537, 1_000_001]:
-        m = n
-        while not smooth(m):
-            m += 1
-        assert _fft_size(n) == m
-
-
 @settings(max_examples=30, deadline=None)
 @given(st.integers(0, 2**32 - 1), st.integers(3, 6), st.integers(3, 5), st.floats(0.3, 1.0))
 def test_regular_tile_grid_locates_as_the_bucket_index(seed, nx, ny, keep):
     """A regular grid of tiles (some missing) finds the same tile as the general bucket
     index for every point: random ones, points exactly on edges and corners, and points
     one ulp either side of them."""
-    from cevm.ingest.dsm import TileIndex, _Tile
+    from cevm.ingest.dsm import TileHeader as _Tile
+    from cevm.ingest.dsm import TileIndex
 
     rng = np.random.default_rng(seed)
     tw, th = 1000.0, 500.0

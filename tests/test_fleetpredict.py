@@ -17,6 +17,7 @@ from hypothesis import strategies as st
 from typer.testing import CliRunner
 
 from cevm.cli import app
+from cevm.cli.values import parse_values
 from cevm.core.cycle import DriveCycle
 from cevm.errors import InputError
 from cevm.core.sweep import (
@@ -24,7 +25,6 @@ from cevm.core.sweep import (
     PredictionSet,
     Source,
     energy_trajectory,
-    parse_values,
     peak_energy_j,
     predict_source,
     sweep,
@@ -205,7 +205,7 @@ def test_both_searches_for_the_sign_change_give_the_plain_loop(hilly, monkeypatc
     # many vehicles with distinct CdA/Cr and payloads: a step's sign differs between the
     # masses of a vehicle, found by a table of prefix counts or (large sweeps) by a binary
     # search on complex keys; both must give the plain loop's totals and lowest SoC
-    import cevm.core.sweep as fp
+    import cevm.core.sweep.wheel as fp
 
     rng = np.random.default_rng(3)
     vehicles = [ev(f"ev{i}", kerb=float(rng.uniform(2000, 16000)), cda=float(rng.uniform(2, 7)),

@@ -284,7 +284,7 @@ def test_strongly_connected_finds_a_cycle():
 
 def test_the_import_graph_has_no_cycle():
     graph = import_graph()
-    assert "cevm.cli.predict" in graph and "cevm.core.cycle" in graph["cevm.core.sweep"]
+    assert "cevm.cli.predict" in graph and "cevm.core.cycle" in graph["cevm.core.sweep.profiles"]
     cycles = [c for c in strongly_connected(graph) if len(c) > 1]
     assert cycles == []
 

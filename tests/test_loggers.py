@@ -734,7 +734,7 @@ def test_iso_offsets_converted_to_utc(tmp_path):
 @settings(max_examples=80, deadline=None)
 @given(st.text(alphabet="ab,\n\r", max_size=60), st.integers(1, 7))
 def test_line_stats_match_plain_python(text, chunk):
-    import cevm.ingest.reading as loggers
+    import cevm.ingest.reading.lines as loggers
 
     data = text.encode()
     old = loggers._CHUNK_BYTES
@@ -755,7 +755,7 @@ def test_line_stats_match_plain_python(text, chunk):
 def test_ascii_heads_skip_re_encoding_only_for_ascii_compatible_codecs(tmp_path, profiles):
     import pandas as pd
 
-    from cevm.ingest.reading import _ascii_transparent
+    from cevm.ingest.textfile import _ascii_transparent
 
     assert all(_ascii_transparent(e) for e in ("utf-8", "utf-8-sig", "cp1252", "latin-1", "ascii"))
     assert not any(_ascii_transparent(e) for e in ("utf-16", "utf-32", "utf-7", "cp500", "no-such-codec"))

@@ -456,7 +456,8 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def _sweep_case():
-    from cevm.core.sweep import PredictionSet, Source, parse_values
+    from cevm.cli.values import parse_values
+    from cevm.core.sweep import PredictionSet, Source
     from cevm.io import load_vehicles
     from cevm_samplegen.cycles import MicroTripSpec, micro_trip_cycle
 
@@ -467,13 +468,13 @@ def _sweep_case():
 
 
 def _sweep_arrays(blocks):
-    from cevm.core.sweep import _BLOCK_ARRAYS
+    from cevm.core.sweep.evaluate import BLOCK_ARRAYS
 
-    return [(b.source_index, b.source.name, *(getattr(b, f).tobytes() for f in _BLOCK_ARRAYS)) for b in blocks]
+    return [(b.source_index, b.source.name, *(getattr(b, f).tobytes() for f in BLOCK_ARRAYS)) for b in blocks]
 
 
 def _check_sweep_on(executor, monkeypatch):
-    import cevm.core.sweep as fp
+    import cevm.core.sweep.driver as fp
 
     monkeypatch.setattr(fp, "SWEEP_BATCH_CELLS", 12)  # several batches of a few sources
     pset, sources = _sweep_case()
@@ -497,7 +498,7 @@ def test_sweep_on_a_dask_cluster_equals_the_serial_sweep_bit_for_bit(monkeypatch
 
 
 def test_predict_cli_with_workers_writes_what_a_serial_run_writes(monkeypatch):
-    import cevm.core.sweep as fp
+    import cevm.core.sweep.driver as fp
 
     monkeypatch.setattr(fp, "SWEEP_BATCH_CELLS", 1)
     args = ["predict", "-v", ROOT / "configs/vehicles/electric-bus.toml", "-v", ROOT / "configs/vehicles/diesel-hgv.toml",

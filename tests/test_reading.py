@@ -23,7 +23,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-import cevm.ingest.reading as reading
+import cevm.ingest.reading.blocks as reading
 from cevm.errors import InputError
 from cevm.ingest.profiles import load_profile, load_profiles
 from cevm.ingest.reading import ReadLimits, detect_profile, read_log

@@ -75,7 +75,8 @@ def test_bus_table_structure_and_lossless_limit(bt):
 
 
 def test_truck_variants_and_adapted_traces(bt):
-    from cevm.core.detailed import diesel_params_from_vehicle, simulate
+    from cevm.core.detailed import simulate
+    from cevm.io.detailed import diesel_params_from_vehicle
     from cevm.io import load_vehicle
 
     hgv = load_vehicle(bt.TRUCK_TOML)
@@ -92,9 +93,9 @@ def test_truck_variants_and_adapted_traces(bt):
     # NYCTRUCK at 44 t: far beyond a 235 kW truck as recorded, followed once adapted
     nyc = cycles[2]
     params = diesel_params_from_vehicle(hgv)
-    raw = simulate(hgv, nyc.time_s, nyc.speed_mps, mass_kg=44000.0)
+    raw = simulate(hgv, nyc.time_s, nyc.speed_mps, mass_kg=44000.0, params=params)
     adapted = bt.adapt_trace(nyc, hgv, params, 44000.0)
-    sim = simulate(hgv, adapted.time_s, adapted.speed_mps, mass_kg=44000.0)
+    sim = simulate(hgv, adapted.time_s, adapted.speed_mps, mass_kg=44000.0, params=params)
     positive = float(np.dot(np.maximum(sim.steps["wheel_power_w"], 0.0), sim.steps["dt_s"]))
     assert raw.traction_deficit_j > 0.05 * positive
     assert sim.traction_deficit_j < 0.02 * positive

@@ -256,14 +256,17 @@ def logged_consumption(kind: str, time_s, speed_mps, elevation_m, mass_kg: float
     model's module, because it reads the project's vehicle files.
     """
     from cevm.core.detailed import simulate
+    from cevm.io.detailed import detailed_params
 
     t = np.asarray(time_s, dtype=float)
     _check_kind(kind, t.size, conditions)
     vehicle = _project_vehicle(kind)
+    params = detailed_params(vehicle)
     cab = _cabin(kind, t, speed_mps, conditions)
 
     def run(**series):
-        return simulate(vehicle, t, speed_mps, elevation_m, mass_kg=mass_kg, time_step_s=None, **series)
+        return simulate(vehicle, t, speed_mps, elevation_m, mass_kg=mass_kg, time_step_s=None, params=params,
+                        **series)
 
     if vehicle.is_ev:
         res = run(aux_power_w=cab.electric_w)

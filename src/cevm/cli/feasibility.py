@@ -1,15 +1,17 @@
 """``cevm feasibility``: can each vehicle run each route, with what margin, and the
-largest payload (:mod:`cevm.core.feasibility`)."""
+largest payload (:mod:`cevm.core.feasibility`). Its CSV and JSON columns are
+:data:`cevm.cli.prediction_columns.FEASIBILITY`; its table (:data:`FEASIBILITY_TABLE`)
+composes them for people."""
 
 from __future__ import annotations
 
-import math
 from collections import Counter
 from contextlib import ExitStack
 from typing import IO, Annotated, Optional
 
 import typer
 
+from cevm.cli.columns import Column
 from cevm.cli.common import (
     EXIT_PARTIAL,
     TABLE_MAX_ROWS,
@@ -37,11 +39,11 @@ from cevm.cli.common import (
     with_cycle_options,
 )
 from cevm.cli.output import OutputFormat, vehicle_legend, write_rows
+from cevm.cli.prediction_columns import feasibility_row
 from cevm.core.cycle import CR0_DEFAULT
-from cevm.core.feasibility import Feasibility, feasibility
+from cevm.core.feasibility import feasibility
 from cevm.core.sweep import DEFAULT_RESERVE_PCT, DEFAULT_SOC_START_PCT
 from cevm.errors import CevmError
-from cevm.units import J_PER_KWH
 
 
 def _mass_for(src, mass_kg: float | None, payload_kg: float | None) -> tuple[float | None, float | None, str]:
@@ -57,48 +59,6 @@ def _mass_for(src, mass_kg: float | None, payload_kg: float | None) -> tuple[flo
     if key is None:
         return None, None, "vehicle file"
     return (key[1], None, own.origin) if key[0] == "gross" else (None, key[1], own.origin)
-
-
-def _feasibility_rows(res: Feasibility, ice_braking: str | None = None) -> list[dict]:
-    src = res.source
-    rows = []
-
-    def num(x):
-        x = float(x)
-        return None if x != x else x
-
-    for i, veh in enumerate(res.vehicles):
-        f = res.feasible[i]
-        row = {
-            "source": src.name, "source_kind": src.kind, "vehicle": veh.name, "vehicle_key": veh.label,
-            "powertrain": veh.powertrain,
-            "distance_km": src.distance_m / 1000.0, "mass_kg": float(res.mass_kg[i]),
-            "payload_kg": float(res.payload_kg[i]), "over_max_gross": bool(res.over_max_gross[i]),
-            "feasible": None if f != f else bool(f > 0.5),
-        }
-        if veh.is_ev:
-            row.update(energy_kwh=num(res.energy_j[i] / J_PER_KWH), soc_end_pct=num(res.soc_end_pct[i]),
-                       soc_min_pct=num(res.soc_min_pct[i]), reserve_margin_pct=num(res.reserve_margin_pct[i]))
-        else:
-            row.update(fuel_l=num(res.fuel_l[i]), tank_l=veh.tank_l, tank_margin_l=num(res.tank_margin_l[i]),
-                       ice_braking=ice_braking or veh.ice_braking)
-        row.update(max_payload_kg=num(res.max_payload_kg[i]), min_payload_kg=num(res.min_payload_kg[i]),
-                   limited_by=res.limited_by[i], ambient_c=num(res.ambient_c[i]), ambient_from=res.ambient_from[i])
-        if veh.is_ev:
-            row.update(reserve_at_km=num(res.reserve_at_m[i] / 1e3), reserve_at_s=num(res.reserve_at_s[i]))
-        row.update(empty_at_km=num(res.empty_at_m[i] / 1e3), empty_at_s=num(res.empty_at_s[i]),
-                   range_km=_range(res.range_m[i]))
-        if veh.is_ev:
-            row["range_reserve_km"] = _range(res.range_reserve_m[i])
-        rows.append(row)
-    return rows
-
-
-def _range(range_m: float) -> float | None:
-    """A range in km; None where unknown, and where unlimited (a source that gives back
-    what it takes: JSON has no infinity)."""
-    x = float(range_m)
-    return None if not math.isfinite(x) else x / 1e3
 
 
 @with_cycle_options
@@ -161,7 +121,7 @@ def feasibility_cmd(
                     if mass_source in ("--mass-kg", "--payload-kg", "vehicle file"):
                         raise
                     raise CevmError(f"trip {src.name!r} ({src.mass.describe()} mass): {exc}") from None
-                rows.extend(dict(r, mass_source=mass_source) for r in _feasibility_rows(res, ice_braking))
+                rows.extend(feasibility_row(res, i, ice_braking, mass_source) for i in range(len(res.vehicles)))
                 speed = src.distance_m / src.duration_s if src.duration_s > 0 else float("nan")
                 seen += [(i, res.mass_kg[i], res.ambient_c[i], speed) for i in range(len(vehicles))]
                 src.release()
@@ -204,6 +164,22 @@ def _warn_outside_calibration(vehicles, seen: list[tuple]) -> None:
             typer.echo(f"cevm: warning: {w}", err=True)
 
 
+#: The columns of feasibility's table, composed from its rows by :func:`_print_feasibility`.
+FEASIBILITY_TABLE = (
+    Column("route", "the source", kind="text", layout="id"),
+    Column("vehicle", "the vehicle's key", kind="text", layout="id"),
+    Column("payload kg", "the payload evaluated [kg]", digits=0),
+    Column("feasible", "yes, NO, or ? (ICE without tank_l)", kind="text", layout="right"),
+    Column("state", "EV: lowest / end state of charge [%]; ICE: fuel / tank [l]", kind="text", layout="right",
+           header="SoC min/end, fuel/tank"),
+    Column("margin", "EV: lowest SoC less the reserve [pp]; ICE: tank less fuel [l]; where it runs empty",
+           kind="text", layout="right"),
+    Column("range km", "the range, the source driven again and again [km]", digits=1),
+    Column("max payload kg", "the payloads that pass [kg]", kind="text", layout="right"),
+    Column("limited by", "what limits the payload", kind="text", layout="right"),
+)
+
+
 def _print_feasibility(rows: list[dict], stream: IO[str]) -> None:
     def mark(f):
         return "?" if f is None else ("yes" if f else "NO")
@@ -235,10 +211,7 @@ def _print_feasibility(rows: list[dict], stream: IO[str]) -> None:
                       "range km": r["range_km"], "max payload kg": payload, "limited by": r["limited_by"]})
         names[r["vehicle_key"]] = (r["vehicle"], r.get("ice_braking"))
     title = "cevm feasibility" + (f" (first {len(table)} of {len(rows)})" if len(rows) > len(table) else "")
-    write_rows(table, OutputFormat.table, title=title, digits={"payload kg": 0, "range km": 1}, stream=stream,
-               columns=["route", "vehicle", "payload kg", "feasible", "state", "margin", "range km", "max payload kg",
-                        "limited by"],
-               headers={"state": "SoC min/end, fuel/tank"})
+    write_rows(table, OutputFormat.table, title=title, columns=FEASIBILITY_TABLE, stream=stream)
     legend = vehicle_legend(names)
     if legend:
         stream.write(legend + "\n")

@@ -3,7 +3,10 @@
 Text in tables and CSV goes through :func:`cevm.text.printable` (control characters in
 ids and file names escaped, so no cell can forge a line or break a record); CSV fields
 are quoted where they need it (a comma, a quote); JSON escapes by its own rules.
-Identifier columns (:data:`ID_COLUMNS`) never wrap: a trip id is read whole.
+Identifier columns never wrap: a trip id is read whole. A command that describes its
+columns (:class:`cevm.cli.columns.Column`: ``predict``, ``feasibility``) passes them to
+:func:`write_rows`, which takes each one's header, decimals and layout from it; for plain
+column names, :data:`ID_COLUMNS` and :data:`TEXT_COLUMNS` say the layout.
 """
 
 from __future__ import annotations
@@ -18,6 +21,7 @@ from typing import IO, Any
 
 import numpy as np
 
+from cevm.cli.columns import Column
 from cevm.text import printable
 
 
@@ -27,7 +31,8 @@ class OutputFormat(str, Enum):
     json = "json"
 
 
-#: Columns of identifiers: left-aligned, never wrapped nor cut in tables.
+#: Columns of identifiers, by name (for columns given without a :class:`Column`):
+#: left-aligned, never wrapped nor cut in tables.
 ID_COLUMNS = {"cycle", "vehicle", "vehicle_key", "trip_id", "vehicle_id", "source", "route", "file", "id", "day",
               "mass_source",
               "vehicle id", "start_utc", "created_utc"}
@@ -81,7 +86,7 @@ def write_rows(
     rows: Sequence[dict[str, Any]],
     fmt: OutputFormat,
     *,
-    columns: Sequence[str] | None = None,
+    columns: Sequence[str | Column] | None = None,
     title: str | None = None,
     stream: IO[str] | None = None,
     digits: dict[str, int] | None = None,
@@ -94,7 +99,8 @@ def write_rows(
     Table: a rich table of ``columns`` titled by ``headers`` (default the column names),
     floats rounded to ``digits[column]`` (default 3), at least 120 characters wide when
     the output is not a terminal, and as wide as its identifier and number columns need
-    (so piped or logged tables never cut them; free text wraps).
+    (so piped or logged tables never cut them; free text wraps). A column given as a
+    :class:`~cevm.cli.columns.Column` brings its own header, decimals and layout.
     """
     stream = stream or sys.stdout
     if columns is None:
@@ -103,29 +109,29 @@ def write_rows(
             for k in r:
                 seen.setdefault(k, None)
         columns = list(seen)
+    names = [c.name if isinstance(c, Column) else c for c in columns]
     if fmt == OutputFormat.json:
         json.dump([{k: _clean(v) for k, v in r.items()} for r in rows], stream, indent=2)
         stream.write("\n")
     elif fmt == OutputFormat.csv:
         w = csv_writer(stream)
-        w.writerow([printable(str(c)) for c in columns])
+        w.writerow([printable(str(c)) for c in names])
         for r in rows:
-            w.writerow([_csv_cell(r.get(k)) for k in columns])
+            w.writerow([_csv_cell(r.get(k)) for k in names])
     else:
         from rich.console import Console
         from rich.measure import Measurement
         from rich.table import Table
 
-        digits = digits or {}
-        headers = headers or {}
-        cells = [[_fmt(r.get(c), digits.get(c, 3)) for c in columns] for r in rows]
+        specs = [_as_column(c, digits or {}, headers or {}) for c in columns]
+        cells = [[_fmt(r.get(c.name), c.digits) for c in specs] for r in rows]
         table = Table(title=None if title is None else printable(title))
-        for j, c in enumerate(columns):
-            header = printable(headers.get(c, c))
-            if c in ID_COLUMNS:
+        for j, c in enumerate(specs):
+            header = printable(c.title)
+            if c.table_layout == "id":
                 longest = max([len(header)] + [len(row[j]) for row in cells])
                 table.add_column(header, justify="left", no_wrap=True, min_width=longest)
-            elif c in TEXT_COLUMNS:
+            elif c.table_layout == "wrap":
                 table.add_column(header, justify="left", overflow="fold")
             else:
                 table.add_column(header, justify="right", no_wrap=True)
@@ -137,6 +143,16 @@ def write_rows(
             need = Measurement.get(wide, wide.options, table).minimum
             console = Console(file=stream, width=max(console.width, 120, need), markup=False, highlight=False)
         console.print(table)
+
+
+def _as_column(c: str | Column, digits: dict[str, int], headers: dict[str, str]) -> Column:
+    """A table column: a Column as given; a name with its ``digits`` and ``headers``
+    entries (default 3 decimals, the name) and the layout of :data:`ID_COLUMNS` and
+    :data:`TEXT_COLUMNS` (else right-aligned)."""
+    if isinstance(c, Column):
+        return c
+    layout = "id" if c in ID_COLUMNS else "wrap" if c in TEXT_COLUMNS else "right"
+    return Column(c, "", header=headers.get(c, c), digits=digits.get(c, 3), layout=layout)
 
 
 def _fmt(value: Any, digits: int) -> str:

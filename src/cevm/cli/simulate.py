@@ -46,6 +46,7 @@ def simulate(
     It takes no ambient temperature: an EV's auxiliaries are its [detailed] table's
     aux_base_power_kw + hvac_power_kw (the summary's aux_power_kw says what was used)."""
     from cevm.core.detailed import simulate as run_simulation
+    from cevm.io.detailed import detailed_params
     from cevm.io.plots import plot_simulation
     from cevm.io import load_vehicle, read_cycle_csv
 
@@ -57,14 +58,7 @@ def simulate(
     try:
         veh = load_vehicle(vehicle)
         if "detailed" not in veh.extra:
-            raise CevmError(
-                f"{vehicle}: no [detailed] table: the detailed model needs the vehicle's drivetrain ("
-                + ("motor, regeneration limits, battery, auxiliaries" if veh.is_ev else "engine map, gearbox, "
-                   "auxiliaries") + "), and this file's CE figures (eta, " + ("aux_power_kw" if veh.is_ev else
-                   "idle_fuel_lph") + ") do not give them. Add a [detailed] table (an empty one takes the "
-                "defaults, which describe " + ("a 10 m electric bus with a 180 kW motor" if veh.is_ev else
-                                               "a 235 kW diesel tractor with a 12-speed gearbox")
-                + "; configs/vehicles/*.toml show every key), or use 'cevm predict' (the CE model)")
+            raise CevmError(_no_detailed_table(vehicle, veh.is_ev))
         mass_source, measured, foreign = "vehicle file", None, None
         if payload_kg is not None:
             mass_kg = (veh.kerb_mass_kg if veh.kerb_mass_kg is not None else veh.mass_kg) + float(
@@ -101,7 +95,8 @@ def simulate(
                 except CevmError as exc:
                     raise CevmError(f"trip {trip!r} ({own.describe()} mass): {exc}") from None
             name, t, v, h = trip, prof["time_s"], prof["speed_mps"], prof["elevation_m"]
-        res = run_simulation(veh, t, v, h, mass_kg=mass_kg, soc_start=soc_start_pct / 100.0)
+        res = run_simulation(veh, t, v, h, mass_kg=mass_kg, soc_start=soc_start_pct / 100.0,
+                             params=detailed_params(veh))
     except CevmError as exc:
         raise fail(exc) from None
     except ValueError as exc:  # inconsistent [detailed] parameters or trace
@@ -152,3 +147,15 @@ def simulate(
     if res.traction_deficit_j > 0.02 * max(res.wheel_energy_j, 1.0):
         typer.echo(f"cevm: warning: the vehicle could not follow the trace: {row['traction_deficit_kwh']:.2f} kWh "
                    "of wheel work beyond its powertrain's limits", err=True)
+
+
+def _no_detailed_table(path: Path, is_ev: bool) -> str:
+    """Why a vehicle file without a [detailed] table cannot be simulated, and what to do."""
+    return (
+        f"{path}: no [detailed] table: the detailed model needs the vehicle's drivetrain ("
+        + ("motor, regeneration limits, battery, auxiliaries" if is_ev else "engine map, gearbox, "
+           "auxiliaries") + "), and this file's CE figures (eta, " + ("aux_power_kw" if is_ev else
+           "idle_fuel_lph") + ") do not give them. Add a [detailed] table (an empty one takes the "
+        "defaults, which describe " + ("a 10 m electric bus with a 180 kW motor" if is_ev else
+                                       "a 235 kW diesel tractor with a 12-speed gearbox")
+        + "; configs/vehicles/*.toml show every key), or use 'cevm predict' (the CE model)")

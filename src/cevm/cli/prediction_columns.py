@@ -1,0 +1,279 @@
+"""The output columns of ``cevm predict`` and ``cevm feasibility``: one
+:class:`~cevm.cli.columns.Column` each, with what it means and how its values come from
+what the core computed.
+
+**To add a column:** one ``Column(...)`` entry in :data:`PREDICT` (or
+:data:`FEASIBILITY`), where it should stand in the CSV, with its meaning (and unit), its
+kind, the powertrains whose rows have it, its decimals and its ``value``: a function of
+the row context (:class:`BlockRows` for predict: one :class:`~cevm.core.sweep.SweepBlock`
+in output units; :class:`VehicleRow` for feasibility: one vehicle of a
+:class:`~cevm.core.feasibility.Feasibility`). CSV, JSON, table headers and formats and
+the manual's reference (:meth:`~cevm.cli.columns.ColumnSpec.reference`) follow. To show
+it in predict's table too, add its name to :data:`PREDICT_TABLE`.
+
+A new per-row quantity of the core flows so: a field of
+:class:`~cevm.core.sweep.SweepBlock` (an array of the block's rows, SI units, None when
+not computed), filled by the core's evaluation (:mod:`cevm.core.sweep.evaluate`); here a
+Column whose ``value`` reads it and converts it to the output unit
+(``lambda r: r.optional(r.block.new_field_j, 1 / J_PER_KWH)``).
+
+Predict's row order is source-major (source, then vehicle, then mass). Its JSON keys
+start with :data:`PREDICT_JSON_LEAD`, the contract of the first ``cevm predict``; its
+CSV starts with the same columns less ``powertrain`` and ``ice_braking``.
+"""
+
+from __future__ import annotations
+
+import math
+from functools import cached_property
+from typing import Any
+
+import numpy as np
+
+from cevm.cli.columns import Column, ColumnSpec
+from cevm.core.sweep import AMBIENT_ORIGINS, SweepBlock
+from cevm.units import J_PER_KWH
+
+EV, ICE = ("ev",), ("ice",)
+
+
+# ------------------------------------------------------------------------------ predict
+
+
+class BlockRows:
+    """What a predict column reads: one block of rows (:class:`~cevm.core.sweep.SweepBlock`)
+    and where its masses come from (``mass_source``), with helpers that give arrays of
+    the block's rows in output units: numbers and booleans as floats (NaN: no value),
+    text as (codes, categories)."""
+
+    def __init__(self, block: SweepBlock, mass_source: str = "vehicle file"):
+        self.block = block
+        self.mass_source = mass_source
+        self.pset = block.pset
+        self.source = block.source
+        self.n = block.pset.n
+
+    @cached_property
+    def km(self) -> float:
+        """The source's distance [km]."""
+        return self.source.distance_m / 1000.0
+
+    def per_km(self, values: np.ndarray, scale: float = 1.0) -> np.ndarray:
+        """``scale * values`` per km of the source (NaN for a source that does not move)."""
+        km = self.km
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return scale * values / km if km > 0 else np.full(self.n, np.nan)
+
+    def same(self, value: float) -> np.ndarray:
+        """One number for every row."""
+        return np.full(self.n, value)
+
+    def text(self, value: str) -> tuple[np.ndarray, list[str]]:
+        """One text for every row."""
+        return np.zeros(self.n, dtype=np.int64), [value]
+
+    def by_vehicle(self, values: list[str]) -> tuple[np.ndarray, list[str]]:
+        """One text per vehicle of the prediction set."""
+        return self.pset.vehicle_index, values
+
+    def optional(self, values: np.ndarray | None, scale: float = 1.0) -> np.ndarray:
+        """An optional block array (None: not computed) times ``scale`` (NaN where none)."""
+        return np.full(self.n, np.nan) if values is None else values * scale
+
+    @cached_property
+    def truth(self) -> dict[str, np.ndarray]:
+        """A stored trip's measured consumption (litres for a fuel measurement, kWh for a
+        battery one) on every row, and the error e = (modelled - measured) / measured [%]
+        of each row of the matching powertrain when the rows are at the trip's own mass
+        (not at a --mass-kg or --payload-kg given for every source); NaN elsewhere."""
+        n, block = self.n, self.block
+        fuel, energy, error = np.full(n, np.nan), np.full(n, np.nan), np.full(n, np.nan)
+        measured = getattr(self.source, "measured", None)  # a stored trip's (cevm.store.sources.StoredTrip)
+        if measured is not None and measured.value > 0:
+            if measured.kind == "fuel_l":
+                fuel[:], modelled = measured.value, block.fuel_l
+            else:
+                energy[:], modelled = measured.value / J_PER_KWH, block.energy_j
+            if self.mass_source not in ("--mass-kg", "--payload-kg"):
+                error = 100.0 * (modelled - measured.value) / measured.value  # NaN on rows of the other powertrain
+        return {"measured_fuel_l": fuel, "measured_energy_kwh": energy, "error_pct": error}
+
+
+def _vehicle_names(r: BlockRows) -> tuple[np.ndarray, list[str]]:
+    return r.by_vehicle([v.name for v in r.pset.vehicles])
+
+
+PREDICT = ColumnSpec((
+    Column("cycle", "the source's name: a cycle file's stem (with --speed-col, stem[column]), a trip id or a route name",
+           kind="text", value=lambda r: r.text(r.source.name)),
+    Column("vehicle", "the vehicle's name (its file's name key)", kind="text", value=_vehicle_names),
+    Column("mass_kg", "gross mass [kg]", header="mass kg", digits=0, decimals=3, value=lambda r: r.pset.mass_kg),
+    Column("distance_km", "the source's distance [km]", header="km", digits=2,
+           value=lambda r: r.same(r.km)),
+    Column("duration_s", "the source's duration [s]", header="s", digits=0, decimals=3,
+           value=lambda r: r.same(r.source.duration_s)),
+    Column("wheel_energy_kwh", "energy at the wheels over the source [kWh] (eq. 22-30)", header="wheel kWh",
+           digits=2, value=lambda r: r.block.wheel_energy_j / J_PER_KWH),
+    Column("energy_kwh", "battery energy over the source [kWh]", EV, header="battery kWh", digits=2,
+           value=lambda r: r.block.energy_j / J_PER_KWH),
+    Column("energy_kwh_per_km", "battery energy per km [kWh/km]", EV, header="kWh/km", digits=3,
+           value=lambda r: r.per_km(r.block.energy_j / J_PER_KWH)),
+    Column("fuel_l", "fuel over the source [l]", ICE, header="fuel l", digits=2, value=lambda r: r.block.fuel_l),
+    Column("fuel_l_per_100km", "fuel per 100 km [l/100km]", ICE, header="l/100km", digits=1,
+           value=lambda r: r.per_km(r.block.fuel_l, 100.0)),
+    Column("source_kind", "what the source is: cycle, trip or route", kind="text",
+           value=lambda r: r.text(r.source.kind)),
+    Column("powertrain", "ev or ice", kind="text", value=lambda r: r.by_vehicle([v.powertrain for v in r.pset.vehicles])),
+    Column("payload_kg", "gross mass less the kerb mass [kg] (empty without kerb_mass_kg)", header="payload kg",
+           digits=0, decimals=3, value=lambda r: r.pset.payload_kg),
+    Column("over_max_gross", "the gross mass is above the vehicle's max_gross_kg", kind="bool",
+           header="over max gross", value=lambda r: r.pset.over_max_gross.astype(float)),
+    Column("soc_end_pct", "state of charge at the end [%] (empty when it runs empty on the way)", EV,
+           header="SoC end %", digits=1, value=lambda r: r.block.soc_end_pct),
+    Column("soc_min_pct", "lowest state of charge along the way [%], never below 0", EV, header="SoC min %",
+           digits=1, value=lambda r: r.block.soc_min_pct),
+    Column("reserve_ok", "the lowest state of charge keeps --reserve-pct", EV, kind="bool", header="reserve ok",
+           value=lambda r: np.where(r.pset.is_ev, r.block.reserve_ok.astype(float), np.nan)),
+    Column("tank_ok", "the fuel fits tank_l (empty without tank_l)", ICE, kind="bool", header="tank ok",
+           value=lambda r: r.block.tank_ok),
+    Column("ice_braking", "the braking mode in force: paper (braking energy credited, eq. 24) or no-credit", ICE,
+           kind="text", value=lambda r: r.by_vehicle(list(r.pset.braking))),
+    Column("ambient_c", "the ambient temperature the row assumed [degC]", header="ambient degC", digits=1,
+           decimals=3, value=lambda r: r.block.ambient_c),
+    Column("ambient_from", "where the temperature comes from: given, source, the vehicle's reference_temp_c or "
+           "the default", kind="text",
+           value=lambda r: (r.block.ambient_from.astype(np.int64), list(AMBIENT_ORIGINS))),
+    Column("vehicle_key", "the vehicle's id: its file's id key, else its stem", kind="text", header="vehicle",
+           value=lambda r: r.by_vehicle([v.label for v in r.pset.vehicles])),
+    Column("reserve_at_km", "where the reserve is first crossed [km from the start] (empty if it is kept)", EV,
+           value=lambda r: r.optional(r.block.reserve_at_m, 1e-3)),
+    Column("reserve_at_s", "when the reserve is first crossed [s from the start]", EV, decimals=3,
+           value=lambda r: r.optional(r.block.reserve_at_s)),
+    Column("empty_at_km", "where the battery or the tank runs empty [km from the start] (empty if it does not)",
+           value=lambda r: r.optional(r.block.empty_at_m, 1e-3)),
+    Column("empty_at_s", "when the battery or the tank runs empty [s from the start]", decimals=3,
+           value=lambda r: r.optional(r.block.empty_at_s)),
+    Column("range_km", "with --range: the distance to empty, the source driven again and again [km]",
+           header="range km", digits=1, value=lambda r: r.optional(r.block.range_m, 1e-3)),
+    Column("range_reserve_km", "with --range: the distance to the reserve, the source driven again and again [km]",
+           EV, value=lambda r: r.optional(r.block.range_reserve_m, 1e-3)),
+    Column("over_power", "the source asks more wheel power than max_power_kw at the row's mass (over any 5 s; "
+           "empty without max_power_kw)", kind="bool", value=lambda r: r.optional(r.block.over_power)),
+    Column("over_speed", "the source is faster than max_speed_kmh (empty without it)", kind="bool",
+           value=lambda r: r.optional(r.block.over_speed)),
+    Column("mass_source", "where the row's mass comes from: --mass-kg, --payload-kg, the vehicle file, or a stored "
+           "trip's own (manifest, by hand, logged)", kind="text", header="mass from",
+           value=lambda r: r.text(r.mass_source)),
+    Column("measured_fuel_l", "a stored trip's measured fuel [l]", ICE, header="measured l", digits=2,
+           value=lambda r: r.truth["measured_fuel_l"]),
+    Column("measured_energy_kwh", "a stored trip's measured battery energy [kWh]", EV, header="measured kWh",
+           digits=2, value=lambda r: r.truth["measured_energy_kwh"]),
+    Column("error_pct", "(modelled - measured) / measured [%], at a stored trip's own mass", header="error %",
+           digits=1, value=lambda r: r.truth["error_pct"]),
+), json_lead=("cycle", "vehicle", "powertrain", "mass_kg", "distance_km", "duration_s", "wheel_energy_kwh", "energy_kwh",
+              "energy_kwh_per_km", "fuel_l", "fuel_l_per_100km", "ice_braking"))
+
+#: The keys every predict JSON object starts with (the first contract).
+PREDICT_JSON_LEAD = PREDICT.json_lead
+
+#: Predict's table status: whether the reserve is kept (EV) or the tank is enough (ICE),
+#: and why not (:func:`cevm.cli.predict.with_status`); for people only, not in CSV or JSON.
+STATUS = Column("status", "reserve kept (EV) or tank enough (ICE), and where not, why", kind="text",
+                header="reserve / tank ok", layout="wrap")
+
+#: The columns predict's table may show, in order (those without a value in any row are
+#: left out, and ambient_c comes in where a vehicle uses the temperature; see
+#: :class:`cevm.cli.predict.PredictWriter`): names of :data:`PREDICT`, and "status".
+PREDICT_TABLE = ("cycle", "vehicle_key", "mass_kg", "mass_source", "distance_km", "energy_kwh", "measured_energy_kwh",
+                 "energy_kwh_per_km", "soc_min_pct", "fuel_l", "measured_fuel_l", "error_pct", "fuel_l_per_100km",
+                 "range_km", "status")
+
+
+# -------------------------------------------------------------------------- feasibility
+
+
+class VehicleRow:
+    """What a feasibility column reads: vehicle ``i`` of a
+    :class:`~cevm.core.feasibility.Feasibility`, the run's ``ice_braking`` override and
+    where the masses come from (``mass_source``). Values are Python values: None where a
+    row has none."""
+
+    def __init__(self, res: Any, i: int, ice_braking: str | None, mass_source: str):
+        self.res = res
+        self.i = i
+        self.vehicle = res.vehicles[i]
+        self.source = res.source
+        self.ice_braking = ice_braking
+        self.mass_source = mass_source
+
+    def num(self, values: np.ndarray) -> float | None:
+        """This vehicle's value of a result array; None for NaN."""
+        x = float(values[self.i])
+        return None if x != x else x
+
+    def range_km(self, range_m: np.ndarray) -> float | None:
+        """A range in km; None where unknown, and where unlimited (a source that gives back
+        what it takes: JSON has no infinity)."""
+        x = float(range_m[self.i])
+        return None if not math.isfinite(x) else x / 1e3
+
+
+def _feasible(r: VehicleRow) -> bool | None:
+    f = r.res.feasible[r.i]
+    return None if f != f else bool(f > 0.5)
+
+
+FEASIBILITY = ColumnSpec((
+    Column("source", "the route, cycle or trip", kind="text", value=lambda r: r.source.name),
+    Column("source_kind", "what the source is: cycle, trip or route", kind="text", value=lambda r: r.source.kind),
+    Column("vehicle", "the vehicle's name", kind="text", value=lambda r: r.vehicle.name),
+    Column("vehicle_key", "the vehicle's id: its file's id key, else its stem", kind="text",
+           value=lambda r: r.vehicle.label),
+    Column("powertrain", "ev or ice", kind="text", value=lambda r: r.vehicle.powertrain),
+    Column("distance_km", "the source's distance [km]", value=lambda r: r.source.distance_m / 1000.0),
+    Column("mass_kg", "the gross mass evaluated [kg]", value=lambda r: float(r.res.mass_kg[r.i])),
+    Column("payload_kg", "the payload evaluated [kg], from kerb_mass_kg (else mass_kg)",
+           value=lambda r: float(r.res.payload_kg[r.i])),
+    Column("over_max_gross", "the gross mass is above max_gross_kg", kind="bool",
+           value=lambda r: bool(r.res.over_max_gross[r.i])),
+    Column("feasible", "keeps the reserve (EV) or fits the tank (ICE) within max_gross_kg (empty: ICE without "
+           "tank_l)", kind="bool", value=_feasible),
+    Column("energy_kwh", "battery energy over the source [kWh]", EV, value=lambda r: r.num(r.res.energy_j / J_PER_KWH)),
+    Column("soc_end_pct", "state of charge at the end [%] (empty when it runs empty on the way)", EV,
+           value=lambda r: r.num(r.res.soc_end_pct)),
+    Column("soc_min_pct", "lowest state of charge along the way [%]", EV, value=lambda r: r.num(r.res.soc_min_pct)),
+    Column("reserve_margin_pct", "lowest state of charge less the reserve [percentage points]", EV,
+           value=lambda r: r.num(r.res.reserve_margin_pct)),
+    Column("fuel_l", "fuel over the source [l]", ICE, value=lambda r: r.num(r.res.fuel_l)),
+    Column("tank_l", "the vehicle's tank [l] (empty without tank_l)", ICE, value=lambda r: r.vehicle.tank_l),
+    Column("tank_margin_l", "tank less fuel [l]", ICE, value=lambda r: r.num(r.res.tank_margin_l)),
+    Column("ice_braking", "the braking mode in force: paper or no-credit", ICE, kind="text",
+           value=lambda r: r.ice_braking or r.vehicle.ice_braking),
+    Column("max_payload_kg", "the largest whole-kg payload that keeps the reserve or fits the tank, within "
+           "max_gross_kg or the search cap [kg] (empty: none does)", value=lambda r: r.num(r.res.max_payload_kg)),
+    Column("min_payload_kg", "the smallest such payload [kg] (above 0 only where the empty vehicle fails)",
+           value=lambda r: r.num(r.res.min_payload_kg)),
+    Column("limited_by", "what limits the payload: reserve, tank, max_gross_kg, payload_cap or infeasible",
+           kind="text", value=lambda r: r.res.limited_by[r.i]),
+    Column("ambient_c", "the ambient temperature evaluated at [degC]", value=lambda r: r.num(r.res.ambient_c)),
+    Column("ambient_from", "where the temperature comes from", kind="text", value=lambda r: r.res.ambient_from[r.i]),
+    Column("reserve_at_km", "where the reserve is first crossed [km] (empty if kept)", EV,
+           value=lambda r: r.num(r.res.reserve_at_m / 1e3)),
+    Column("reserve_at_s", "when the reserve is first crossed [s]", EV, value=lambda r: r.num(r.res.reserve_at_s)),
+    Column("empty_at_km", "where the battery or tank runs empty [km] (empty if it does not)",
+           value=lambda r: r.num(r.res.empty_at_m / 1e3)),
+    Column("empty_at_s", "when the battery or tank runs empty [s]", value=lambda r: r.num(r.res.empty_at_s)),
+    Column("range_km", "the distance to empty, the source driven again and again [km] (empty: unlimited)",
+           value=lambda r: r.range_km(r.res.range_m)),
+    Column("range_reserve_km", "the distance to the reserve, the source driven again and again [km]", EV,
+           value=lambda r: r.range_km(r.res.range_reserve_m)),
+    Column("mass_source", "where the mass comes from: --mass-kg, --payload-kg, the vehicle file, or a stored "
+           "trip's own", kind="text", value=lambda r: r.mass_source),
+))
+
+
+def feasibility_row(res: Any, i: int, ice_braking: str | None, mass_source: str) -> dict[str, Any]:
+    """The output row of vehicle ``i`` of a feasibility result: the columns its powertrain
+    has, in order."""
+    ctx = VehicleRow(res, i, ice_braking, mass_source)
+    return {c.name: c.value(ctx) for c in FEASIBILITY.for_powertrain(ctx.vehicle.powertrain)}

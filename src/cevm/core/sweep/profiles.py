@@ -1,0 +1,96 @@
+"""A source's samples and its plain per-step terms in driving order.
+
+A :class:`LegProfile` is one leg's samples (time, speed, elevation); a source (a cycle,
+a stored trip, a route of legs) drives its legs one after another. :class:`StepTable`
+holds the per-step terms of :func:`cevm.core.cycle.step_terms` of all its legs in driving
+order, with the time and distance at each step's start: what the range
+(:mod:`~cevm.core.sweep.ranges`), the power a source asks (:mod:`~cevm.core.sweep.power`)
+and the energy along the way (:mod:`~cevm.core.sweep.stepenergy`) are computed from.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from cevm.core.cycle import CR0_DEFAULT, PAPER_PHYSICS, Physics, step_terms
+
+
+@dataclass(frozen=True, eq=False)
+class LegProfile:
+    """One leg's samples: time [s] (strictly increasing), speed [m/s], road elevation [m]
+    (None for a flat road). Consecutive legs are *not* joined by a step: a route's
+    vector is the sum of its legs' vectors, and its profile is the legs one after
+    another."""
+
+    time_s: np.ndarray
+    speed_mps: np.ndarray
+    elevation_m: np.ndarray | None = None
+
+    @classmethod
+    def from_profile(cls, profile: Mapping[str, np.ndarray]) -> LegProfile:
+        """From a stored profile dict (:meth:`cevm.store.TripStore.load_profile`)."""
+        h = profile.get("elevation_m")
+        return cls(np.asarray(profile["time_s"], np.float64), np.asarray(profile["speed_mps"], np.float64),
+                   None if h is None else np.asarray(h, np.float64))
+
+
+
+@dataclass(frozen=True, eq=False)
+class StepTable:
+    """A source's per-step terms in driving order (legs one after another), SI: ``k``
+    (kinetic, J/kg), ``x`` = k + e (J/kg), ``a`` (J/m^2), ``r`` (J/kg per unit Cr),
+    ``dt`` [s], ``dd`` (distance of the step [m]), ``t0`` and ``d0`` (time [s] and
+    distance [m] at the step's start), ``simplified`` (criterion 8 with the source's
+    Cr0), ``moving`` (a > 0); ``v_max_mps`` the source's top speed."""
+
+    k: np.ndarray
+    x: np.ndarray
+    a: np.ndarray
+    r: np.ndarray
+    dt: np.ndarray
+    dd: np.ndarray
+    t0: np.ndarray
+    d0: np.ndarray
+    simplified: np.ndarray
+    moving: np.ndarray
+    v_max_mps: float
+
+    @property
+    def n(self) -> int:
+        return int(self.dt.size)
+
+    @property
+    def duration_s(self) -> float:
+        return float(self.t0[-1] + self.dt[-1]) if self.n else 0.0
+
+    @property
+    def distance_m(self) -> float:
+        return float(self.d0[-1] + self.dd[-1]) if self.n else 0.0
+
+
+def build_step_table(legs: Sequence[LegProfile], *, cr0: float = CR0_DEFAULT,
+                     physics: Physics = PAPER_PHYSICS) -> StepTable:
+    """The :class:`StepTable` of a source's legs."""
+    ks, xs, as_, rs, dts = [], [], [], [], []
+    vmax = 0.0
+    for leg in legs:
+        st = step_terms(leg.time_s, leg.speed_mps, leg.elevation_m, physics)
+        ks.append(st.k)
+        xs.append(st.k + st.e)
+        as_.append(st.a)
+        rs.append(st.r)
+        dts.append(st.dt)
+        if leg.speed_mps.size:
+            vmax = max(vmax, float(np.max(leg.speed_mps)))
+    z = np.zeros(0)
+    k, x, a, r, dt = (v[0] if len(v) == 1 else np.concatenate(v) if v else z  # one leg: no copy
+                      for v in (ks, xs, as_, rs, dts))
+    dd = r / physics.g_mps2
+    t0 = np.concatenate([[0.0], np.cumsum(dt)[:-1]]) if dt.size else z
+    d0 = np.concatenate([[0.0], np.cumsum(dd)[:-1]]) if dd.size else z
+    return StepTable(k=k, x=x, a=a, r=r, dt=dt, dd=dd, t0=t0, d0=d0, simplified=(x + cr0 * r) > 0,
+                     moving=a > 0, v_max_mps=vmax)
+

@@ -1,0 +1,129 @@
+"""The cleaning's parameters and results: :class:`CleanParams`, :class:`CleanTrip`,
+:class:`CleanResult`, and the names of the speed sources."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from cevm.core.trip import Measurement
+from cevm.ingest.consumption import ConsumptionParams
+
+#: Speed sources in order of preference (``quality["speed_source"]`` uses these names).
+SPEED_SOURCES = ("wheel_speed_mps", "gps_speed_mps", "gps_positions")
+
+
+@dataclass(frozen=True)
+class CleanParams:
+    """Parameters of the cleaning stage (all times in s, speeds in m/s, lengths in m).
+
+    - ``gap_s = 300``: no speed data for 5 min ends a trip; a logger pause that long
+      rarely hides continuous driving and the profile inside is unknowable.
+    - ``stop_s = 1800``: standstill over 30 min ends a trip (a parked vehicle with the
+      logger on); shorter stops (traffic, deliveries, layovers) stay in the trip.
+    - ``min_duration_s = 60``, ``min_distance_m = 200``: shorter segments (yard moves,
+      logger restarts) are dropped and reported; they carry too little energy for a
+      quantised measurement to mean anything.
+    - ``grid_s = 1.0``: the paper's loggers tick at about 1 Hz; None keeps raw times.
+    - ``max_fill_s = 15``: speed holes up to 15 s are interpolated: 1 Hz loggers with
+      missed ticks and telematics portals logging every 1-10 s while moving.
+    - ``gps_max_fill_s = 30``: GPS dropouts up to 30 s are interpolated along time
+      (positions feed elevation look-ups, where a straight chord over 30 s is good
+      enough); longer dropouts stay NaN.
+    - ``max_speed_mps = 70``: 252 km/h; faster implied GPS motion is impossible for a
+      road vehicle; also bounds speed readings (FMS "not available" 0xFFFF = 256 km/h).
+    - ``max_accel_mps2 = 15``: 1.5 g. Tyre grip limits a road vehicle's acceleration and
+      braking to about 1.0-1.2 g (sports cars on dry asphalt; buses and trucks well
+      under 0.7 g), so a speed reading that jumps faster, and back, is a spike.
+    - ``speed_jump_tolerance_mps = 1``: speed noise allowed on top of the acceleration
+      bound (phone GPS speed at 1 Hz scatters by a few tenths of a m/s).
+    - ``speed_outlier_max_samples = 3``: runs of at most 3 speed readings between two
+      impossible jumps are spikes (rejected); longer runs are kept and the jump reported.
+    - ``gps_jump_tolerance_m = 20``: position noise allowed on top of the speed bound
+      (a consumer GPS is good to a few metres, 20 m keeps short-dt fixes from tripping).
+    - ``gps_outlier_max_fixes = 5``: runs of at most 5 fixes between two jumps are
+      outliers (multipath, cold start); longer runs are kept and the jump reported.
+    - ``max_hdop = 20``: HDOP above 20 is a very poor fix (positions off by ~100 m).
+    - ``standstill_mps = 0.5``: 1.8 km/h; below walking pace the vehicle is stopped,
+      above the speed noise of a phone GPS at rest (~0.1-0.3 m/s).
+    - ``clock_step_min_s = 2``: backward jumps up to 2 s are local reordering (sorted).
+    - ``max_clock_step_s = 3600``: clock corrections are seconds to minutes, or an hour
+      (time zone / DST slip); bigger jumps are out-of-order blocks (sorted) or pauses.
+    - ``clock_moving_mps = 2``: motion needed on both sides of a forward jump to take it
+      as a clock step (positions must then have moved by about one tick).
+    - ``unordered_share = 0.05``: more than 5 % backward steps = unordered file.
+    - ``time_outlier_max_rows = 3``: longest junk-timestamp block dropped.
+    - ``consumption``: :class:`cevm.ingest.consumption.ConsumptionParams`.
+    """
+
+    gap_s: float = 300.0
+    stop_s: float = 1800.0
+    min_duration_s: float = 60.0
+    min_distance_m: float = 200.0
+    grid_s: float | None = 1.0
+    max_fill_s: float = 15.0
+    gps_max_fill_s: float = 30.0
+    max_speed_mps: float = 70.0
+    max_accel_mps2: float = 15.0
+    speed_jump_tolerance_mps: float = 1.0
+    speed_outlier_max_samples: int = 3
+    gps_jump_tolerance_m: float = 20.0
+    gps_outlier_max_fixes: int = 5
+    max_hdop: float = 20.0
+    standstill_mps: float = 0.5
+    clock_step_min_s: float = 2.0
+    max_clock_step_s: float = 3600.0
+    clock_moving_mps: float = 2.0
+    unordered_share: float = 0.05
+    time_outlier_max_rows: int = 3
+    consumption: ConsumptionParams = field(default_factory=ConsumptionParams)
+
+
+@dataclass(frozen=True, eq=False)
+class CleanTrip:
+    """One clean trip segment (the lead adds elevation and builds a :class:`Trip`).
+
+    Arrays share one length; ``time_s`` [s] starts at 0 and strictly increases;
+    ``start_utc_s`` is the absolute time of sample 0 (Unix epoch, UTC).
+    ``speed_mps`` >= 0; ``distance_m`` cumulative trapezoidal distance from 0;
+    ``lat_deg``/``lon_deg`` (WGS84) and ``gps_alt_m`` NaN where unknown;
+    ``gross_weight_kg`` median of the trip's readings or None; ``measured`` the measured
+    consumption or None; ``first_source_line``/``last_source_line`` the lowest and
+    highest file line of the trip's rows. ``rows`` holds the trip's cleaned readings of
+    the :data:`cevm.ingest.evidence.EVIDENCE_COLUMNS` the log has, at the row times
+    ``rows_t_s`` [s, UTC epoch] from ``consumption.max_gap_s`` before the first sample
+    to as long after the last (for :func:`cevm.ingest.evidence.trip_evidence`).
+    """
+
+    start_utc_s: float
+    time_s: np.ndarray
+    speed_mps: np.ndarray
+    distance_m: np.ndarray
+    lat_deg: np.ndarray
+    lon_deg: np.ndarray
+    gps_alt_m: np.ndarray
+    gross_weight_kg: float | None
+    measured: Measurement | None
+    quality: dict
+    first_source_line: int
+    last_source_line: int
+    rows_t_s: np.ndarray = field(default_factory=lambda: np.empty(0))
+    rows: dict = field(default_factory=dict)
+
+    @property
+    def duration_s(self) -> float:
+        return float(self.time_s[-1] - self.time_s[0]) if len(self.time_s) else 0.0
+
+    @property
+    def length_m(self) -> float:
+        return float(self.distance_m[-1]) if len(self.distance_m) else 0.0
+
+
+@dataclass(frozen=True, eq=False)
+class CleanResult:
+    """Kept trips, dropped (too short) segments with the reason, file-level quality."""
+
+    trips: tuple[CleanTrip, ...]
+    dropped: tuple[dict, ...]
+    quality: dict

@@ -1,0 +1,182 @@
+"""The cleaning's driver: steps 1 to 5 over the whole log, then the trips one at a time
+(:class:`CleanStream`, :func:`clean_log`, :func:`clean_trips`)."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator, Sequence
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from cevm.errors import InputError
+from cevm.ingest.cleaning.arrays import _jsonable, _let_go, _nonzero
+from cevm.ingest.cleaning.clock import _repair_time, _sort_by_time
+from cevm.ingest.cleaning.duplicates import _merge_ticks
+from cevm.ingest.cleaning.events import RepairEvents
+from cevm.ingest.cleaning.grid import TripSpeedRows
+from cevm.ingest.cleaning.params import CleanParams, CleanResult, CleanTrip
+from cevm.ingest.cleaning.rows import _ROW_SPEED_COLUMNS, _load
+from cevm.ingest.cleaning.speed import _row_speed
+from cevm.ingest.cleaning.splitting import _SPLIT_REASONS, _ignition_on, _segment
+from cevm.ingest.cleaning.trip import CleanedLog, _clean_trip
+from cevm.ingest.consumption import EnergySourceLike, columns_read
+from cevm.ingest.evidence import EVIDENCE_COLUMNS
+
+
+def _require_speed_or_position(cols: dict, path) -> None:
+    if not any(c in cols for c in ("wheel_speed_mps", "gps_speed_mps")) and not (
+        "lat_deg" in cols and "lon_deg" in cols
+    ):
+        raise InputError(path, "no speed or position column (wheel_speed_mps, gps_speed_mps or lat_deg+lon_deg)")
+
+
+def _columns_needed(sources: Sequence[EnergySourceLike]) -> set[str]:
+    """The canonical columns that the steps after the tick merge read: those of the row
+    speeds and the GPS fixes, each trip's ignition, odometer, gross weight and evidence
+    columns, and the energy sources' columns. The others (an engine's speed, a pedal)
+    count only in the duplicates and tick merging, and are dropped there."""
+    need = {*_ROW_SPEED_COLUMNS, "ignition", "odometer_m", "gross_weight_kg", *EVIDENCE_COLUMNS}
+    for s in sources:
+        need |= columns_read(str(s.column))
+    return need
+
+
+class CleanStream:
+    """:func:`clean_log` one trip at a time.
+
+    Made, it runs the steps over the whole log (1 to 5 of the module docstring; errors
+    are raised here); iterated, it makes each trip (steps 6 to 9) when it is asked
+    for. Once the iteration has ended, ``dropped`` (the dropped segments) and
+    ``quality`` (the file-level quality) are complete and the log's arrays are
+    released. Iterate it once. The trips of a large log then need not all be held at
+    once: :func:`cevm.ingest.task.process_file` hands each to the next stages and lets
+    it go. Parameters as :func:`clean_log`.
+    """
+
+    def __init__(self, frame: pd.DataFrame, sources: Sequence[EnergySourceLike] = (),
+                 params: CleanParams = CleanParams(), *, path: str | Path | None = None,
+                 release_frame: bool = False) -> None:
+        p = params
+        n_in = len(frame)
+        t, line, rows, no_time = _load(frame, path, release_frame)
+        _require_speed_or_position(rows.cols, path)
+        ev = RepairEvents()
+        # Each step over the whole log returns its temporaries' memory to the system once
+        # done (for a large log, :func:`_let_go`), and so do the steps that make column
+        # after column.
+        t, line, tinfo = _repair_time(t, line, rows, p, ev)
+        _let_go(t.size)
+        t, line = _sort_by_time(t, line, rows)
+        _let_go(t.size)
+        t, line = _merge_ticks(t, line, rows, _columns_needed(sources), ev)
+        _let_go(t.size)
+        cols = rows.cols
+        self.dropped: list[dict] = []
+        self.quality: dict = {"rows_in": n_in, "rows_without_time": no_time, "rows_clean": int(t.size), **tinfo}
+        self._sources, self._params = tuple(sources), p
+        self._work: tuple | None = None
+        if t.size < 2:
+            ev.finish()
+            self.quality.update(ev.totals(), trips=0, trips_dropped=0)
+            self.quality = _jsonable(self.quality)
+            return
+
+        v, src, fixes = _row_speed(t, cols, p, ev)
+        _let_go(t.size)
+        ev.finish()
+        fin = np.isfinite(v)
+        rows_v = None if fin.all() else _nonzero(fin)  # the rows with a speed (None: all)
+        del fin
+        ts, vs = (t, v) if rows_v is None else (t[rows_v], v[rows_v])
+        keep_idx, starts, start_reasons = _segment(ts, vs, _ignition_on(cols, rows_v, t.size), p)
+        del ts, vs
+        # the log rows of the kept speed rows, in trip order (None: every row)
+        if keep_idx is None:
+            rows_k = rows_v
+        else:
+            rows_k = keep_idx if rows_v is None else rows_v[keep_idx]
+        del keep_idx
+        _let_go(t.size)
+        n_kept = t.size if rows_k is None else rows_k.size
+        self.quality.update(ev.totals())
+        self.quality.update(
+            splits={r: start_reasons[1:].count(r) for r in _SPLIT_REASONS[1:]},
+            trips=0,
+            trips_dropped=0,
+            speed_rows=int(t.size if rows_v is None else rows_v.size),
+            gps_fixes_kept=int(fixes.rows.size),
+        )
+        bounds = np.append(starts, n_kept)
+        # each trip's lowest and highest file line (its rows' span), so that the lines
+        # need not be kept while the trips are made
+        first = bounds[:-1] if rows_k is None else rows_k[bounds[:-1]]
+        last = bounds[1:] - 1 if rows_k is None else rows_k[bounds[1:] - 1]
+        lines = [(int(line[a:b + 1].min()), int(line[a:b + 1].max())) for a, b in zip(first.tolist(), last.tolist())]
+        del line
+        self._work = (CleanedLog(t, cols, fixes, ev), v, src, rows_k, bounds, start_reasons, lines)
+
+    def __iter__(self) -> Iterator[CleanTrip]:
+        work, self._work = self._work, None
+        if work is None:
+            return
+        log, v, src, rows_k, bounds, reasons, lines = work
+        del work
+        n_trips = len(reasons)
+        kept = 0
+        for j in range(n_trips):
+            a, b = int(bounds[j]), int(bounds[j + 1])
+            r = slice(a, b) if rows_k is None else rows_k[a:b]
+            seg = TripSpeedRows(log.t[r], v[r], src[r], reasons[j], reasons[j + 1] if j + 1 < n_trips else "end", lines[j])
+            out = _clean_trip(log, seg, self._sources, self._params)
+            if isinstance(out, CleanTrip):
+                kept += 1
+                yield out
+            else:
+                self.dropped.append(out)
+        self.quality.update(trips=kept, trips_dropped=len(self.dropped))
+        self.quality = _jsonable(self.quality)
+
+
+def clean_log(
+    frame: pd.DataFrame,
+    sources: Sequence[EnergySourceLike] = (),
+    params: CleanParams = CleanParams(),
+    *,
+    path: str | Path | None = None,
+    release_frame: bool = False,
+) -> CleanResult:
+    """Clean a canonical log frame of one vehicle into trips (see the module docstring;
+    :class:`CleanStream` makes them one at a time).
+
+    Parameters
+    ----------
+    frame : canonical columns (``time_s`` [s, UTC epoch] required), rows in file order.
+    sources : energy sources for the measured consumption (:class:`EnergySourceLike`).
+    params : :class:`CleanParams`.
+    path : the source file, for error messages.
+    release_frame : remove the columns from ``frame`` as soon as their arrays are taken
+        (the cleaning then holds the only reference to them and drops each once it has
+        made its own), so that a large log is not held twice; the caller's frame is
+        left without columns (default False).
+
+    Returns
+    -------
+    :class:`CleanResult` with the kept trips in time order, the dropped segments and a
+    file-level quality dict. Raises :class:`cevm.errors.InputError` for a frame without
+    time, with non-numeric values, or without any speed or position column.
+    """
+    stream = CleanStream(frame, sources, params, path=path, release_frame=release_frame)
+    trips = tuple(stream)
+    return CleanResult(trips, tuple(stream.dropped), stream.quality)
+
+
+def clean_trips(
+    frame: pd.DataFrame,
+    sources: Sequence[EnergySourceLike] = (),
+    params: CleanParams = CleanParams(),
+    *,
+    path: str | Path | None = None,
+) -> list[CleanTrip]:
+    """The kept trips of :func:`clean_log` (dropped segments and file quality dropped)."""
+    return list(clean_log(frame, sources, params, path=path).trips)

@@ -1,0 +1,140 @@
+"""A DSM's rasters by their headers: which files a source names, each tile's grid, CRS,
+nodata and scale (:class:`TileHeader`), and the headers sent to workers once
+(:class:`DsmHeaders`)."""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+from dataclasses import dataclass
+from functools import lru_cache
+from pathlib import Path
+
+from cevm.errors import InputError
+
+
+@dataclass(frozen=True)
+class TileHeader:
+    """Header of one raster: where it is and how pixels map to its CRS.
+
+    x = x0 + a * col, y = y0 + e * row, with (col, row) at a pixel's top-left corner
+    (axis-aligned transform; e < 0 for the usual north-up raster).
+    """
+
+    name: str
+    crs_key: str  # pyproj-usable CRS string ("EPSG:27700" or WKT)
+    width: int
+    height: int
+    x0: float
+    y0: float
+    a: float
+    e: float
+    nodata: float | None
+    scale: float
+    offset: float
+    block: int = 0  # side of the file's square internal tiles [px], 0 if not square-tiled
+    driver: str = ""  # the only GDAL driver to open it with ("": any; see cevm.ingest.dsm_sources)
+
+    @property
+    def bounds(self) -> tuple[float, float, float, float]:
+        xs = (self.x0, self.x0 + self.a * self.width)
+        ys = (self.y0, self.y0 + self.e * self.height)
+        return min(xs), min(ys), max(xs), max(ys)
+
+
+@dataclass(frozen=True)
+class DsmHeaders:
+    """What :meth:`DsmSampler.open` read from a DSM's rasters (their headers) and its
+    label: enough to make an equal sampler elsewhere (:meth:`DsmSampler.from_headers`,
+    e.g. in a worker process) without reading the headers again. Picklable and
+    hashable."""
+
+    tiles: tuple[TileHeader, ...]
+    label: str
+
+
+def _is_gdal_name(source: str) -> bool:
+    """True for names GDAL resolves itself (URLs, /vsi paths): never checked on disk."""
+    return source.startswith("/vsi") or "://" in source
+
+
+@lru_cache(maxsize=256)
+def _crs_key_from_wkt(wkt: str) -> str:
+    """A pyproj-usable CRS string: ``EPSG:n`` when the WKT matches an EPSG code (so
+    that pyproj picks the EPSG datum transformation, e.g. OSGB36 Helmert), else the WKT."""
+    import pyproj
+
+    crs = pyproj.CRS.from_wkt(wkt)
+    epsg = crs.to_epsg(min_confidence=90)
+    return f"EPSG:{epsg}" if epsg is not None else wkt
+
+
+@lru_cache(maxsize=64)
+def _transformer(src: str, dst: str):
+    """Cached ``pyproj.Transformer.from_crs(src, dst, always_xy=True)``."""
+    import pyproj
+
+    return pyproj.Transformer.from_crs(src, dst, always_xy=True)
+
+
+def _read_header(name: str, shown: str, driver: str = "") -> TileHeader:
+    import rasterio
+    from rasterio.errors import RasterioError
+
+    try:
+        with rasterio.open(name, driver=driver or None) as ds:
+            if ds.count < 1:
+                raise InputError(shown, "raster has no band")
+            if ds.crs is None:
+                raise InputError(shown, "raster has no CRS (georeferencing) to place GPS fixes in")
+            t = ds.transform
+            if t.b != 0 or t.d != 0:
+                raise InputError(shown, "rotated or sheared rasters are not supported")
+            if t.a == 0 or t.e == 0:
+                raise InputError(shown, "raster has a degenerate geotransform")
+            bh, bw = ds.block_shapes[0]
+            block = bw if bh == bw and bh < ds.height else 0
+            scale = ds.scales[0] if ds.scales and ds.scales[0] is not None else 1.0
+            offset = ds.offsets[0] if ds.offsets and ds.offsets[0] is not None else 0.0
+            return TileHeader(
+                name=name,
+                crs_key=_crs_key_from_wkt(ds.crs.to_wkt()),
+                width=ds.width,
+                height=ds.height,
+                x0=float(t.c),
+                y0=float(t.f),
+                a=float(t.a),
+                e=float(t.e),
+                nodata=None if ds.nodata is None else float(ds.nodata),
+                scale=float(scale),
+                offset=float(offset),
+                block=int(block),
+                driver=driver,
+            )
+    except RasterioError as exc:
+        raise InputError(shown, f"cannot open as a raster: {exc}") from None
+
+
+def _list_sources(source: str | os.PathLike | Sequence[str | os.PathLike]) -> list[str]:
+    """Resolve a DSM argument to raster names GDAL can open (see :meth:`DsmSampler.open`)."""
+    if isinstance(source, (list, tuple)):
+        names: list[str] = []
+        for s in source:
+            names.extend(_list_sources(s))
+        return names
+    text = os.fspath(source)
+    if _is_gdal_name(text):
+        return [text]
+    path = Path(text)
+    if path.is_dir():
+        names = sorted(
+            str(p)
+            for p in path.rglob("*")
+            if p.is_file() and p.suffix.lower() in (".tif", ".tiff")
+        )
+        if not names:
+            raise InputError(text, "directory holds no GeoTIFF tile (*.tif, *.tiff)")
+        return names
+    if not path.exists():
+        raise InputError(text, "DSM not found (expected a GeoTIFF, a VRT, a directory of tiles or a URL)")
+    return [text]
