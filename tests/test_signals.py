@@ -30,9 +30,9 @@ SCENARIO = ROOT / "configs" / "fleet" / "paper-case-study.toml"
 COMMANDS = [
     (("calibrate", "-v", DIESEL, "--vehicle-id", "HGV-77", "--out", "{tmp}/out.toml"), "cevm.core.calibration:select",
      False),
-    (("predict", "-v", BUS, "--vehicle-id", "EB-09", "-f", "csv"), "cevm.cli.predict:_PredictWriter.add", False),
+    (("predict", "-v", BUS, "--vehicle-id", "EB-09", "-f", "csv"), "cevm.cli.predict:PredictWriter.add", False),
     (("predict", "-v", BUS, "--vehicle-id", "EB-09", "--workers", "2", "-f", "csv"),
-     "cevm.cli.predict:_PredictWriter.add", True),
+     "cevm.cli.predict:PredictWriter.add", True),
     (("feasibility", "-v", BUS, "--vehicle-id", "EB-09"), "cevm.cli.feasibility:feasibility", False),
     (("simulate", "-v", BUS, "--trip", "{bus}", "--out", "{tmp}/sim.csv"), "cevm.core.detailed:simulate", False),
     (("store", "check"), "cevm.store.check:_trip_problems", False),

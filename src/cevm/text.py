@@ -8,6 +8,13 @@ bidirectional and other format characters) as ``\\n``, ``\\r``, ``\\t``, ``\\xNN
 ``\\uNNNN`` or ``\\UNNNNNNNN``; a backslash itself is kept, so escaping twice changes
 nothing. Every table, CSV and plain line cevm prints goes through it; JSON output escapes
 control characters by its own rules (``\\u000d``), so a JSON reader gets the exact value.
+
+:func:`csv_text` is what a text cell of cevm's CSV output holds: :func:`printable`, and
+neutralised against spreadsheet formulas (OWASP's "CSV injection"): a text that starts
+with ``=``, ``+``, ``-``, ``@``, a tab or a carriage return (:data:`FORMULA_PREFIXES`)
+gets a leading apostrophe (``'=HYPERLINK(...)``, ``'-EB-07``), which a spreadsheet shows
+as the text itself and never evaluates. Only text cells are touched: numbers (floats and
+integers, -3.5 among them) are written as numbers.
 """
 
 from __future__ import annotations
@@ -32,3 +39,15 @@ def printable(text: str) -> str:
     if text.isprintable():
         return text
     return "".join(ch if ch.isprintable() else _escape(ch) for ch in text)
+
+
+#: First characters that make a spreadsheet (Excel, LibreOffice, Google Sheets) read a cell
+#: as a formula or a command (OWASP, "CSV Injection").
+FORMULA_PREFIXES = ("=", "+", "-", "@", "\t", "\r")
+
+
+def csv_text(text: str) -> str:
+    """A text cell of CSV output: :func:`printable`, with a leading apostrophe when it
+    would start with one of :data:`FORMULA_PREFIXES` (see the module notes)."""
+    text = printable(text)
+    return "'" + text if text.startswith(FORMULA_PREFIXES) else text
