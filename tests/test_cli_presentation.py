@@ -1,5 +1,5 @@
 """The command line reads right: help texts keep their bracketed words, flags show no
-metavar, exit codes as the README says, one message per mistake across commands, fleet
+metavar, exit codes as docs/reference/commands.md says, one message per mistake across commands, fleet
 days by name or 1-based number, tables that do not break ids, text that cannot forge
 output (control characters escaped in tables, CSV and error lines)."""
 

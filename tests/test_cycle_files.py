@@ -1,5 +1,6 @@
 """Cycle files as users have them (cevm.io.cycles, cevm.io.numeric_csv): layouts,
-detection, the public VECTO files, gzip, decimal commas, plausibility bounds, and errors
+detection, VECTO's layout (a stand-in in tests/data/cycles, and the public files when
+../shared is there), gzip, decimal commas, plausibility bounds, and errors
 that name file, line and column. Expected values come from plain Python parsing and
 loops here, never from the reader under test."""
 
@@ -26,16 +27,45 @@ from cevm.io.cycles import (
     read_cycles,
 )
 from cevm.io.numeric_csv import read_numeric_columns, sniff_csv
+from conftest import DATA, SHARED, shared_or_skip
 
 runner = CliRunner()
-VECTO = Path(__file__).resolve().parents[2] / "shared" / "cycles" / "vecto-carculator"
+VECTO_STANDIN = DATA / "cycles" / "vecto-standin"
+VECTO = SHARED / "cycles" / "vecto-carculator"
 
 
-@pytest.fixture
-def vecto() -> Path:
-    if not VECTO.is_dir():
-        pytest.skip("../shared/cycles/vecto-carculator is not beside this checkout")
-    return VECTO
+def vecto_facts(splice_line: int, missions_read: int, regional_rows: int, bus_time_stop_line: int,
+                bus_rows: int) -> dict:
+    """What a folder of VECTO-layout files holds, counted with the csv module (the stand-in's
+    by construction, see tests/data/cycles/README.md): the truck file's mission columns that
+    read, those refused (line, column, words of the message), the rows of 'Regional
+    delivery, 7.5t', the line where the bus file's Time column has stopped, the bus rows."""
+    return {
+        "missions_read": missions_read,
+        "refusals": {
+            # 0 -> 59.9 km/h in one second, spliced into the trace
+            "Long haul, 7.5t": (splice_line, "Long haul, 7.5t", "acceleration 16.6 m/s^2"),
+            # the gradient file names this column 'Regional delivery, 8.5t'
+            "Regional delivery, 7.5t": (1, None, "did you mean 'Regional delivery, 8.5t'"),
+        },
+        "regional_rows": regional_rows, "bus_time_stop_line": bus_time_stop_line, "bus_rows": bus_rows,
+    }
+
+
+VECTO_FACTS = {
+    VECTO_STANDIN: vecto_facts(splice_line=122, missions_read=3, regional_rows=290, bus_time_stop_line=122,
+                               bus_rows=483),
+    VECTO: vecto_facts(splice_line=5202, missions_read=19, regional_rows=1676, bus_time_stop_line=5827,
+                       bus_rows=17918),
+}
+
+
+@pytest.fixture(params=["standin", "public"])
+def vecto(request) -> Path:
+    """A folder of VECTO-layout files: the stand-in always, the public files when there."""
+    if request.param == "public":
+        return shared_or_skip("cycles", "vecto-carculator")
+    return VECTO_STANDIN
 
 
 def plain_columns(path: Path, sep: str = ";") -> tuple[list[str], list[list[str]]]:
@@ -54,15 +84,16 @@ def plain_elevation(t, v, g):
     return h
 
 
-TRUCK = CycleFormat(speed_columns=("Long haul, 26t",), speed_unit="km/h", grade_file=VECTO / "gradient_truck.csv",
-                    grade_unit="fraction")
+def truck(vecto: Path) -> CycleFormat:
+    return CycleFormat(speed_columns=("Long haul, 26t",), speed_unit="km/h", grade_file=vecto / "gradient_truck.csv",
+                       grade_unit="fraction")
 
 
 # ------------------------------------------------------------------------- VECTO files
 
 
 def test_vecto_truck_mission_with_its_gradient(vecto):
-    cyc = read_cycle_csv(vecto / "driving_cycles_truck.csv", TRUCK)
+    cyc = read_cycle_csv(vecto / "driving_cycles_truck.csv", truck(vecto))
     header, rows = plain_columns(vecto / "driving_cycles_truck.csv")
     gheader, grows = plain_columns(vecto / "gradient_truck.csv")
     j, gj = header.index("Long haul, 26t"), gheader.index("Long haul, 26t")
@@ -80,12 +111,7 @@ def test_vecto_truck_file_reads_as_one_cycle_per_mission_column(vecto):
     trailing empty cells), with its gradient; the two columns the public files get wrong
     are refused with their line and column."""
     header, rows = plain_columns(vecto / "driving_cycles_truck.csv")
-    expected_refusals = {
-        # 0 -> 59.9 km/h in one second, spliced into the trace
-        "Long haul, 7.5t": (5202, "Long haul, 7.5t", "acceleration 16.6 m/s^2"),
-        # the gradient file names this column 'Regional delivery, 8.5t'
-        "Regional delivery, 7.5t": (1, None, "did you mean 'Regional delivery, 8.5t'"),
-    }
+    expected_refusals = VECTO_FACTS[vecto]["refusals"]
     read = 0
     for j, name in enumerate(header[1:], start=1):
         fmt = CycleFormat(speed_columns=(name,), speed_unit="km/h", grade_file=vecto / "gradient_truck.csv",
@@ -101,7 +127,7 @@ def test_vecto_truck_file_reads_as_one_cycle_per_mission_column(vecto):
         assert cyc.time_s.size == n and cyc.name == f"driving_cycles_truck[{name}]"
         assert cyc.elevation_m is not None and cyc.elevation_m[0] == 0.0
         read += 1
-    assert read == len(header) - 1 - len(expected_refusals) == 19
+    assert read == len(header) - 1 - len(expected_refusals) == VECTO_FACTS[vecto]["missions_read"]
     # a glob selects several missions at once, one cycle each, in the file's order
     cycles = read_cycles(vecto / "driving_cycles_truck.csv",
                          CycleFormat(speed_columns=("Urban delivery*",), speed_unit="km/h"))
@@ -112,16 +138,19 @@ def test_grade_column_of_another_name_and_a_fixed_time_step(vecto):
     fmt = CycleFormat(speed_columns=("Regional delivery, 7.5t",), speed_unit="kmh",
                       grade_file=vecto / "gradient_truck.csv", grade_column="Regional delivery, 8.5t",
                       grade_unit="fraction")
-    assert read_cycle_csv(vecto / "driving_cycles_truck.csv", fmt).time_s.size == 1676
-    # the bus file's Time column stops at 5825 while the missions go on to 17918
+    facts = VECTO_FACTS[vecto]
+    assert read_cycle_csv(vecto / "driving_cycles_truck.csv", fmt).time_s.size == facts["regional_rows"]
+    # the bus file's Time column stops long before its missions (public: 5825 and 17918)
     bus = CycleFormat(speed_columns=("Urban, 9m",), speed_unit="km/h")
     with pytest.raises(InputError) as err:
         read_cycle_csv(vecto / "driving_cycles_bus.csv", bus)
-    assert (err.value.line, err.value.column) == (5827, "Time") and "--time-step-s" in str(err.value)
+    assert (err.value.line, err.value.column) == (facts["bus_time_stop_line"], "Time")
+    assert "--time-step-s" in str(err.value)
     cyc = read_cycle_csv(vecto / "driving_cycles_bus.csv", CycleFormat(
         speed_columns=("Urban, 9m",), speed_unit="km/h", time_step_s=1.0, grade_file=vecto / "gradient_bus.csv",
         grade_unit="fraction"))
-    assert cyc.time_s.size == 17918 and cyc.time_s[0] == 0.0 and cyc.time_s[-1] == 17917.0
+    n = facts["bus_rows"]
+    assert cyc.time_s.size == n and cyc.time_s[0] == 0.0 and cyc.time_s[-1] == n - 1.0
 
 
 def test_a_grade_file_with_other_rows_is_refused(tmp_path):
@@ -392,7 +421,7 @@ def test_every_command_that_reads_cycles_takes_the_options(vecto, root, tmp_path
     res = runner.invoke(app, ["predict", "-v", hgv, "-c", cyc_file, *opts, "-m", "30000", "-f", "json"])
     assert res.exit_code == 0, res.output
     (row,) = json.loads(res.stdout)
-    cyc = read_cycle_csv(vecto / "driving_cycles_truck.csv", TRUCK)
+    cyc = read_cycle_csv(vecto / "driving_cycles_truck.csv", truck(vecto))
     from reference import reference_wheel_energy_j
     from cevm.io import load_vehicle
 

@@ -1,4 +1,4 @@
-"""The layout stays true to the architecture (README, "Layout"), checked on the source.
+"""The layout stays true to the architecture (docs/layout.md), checked on the source.
 
 - cevm.core is pure: no module of it imports the I/O packages (cevm.io, cevm.ingest,
   cevm.store, cevm.cli), the sample generator, sqlite3, rasterio, matplotlib or typer,

@@ -27,7 +27,6 @@ from cevm.ingest.reading import PLAUSIBLE_RANGE_SI, EnergySource, detect_profile
 from cevm.ingest.timestamps import parse_datetimes
 
 DATA = Path(__file__).parent / "data"
-REAL_TWIZY = Path("/work/shared/real-logs/twizy")
 KMH = 1 / 3.6  # m/s per km/h
 MPH = 0.44704  # m/s per mph (exact by definition)
 MILE = 1609.344  # m per mile (exact)
@@ -480,16 +479,17 @@ def test_date_repair_disabled_reports_line(tmp_path, profiles):
         read_log(bad_time, profiles=profiles)
 
 
-@pytest.mark.skipif(not REAL_TWIZY.is_dir(), reason="real Twizy logs not available")
-def test_all_real_twizy_files(profiles):
-    files = sorted(REAL_TWIZY.glob("*.csv"))
-    assert len(files) >= 17
+def test_all_real_twizy_files(profiles, twizy_logs):
+    folder, n_files = twizy_logs
+    files = sorted(folder.glob("*.csv*"))
+    assert len(files) == n_files
     report = []
     for f in files:
         [log] = read_log(f, profiles=profiles)
         assert log.profile == "twizy"
         t = log.frame["time_s"].to_numpy()
-        assert len(t) == len(f.read_text().splitlines()) - 1  # every data row kept
+        text = gzip.decompress(f.read_bytes()).decode() if f.suffix == ".gz" else f.read_text()
+        assert len(t) == len(text.splitlines()) - 1  # every data row kept
         assert (np.diff(t) > 0).all(), f.name
         # the local date of every row equals the session date in the file name (M_D_Y)
         m, d, y = (int(x) for x in re.search(r"_(\d\d)_(\d\d)_(\d{4})", f.name).groups())

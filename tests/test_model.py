@@ -14,6 +14,7 @@ from cevm.core.model import (
     nonsimplified_positive_j,
     wheel_energy_j,
 )
+from conftest import DATA, shared_or_skip
 from reference import G, RHO, reference_wheel_energy_j
 
 MODES = {"paper": lambda eta: 1.0, "no-credit": lambda eta: 0.0, "ev": lambda eta: eta * eta}
@@ -145,11 +146,22 @@ def test_scalar_calls_repeated_switch_to_the_table_and_stay_exact():
     np.testing.assert_allclose(arr, want, rtol=1e-10)
 
 
-def test_shared_public_cycles_against_reference(shared_cycles):
+ADVISOR_STANDINS = ["CYC_STANDIN_BUS.csv", "CYC_STANDIN_TOWNTRUCK.csv", "CYC_STANDIN_10HZ.csv"]
+ADVISOR_PUBLIC = ["CYC_UKBUS6.csv", "CYC_NYCTRUCK.csv", "CYC_HHDDT65.csv"]
+
+
+@pytest.mark.parametrize("source", ["standin", "public"])
+def test_public_cycles_against_reference(source):
+    """ADVISOR-layout cycles (a 10 Hz one among them): the stand-ins of tests/data/cycles,
+    and the public cycles when ../shared is there."""
     import pandas as pd
 
-    for name in ["CYC_UKBUS6.csv", "CYC_NYCTRUCK.csv", "CYC_HHDDT65.csv"]:
-        df = pd.read_csv(shared_cycles / name)
+    if source == "public":
+        folder, names = shared_or_skip("cycles", "advisor"), ADVISOR_PUBLIC
+    else:
+        folder, names = DATA / "cycles" / "advisor-standin", ADVISOR_STANDINS
+    for name in names:
+        df = pd.read_csv(folder / name)
         t = df["time_s"].to_numpy(float)
         v = df["speed_kmh"].to_numpy(float) / 3.6
         vec = drive_cycle_vector(t, v)

@@ -76,11 +76,9 @@ def test_pyarrow_and_pandas_parsers_and_small_blocks_give_the_same_logs(path, pr
     frames_equal(read_log(path, profiles=profiles, engine="pandas"), ref)
 
 
-def test_real_twizy_logs_same_with_both_parsers(profiles):
-    real = Path("/work/shared/real-logs/twizy")
-    files = sorted(real.glob("*.csv")) if real.is_dir() else sorted((ROOT.parent / "shared/real-logs/twizy").glob("*.csv"))
-    if not files:
-        pytest.skip("real logs not beside this checkout")
+def test_real_twizy_logs_same_with_both_parsers(profiles, twizy_logs):
+    files = sorted(twizy_logs[0].glob("*.csv*"))
+    assert files
     for f in files[:5]:
         frames_equal(read_log(f, profiles=profiles), read_log(f, profiles=profiles, engine="pandas"))
 

@@ -1,6 +1,6 @@
 """Fault injection against the trip store, through the command line: damaged pages and
 blobs, a read-only store, a full disk, a store locked past the busy timeout. Whatever
-happens: one clear line and a documented exit code (README "Commands"), never a
+happens: one clear line and a documented exit code (docs/reference/commands.md), never a
 traceback, and the store as it was."""
 
 from __future__ import annotations

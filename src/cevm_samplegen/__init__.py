@@ -153,7 +153,7 @@ import hashlib
 import importlib
 import json
 from collections.abc import Callable, Sequence
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
 
 from cevm_samplegen.common import BNG, DEFAULT_SEED, GEOID_UNDULATION_M
@@ -179,6 +179,7 @@ from cevm_samplegen.fleet import (
     check_consumption_fn,
     simulate_fleet,
 )
+from cevm_samplegen.manifests import write_manifests
 from cevm_samplegen.world import (
     DsmSpec,
     Route,
@@ -190,19 +191,18 @@ from cevm_samplegen.world import (
     route_dsm_summary,
     write_dsm_tiles,
 )
-from cevm_samplegen.manifests import write_manifests
 from cevm_samplegen.writers import _Counters, _portal_file, _srf_file, _transformer
 
 __all__ = [
+    "SAMPLE_FLEET",
+    "SMALL_FLEET",
+    "STANDIN",
     "Consumption",
     "ConsumptionFn",
     "DsmSpec",
     "DutySpec",
     "FleetSpec",
     "Route",
-    "SAMPLE_FLEET",
-    "SMALL_FLEET",
-    "STANDIN",
     "StandInParams",
     "Terrain",
     "TripConditions",
@@ -226,7 +226,7 @@ def _qualname(fn: Callable) -> str:
 
 def _iso(t: float) -> str:
     ms = int(round(t * 1000.0))
-    return datetime.fromtimestamp(ms // 1000, timezone.utc).strftime("%Y-%m-%dT%H:%M:%S") + f".{ms % 1000:03d}Z"
+    return datetime.fromtimestamp(ms // 1000, UTC).strftime("%Y-%m-%dT%H:%M:%S") + f".{ms % 1000:03d}Z"
 
 
 def _finish_records(records: list[dict]) -> None:
@@ -258,7 +258,8 @@ def _write_srf(outdir: Path, world: World, fleet: FleetSpec, truth, seed: int) -
             gz = (veh.vehicle_id, day_index) in fleet.gzip_files
             path = _write(outdir / "srf" / f"{veh.vehicle_id}_{date}.csv", data, gz)
             rel = path.relative_to(outdir).as_posix()
-            info = {"path": rel, "sha256": hashlib.sha256(path.read_bytes()).hexdigest(), "bytes": path.stat().st_size, **info}
+            info = {"path": rel, "sha256": hashlib.sha256(path.read_bytes()).hexdigest(),
+                    "bytes": path.stat().st_size, **info}
             for r in recs:
                 r["file"] = rel
             files.append(info)
@@ -267,7 +268,9 @@ def _write_srf(outdir: Path, world: World, fleet: FleetSpec, truth, seed: int) -
 
 
 def _vehicles_json(vehicles: Sequence[VehicleSpec]) -> dict:
-    return {v.vehicle_id: {k: (round(x, 3) if isinstance(x, float) else x) for k, x in sorted(dataclasses.asdict(v).items()) if k != "vehicle_id"} for v in vehicles}
+    return {v.vehicle_id: {k: (round(x, 3) if isinstance(x, float) else x)
+                           for k, x in sorted(dataclasses.asdict(v).items()) if k != "vehicle_id"}
+            for v in vehicles}
 
 
 def _dump_json(obj, path: Path) -> None:
@@ -292,7 +295,9 @@ def _weather_json(truth: dict[str, list[list[TruthTrip]]]) -> dict:
                 "forced": w.forced, "sunrise_utc_h": round(w.sunrise_utc_h, 3)} for d, w in sorted(days.items())}
 
 
-def generate_sample_logs(outdir: str | Path, consumption_fn: ConsumptionFn = standin_consumption, *, seed: int = DEFAULT_SEED, small: bool = False, fleet: FleetSpec | None = None, write_dsm: bool = True) -> dict:
+def generate_sample_logs(outdir: str | Path, consumption_fn: ConsumptionFn = standin_consumption, *,
+                         seed: int = DEFAULT_SEED, small: bool = False, fleet: FleetSpec | None = None,
+                         write_dsm: bool = True) -> dict:
     """Generate the sample logs, DSM tiles and ``truth.json`` into ``outdir``.
 
     ``small=True`` uses :data:`SMALL_FLEET` (a few minutes of driving, four 5 m tiles:
@@ -307,7 +312,7 @@ def generate_sample_logs(outdir: str | Path, consumption_fn: ConsumptionFn = sta
         data, precs, pinfo = _portal_file(world, fleet, truth, seed, _transformer())
         dates = sorted({d for ds in fleet.portal_dates.values() for d in ds})
         # the night duty's first trip starts the evening before its first date
-        first = min(datetime.fromtimestamp(r["start_utc_s"], timezone.utc).date().isoformat() for r in precs)
+        first = min(datetime.fromtimestamp(r["start_utc_s"], UTC).date().isoformat() for r in precs)
         path = _write(outdir / "portal" / f"portal_export_{first}_{dates[-1]}.csv", data, False)
         rel = path.relative_to(outdir).as_posix()
         for r in precs:
@@ -334,7 +339,8 @@ def generate_sample_logs(outdir: str | Path, consumption_fn: ConsumptionFn = sta
         "trips": records,
         "routes": {name: route_dsm_summary(world, r) for name, r in sorted(world.routes.items())},
         "dsm": {
-            "crs": BNG, "tile_m": fleet.dsm.tile_m, "resolution_m": fleet.dsm.resolution_m, "quantum_m": fleet.dsm.quantum_m,
+            "crs": BNG, "tile_m": fleet.dsm.tile_m, "resolution_m": fleet.dsm.resolution_m,
+            "quantum_m": fleet.dsm.quantum_m,
             "nodata": fleet.dsm.nodata, "survey_box": list(fleet.dsm.survey_box),
             "omitted_tiles": [os_tile_name(*c) for c in fleet.dsm.omitted_cells], "tiles": tiles,
             "geoid_undulation_m": GEOID_UNDULATION_M,
@@ -353,7 +359,9 @@ _BENCH_TEMPLATES = (
 )
 
 
-def fleet_for_benchmark(n_vehicles: int, n_days: int, outdir: str | Path, *, seed: int = DEFAULT_SEED, consumption_fn: ConsumptionFn = standin_consumption, first_date: str = "2019-05-13", dsm_dir: str | Path | None = None, full_days: bool = False) -> dict:
+def fleet_for_benchmark(n_vehicles: int, n_days: int, outdir: str | Path, *, seed: int = DEFAULT_SEED,
+                        consumption_fn: ConsumptionFn = standin_consumption, first_date: str = "2019-05-13",
+                        dsm_dir: str | Path | None = None, full_days: bool = False) -> dict:
     """A larger srf fleet for the ingest benchmark: ``n_vehicles`` (cycling through two
     buses, a regional and a long-haul truck, ids ``BM-001``...) x ``n_days`` consecutive
     days from ``first_date``, on the same routes as the sample logs (so the sample's DSM
@@ -370,7 +378,8 @@ def fleet_for_benchmark(n_vehicles: int, n_days: int, outdir: str | Path, *, see
             duty = f"{duty}-day"
         vid = f"BM-{i + 1:03d}"
         vehicles.append(VehicleSpec(vid, vt, duty, route, _BUS_KERB if vt == "electric-bus" else _HGV_KERB,
-                                    flowmeter=(i % 8 == 2), fuel_counter_start_l=1000.0 * (i + 1), energy_counter_start_kwh=500.0 * (i + 1)))
+                                    flowmeter=(i % 8 == 2), fuel_counter_start_l=1000.0 * (i + 1),
+                                    energy_counter_start_kwh=500.0 * (i + 1)))
     d0 = datetime.fromisoformat(first_date)
     dates = tuple((d0.fromordinal(d0.toordinal() + k)).date().isoformat() for k in range(n_days))
     fleet = FleetSpec(tuple(vehicles), dates, (), {})
@@ -405,12 +414,15 @@ def main(argv: list[str] | None = None) -> int:
     [--benchmark N_VEHICLES N_DAYS]``."""
     import argparse
 
-    ap = argparse.ArgumentParser(prog="python -m cevm_samplegen", description="Generate synthetic logger exports, DSM tiles and truth.json.")
+    ap = argparse.ArgumentParser(prog="python -m cevm_samplegen",
+                                 description="Generate synthetic logger exports, DSM tiles and truth.json.")
     ap.add_argument("outdir", type=Path)
     ap.add_argument("--small", action="store_true", help="tiny fleet for tests (well under a second)")
     ap.add_argument("--seed", type=int, default=DEFAULT_SEED)
-    ap.add_argument("--consumption", default="cevm_samplegen:standin_consumption", help="MODULE:FUNCTION giving the measured consumption (default: the stand-in)")
-    ap.add_argument("--benchmark", nargs=2, type=int, metavar=("N_VEHICLES", "N_DAYS"), help="write a benchmark srf fleet instead")
+    ap.add_argument("--consumption", default="cevm_samplegen:standin_consumption",
+                    help="MODULE:FUNCTION giving the measured consumption (default: the stand-in)")
+    ap.add_argument("--benchmark", nargs=2, type=int, metavar=("N_VEHICLES", "N_DAYS"),
+                    help="write a benchmark srf fleet instead")
     a = ap.parse_args(argv)
     fn = _load_fn(a.consumption)
     try:
@@ -422,6 +434,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{len(doc['files'])} files, {doc['rows']} rows, {doc['bytes']} bytes in {a.outdir}")
         return 0
     doc = generate_sample_logs(a.outdir, fn, seed=a.seed, small=a.small)
-    print(f"{len(doc['files'])} log files, {len(doc['trips'])} trips, {len(doc['dsm']['tiles'])} DSM tiles in {a.outdir}")
+    print(f"{len(doc['files'])} log files, {len(doc['trips'])} trips, {len(doc['dsm']['tiles'])} DSM tiles "
+          f"in {a.outdir}")
     return 0
 

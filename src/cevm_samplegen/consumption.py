@@ -39,9 +39,10 @@ class StandInParams:
     ``drive_eff`` (battery -> wheel, marginal), ``drive_loss_w`` (constant loss while
     driving), ``regen_eff`` (wheel -> battery), ``regen_max_w`` (regenerative braking
     limit at the wheel; friction brakes do the rest), ``aux_w`` (air compressor,
-    steering, 24 V: always on; heating and A/C come from the cabin model). Diesel: ``idle_fuel_w`` (fuel power at idle, about 2.5 l/h for a 13 l engine),
-    ``marginal_eff`` (Willans slope: wheel power per fuel power above idle, transmission
-    included), ``fuel_lhv_j_per_l`` (EN 590 diesel), ``aux_w`` (alternator, compressor).
+    steering, 24 V: always on; heating and A/C come from the cabin model). Diesel:
+    ``idle_fuel_w`` (fuel power at idle, about 2.5 l/h for a 13 l engine), ``marginal_eff``
+    (Willans slope: wheel power per fuel power above idle, transmission included),
+    ``fuel_lhv_j_per_l`` (EN 590 diesel), ``aux_w`` (alternator, compressor).
     Values are plausible for the paper's vehicles, not calibrated.
     """
 
@@ -226,9 +227,8 @@ MAX_DEFICIT_SHARE = 0.02
 
 @lru_cache(maxsize=8)
 def _project_vehicle(kind: str):
-    from cevm.io import load_vehicle
-
     from cevm.configs_dir import shipped_configs_dir
+    from cevm.io import load_vehicle
 
     path = shipped_configs_dir() / "vehicles" / f"{kind}.toml"
     return load_vehicle(path)

@@ -5,7 +5,6 @@ from __future__ import annotations
 import numpy as np
 
 
-
 def num_field(x, decimals: int, *, strip: bool = False, dec: bytes = b".") -> tuple[np.ndarray, np.ndarray]:
     """Characters (N x W uint8) and keep-mask of numbers printed with ``decimals``
     decimals (``strip``: trailing fractional zeros dropped); NaN -> empty field."""
@@ -25,11 +24,12 @@ def num_field(x, decimals: int, *, strip: bool = False, dec: bytes = b".") -> tu
     if decimals:
         if strip:
             keep_f = np.logical_or.accumulate((digits[:, ni:] != 0)[:, ::-1], axis=1)[:, ::-1]
-            dot = keep_f.any(axis=1)
+            dot = np.asarray(keep_f.any(axis=1))
         else:
             keep_f = np.ones((nrow, decimals), bool)
             dot = np.ones(nrow, bool)
-        chars = np.concatenate([np.full((nrow, 1), ord("-"), np.uint8), digits[:, :ni] + 48, np.full((nrow, 1), dec[0], np.uint8), digits[:, ni:] + 48], axis=1)
+        chars = np.concatenate([np.full((nrow, 1), ord("-"), np.uint8), digits[:, :ni] + 48,
+                                np.full((nrow, 1), dec[0], np.uint8), digits[:, ni:] + 48], axis=1)
         keep = np.concatenate([neg[:, None], keep_i, dot[:, None], keep_f], axis=1)
     else:
         chars = np.concatenate([np.full((nrow, 1), ord("-"), np.uint8), digits + 48], axis=1)

@@ -90,7 +90,8 @@ def write_cycle_csv(cycle: DriveCycle, path: Path) -> None:
     """Write a cycle as CSV: time_s, speed_kmh, elevation_m."""
     elev = cycle.elevation_m if cycle.elevation_m is not None else np.zeros_like(cycle.time_s)
     data = np.column_stack([cycle.time_s, cycle.speed_mps * 3.6, elev])
-    np.savetxt(path, data, delimiter=",", header="time_s,speed_kmh,elevation_m", comments="", fmt=["%.1f", "%.3f", "%.2f"])
+    np.savetxt(path, data, delimiter=",", header="time_s,speed_kmh,elevation_m", comments="",
+               fmt=["%.1f", "%.3f", "%.2f"])
 
 
 def main(argv: list[str] | None = None) -> None:

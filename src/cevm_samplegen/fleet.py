@@ -6,7 +6,7 @@ import dataclasses
 import inspect
 from collections.abc import Callable
 from dataclasses import dataclass
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 
 import numpy as np
 
@@ -87,12 +87,17 @@ class DutySpec:
     return_kg: tuple[float, float] = (0.0, 9000.0)
 
 
-URBAN_BUS = MicroTripSpec(cruise_kmh=(20.0, 48.0), cruise_s=(10.0, 60.0), dwell_s=(8.0, 40.0), accel_mps2=(0.6, 1.1), decel_mps2=(0.8, 1.4), fluctuation_kmh=2.0)
+URBAN_BUS = MicroTripSpec(cruise_kmh=(20.0, 48.0), cruise_s=(10.0, 60.0), dwell_s=(8.0, 40.0),
+                          accel_mps2=(0.6, 1.1), decel_mps2=(0.8, 1.4), fluctuation_kmh=2.0)
 #: Town deliveries: short runs between junctions and drops, engine idling at each.
-URBAN_TRUCK = MicroTripSpec(cruise_kmh=(18.0, 48.0), cruise_s=(8.0, 50.0), dwell_s=(5.0, 90.0), accel_mps2=(0.3, 0.6), decel_mps2=(0.5, 1.0), fluctuation_kmh=2.0)
-TOWN_TRUCK = MicroTripSpec(cruise_kmh=(30.0, 64.0), cruise_s=(20.0, 120.0), dwell_s=(3.0, 30.0), accel_mps2=(0.3, 0.6), decel_mps2=(0.5, 0.9), fluctuation_kmh=2.0)
-RURAL_TRUCK = MicroTripSpec(cruise_kmh=(50.0, 88.0), cruise_s=(60.0, 300.0), dwell_s=(3.0, 25.0), accel_mps2=(0.25, 0.5), decel_mps2=(0.5, 0.9), fluctuation_kmh=2.5)
-MOTORWAY = MicroTripSpec(cruise_kmh=(80.0, 89.0), cruise_s=(500.0, 1300.0), dwell_s=(2.0, 15.0), accel_mps2=(0.15, 0.35), decel_mps2=(0.3, 0.6), fluctuation_kmh=1.5)
+URBAN_TRUCK = MicroTripSpec(cruise_kmh=(18.0, 48.0), cruise_s=(8.0, 50.0), dwell_s=(5.0, 90.0),
+                            accel_mps2=(0.3, 0.6), decel_mps2=(0.5, 1.0), fluctuation_kmh=2.0)
+TOWN_TRUCK = MicroTripSpec(cruise_kmh=(30.0, 64.0), cruise_s=(20.0, 120.0), dwell_s=(3.0, 30.0),
+                           accel_mps2=(0.3, 0.6), decel_mps2=(0.5, 0.9), fluctuation_kmh=2.0)
+RURAL_TRUCK = MicroTripSpec(cruise_kmh=(50.0, 88.0), cruise_s=(60.0, 300.0), dwell_s=(3.0, 25.0),
+                            accel_mps2=(0.25, 0.5), decel_mps2=(0.5, 0.9), fluctuation_kmh=2.5)
+MOTORWAY = MicroTripSpec(cruise_kmh=(80.0, 89.0), cruise_s=(500.0, 1300.0), dwell_s=(2.0, 15.0),
+                         accel_mps2=(0.15, 0.35), decel_mps2=(0.3, 0.6), fluctuation_kmh=1.5)
 
 _REGIONAL = ((TOWN_TRUCK, (2, 4)), (RURAL_TRUCK, (3, 5)), (TOWN_TRUCK, (1, 3)))
 _LONGHAUL = ((TOWN_TRUCK, (2, 3)), (MOTORWAY, (2, 3)), (TOWN_TRUCK, (1, 2)))
@@ -109,12 +114,13 @@ DUTIES: dict[str, DutySpec] = {
     "longhaul": DutySpec(_LONGHAUL, (2, 2), (1800.0, 2700.0), (4.0, 10.0), 89.5, "out_back",
                          payload_kg=(15000.0, 26000.0)),
     # Night trunk for the portal: first trip starts 23:40-23:50 UTC the evening before.
-    "night": DutySpec(((TOWN_TRUCK, (2, 3)), (MOTORWAY, (2, 2)), (TOWN_TRUCK, (1, 2))), (2, 2), (1200.0, 1800.0), (-0.33, -0.17), 89.5, "out_back",
-                      payload_kg=(15000.0, 26000.0)),
+    "night": DutySpec(((TOWN_TRUCK, (2, 3)), (MOTORWAY, (2, 2)), (TOWN_TRUCK, (1, 2))), (2, 2), (1200.0, 1800.0),
+                      (-0.33, -0.17), 89.5, "out_back", payload_kg=(15000.0, 26000.0)),
     # Full working days (benchmark fleets): the same duties, 4-6 h of driving.
     "bus-day": DutySpec(((URBAN_BUS, (14, 20)),), (12, 12), (720.0, 1500.0), (5.0, 5.6), 50.0, "passengers"),
     "regional-day": DutySpec(_REGIONAL, (9, 9), (900.0, 1800.0), (5.5, 6.5), 89.5, "drops"),
-    "longhaul-day": DutySpec(_LONGHAUL, (6, 6), (1800.0, 2700.0), (4.0, 4.5), 89.5, "out_back", payload_kg=(15000.0, 26000.0)),
+    "longhaul-day": DutySpec(_LONGHAUL, (6, 6), (1800.0, 2700.0), (4.0, 4.5), 89.5, "out_back",
+                             payload_kg=(15000.0, 26000.0)),
     # --small duties: a few minutes of driving.
     "bus-short": DutySpec(((URBAN_BUS, (3, 4)),), (2, 2), (700.0, 800.0), (7.0, 7.1), 50.0, "passengers"),
     "truck-short": DutySpec(((TOWN_TRUCK, (2, 3)),), (2, 2), (700.0, 800.0), (6.0, 6.1), 89.5, "drops"),
@@ -174,7 +180,7 @@ class FleetSpec:
     srf_dates: tuple[str, ...]
     portal_vehicles: tuple[VehicleSpec, ...]
     portal_dates: dict[str, tuple[str, ...]]
-    dsm: DsmSpec = DsmSpec()
+    dsm: DsmSpec = dataclasses.field(default_factory=DsmSpec)
     clock_step: tuple[str, int, int, float] | None = None
     fuel_reset: tuple[str, int, int, float] | None = None
     gzip_files: tuple[tuple[str, int], ...] = ()
@@ -215,10 +221,13 @@ SAMPLE_FLEET = FleetSpec(
     ),
     srf_dates=("2019-01-31", "2019-02-01", "2019-04-10", "2019-05-15", "2019-07-25", "2019-08-27"),
     portal_vehicles=(
-        VehicleSpec("KX19 LMR", "diesel-hgv", "regional", "regional", _HGV_KERB, fuel_counter_start_l=212344.0, odometer_start_m=287041.3 * 1609.344),
-        VehicleSpec("KX19 LMT", "diesel-hgv", "night", "trunk", _HGV_KERB, fuel_counter_start_l=418870.5, odometer_start_m=402118.8 * 1609.344),
+        VehicleSpec("KX19 LMR", "diesel-hgv", "regional", "regional", _HGV_KERB, fuel_counter_start_l=212344.0,
+                    odometer_start_m=287041.3 * 1609.344),
+        VehicleSpec("KX19 LMT", "diesel-hgv", "night", "trunk", _HGV_KERB, fuel_counter_start_l=418870.5,
+                    odometer_start_m=402118.8 * 1609.344),
     ),
-    portal_dates={"KX19 LMR": ("2019-10-25", "2019-10-26", "2019-10-28"), "KX19 LMT": ("2019-10-26", "2019-10-27", "2019-10-28")},
+    portal_dates={"KX19 LMR": ("2019-10-25", "2019-10-26", "2019-10-28"),
+                  "KX19 LMT": ("2019-10-26", "2019-10-27", "2019-10-28")},
     clock_step=("EB-02", 1, 1, 4.25),
     fuel_reset=("HGV-21", 1, 1, 12.5),
     gzip_files=tuple((v, d) for v in ("EB-01", "EB-02", "HGV-11", "HGV-21") for d in range(1, 6)),
@@ -235,11 +244,14 @@ SMALL_FLEET = FleetSpec(
     ),
     srf_dates=("2019-01-31", "2019-07-25"),
     portal_vehicles=(
-        VehicleSpec("KX19 LMR", "diesel-hgv", "truck-short", "regional", _HGV_KERB, fuel_counter_start_l=212344.0, odometer_start_m=287041.3 * 1609.344),
-        VehicleSpec("KX19 LMT", "diesel-hgv", "night-short", "regional", _HGV_KERB, fuel_counter_start_l=418870.5, odometer_start_m=402118.8 * 1609.344),
+        VehicleSpec("KX19 LMR", "diesel-hgv", "truck-short", "regional", _HGV_KERB, fuel_counter_start_l=212344.0,
+                    odometer_start_m=287041.3 * 1609.344),
+        VehicleSpec("KX19 LMT", "diesel-hgv", "night-short", "regional", _HGV_KERB, fuel_counter_start_l=418870.5,
+                    odometer_start_m=402118.8 * 1609.344),
     ),
     portal_dates={"KX19 LMR": ("2019-10-26",), "KX19 LMT": ("2019-10-27",)},
-    dsm=DsmSpec(resolution_m=5.0, survey_box=(483000.0, 235000.0, 489000.0, 238000.0), omitted_cells=((485000.0, 237000.0),)),
+    dsm=DsmSpec(resolution_m=5.0, survey_box=(483000.0, 235000.0, 489000.0, 238000.0),
+                omitted_cells=((485000.0, 237000.0),)),
     clock_step=("EB-01", 0, 1, 4.25),
     fuel_reset=("HGV-11", 0, 1, 12.5),
     gzip_files=(("HGV-11", 0),),
@@ -333,6 +345,7 @@ def _return_trace(duty: DutySpec, rng: np.random.Generator, target_m: float, tri
             best = v
         if abs(_trapz_m(best) - target_m) <= 0.15 * target_m:
             break
+    assert best is not None  # tries >= 1
     v = best
     for _ in range(4):
         excess = _trapz_m(v) - target_m
@@ -353,7 +366,7 @@ def _return_trace(duty: DutySpec, rng: np.random.Generator, target_m: float, tri
 
 
 def _utc_midnight_s(date: str) -> float:
-    return datetime.fromisoformat(date).replace(tzinfo=timezone.utc).timestamp()
+    return datetime.fromisoformat(date).replace(tzinfo=UTC).timestamp()
 
 
 def _day_loads(duty: DutySpec, n_trips: int, rng: np.random.Generator) -> list[float]:
@@ -367,7 +380,8 @@ def _day_loads(duty: DutySpec, n_trips: int, rng: np.random.Generator) -> list[f
             out.append(p)
             p = max(0.0, float(np.round(p - rng.uniform(*duty.drop_kg), -1)))
         return out
-    return [float(np.round(rng.uniform(*(duty.payload_kg if i % 2 == 0 else duty.return_kg)), -1)) for i in range(n_trips)]
+    return [float(np.round(rng.uniform(*(duty.payload_kg if i % 2 == 0 else duty.return_kg)), -1))
+            for i in range(n_trips)]
 
 
 def check_consumption_fn(fn: ConsumptionFn) -> None:
@@ -408,7 +422,7 @@ def simulate_day(world: World, veh: VehicleSpec, day_index: int, date: str, cons
     layovers = [OVERNIGHT_SOAK_S] + [float(round(rng.uniform(*duty.layover_s))) for _ in range(n_trips - 1)]
     route = world.routes[route_name]
     route_d = 0.0
-    trips = []
+    trips: list[TruthTrip] = []
     for j in range(n_trips):
         if duty.load == "out_back" and j % 2 == 1 and not route.closed:
             # the return leg: turn round (the mirror position on the way back, see
@@ -419,8 +433,12 @@ def simulate_day(world: World, veh: VehicleSpec, day_index: int, date: str, cons
             v = _speed_trace(duty, rng)
         passengers = duty.load == "passengers"
         mass = veh.kerb_mass_kg + (loads[j] * 75.0 if passengers else loads[j])
+
+        def elevation_at(s_m, d0=route_d):
+            return world.terrain.elevation_m(*route.xy(d0 + s_m))
+
         v = power_limited_trace(
-            v, lambda s_m, d0=route_d: world.terrain.elevation_m(*route.xy(d0 + s_m)), mass,
+            v, elevation_at, mass,
             STANDIN[veh.vehicle_type], DRIVER_MAX_WHEEL_POWER_W[veh.vehicle_type],
         )
         t = np.arange(v.size, dtype=float)
@@ -438,7 +456,9 @@ def simulate_day(world: World, veh: VehicleSpec, day_index: int, date: str, cons
     return trips
 
 
-def simulate_fleet(fleet: FleetSpec = SAMPLE_FLEET, consumption_fn: ConsumptionFn = standin_consumption, seed: int = DEFAULT_SEED, world: World | None = None) -> tuple[World, dict[str, list[list[TruthTrip]]]]:
+def simulate_fleet(fleet: FleetSpec = SAMPLE_FLEET, consumption_fn: ConsumptionFn = standin_consumption,
+                   seed: int = DEFAULT_SEED, world: World | None = None,
+                   ) -> tuple[World, dict[str, list[list[TruthTrip]]]]:
     """The world and, per vehicle id, per day, the truth trips of ``fleet`` (srf vehicles
     on ``fleet.srf_dates``, portal vehicles on their ``portal_dates``)."""
     check_consumption_fn(consumption_fn)

@@ -16,7 +16,7 @@ Deterministic: the same truth gives the same bytes.
 from __future__ import annotations
 
 import math
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
 from zoneinfo import ZoneInfo
 
@@ -27,11 +27,11 @@ _LONDON = ZoneInfo("Europe/London")
 
 
 def _iso_utc(t_s: float) -> str:
-    return datetime.fromtimestamp(t_s, timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
+    return datetime.fromtimestamp(t_s, UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
 
 
 def _local_minute(t_s: float) -> str:
-    local = datetime.fromtimestamp(t_s, timezone.utc).astimezone(_LONDON)
+    local = datetime.fromtimestamp(t_s, UTC).astimezone(_LONDON)
     return local.strftime("%Y-%m-%dT%H:%M") + local.strftime("%z")[:3] + ":" + local.strftime("%z")[3:]
 
 
@@ -42,9 +42,9 @@ def write_manifests(outdir: Path, records: list[dict]) -> list[Path]:
     bus = [r for r in records if r["dialect"] == "srf" and r["load_unit"] == "passengers"]
     if bus:
         lines = ["vehicle_id,start_utc,end_utc,payload_kg"]
-        for r in sorted(bus, key=lambda r: (r["vehicle_id"], r["start_utc_s"])):
-            lines.append(f"{r['vehicle_id']},{_iso_utc(math.floor(r['start_utc_s']))},"
-                         f"{_iso_utc(math.ceil(r['end_utc_s']))},{r['load'] * PASSENGER_KG:.0f}")
+        lines.extend(f"{r['vehicle_id']},{_iso_utc(math.floor(r['start_utc_s']))},"
+                     f"{_iso_utc(math.ceil(r['end_utc_s']))},{r['load'] * PASSENGER_KG:.0f}"
+                     for r in sorted(bus, key=lambda r: (r["vehicle_id"], r["start_utc_s"])))
         out.append(_write(outdir / "manifests" / "bus-loads.csv", "\n".join(lines) + "\n"))
     portal = [r for r in records if r["dialect"] == "portal"]
     if portal:

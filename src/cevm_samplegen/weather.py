@@ -32,7 +32,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 
 import numpy as np
 
@@ -168,7 +168,7 @@ def _ar1_grid(n: int, tau_steps: float, sd: float, rng: np.random.Generator) -> 
 def day_weather(date: str, seed: int, forced: ForcedDay | None = None, climate: Climate = MILTON_KEYNES) -> DayWeather:
     """The weather of ``date`` (ISO) for ``seed``: drawn from ``climate`` unless
     ``forced`` gives it. Pure: the same arguments give the same weather."""
-    day = datetime.fromisoformat(date).replace(tzinfo=timezone.utc)
+    day = datetime.fromisoformat(date).replace(tzinfo=UTC)
     doy = float(day.timetuple().tm_yday)
     rng = _rng(seed, "weather", date)
     anomaly = float(rng.normal(0.0, climate.anomaly_sd_k))

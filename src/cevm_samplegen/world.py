@@ -11,7 +11,6 @@ import numpy as np
 from cevm_samplegen.common import BNG, DEFAULT_SEED, WORLD_ORIGIN_EN, _rng
 
 
-
 @dataclass(frozen=True, eq=False)
 class Terrain:
     """Smooth hills: ``base_m + sum_i amp_i cos(kx_i (x - x0) + ky_i (y - y0) + phase_i)``
@@ -29,7 +28,7 @@ class Terrain:
         x = np.asarray(x, dtype=float) - WORLD_ORIGIN_EN[0]
         y = np.asarray(y, dtype=float) - WORLD_ORIGIN_EN[1]
         out = np.full(np.broadcast(x, y).shape, self.base_m)
-        for kx, ky, a, ph in zip(self.kx, self.ky, self.amp_m, self.phase):
+        for kx, ky, a, ph in zip(self.kx, self.ky, self.amp_m, self.phase, strict=True):
             out += a * np.cos(kx * x + ky * y + ph)
         return out
 
@@ -271,7 +270,9 @@ def _place_objects(seed: int, terrain: Terrain, routes: dict[str, Route], dsm: D
             off = rng.uniform(7.0, 30.0, m)
             cx, cy = x - side * uy * off, y + side * ux * off
             ok = clear_of_roads(cx, cy, r, 6.0) & _in_box(cx, cy, box, 50.0)
-            T["cx"].append(cx[ok]), T["cy"].append(cy[ok]), T["r"].append(r[ok])
+            T["cx"].append(cx[ok])
+            T["cy"].append(cy[ok])
+            T["r"].append(r[ok])
             T["ground"].append(terrain.elevation_m(cx[ok], cy[ok]))
             T["h"].append(rng.uniform(5.0, 14.0, m)[ok])
         # Trees over the road.
@@ -280,25 +281,35 @@ def _place_objects(seed: int, terrain: Terrain, routes: dict[str, Route], dsm: D
         x, y, ux, uy = frame(route, s)
         lat = rng.uniform(-2.0, 2.0, m)
         cx, cy = x - uy * lat, y + ux * lat
-        T["cx"].append(cx), T["cy"].append(cy), T["r"].append(rng.uniform(3.0, 5.0, m))
-        T["ground"].append(terrain.elevation_m(cx, cy)), T["h"].append(rng.uniform(7.0, 12.0, m))
+        T["cx"].append(cx)
+        T["cy"].append(cy)
+        T["r"].append(rng.uniform(3.0, 5.0, m))
+        T["ground"].append(terrain.elevation_m(cx, cy))
+        T["h"].append(rng.uniform(7.0, 12.0, m))
         # Bridges: a deck across the road, 6.5-7.5 m above it.
         s = rng.uniform(s_lo + 0.1 * span, s_hi - 0.1 * span, n_bridges)
         x, y, ux, uy = frame(route, s)
         R["kind"].append(np.full(n_bridges, "bridge"))
-        R["cx"].append(x), R["cy"].append(y), R["ux"].append(-uy), R["uy"].append(ux)
-        R["hl"].append(np.full(n_bridges, 25.0)), R["hw"].append(rng.uniform(5.0, 7.5, n_bridges))
+        R["cx"].append(x)
+        R["cy"].append(y)
+        R["ux"].append(-uy)
+        R["uy"].append(ux)
+        R["hl"].append(np.full(n_bridges, 25.0))
+        R["hw"].append(rng.uniform(5.0, 7.5, n_bridges))
         R["top"].append(terrain.elevation_m(x, y) + rng.uniform(6.5, 7.5, n_bridges))
         # Holes on the road (a LIDAR void over wet tarmac, say).
         m = 2
         s = rng.uniform(s_lo, s_hi, m)
         x, y, _, _ = frame(route, s)
-        H["cx"].append(x), H["cy"].append(y), H["r"].append(rng.uniform(3.0, 8.0, m))
+        H["cx"].append(x)
+        H["cy"].append(y)
+        H["r"].append(rng.uniform(3.0, 8.0, m))
     # Off-road holes (water, voids): about one per km^2 of the survey box.
     rng = _rng(seed, "holes")
     area_km2 = (box[2] - box[0]) * (box[3] - box[1]) / 1e6
     m = max(1, int(round(area_km2)))
-    H["cx"].append(rng.uniform(box[0], box[2], m)), H["cy"].append(rng.uniform(box[1], box[3], m))
+    H["cx"].append(rng.uniform(box[0], box[2], m))
+    H["cy"].append(rng.uniform(box[1], box[3], m))
     H["r"].append(rng.uniform(5.0, 25.0, m))
 
     def cat(d, k, dtype=float):
@@ -322,7 +333,7 @@ def _tile_set(routes: dict[str, Route], dsm: DsmSpec) -> tuple[tuple[float, floa
     for r in routes.values():
         cx, cy = _cell_of(r.x_m, r.y_m, t)
         ok = (cx >= box[0]) & (cx + t <= box[2]) & (cy >= box[1]) & (cy + t <= box[3])
-        cells.update(zip(cx[ok].tolist(), cy[ok].tolist()))
+        cells.update(zip(cx[ok].tolist(), cy[ok].tolist(), strict=True))
     cells -= {(float(a), float(b)) for a, b in dsm.omitted_cells}
     return tuple(sorted(cells))
 
@@ -357,7 +368,8 @@ def dsm_tile(world: World, e0: float, n0: float) -> np.ndarray:
         return r0, r1, c0, c1
 
     def near(cx, cy, rad):
-        return np.flatnonzero((cx + rad >= e0) & (cx - rad <= e0 + spec.tile_m) & (cy + rad >= n0) & (cy - rad <= n0 + spec.tile_m))
+        return np.flatnonzero((cx + rad >= e0) & (cx - rad <= e0 + spec.tile_m)
+                              & (cy + rad >= n0) & (cy - rad <= n0 + spec.tile_m))
 
     rad = np.hypot(o.rect_hl, o.rect_hw)
     for i in near(o.rect_cx, o.rect_cy, rad):
@@ -435,7 +447,7 @@ def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
     """Index ranges [i0, i1] (inclusive) of the True runs of ``mask``."""
     m = np.concatenate(([False], mask, [False])).astype(np.int8)
     d = np.diff(m)
-    return list(zip(np.flatnonzero(d == 1).tolist(), (np.flatnonzero(d == -1) - 1).tolist()))
+    return list(zip(np.flatnonzero(d == 1).tolist(), (np.flatnonzero(d == -1) - 1).tolist(), strict=True))
 
 
 def route_dsm_summary(world: World, route: Route) -> dict:
@@ -451,7 +463,8 @@ def route_dsm_summary(world: World, route: Route) -> dict:
     tree = cKDTree(np.column_stack([x, y]))
     hit: dict[str, np.ndarray] = {k: np.zeros(s.size, bool) for k in ("bridge", "building", "hole", "tree")}
     rad = np.hypot(o.rect_hl, o.rect_hw) + margin
-    for i, idx in enumerate(tree.query_ball_point(np.column_stack([o.rect_cx, o.rect_cy]), rad) if o.rect_cx.size else []):
+    hits = tree.query_ball_point(np.column_stack([o.rect_cx, o.rect_cy]), rad) if o.rect_cx.size else []
+    for i, idx in enumerate(hits):
         if not idx:
             continue
         idx = np.asarray(idx)
@@ -462,7 +475,7 @@ def route_dsm_summary(world: World, route: Route) -> dict:
     for kind, cx, cy, r in (("tree", o.tree_cx, o.tree_cy, o.tree_r), ("hole", o.hole_cx, o.hole_cy, o.hole_r)):
         if not cx.size:
             continue
-        for i, idx in enumerate(tree.query_ball_point(np.column_stack([cx, cy]), r + margin)):
+        for idx in tree.query_ball_point(np.column_stack([cx, cy]), r + margin):
             if idx:
                 hit[kind][np.asarray(idx)] = True
     objects = []
@@ -470,6 +483,7 @@ def route_dsm_summary(world: World, route: Route) -> dict:
         for a, b in _runs(hit[kind]):
             objects.append({"kind": kind, "from_m": round(float(s[a]), 1), "to_m": round(float(s[b]), 1)})
     objects.sort(key=lambda d: (d["from_m"], d["kind"]))
-    return {"closed": route.closed, "length_m": round(route.length_m, 1), "dsm_gaps_m": gaps, "surface_objects": objects}
+    return {"closed": route.closed, "length_m": round(route.length_m, 1), "dsm_gaps_m": gaps,
+            "surface_objects": objects}
 
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 
 import numpy as np
 
@@ -13,7 +13,6 @@ from cevm_samplegen.consumption import STANDIN, _wheel_power_w
 from cevm_samplegen.csvfmt import assemble, iso_utc_ms, num_field, text_field, uk_local
 from cevm_samplegen.fleet import FleetSpec, TruthTrip, VehicleSpec
 from cevm_samplegen.world import World
-
 
 SRF_BUS_COLUMNS = (
     "timestamp_utc", "gps_lat_deg", "gps_lon_deg", "gps_alt_m", "gps_speed_kmh", "gps_hdop",
@@ -174,16 +173,17 @@ class _Counters:
     reset_offset: float | None = None  # ECU counter after a reset = offset + bias x consumption
 
 
-def _srf_file(world: World, veh: VehicleSpec, trips: list[TruthTrip], date: str, state: _Counters, fleet: FleetSpec, seed: int, transformer) -> tuple[bytes, list[dict], dict]:
+def _srf_file(world: World, veh: VehicleSpec, trips: list[TruthTrip], date: str, state: _Counters, fleet: FleetSpec,
+              seed: int, transformer) -> tuple[bytes, list[dict], dict]:
     """One srf session file: (bytes, truth records of its trips, file record)."""
     rng = _rng(seed, "srf", veh.vehicle_id, date)
     is_bus = veh.vehicle_type == "electric-bus"
-    cols = SRF_BUS_COLUMNS if is_bus else SRF_TRUCK_COLUMNS
+    cols: tuple[str, ...] = SRF_BUS_COLUMNS if is_bus else SRF_TRUCK_COLUMNS
     if not is_bus and not veh.flowmeter:
         cols = tuple(c for c in cols if c != "flowmeter_fuel_lph")
     day_index = trips[0].day_index
     faults: list[dict] = []
-    blocks: list[dict[str, np.ndarray]] = []
+    blocks: list[dict] = []
     records: list[dict] = []
     soc0 = float(rng.uniform(92.0, 100.0))
     day_energy0 = state.consumption
@@ -221,16 +221,19 @@ def _srf_file(world: World, veh: VehicleSpec, trips: list[TruthTrip], date: str,
         gspeed = np.abs(at["speed"] + rng.normal(0.0, 0.15, n)) * 3.6
         nan = np.where(fix, 1.0, np.nan)
         cols_v["gps_lat_deg"], cols_v["gps_lon_deg"] = lat * nan, lon * nan
-        cols_v["gps_alt_m"], cols_v["gps_speed_kmh"], cols_v["gps_hdop"] = alt * nan, gspeed * nan, _round_q(hdop, 0.1) * nan
+        cols_v["gps_alt_m"], cols_v["gps_speed_kmh"] = alt * nan, gspeed * nan
+        cols_v["gps_hdop"] = _round_q(hdop, 0.1) * nan
         # ---- FMS common (three broadcast groups, each missing in 0.5 % of ticks)
         fms = _fms_common(veh, tr, at, rng)
-        groups = (("fms_wheel_speed_kmh", "fms_brake_switch"), ("fms_accel_pedal_pct",), ("fms_engine_speed_rpm", "fms_engine_torque_pct"))
+        groups = (("fms_wheel_speed_kmh", "fms_brake_switch"), ("fms_accel_pedal_pct",),
+                  ("fms_engine_speed_rpm", "fms_engine_torque_pct"))
         for g in groups:
             m = np.where(rng.random(n) > 0.005, 1.0, np.nan)
             for c in g:
                 cols_v[c] = fms[c] * m
         sensed = np.interp(tk, tr.time_s, ambient_sensor_c(tr))
-        cols_v["fms_ambient_air_temp_c"] = np.where(_arrivals(tk, (4.0, 6.0), rng), _round_q(sensed, AMBIENT_RESOLUTION_C), np.nan)
+        cols_v["fms_ambient_air_temp_c"] = np.where(_arrivals(tk, (4.0, 6.0), rng),
+                                                    _round_q(sensed, AMBIENT_RESOLUTION_C), np.nan)
         cons = state.consumption + at["cons"]
         rate = np.diff(tr.consumption)[at["k"]]  # per 1 s step: l/s or W
         if is_bus:
@@ -251,7 +254,8 @@ def _srf_file(world: World, veh: VehicleSpec, trips: list[TruthTrip], date: str,
             if fleet.fuel_reset and fleet.fuel_reset[:3] == (veh.vehicle_id, day_index, tr.trip_index):
                 i_reset = n // 2
                 state.reset_offset = fleet.fuel_reset[3] - veh.ecu_fuel_bias * cons[i_reset]
-                faults.append({"kind": "fuel_counter_reset", "trip_index": tr.trip_index, "tick": sum(b["n"] for b in blocks) + i_reset,
+                faults.append({"kind": "fuel_counter_reset", "trip_index": tr.trip_index,
+                               "tick": sum(b["n"] for b in blocks) + i_reset,
                                "from_l": float(_floor_q(ecu[i_reset - 1], 0.5)), "to_l": fleet.fuel_reset[3]})
                 ecu = np.where(np.arange(n) >= i_reset, state.reset_offset + veh.ecu_fuel_bias * cons, ecu)
             elif state.reset_offset is not None:
@@ -270,7 +274,8 @@ def _srf_file(world: World, veh: VehicleSpec, trips: list[TruthTrip], date: str,
                 flow[idx] = _round_q(np.maximum(0.0, mean_lph * (1.0 + rng.normal(0.0, 0.015, idx.size))), 0.01)
                 cols_v["flowmeter_fuel_lph"] = flow
             moved = np.cumsum(np.concatenate(([0.0], np.diff(tk))) * (at["speed"] > 0.5)) > 30.0
-            cols_v["fms_gross_weight_kg"] = np.where(_arrivals(tk, (9.0, 11.0), rng) & moved, _round_q(tr.mass_kg, 10.0), np.nan)
+            cols_v["fms_gross_weight_kg"] = np.where(_arrivals(tk, (9.0, 11.0), rng) & moved,
+                                                     _round_q(tr.mass_kg, 10.0), np.nan)
         # ---- clock: the phone clock ran ahead until a mid-trip correction
         clock = np.zeros(n)
         cs = fleet.clock_step
@@ -280,7 +285,8 @@ def _srf_file(world: World, veh: VehicleSpec, trips: list[TruthTrip], date: str,
             elif tr.trip_index == cs[2]:
                 i_step = n // 2
                 clock[:i_step] = cs[3]
-                faults.append({"kind": "clock_step_backwards", "trip_index": tr.trip_index, "tick": sum(b["n"] for b in blocks) + i_step, "seconds": cs[3]})
+                faults.append({"kind": "clock_step_backwards", "trip_index": tr.trip_index,
+                               "tick": sum(b["n"] for b in blocks) + i_step, "seconds": cs[3]})
         true_ms = np.round((tr.start_utc_s + tk) * 1000.0).astype(np.int64)
         cols_v["timestamp_ms"] = true_ms + np.round(clock * 1000.0).astype(np.int64)
         blocks.append({"n": n, "cols": cols_v})
@@ -288,8 +294,9 @@ def _srf_file(world: World, veh: VehicleSpec, trips: list[TruthTrip], date: str,
         c_first, c_last = at["cons"][0], at["cons"][-1]
         records.append({
             "vehicle_id": veh.vehicle_id, "vehicle_type": veh.vehicle_type, "dialect": "srf", "day_index": day_index,
-            "trip_index": tr.trip_index, "start_utc_s": round(tr.start_utc_s + t_first, 3), "end_utc_s": round(tr.start_utc_s + t_last, 3),
-            "duration_s": round(t_last - t_first, 3), "distance_m": round(float(at["distance"][-1] - at["distance"][0]), 2),
+            "trip_index": tr.trip_index, "start_utc_s": round(tr.start_utc_s + t_first, 3),
+            "end_utc_s": round(tr.start_utc_s + t_last, 3), "duration_s": round(t_last - t_first, 3),
+            "distance_m": round(float(at["distance"][-1] - at["distance"][0]), 2),
             "mass_kg": tr.mass_kg, "consumption": float(c_last - c_first),
             "route_from_m": round(tr.route_from_m + float(at["distance"][0]), 2),
             "load": tr.load, "dsm_covered_share": round(float(world.in_tiles(tr.x_m, tr.y_m).mean()), 4),
@@ -303,9 +310,10 @@ def _srf_file(world: World, veh: VehicleSpec, trips: list[TruthTrip], date: str,
     order = np.repeat(np.arange(ntot), 1 + rep.astype(int))
     first_row = np.concatenate(([0], np.cumsum([b["n"] for b in blocks])))
     # line of row i of the original = header lines + position in `order`
-    started = datetime.fromtimestamp(int(allc["timestamp_ms"][0] // 1000) - int(rng.integers(2, 9)), timezone.utc)
+    started = datetime.fromtimestamp(int(allc["timestamp_ms"][0] // 1000) - int(rng.integers(2, 9)), UTC)
     header = (
-        f"# vehicle_id={veh.vehicle_id}\n# logger=SRF Logger 2.4.1\n# started={started.strftime('%Y-%m-%dT%H:%M:%SZ')}\n"
+        f"# vehicle_id={veh.vehicle_id}\n# logger=SRF Logger 2.4.1\n"
+        f"# started={started.strftime('%Y-%m-%dT%H:%M:%SZ')}\n"
         f"# fms_dongle=FMS-BT 1.7\n{','.join(cols)}\n"
     ).encode()
     n_head = header.count(b"\n")
@@ -322,7 +330,8 @@ def _srf_file(world: World, veh: VehicleSpec, trips: list[TruthTrip], date: str,
         dec, strip = SRF_FORMAT[c]
         fields.append(num_field(allc[c][order], dec, strip=strip))
     data = header + assemble(fields, b",", b"\n")
-    info = {"vehicle_id": veh.vehicle_id, "dialect": "srf", "rows": int(order.size), "repeated_ticks": int(rep.sum()), "faults": faults}
+    info = {"vehicle_id": veh.vehicle_id, "dialect": "srf", "rows": int(order.size), "repeated_ticks": int(rep.sum()),
+            "faults": faults}
     return data, records, info
 
 
@@ -330,12 +339,14 @@ def _srf_file(world: World, veh: VehicleSpec, trips: list[TruthTrip], date: str,
 # Sensors: portal
 # ======================================================================================
 
-PORTAL_COLUMNS = ("Registration", "Date/Time", "Latitude", "Longitude", "Speed (mph)", "Odometer (mi)", "Fuel Used (l)", "Ignition", "Event")
+PORTAL_COLUMNS = ("Registration", "Date/Time", "Latitude", "Longitude", "Speed (mph)", "Odometer (mi)", "Fuel Used (l)",
+                  "Ignition", "Event")
 MPH = 0.44704
 MILE_M = 1609.344
 
 
-def _portal_vehicle(world: World, veh: VehicleSpec, days: list[list[TruthTrip]], state: _Counters, seed: int, transformer) -> tuple[dict[str, np.ndarray], list[dict]]:
+def _portal_vehicle(world: World, veh: VehicleSpec, days: list[list[TruthTrip]], state: _Counters, seed: int,
+                    transformer) -> tuple[dict[str, np.ndarray], list[dict]]:
     """Rows of one vehicle (time order) and truth records of its trips."""
     rng = _rng(seed, "portal", veh.vehicle_id)
     rows: dict[str, list[np.ndarray]] = {k: [] for k in ("t", "x", "y", "speed_mph", "odo", "fuel", "ign", "event")}
@@ -358,7 +369,8 @@ def _portal_vehicle(world: World, veh: VehicleSpec, days: list[list[TruthTrip]],
         ex = _ar1(n, 8.0, 3.0, rng)
         ny = _ar1(n, 8.0, 3.0, rng)
         rows["t"].append(tr.start_utc_s + ts)
-        rows["x"].append(at["x"] + ex), rows["y"].append(at["y"] + ny)
+        rows["x"].append(at["x"] + ex)
+        rows["y"].append(at["y"] + ny)
         rows["speed_mph"].append(np.abs(at["speed"] + rng.normal(0.0, 0.2, n) * (at["speed"] > 0.3)) / MPH)
         rows["odo"].append(state.odometer_m + at["distance"])
         rows["fuel"].append(veh.fuel_counter_start_l + state.consumption + at["cons"])
@@ -378,9 +390,11 @@ def _portal_vehicle(world: World, veh: VehicleSpec, days: list[list[TruthTrip]],
             ev[-1] = "Fuel card: £152,40 at Shell Newport Pagnell"
         rows["event"].append(ev)
         records.append({
-            "vehicle_id": veh.vehicle_id, "vehicle_type": veh.vehicle_type, "dialect": "portal", "day_index": tr.day_index,
-            "trip_index": j, "start_utc_s": float(tr.start_utc_s), "end_utc_s": float(tr.start_utc_s + T), "duration_s": float(T),
-            "distance_m": round(float(tr.distance_m[-1]), 2), "mass_kg": tr.mass_kg, "consumption": float(tr.consumption[-1]),
+            "vehicle_id": veh.vehicle_id, "vehicle_type": veh.vehicle_type, "dialect": "portal",
+            "day_index": tr.day_index, "trip_index": j, "start_utc_s": float(tr.start_utc_s),
+            "end_utc_s": float(tr.start_utc_s + T), "duration_s": float(T),
+            "distance_m": round(float(tr.distance_m[-1]), 2), "mass_kg": tr.mass_kg,
+            "consumption": float(tr.consumption[-1]),
             "route_from_m": round(tr.route_from_m, 2), "load": tr.load, **conditions_record(tr, 0.0, float(T)),
             "dsm_covered_share": round(float(world.in_tiles(tr.x_m, tr.y_m).mean()), 4),
         })
@@ -394,9 +408,12 @@ def _portal_vehicle(world: World, veh: VehicleSpec, days: list[list[TruthTrip]],
             m = hb.size
             if m:
                 rows["t"].append(hb)
-                rows["x"].append(np.full(m, at["x"][-1]) + rng.normal(0, 2.0, m)), rows["y"].append(np.full(m, at["y"][-1]) + rng.normal(0, 2.0, m))
-                rows["speed_mph"].append(np.zeros(m)), rows["odo"].append(np.full(m, state.odometer_m))
-                rows["fuel"].append(np.full(m, veh.fuel_counter_start_l + state.consumption)), rows["ign"].append(np.zeros(m))
+                rows["x"].append(np.full(m, at["x"][-1]) + rng.normal(0, 2.0, m))
+                rows["y"].append(np.full(m, at["y"][-1]) + rng.normal(0, 2.0, m))
+                rows["speed_mph"].append(np.zeros(m))
+                rows["odo"].append(np.full(m, state.odometer_m))
+                rows["fuel"].append(np.full(m, veh.fuel_counter_start_l + state.consumption))
+                rows["ign"].append(np.zeros(m))
                 rows["event"].append(np.full(m, "", dtype=object))
     out = {k: np.concatenate(vv) for k, vv in rows.items()}
     o = np.argsort(out["t"], kind="stable")
@@ -407,12 +424,14 @@ def _portal_vehicle(world: World, veh: VehicleSpec, days: list[list[TruthTrip]],
     return out, records
 
 
-def _portal_file(world: World, fleet: FleetSpec, truth: dict[str, list[list[TruthTrip]]], seed: int, transformer) -> tuple[bytes, list[dict], dict]:
+def _portal_file(world: World, fleet: FleetSpec, truth: dict[str, list[list[TruthTrip]]], seed: int,
+                 transformer) -> tuple[bytes, list[dict], dict]:
     """The portal export of all portal vehicles: (cp1252 bytes, truth records, file record)."""
     per = []
     records = []
     for veh in sorted(fleet.portal_vehicles, key=lambda v: v.vehicle_id):
-        rows, recs = _portal_vehicle(world, veh, truth[veh.vehicle_id], _Counters(odometer_m=veh.odometer_start_m), seed, transformer)
+        rows, recs = _portal_vehicle(world, veh, truth[veh.vehicle_id], _Counters(odometer_m=veh.odometer_start_m),
+                                     seed, transformer)
         per.append((veh, rows))
         records.extend(recs)
     reg = np.concatenate([np.full(r["t"].size, v.vehicle_id.encode("cp1252")) for v, r in per])
