@@ -179,3 +179,20 @@ def test_a_new_store_on_a_read_only_file_system_is_one_line_and_exit_3(capsys, m
                 line = one_line(err)
                 assert str(store) in line and "read-only file system" in line.lower(), line
         assert list(ro.iterdir()) == []
+
+
+@pytest.mark.parametrize("command", ["predict", "ingest"])
+def test_a_bad_scheduler_address_is_one_line_and_ends_there(tmp_path, command):
+    """The one line, exit 2, and the process ends: the half-made Dask client no longer
+    waits 40 s at exit and prints a TimeoutError traceback after the line."""
+    pytest.importorskip("distributed")
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(ROOT / "src"), os.environ.get("PYTHONPATH", "")]))
+    args = (["predict", "-v", str(BUS), "-c", str(URBAN)] if command == "predict" else
+            ["ingest", str(ROOT / "sample_logs" / "srf" / "EB-01_2019-01-31.csv"), "--store", str(tmp_path / "s.sqlite")])
+    proc = subprocess.run([sys.executable, "-m", "cevm", *args, "--scheduler", "nonsense://10.0.0.5:8786"],
+                          capture_output=True, text=True, env=env, timeout=35)
+    assert proc.returncode == 2, proc.stderr
+    lines = proc.stderr.splitlines()
+    assert len(lines) == 1 and lines[0].startswith("cevm: error: cannot reach the Dask scheduler at "
+                                                   "nonsense://10.0.0.5:8786: ValueError: unknown address scheme"), lines
+    assert not (tmp_path / "s.sqlite").exists()
