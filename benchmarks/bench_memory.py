@@ -21,6 +21,12 @@ and whether the peak meets the goal. The cases:
 - ``wide``: the sample's bus day with every srf column (20, a hybrid's fuel columns
   added), at the most rows the default values bound allows it (ingested) and at 2.5 M
   rows (refused by that bound, at the row past it).
+- ``portal 2.5M``: the sample portal log's first day (``;``, decimal commas, cp1252,
+  local times) repeated on consecutive days from 1 November 2019 to 2.5 million rows,
+  its default row limit.
+- ``DSM one strip``, ``DSM 16k tiles``: a sample srf log with a DSM of one 40,000 x
+  40,000 float32 deflate strip (sparse: kilobytes on disk, 6.4 GB decoded), or of
+  16,384-pixel tiles (1.07 GB each decoded): refused from the raster's header.
 - ``gzip bomb``: about 10 MB of gzip expanding to ``--bomb-gib`` GiB (default 3) of
   valid, identical srf rows: it must fail fast with a clear message.
 - ``no line breaks``: 415 MB of text without a line break: must fail from its first
@@ -121,6 +127,40 @@ def make_wide_srf(out: Path, rows: int, sample: Path) -> Path:
     assert all(ln[:10] == b"2019-01-31" for ln in body), "a day that crosses midnight"
     tails = [ln[10:] + b",1000.0,1.50,1.45,12000" for ln in body]
     return _write_days(out, head, header, tails, dt.date(2019, 1, 31), rows)
+
+
+def make_portal(out: Path, rows: int, sample: Path) -> Path:
+    """A portal export of ``rows`` rows: the sample portal log's first day repeated on
+    consecutive days from 2019-11-01 (no clock change), in the export's own bytes."""
+    import datetime as dt
+
+    src = next((sample / "portal").glob("*.csv")).read_bytes().split(b"\n")
+    header, body = src[0], [ln for ln in src[1:] if ln.strip()]
+    first = body[0].split(b";")[1][:10]
+    day = [ln for ln in body if ln.split(b";")[1][:10] == first]
+    with open(out, "wb") as fh:
+        fh.write(header + b"\n")
+        n, d = 0, dt.date(2019, 11, 1)
+        while n < rows:
+            stamp = d.strftime("%d/%m/%Y").encode()
+            chunk = day[: rows - n]
+            fh.write(b"\n".join(ln.replace(first, stamp, 1) for ln in chunk) + b"\n")
+            n += len(chunk)
+            d += dt.timedelta(days=1)
+    return out
+
+
+def make_huge_block_dsm(out: Path, **layout) -> Path:
+    """A 40,000 x 40,000 float32 GeoTIFF (over the sample's area) with ``layout``'s
+    blocks, written sparse (no block written: kilobytes on disk)."""
+    import rasterio
+    from rasterio.transform import from_origin
+
+    with rasterio.open(out, "w", driver="GTiff", width=40_000, height=40_000, count=1, dtype="float32",
+                       crs="EPSG:27700", transform=from_origin(470_000, 250_000, 2.0, 2.0), compress="deflate",
+                       sparse_ok=True, **layout):
+        pass
+    return out
 
 
 def make_bomb(out: Path, gib: float) -> Path:
@@ -348,6 +388,13 @@ def log_cases(args, work: Path, lim, wide_rows: int, big_name: str) -> list:
         for path, n in ((wide, wide_rows), (wide_over, 2_500_000)):
             if not (args.keep and path.exists()):
                 make_wide_srf(path, n, work / "sample")
+        portal = work / "portal-2500000.csv"
+        if not (args.keep and portal.exists()):
+            make_portal(portal, 2_500_000, work / "sample")
+        strip_dsm, tiles_dsm = work / "dsm-strip.tif", work / "dsm-16k.tif"
+        make_huge_block_dsm(strip_dsm, tiled=False, blockysize=40_000)
+        make_huge_block_dsm(tiles_dsm, tiled=True, blockxsize=16_384, blockysize=16_384)
+        bus_day = work / "sample" / "srf" / "EB-01_2019-01-31.csv"
         bomb, lineless, nul = work / "bomb.csv.gz", work / "lineless.csv", work / "nul.csv"
         if not (args.keep and bomb.exists()):
             make_bomb(bomb, args.bomb_gib)
@@ -359,7 +406,8 @@ def log_cases(args, work: Path, lim, wide_rows: int, big_name: str) -> list:
               f"({args.rows:,} rows), {bomb.name} {bomb.stat().st_size / 1e6:.1f} MB -> {args.bomb_gib:g} GiB, "
               f"{lineless.name} {lineless.stat().st_size / 1e6:.0f} MB, {nul.name} {nul.stat().st_size / 1e9:.1f} GB",
               flush=True)
-        made.update(big=big, dsm=dsm, wide=wide, wide_over=wide_over, bomb=bomb, lineless=lineless, nul=nul)
+        made.update(big=big, dsm=dsm, wide=wide, wide_over=wide_over, portal=portal, strip_dsm=strip_dsm,
+                    tiles_dsm=tiles_dsm, bus_day=bus_day, bomb=bomb, lineless=lineless, nul=nul)
         return made
 
     def ingest(k: int, name: str, key: str | None, extra=lambda m: [], stages: bool = False):
@@ -373,13 +421,19 @@ def log_cases(args, work: Path, lim, wide_rows: int, big_name: str) -> list:
             return run_case(name, m[key], store, extra(m), stages=stages)
         return name, "logs", run
 
+    def dsm(key: str = "dsm"):
+        return lambda m: ["--dsm", str(m[key])]
+
     return [ingest(0, "import only", None),
             ingest(1, big_name, "big", lambda m: ["--dsm", str(m["dsm"]), "--max-rows", str(max(args.rows,
                                                                                                  lim.max_rows))],
                    stages=True),
-            ingest(2, f"wide {wide_rows / 1e6:g}M", "wide", lambda m: ["--dsm", str(m["dsm"])]),
-            ingest(3, "wide 2.5M", "wide_over", lambda m: ["--dsm", str(m["dsm"])]),
-            ingest(4, "gzip bomb", "bomb"), ingest(5, "no line breaks", "lineless"), ingest(6, "all NUL", "nul")]
+            ingest(2, f"wide {wide_rows / 1e6:g}M", "wide", dsm()),
+            ingest(3, "wide 2.5M", "wide_over", dsm()),
+            ingest(4, "portal 2.5M", "portal", dsm()),
+            ingest(5, "DSM one strip", "bus_day", dsm("strip_dsm")),
+            ingest(6, "DSM 16k tiles", "bus_day", dsm("tiles_dsm")),
+            ingest(7, "gzip bomb", "bomb"), ingest(8, "no line breaks", "lineless"), ingest(9, "all NUL", "nul")]
 
 
 # ------------------------------------------------------------ inputs that are not logs
@@ -387,11 +441,11 @@ def other_limits() -> str:
     from cevm.io.cycles import MAX_CYCLE_SAMPLES
     from cevm.io.inputs import MAX_TOML_BYTES
     from cevm.io.manifest import MAX_MANIFEST_BYTES, MAX_MANIFEST_ROWS
-    from cevm.store.codec import MAX_STORED_SAMPLES
+    from cevm.store.codec import MAX_PROFILE_SAMPLES
 
     return (f"default limits (other inputs): TOML {MAX_TOML_BYTES / 2**20:g} MiB; manifest {MAX_MANIFEST_ROWS:,} rows "
             f"and {MAX_MANIFEST_BYTES / 2**20:g} MiB; cycle file {MAX_CYCLE_SAMPLES:,} samples; stored profile "
-            f"{MAX_STORED_SAMPLES:,} samples (and its trip's own count)")
+            f"{MAX_PROFILE_SAMPLES:,} samples (and its trip's own count)")
 
 
 def make_toml_of_keys(out: Path, nbytes: int, head: str = "") -> Path:

@@ -14,11 +14,15 @@ environment are not the test's: a forkserver keeps the environment it started wi
   ``<log path>.held-<pid>`` and wait forever. (Directories are searched for ``*.csv``
   and ``*.csv.gz``: the markers are never taken for logs.)
 
-``python tests/faults.py [--task-s S] [--stall-write NAME] CEVM-ARGS...`` runs the
+``python tests/faults.py [--task-s S] [--stall-write NAME] [--hold-after-ingest] [--hold-after-summary]
+CEVM-ARGS...`` runs the
 ``cevm`` command (its :func:`cevm.cli.main`) with ``process_file_or_die`` as the
 ingest task; ``--task-s`` sets the local pool's task size, ``--stall-write NAME``
 stalls the store transaction of the log named NAME for a second (after writing
-``<store>.in-transaction``).
+``<store>.in-transaction``); ``--hold-after-ingest`` holds ``cevm ingest`` for 3 s once
+every file is stored, before its manifest is applied (after writing ``<store>.ingested``);
+``--hold-after-summary`` for 3 s once its summary is printed (after writing
+``<store>.summarised``).
 """
 
 from __future__ import annotations
@@ -62,6 +66,38 @@ def process_file_or_die(path, *args, **kwargs):
     return process_file(path, *args, **kwargs)
 
 
+def _hold(marker: str, seconds: float = 3.0) -> None:
+    Path(marker).touch()
+    t_end = time.monotonic() + seconds
+    while time.monotonic() < t_end:  # signals may arrive
+        time.sleep(0.01)
+
+
+def _install_holds(holds: set[str], store: str) -> None:
+    import typer
+
+    import cevm.ingest
+
+    if "--hold-after-ingest" in holds:
+        real_ingest = cevm.ingest.ingest
+
+        def ingest(*a, **kw):
+            report = real_ingest(*a, **kw)
+            _hold(store + ".ingested")
+            return report
+
+        cevm.ingest.ingest = ingest
+    if "--hold-after-summary" in holds:
+        real_echo = typer.echo
+
+        def echo(message=None, *a, **kw):
+            real_echo(message, *a, **kw)
+            if isinstance(message, str) and ('"event": "summary"' in message or message.startswith("cevm ingest: ")):
+                _hold(store + ".summarised")
+
+        typer.echo = echo
+
+
 def markers(directory: Path, pattern: str) -> list[str]:
     return sorted(p.name for p in Path(directory).rglob(pattern))
 
@@ -88,12 +124,15 @@ def session_processes(sid: int) -> list[tuple[int, str]]:
 def _main(argv: list[str]) -> None:
     task_s = None
     stall = None
+    holds: set[str] = set()
     while argv and argv[0].startswith("--"):
         opt = argv.pop(0)
         if opt == "--task-s":
             task_s = float(argv.pop(0))
         elif opt == "--stall-write":
             stall = argv.pop(0)
+        elif opt in ("--hold-after-ingest", "--hold-after-summary"):
+            holds.add(opt)
         else:
             raise SystemExit(f"faults.py: unknown option {opt}")
     import cevm.executors as executors
@@ -128,6 +167,8 @@ def _main(argv: list[str]) -> None:
 
         trips.TripStore.replace_file_trips = replace_file_trips
         trips._checkpoint = checkpoint
+    if holds:
+        _install_holds(holds, argv[argv.index("--store") + 1])
     from cevm.cli import main
 
     sys.argv = ["cevm", *argv]

@@ -110,3 +110,37 @@ def test_vrt_with_python_code_or_a_loop_is_refused(cog_dir, tmp_path):
     _vrt(tmp_path / "loop.vrt", "loop.vrt", relative=True)
     with pytest.raises(InputError, match="refers to itself"):
         check_local(str(tmp_path / "loop.vrt"))
+
+
+@pytest.mark.parametrize("layout", [dict(tiled=False, blockysize=40_000), dict(tiled=True, blockxsize=16_384,
+                                                                              blockysize=16_384)],
+                         ids=["one 40000-px strip", "16384-px tiles"])
+def test_a_raster_of_huge_blocks_is_refused_before_any_pixel_is_read(tmp_path, layout):
+    """Issue 24: a 40,000 x 40,000 GeoTIFF of one deflate strip (kilobytes on disk, 6.4 GB
+    decoded) drove ingest to 6.3 GB, 16,384-pixel tiles to 1.24 GB. Its header says so:
+    refused when the DSM is opened, with the block size and the way out, and `cevm
+    ingest` stops with exit 2 before any file is read."""
+    import rasterio
+    from rasterio.transform import from_origin
+    from typer.testing import CliRunner
+
+    from cevm.cli import app
+    from cevm.errors import InputError
+
+    big = tmp_path / "big.tif"
+    with rasterio.open(big, "w", driver="GTiff", width=40_000, height=40_000, count=1, dtype="float32",
+                       crs="EPSG:27700", transform=from_origin(480_000, 240_000, 2.0, 2.0), compress="deflate",
+                       sparse_ok=True, **layout):
+        pass  # nothing written: every block sparse
+    assert big.stat().st_size < 200_000
+    with pytest.raises(InputError, match=r"take [\d,]+ MB each decoded, over the 64 MB") as ei:
+        DsmSampler.open(big)
+    assert "big.tif" in str(ei.value) and "TILED=YES" in str(ei.value)
+    from test_ingest import write_srf
+
+    (tmp_path / "logs").mkdir()
+    write_srf(tmp_path / "logs" / "a.csv", "EB-01", 1_557_820_800, 0, n=120)
+    res = CliRunner().invoke(app, ["ingest", str(tmp_path / "logs"), "--dsm", str(big), "--store",
+                                   str(tmp_path / "s.sqlite")])
+    assert res.exit_code == 2 and "MB each decoded" in res.output, res.output
+    assert not (tmp_path / "s.sqlite").exists()

@@ -250,3 +250,82 @@ def test_property_any_bytes_give_a_clear_error_or_trips_never_a_crash(tmp_path, 
 
 
 PROFILES = load_profiles()
+
+
+def test_an_unreadable_subfolder_is_reported_and_fails_the_run(tmp_path, fleet, monkeypatch):
+    """A subfolder that cannot be listed (here: os.scandir refused for it, as for a
+    folder without read permission, which root's tests cannot make) is named in one
+    line, in --log-json too, and the run exits 1, not 0: a cron job learns it missed
+    logs. The readable logs are ingested."""
+    import os
+
+    logs, _ = fleet
+    locked = Path(logs) / "locked"
+    locked.mkdir()
+    real_scandir = os.scandir
+
+    def scandir(path="."):
+        if Path(path) == locked:
+            raise PermissionError(13, "Permission denied", str(path))
+        return real_scandir(path)
+
+    monkeypatch.setattr(os, "scandir", scandir)
+    res = run("ingest", logs, "--store", tmp_path / "s.sqlite", "--log-json")
+    assert res.exit_code == 1, res.output
+    events = [json.loads(line) for line in res.stdout.splitlines()]
+    failed = [e for e in events if e["event"] == "file" and e["status"] == "failed"]
+    assert len(failed) == 1 and str(locked) in failed[0]["error"] and "Permission denied" in failed[0]["error"]
+    assert events[-1]["event"] == "summary" and events[-1]["ingested"] == 3 and events[-1]["failed"] == 1
+    res = run("ingest", logs, "--store", tmp_path / "t.sqlite", "-q")
+    assert res.exit_code == 1 and str(locked) in res.output
+
+
+def test_a_trip_starts_at_the_state_of_charge_its_log_holds_there(root):
+    """Issue 22 item 6: a stored trip records the state of charge logged at its start:
+    the reading at or last before the start within 60 s, else the first within 60 s
+    after it. Expected values read from the file with the csv module."""
+    import csv
+    from datetime import datetime
+
+    from cevm.ingest.task import IngestOptions, process_file
+
+    path = root / "sample_logs" / "srf" / "EB-01_2019-01-31.csv"
+    with open(path) as fh:
+        rows = [r for r in csv.DictReader(line for line in fh if not line.startswith("#"))]
+    soc = [(datetime.fromisoformat(r["timestamp_utc"].replace("Z", "+00:00")).timestamp(),
+            float(r["fms_battery_soc_pct"])) for r in rows if r["fms_battery_soc_pct"]]
+    out = process_file(path, IngestOptions())
+    assert out.error is None and len(out.trips) >= 2
+    for trip in out.trips:
+        t0 = trip.start_utc_s
+        before = [(t, x) for t, x in soc if t0 - 60 <= t <= t0]
+        after = [(t, x) for t, x in soc if t0 < t <= t0 + 60]
+        t_want, want = before[-1] if before else after[0]
+        assert trip.start_soc_pct == want
+        assert trip.quality["start_soc"] == {"pct": want, "reading_offset_s": pytest.approx(t_want - t0, abs=1e-6)}
+    # a log without a state of charge: none
+    out = process_file(root / "sample_logs" / "srf" / "HGV-11_2019-01-31.csv", IngestOptions())
+    assert out.trips and all(t.start_soc_pct is None and "start_soc" not in t.quality for t in out.trips)
+
+
+def test_trips_shows_the_start_state_and_sources_carry_it(tmp_path, root):
+    """`cevm trips` lists each trip's start SoC and the time its vehicle stood before it;
+    the stored trips handed to predict (load_sources) carry both."""
+    from contextlib import ExitStack
+
+    from cevm.store.sources import load_sources
+
+    store = tmp_path / "s.sqlite"
+    srf = root / "sample_logs" / "srf"
+    assert run("ingest", srf / "EB-01_2019-01-31.csv", "--store", store, "--workers", "1", "-q").exit_code == 0
+    rows = json.loads(run("trips", "--store", store, "--format", "json").stdout)
+    rows.sort(key=lambda r: r["start_utc"])
+    assert rows[0]["standstill_before_s"] is None and rows[0]["start_soc_pct"] == 97.2
+    for a, b in zip(rows, rows[1:]):
+        assert b["standstill_before_s"] > 0 and b["start_soc_pct"] is not None
+    with ExitStack() as stack:
+        srcs = load_sources(stack, store, [], [], ["EB-01"], [], cr0=0.0, need_profiles=False)
+        by_id = {s.name: s for s in srcs}
+        for r in rows:
+            assert by_id[r["trip_id"]].start_soc_pct == r["start_soc_pct"]
+            assert by_id[r["trip_id"]].standstill_before_s == r["standstill_before_s"]

@@ -641,10 +641,55 @@ def test_absurd_values_whole_column_is_error(tmp_path, profiles):
         read_log(srf_file(tmp_path, rows), profiles=profiles)
 
 
-def test_not_a_number(tmp_path, profiles):
+def _requiring(prof, source: str):
+    """``prof`` with the column ``source`` required (every cell a number)."""
+    from dataclasses import replace
+
+    return replace(prof, columns=tuple(replace(m, required=True) if m.source == source else m for m in prof.columns))
+
+
+def test_not_a_number_in_a_required_column_is_an_error(tmp_path, profiles):
     rows = srf_rows(5)
     rows[3] = rows[3].rsplit(",", 1)[0] + ",abc"
     with raises_at("not a number: 'abc'", line=6, column="fms_total_energy_used_kwh"):
+        read_log(srf_file(tmp_path, rows), _requiring(profiles["srf"], "fms_total_energy_used_kwh"))
+
+
+@pytest.mark.parametrize("cell", ["ERR", "abc", "---", "#N/A", "#VALUE!", "error"])
+def test_a_bad_cell_in_a_measured_column_is_a_missing_value_with_a_note(tmp_path, profiles, cell):
+    """Issue 27: one 'ERR' in a measured column (an energy counter here, a flow meter on a
+    truck) cost the whole day's log. Now it is a missing value, as 'N/A' is, and the
+    repair names the line and the column; the other rows are read as written."""
+    rows = srf_rows(6)
+    rows[3] = rows[3].rsplit(",", 1)[0] + "," + cell  # line 2 + 4 = 6
+    [log] = read_log(srf_file(tmp_path, rows), profiles=profiles)
+    e = log.frame["total_energy_j"].to_numpy()
+    assert np.isnan(e[3]) and e[2] == pytest.approx(100.2 * 3.6e6) and e[4] == pytest.approx(100.4 * 3.6e6)
+    notes = [r for r in log.repairs if "not numbers" in r]
+    assert len(notes) == 1 and "'fms_total_energy_used_kwh'" in notes[0] and notes[0].endswith("line 6")
+    assert repr(cell) in notes[0]
+
+
+def test_a_value_written_with_its_unit_is_read_as_that_number(tmp_path, profiles):
+    """'36.5 km/h' in a km/h column is 36.5 km/h (any case and spacing), reported; '36.5 mph'
+    there is not a km/h value: a missing one, reported."""
+    rows = srf_rows(6)
+    rows[2] = rows[2].replace(",36.0,36.0,", ",36.0,36.5 km/h,", 1)  # line 5: the wheel speed
+    rows[3] = rows[3].replace(",36.0,36.0,", ",36.0,36.5KM/H,", 1)  # line 6
+    rows[4] = rows[4].replace(",36.0,36.0,", ",36.0,36.5 mph,", 1)  # line 7
+    [log] = read_log(srf_file(tmp_path, rows), profiles=profiles)
+    v = log.frame["wheel_speed_mps"].to_numpy()
+    assert v[2] == pytest.approx(36.5 / 3.6) and v[3] == pytest.approx(36.5 / 3.6) and np.isnan(v[4])
+    assert any("2 values written with their unit ('km/h')" in r and r.endswith("lines 5-6") for r in log.repairs)
+    assert any("'36.5 mph'" in r and r.endswith("line 7") for r in log.repairs)
+
+
+def test_a_column_of_mostly_bad_cells_is_refused(tmp_path, profiles):
+    """More than the profile's absurd_error_share of a column not numbers: not what the
+    profile says the column is (a wrong decimal mark, a wrong column), an error at the
+    first such cell."""
+    rows = [r.rsplit(",", 1)[0] + ",12;5" for r in srf_rows(6)]
+    with raises_at("6 of 6 cells are not numbers", line=3, column="fms_total_energy_used_kwh"):
         read_log(srf_file(tmp_path, rows), profiles=profiles)
 
 

@@ -57,6 +57,38 @@ def test_a_lasting_jump_is_reported_not_guessed():
     assert res.quality["speed_unresolved_jumps"] == 1 and res.quality["speed_spikes_rejected"] == 0
 
 
+def test_a_spliced_recording_is_reported_with_its_time_and_size_and_kept_in_the_trip_quality(tmp_path):
+    """Issue 27: a 1-s jump of 119 km/h that lasts (two recordings spliced) is kept as
+    logged (it cannot be told from a spike of the other part), but no longer silently:
+    the trip's stored quality lists it under 'speed_jumps' (UTC time, time step, speeds
+    before and after, in SI) for calibrate, and the file's repairs say it with its time
+    and size."""
+    v = np.concatenate([np.full(300, 5.0), np.full(300, 5.0 + 119 / 3.6), np.full(300, 5.0)])
+    res = clean_log(_frame(v))
+    (trip,) = res.trips
+    jumps = trip.quality["speed_jumps"]
+    assert len(jumps) == 2 and trip.quality["speed_unresolved_jumps"] == 2
+    up = next(j for j in jumps if j["to_mps"] > j["from_mps"])
+    assert up["utc_s"] == T0 + 300 and up["dt_s"] == 1.0 and up["source"] == "wheel_speed_mps"
+    assert (up["from_mps"], up["to_mps"]) == (5.0, pytest.approx(5.0 + 119 / 3.6))
+    # through a file: the note in the file's repairs, the list in the stored quality
+    f = tmp_path / "splice.csv"
+    write_srf(f, "EB-01", 1_557_820_800, 0, n=900)
+    lines = f.read_text().splitlines()
+    head = next(i for i, ln in enumerate(lines) if ln.startswith("timestamp_utc"))
+    col = lines[head].split(",").index("fms_wheel_speed_kmh")
+    for i in range(head + 400, head + 700):
+        cells = lines[i].split(",")
+        cells[col] = f"{float(cells[col]) + 119:.1f}"
+        lines[i] = ",".join(cells)
+    f.write_text("\n".join(lines) + "\n")
+    out = process_file(f, IngestOptions())
+    assert out.error is None
+    notes = [r for r in out.repairs if "lasting speed jump" in r]
+    assert len(notes) == 1 and ("+119 km/h in 1 s at 2019-05-14" in notes[0] or "-119 km/h in 1 s at 2019-05-14" in notes[0])
+    assert sum(len(t.quality.get("speed_jumps", ())) for t in out.trips) == 2
+
+
 def test_the_acceleration_bound_is_a_parameter():
     v = np.full(601, 20.0)
     v[300] = 26.0  # 6 m/s in a second and back: possible for the default bound

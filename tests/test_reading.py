@@ -76,6 +76,57 @@ def test_pyarrow_and_pandas_parsers_and_small_blocks_give_the_same_logs(path, pr
     frames_equal(read_log(path, profiles=profiles, engine="pandas"), ref)
 
 
+def _block_with_both_engines(text: bytes, prof):
+    """One block of a log's data lines parsed by each engine on the very same bytes:
+    (pyarrow's ParsedBlock or None where it refuses the block, pandas' ParsedBlock)."""
+    from cevm.ingest.reading.blocks import ReadRepairs
+    from cevm.ingest.reading.engine_arrow import _arrow_block
+    from cevm.ingest.reading.engine_pandas import _pandas_block
+    from cevm.ingest.reading.gather import ColumnGatherer
+    from cevm.ingest.reading.header import _find_header, _plan_columns
+
+    hdr = _find_header(text, prof.comment_prefix, prof.separator)
+    plan = _plan_columns(prof, hdr, Path("x.csv"))
+    block = text[hdr.body_offset:]
+    gather = ColumnGatherer(plan, prof, Path("x.csv"), ReadLimits(), ReadRepairs())
+    arrow = _arrow_block(block, hdr.line + 1, plan, prof, gather.arrow_time_type(block, plan, prof))
+    return arrow, _pandas_block(block, hdr.line + 1, plan, prof, Path("x.csv"))
+
+
+def _times_ns(part, prof) -> np.ndarray:
+    """A block's time column as ns: what the engine typed, else its text parsed."""
+    from cevm.ingest.timestamps import parse_datetimes
+
+    if part.time_ns is not None:
+        return part.time_ns
+    return parse_datetimes(part.text[prof.time.columns[0]], prof.time.format)
+
+
+@pytest.mark.parametrize("path", [ROOT / "sample_logs/srf/EB-01_2019-01-31.csv", DATA / "srf_sample.csv",
+                                  DATA / "portal_dst.csv", DATA / "twizy_excerpt.csv"], ids=lambda p: p.name)
+def test_both_parse_engines_agree_on_the_same_bytes(path, profiles):
+    """The pyarrow engine (typed columns, its ISO 8601 parser) and the pandas engine (C
+    parser, times straight from the bytes by the byte-level path) on one block of the
+    same bytes: the same lines, numbers, text, times and blank rows."""
+    prof = detect_profile(path, profiles)
+    raw = path.read_bytes()
+    text = raw.decode(prof.encoding).encode("utf-8")
+    arrow, pandas = _block_with_both_engines(text, prof)
+    assert arrow is not None  # these logs are well formed: pyarrow takes them
+    np.testing.assert_array_equal(arrow.lines, pandas.lines)
+    np.testing.assert_array_equal(arrow.blank, pandas.blank)
+    assert sorted(arrow.numbers) == sorted(pandas.numbers)
+    for c in arrow.numbers:
+        np.testing.assert_array_equal(arrow.numbers[c], pandas.numbers[c])  # NaN where NaN
+    for c in set(arrow.text) & set(pandas.text):
+        if c != prof.time.columns[0] or len(prof.time.columns) > 1:
+            assert pd.Series(arrow.text[c]).equals(pd.Series(pandas.text[c])), c
+    if len(prof.time.columns) == 1:
+        np.testing.assert_array_equal(_times_ns(arrow, prof), _times_ns(pandas, prof))
+        if arrow.time_ns is not None and pandas.time_ns is not None:
+            assert arrow.time_utc == pandas.time_utc
+
+
 def test_real_twizy_logs_same_with_both_parsers(profiles, twizy_logs):
     files = sorted(twizy_logs[0].glob("*.csv*"))
     assert files
@@ -145,9 +196,17 @@ def test_errors_in_a_later_block_name_their_line(tmp_path, profiles, monkeypatch
     rows = srf_rows(300)
     rows[250] = rows[250].rsplit(",", 1)[0] + ",abc"  # line 2 + 251 = 253
     rows[260] = rows[260].rsplit(",", 1)[0] + ",abc"
+    from dataclasses import replace
+
+    prof = profiles["srf"]
+    required = replace(prof, columns=tuple(replace(m, required=m.source == "fms_total_energy_used_kwh")
+                                           for m in prof.columns))
     with pytest.raises(InputError, match="not a number: 'abc'") as ei:
-        read_log(write(tmp_path / "b.csv", srf_text(rows)), profiles=profiles)
+        read_log(write(tmp_path / "b.csv", srf_text(rows)), required)
     assert (ei.value.line, ei.value.column) == (253, "fms_total_energy_used_kwh")
+    # in a measured column: missing values, and one note naming both lines
+    [log] = read_log(write(tmp_path / "b.csv", srf_text(rows)), profiles=profiles)
+    assert [r for r in log.repairs if "not numbers" in r][0].endswith("lines 253, 263")
 
 
 # ======================================================================================

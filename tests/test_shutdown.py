@@ -180,3 +180,64 @@ def test_sigterm_in_mid_transaction_finishes_that_file_and_counts_it(logs, refer
                                       "(3 ingested, 0 unchanged, 0 failed)"), err.read_text()
     assert [Path(f[0]).name for f in store_content(store)["files"]] == ["a0.csv", "a1.csv", "a2.csv"]
     check_consistent(store, reference, logs, 3)
+
+
+@pytest.fixture
+def manifest(tmp_path):
+    """A manifest giving the first trip of each log its payload."""
+    f = tmp_path / "loads.csv"
+    f.write_text("vehicle_id,start_utc,end_utc,payload_kg\n" + "".join(
+        f"EB-0{k},{time.strftime('%Y-%m-%dT%H:%M:%SZ', time.gmtime(1_557_820_800 + 86_400 * k))},"
+        f"{time.strftime('%Y-%m-%dT%H:%M:%SZ', time.gmtime(1_557_820_800 + 86_400 * k + 3_600))},1500\n"
+        for k in range(N_FILES)))
+    return f
+
+
+def _trip_masses(store: Path) -> int:
+    con = sqlite3.connect(f"file:{store}?mode=ro", uri=True)
+    try:
+        return con.execute("SELECT COUNT(*) FROM trip_masses").fetchone()[0]
+    finally:
+        con.close()
+
+
+@pytest.mark.parametrize("sig,code", [(signal.SIGINT, 130), (signal.SIGTERM, 143)], ids=["SIGINT", "SIGTERM"])
+def test_a_signal_after_the_last_file_says_the_manifest_was_not_applied(logs, manifest, tmp_path, sig, code):
+    """Issue 27: a signal after the last file but before the manifest's masses are
+    written said "6 of 6 files done ... 0 not done", and nothing of the masses. The line
+    (and the JSON object) says the manifest was not applied; the exit code is the
+    signal's; a new run applies it."""
+    (logs / "z_held.csv").rename(logs / "a9.csv")  # no held file here
+    store = tmp_path / "s.sqlite"
+    proc, out, err = start(["--hold-after-ingest", "ingest", logs, "--store", store, "--workers", "1",
+                            "--manifest", manifest, "--log-json"], tmp_path)
+    wait_for(lambda: Path(f"{store}.ingested").exists() or proc.poll() is not None, "the files stored")
+    assert proc.poll() is None, err.read_text()
+    os.kill(proc.pid, sig)
+    assert proc.wait(timeout=60) == code, err.read_text()
+    line = [ln for ln in err.read_text().splitlines() if "interrupted by" in ln]
+    assert len(line) == 1 and f"{N_FILES} of {N_FILES} files done" in line[0], err.read_text()
+    assert f"the manifest {manifest} was not applied" in line[0]
+    event = json.loads(out.read_text().splitlines()[-1])
+    assert event["event"] == "interrupted" and event["not_done"] == 0 and event["manifest"] == "not applied"
+    assert _trip_masses(store) == 0
+    res = run("ingest", logs, "--store", store, "--workers", "1", "--manifest", manifest, "-q")
+    assert res.exit_code == 0, res.output
+    assert _trip_masses(store) == N_FILES
+
+
+def test_a_signal_after_the_summary_does_not_make_a_finished_run_interrupted(logs, manifest, tmp_path):
+    """A SIGINT that arrives once the run is finished and its summary printed stops
+    nothing: the exit code is the run's (0), the summary stands, and one line says the
+    signal came too late to stop anything (no exit 130 without an 'interrupted' line)."""
+    (logs / "z_held.csv").rename(logs / "a9.csv")
+    store = tmp_path / "s.sqlite"
+    proc, out, err = start(["--hold-after-summary", "ingest", logs, "--store", store, "--workers", "1",
+                            "--manifest", manifest, "--log-json"], tmp_path)
+    wait_for(lambda: Path(f"{store}.summarised").exists() or proc.poll() is not None, "the summary")
+    assert proc.poll() is None, err.read_text()
+    os.kill(proc.pid, signal.SIGINT)
+    assert proc.wait(timeout=60) == 0, err.read_text()
+    assert json.loads(out.read_text().splitlines()[-1])["event"] == "summary"
+    assert "SIGINT arrived after the run had finished" in err.read_text()
+    assert "interrupted" not in err.read_text() and _trip_masses(store) == N_FILES

@@ -229,6 +229,54 @@ def test_profile_is_compact_for_smooth_data():
     assert len(encode_profile(prof)) < 0.6 * raw_bytes
 
 
+def _format_1_blob(prof: dict) -> bytes:
+    """A profile as cevm wrote it before format 2 (spelt out here: stores hold them):
+    each array byte-shuffled, zlib level 1."""
+    import json as _json
+    import struct
+    import zlib
+
+    entries, payloads = [], []
+    n = len(prof["time_s"])
+    for name, dtype in store_mod.PROFILE_DTYPES.items():
+        a = np.ascontiguousarray(prof[name], dtype=dtype)
+        payload = zlib.compress(a.view(np.uint8).reshape(n, a.itemsize).T.tobytes(), 1)
+        entries.append([name, dtype, len(payload)])
+        payloads.append(payload)
+    head = _json.dumps({"n": n, "codec": "shuffle+zlib", "arrays": entries}).encode()
+    return b"".join([b"CEVMPRF1", struct.pack("<I", len(head)), head, *payloads])
+
+
+def test_profiles_of_format_1_still_decode_and_format_2_is_smaller():
+    t = np.arange(1800, dtype=np.float64)
+    v = 8.0 + 4.0 * np.sin(t / 50.0)
+    prof = {"time_s": t, "speed_mps": v, "distance_m": np.cumsum(v), "elevation_m": 80.0 + 0.02 * t,
+            "lat_deg": 52.0 + 1e-5 * np.cumsum(v), "lon_deg": np.where(t % 97 == 0, np.nan, -0.7 + 1e-5 * t)}
+    old = _format_1_blob(prof)
+    new = encode_profile(prof)
+    assert new[:8] == b"CEVMPRF2" and len(new) < len(old)
+    for blob in (old, new):
+        back = decode_profile(blob)
+        for k, dtype in store_mod.PROFILE_DTYPES.items():
+            np.testing.assert_array_equal(back[k], prof[k].astype(dtype).astype(np.float64))
+
+
+def test_a_profile_header_claiming_too_many_samples_is_refused_before_decompressing():
+    """Issue 24: a blob whose header says 10^9 samples (damaged, with a valid CRC) must
+    not make a reader allocate gigabytes: refused from the header."""
+    import json as _json
+    import struct
+
+    blob = encode_profile({k: np.zeros(3) for k in store_mod.PROFILE_DTYPES})
+    hlen = struct.unpack_from("<I", blob, 8)[0]
+    head = _json.loads(blob[12:12 + hlen])
+    head["n"] = 10**9
+    forged = _json.dumps(head).encode()
+    bomb = blob[:8] + struct.pack("<I", len(forged)) + forged + blob[12 + hlen:]
+    with pytest.raises(CevmError, match="header says 1,000,000,000 samples"):
+        decode_profile(bomb)
+
+
 def test_profile_rejects_bad_input():
     good = {k: np.zeros(3) for k in store_mod.PROFILE_DTYPES}
     with pytest.raises(ValueError, match="lacks"):

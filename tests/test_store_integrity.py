@@ -294,18 +294,24 @@ def test_decoding_inflates_no_stream_past_its_header():
     """The codec alone: a stream longer than its header says, or shorter, is refused; a
     zero-sample header with a non-empty stream too (zlib's max_length 0 means no limit)."""
     from cevm.errors import CevmError
-    from cevm.store.codec import MAX_STORED_SAMPLES, decode_profile, encode_profile, inflate_exactly
+    from cevm.store.codec import MAX_PROFILE_SAMPLES, decode_profile, encode_profile, inflate_exactly
 
     prof = {k: np.arange(5.0) for k in ("time_s", "speed_mps", "distance_m", "elevation_m", "lat_deg", "lon_deg")}
     blob = encode_profile(prof)
     assert decode_profile(blob, 5)["time_s"].tolist() == [0, 1, 2, 3, 4]
     with pytest.raises(CevmError, match="the trip 6"):
         decode_profile(blob, 6)
+    hlen = struct.unpack_from("<I", blob, 8)[0]  # the current format (zstd): a header of 6 over streams of 5
+    head = json.loads(blob[12:12 + hlen])
+    head["n"] = 6
+    forged = json.dumps(head).encode()
+    with pytest.raises(CevmError, match="does not decompress to the 48 bytes of its header"):
+        decode_profile(blob[:8] + struct.pack("<I", len(forged)) + forged + blob[12 + hlen:])
     stream = zlib.compress(bytes(1000))
     for size in (0, 999, 1001):
         with pytest.raises(CevmError, match="inflates to"):
             inflate_exactly(stream, size)
     assert inflate_exactly(stream, 1000) == bytes(1000)
-    header = json.dumps({"n": MAX_STORED_SAMPLES + 1, "codec": "shuffle+zlib", "arrays": []}).encode()
+    header = json.dumps({"n": MAX_PROFILE_SAMPLES + 1, "codec": "shuffle+zlib", "arrays": []}).encode()
     with pytest.raises(CevmError, match="at most"):
         decode_profile(b"CEVMPRF1" + struct.pack("<I", len(header)) + header)

@@ -241,3 +241,59 @@ def test_trip_evidence_round_trips(tmp_path):
             assert math.isnan(row[f]) and getattr(back, f) is None and math.isnan(row_b[f])
         else:
             assert row[f] == x and getattr(back, f) == x and row_b[f] == x
+
+
+def _record(vehicle: str, start_s: float, duration_s: float, sha: str, index: int = 0, soc: float | None = None):
+    from cevm.core.trip import TripRecord
+
+    return TripRecord(vehicle, "/logs/x.csv", sha, index, start_s, duration_s, 1000.0, 2, "flat", 0.0, None, None,
+                      start_soc_pct=soc)
+
+
+def _starts(st: TripStore, vehicle: str = "EB-1") -> list:
+    df = st.list_trips(vehicle_id=vehicle)
+    return [(float(s), None if math.isnan(g) else float(g), None if math.isnan(c) else float(c))
+            for s, g, c in zip(df["start_utc_s"], df["standstill_before_s"], df["start_soc_pct"])]
+
+
+def test_migration_6_gives_stored_trips_their_standstill_before(tmp_path):
+    """A store of version 1 with two trips of one vehicle: migration 6 adds the start
+    columns, the time the vehicle stood between them (none before its first), and no
+    state of charge (not known before the file is ingested again)."""
+    db = tmp_path / "old.sqlite"
+    make_v1_store(db)
+    con = sqlite3.connect(db)
+    with con:  # a second trip of HGV-11, 600 s after the first ends (1700000000 + 120 s)
+        con.execute("INSERT INTO trips VALUES ('HGV-11:1700000720:ab', 'HGV-11', '/logs/a.csv', ?, 1, 1700000720.0, "
+                    "60.0, 500.0, 61, 'dsm', 98.5, NULL, NULL, NULL, NULL, NULL, NULL, '{}')", (SHA,))
+    con.close()
+    with TripStore(db) as st:
+        assert _starts(st, "HGV-11") == [(1700000000.0, None, None), (1700000720.0, 600.0, None)]
+    assert {"start_soc_pct", "standstill_before_s"} <= set(trip_columns(db))
+
+
+def test_standstill_before_stays_right_when_files_come_in_any_order_change_or_go(tmp_path):
+    """The time a vehicle stood before each trip, by hand: trips at 1000-1100 (file a),
+    1500-1600 and 2000-2050 (file b), 3000-3100 (file c). Ingested c, a, b; then b
+    replaced by a version whose last trip ends later; then b forgotten; then an
+    overlapping trip (another file, starting before the previous ends): no standstill."""
+    sha = {k: k * 64 for k in "abcd"}
+    with TripStore(tmp_path / "s.sqlite") as st:
+        def put(name, trips):
+            recs = [_record("EB-1", s, d, sha[name], i, soc) for i, (s, d, soc) in enumerate(trips)]
+            st.replace_file_trips(f"/logs/{name}.csv", recs, [b"v"] * len(recs), sha256=sha[name], size_bytes=1,
+                                  mtime_s=0.0, profile="srf", profile_blobs=[b"p"] * len(recs), force=True)
+
+        put("c", [(3000.0, 100.0, 55.0)])
+        put("a", [(1000.0, 100.0, 90.5)])
+        assert _starts(st) == [(1000.0, None, 90.5), (3000.0, 1900.0, 55.0)]
+        put("b", [(1500.0, 100.0, None), (2000.0, 50.0, 70.0)])
+        assert _starts(st) == [(1000.0, None, 90.5), (1500.0, 400.0, None), (2000.0, 400.0, 70.0),
+                               (3000.0, 950.0, 55.0)]
+        sha["b"] = "e" * 64  # a changed file b: its second trip now ends at 2400
+        put("b", [(1500.0, 100.0, None), (2000.0, 400.0, 70.0)])
+        assert _starts(st)[-1] == (3000.0, 600.0, 55.0)
+        st.forget_file("/logs/b.csv")
+        assert _starts(st) == [(1000.0, None, 90.5), (3000.0, 1900.0, 55.0)]
+        put("d", [(3050.0, 10.0, None)])  # starts before the trip at 3000 ends
+        assert _starts(st)[-1] == (3050.0, None, None)

@@ -74,6 +74,7 @@ def ingest(
 
     from cevm.cli import interrupts
     from cevm.ingest import IngestOptions
+    from cevm.runtime import signals_deferred
     from cevm.ingest.pipeline import discover
     from cevm.ingest import ingest as run_ingest
     from cevm.executors import make_executor
@@ -134,13 +135,16 @@ def ingest(
         except CevmError as exc:
             raise fail(exc) from None
     not_applied = 0
+    manifest_applied = False  # said in the line of an interrupted run: the masses wait for the next one
     new_store = not store_path.exists()
     try:
         with make_executor(workers, scheduler) as executor, TripStore.open(store_path) as st:
             st.require_intact()  # never write into a damaged database
             report = run_ingest(paths, st, options, on_file=on_file, on_start=on_start, executor=executor)
             if masses is not None:
-                _, not_applied = apply_manifest(st, manifest, masses)
+                with signals_deferred():  # the masses written are the masses reported
+                    _, not_applied = apply_manifest(st, manifest, masses)
+                    manifest_applied = True
     except StoreAccessError as exc:
         stop = fail(exc)
         typer.echo("cevm: note: the files written before the failure are stored, the one being written was rolled "
@@ -153,22 +157,32 @@ def ingest(
     except KeyboardInterrupt as exc:  # SIGINT, or SIGTERM under cevm.cli.main: what is stored, what is not
         if progress is not None:
             progress.stop()
-        typer.echo(_interrupted_line(exc, done, n_files, store_path), err=True)
+        pending = manifest if masses is not None and not manifest_applied else None
+        typer.echo(_interrupted_line(exc, done, n_files, store_path, pending), err=True)
         if log_json:
-            typer.echo(json.dumps({"event": "interrupted", "signal": interrupts.signal_name(exc),
-                                   "store": str(store_path), "files": n_files[0] if n_files else None,
-                                   "done": len(done), "not_done": n_files[0] - len(done) if n_files else None}))
+            event = {"event": "interrupted", "signal": interrupts.signal_name(exc), "store": str(store_path),
+                     "files": n_files[0] if n_files else None, "done": len(done),
+                     "not_done": n_files[0] - len(done) if n_files else None}
+            if masses is not None:
+                event["manifest"] = "applied" if manifest_applied else "not applied"
+            typer.echo(json.dumps(event))
         raise typer.Exit(interrupts.exit_code(exc)) from None
     finally:
         if progress is not None:
             progress.stop()
-    summary = report.summary()
-    if log_json:
-        typer.echo(json.dumps({"event": "summary", "store": str(store_path), **summary}))
-    elif quiet:
-        typer.echo(_summary_line(summary, store_path))
-    else:
-        _print_ingest_table(report, summary, store_path)
+    # The run is finished and stored: a stop signal from here on stops nothing, and turns
+    # neither the summary nor the exit code into an interrupted run's; it is said in a line.
+    with interrupts.late_signals_noted() as late:
+        summary = report.summary()
+        if log_json:
+            typer.echo(json.dumps({"event": "summary", "store": str(store_path), **summary}))
+        elif quiet:
+            typer.echo(_summary_line(summary, store_path))
+        else:
+            _print_ingest_table(report, summary, store_path)
+        if late:
+            typer.echo(f"cevm ingest: {interrupts.signal_name(interrupts.Interrupted(late[0]))} arrived after the "
+                       "run had finished: it stopped nothing, the summary above stands", err=True)
     raise typer.Exit(EXIT_PARTIAL if report.failed or not_applied else EXIT_OK)
 
 
@@ -190,18 +204,23 @@ def _summary_line(s: dict, store_path: Path) -> str:
             f"in {s['seconds']:.2f} s -> {store_path}")
 
 
-def _interrupted_line(exc: BaseException, done: list, n_files: list[int], store_path: Path) -> str:
+def _interrupted_line(exc: BaseException, done: list, n_files: list[int], store_path: Path,
+                      manifest_pending: Path | None = None) -> str:
     """One line after an interrupt: the files done (each stored as reported), the files
-    not done (left as the store had them)."""
+    not done (left as the store had them), and a manifest whose masses were not applied."""
     from cevm.cli.interrupts import signal_name
 
     head = f"cevm ingest: interrupted by {signal_name(exc)}"
+    masses = ""
+    if manifest_pending is not None:
+        masses = (f"; the manifest {printable(str(manifest_pending))} was not applied: no trip has its mass from it "
+                  "(run again: the stored files are skipped, then the manifest is applied)")
     if not n_files:
-        return f"{head} before any file was read; nothing stored -> {store_path}"
+        return f"{head} before any file was read; nothing stored{masses} -> {store_path}"
     counts = {k: sum(1 for f in done if f.status == k) for k in ("ingested", "unchanged", "failed")}
     return (f"{head}: {len(done)} of {n_files[0]} files done ({counts['ingested']} ingested, "
             f"{counts['unchanged']} unchanged, {counts['failed']} failed) and stored as reported; "
-            f"{n_files[0] - len(done)} not done, left as they were (run again to ingest them) -> {store_path}")
+            f"{n_files[0] - len(done)} not done, left as they were (run again to ingest them){masses} -> {store_path}")
 
 
 def _print_ingest_table(report, summary: dict, store_path: Path) -> None:

@@ -131,3 +131,23 @@ def stopped(exc: BaseException, argv: Sequence[str]) -> int | str | None:
             pass
         return EXIT_SIGNAL_BASE + signum
     return code
+
+
+@contextmanager
+def late_signals_noted() -> Iterator[list[int]]:
+    """Within the block, in the main thread, SIGINT and SIGTERM are only noted in the list
+    yielded (in the order they arrive), not raised: for a command whose work is finished
+    and stored, so that a late signal neither cuts its report nor turns its exit code
+    into an interrupted run's (the command says that it arrived). The handlers before
+    the block come back after it."""
+    noted: list[int] = []
+    try:
+        saved = {s: signal.signal(s, lambda signum, frame: noted.append(signum)) for s in STOP_SIGNALS}
+    except ValueError:  # not the main thread
+        yield noted
+        return
+    try:
+        yield noted
+    finally:
+        for s, handler in saved.items():
+            signal.signal(s, handler)

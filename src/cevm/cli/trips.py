@@ -25,8 +25,9 @@ def trips(
     fmt: Annotated[OutputFormat, typer.Option("--format", "-f", help="Output format.")] = OutputFormat.table,
 ) -> None:
     """List the stored trips, each with its mass and where it comes from (a manifest, by
-    hand, the logger, or none: the vehicle file's). 'cevm trips set-mass' gives trips
-    their masses."""
+    hand, the logger, or none: the vehicle file's), the state of charge logged at its
+    start (EV logs) and the time the vehicle stood since its previous stored trip (none
+    for its first). 'cevm trips set-mass' gives trips their masses."""
     if ctx.invoked_subcommand is not None:
         return
     from cevm.store import TripStore, format_trips
@@ -40,12 +41,14 @@ def trips(
     except CevmError as exc:
         raise fail(exc) from None
     rows = [{k: (None if isinstance(v, float) and v != v else v) for k, v in r.items()} for r in df.to_dict("records")]
-    columns = ["trip_id", "vehicle_id", "start_utc", "distance_km", "duration_s", "mass_kg", "payload_kg",
-               "mass_source", "measured_fuel_l", "measured_energy_kwh", "dsm_coverage_pct", "elevation_source"]
+    columns = ["trip_id", "vehicle_id", "start_utc", "distance_km", "duration_s", "start_soc_pct",
+               "standstill_before_s", "mass_kg", "payload_kg", "mass_source", "measured_fuel_l", "measured_energy_kwh",
+               "dsm_coverage_pct", "elevation_source"]
     if fmt == OutputFormat.table:
         columns = [c for c in columns if any(r.get(c) is not None for r in rows)] or columns[:5]
         write_rows(rows, fmt, columns=columns, title=f"cevm trips ({len(rows)})", headers=TRIPS_HEADERS,
-                   digits={"duration_s": 0, "dsm_coverage_pct": 1, "distance_km": 2, "mass_kg": 0, "payload_kg": 0})
+                   digits={"duration_s": 0, "dsm_coverage_pct": 1, "distance_km": 2, "mass_kg": 0, "payload_kg": 0,
+                           "start_soc_pct": 1, "standstill_before_s": 0})
         off = [r for r in rows if r["mass_vs_logged_pct"] is not None and abs(r["mass_vs_logged_pct"]) > 5.0]
         if off:
             typer.echo(f"cevm: note: {len(off)} trip(s) have a given mass more than 5 % from their logged gross "
@@ -58,7 +61,7 @@ def trips(
 TRIPS_HEADERS = {"vehicle_id": "vehicle", "start_utc": "start (UTC)", "distance_km": "km", "duration_s": "s",
                  "measured_fuel_l": "fuel l", "measured_energy_kwh": "kWh", "dsm_coverage_pct": "DSM %",
                  "elevation_source": "elevation", "mass_kg": "mass kg", "payload_kg": "payload kg",
-                 "mass_source": "mass from"}
+                 "mass_source": "mass from", "start_soc_pct": "SoC start %", "standstill_before_s": "stood s"}
 
 
 @app.command("set-mass")

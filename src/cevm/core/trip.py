@@ -95,6 +95,7 @@ class Trip:
     standstill_s: float | None = None  # time at standstill with the ignition on [s]
     standstill_power_w: float | None = None  # EV: mean measured battery power at standstill [W]
     standstill_fuel_lps: float | None = None  # ICE: mean measured fuel rate at standstill [l/s]
+    start_soc_pct: float | None = None  # state of charge logged at the start [%] (None: not logged)
 
     @property
     def trip_id(self) -> str:
@@ -119,6 +120,7 @@ class Trip:
             self.vehicle_id, self.source_file, self.source_sha256, int(self.trip_index), float(self.start_utc_s),
             self.duration_s, self.length_m, self.n_samples, self.elevation_source, self.dsm_coverage_pct,
             self.measured, self.gross_weight_kg, self.quality, **{k: getattr(self, k) for k in TRIP_EVIDENCE_FIELDS},
+            start_soc_pct=self.start_soc_pct,
         )
 
 
@@ -147,6 +149,7 @@ class TripRecord:
     standstill_s: float | None = None
     standstill_power_w: float | None = None
     standstill_fuel_lps: float | None = None
+    start_soc_pct: float | None = None
 
     @property
     def trip_id(self) -> str:

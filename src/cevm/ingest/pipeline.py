@@ -19,6 +19,7 @@ caller has seen are exactly what is stored.
 
 from __future__ import annotations
 
+import fnmatch
 import glob
 import os
 import sys
@@ -102,25 +103,49 @@ class IngestReport:
 
 def discover(inputs: Iterable[str | Path]) -> tuple[list[Path], list[str]]:
     """Expand files, directories (recursive) and glob patterns into a sorted, unique
-    list of files; return it with a message for each input that matched nothing."""
+    list of files; return it with a message for each input that matched nothing and for
+    each directory that could not be read (its logs, if any, are not ingested: the run
+    reports it as failed, never skips it in silence)."""
     found: dict[str, Path] = {}
     missing: list[str] = []
     for item in inputs:
         s = str(item)
         p = Path(s)
+        unreadable: list[str] = []
         if p.is_dir():
-            hits = [q for pat in LOG_PATTERNS for q in p.rglob(pat) if q.is_file()]
+            hits = _logs_under(p, unreadable)
         elif p.is_file():
             hits = [p]
         elif glob.has_magic(s):
             hits = [Path(q) for q in glob.glob(s, recursive=True) if Path(q).is_file()]
         else:
             hits = []
-        if not hits:
+        missing.extend(unreadable)
+        if not hits and not unreadable:
             missing.append(printable(f"{s}: no such file, directory or matching log files"))
         for q in hits:
             found.setdefault(str(q.resolve()), q)
     return [found[k] for k in sorted(found)], missing
+
+
+def _logs_under(root: Path, unreadable: list[str]) -> list[Path]:
+    """The log files (:data:`LOG_PATTERNS`) in ``root`` and its subdirectories (symbolic
+    links to directories not followed, as ``Path.rglob``); a message for each directory
+    that cannot be listed goes to ``unreadable``."""
+
+    def note(exc: OSError) -> None:
+        why = exc.strerror or type(exc).__name__
+        unreadable.append(printable(f"{exc.filename}: cannot read this directory ({why}); the logs in it, if "
+                                    "any, were not ingested"))
+
+    hits = []
+    for dirpath, _, filenames in os.walk(root, onerror=note):
+        for name in filenames:
+            if any(fnmatch.fnmatchcase(name, pat) for pat in LOG_PATTERNS):
+                q = Path(dirpath, name)
+                if q.is_file():
+                    hits.append(q)
+    return hits
 
 
 def ingest(

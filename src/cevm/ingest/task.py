@@ -123,6 +123,7 @@ def _trip_from_clean(ct: CleanTrip, *, vehicle_id: str, path: Path, sha256: str,
         measured=ct.measured,
         gross_weight_kg=ct.gross_weight_kg,
         quality=quality,
+        start_soc_pct=ct.start_soc_pct,
         **evidence,
     )
 
@@ -168,7 +169,22 @@ def trip_warnings(trip: Trip) -> list[str]:
     refused), each naming the trip, for the file's repairs."""
     q = trip.quality
     found = [*q.get("consumption", {}).get("warnings", ()), *q.get("elevation", {}).get("elevation_warnings", ())]
+    if q.get("speed_jumps"):
+        found.append(speed_jump_warning(q["speed_jumps"], int(q.get("speed_unresolved_jumps", 0))))
     return [f"trip {trip.trip_id}: {w}" for w in found]
+
+
+def speed_jump_warning(jumps: list[dict], n: int) -> str:
+    """The repair note of a trip's lasting speed jumps (its quality's ``speed_jumps``, the
+    largest first; ``n`` of them in all)."""
+    import datetime as dt
+
+    j = jumps[0]
+    when = dt.datetime.fromtimestamp(j["utc_s"], dt.timezone.utc).strftime("%Y-%m-%d %H:%M:%S")
+    return (f"speed: {max(n, len(jumps))} lasting speed jump(s) the cleaning could not repair, the largest "
+            f"{3.6 * (j['to_mps'] - j['from_mps']):+.0f} km/h in {j['dt_s']:g} s at {when} UTC in "
+            f"{j['source']} (a spliced recording?); kept as logged, and listed in the trip's quality "
+            "('speed_jumps') for calibrate to flag or down-weight the trip")
 
 
 def process_file(

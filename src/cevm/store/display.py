@@ -23,7 +23,8 @@ def format_utc(t_s: np.ndarray | pd.Series | float) -> pd.Series | str:
 def format_trips(df: pd.DataFrame, masses: Mapping | None = None) -> pd.DataFrame:
     """The display table of :meth:`~cevm.store.TripStore.list_trips` rows: trip_id, vehicle_id,
     start_utc (ISO 8601, ``Z``), duration_s, distance_km, measured_fuel_l,
-    measured_energy_kwh (from joules, 1 kWh = 3.6e6 J), dsm_coverage_pct,
+    start_soc_pct (logged at the start), standstill_before_s (since the vehicle's previous
+    trip), measured_energy_kwh (from joules, 1 kWh = 3.6e6 J), dsm_coverage_pct,
     elevation_source, source_file; with ``masses`` (:func:`cevm.store.masses.trip_masses`)
     also each trip's mass: mass_kg (the gross mass it is predicted at, as far as known
     without a vehicle file: given, else logged), payload_kg (a payload given to it),
@@ -39,6 +40,8 @@ def format_trips(df: pd.DataFrame, masses: Mapping | None = None) -> pd.DataFram
             "start_utc": format_utc(df["start_utc_s"]).to_numpy(),
             "duration_s": df["duration_s"].astype(np.float64),
             "distance_km": df["distance_m"].astype(np.float64) / 1000.0,
+            "start_soc_pct": df["start_soc_pct"].astype(np.float64),
+            "standstill_before_s": df["standstill_before_s"].astype(np.float64),
             "measured_fuel_l": value.where(kind == "fuel_l"),
             "measured_energy_kwh": value.where(kind == "energy_j") / J_PER_KWH,
             "dsm_coverage_pct": df["dsm_coverage_pct"].astype(np.float64),

@@ -166,7 +166,9 @@ class TripQueries:
         'energy_j' | None), measured_value [l or J], measured_source,
         measured_resolution, measured_uncertainty, quality_json, then the evidence of
         :data:`~cevm.core.trip.TRIP_EVIDENCE_FIELDS` (ambient_temp_c, ...,
-        standstill_fuel_lps). Float columns hold NaN for missing values. An unknown ``vehicle_id`` or any unknown id in ``trip_ids``
+        standstill_fuel_lps), then the trip's start (start_soc_pct [%], standstill_before_s
+        [s] since the vehicle's previous trip: :data:`~cevm.store.schema.TRIP_START_COLUMNS`).
+        Float columns hold NaN for missing values. An unknown ``vehicle_id`` or any unknown id in ``trip_ids``
         raises :class:`CevmError`. :func:`~cevm.store.format_trips` makes the display
         table.
         """
@@ -354,6 +356,7 @@ class TripQueries:
             gross_weight_kg=r["gross_weight_kg"],
             quality=json.loads(r["quality_json"]),
             **{f: r[f] for f in TRIP_EVIDENCE_FIELDS},
+            start_soc_pct=r["start_soc_pct"],
             **prof,
         )
 

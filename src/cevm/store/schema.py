@@ -14,7 +14,9 @@ Tables
                    uncertainty; NULL when not measured), gross weight [kg],
                    elevation source, DSM coverage [%]; the evidence of
                    :data:`cevm.core.trip.TRIP_EVIDENCE_FIELDS` (ambient temperature
-                   [degC], standstill time [s] and rate [W or l/s]; NULL when not logged).
+                   [degC], standstill time [s] and rate [W or l/s]; NULL when not logged);
+                   its start (:data:`TRIP_START_COLUMNS`: state of charge [%], standstill
+                   since the vehicle's previous trip [s]).
     ``trip_blobs`` per trip: the drive-cycle vector (opaque bytes from the caller) and
                    the profile arrays (see :func:`cevm.store.codec.encode_profile`). Kept
                    apart from ``trips`` so that listing trips never reads the blobs.
@@ -55,6 +57,13 @@ from cevm import __version__
 from cevm.core.trip import TRIP_EVIDENCE_FIELDS
 from cevm.errors import CevmError
 
+#: A trip's state at its start (migration 6): the state of charge its log holds there [%]
+#: (NULL where the log has none), and the time the vehicle stood since the end of its
+#: previous stored trip [s] (NULL for its first, or where that trip overlaps this one);
+#: the store keeps the second one right for every trip of a vehicle whenever its trips
+#: change (:func:`cevm.store.writing.update_standstill_before`).
+TRIP_START_COLUMNS: tuple[str, ...] = ("start_soc_pct", "standstill_before_s")
+
 TRIP_COLUMNS: tuple[str, ...] = (
     "trip_id",
     "vehicle_id",
@@ -75,6 +84,7 @@ TRIP_COLUMNS: tuple[str, ...] = (
     "measured_uncertainty",
     "quality_json",
     *TRIP_EVIDENCE_FIELDS,
+    *TRIP_START_COLUMNS,
 )
 TRIP_FLOAT_COLUMNS = (
     "start_utc_s",
@@ -86,6 +96,7 @@ TRIP_FLOAT_COLUMNS = (
     "measured_resolution",
     "measured_uncertainty",
     *TRIP_EVIDENCE_FIELDS,
+    *TRIP_START_COLUMNS,
 )
 
 FILE_COLUMNS: tuple[str, ...] = (
@@ -226,6 +237,16 @@ _V5_STATEMENTS: tuple[str, ...] = (
     "UPDATE route_legs SET vector_crc32 = crc32(vector) WHERE kind = 'cycle'",
 )
 
+#: Each trip's standstill since the end of the previous trip of its vehicle (NULL for the
+#: first, or an overlap), for the vehicles in ``{vehicles}`` (an SQL condition on
+#: ``vehicle_id``).
+STANDSTILL_BEFORE_SQL = """UPDATE trips SET standstill_before_s = g.gap FROM (
+    SELECT trip_id, CASE WHEN gap >= 0 THEN gap END AS gap FROM (
+        SELECT trip_id, start_utc_s - LAG(start_utc_s + duration_s)
+            OVER (PARTITION BY vehicle_id ORDER BY start_utc_s, trip_id) AS gap
+        FROM trips WHERE {vehicles})) AS g
+    WHERE trips.trip_id = g.trip_id AND trips.standstill_before_s IS NOT g.gap"""
+
 MIGRATIONS: tuple[Migration, ...] = (
     Migration(1, "files, trips, their blobs and ingest runs", _V1_STATEMENTS),
     Migration(2, "trip evidence: ambient temperature (mean, min, max), standstill time and rate",
@@ -244,6 +265,12 @@ MIGRATIONS: tuple[Migration, ...] = (
     )),
     Migration(5, "cycle vectors in format 3 (with the positive kinetic energy and the traction time the "
                  "energy terms need), computed from each trip's or route leg's stored profile", _V5_STATEMENTS),
+    Migration(6, "a trip's start: the state of charge logged there (known after a re-ingest of its file), the "
+                 "time its vehicle stood since its previous trip", (
+                     "ALTER TABLE trips ADD COLUMN start_soc_pct REAL",
+                     "ALTER TABLE trips ADD COLUMN standstill_before_s REAL",
+                     STANDSTILL_BEFORE_SQL.format(vehicles="1"),
+                 )),
 )
 
 SCHEMA_VERSION = MIGRATIONS[-1].version

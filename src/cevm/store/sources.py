@@ -38,11 +38,15 @@ class StoredTrip(Source):
     """A stored trip as a sweep source, with what the store knows of it beyond its cycle:
     its mass (:class:`~cevm.store.masses.TripMass`: given, logged) and its measured
     consumption (None if unmeasured), to predict it at its own mass and show the
-    measurement beside the model."""
+    measurement beside the model; and its start: the state of charge its log holds there
+    [%] and the time its vehicle stood since its previous stored trip [s] (None where not
+    known), inputs known before a trip in operations."""
 
     mass: TripMass | None = None
     measured: Measurement | None = None
     elevation_source: str | None = None  # cevm.ingest.elevation: "dsm", "gps", "flat", ...
+    start_soc_pct: float | None = None
+    standstill_before_s: float | None = None
 
 
 #: Without a max_gross_kg, a trip's gross mass above this multiple of a vehicle's kerb
@@ -166,15 +170,16 @@ def load_sources(stack: ExitStack, store: Optional[Path], cycles: Sequence[Path]
             facts[r.trip_id] = (None if not math.isfinite(t_c) else float(t_c), masses[r.trip_id],
                                 row_measurement(r.measured_kind, r.measured_value, r.measured_source,
                                                 r.measured_resolution, r.measured_uncertainty),
-                                r.elevation_source)
+                                r.elevation_source, _finite(r.start_soc_pct), _finite(r.standstill_before_s))
 
     def trip_legs(tid: str):
         return lambda: (LegProfile.from_profile(st.load_profile(tid)),)
 
     for tid, vec in vectors.items():
-        ambient, mass, measured, elevation = facts[tid]
+        ambient, mass, measured, elevation, soc, stood = facts[tid]
         sources.append(StoredTrip(name=tid, kind="trip", vector=vec, legs=trip_legs(tid), ambient_c=ambient,
-                                  mass=mass, measured=measured, elevation_source=elevation))
+                                  mass=mass, measured=measured, elevation_source=elevation, start_soc_pct=soc,
+                                  standstill_before_s=stood))
 
     def route_legs(name: str):
         return lambda: [LegProfile.from_profile(p) for p in load_route_profiles(st, name)]
@@ -189,6 +194,11 @@ def load_sources(stack: ExitStack, store: Optional[Path], cycles: Sequence[Path]
         sources.append(Source(name=name, kind="route", vector=vec, legs=route_legs(name),
                               ambient_c=route_ambient_c(st, legs)))
     return sources
+
+
+def _finite(x: float) -> float | None:
+    """A stored REAL as the list's NaN-for-NULL gives it: a float, or None for NaN."""
+    return float(x) if math.isfinite(x) else None
 
 
 def route_ambient_c(st: TripStore, legs: Sequence) -> float | None:

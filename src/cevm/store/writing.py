@@ -29,14 +29,15 @@ import json
 import os
 import socket
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 from cevm.core.trip import TRIP_EVIDENCE_FIELDS, Trip, TripRecord
 from cevm.store.codec import trip_profile_blob
 from cevm.store.location import file_key
-from cevm.store.schema import FILE_COLUMNS, TRIP_COLUMNS, blob_crc32, in_json, json_default, sql_real
+from cevm.store.schema import (FILE_COLUMNS, STANDSTILL_BEFORE_SQL, TRIP_COLUMNS, blob_crc32, in_json,
+                               json_default, sql_real)
 
 
 @dataclass(frozen=True)
@@ -85,7 +86,19 @@ def trip_row(t: Trip | TripRecord, key: str) -> tuple:
         None if m is None else sql_real(m.uncertainty),
         json.dumps(t.quality, default=json_default, sort_keys=True),
         *(sql_real(getattr(t, f)) for f in TRIP_EVIDENCE_FIELDS),
+        sql_real(getattr(t, "start_soc_pct", None)),
+        None,  # standstill_before_s: made by update_standstill_before once the file's trips are in
     )
+
+
+def update_standstill_before(con, vehicle_ids: Iterable[str]) -> None:
+    """Each stored trip's ``standstill_before_s`` for the vehicles ``vehicle_ids``: the
+    time from the end of the vehicle's previous trip (by start) to its start [s]; NULL
+    for its first trip, or when the previous one ends after this one starts (an overlap:
+    the previous trip is not known). Run in the transaction that changed their trips,
+    so that the trip after a replaced or removed one is right too."""
+    con.execute(STANDSTILL_BEFORE_SQL.format(vehicles="vehicle_id IN (SELECT value FROM json_each(?))"),
+                (in_json(sorted(set(vehicle_ids))),))
 
 
 def _carry_masses(con, old_ids: Sequence[str], new_ids: Sequence[str]) -> None:
@@ -182,7 +195,8 @@ class TripWriting:
             if not force and state is not None and state == (sha256, "ok"):
                 return WriteResult(key, unchanged=True, inserted=0, replaced=0)
             self._checkpoint("begun")
-            old_ids = [r[0] for r in con.execute("SELECT trip_id FROM trips WHERE source_file = ?", (key,))]
+            old = con.execute("SELECT trip_id, vehicle_id FROM trips WHERE source_file = ?", (key,)).fetchall()
+            old_ids = [r[0] for r in old]
             n_old = len(old_ids)
             con.execute(
                 "DELETE FROM trip_blobs WHERE trip_id IN "
@@ -244,6 +258,7 @@ class TripWriting:
             )
             self._checkpoint("blobs_inserted")
             _carry_masses(con, old_ids, [ids[i] for i in keep])
+            update_standstill_before(con, {r[1] for r in old} | {trip_rows[i][1] for i in keep})
         return WriteResult(
             key, unchanged=False, inserted=len(keep), replaced=n_old, duplicates=tuple(duplicates)
         )
@@ -291,6 +306,7 @@ class TripWriting:
         key = file_key(path)
         con = self.con
         with self._write():
+            vehicles = {r[0] for r in con.execute("SELECT vehicle_id FROM trips WHERE source_file = ?", (key,))}
             (n,) = con.execute("SELECT COUNT(*) FROM trips WHERE source_file = ?", (key,)).fetchone()
             con.execute(
                 "DELETE FROM trip_blobs WHERE trip_id IN "
@@ -299,6 +315,7 @@ class TripWriting:
             )
             con.execute("DELETE FROM trips WHERE source_file = ?", (key,))
             con.execute("DELETE FROM files WHERE path = ?", (key,))
+            update_standstill_before(con, vehicles)
         return int(n)
 
     # ------------------------------------------------------------------------ runs

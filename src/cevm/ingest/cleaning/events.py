@@ -16,8 +16,21 @@ class RepairEvents:
         "speed_spikes_rejected", "speed_unresolved_jumps", "gps_speed_zeroed",
     )
 
+    #: Lasting speed jumps kept per trip in its quality (the largest first), at most.
+    MAX_JUMPS_LISTED = 10
+
     def __init__(self) -> None:
         self._t: dict[str, list[np.ndarray]] = {k: [] for k in self.NAMES}
+        self._jumps: list[tuple[str, np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
+
+    def add_jumps(self, source: str, t_s, dt_s, from_mps, to_mps) -> None:
+        """Lasting speed jumps of the speed column ``source`` that the cleaning could not
+        repair (a spliced recording): the time [s, UTC] of the reading after each, the
+        time step [s] and the speeds before and after [m/s]."""
+        t_s = np.atleast_1d(np.asarray(t_s, dtype=float))
+        if t_s.size:
+            self._jumps.append((source, t_s, *(np.atleast_1d(np.asarray(a, dtype=float))
+                                               for a in (dt_s, from_mps, to_mps))))
 
     def add(self, name: str, times) -> None:
         arr = np.atleast_1d(np.asarray(times, dtype=float))
@@ -32,6 +45,18 @@ class RepairEvents:
             if a.size > 1 and not (a[1:] >= a[:-1]).all():
                 a = np.sort(a)
             self.times[k] = a
+
+    def jumps_between(self, t0: float, t1: float) -> list[dict]:
+        """The lasting speed jumps from ``t0`` to ``t1`` [s, UTC], the largest first (at
+        most :data:`MAX_JUMPS_LISTED`): ``{"source", "utc_s", "dt_s", "from_mps",
+        "to_mps"}`` each."""
+        found = []
+        for source, t, dt, v0, v1 in self._jumps:
+            for i in np.flatnonzero((t >= t0) & (t <= t1)):
+                found.append({"source": source, "utc_s": float(t[i]), "dt_s": float(dt[i]),
+                              "from_mps": float(v0[i]), "to_mps": float(v1[i])})
+        found.sort(key=lambda j: (-abs(j["to_mps"] - j["from_mps"]), j["utc_s"]))
+        return found[: self.MAX_JUMPS_LISTED]
 
     def totals(self) -> dict:
         return {k: int(v.size) for k, v in self.times.items()}

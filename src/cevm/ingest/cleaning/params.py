@@ -54,6 +54,9 @@ class CleanParams:
       as a clock step (positions must then have moved by about one tick).
     - ``unordered_share = 0.05``: more than 5 % backward steps = unordered file.
     - ``time_outlier_max_rows = 3``: longest junk-timestamp block dropped.
+    - ``start_soc_window_s = 60``: a trip's start state of charge is the reading at or
+      last before its start within 60 s, else the first within 60 s after it (a BMS
+      reports every few seconds; in a minute a vehicle's SoC moves by well under 1 %).
     - ``consumption``: :class:`cevm.ingest.consumption.ConsumptionParams`.
     """
 
@@ -77,6 +80,7 @@ class CleanParams:
     clock_moving_mps: float = 2.0
     unordered_share: float = 0.05
     time_outlier_max_rows: int = 3
+    start_soc_window_s: float = 60.0
     consumption: ConsumptionParams = field(default_factory=ConsumptionParams)
 
 
@@ -94,6 +98,8 @@ class CleanTrip:
     the :data:`cevm.ingest.evidence.EVIDENCE_COLUMNS` the log has, at the row times
     ``rows_t_s`` [s, UTC epoch] from ``consumption.max_gap_s`` before the first sample
     to as long after the last (for :func:`cevm.ingest.evidence.trip_evidence`).
+    ``start_soc_pct`` is the state of charge logged at the trip's start [%] (None where
+    the log has none near it; ``CleanParams.start_soc_window_s``).
     """
 
     start_utc_s: float
@@ -110,6 +116,7 @@ class CleanTrip:
     last_source_line: int
     rows_t_s: np.ndarray = field(default_factory=lambda: np.empty(0))
     rows: dict = field(default_factory=dict)
+    start_soc_pct: float | None = None
 
     @property
     def duration_s(self) -> float:

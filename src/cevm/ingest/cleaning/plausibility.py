@@ -40,14 +40,15 @@ def _speed_rows(t, cols, name, p: CleanParams, ev: RepairEvents) -> np.ndarray |
     ok = fin & (v >= 0) & (v <= p.max_speed_mps)
     ev.add("speed_values_rejected", t[fin & ~ok])
     del fin
-    return _drop_speed_spikes(t, v, ok, p, ev)
+    return _drop_speed_spikes(t, v, ok, p, ev, name)
 
 
-def _drop_speed_spikes(t, v, ok: np.ndarray, p: CleanParams, ev: RepairEvents) -> np.ndarray:
+def _drop_speed_spikes(t, v, ok: np.ndarray, p: CleanParams, ev: RepairEvents, name: str = "speed") -> np.ndarray:
     """``ok`` without speed spikes: consecutive readings whose change exceeds
     ``max_accel_mps2 * dt + speed_jump_tolerance_mps`` are impossible jumps; runs of at
     most ``speed_outlier_max_samples`` readings between them are rejected
-    (``speed_spikes_rejected``), jumps left are counted (``speed_unresolved_jumps``)."""
+    (``speed_spikes_rejected``), jumps left are counted (``speed_unresolved_jumps``) and
+    kept with their time and size (:meth:`RepairEvents.add_jumps`, column ``name``)."""
     idx = _nonzero(ok)
     if idx.size < 2:
         return ok
@@ -68,5 +69,9 @@ def _drop_speed_spikes(t, v, ok: np.ndarray, p: CleanParams, ev: RepairEvents) -
         ok[idx[bad]] = False
         idx = idx[~bad]
         jump = jumps(idx) if idx.size > 1 else np.zeros(0, dtype=bool)
-    ev.add("speed_unresolved_jumps", t[idx[1:][jump]])
+    after = idx[1:][jump]
+    ev.add("speed_unresolved_jumps", t[after])
+    if after.size:
+        before = idx[:-1][jump]
+        ev.add_jumps(name, t[after], t[after] - t[before], v[before], v[after])
     return ok

@@ -33,10 +33,10 @@ def _require_speed_or_position(cols: dict, path) -> None:
 
 def _columns_needed(sources: Sequence[EnergySourceLike]) -> set[str]:
     """The canonical columns that the steps after the tick merge read: those of the row
-    speeds and the GPS fixes, each trip's ignition, odometer, gross weight and evidence
-    columns, and the energy sources' columns. The others (an engine's speed, a pedal)
+    speeds and the GPS fixes, each trip's ignition, odometer, gross weight, start state of
+    charge and evidence columns, and the energy sources' columns. The others (an engine's speed, a pedal)
     count only in the duplicates and tick merging, and are dropped there."""
-    need = {*_ROW_SPEED_COLUMNS, "ignition", "odometer_m", "gross_weight_kg", *EVIDENCE_COLUMNS}
+    need = {*_ROW_SPEED_COLUMNS, "ignition", "odometer_m", "gross_weight_kg", "soc_pct", *EVIDENCE_COLUMNS}
     for s in sources:
         need |= columns_read(str(s.column))
     return need

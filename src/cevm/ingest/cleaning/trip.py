@@ -95,6 +95,12 @@ def _clean_trip(log: CleanedLog, seg: TripSpeedRows, sources: Sequence[EnergySou
         "distance_ratio_speed_vs_odometer": _odometer_ratio(log, lo, hi, grid_t, dist),
         "consumption": mq,
     }
+    start_soc, soc_offset_s = _start_soc(log, float(grid_t[0]), p.start_soc_window_s)
+    if start_soc is not None:
+        tq["start_soc"] = {"pct": start_soc, "reading_offset_s": soc_offset_s}
+    jumps = log.ev.jumps_between(float(seg.t[0]), float(seg.t[-1]))
+    if jumps:  # a splice the cleaning kept as logged: for calibrate to flag or down-weight the trip
+        tq["speed_jumps"] = jumps
     return CleanTrip(
         start_utc_s=float(grid_t[0]),
         time_s=grid_t - grid_t[0],
@@ -110,6 +116,7 @@ def _clean_trip(log: CleanedLog, seg: TripSpeedRows, sources: Sequence[EnergySou
         last_source_line=lines[1],
         rows_t_s=rows_t,
         rows=rows,
+        start_soc_pct=start_soc,
     )
 
 
@@ -124,3 +131,21 @@ def _evidence_rows(log: CleanedLog, t0: float, t1: float, p: CleanParams) -> tup
     a = int(np.searchsorted(log.t, t0 - w, "left"))
     b = int(np.searchsorted(log.t, t1 + w, "right"))
     return log.t[a:b], {c: log.cols[c][a:b].astype(np.float64, copy=False) for c in names}
+
+
+def _start_soc(log: CleanedLog, t0: float, window_s: float) -> tuple[float | None, float | None]:
+    """The state of charge [%] logged at ``t0`` [s, UTC]: the reading at or last before it
+    within ``window_s``, else the first within ``window_s`` after it; and the reading's
+    time from ``t0`` [s]. (None, None) where the log has no reading there."""
+    soc = log.cols.get("soc_pct")
+    if soc is None:
+        return None, None
+    a = int(np.searchsorted(log.t, t0 - window_s, "left"))
+    b = int(np.searchsorted(log.t, t0 + window_s, "right"))
+    t, x = log.t[a:b], soc[a:b].astype(np.float64, copy=False)
+    ok = np.isfinite(x)
+    before = np.flatnonzero(ok & (t <= t0))
+    i = before[-1] if before.size else next(iter(np.flatnonzero(ok & (t > t0))), None)
+    if i is None:
+        return None, None
+    return float(x[i]), float(t[i] - t0)

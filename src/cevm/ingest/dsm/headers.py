@@ -53,6 +53,43 @@ class DsmHeaders:
     label: str
 
 
+#: The most memory one internal block of a raster (a tile, or a strip of rows) may take
+#: decoded [bytes]: GDAL decodes a whole block to read any pixel of it, so a raster of
+#: larger blocks is refused when its header is read, before any pixel is (one 40,000 x
+#: 40,000 float32 strip is 6.4 GB decoded, a 16,384-pixel tile 1.07 GB; GeoTIFFs
+#: written for reading in windows use 256-1,024 pixel tiles, 0.25-4 MB).
+MAX_BLOCK_BYTES = 64 << 20
+
+#: GDAL's own cache of decoded blocks [MB] (``GDAL_CACHEMAX``) in a process that reads a
+#: DSM, unless the user set it: its default, 5 % of the machine's memory, would be 1.2 GB
+#: on a 24 GB machine, beside :class:`~cevm.ingest.dsm.windows.WindowReader`'s own
+#: cache. A DSM lookup then holds at most this plus that cache plus one block
+#: (:data:`MAX_BLOCK_BYTES`) of decoded pixels.
+GDAL_CACHE_MB = 64
+
+
+def gdal_cache_bounded() -> None:
+    """Bound GDAL's block cache to :data:`GDAL_CACHE_MB` unless ``GDAL_CACHEMAX`` is set
+    (before GDAL's first read in this process, which takes it then)."""
+    os.environ.setdefault("GDAL_CACHEMAX", str(GDAL_CACHE_MB))
+
+
+def _check_block_size(ds, shown: str) -> None:
+    """Refuse a raster whose internal blocks decode to more than :data:`MAX_BLOCK_BYTES`
+    each (all bands of a pixel-interleaved one)."""
+    import numpy as np
+
+    bh, bw = ds.block_shapes[0]
+    bands = ds.count if str(getattr(ds.interleaving, "value", ds.interleaving)).upper() == "PIXEL" else 1
+    nbytes = int(bh) * int(bw) * np.dtype(ds.dtypes[0]).itemsize * bands
+    if nbytes > MAX_BLOCK_BYTES:
+        kind = "strip" if bw == ds.width else "tile"
+        raise InputError(shown, f"its internal blocks ({kind}s of {bw:,} x {bh:,} pixels, {ds.dtypes[0]}) take "
+                                f"{nbytes / 1e6:,.0f} MB each decoded, over the {MAX_BLOCK_BYTES >> 20} MB a DSM block "
+                                "may take (GDAL decodes a whole block to read one pixel); write it in tiles, e.g. "
+                                "gdal_translate -co TILED=YES -co BLOCKXSIZE=512 -co BLOCKYSIZE=512 -co COMPRESS=DEFLATE")
+
+
 def _is_gdal_name(source: str) -> bool:
     """True for names GDAL resolves itself (URLs, /vsi paths): never checked on disk."""
     return source.startswith("/vsi") or "://" in source
@@ -81,6 +118,7 @@ def _read_header(name: str, shown: str, driver: str = "") -> TileHeader:
     import rasterio
     from rasterio.errors import RasterioError
 
+    gdal_cache_bounded()
     try:
         with rasterio.open(name, driver=driver or None) as ds:
             if ds.count < 1:
@@ -92,6 +130,7 @@ def _read_header(name: str, shown: str, driver: str = "") -> TileHeader:
                 raise InputError(shown, "rotated or sheared rasters are not supported")
             if t.a == 0 or t.e == 0:
                 raise InputError(shown, "raster has a degenerate geotransform")
+            _check_block_size(ds, shown)
             bh, bw = ds.block_shapes[0]
             block = bw if bh == bw and bh < ds.height else 0
             scale = ds.scales[0] if ds.scales and ds.scales[0] is not None else 1.0

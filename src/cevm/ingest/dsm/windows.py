@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from cevm.ingest.dsm.headers import TileHeader
+from cevm.ingest.dsm.headers import TileHeader, gdal_cache_bounded
 from cevm.ingest.dsm.tiles import _unique_inverse
 
 
@@ -117,6 +117,7 @@ class WindowReader:
             return ds
         import rasterio
 
+        gdal_cache_bounded()  # in a worker too, which has only the headers
         ds = rasterio.open(self.tiles[tile].name, driver=self.tiles[tile].driver or None)
         self._open[tile] = ds
         while len(self._open) > self.max_open:

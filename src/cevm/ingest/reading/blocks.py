@@ -118,6 +118,9 @@ class ParsedBlock:
     blank: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     fewer: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     last_line: int = 0  # the block's last line
+    #: cells of measured (not required) numeric columns that are not numbers, read as
+    #: missing: per column, their lines and text (:class:`~.cells.BadCells`)
+    bad_cells: dict = field(default_factory=dict)
 
 
 def _drop_empty_rows(part: ParsedBlock, empty: np.ndarray) -> ParsedBlock:

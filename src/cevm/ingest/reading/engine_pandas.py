@@ -16,9 +16,10 @@ import pandas as pd
 
 from cevm.errors import InputError
 from cevm.ingest.profiles import Profile
+from cevm.ingest.reading.cells import BadCells, cell_numbers, not_a_number
 from cevm.ingest.reading.blocks import _NUMERIC_NA, ParsedBlock, _drop_empty_rows
 from cevm.ingest.reading.header import ColumnPlan
-from cevm.ingest.reading.lines import _check_field_counts, _line_col_error, _line_stats
+from cevm.ingest.reading.lines import _check_field_counts, _line_stats
 from cevm.ingest.timestamps import fast_first_column
 
 
@@ -43,11 +44,14 @@ def _pandas_block(block: bytes, first_line: int, plan: ColumnPlan, prof: Profile
                 and tspec.columns[0] not in used[1:]:
             fast = fast_first_column(block, bview, starts, prof.separator, tspec.format)  # type: ignore[arg-type]
     table_cols = used[1:] if fast is not None else used
+    bad_cells: dict = {}
     df = _read_table(block, path, prof, plan.unique_names, table_cols, plan.num_cols, plan.text_cols,
-                     first_line - 1, all_cols=quoted)
+                     first_line - 1, all_cols=quoted, required=plan.required_num, units=plan.units, bad_out=bad_cells)
     if fast is not None and len(fast.ns) != len(df):  # alignment lost (should not happen): slow path
         fast = None
-        df = _read_table(block, path, prof, plan.unique_names, used, plan.num_cols, plan.text_cols, first_line - 1)
+        bad_cells = {}
+        df = _read_table(block, path, prof, plan.unique_names, used, plan.num_cols, plan.text_cols, first_line - 1,
+                         required=plan.required_num, units=plan.units, bad_out=bad_cells)
     lines = first_line + np.arange(len(df), dtype=np.int64)
     # rows without any used value (with the fast time column, only a blank line can be
     # one: every other line holds a time)
@@ -60,7 +64,7 @@ def _pandas_block(block: bytes, first_line: int, plan: ColumnPlan, prof: Profile
     numbers = {c: _writable(df[c].to_numpy(dtype=np.float64)) for c in plan.num_cols}  # copy-on-write views
     text = {c: df[c].to_numpy(dtype=object) for c in plan.text_cols if c in df.columns}
     part = ParsedBlock(lines, numbers, text, fast.ns if fast is not None else None, bool(fast is not None and fast.is_utc),
-                 fewer=fewer, last_line=first_line + len(df) - 1)
+                 fewer=fewer, last_line=first_line + len(df) - 1, bad_cells=bad_cells)
     return _drop_empty_rows(part, empty)
 
 
@@ -72,11 +76,14 @@ def _writable(x: np.ndarray) -> np.ndarray:
 
 def _read_table(body: bytes, path: Path, prof: Profile, names: list[str], usecols: list[str],
                 num_cols: list[str], text_cols: list[str], header_line: int,
-                all_cols: bool = False) -> pd.DataFrame:
+                all_cols: bool = False, required: frozenset[str] = frozenset(), units: dict | None = None,
+                bad_out: dict | None = None) -> pd.DataFrame:
     """The ``usecols`` columns of the data lines with pandas' C parser: numbers as float64
     (NaN for empty or NA-like fields), text as object. With ``all_cols`` every column is
     tokenised (so that the parser checks field counts) and the others dropped after.
-    Malformed rows and non-numbers raise InputError with the file line."""
+    Malformed rows raise InputError with the file line; a cell that is not a number is an
+    error in a ``required`` column, else a missing value whose line and text go to
+    ``bad_out`` (column -> :class:`~.cells.BadCells`; :mod:`.cells`)."""
     kw = dict(sep=prof.separator, decimal=prof.decimal, header=None, names=names, index_col=False,
               usecols=None if all_cols else usecols, keep_default_na=False, skip_blank_lines=False,
               engine="c", encoding="utf-8", quotechar='"', low_memory=False)
@@ -96,19 +103,11 @@ def _read_table(body: bytes, path: Path, prof: Profile, names: list[str], usecol
         except ValueError as exc:
             if isinstance(exc, pd.errors.ParserError):
                 raise
-            # a field that is not a number: find it (slow path, error only)
+            # a field that is not a number: a missing value in a measured column (reported),
+            # an error in a required one (slow path, blocks with such a cell only)
             df = pd.read_csv(io.BytesIO(body), dtype=object, na_values=na_values, **kw)
-            lines = header_line + 1 + np.arange(len(df))
-            for c in num_cols:
-                if c not in usecols:
-                    continue
-                col = df[c]
-                txt = col if prof.decimal == "." else col.str.replace(prof.decimal, ".", regex=False)
-                conv = pd.to_numeric(txt, errors="coerce")
-                bad = (conv.isna() & col.notna()).to_numpy()
-                if bad.any():
-                    raise _line_col_error(path, "not a number:", lines, bad, c.split("\x00")[0], col.to_numpy())
-            raise
+            if not _cells_to_numbers(df, path, prof, num_cols, usecols, header_line, required, units, bad_out):
+                raise
     except pd.errors.ParserError as exc:
         m = re.search(r"line (\d+)", str(exc))
         line = header_line + int(m.group(1)) if m else None
@@ -120,3 +119,25 @@ def _read_table(body: bytes, path: Path, prof: Profile, names: list[str], usecol
         df = df[usecols]
     df.columns = [c.split("\x00")[0] for c in df.columns]
     return df
+
+
+def _cells_to_numbers(df: pd.DataFrame, path: Path, prof: Profile, num_cols: list[str], usecols: list[str],
+                      header_line: int, required: frozenset[str], units: dict | None, bad_out: dict | None) -> bool:
+    """The numeric columns of ``df`` (read as text) as float64 in place; their cells that
+    are not numbers are errors in a ``required`` column, else missing values recorded in
+    ``bad_out``. False when every cell was a number (the parser's error was another)."""
+    lines = header_line + 1 + np.arange(len(df))
+    any_bad = False
+    for c in num_cols:
+        if c not in usecols:
+            continue
+        name = c.split("\x00")[0]
+        x, found = cell_numbers(df[c], prof.decimal, (units or {}).get(name), lines)
+        if found.lines or found.unit_lines:
+            any_bad = True
+            if name in required or bad_out is None:
+                bad = np.isin(lines, np.concatenate(found.lines + found.unit_lines))
+                raise not_a_number(path, name, df[c], lines, bad)
+            bad_out.setdefault(name, BadCells()).add(found)
+        df[c] = x
+    return any_bad

@@ -13,6 +13,7 @@ import pandas as pd
 
 from cevm.errors import InputError, has_control
 from cevm.ingest.profiles import ColumnMap, Profile
+from cevm.ingest.reading.cells import BadCells, check_bad_cells
 from cevm.ingest.reading.blocks import ParsedBlock, ReadRepairs
 from cevm.ingest.reading.engine_arrow import _arrow
 from cevm.ingest.reading.header import ColumnPlan, Header
@@ -52,6 +53,7 @@ class ColumnGatherer:
         self._date_index: dict[str, int] = {}
         self._vcodes: list[np.ndarray] = []
         self._vindex: dict[str, int] = {}
+        self._bad_cells: dict[str, BadCells] = {}  # measured columns' cells that were not numbers
         self._blank: list[np.ndarray] = []
         self._fewer: list[np.ndarray] = []
         # numeric columns that are SI as logged and so far exactly float32 (kept so)
@@ -119,6 +121,8 @@ class ColumnGatherer:
             self._blank.append(part.blank)
         if len(part.fewer):
             self._fewer.append(part.fewer)
+        for c, found in part.bad_cells.items():
+            self._bad_cells.setdefault(c, BadCells()).add(found)
         if n == 0:
             return
         upto = None if last else part.last_line
@@ -255,10 +259,17 @@ class ColumnGatherer:
 
     def pop_columns(self) -> dict[str, np.ndarray]:
         """The numeric source columns (by source name) and the value-map columns (by
-        canonical name), each as one array; the blocks' pieces are released as it goes."""
+        canonical name), each as one array; the blocks' pieces are released as it goes.
+        The cells of a measured column that were not numbers are reported (or, when they
+        are most of it, refused: :func:`~.cells.check_bad_cells`)."""
         out: dict[str, np.ndarray] = {}
         for c in list(self._numbers):
             out[c] = _concat(self._numbers.pop(c))
+            found = self._bad_cells.pop(c, None)
+            if found is not None:
+                m = next(m for m in self.plan.maps if m.source == c and m.value_map is None)
+                check_bad_cells(self.path, c, m.canonical, m.unit, found, int(np.count_nonzero(~np.isnan(out[c]))),
+                                self.prof.absurd_error_share, self.repairs.columns)
         for c in list(self._mapped):
             out[c] = _concat(self._mapped.pop(c))
         return out

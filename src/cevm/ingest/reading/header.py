@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import csv
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from cevm.errors import InputError
@@ -95,6 +95,11 @@ class ColumnPlan:
     text_cols: list[str]  # read as text: time columns, vehicle column, value-map columns
     num_cols: list[str]  # read as numbers
     used: list[str]  # text_cols + num_cols, each once
+    #: numeric columns whose every cell must be a number (the profile's ``required``
+    #: columns, and those its detection needs): a cell that is not one is an error;
+    #: in the others it is a missing value, reported (:mod:`.cells`)
+    required_num: frozenset[str] = frozenset()
+    units: dict[str, str] = field(default_factory=dict)  # numeric column -> the profile's unit
 
 
 def _plan_columns(prof: Profile, hdr: Header, path: Path) -> ColumnPlan:
@@ -122,7 +127,10 @@ def _plan_columns(prof: Profile, hdr: Header, path: Path) -> ColumnPlan:
     if dups:
         raise InputError(path, f"column name(s) {dups} appear more than once in the header", line=hdr.line, column=dups[0])
     unique_names = [f"{n}\x00{i}" if names.count(n) > 1 else n for i, n in enumerate(names)]
-    return ColumnPlan(names, unique_names, maps, text_cols, num_cols, used)
+    required_num = frozenset(m.source for m in maps if m.value_map is None and
+                             (m.required or m.source in prof.required_columns))
+    units = {m.source: m.unit for m in maps if m.value_map is None and m.unit}
+    return ColumnPlan(names, unique_names, maps, text_cols, num_cols, used, required_num, units)
 
 
 def _column_finder(names: list[str], sep: str):
