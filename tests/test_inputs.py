@@ -199,3 +199,22 @@ def test_a_streamed_manifest_holds_no_rows(fleet, tmp_path):
     assert seen == [line for line, _ in whole.problems] == list(range(2, 20_002))
     seen_bytes = 20_000 * 36  # the list of line numbers this test keeps
     assert streamed - seen_bytes < 1.5e6 and held > 5e6, (streamed, held)
+
+
+def test_a_logger_profile_that_is_a_device_or_nested_without_end_is_refused(tmp_path):
+    """``--profiles-dir`` (or $CEVM_PROFILES) holding a profile that is /dev/zero (a link
+    to it), or one nested 50,000 levels deep: one line, exit 2 (before: memory without end,
+    a RecursionError)."""
+    log = ROOT / "sample_logs" / "srf" / "EB-01_2019-01-31.csv"
+    profiles = tmp_path / "profiles"
+    profiles.mkdir()
+    (profiles / "deep.toml").write_text("x = " + "[" * 50_000 + "]" * 50_000 + "\n")
+    line = one_error(cevm("ingest", log, "--profiles-dir", profiles, "--store", tmp_path / "s.sqlite", "-q"))
+    assert "deep.toml: not a valid TOML profile: its arrays or tables nest too deeply" in line
+    (profiles / "deep.toml").unlink()
+    if Path("/dev/zero").exists():
+        (profiles / "zero.toml").symlink_to("/dev/zero")
+        line = one_error(cevm_process("ingest", log, "--profiles-dir", profiles, "--store", tmp_path / "s.sqlite",
+                                      "-q", timeout_s=30))
+        assert "zero.toml: is a character device, not a logger profile" in line
+    assert not (tmp_path / "s.sqlite").exists()
