@@ -150,8 +150,9 @@ def ingest(
                     manifest_applied = True
     except StoreAccessError as exc:
         stop = fail(exc)
-        typer.echo("cevm: note: the files written before the failure are stored, the one being written was rolled "
-                   "back; run the same command again once it is fixed (stored files are skipped)", err=True)
+        if done:  # not for a store that could not even be opened or created
+            typer.echo("cevm: note: the files written before the failure are stored, the one being written was "
+                       "rolled back; run the same command again once it is fixed (stored files are skipped)", err=True)
         raise stop from None
     except CevmError as exc:  # bad options found once the store was open (profile, DSM): no store made for them
         if new_store and not done:
