@@ -14,7 +14,7 @@ from cevm.errors import CevmError, InputError
 from cevm.io import load_vehicle
 from cevm.io.manifest import ManifestFormat, read_manifest
 from cevm.store import TripStore
-from cevm.store.check import store_info
+from cevm.store.integrity import store_info
 from cevm.store.masses import AssignedMass, TripMass, assigned_masses, clear_masses, match_manifest, set_masses
 from fleet_store import DIESEL, make_fleet, unlogged, write_manifest
 

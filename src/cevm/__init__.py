@@ -6,12 +6,13 @@ binary search and a few multiply-adds::
 
     import numpy as np
     import cevm
+    from cevm.units import J_PER_KWH
 
     t = np.arange(0.0, 601.0)                       # s
     vec = cevm.drive_cycle_vector(t, np.full(t.size, 15.0))   # m/s; once per cycle
     bus = cevm.load_vehicle("configs/vehicles/electric-bus.toml")
     p = cevm.predict(vec, bus, mass_kg=np.linspace(9000, 14000, 6))
-    p.energy_j / 3.6e6                              # kWh at the battery
+    p.energy_j / J_PER_KWH                          # kWh at the battery
 
 The public API, by what it is for:
 

@@ -48,6 +48,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from cevm.units import S_PER_H
+
 #: Kelvin at 0 degC.
 K0 = 273.15
 
@@ -275,7 +277,7 @@ class EngineWarmup:
     capacity_j_per_k: float = 650e3
     heat_share: float = 0.30
     hot_c: float = 88.0
-    soak_tau_s: float = 3.0 * 3600.0
+    soak_tau_s: float = 3.0 * S_PER_H
     friction_per_k: float = 0.012
 
     def start_c(self, ambient_c: float, soak_s: float) -> float:

@@ -26,6 +26,7 @@ from functools import lru_cache
 
 import numpy as np
 
+from cevm.units import J_PER_KWH
 from cevm_samplegen.auxiliaries import BUS_CABIN, DIESEL_WARMUP, TRUCK_CAB, CabinLoad, cabin_load
 from cevm_samplegen.common import G_MPS2, RHO_AIR_KG_M3
 
@@ -286,7 +287,7 @@ def logged_consumption(kind: str, time_s, speed_mps, elevation_m, mass_kg: float
     positive = float(np.sum(np.maximum(res.steps["wheel_power_w"] * res.steps["dt_s"], 0.0)))
     if res.traction_deficit_j > MAX_DEFICIT_SHARE * max(positive, 1.0):
         raise ValueError(
-            f"{kind} at {mass_kg:.0f} kg cannot follow the trace: {res.traction_deficit_j / 3.6e6:.2f} kWh "
+            f"{kind} at {mass_kg:.0f} kg cannot follow the trace: {res.traction_deficit_j / J_PER_KWH:.2f} kWh "
             f"beyond its powertrain ({100 * res.traction_deficit_j / positive:.1f} % of the wheel work)"
         )
     key = "energy_cum_j" if vehicle.is_ev else "fuel_cum_l"

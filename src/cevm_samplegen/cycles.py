@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from cevm.core.cycle import DriveCycle
+from cevm.units import MPS_TO_KMH
 
 
 @dataclass(frozen=True)
@@ -40,7 +41,7 @@ def micro_trip_cycle(spec: MicroTripSpec, seed: int, name: str = "", dt_s: float
     rng = np.random.default_rng(seed)
     pieces = [np.zeros(int(rng.uniform(*spec.dwell_s) / dt_s))]
     for _ in range(spec.n_trips):
-        v = rng.uniform(*spec.cruise_kmh) / 3.6
+        v = rng.uniform(*spec.cruise_kmh) / MPS_TO_KMH
         acc = rng.uniform(*spec.accel_mps2)
         dec = rng.uniform(*spec.decel_mps2)
         n_acc = max(1, int(np.ceil(v / acc / dt_s)))
@@ -52,7 +53,7 @@ def micro_trip_cycle(spec: MicroTripSpec, seed: int, name: str = "", dt_s: float
         walk -= np.linspace(walk[0], walk[-1], n_cruise)
         kernel = np.hanning(min(15, n_cruise) + 2)[1:-1]
         smooth = np.convolve(walk, kernel / kernel.sum(), mode="same")
-        scale = spec.fluctuation_kmh / 3.6 / max(1e-9, float(np.std(smooth)) if n_cruise > 2 else 1.0)
+        scale = spec.fluctuation_kmh / MPS_TO_KMH / max(1e-9, float(np.std(smooth)) if n_cruise > 2 else 1.0)
         cruise = np.clip(v + smooth * scale, 0.3 * v, None)
         down = cruise[-1] * np.maximum(0.0, 1.0 - np.arange(1, n_dec + 1) * dt_s * dec / max(cruise[-1], 1e-9))
         dwell = np.zeros(max(1, int(rng.uniform(*spec.dwell_s) / dt_s)))
@@ -89,7 +90,7 @@ DEMO_CYCLES: dict[str, tuple[MicroTripSpec, int]] = {
 def write_cycle_csv(cycle: DriveCycle, path: Path) -> None:
     """Write a cycle as CSV: time_s, speed_kmh, elevation_m."""
     elev = cycle.elevation_m if cycle.elevation_m is not None else np.zeros_like(cycle.time_s)
-    data = np.column_stack([cycle.time_s, cycle.speed_mps * 3.6, elev])
+    data = np.column_stack([cycle.time_s, cycle.speed_mps * MPS_TO_KMH, elev])
     np.savetxt(path, data, delimiter=",", header="time_s,speed_kmh,elevation_m", comments="",
                fmt=["%.1f", "%.3f", "%.2f"])
 

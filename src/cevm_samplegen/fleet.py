@@ -10,6 +10,7 @@ from datetime import UTC, datetime
 
 import numpy as np
 
+from cevm.units import M_PER_MILE, MPS_TO_KMH, S_PER_H
 from cevm_samplegen.common import DEFAULT_SEED, _rng
 from cevm_samplegen.consumption import (
     DRIVER_MAX_WHEEL_POWER_W,
@@ -132,7 +133,7 @@ DUTIES: dict[str, DutySpec] = {
 }
 
 #: Ignition-off time before the first trip of a logging day [s]: parked overnight.
-OVERNIGHT_SOAK_S = 12.0 * 3600.0
+OVERNIGHT_SOAK_S = 12.0 * S_PER_H
 
 
 @dataclass(frozen=True)
@@ -222,9 +223,9 @@ SAMPLE_FLEET = FleetSpec(
     srf_dates=("2019-01-31", "2019-02-01", "2019-04-10", "2019-05-15", "2019-07-25", "2019-08-27"),
     portal_vehicles=(
         VehicleSpec("KX19 LMR", "diesel-hgv", "regional", "regional", _HGV_KERB, fuel_counter_start_l=212344.0,
-                    odometer_start_m=287041.3 * 1609.344),
+                    odometer_start_m=287041.3 * M_PER_MILE),
         VehicleSpec("KX19 LMT", "diesel-hgv", "night", "trunk", _HGV_KERB, fuel_counter_start_l=418870.5,
-                    odometer_start_m=402118.8 * 1609.344),
+                    odometer_start_m=402118.8 * M_PER_MILE),
     ),
     portal_dates={"KX19 LMR": ("2019-10-25", "2019-10-26", "2019-10-28"),
                   "KX19 LMT": ("2019-10-26", "2019-10-27", "2019-10-28")},
@@ -245,9 +246,9 @@ SMALL_FLEET = FleetSpec(
     srf_dates=("2019-01-31", "2019-07-25"),
     portal_vehicles=(
         VehicleSpec("KX19 LMR", "diesel-hgv", "truck-short", "regional", _HGV_KERB, fuel_counter_start_l=212344.0,
-                    odometer_start_m=287041.3 * 1609.344),
+                    odometer_start_m=287041.3 * M_PER_MILE),
         VehicleSpec("KX19 LMT", "diesel-hgv", "night-short", "regional", _HGV_KERB, fuel_counter_start_l=418870.5,
-                    odometer_start_m=402118.8 * 1609.344),
+                    odometer_start_m=402118.8 * M_PER_MILE),
     ),
     portal_dates={"KX19 LMR": ("2019-10-26",), "KX19 LMT": ("2019-10-27",)},
     dsm=DsmSpec(resolution_m=5.0, survey_box=(483000.0, 235000.0, 489000.0, 238000.0),
@@ -323,7 +324,7 @@ def _speed_trace(duty: DutySpec, rng: np.random.Generator) -> np.ndarray:
         n = int(rng.integers(lo, hi + 1))
         cyc = micro_trip_cycle(dataclasses.replace(spec, n_trips=n), int(rng.integers(0, 2**31 - 1)))
         parts.append(cyc.speed_mps)
-    v = np.minimum(np.concatenate(parts), duty.max_speed_kmh / 3.6)
+    v = np.minimum(np.concatenate(parts), duty.max_speed_kmh / MPS_TO_KMH)
     v[0] = v[-1] = 0.0
     return v
 
@@ -418,7 +419,7 @@ def simulate_day(world: World, veh: VehicleSpec, day_index: int, date: str, cons
     rng = _rng(seed, "day", veh.vehicle_id, date)
     n_trips = int(rng.integers(duty.trips_per_day[0], duty.trips_per_day[1] + 1))
     loads = _day_loads(duty, n_trips, rng)
-    start = _utc_midnight_s(date) + round(rng.uniform(*duty.first_start_utc_h) * 3600.0)
+    start = _utc_midnight_s(date) + round(rng.uniform(*duty.first_start_utc_h) * S_PER_H)
     layovers = [OVERNIGHT_SOAK_S] + [float(round(rng.uniform(*duty.layover_s))) for _ in range(n_trips - 1)]
     route = world.routes[route_name]
     route_d = 0.0

@@ -36,6 +36,7 @@ from datetime import UTC, datetime
 
 import numpy as np
 
+from cevm.units import S_PER_H
 from cevm_samplegen.common import _rng
 
 _GRID_S = 60.0
@@ -132,7 +133,7 @@ class DayWeather:
 
     def ambient_c(self, utc_s) -> np.ndarray:
         """Air temperature [degC] at UTC times ``utc_s`` [s]."""
-        h = (np.asarray(utc_s, dtype=np.float64) - self.midnight_utc_s) / 3600.0
+        h = (np.asarray(utc_s, dtype=np.float64) - self.midnight_utc_s) / S_PER_H
         t_min = self.sunrise_utc_h + 0.5
         t_max = self.solar_noon_utc_h + 2.5
         x = np.mod(h - t_min, 24.0)  # hours since this cycle's minimum
@@ -142,7 +143,7 @@ class DayWeather:
 
     def solar_elevation_sin(self, utc_s) -> np.ndarray:
         """Sine of the solar elevation at UTC times ``utc_s`` [s]."""
-        h = (np.asarray(utc_s, dtype=np.float64) - self.midnight_utc_s) / 3600.0
+        h = (np.asarray(utc_s, dtype=np.float64) - self.midnight_utc_s) / S_PER_H
         omega = np.radians(15.0 * (h + self.climate.lon_deg / 15.0 + self.eot_h - 12.0))
         phi = math.radians(self.climate.lat_deg)
         d = self.declination_rad

@@ -8,6 +8,7 @@ from datetime import UTC, datetime
 
 import numpy as np
 
+from cevm.units import J_PER_KWH, M_PER_MILE, MPH_TO_MPS, MPS_TO_KMH, RAD_S_PER_RPM, S_PER_H
 from cevm_samplegen.common import BNG, GEOID_UNDULATION_M, WGS84, _rng
 from cevm_samplegen.consumption import STANDIN, _wheel_power_w
 from cevm_samplegen.csvfmt import assemble, iso_utc_ms, num_field, text_field, uk_local
@@ -47,7 +48,7 @@ SENSOR_TAU_S = 60.0
 #: Truck gearbox (12-speed AMT) and axle ratio of the plausible engine-speed model.
 _GEARS = np.array([14.9, 11.7, 9.0, 7.1, 5.6, 4.4, 3.5, 2.7, 2.1, 1.7, 1.3, 1.0])
 _AXLE = 2.8
-_EV_USABLE_J = 124.0 * 3.6e6  # configs/vehicles/electric-bus.toml battery_kwh
+_EV_USABLE_J = 124.0 * J_PER_KWH  # configs/vehicles/electric-bus.toml battery_kwh
 
 
 def _arrivals(tk: np.ndarray, period_s: tuple[float, float], rng: np.random.Generator) -> np.ndarray:
@@ -117,7 +118,7 @@ def _fms_common(veh: VehicleSpec, tr: TruthTrip, at: dict, rng: np.random.Genera
     v = at["speed"]
     n = v.size
     out = {}
-    out["fms_wheel_speed_kmh"] = np.round(v * veh.wheel_speed_scale * 3.6 * 256.0) / 256.0
+    out["fms_wheel_speed_kmh"] = np.round(v * veh.wheel_speed_scale * MPS_TO_KMH * 256.0) / 256.0
     out["fms_accel_pedal_pct"] = _round_q(np.clip(100.0 * pw / p.max_power_w, 0.0, 100.0) * (pw > 0), 0.4)
     out["fms_brake_switch"] = ((acc < -0.3) | (v < 0.05)).astype(float)
     omega_w = v / p.wheel_radius_m  # wheel rad/s
@@ -131,7 +132,7 @@ def _fms_common(veh: VehicleSpec, tr: TruthTrip, at: dict, rng: np.random.Genera
         gear = np.maximum((rpm_all >= 1000.0).sum(axis=1) - 1, 0)
         rpm = np.clip(rpm_all[np.arange(n), gear], 600.0, 1900.0) + rng.normal(0.0, 4.0, n)
         pe = pw + p.aux_w
-        torque = np.where(pe > 0, pe / (rpm * 2 * np.pi / 60.0), -0.08 * p.ref_torque_nm)
+        torque = np.where(pe > 0, pe / (rpm * RAD_S_PER_RPM), -0.08 * p.ref_torque_nm)
         torque = np.where(v < 0.1, 0.05 * p.ref_torque_nm, torque)
     out["fms_engine_speed_rpm"] = _round_q(np.maximum(rpm, 0.0), 0.125)
     out["fms_engine_torque_pct"] = np.clip(np.round(100.0 * torque / p.ref_torque_nm), -125, 125)
@@ -218,7 +219,7 @@ def _srf_file(world: World, veh: VehicleSpec, trips: list[TruthTrip], date: str,
         ny = _ar1(n, 40.0, 2.5, rng) * scale + rng.normal(0.0, 0.7, n)
         lon, lat = transformer.transform(at["x"] + ex, at["y"] + ny)
         alt = at["elev"] + GEOID_UNDULATION_M + alt_bias + _ar1(n, 200.0, 12.0, rng) + rng.normal(0.0, 2.0, n)
-        gspeed = np.abs(at["speed"] + rng.normal(0.0, 0.15, n)) * 3.6
+        gspeed = np.abs(at["speed"] + rng.normal(0.0, 0.15, n)) * MPS_TO_KMH
         nan = np.where(fix, 1.0, np.nan)
         cols_v["gps_lat_deg"], cols_v["gps_lon_deg"] = lat * nan, lon * nan
         cols_v["gps_alt_m"], cols_v["gps_speed_kmh"] = alt * nan, gspeed * nan
@@ -247,7 +248,7 @@ def _srf_file(world: World, veh: VehicleSpec, trips: list[TruthTrip], date: str,
             cols_v["fms_battery_voltage_v"] = _round_q(volt, 0.1) * m
             cols_v["fms_battery_current_a"] = _round_q(cur, 0.1) * m
             cols_v["fms_battery_soc_pct"] = np.where(_arrivals(tk, (9.0, 11.0), rng), _round_q(soc_true, 0.4), np.nan)
-            kwh = veh.energy_counter_start_kwh + cons / 3.6e6
+            kwh = veh.energy_counter_start_kwh + cons / J_PER_KWH
             cols_v["fms_total_energy_used_kwh"] = np.where(_arrivals(tk, (4.0, 6.0), rng), _floor_q(kwh, 0.1), np.nan)
         else:
             ecu = veh.fuel_counter_start_l + veh.ecu_fuel_bias * cons
@@ -261,7 +262,7 @@ def _srf_file(world: World, veh: VehicleSpec, trips: list[TruthTrip], date: str,
             elif state.reset_offset is not None:
                 ecu = state.reset_offset + veh.ecu_fuel_bias * cons
             cols_v["fms_total_fuel_used_l"] = np.where(_arrivals(tk, (5.0, 10.0), rng), _floor_q(ecu, 0.5), np.nan)
-            lph = np.maximum(0.0, veh.ecu_fuel_bias * rate * 3600.0 * (1.0 + rng.normal(0.0, 0.02, n)))
+            lph = np.maximum(0.0, veh.ecu_fuel_bias * rate * S_PER_H * (1.0 + rng.normal(0.0, 0.02, n)))
             cols_v["fms_fuel_rate_lph"] = np.where(rng.random(n) > 0.03, _round_q(lph, 0.05), np.nan)
             if veh.flowmeter:
                 m = _arrivals(tk, (1.8, 2.2), rng)
@@ -269,7 +270,7 @@ def _srf_file(world: World, veh: VehicleSpec, trips: list[TruthTrip], date: str,
                 c_at = at["cons"][idx]
                 prev_t = np.concatenate(([tk[idx[0]] - 2.0], tk[idx[:-1]])) if idx.size else idx
                 prev_c = np.interp(prev_t, tr.time_s, tr.consumption) if idx.size else idx
-                mean_lph = (c_at - prev_c) / np.maximum(tk[idx] - prev_t, 1e-3) * 3600.0
+                mean_lph = (c_at - prev_c) / np.maximum(tk[idx] - prev_t, 1e-3) * S_PER_H
                 flow = np.full(n, np.nan)
                 flow[idx] = _round_q(np.maximum(0.0, mean_lph * (1.0 + rng.normal(0.0, 0.015, idx.size))), 0.01)
                 cols_v["flowmeter_fuel_lph"] = flow
@@ -341,8 +342,6 @@ def _srf_file(world: World, veh: VehicleSpec, trips: list[TruthTrip], date: str,
 
 PORTAL_COLUMNS = ("Registration", "Date/Time", "Latitude", "Longitude", "Speed (mph)", "Odometer (mi)", "Fuel Used (l)",
                   "Ignition", "Event")
-MPH = 0.44704
-MILE_M = 1609.344
 
 
 def _portal_vehicle(world: World, veh: VehicleSpec, days: list[list[TruthTrip]], state: _Counters, seed: int,
@@ -371,7 +370,7 @@ def _portal_vehicle(world: World, veh: VehicleSpec, days: list[list[TruthTrip]],
         rows["t"].append(tr.start_utc_s + ts)
         rows["x"].append(at["x"] + ex)
         rows["y"].append(at["y"] + ny)
-        rows["speed_mph"].append(np.abs(at["speed"] + rng.normal(0.0, 0.2, n) * (at["speed"] > 0.3)) / MPH)
+        rows["speed_mph"].append(np.abs(at["speed"] + rng.normal(0.0, 0.2, n) * (at["speed"] > 0.3)) / MPH_TO_MPS)
         rows["odo"].append(state.odometer_m + at["distance"])
         rows["fuel"].append(veh.fuel_counter_start_l + state.consumption + at["cons"])
         ign = np.ones(n)
@@ -442,7 +441,7 @@ def _portal_file(world: World, fleet: FleetSpec, truth: dict[str, list[list[Trut
     fields = [
         text_field(reg), uk_local(t),
         num_field(allr["lat"], 5, dec=b","), num_field(allr["lon"], 5, dec=b","),
-        num_field(allr["speed_mph"], 1, dec=b","), num_field(_floor_q(allr["odo"] / MILE_M, 0.1), 1, dec=b","),
+        num_field(allr["speed_mph"], 1, dec=b","), num_field(_floor_q(allr["odo"] / M_PER_MILE, 0.1), 1, dec=b","),
         num_field(_floor_q(allr["fuel"], 0.5), 1, dec=b","),
         text_field(np.where(allr["ign"] > 0, b"On", b"Off")),
         text_field(events),

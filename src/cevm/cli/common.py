@@ -282,17 +282,17 @@ def check_common(ice_braking: Optional[str], soc_start: float, reserve_pct: floa
 
 
 def check_soc(soc_start: float, reserve_pct: float | None = None) -> None:
-    """--soc-start and --reserve-pct, with the words of :func:`cevm.core.checks.soc_pct`
+    """--soc-start and --reserve-pct, with the words of :func:`cevm.core.physical_inputs.soc_pct`
     (the same message from every command)."""
-    from cevm.core import checks
+    from cevm.core import physical_inputs
 
     try:
-        checks.soc_pct(soc_start)
+        physical_inputs.soc_pct(soc_start)
     except CevmError as exc:
         raise fail(f"--soc-start: {exc}") from None
     if reserve_pct is not None:
         try:
-            checks.soc_pct(100.0, reserve_pct)
+            physical_inputs.soc_pct(100.0, reserve_pct)
         except CevmError as exc:
             raise fail(f"--reserve-pct: {exc}") from None
 

@@ -19,7 +19,7 @@ from cevm.cli.common import (
     os_error_text,
     with_cycle_options,
 )
-from cevm.core import checks
+from cevm.core import physical_inputs
 from cevm.cli.output import OutputFormat, write_rows
 from cevm.errors import CevmError
 from cevm.text import printable
@@ -62,10 +62,10 @@ def simulate(
         mass_source, measured, foreign = "vehicle file", None, None
         if payload_kg is not None:
             mass_kg = (veh.kerb_mass_kg if veh.kerb_mass_kg is not None else veh.mass_kg) + float(
-                checks.payloads_kg(payload_kg))
+                physical_inputs.payloads_kg(payload_kg))
             mass_source = "--payload-kg"
         elif mass_kg is not None:
-            mass_kg = float(checks.masses_for([veh], mass_kg))
+            mass_kg = float(physical_inputs.masses_for([veh], mass_kg))
             mass_source = "--mass-kg"
         if cycle is not None:
             c = read_cycle_csv(cycle, cycle_fmt)
@@ -91,7 +91,7 @@ def simulate(
 
                 foreign = foreign_mass(own, measured, veh)
                 try:
-                    mass_kg = float(checks.masses_for([veh], mass_kg))
+                    mass_kg = float(physical_inputs.masses_for([veh], mass_kg))
                 except CevmError as exc:
                     raise CevmError(f"trip {trip!r} ({own.describe()} mass): {exc}") from None
             name, t, v, h = trip, prof["time_s"], prof["speed_mps"], prof["elevation_m"]

@@ -1,5 +1,5 @@
 """``cevm store check | info``: whether the trip store is sound, and what it holds
-(:mod:`cevm.store.check`). Both only read: they work on a read-only store."""
+(:mod:`cevm.store.integrity`). Both only read: they work on a read-only store."""
 
 from __future__ import annotations
 
@@ -27,7 +27,7 @@ def store_check(
     is damaged (restore a backup, or re-ingest the damaged trips' log files with --force,
     or all logs into a new store), 3 if it could not be read."""
     from cevm.store import TripStore
-    from cevm.store.check import check_store
+    from cevm.store.integrity import check_store
 
     path = existing_store(store)
     progress = None
@@ -75,7 +75,7 @@ def store_info_cmd(
     """What the store holds: schema version, files, trips, vehicles, routes, the last
     ingest run."""
     from cevm.store import TripStore, format_utc
-    from cevm.store.check import store_info
+    from cevm.store.integrity import store_info
 
     path = existing_store(store)
     try:

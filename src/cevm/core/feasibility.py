@@ -27,7 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from cevm.core import checks
+from cevm.core import physical_inputs
 from cevm.core.sweep import (
     RANGE_FIELDS,
     DEFAULT_RESERVE_PCT,
@@ -215,11 +215,11 @@ def feasibility(
     base = np.array([v.kerb_mass_kg if v.kerb_mass_kg is not None else v.mass_kg for v in vehicles])
     if payload_kg is not None and mass_kg is not None:
         raise CevmError("give a payload or a gross mass, not both")
-    checks.soc_pct(soc_start_pct, reserve_pct)
+    physical_inputs.soc_pct(soc_start_pct, reserve_pct)
     if payload_kg is not None:
-        mass = base + float(checks.payloads_kg(payload_kg))
+        mass = base + float(physical_inputs.payloads_kg(payload_kg))
     elif mass_kg is not None:
-        mass = np.full(nv, float(checks.masses_for(vehicles, mass_kg)))
+        mass = np.full(nv, float(physical_inputs.masses_for(vehicles, mass_kg)))
     else:
         mass = np.array([v.mass_kg for v in vehicles], dtype=np.float64)
     f = _LoadFunction(source, vehicles, base, soc_start_pct, reserve_pct, ice_braking, ambient_c)
@@ -244,7 +244,43 @@ def feasibility(
     known = ev | np.isfinite(ps.tank_l)
     feasible = np.where(known, (ok_load & ~over).astype(float), np.nan)
 
-    # payload search on whole kg in [0, plim]
+    max_p, min_p, limited = _payload_range(f, known, max_gross, base, payload_cap_kg)
+    at = load_ranges(source, vehicles, mass, soc_start_pct=soc_start_pct, reserve_pct=reserve_pct,
+                     ice_braking=ice_braking, ambient_c=ambient_c)
+    empty = np.isfinite(at["empty_at_m"]) & ev
+    with np.errstate(invalid="ignore"):
+        soc_end[empty | (soc_end < 0)] = np.nan  # it does not reach the end: no charge below 0
+        soc_min[empty | (soc_min < 0)] = 0.0
+    return Feasibility(
+        **at,
+        source=source,
+        vehicles=vehicles,
+        mass_kg=mass,
+        payload_kg=mass - base,
+        over_max_gross=over,
+        energy_j=energy,
+        fuel_l=fuel,
+        soc_end_pct=soc_end,
+        soc_min_pct=soc_min,
+        reserve_margin_pct=soc_min - reserve_pct,
+        tank_margin_l=tank_margin,
+        feasible=feasible,
+        max_payload_kg=max_p,
+        min_payload_kg=min_p,
+        limited_by=tuple(str(s) for s in limited),
+        ambient_c=terms.ambient_c[:, 0],
+        ambient_from=tuple(AMBIENT_ORIGINS[int(c)] for c in terms.ambient_from[:, 0]),
+    )
+
+
+def _payload_range(f: _LoadFunction, known: np.ndarray, max_gross: np.ndarray, base: np.ndarray,
+                   payload_cap_kg: float | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The feasible payloads of each vehicle, searched on whole kg in [0, the gross limit
+    or the cap]: (largest, smallest, what limits the largest: "max_gross_kg",
+    "payload_cap", "reserve", "tank" or "infeasible"). ``known``: whether a vehicle has
+    a limit besides its gross mass (an EV's reserve, an ICE's tank)."""
+    ps = f.pset
+    nv = base.size
     if payload_cap_kg is not None and not (math.isfinite(payload_cap_kg) and payload_cap_kg >= 0):
         raise CevmError("the payload cap must be finite and >= 0 kg")
     cap = np.where(np.isfinite(max_gross), max_gross - base, base if payload_cap_kg is None else payload_cap_kg)
@@ -297,32 +333,7 @@ def feasibility(
                     vl = vd[lo_ok]
                     max_p[vl] = _last_true(f.ok, vl, pstar[d][lo_ok], plim[vl])
                     limited[vl] = kind[c][d][lo_ok]
-    at = load_ranges(source, vehicles, mass, soc_start_pct=soc_start_pct, reserve_pct=reserve_pct,
-                     ice_braking=ice_braking, ambient_c=ambient_c)
-    empty = np.isfinite(at["empty_at_m"]) & ev
-    with np.errstate(invalid="ignore"):
-        soc_end[empty | (soc_end < 0)] = np.nan  # it does not reach the end: no charge below 0
-        soc_min[empty | (soc_min < 0)] = 0.0
-    return Feasibility(
-        **at,
-        source=source,
-        vehicles=vehicles,
-        mass_kg=mass,
-        payload_kg=mass - base,
-        over_max_gross=over,
-        energy_j=energy,
-        fuel_l=fuel,
-        soc_end_pct=soc_end,
-        soc_min_pct=soc_min,
-        reserve_margin_pct=soc_min - reserve_pct,
-        tank_margin_l=tank_margin,
-        feasible=feasible,
-        max_payload_kg=max_p,
-        min_payload_kg=min_p,
-        limited_by=tuple(str(s) for s in limited),
-        ambient_c=terms.ambient_c[:, 0],
-        ambient_from=tuple(AMBIENT_ORIGINS[int(c)] for c in terms.ambient_from[:, 0]),
-    )
+    return max_p, min_p, limited
 
 
 def load_ranges(source: Source, vehicles: Sequence[Vehicle], mass_kg: np.ndarray, *,

@@ -254,7 +254,7 @@ class Executor(ABC):
         if not entry.grouped:
             return [TaskResult(entry.index, entry.task, value=value, attempts=entry.attempts, seconds=seconds)]
         out = []
-        for (i, task), (v, s, error), single in zip(entry.items, value, entry.singles()):
+        for (i, task), (v, s, error), single in zip(entry.items, value, entry.singles(), strict=True):
             if error is None:
                 out.append(TaskResult(i, task, value=v, attempts=entry.attempts, seconds=s))
             else:
@@ -299,7 +299,7 @@ class Executor(ABC):
         pays for itself."""
         return self
 
-    def close(self) -> None:
+    def close(self) -> None:  # noqa: B027 (a no-op by default, not abstract: the serial executor holds nothing)
         """Release the workers (a no-op for executors that hold none)."""
 
     def terminate(self) -> None:

@@ -24,6 +24,7 @@ When a pool pays for itself
 
 from __future__ import annotations
 
+import contextlib
 import multiprocessing as mp
 import os
 from collections.abc import Callable
@@ -246,10 +247,8 @@ class ProcessExecutor(Executor):
             kill()
         else:
             for p in list((getattr(pool, "_processes", None) or {}).values()):
-                try:
+                with contextlib.suppress(OSError, ValueError):  # gone already
                     p.kill()
-                except (OSError, ValueError):
-                    pass  # gone already
         pool.shutdown(wait=True, cancel_futures=True)
 
 

@@ -67,7 +67,7 @@ from cevm.io.numeric_csv import (
     separator_name,
     sniff_csv,
 )
-from cevm.units import FT_TO_M, KMH_TO_MPS, MPH_TO_MPS
+from cevm.units import FT_TO_M, KMH_TO_MPS, MPH_TO_MPS, S_PER_H
 
 #: Highest speed of a cycle [km/h]: above every road vehicle a fleet runs (production
 #: cars are mostly limited to 250 km/h; EU speed limiters hold trucks to 90 and buses to
@@ -95,7 +95,7 @@ SPEED_UNITS = {"km/h": ("km/h", KMH_TO_MPS), "kmh": ("km/h", KMH_TO_MPS), "kph":
 #: Grade units: accepted spellings -> (canonical name, factor to a fraction).
 GRADE_UNITS = {"%": ("%", 0.01), "pct": ("%", 0.01), "percent": ("%", 0.01),
                "fraction": ("fraction", 1.0), "frac": ("fraction", 1.0), "-": ("fraction", 1.0)}
-_TIME_UNITS = {"s": 1.0, "sec": 1.0, "secs": 1.0, "seconds": 1.0, "ms": 1e-3, "min": 60.0, "h": 3600.0}
+_TIME_UNITS = {"s": 1.0, "sec": 1.0, "secs": 1.0, "seconds": 1.0, "ms": 1e-3, "min": 60.0, "h": S_PER_H}
 _ELEVATION_UNITS = {"m": 1.0, "ft": FT_TO_M}
 _BASES = {
     "time": {"time", "t"},

@@ -1,11 +1,15 @@
-"""The figures of ``cevm calibrate``, ``cevm simulate`` and ``cevm predict`` (PNG files,
-matplotlib with the Agg backend, imported when a figure is drawn)."""
+"""The figures of ``cevm calibrate``, ``cevm simulate`` and ``cevm predict`` (PNG files).
+
+Drawn with matplotlib's object API (a :class:`matplotlib.figure.Figure` on its own
+:class:`~matplotlib.backends.backend_agg.FigureCanvasAgg`, imported when a figure is
+drawn): no pyplot state, so drawing a figure neither selects nor switches the backend
+of a program or notebook that calls these functions, and leaves no figure open."""
 
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Optional
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -20,14 +24,19 @@ if TYPE_CHECKING:
 PLOT_MAX_LINES = 12
 
 
+def _figure(figsize: tuple[float, float]):
+    """A new figure of ``figsize`` [in] on its own Agg canvas (PNG), outside pyplot."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=figsize)
+    FigureCanvasAgg(fig)
+    return fig
+
+
 def plot_calibration(result: CalibrationResult, path: Path, title: str) -> None:
     """Predicted against measured with the 1:1 line (the paper's figures 5 and 7), and the
     percent error against trip distance, in-sample and cross-validated."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     from cevm.core.calibration import display_value
 
     unit = "kWh" if result.unit == "J" else "l"
@@ -35,7 +44,8 @@ def plot_calibration(result: CalibrationResult, path: Path, title: str) -> None:
     ins = np.array([display_value(result, r.predicted_in_sample) for r in result.rows])
     cv = np.array([display_value(result, r.predicted_cv) for r in result.rows])
     dist = np.array([r.distance_m for r in result.rows]) / 1e3
-    fig, (a1, a2) = plt.subplots(1, 2, figsize=(11, 4.8))
+    fig = _figure((11, 4.8))
+    a1, a2 = fig.subplots(1, 2)
     lim = [0, max(meas.max(), np.nanmax(cv) if np.isfinite(cv).any() else 0, ins.max()) * 1.05]
     a1.plot(lim, lim, "k-", lw=1, label="1:1")
     a1.scatter(meas, ins, s=18, label="CE model, in-sample")
@@ -51,18 +61,13 @@ def plot_calibration(result: CalibrationResult, path: Path, title: str) -> None:
     a2.legend()
     fig.tight_layout()
     fig.savefig(path, dpi=120)
-    plt.close(fig)
 
 
 def plot_simulation(frame, res, path: Path, title: str) -> None:
     """State of charge (EV, the paper's figure 4) or fuel used (ICE, figure 6) against
     time, with the elevation, from :meth:`SimulationResult.to_frame`."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(10, 4.5))
+    fig = _figure((10, 4.5))
+    ax = fig.subplots()
     t_min = frame["time_s"] / 60.0
     if res.powertrain == "ev":
         ax.plot(t_min, frame["soc_pct"], label="state of charge")
@@ -78,7 +83,6 @@ def plot_simulation(frame, res, path: Path, title: str) -> None:
         ax2.set_ylabel("elevation [m]")
     fig.tight_layout()
     fig.savefig(path, dpi=120)
-    plt.close(fig)
 
 
 def vehicle_label(vehicle) -> str:
@@ -89,7 +93,7 @@ def vehicle_label(vehicle) -> str:
 
 
 def plot_predictions(path: Path, sources: list[Source], pset: PredictionSet | Sequence[PredictionSet],
-                     sweep_data: list, soc_start: float, reserve_pct: float, ice_braking: Optional[str],
+                     sweep_data: list, soc_start: float, reserve_pct: float, ice_braking: str | None,
                      warn: Callable[[str], None] | None = None) -> None:
     """SoC (EV) or fuel (ICE) along each source for each vehicle (one mass each: the
     paper's figure 4), or energy / fuel against payload when vehicles have several
@@ -98,11 +102,6 @@ def plot_predictions(path: Path, sources: list[Source], pset: PredictionSet | Se
     :data:`PLOT_MAX_LINES` (source, vehicle) pairs are drawn."""
     per_source = list(pset) if isinstance(pset, (list, tuple)) else None
     pset = per_source[0] if per_source else pset
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     from cevm.core.sweep import energy_trajectory
 
     counts = np.bincount(pset.vehicle_index)
@@ -114,7 +113,8 @@ def plot_predictions(path: Path, sources: list[Source], pset: PredictionSet | Se
     has_ev = any(pset.vehicles[v].is_ev for _, v in pairs)
     has_ice = any(not pset.vehicles[v].is_ev for _, v in pairs)
     n_ax = int(has_ev) + int(has_ice)
-    fig, axes = plt.subplots(n_ax, 1, figsize=(9, 4.5 * n_ax), squeeze=False)
+    fig = _figure((9, 4.5 * n_ax))
+    axes = fig.subplots(n_ax, 1, squeeze=False)
     ax_ev = axes[0, 0] if has_ev else None
     ax_ice = axes[-1, 0] if has_ice else None
     if counts.max() > 1:  # a mass sweep: energy against payload (or mass)
@@ -135,7 +135,8 @@ def plot_predictions(path: Path, sources: list[Source], pset: PredictionSet | Se
                 ax = ax_ev if veh.is_ev else ax_ice
                 ax.plot(x[over], (ys["energy_kwh"] if veh.is_ev else ys["fuel_l"])[sel][over], "x", color="red")
         if ax_ev is not None:
-            ax_ev.set(xlabel=xname, ylabel="battery energy [kWh]", title="EV energy against load (x: over max_gross_kg)")
+            ax_ev.set(xlabel=xname, ylabel="battery energy [kWh]",
+                      title="EV energy against load (x: over max_gross_kg)")
         if ax_ice is not None:
             ax_ice.set(xlabel=xname, ylabel="fuel [l]", title="ICE fuel against load (x: over max_gross_kg)")
     else:  # state of charge along the route (the paper's figure 4)
@@ -168,5 +169,3 @@ def plot_predictions(path: Path, sources: list[Source], pset: PredictionSet | Se
         fig.savefig(path, dpi=120)
     except OSError as exc:
         raise CevmError(f"{path}: cannot write the plot: {exc.strerror or exc}") from None
-    finally:
-        plt.close(fig)

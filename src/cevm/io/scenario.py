@@ -42,7 +42,6 @@ from cevm.io.cycles import CycleFormat, read_cycle_csv
 from cevm.io.toml import read_toml
 from cevm.io.vehicles import load_vehicle
 
-
 #: A leg resolver: (one copy of a leg source, directory of the scenario file) -> vector.
 LegResolver = Callable[[LegSource, Path], CycleVector]
 
@@ -188,8 +187,47 @@ def load_scenario(path: str | Path, resolve_leg: LegResolver = default_resolver)
     t0 = time.perf_counter()
     path = Path(path)
     data = _read_toml(path)
-    base = path.parent
     _check_keys(path, "scenario", data, _TOP_KEYS)
+    head = _header(path, data)
+    prices = _prices(path, data)
+    depots = _depots(path, data)
+    vehicles = _fleet_vehicles(path, data, head.reserve_default)
+    routes = _routes(path, data, depots, head.return_default, _LegVectors(path, resolve_leg))
+    allowed, default_vehicle = _stops(path, data)
+    payload = _payloads(path, data, len(head.days))
+    return Scenario(
+        name=head.name,
+        vehicles=tuple(vehicles),
+        routes=tuple(routes),
+        days=tuple(head.days),
+        payload_kg=payload,
+        allowed=allowed,
+        default_vehicle=default_vehicle,
+        objective=head.objective,
+        prices=prices,
+        mass_model=head.mass_model,
+        path=str(path),
+        load_time_s=time.perf_counter() - t0,
+        ambient_c=head.ambient,
+    )
+
+
+@dataclasses.dataclass(frozen=True)
+class _Header:
+    """A scenario file's top-level settings."""
+
+    name: str
+    objective: str | None
+    mass_model: str
+    return_default: bool
+    reserve_default: float
+    days: list[str]
+    ambient: tuple[float | None, ...]
+
+
+def _header(path: Path, data: dict) -> _Header:
+    """The top-level keys: name, objective, mass model, the routes' and EVs' defaults,
+    the days and their temperatures."""
     name = _str(path, "name", data.get("name", path.stem))
     objective = data.get("objective")
     if objective is not None and objective not in OBJECTIVES:
@@ -200,38 +238,52 @@ def load_scenario(path: str | Path, resolve_leg: LegResolver = default_resolver)
     ret_default = data.get("return_to_depot", True)
     if not isinstance(ret_default, bool):
         raise InputError(path, f"return_to_depot must be true or false, got {ret_default!r}")
-    reserve_default = _num(path, "ev_reserve_fraction", data.get("ev_reserve_fraction", EV_RESERVE_FRACTION_DEFAULT), 0.0, 1.0)
+    reserve_default = _num(path, "ev_reserve_fraction", data.get("ev_reserve_fraction", EV_RESERVE_FRACTION_DEFAULT),
+                           0.0, 1.0)
     days = data.get("days")
     if not isinstance(days, list) or not days or not all(isinstance(d, str) and d for d in days):
         raise InputError(path, "days must be a non-empty list of day names, e.g. days = [\"day 1\"]")
     if len(set(days)) != len(days):
         raise InputError(path, "days: duplicate day name")
     ambient = _day_temperatures(path, data.get("ambient_c"), len(days))
+    return _Header(name=name, objective=objective, mass_model=mass_model, return_default=ret_default,
+                   reserve_default=reserve_default, days=days, ambient=ambient)
 
-    prices = None
-    if "prices" in data:
-        p = _check_keys(path, "prices", data["prices"], _PRICE_KEYS)
-        prices = Prices(
-            fuel_per_l=_num(path, "prices.fuel_per_l", p["fuel_per_l"], 0.0) if "fuel_per_l" in p else None,
-            electricity_per_kwh=(
-                _num(path, "prices.electricity_per_kwh", p["electricity_per_kwh"], 0.0)
-                if "electricity_per_kwh" in p
-                else None
-            ),
-            currency=_str(path, "prices.currency", p.get("currency", "cost")),
-        )
 
+def _prices(path: Path, data: dict) -> Prices | None:
+    """``[prices]``, or None without one."""
+    if "prices" not in data:
+        return None
+    p = _check_keys(path, "prices", data["prices"], _PRICE_KEYS)
+    return Prices(
+        fuel_per_l=_num(path, "prices.fuel_per_l", p["fuel_per_l"], 0.0) if "fuel_per_l" in p else None,
+        electricity_per_kwh=(
+            _num(path, "prices.electricity_per_kwh", p["electricity_per_kwh"], 0.0)
+            if "electricity_per_kwh" in p
+            else None
+        ),
+        currency=_str(path, "prices.currency", p.get("currency", "cost")),
+    )
+
+
+def _depots(path: Path, data: dict) -> list[str]:
+    """The ids of the ``[[depot]]`` tables, in file order."""
     depots = []
     for i, d in enumerate(_array_of_tables(path, data, "depot")):
         d = _check_keys(path, f"depot[{i}]", d, {"id", "name", "notes"})
         depots.append(_str(path, f"depot[{i}].id", d.get("id", d.get("name"))))
+    return depots
+
+
+def _fleet_vehicles(path: Path, data: dict, reserve_default: float) -> list[FleetVehicle]:
+    """The ``[[vehicle]]`` tables, each vehicle file loaded once."""
     vehicles = []
     vehicle_cache: dict[Path, Vehicle] = {}
     for i, v in enumerate(_array_of_tables(path, data, "vehicle")):
         where = f"vehicle[{i}]"
         v = _check_keys(path, where, v, _VEHICLE_KEYS)
         vid = _str(path, f"{where}.id", v.get("id"))
-        vfile = base / _str(path, f"{where}.file", v.get("file"))
+        vfile = path.parent / _str(path, f"{where}.file", v.get("file"))
         if vfile not in vehicle_cache:
             vehicle_cache[vfile] = load_vehicle(vfile)
         veh = vehicle_cache[vfile]
@@ -241,63 +293,78 @@ def load_scenario(path: str | Path, resolve_leg: LegResolver = default_resolver)
                 id=vid,
                 vehicle=veh,
                 max_gross_kg=None if maxg is None else _num(path, f"{where}.max_gross_kg", maxg, 0.0),
-                ev_reserve_fraction=_num(path, f"{where}.ev_reserve_fraction", v.get("ev_reserve_fraction", reserve_default), 0.0, 1.0),
+                ev_reserve_fraction=_num(path, f"{where}.ev_reserve_fraction",
+                                         v.get("ev_reserve_fraction", reserve_default), 0.0, 1.0),
                 soc_start=_num(path, f"{where}.soc_start", v.get("soc_start", SOC_START_DEFAULT), 0.0, 1.0),
             )
         )
+    return vehicles
 
-    vector_cache: dict[tuple[str, str], CycleVector] = {}
-    repeat_cache: dict[LegSource, CycleVector] = {}
 
-    def resolve(source: LegSource, where: str) -> Leg:
+class _LegVectors:
+    """Legs from their sources: each source resolved once (repeats of it scaled from
+    one copy), a resolver's error without a file named after the scenario's key."""
+
+    def __init__(self, path: Path, resolve_leg: LegResolver):
+        self.path = path
+        self.resolve_leg = resolve_leg
+        self.vectors: dict[tuple, CycleVector] = {}
+        self.repeated: dict[LegSource, CycleVector] = {}
+
+    def leg(self, source: LegSource, where: str) -> Leg:
         key = (source.kind, source.ref, source.options)
-        if key not in vector_cache:
+        if key not in self.vectors:
             try:
-                vector_cache[key] = resolve_leg(dataclasses.replace(source, repeat=1), base)
+                self.vectors[key] = self.resolve_leg(dataclasses.replace(source, repeat=1), self.path.parent)
             except InputError as exc:
                 if exc.path is None:
-                    raise InputError(path, f"{where}: {exc.message}") from None
+                    raise InputError(self.path, f"{where}: {exc.message}") from None
                 raise
-        if source not in repeat_cache:
-            repeat_cache[source] = vector_cache[key].repeated(source.repeat)
-        return Leg(vector=repeat_cache[source], source=source)
+        if source not in self.repeated:
+            self.repeated[source] = self.vectors[key].repeated(source.repeat)
+        return Leg(vector=self.repeated[source], source=source)
 
-    routes = []
-    for i, r in enumerate(_array_of_tables(path, data, "route")):
-        where = f"route[{i}]"
-        r = _check_keys(path, where, r, _ROUTE_KEYS)
-        rid = _str(path, f"{where}.id", r.get("id"))
-        where = f"route {rid!r}"
-        stops = r.get("stops")
-        if not isinstance(stops, list) or not stops or not all(isinstance(s, str) and s for s in stops):
-            raise InputError(path, f"{where}.stops must be a non-empty list of stop names")
-        ret = r.get("return_to_depot", ret_default)
-        if not isinstance(ret, bool):
-            raise InputError(path, f"{where}.return_to_depot must be true or false")
-        depot = r.get("depot", depots[0] if depots else "depot")
-        if depots and depot not in depots:
-            raise InputError(path, f"{where}.depot: unknown depot {depot!r}; depots: {', '.join(depots)}")
-        n_legs = len(stops) + (1 if ret else 0)
-        if ("leg" in r) == ("legs" in r):
-            raise InputError(path, f"{where} needs either leg = {{...}} (every leg) or legs = [...] ({n_legs} legs)")
-        if "leg" in r:
-            leg = resolve(_leg_source(path, f"{where}.leg", r["leg"]), f"{where}.leg")
-            legs = (leg,) * n_legs
-        else:
-            if not isinstance(r["legs"], list) or len(r["legs"]) != n_legs:
-                raise InputError(
-                    path,
-                    f"{where}.legs must list {n_legs} legs ({len(stops)} stops"
-                    f"{' + the return to the depot' if ret else ''})",
-                )
-            legs = tuple(
-                resolve(_leg_source(path, f"{where}.legs[{j}]", t), f"{where}.legs[{j}]") for j, t in enumerate(r["legs"])
+
+def _routes(path: Path, data: dict, depots: list[str], ret_default: bool, legs: _LegVectors) -> list[Route]:
+    """The ``[[route]]`` tables, their legs resolved."""
+    return [_route(path, i, r, depots, ret_default, legs) for i, r in enumerate(_array_of_tables(path, data, "route"))]
+
+
+def _route(path: Path, i: int, r: Any, depots: list[str], ret_default: bool, vectors: _LegVectors) -> Route:
+    where = f"route[{i}]"
+    r = _check_keys(path, where, r, _ROUTE_KEYS)
+    rid = _str(path, f"{where}.id", r.get("id"))
+    where = f"route {rid!r}"
+    stops = r.get("stops")
+    if not isinstance(stops, list) or not stops or not all(isinstance(s, str) and s for s in stops):
+        raise InputError(path, f"{where}.stops must be a non-empty list of stop names")
+    ret = r.get("return_to_depot", ret_default)
+    if not isinstance(ret, bool):
+        raise InputError(path, f"{where}.return_to_depot must be true or false")
+    depot = r.get("depot", depots[0] if depots else "depot")
+    if depots and depot not in depots:
+        raise InputError(path, f"{where}.depot: unknown depot {depot!r}; depots: {', '.join(depots)}")
+    n_legs = len(stops) + (1 if ret else 0)
+    if ("leg" in r) == ("legs" in r):
+        raise InputError(path, f"{where} needs either leg = {{...}} (every leg) or legs = [...] ({n_legs} legs)")
+    if "leg" in r:
+        leg = vectors.leg(_leg_source(path, f"{where}.leg", r["leg"]), f"{where}.leg")
+        legs = (leg,) * n_legs
+    else:
+        if not isinstance(r["legs"], list) or len(r["legs"]) != n_legs:
+            raise InputError(
+                path,
+                f"{where}.legs must list {n_legs} legs ({len(stops)} stops"
+                f"{' + the return to the depot' if ret else ''})",
             )
-        routes.append(
-            Route(id=rid, vehicle_id=_str(path, f"{where}.vehicle", r.get("vehicle")), stops=tuple(stops), legs=legs,
-                  depot=depot, return_to_depot=ret)
-        )
+        legs = tuple(vectors.leg(_leg_source(path, f"{where}.legs[{j}]", t), f"{where}.legs[{j}]")
+                     for j, t in enumerate(r["legs"]))
+    return Route(id=rid, vehicle_id=_str(path, f"{where}.vehicle", r.get("vehicle")), stops=tuple(stops), legs=legs,
+                 depot=depot, return_to_depot=ret)
 
+
+def _stops(path: Path, data: dict) -> tuple[dict[str, tuple[str, ...]], dict[str, str]]:
+    """The ``[stop."NAME"]`` tables: who may serve each stop, and its default vehicle."""
     allowed: dict[str, tuple[str, ...]] = {}
     default_vehicle: dict[str, str] = {}
     stop_tables = data.get("stop", {})
@@ -313,7 +380,11 @@ def load_scenario(path: str | Path, resolve_leg: LegResolver = default_resolver)
             allowed[s] = tuple(vs)
         if "default" in t:
             default_vehicle[s] = _str(path, f"{where}.default", t["default"])
+    return allowed, default_vehicle
 
+
+def _payloads(path: Path, data: dict, n_days: int) -> dict[str, tuple[float, ...]]:
+    """``[payload_kg]``: per stop, one payload [kg] per day (one value: every day)."""
     payload_tab = data.get("payload_kg")
     if not isinstance(payload_tab, dict):
         raise InputError(path, "missing table [payload_kg] (payload per stop, one value per day)")
@@ -323,23 +394,8 @@ def load_scenario(path: str | Path, resolve_leg: LegResolver = default_resolver)
         if isinstance(vals, list):
             payload[s] = tuple(_num(path, f"{where}[{j}]", x, 0.0) for j, x in enumerate(vals))
         else:
-            payload[s] = (_num(path, where, vals, 0.0),) * len(days)
-
-    return Scenario(
-        name=name,
-        vehicles=tuple(vehicles),
-        routes=tuple(routes),
-        days=tuple(days),
-        payload_kg=payload,
-        allowed=allowed,
-        default_vehicle=default_vehicle,
-        objective=objective,
-        prices=prices,
-        mass_model=mass_model,
-        path=str(path),
-        load_time_s=time.perf_counter() - t0,
-        ambient_c=ambient,
-    )
+            payload[s] = (_num(path, where, vals, 0.0),) * n_days
+    return payload
 
 
 def _day_temperatures(path: Path, value, n_days: int) -> tuple[float | None, ...]:
@@ -374,7 +430,8 @@ def resolve_day(sc: Scenario, spec: str) -> str:
         n = int(text)
         if 1 <= n <= len(sc.days):
             return sc.days[n - 1]
-        why = "days are numbered from 1, as the paper numbers them" if n == 0 else f"the scenario has {len(sc.days)} days"
+        why = ("days are numbered from 1, as the paper numbers them" if n == 0
+               else f"the scenario has {len(sc.days)} days")
         raise InputError(sc.path, f"no day {n}: {why}; days: {listing}")
     raise InputError(sc.path, f"unknown day {spec!r}: give a day's name or its number from 1; days: {listing}")
 
@@ -391,8 +448,6 @@ def fleet_report(path: str | Path, days: Sequence[str | int] | None = None, *, m
     :func:`cevm.core.assignment.plan` takes them)."""
     sc = load_scenario(path, resolve_leg)
     if ambient_c is not None:
-        import dataclasses
-
         sc = dataclasses.replace(sc, ambient_c=_day_temperatures(Path(path), float(ambient_c), len(sc.days)))
     chosen = [resolve_day(sc, d) if isinstance(d, str) else d for d in days] if days is not None else sc.days
     plans = [plan(sc, d, method=method) for d in chosen]

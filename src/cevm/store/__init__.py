@@ -12,7 +12,7 @@
   (read-write, or read-only for the commands that only read);
 - :mod:`~cevm.store.failures`: SQLite's errors as the store's (damaged, could not be
   written) and the damaged trips and routes;
-- :mod:`~cevm.store.check`: ``cevm store check`` and ``info``;
+- :mod:`~cevm.store.integrity`: ``cevm store check`` and ``info``;
 - :mod:`~cevm.store.display`: listed trips as a person reads them;
 - :mod:`~cevm.store.routes`: named routes (sequences of stored trips and cycles);
 - :mod:`~cevm.store.masses`: trip masses given by manifests or by hand, and which mass a

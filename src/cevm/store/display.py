@@ -24,7 +24,7 @@ def format_trips(df: pd.DataFrame, masses: Mapping | None = None) -> pd.DataFram
     """The display table of :meth:`~cevm.store.TripStore.list_trips` rows: trip_id, vehicle_id,
     start_utc (ISO 8601, ``Z``), duration_s, distance_km, measured_fuel_l,
     start_soc_pct (logged at the start), standstill_before_s (since the vehicle's previous
-    trip), measured_energy_kwh (from joules, 1 kWh = 3.6e6 J), dsm_coverage_pct,
+    trip), measured_energy_kwh (from joules, :data:`cevm.units.J_PER_KWH`), dsm_coverage_pct,
     elevation_source, source_file; with ``masses`` (:func:`cevm.store.masses.trip_masses`)
     also each trip's mass: mass_kg (the gross mass it is predicted at, as far as known
     without a vehicle file: given, else logged), payload_kg (a payload given to it),

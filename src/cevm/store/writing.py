@@ -118,6 +118,101 @@ def _carry_masses(con, old_ids: Sequence[str], new_ids: Sequence[str]) -> None:
                         [(new, old) for new, old in moves if new not in taken])
 
 
+def _rows(key: str, trips: Sequence[Trip | TripRecord], vectors: Sequence[bytes], sha256: str,
+          profile_blobs: Sequence[bytes] | None) -> tuple[list[tuple], list[tuple], list[str]]:
+    """The ``trips`` and ``trip_blobs`` rows of a file's trips, and their ids, after
+    checking that they belong together (everything that costs CPU, before the write
+    lock is taken)."""
+    if len(trips) != len(vectors):
+        raise ValueError(f"{len(trips)} trips but {len(vectors)} vectors for {key}")
+    if profile_blobs is None:
+        if not all(isinstance(t, Trip) for t in trips):
+            raise ValueError(f"trip records without arrays need their profile_blobs ({key})")
+        profile_blobs = [trip_profile_blob(t) for t in trips]
+    elif len(profile_blobs) != len(trips):
+        raise ValueError(f"{len(trips)} trips but {len(profile_blobs)} profiles for {key}")
+    for t in trips:
+        if t.source_sha256 != sha256:
+            raise ValueError(
+                f"trip {t.trip_id} has source_sha256 {t.source_sha256[:12]}..., "
+                f"file {key} has {sha256[:12]}..."
+            )
+    indices = [int(t.trip_index) for t in trips]
+    if len(set(indices)) != len(indices):
+        raise ValueError(f"repeated trip_index in the trips of {key}")
+    trip_rows, blob_rows, ids = [], [], []
+    for t, vec, prof in zip(trips, vectors, profile_blobs, strict=True):
+        trip_rows.append(trip_row(t, key))
+        vec, prof = bytes(vec), bytes(prof)
+        blob_rows.append((t.trip_id, vec, prof, blob_crc32(vec), blob_crc32(prof)))
+        ids.append(t.trip_id)
+    return trip_rows, blob_rows, ids
+
+
+def _delete_trips_of(con, key: str) -> list[tuple[str, str]]:
+    """Delete the trips (and their blobs) of the file keyed ``key``; their
+    ``(trip_id, vehicle_id)``."""
+    old = [(r[0], r[1]) for r in con.execute("SELECT trip_id, vehicle_id FROM trips WHERE source_file = ?", (key,))]
+    con.execute(
+        "DELETE FROM trip_blobs WHERE trip_id IN "
+        "(SELECT trip_id FROM trips WHERE source_file = ?)",
+        (key,),
+    )
+    con.execute("DELETE FROM trips WHERE source_file = ?", (key,))
+    return old
+
+
+def _not_stored(con, key: str, ids: Sequence[str]) -> tuple[list[int], list[tuple[str, str]]]:
+    """Which of a file's trips to insert (their positions in ``ids``), and the
+    duplicates: ``(trip_id, path already holding it)`` for a trip_id stored from
+    another path, or met earlier in this file."""
+    taken = dict(
+        con.execute(
+            "SELECT trip_id, source_file FROM trips "
+            "WHERE trip_id IN (SELECT value FROM json_each(?))",
+            (in_json(ids),),
+        ).fetchall()
+    )
+    keep, duplicates = [], []
+    for i, tid in enumerate(ids):
+        if tid in taken:
+            duplicates.append((tid, taken[tid]))
+        else:
+            taken[tid] = key
+            keep.append(i)
+    return keep, duplicates
+
+
+def _file_ok(con, key: str, sha256: str, size_bytes: int | None, mtime_s: float | None, profile: str | None, *,
+             n_trips: int, n_duplicates: int) -> None:
+    """The ``files`` row of a file stored ``'ok'`` at this version (inserted, or the
+    path's row updated)."""
+    con.execute(
+        f"""INSERT INTO files ({', '.join(FILE_COLUMNS)})
+            VALUES ({', '.join('?' * len(FILE_COLUMNS))})
+            ON CONFLICT (path) DO UPDATE SET
+                sha256 = excluded.sha256, size_bytes = excluded.size_bytes,
+                mtime_s = excluded.mtime_s, profile = excluded.profile,
+                status = excluded.status, error = excluded.error,
+                ingested_utc_s = excluded.ingested_utc_s,
+                trips_sha256 = excluded.trips_sha256, n_trips = excluded.n_trips,
+                n_duplicates = excluded.n_duplicates""",
+        (
+            key,
+            sha256,
+            None if size_bytes is None else int(size_bytes),
+            sql_real(mtime_s),
+            profile,
+            "ok",
+            None,
+            time.time(),
+            sha256,
+            n_trips,
+            n_duplicates,
+        ),
+    )
+
+
 class TripWriting:
     """The writes of :class:`~cevm.store.TripStore` (a mixin: it needs the store's
     ``con``, ``_write()`` transaction and ``_checkpoint(stage)`` hook)."""
@@ -161,32 +256,7 @@ class TripWriting:
         ``duplicates``. Any exception rolls the whole file back.
         """
         key = file_key(path)
-        if len(trips) != len(vectors):
-            raise ValueError(f"{len(trips)} trips but {len(vectors)} vectors for {key}")
-        if profile_blobs is None:
-            if not all(isinstance(t, Trip) for t in trips):
-                raise ValueError(f"trip records without arrays need their profile_blobs ({key})")
-            profile_blobs = [trip_profile_blob(t) for t in trips]
-        elif len(profile_blobs) != len(trips):
-            raise ValueError(f"{len(trips)} trips but {len(profile_blobs)} profiles for {key}")
-        for t in trips:
-            if t.source_sha256 != sha256:
-                raise ValueError(
-                    f"trip {t.trip_id} has source_sha256 {t.source_sha256[:12]}..., "
-                    f"file {key} has {sha256[:12]}..."
-                )
-        indices = [int(t.trip_index) for t in trips]
-        if len(set(indices)) != len(indices):
-            raise ValueError(f"repeated trip_index in the trips of {key}")
-
-        # Everything that costs CPU happens before the write lock is taken.
-        trip_rows, blob_rows, ids = [], [], []
-        for t, vec, prof in zip(trips, vectors, profile_blobs):
-            trip_rows.append(trip_row(t, key))
-            vec, prof = bytes(vec), bytes(prof)
-            blob_rows.append((t.trip_id, vec, prof, blob_crc32(vec), blob_crc32(prof)))
-            ids.append(t.trip_id)
-
+        trip_rows, blob_rows, ids = _rows(key, trips, vectors, sha256, profile_blobs)
         con = self.con
         with self._write():
             state = con.execute(
@@ -195,56 +265,11 @@ class TripWriting:
             if not force and state is not None and state == (sha256, "ok"):
                 return WriteResult(key, unchanged=True, inserted=0, replaced=0)
             self._checkpoint("begun")
-            old = con.execute("SELECT trip_id, vehicle_id FROM trips WHERE source_file = ?", (key,)).fetchall()
+            old = _delete_trips_of(con, key)
             old_ids = [r[0] for r in old]
-            n_old = len(old_ids)
-            con.execute(
-                "DELETE FROM trip_blobs WHERE trip_id IN "
-                "(SELECT trip_id FROM trips WHERE source_file = ?)",
-                (key,),
-            )
-            con.execute("DELETE FROM trips WHERE source_file = ?", (key,))
             self._checkpoint("deleted")
-
-            taken = dict(
-                con.execute(
-                    "SELECT trip_id, source_file FROM trips "
-                    "WHERE trip_id IN (SELECT value FROM json_each(?))",
-                    (in_json(ids),),
-                ).fetchall()
-            )
-            keep, duplicates = [], []
-            for i, tid in enumerate(ids):
-                if tid in taken:
-                    duplicates.append((tid, taken[tid]))
-                else:
-                    taken[tid] = key
-                    keep.append(i)
-
-            con.execute(
-                f"""INSERT INTO files ({', '.join(FILE_COLUMNS)})
-                    VALUES ({', '.join('?' * len(FILE_COLUMNS))})
-                    ON CONFLICT (path) DO UPDATE SET
-                        sha256 = excluded.sha256, size_bytes = excluded.size_bytes,
-                        mtime_s = excluded.mtime_s, profile = excluded.profile,
-                        status = excluded.status, error = excluded.error,
-                        ingested_utc_s = excluded.ingested_utc_s,
-                        trips_sha256 = excluded.trips_sha256, n_trips = excluded.n_trips,
-                        n_duplicates = excluded.n_duplicates""",
-                (
-                    key,
-                    sha256,
-                    None if size_bytes is None else int(size_bytes),
-                    sql_real(mtime_s),
-                    profile,
-                    "ok",
-                    None,
-                    time.time(),
-                    sha256,
-                    len(keep),
-                    len(duplicates),
-                ),
-            )
+            keep, duplicates = _not_stored(con, key, ids)
+            _file_ok(con, key, sha256, size_bytes, mtime_s, profile, n_trips=len(keep), n_duplicates=len(duplicates))
             con.executemany(
                 f"INSERT INTO trips ({', '.join(TRIP_COLUMNS)}) "
                 f"VALUES ({', '.join('?' * len(TRIP_COLUMNS))})",
@@ -260,7 +285,7 @@ class TripWriting:
             _carry_masses(con, old_ids, [ids[i] for i in keep])
             update_standstill_before(con, {r[1] for r in old} | {trip_rows[i][1] for i in keep})
         return WriteResult(
-            key, unchanged=False, inserted=len(keep), replaced=n_old, duplicates=tuple(duplicates)
+            key, unchanged=False, inserted=len(keep), replaced=len(old_ids), duplicates=tuple(duplicates)
         )
 
     def record_failure(

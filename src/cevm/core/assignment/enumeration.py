@@ -48,7 +48,8 @@ def solve_enumerate(sc: Scenario, prob: DayProblem) -> tuple[dict[str, int] | No
         for vec, cols in vector_groups(r.legs):
             m = mass[:, cols]
             uniq, inv = np.unique(m, return_inverse=True)
-            use = quantity(predict(vec, v.vehicle, uniq, ambient_c=sc.ambient_of(prob.d)), v.vehicle)[inv].reshape(m.shape)
+            pred = predict(vec, v.vehicle, uniq, ambient_c=sc.ambient_of(prob.d))
+            use = quantity(pred, v.vehicle)[inv].reshape(m.shape)
             q += np.sum(use * driven[:, cols], axis=1)
         vehicle_q[v.id] += q
     for v in sc.vehicles:

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from itertools import pairwise
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -76,7 +77,8 @@ class Evaluation:
             if v.max_gross_kg is not None and v.max_gross_used_kg > v.max_gross_kg * (1 + 1e-12):
                 out.append(f"{v.vehicle_id} gross {v.max_gross_used_kg:g} kg > {v.max_gross_kg:g} kg")
             if v.energy_budget_j is not None and v.energy_j > v.energy_budget_j * (1 + BUDGET_RTOL):
-                out.append(f"{v.vehicle_id} uses {v.energy_j / J_PER_KWH:.1f} kWh > budget {v.energy_budget_j / J_PER_KWH:.1f} kWh")
+                out.append(f"{v.vehicle_id} uses {v.energy_j / J_PER_KWH:.1f} kWh > budget "
+                           f"{v.energy_budget_j / J_PER_KWH:.1f} kWh")
         return out
 
 
@@ -127,15 +129,14 @@ def calibration_warnings(sc: Scenario, plans: Sequence[Plan]) -> list[str]:
     for v in sc.vehicles:
         if not masses.get(v.id):
             continue
-        for w in domain_warnings(v.vehicle, mass_kg=masses[v.id], ambient_c=temps[v.id],
-                                 mean_speed_mps=speeds.get(v.id) or None):
-            out.append(f"{v.id}: {w}")
+        out.extend(f"{v.id}: {w}" for w in domain_warnings(v.vehicle, mass_kg=masses[v.id], ambient_c=temps[v.id],
+                                                            mean_speed_mps=speeds.get(v.id) or None))
     return out
 
 
 def leg_names(route: Route) -> list[str]:
     places = [route.depot, *route.stops] + ([route.depot] if route.return_to_depot else [])
-    return [f"{a} -> {b}" for a, b in zip(places[:-1], places[1:])]
+    return [f"{a} -> {b}" for a, b in pairwise(places)]
 
 
 def evaluate(sc: Scenario, day: str | int, assignment: Mapping[str, int | str]) -> Evaluation:
@@ -179,7 +180,7 @@ def evaluate(sc: Scenario, day: str | int, assignment: Mapping[str, int | str]) 
         per_vehicle[v.id].append(
             RouteUse(
                 route_id=r.id,
-                stops_served=tuple(s for s, ok in zip(r.stops, served) if ok),
+                stops_served=tuple(s for s, ok in zip(r.stops, served, strict=True) if ok),
                 leg_names=tuple(names[j] for j in driven),
                 leg_mass_kg=tuple(float(mass[j]) for j in driven),
                 leg_use=tuple(float(use[j]) for j in driven),

@@ -27,6 +27,7 @@ from cevm.units import J_PER_KWH
 _MILP_OBJECTIVE_SCALE = 1e3
 
 _METHOD = "milp (HiGHS)"
+_HIGHS_STATUS = {0: "optimal", 1: "time limit", 2: "infeasible", 3: "unbounded", 4: "error"}
 
 
 class _Infeasible(Exception):
@@ -58,7 +59,7 @@ def binaries(prob: DayProblem) -> Binaries:
         for ri in opts:
             opt_stop.append(j)
             opt_route.append(ri)
-    opt_of = {(prob.free[j], ri): k for k, (j, ri) in enumerate(zip(opt_stop, opt_route))}
+    opt_of = {(prob.free[j], ri): k for k, (j, ri) in enumerate(zip(opt_stop, opt_route, strict=True))}
     pay_x = np.array([prob.payload[prob.free[j]] for j in opt_stop])
     return Binaries(stop=opt_stop, route=opt_route, of=opt_of, payload_kg=pay_x)
 
@@ -176,7 +177,7 @@ def objective(sc: Scenario, weights: dict[str, float], xb: Binaries, terms: LegT
     c = np.zeros(xb.n + terms.n_t)
     for v in sc.vehicles:
         c[:xb.n] += terms.lin_x[v.id] * qscale[v.id]
-    for t, (vid, curve, m0, sel, pay) in enumerate(terms.epi):
+    for t, (vid, *_) in enumerate(terms.epi):
         c[xb.n + t] = qscale[vid]
     return Objective(c=c, ref=ref, qscale=qscale)
 
@@ -224,7 +225,7 @@ def constraints(sc: Scenario, prob: DayProblem, xb: Binaries, terms: LegTerms, o
         rows.add(sel, pay / 1e3, -np.inf, cap / 1e3)
     for t, (vid, curve, m0, sel, pay) in enumerate(terms.epi):
         s = obj.qscale[vid] if obj.qscale[vid] > 0 else 1.0
-        for a, b in zip(curve.alpha, curve.beta):
+        for a, b in zip(curve.alpha, curve.beta, strict=True):
             # t >= a + b (m0 + sum pay x)  <=>  b pay . x - t <= -(a + b m0)
             rows.add(np.append(sel, n_x + t), np.append(b * pay * s, -s), -np.inf, -(a + b * m0) * s)
     for v in sc.vehicles:
@@ -264,7 +265,7 @@ def _decode(res, sc: Scenario, prob: DayProblem, xb: Binaries, terms: LegTerms, 
             weights: dict[str, float], info: dict[str, Any]) -> dict[str, int] | None:
     """The assignment HiGHS found (None if none), and its status, gap and objective (in
     objective units, the constant terms included) in ``info``."""
-    status = {0: "optimal", 1: "time limit", 2: "infeasible", 3: "unbounded", 4: "error"}.get(res.status, str(res.status))
+    status = _HIGHS_STATUS.get(res.status, str(res.status))
     info["status"] = status
     info["mip_gap"] = getattr(res, "mip_gap", None)
     if res.x is None:

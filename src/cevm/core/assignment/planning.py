@@ -71,32 +71,31 @@ class Plan:
 
     def to_dict(self) -> dict:
         """JSON-ready dict (SI units, plus kWh for readability)."""
-        vehicles = []
-        for v in self.evaluation.vehicles:
-            vehicles.append(
-                {
-                    "vehicle": v.vehicle_id,
-                    "stops": list(v.stops),
-                    "fuel_l": v.fuel_l,
-                    "energy_j": v.energy_j,
-                    "energy_kwh": None if v.energy_j is None else v.energy_j / J_PER_KWH,
-                    "value": v.value,
-                    "max_gross_used_kg": v.max_gross_used_kg,
-                    "max_gross_kg": v.max_gross_kg,
-                    "energy_budget_j": v.energy_budget_j,
-                    "routes": [
-                        {
-                            "route": ru.route_id,
-                            "stops_served": list(ru.stops_served),
-                            "legs": [
-                                {"leg": n, "mass_kg": m, ("energy_j" if v.energy_j is not None else "fuel_l"): u}
-                                for n, m, u in zip(ru.leg_names, ru.leg_mass_kg, ru.leg_use)
-                            ],
-                        }
-                        for ru in v.routes
-                    ],
-                }
-            )
+        vehicles = [
+            {
+                "vehicle": v.vehicle_id,
+                "stops": list(v.stops),
+                "fuel_l": v.fuel_l,
+                "energy_j": v.energy_j,
+                "energy_kwh": None if v.energy_j is None else v.energy_j / J_PER_KWH,
+                "value": v.value,
+                "max_gross_used_kg": v.max_gross_used_kg,
+                "max_gross_kg": v.max_gross_kg,
+                "energy_budget_j": v.energy_budget_j,
+                "routes": [
+                    {
+                        "route": ru.route_id,
+                        "stops_served": list(ru.stops_served),
+                        "legs": [
+                            {"leg": n, "mass_kg": m, ("energy_j" if v.energy_j is not None else "fuel_l"): u}
+                            for n, m, u in zip(ru.leg_names, ru.leg_mass_kg, ru.leg_use, strict=True)
+                        ],
+                    }
+                    for ru in v.routes
+                ],
+            }
+            for v in self.evaluation.vehicles
+        ]
         return {
             "scenario": self.scenario,
             "day": self.day,

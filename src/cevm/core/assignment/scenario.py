@@ -269,7 +269,8 @@ def validate_scenario(sc: Scenario) -> None:
     evs = [v.id for v in sc.vehicles if v.vehicle.is_ev]
     ices = [v.id for v in sc.vehicles if not v.vehicle.is_ev]
     if kind == "fuel" and evs:
-        raise bad(f"objective 'fuel' but {evs[0]!r} is electric: use objective = 'cost' with [prices] for a mixed fleet")
+        raise bad(f"objective 'fuel' but {evs[0]!r} is electric: use objective = 'cost' with [prices] "
+                  "for a mixed fleet")
     if kind == "energy" and ices:
         raise bad(f"objective 'energy' is for electric fleets, but {ices[0]!r} burns fuel: use 'fuel' or 'cost'")
     if kind == "cost":

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from cevm.units import RAD_S_PER_RPM
+from cevm.units import MPS_TO_KMH, RAD_S_PER_RPM
 
 RPM = RAD_S_PER_RPM  # rad/s per rpm
 
@@ -73,8 +73,8 @@ class EvParams:
     constant_loss_frac: float = 0.003
     regen_max_power_w: float = 120e3
     regen_max_torque_nm: float | None = None
-    regen_fade_low_mps: float = 4.0 / 3.6
-    regen_fade_high_mps: float = 10.0 / 3.6
+    regen_fade_low_mps: float = 4.0 / MPS_TO_KMH
+    regen_fade_high_mps: float = 10.0 / MPS_TO_KMH
     cells_in_series: float = 180.0
     ocv_soc: tuple[float, ...] = (0.0, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 1.0)
     ocv_cell_v: tuple[float, ...] = (3.40, 3.55, 3.61, 3.65, 3.69, 3.74, 3.80, 3.87, 3.94, 4.02, 4.10)
@@ -237,7 +237,8 @@ class DieselParams:
         d = (w - self.best_efficiency_speed_rad_s) / (1000.0 * RPM)
         e = self.indicated_efficiency_max - self.indicated_efficiency_speed_drop * d * d
         tmax = self.full_load_torque(w)
-        load = np.where(tmax > 0, np.clip(np.asarray(torque_nm, dtype=np.float64), 0.0, None) / np.where(tmax > 0, tmax, 1.0), 0.0)
+        brake = np.clip(np.asarray(torque_nm, dtype=np.float64), 0.0, None)
+        load = np.where(tmax > 0, brake / np.where(tmax > 0, tmax, 1.0), 0.0)
         return e * (1.0 - self.indicated_efficiency_load_drop * np.minimum(load, 1.0) ** 2)
 
     def fuel_power_w(self, speed_rad_s, brake_power_w, friction_scale=1.0) -> np.ndarray:
@@ -341,9 +342,8 @@ def _seq_problem(name: str, values: tuple, params) -> str | None:
     a = np.asarray(values, dtype=np.float64)
     if a.ndim != 1 or a.size == 0 or not np.all(np.isfinite(a)):
         return "must be a non-empty list of finite numbers"
-    if name in ("ocv_soc", "full_load_speed_rad_s"):
-        if a.size < 2 or np.any(np.diff(a) <= 0):
-            return "must be strictly increasing, at least 2 values"
+    if name in ("ocv_soc", "full_load_speed_rad_s") and (a.size < 2 or np.any(np.diff(a) <= 0)):
+        return "must be strictly increasing, at least 2 values"
     if name == "ocv_soc" and (a[0] > 0.0 or a[-1] < 1.0):
         return "must span 0 to 1 (first value <= 0, last >= 1)"
     if name in ("ocv_cell_v", "full_load_torque_nm", "gear_ratios") and np.any(a <= 0):

@@ -12,7 +12,7 @@ import numpy as np
 
 from cevm.core.cycle import trapezoid_distance_m
 from cevm.core.detailed.params import RPM
-from cevm.units import J_PER_KWH
+from cevm.units import J_PER_KWH, MPS_TO_KMH, S_PER_H
 
 
 @dataclass(frozen=True, eq=False)
@@ -87,7 +87,7 @@ class SimulationResult:
 
         cols: dict[str, Any] = {
             "time_s": self.time_s,
-            "speed_kmh": self.speed_mps * 3.6,
+            "speed_kmh": self.speed_mps * MPS_TO_KMH,
         }
         if self.elevation_m is not None:
             cols["elevation_m"] = self.elevation_m
@@ -115,7 +115,7 @@ class SimulationResult:
             cols["engine_speed_rpm"] = per_sample(s["engine_speed_rad_s"], 1 / RPM)
             cols["engine_torque_nm"] = per_sample(s["engine_torque_nm"])
             cols["engine_power_kw"] = per_sample(s["engine_power_w"], 1e-3)
-            cols["fuel_rate_lph"] = per_sample(s["fuel_rate_lps"], 3600.0)
+            cols["fuel_rate_lph"] = per_sample(s["fuel_rate_lps"], S_PER_H)
             cols["friction_brake_power_kw"] = per_sample(s["friction_brake_power_w"], 1e-3)
             cols["fuel_cum_l"] = self.samples["fuel_cum_l"]
         cols["traction_deficit_kw"] = per_sample(s["traction_deficit_w"], 1e-3)

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from cevm.core import checks, energy
+from cevm.core import energy, physical_inputs
 from cevm.core.model import braking_weight
 from cevm.core.sweep.sources import Source
 from cevm.core.vehicle import Vehicle
@@ -92,12 +92,12 @@ class PredictionSet:
             raise CevmError("no vehicles")
         masses: list[np.ndarray] = []
         if mass_kg is not None:
-            m = checks.masses_for(vehicles, np.asarray(mass_kg, dtype=np.float64).ravel())
+            m = physical_inputs.masses_for(vehicles, np.asarray(mass_kg, dtype=np.float64).ravel())
             if m.size == 0:
                 raise CevmError("no gross masses given")
             masses = [m] * len(vehicles)
         elif payload_kg is not None:
-            p = checks.payloads_kg(np.asarray(payload_kg, dtype=np.float64).ravel())
+            p = physical_inputs.payloads_kg(np.asarray(payload_kg, dtype=np.float64).ravel())
             if p.size == 0:
                 raise CevmError("no payloads given")
             for v in vehicles:
