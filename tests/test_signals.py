@@ -35,7 +35,7 @@ COMMANDS = [
      "cevm.cli.predict:PredictWriter.add", True),
     (("feasibility", "-v", BUS, "--vehicle-id", "EB-09"), "cevm.cli.feasibility:feasibility", False),
     (("simulate", "-v", BUS, "--trip", "{bus}", "--out", "{tmp}/sim.csv"), "cevm.core.detailed:simulate", False),
-    (("store", "check"), "cevm.store.check:_trip_problems", False),
+    (("store", "check"), "cevm.store.integrity:_trip_problems", False),
     (("fleet", "plan", SCENARIO), "cevm.io.scenario:fleet_report", False),
     (("trips", "set-mass", "{hgv}", "--gross-kg", "31000"), "cevm.store.masses:set_masses", False),
     (("route", "add", "R7", "--cycle", URBAN), "cevm.store.routes:add_route", False),

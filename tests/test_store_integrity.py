@@ -315,3 +315,23 @@ def test_decoding_inflates_no_stream_past_its_header():
     header = json.dumps({"n": MAX_PROFILE_SAMPLES + 1, "codec": "shuffle+zlib", "arrays": []}).encode()
     with pytest.raises(CevmError, match="at most"):
         decode_profile(b"CEVMPRF1" + struct.pack("<I", len(header)) + header)
+
+
+def test_store_check_reads_every_trips_row(fleet):
+    """A row whose text is not UTF-8, or whose quality summary is not JSON, is named by
+    `store check` (it said "sound" while `cevm trips` stopped on the row)."""
+    db, ids = fleet
+    a, b = ids["HGV-77"][2], ids["EB-09"][1]
+    garble(db, "UPDATE trips SET quality_json = CAST(x'7b22ff22' AS TEXT) WHERE trip_id = ?", a)
+    garble(db, "UPDATE trips SET quality_json = '{\"cut' WHERE trip_id = ?", b)
+    check = cevm("store", "check", "--store", db, "-f", "json")
+    assert check.exit_code == EXIT_STORE_DAMAGED
+    problems = {p["id"]: p["problem"] for p in json.loads(check.stdout)["problems"]}
+    assert set(problems) == {a, b}
+    assert "its row cannot be read" in problems[a] and "quality_json" in problems[a]
+    assert problems[b].startswith("its quality summary is not JSON")
+    from cevm.store import TripStore
+    from cevm.store.failures import DamagedTripError
+
+    with TripStore(db, readonly=True) as st, pytest.raises(DamagedTripError, match="quality: not JSON"):
+        st.load_trip(b)

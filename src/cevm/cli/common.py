@@ -26,7 +26,7 @@ import typer
 
 from cevm.cli.output import OutputFormat
 from cevm.core.model import ICE_BRAKING_MODES
-from cevm.errors import CevmError
+from cevm.errors import CevmError, OutputError, os_error_text
 from cevm.text import printable
 
 EXIT_OK = 0
@@ -295,27 +295,6 @@ def check_soc(soc_start: float, reserve_pct: float | None = None) -> None:
             physical_inputs.soc_pct(100.0, reserve_pct)
         except CevmError as exc:
             raise fail(f"--reserve-pct: {exc}") from None
-
-
-class OutputError(CevmError):
-    """An output (stdout, an --out or --plot file) that could not be written: exit 3."""
-
-
-#: errno values that say a write found no room or no write access: the disk (or quota,
-#: or file-size limit) is full, the file system is read-only.
-_NO_ROOM = {errno.ENOSPC: "the disk is full", errno.EDQUOT: "the disk quota is exhausted",
-            errno.EFBIG: "the file-size limit is reached", errno.EROFS: "a read-only file system"}
-
-
-def os_error_text(exc: OSError, what: str | None = None) -> str:
-    """One line for an OSError of writing or reading ``what`` (default: its file name, or
-    the output): ``FILE: could not be written: the disk is full (No space left on
-    device)``."""
-    where = what or (str(exc.filename) if exc.filename else "the output")
-    reason = exc.strerror or str(exc)
-    if exc.errno in _NO_ROOM:
-        return f"{where}: could not be written: {_NO_ROOM[exc.errno]} ({reason})"
-    return f"{where}: could not be written or read: {reason} (an I/O error)"
 
 
 def os_error_exit(exc: OSError, what: str | None = None) -> int:

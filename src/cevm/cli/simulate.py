@@ -10,13 +10,11 @@ import numpy as np
 import typer
 
 from cevm.cli.common import (
-    EXIT_STORE_ACCESS,
     OutFile,
     SocStartOption,
     StoreOption,
     check_soc,
     fail,
-    os_error_text,
     with_cycle_options,
 )
 from cevm.core import physical_inputs
@@ -111,9 +109,8 @@ def simulate(
     if plot is not None:
         try:
             plot_simulation(frame, res, plot, f"{veh.name}: {name}")
-        except OSError as exc:  # a full disk, an I/O error: the plot's, exit 3, and no half-written file
-            Path(plot).unlink(missing_ok=True)
-            raise fail(os_error_text(exc, str(plot)), EXIT_STORE_ACCESS) from None
+        except CevmError as exc:  # a full disk: the plot's, exit 3 (cevm.io.plots leaves no half-written file)
+            raise fail(exc) from None
     row = {"cycle": name, "vehicle": veh.name, "mass_kg": res.mass_kg, "mass_source": mass_source,
            "distance_km": res.distance_m / 1e3,
            "duration_s": res.duration_s, "wheel_energy_kwh": res.wheel_energy_j / J_PER_KWH,

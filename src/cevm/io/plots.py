@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from cevm.errors import CevmError
+from cevm.errors import OutputError, os_error_text
 from cevm.text import printable
 
 if TYPE_CHECKING:
@@ -60,7 +60,7 @@ def plot_calibration(result: CalibrationResult, path: Path, title: str) -> None:
     a2.set(xlabel="trip distance [km]", ylabel="error (modelled - measured) / measured [%]")
     a2.legend()
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
+    _save(fig, path)
 
 
 def plot_simulation(frame, res, path: Path, title: str) -> None:
@@ -82,7 +82,21 @@ def plot_simulation(frame, res, path: Path, title: str) -> None:
         ax2.plot(t_min, frame["elevation_m"], color="0.6", lw=0.8, label="elevation")
         ax2.set_ylabel("elevation [m]")
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
+    _save(fig, path)
+
+
+def _save(fig, path) -> None:
+    """Write the figure to ``path`` (PNG): a failed write (a full disk) is an
+    :class:`~cevm.errors.OutputError` naming the file (exit 3), and leaves no half-written
+    file."""
+    try:
+        fig.savefig(path, dpi=120)
+    except OSError as exc:
+        try:
+            Path(path).unlink(missing_ok=True)
+        except OSError:
+            pass
+        raise OutputError(os_error_text(exc, str(path))) from None
 
 
 def vehicle_label(vehicle) -> str:
@@ -165,7 +179,4 @@ def plot_predictions(path: Path, sources: list[Source], pset: PredictionSet | Se
         ax.grid(True, alpha=0.3)
         ax.legend(fontsize=7)
     fig.tight_layout()
-    try:
-        fig.savefig(path, dpi=120)
-    except OSError as exc:
-        raise CevmError(f"{path}: cannot write the plot: {exc.strerror or exc}") from None
+    _save(fig, path)

@@ -344,6 +344,10 @@ class TripQueries:
                 resolution=nan_for_null(r["measured_resolution"]),
                 uncertainty=nan_for_null(r["measured_uncertainty"]),
             )
+        try:
+            quality = json.loads(r["quality_json"])
+        except (TypeError, ValueError) as exc:  # damaged text that is still UTF-8
+            raise self._damaged(trip_id, "quality", f"not JSON: {exc}") from None
         return Trip(
             vehicle_id=r["vehicle_id"],
             source_file=r["source_file"],
@@ -354,7 +358,7 @@ class TripQueries:
             dsm_coverage_pct=nan_for_null(r["dsm_coverage_pct"]),
             measured=measured,
             gross_weight_kg=r["gross_weight_kg"],
-            quality=json.loads(r["quality_json"]),
+            quality=quality,
             **{f: r[f] for f in TRIP_EVIDENCE_FIELDS},
             start_soc_pct=r["start_soc_pct"],
             **prof,
