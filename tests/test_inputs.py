@@ -218,3 +218,52 @@ def test_a_logger_profile_that_is_a_device_or_nested_without_end_is_refused(tmp_
                                       "-q", timeout_s=30))
         assert "zero.toml: is a character device, not a logger profile" in line
     assert not (tmp_path / "s.sqlite").exists()
+
+
+# ---------------------------------------------------------------------------- scenarios
+
+SCENARIO = """name = "probe"
+days = ["d1"]
+[[depot]]
+id = "depot"
+[[vehicle]]
+id = "V1"
+file = "{vehicle}"
+[[route]]
+id = "R1"
+vehicle = "V1"
+stops = ["S1"]
+leg = {{ cycle = "{cycle}" }}
+[payload_kg]
+"S1" = [1000]
+"""
+
+
+def test_a_scenario_never_quotes_a_file_it_names(tmp_path):
+    """A scenario naming someone's secrets as its leg or its vehicle file (the
+    /etc/shadow of the trial, here files of the test's own) gets one line naming the file,
+    the key and the line, and not a word of what the file holds (before: "the header has:"
+    and the file's first line); a FIFO or a device is refused before it is read."""
+    secret = tmp_path / "shadow"
+    secret.write_text("xuserx:$6$SECRETHASH:19000:0:99999:7:::\n")
+    secret_toml = tmp_path / "credentials"
+    secret_toml.write_text('API_TOKEN = "SECRETTOKEN"\n')
+    DIESEL_PAPER = ROOT / "configs" / "vehicles" / "diesel-hgv-paper.toml"
+    scenario = tmp_path / "s.toml"
+    cases = [(DIESEL_PAPER, secret, "shadow:1: not a usable cycle file (named by route 'R1'.leg of"),
+             (secret_toml, URBAN, "credentials: not a usable vehicle file (named by vehicle[0].file of")]
+    for vehicle, cycle, said in cases:
+        scenario.write_text(SCENARIO.format(vehicle=vehicle, cycle=cycle))
+        line = one_error(cevm("fleet", "plan", scenario))
+        assert said in line and "SECRET" not in line and "API_TOKEN" not in line and "xuserx" not in line, line
+    fifo = tmp_path / "pipe.csv"
+    if hasattr(os, "mkfifo"):
+        os.mkfifo(fifo)
+        for cycle, said in ((fifo, "is a FIFO (named pipe), not a cycle file"),
+                            (Path("/dev/zero"), "is a character device, not a cycle file")):
+            if cycle.exists():
+                scenario.write_text(SCENARIO.format(vehicle=DIESEL_PAPER, cycle=cycle))
+                line = one_error(cevm_process("fleet", "plan", scenario, timeout_s=30))
+                assert said in line and "(named by route 'R1'.leg of" in line, line
+    scenario.write_text(SCENARIO.format(vehicle=DIESEL_PAPER, cycle=tmp_path / "missing.csv"))
+    assert "missing.csv: cycle file not found (named by route 'R1'.leg" in one_error(cevm("fleet", "plan", scenario))

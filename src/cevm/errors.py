@@ -53,6 +53,12 @@ class InputError(CevmError):
         return printable(f"{where}: {self.message}")
 
 
+class FileAccessError(InputError):
+    """A file that could not be opened as the kind of file asked for: missing, unreadable,
+    not a regular file (a FIFO, a device), over its size bound. Its message never quotes
+    the file's content (:mod:`cevm.io.inputs`)."""
+
+
 class OutputError(CevmError):
     """An output (stdout, an ``--out`` or ``--plot`` file) that could not be written: a
     full disk, a read-only file system, an I/O error. The command line exits 3 for it, as

@@ -10,8 +10,9 @@ file is allowed (:data:`MAX_TOML_BYTES` for TOML, the readers' own limits for th
 others), refusing a larger file from its size, before reading it, and a file that grows
 past the limit while it is read at the limit.
 
-Every refusal is an :class:`~cevm.errors.InputError` naming the file and the bound, and
-never quotes the file's content (a scenario may name any file on the machine).
+Every refusal is a :class:`~cevm.errors.FileAccessError` (an InputError) naming the file
+and the bound, and never quotes the file's content (a scenario may name any file on the
+machine: :mod:`cevm.io.scenario` passes these on and no other error of such a file).
 """
 
 from __future__ import annotations
@@ -22,7 +23,7 @@ import stat
 from pathlib import Path
 from typing import BinaryIO
 
-from cevm.errors import InputError
+from cevm.errors import FileAccessError
 
 #: Largest TOML file read (vehicle files, logger profiles, fleet scenarios) [bytes]. The
 #: shipped ones are 1-6 kB; Python's TOML parser takes about 2 s per MiB, and its nesting
@@ -40,12 +41,12 @@ def _kind(mode: int) -> str | None:
     return next((name for test, name in _KINDS if test(mode)), "not a regular file")
 
 
-def _os_error(path: Path, what: str, exc: OSError) -> InputError:
+def _os_error(path: Path, what: str, exc: OSError) -> FileAccessError:
     if isinstance(exc, FileNotFoundError):
-        return InputError(path, f"{what} not found")
+        return FileAccessError(path, f"{what} not found")
     if isinstance(exc, PermissionError):
-        return InputError(path, f"cannot read the {what}: permission denied")
-    return InputError(path, f"cannot read the {what}: {exc.strerror or exc}")
+        return FileAccessError(path, f"cannot read the {what}: permission denied")
+    return FileAccessError(path, f"cannot read the {what}: {exc.strerror or exc}")
 
 
 def open_regular(path: str | Path, what: str = "file") -> BinaryIO:
@@ -56,7 +57,7 @@ def open_regular(path: str | Path, what: str = "file") -> BinaryIO:
     try:
         kind = _kind(os.stat(path).st_mode)  # refused before it is opened, where possible
         if kind is not None:
-            raise InputError(path, f"is {kind}, not a {what}")
+            raise FileAccessError(path, f"is {kind}, not a {what}")
         flags = os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_CLOEXEC", 0) | getattr(os, "O_BINARY", 0)
         fd = os.open(path, flags)
     except OSError as exc:
@@ -64,7 +65,7 @@ def open_regular(path: str | Path, what: str = "file") -> BinaryIO:
     try:
         kind = _kind(os.fstat(fd).st_mode)  # the file opened, whatever the path now names
         if kind is not None:
-            raise InputError(path, f"is {kind}, not a {what}")
+            raise FileAccessError(path, f"is {kind}, not a {what}")
         if hasattr(os, "set_blocking"):
             os.set_blocking(fd, True)
         return io.open(fd, "rb", closefd=True)
@@ -77,7 +78,7 @@ def check_size(path: Path, fh: BinaryIO, max_bytes: int, what: str, hint: str = 
     """The size of the open file ``fh``, refused (:class:`InputError`) above ``max_bytes``."""
     size = os.fstat(fh.fileno()).st_size
     if size > max_bytes:
-        raise InputError(path, f"{size:,} bytes: larger than a {what} may be ({_size(max_bytes)}){hint}")
+        raise FileAccessError(path, f"{size:,} bytes: larger than a {what} may be ({_size(max_bytes)}){hint}")
     return size
 
 
@@ -94,7 +95,7 @@ def read_bounded(path: str | Path, max_bytes: int, what: str = "file", hint: str
         except OSError as exc:
             raise _os_error(path, what, exc) from None
     if len(data) > max_bytes:
-        raise InputError(path, f"more than {_size(max_bytes)}: larger than a {what} may be{hint}")
+        raise FileAccessError(path, f"more than {_size(max_bytes)}: larger than a {what} may be{hint}")
     return data
 
 
