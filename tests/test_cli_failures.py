@@ -185,12 +185,14 @@ def test_a_bad_scheduler_address_is_one_line_and_ends_there(tmp_path, command):
     waits 40 s at exit and prints a TimeoutError traceback after the line."""
     pytest.importorskip("distributed")
     env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(ROOT / "src"), os.environ.get("PYTHONPATH", "")]))
+    log = ROOT / "sample_logs" / "srf" / "EB-01_2019-01-31.csv"
     args = (["predict", "-v", str(BUS), "-c", str(URBAN)] if command == "predict" else
-            ["ingest", str(ROOT / "sample_logs" / "srf" / "EB-01_2019-01-31.csv"), "--store", str(tmp_path / "s.sqlite")])
+            ["ingest", str(log), "--store", str(tmp_path / "s.sqlite")])
     proc = subprocess.run([sys.executable, "-m", "cevm", *args, "--scheduler", "nonsense://10.0.0.5:8786"],
                           capture_output=True, text=True, env=env, timeout=35)
     assert proc.returncode == 2, proc.stderr
     lines = proc.stderr.splitlines()
-    assert len(lines) == 1 and lines[0].startswith("cevm: error: cannot reach the Dask scheduler at "
-                                                   "nonsense://10.0.0.5:8786: ValueError: unknown address scheme"), lines
+    assert len(lines) == 1, lines
+    assert lines[0].startswith("cevm: error: cannot reach the Dask scheduler at nonsense://10.0.0.5:8786: "
+                               "ValueError: unknown address scheme"), lines
     assert not (tmp_path / "s.sqlite").exists()

@@ -18,7 +18,7 @@ from pathlib import Path
 import pytest
 from typer.testing import CliRunner
 
-from fleet_store import BUS, DIESEL, URBAN, make_fleet
+from fleet_store import BUS, URBAN, make_fleet
 
 ROOT = Path(__file__).resolve().parents[1]
 runner = CliRunner()

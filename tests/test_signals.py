@@ -7,6 +7,7 @@ its own tests (tests/test_shutdown.py)."""
 
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
 import sqlite3
@@ -64,10 +65,8 @@ def left_over(sid: int, within_s: float = 15.0) -> list:
     while (procs := faults.session_processes(sid)) and time.monotonic() < t_end:
         time.sleep(0.1)
     for pid, _ in procs:  # this test's: killed, so a failure leaves nothing running
-        try:
+        with contextlib.suppress(ProcessLookupError):
             os.kill(pid, signal.SIGKILL)
-        except ProcessLookupError:
-            pass
     return procs
 
 
@@ -87,9 +86,10 @@ def test_a_signal_stops_every_command_with_its_code_and_one_line(fleet, tmp_path
     env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(ROOT / "src"), str(STALL.parent),
                                                        os.environ.get("PYTHONPATH", "")]))
     err = tmp_path / "stderr.txt"
-    proc = subprocess.Popen([sys.executable, str(STALL), where, str(marker), *args, "--store", str(db)],
-                            start_new_session=True, stdout=subprocess.DEVNULL, stderr=open(err, "w"),
-                            stdin=subprocess.DEVNULL, env=env)
+    with open(err, "w") as err_file:
+        proc = subprocess.Popen([sys.executable, str(STALL), where, str(marker), *args, "--store", str(db)],
+                                start_new_session=True, stdout=subprocess.DEVNULL, stderr=err_file,
+                                stdin=subprocess.DEVNULL, env=env)
     try:
         t_end = time.monotonic() + 120
         while not marker.exists() and proc.poll() is None and time.monotonic() < t_end:

@@ -197,9 +197,7 @@ def _zeros_stream(nbytes: int) -> bytes:
     """A zlib stream of ``nbytes`` zero bytes, made in chunks (a few MB at a time)."""
     z = zlib.compressobj(9)
     chunk = bytes(8 << 20)
-    parts = []
-    for _ in range(nbytes // len(chunk)):
-        parts.append(z.compress(chunk))
+    parts = [z.compress(chunk) for _ in range(nbytes // len(chunk))]
     parts.append(z.compress(bytes(nbytes % len(chunk))))
     parts.append(z.flush())
     return b"".join(parts)

@@ -27,6 +27,7 @@ import typer
 from cevm.cli.output import OutputFormat
 from cevm.core.model import ICE_BRAKING_MODES
 from cevm.errors import CevmError, OutputError, os_error_text
+from cevm.io.outputs import OutFile
 from cevm.text import printable
 
 EXIT_OK = 0
@@ -347,62 +348,6 @@ def flush_stdout(code, *, said: bool = False):
     except (ValueError, AttributeError):  # closed or replaced
         pass
     return code
-
-
-class OutFile:
-    """``--out`` as a context manager: written to ``PATH.partial``, renamed to PATH when
-    the command succeeds, deleted when it fails (no truncated output left behind). A
-    write that fails (a full disk) is :class:`OutputError` naming PATH (exit 3).
-
-    PATH that exists and is not a regular file (``/dev/stdout``, a FIFO, a device) is
-    written directly: a rename would replace the device node itself. A symlink is
-    followed: the file it names is replaced, not the link."""
-
-    def __init__(self, path: Path):
-        self.path = Path(path)
-        target = Path(os.path.realpath(self.path))
-        self.direct = target.exists() and not target.is_file()
-        self.target = target
-        self.tmp = target if self.direct else target.with_name(target.name + ".partial")
-
-    def __enter__(self) -> IO[str]:
-        try:
-            self.fh = open(self.tmp, "w", encoding="utf-8", newline="")
-        except OSError as exc:
-            raise CevmError(f"{self.path}: cannot write: {exc.strerror or exc}") from None
-        return self.fh
-
-    def __exit__(self, exc_type, exc, tb) -> bool:
-        if self.direct:
-            try:
-                self.fh.close()
-            except OSError as err:
-                if exc_type is None or issubclass(exc_type, OSError):
-                    raise OutputError(os_error_text(err, str(self.path))) from None
-            if exc_type is not None and issubclass(exc_type, OSError):
-                raise OutputError(os_error_text(exc, str(self.path))) from None
-            return False
-        try:
-            self.fh.close()  # the last buffered bytes are written here
-            if exc_type is None:
-                os.replace(self.tmp, self.target)
-        except OSError as err:
-            _unlink_quietly(self.tmp)
-            if exc_type is None or issubclass(exc_type, OSError):
-                raise OutputError(os_error_text(err, str(self.path))) from None
-            return False
-        if exc_type is not None:
-            _unlink_quietly(self.tmp)
-            if issubclass(exc_type, OSError):  # a write in the block failed: named as this file's
-                raise OutputError(os_error_text(exc, str(self.path))) from None
-        return False
-
-
-def _unlink_quietly(path: Path) -> None:
-    try:
-        path.unlink(missing_ok=True)
-    except OSError:
-        pass
 
 
 def open_out(stack: ExitStack, out: Optional[Path]) -> IO[str]:

@@ -17,7 +17,6 @@ machine: :mod:`cevm.io.scenario` passes these on and no other error of such a fi
 
 from __future__ import annotations
 
-import io
 import os
 import stat
 from pathlib import Path
@@ -68,7 +67,7 @@ def open_regular(path: str | Path, what: str = "file") -> BinaryIO:
             raise FileAccessError(path, f"is {kind}, not a {what}")
         if hasattr(os, "set_blocking"):
             os.set_blocking(fd, True)
-        return io.open(fd, "rb", closefd=True)
+        return open(fd, "rb", closefd=True)
     except BaseException:
         os.close(fd)
         raise

@@ -308,8 +308,9 @@ class ManifestReader:
                                    f"{', '.join(header)}", line=1)
         units = {}
         for role in ("gross", "payload"):
-            if cols[role] is not None:
-                units[role] = fmt.mass_unit or _unit_of(_norm(cols[role])) or "kg"
+            col = cols[role]
+            if col is not None:
+                units[role] = fmt.mass_unit or _unit_of(_norm(col)) or "kg"
                 if units[role] not in ("kg", "t"):
                     raise InputError(path, f"mass unit {units[role]!r}: use kg or t")
         self.sep, self.decimal, self._cols, self._units = sep, decimal, cols, units
@@ -370,7 +371,10 @@ def read_manifest(path: str | Path, fmt: ManifestFormat | None = None, *,
         rows: list[ManifestRow] = []
         problems: list[tuple[int, str]] = []
         for item in reader.items():
-            (rows if isinstance(item, ManifestRow) else problems).append(item)
+            if isinstance(item, ManifestRow):
+                rows.append(item)
+            else:
+                problems.append(item)
     return Manifest(reader.path, tuple(rows), tuple(problems), reader.columns, reader.mass_unit, reader.decimal)
 
 

@@ -29,6 +29,7 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -252,7 +253,7 @@ def match_manifest(store: TripStore, manifest,
         else:
             on_problem(line, why)
 
-    hits: dict[str, tuple[set, list[int], object]] = {}  # trip: (its masses, their lines, the last row)
+    hits: dict[str, tuple[set, list[int], Any]] = {}  # trip: (its masses, their lines, the last row)
     for row in manifest.items():
         if isinstance(row, tuple):
             problem(*row)
