@@ -2,6 +2,7 @@
 
     python benchmarks/bench_ingest.py [--quick] [--vehicles N] [--days D]
                                       [--baseline-src DIR] [--repeat N]
+    python benchmarks/bench_ingest.py --sizes [--baseline-src DIR] [--repeat N]
 
 Generates a fleet of srf logs on the sample routes (cevm_samplegen.fleet_for_benchmark,
 the stand-in consumption: the benchmark measures ingest, not the detailed model) with
@@ -19,6 +20,14 @@ and ``--baseline-src /tmp/before/src``),
 in a subprocess of the same run, alternating ``--repeat`` times, and prints each
 stage's seconds and share for both (the minimum of the repeats): before and after a
 change, measured side by side.
+
+``--sizes`` measures one file at a time instead: srf logs of 1,000, 100,000, 1 M and 5 M
+rows (a long-haul truck's working days of the benchmark fleet, repeated on consecutive
+days, as ``benchmarks/bench_memory.py`` makes them), each ingested with the sample DSM by a
+fresh ``cevm ingest --workers 1`` process of this checkout (and of ``--baseline-src``,
+alternating, ``--repeat`` times): the process's CPU seconds, the cost per trip sample
+[us] and its peak memory (VmHWM), for a linear cost and a bounded memory whatever the
+file's size (the 5 M-row file with ``--max-rows`` and ``--max-samples`` lifted).
 
 The process runs with :func:`cevm.runtime.tune_allocator` applied, as the ``cevm``
 command does (``CEVM_TUNE_ALLOCATOR=0`` to measure glibc's defaults: ~7 % slower,
@@ -68,6 +77,75 @@ print(json.dumps({"seconds": dt, "samples": rep.summary()["samples"], "stage_s":
 """
 
 
+# One file by ``cevm ingest`` (the command, as a user runs it) in this process: prints its
+# CPU seconds, the samples stored and the process's peak memory (VmHWM) as JSON.
+_RUN_ONE = r"""
+import json, os, re, resource, sqlite3, sys, time
+os.environ.setdefault("OMP_NUM_THREADS", "1"); os.environ.setdefault("GDAL_NUM_THREADS", "1")
+from cevm.cli import main
+store = sys.argv[sys.argv.index("--store") + 1]
+sys.argv = ["cevm", "ingest", *sys.argv[1:]]
+t0 = time.process_time()
+try:
+    main()
+except SystemExit as exc:
+    assert not exc.code, exc.code
+cpu = time.process_time() - t0
+hwm = float(re.search(r"VmHWM:\s+(\d+)", open("/proc/self/status").read()).group(1)) / 1024
+con = sqlite3.connect(store)
+samples = con.execute("SELECT COALESCE(SUM(n_samples), 0) FROM trips").fetchone()[0]
+print("\n@@" + json.dumps({"cpu_s": cpu, "samples": samples, "peak_mb": hwm}))
+"""
+
+
+def _ingest_one(src: str, path: Path, dsm: Path, tmp: Path) -> dict:
+    store = tmp / "one.sqlite"
+    for p in tmp.glob("one.sqlite*"):
+        p.unlink()
+    env = {**os.environ, "PYTHONPATH": src}
+    lift = ["--max-rows", "6000000"]
+    if "max_samples" in (Path(src) / "cevm" / "cli" / "ingest.py").read_text():  # a checkout from before it: none
+        lift += ["--max-samples", "50000000"]
+    out = subprocess.run([sys.executable, "-c", _RUN_ONE, str(path), "--dsm", str(dsm), "--store", str(store),
+                          "--workers", "1", "-q", *lift], env=env, check=True, capture_output=True, text=True).stdout
+    return json.loads(out.split("@@")[-1])
+
+
+def _sizes(args, tmp: Path) -> None:
+    """Cost per sample and peak memory of one file of each size (module docstring)."""
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from bench_memory import make_large_srf
+
+    sizes = (1_000, 100_000, 1_000_000, 5_000_000)
+    files = {sizes[-1]: make_large_srf(tmp / f"srf-{sizes[-1]}.csv", sizes[-1], tmp)}
+    for n in sizes[:-1]:  # the first rows of the largest
+        with open(files[sizes[-1]], "rb") as src, open(tmp / f"srf-{n}.csv", "wb") as out:
+            k = 0
+            for line in src:
+                out.write(line)
+                k += not line.startswith((b"#", b"timestamp_utc"))
+                if k == n:
+                    break
+        files[n] = tmp / f"srf-{n}.csv"
+    dsm = tmp / "sample" / "dsm"
+    this_src = str(Path(__file__).resolve().parents[1] / "src")
+    srcs = {"this": this_src, **({"baseline": args.baseline_src} if args.baseline_src else {})}
+    print(f"{'rows':>10s} {'code':>9s} {'samples':>10s} {'CPU s':>8s} {'us/sample':>10s} {'peak MB':>8s}")
+    for n in sizes:
+        best: dict[str, dict] = {}
+        for _ in range(max(1, args.repeat)):
+            for name, src in srcs.items():
+                r = _ingest_one(src, files[n], dsm, tmp)
+                if name not in best or r["cpu_s"] < best[name]["cpu_s"]:
+                    best[name] = r
+        for name, r in best.items():
+            print(f"{n:>10,d} {name:>9s} {r['samples']:>10,d} {r['cpu_s']:>8.2f} "
+                  f"{1e6 * r['cpu_s'] / max(r['samples'], 1):>10.2f} {r['peak_mb']:>8.0f}")
+        if len(best) == 2:
+            print(f"{'':>10s} {'ratio':>9s} {'':>10s} {best['baseline']['cpu_s'] / best['this']['cpu_s']:>7.2f}x "
+                  "(baseline CPU / this CPU, same run)")
+
+
 def _ingest_with(src: str, fleet: Path, dsm: Path) -> dict:
     env = {**os.environ, "PYTHONPATH": src}
     out = subprocess.run([sys.executable, "-c", _RUN_INGEST, str(fleet), str(dsm)], env=env, check=True,
@@ -103,7 +181,12 @@ def main() -> None:
     ap.add_argument("--days", type=int, default=None)
     ap.add_argument("--baseline-src", default=None, help="another checkout's src/ to ingest the same files with")
     ap.add_argument("--repeat", type=int, default=1, help="alternating runs of this and the baseline (with --baseline-src)")
+    ap.add_argument("--sizes", action="store_true", help="one file of 1k, 100k, 1M and 5M rows each: cost and memory")
     args = ap.parse_args()
+    if args.sizes:
+        with tempfile.TemporaryDirectory(prefix="cevm-bench-") as tmp:
+            _sizes(args, Path(tmp))
+        return
     n_veh = args.vehicles or (8 if args.quick else 40)
     n_days = args.days or (2 if args.quick else 5)
     print(f"allocator tuned as the CLI runs: {tune_allocator()}")

@@ -21,9 +21,11 @@ and whether the peak meets the goal. The cases:
 - ``wide``: the sample's bus day with every srf column (20, a hybrid's fuel columns
   added), at the most rows the default values bound allows it (ingested) and at 2.5 M
   rows (refused by that bound, at the row past it).
-- ``portal 2.5M``: the sample portal log's first day (``;``, decimal commas, cp1252,
-  local times) repeated on consecutive days from 1 November 2019 to 2.5 million rows,
-  its default row limit.
+- ``portal 2.5M``, ``portal 1.2M``: the sample portal log's first day (``;``, decimal
+  commas, cp1252, local times) repeated on consecutive days from 1 November 2019 to 2.5
+  million rows (the default row limit: 12 M trip samples on the 1 s grid, a row every
+  5 s; refused by the samples bound, ``--max-samples``) and to 1.2 million (5.8 M
+  samples, under it: ingested).
 - ``DSM one strip``, ``DSM 16k tiles``: a sample srf log with a DSM of one 40,000 x
   40,000 float32 deflate strip (sparse: kilobytes on disk, 6.4 GB decoded), or of
   16,384-pixel tiles (1.07 GB each decoded): refused from the raster's header.
@@ -388,9 +390,10 @@ def log_cases(args, work: Path, lim, wide_rows: int, big_name: str) -> list:
         for path, n in ((wide, wide_rows), (wide_over, 2_500_000)):
             if not (args.keep and path.exists()):
                 make_wide_srf(path, n, work / "sample")
-        portal = work / "portal-2500000.csv"
-        if not (args.keep and portal.exists()):
-            make_portal(portal, 2_500_000, work / "sample")
+        portal, portal_half = work / "portal-2500000.csv", work / "portal-1200000.csv"
+        for path, n in ((portal, 2_500_000), (portal_half, 1_200_000)):
+            if not (args.keep and path.exists()):
+                make_portal(path, n, work / "sample")
         strip_dsm, tiles_dsm = work / "dsm-strip.tif", work / "dsm-16k.tif"
         make_huge_block_dsm(strip_dsm, tiled=False, blockysize=40_000)
         make_huge_block_dsm(tiles_dsm, tiled=True, blockxsize=16_384, blockysize=16_384)
@@ -406,7 +409,8 @@ def log_cases(args, work: Path, lim, wide_rows: int, big_name: str) -> list:
               f"({args.rows:,} rows), {bomb.name} {bomb.stat().st_size / 1e6:.1f} MB -> {args.bomb_gib:g} GiB, "
               f"{lineless.name} {lineless.stat().st_size / 1e6:.0f} MB, {nul.name} {nul.stat().st_size / 1e9:.1f} GB",
               flush=True)
-        made.update(big=big, dsm=dsm, wide=wide, wide_over=wide_over, portal=portal, strip_dsm=strip_dsm,
+        made.update(big=big, dsm=dsm, wide=wide, wide_over=wide_over, portal=portal, portal_half=portal_half,
+                    strip_dsm=strip_dsm,
                     tiles_dsm=tiles_dsm, bus_day=bus_day, bomb=bomb, lineless=lineless, nul=nul)
         return made
 
@@ -431,9 +435,10 @@ def log_cases(args, work: Path, lim, wide_rows: int, big_name: str) -> list:
             ingest(2, f"wide {wide_rows / 1e6:g}M", "wide", dsm()),
             ingest(3, "wide 2.5M", "wide_over", dsm()),
             ingest(4, "portal 2.5M", "portal", dsm()),
-            ingest(5, "DSM one strip", "bus_day", dsm("strip_dsm")),
-            ingest(6, "DSM 16k tiles", "bus_day", dsm("tiles_dsm")),
-            ingest(7, "gzip bomb", "bomb"), ingest(8, "no line breaks", "lineless"), ingest(9, "all NUL", "nul")]
+            ingest(5, "portal 1.2M", "portal_half", dsm()),
+            ingest(6, "DSM one strip", "bus_day", dsm("strip_dsm")),
+            ingest(7, "DSM 16k tiles", "bus_day", dsm("tiles_dsm")),
+            ingest(8, "gzip bomb", "bomb"), ingest(9, "no line breaks", "lineless"), ingest(10, "all NUL", "nul")]
 
 
 # ------------------------------------------------------------ inputs that are not logs

@@ -37,8 +37,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "src"))
 
-from cevm.core.cycle import CycleVector  # noqa: E402
-from cevm.store.codec import decode_profile  # noqa: E402
+from cevm.core.cycle import CycleVector
+from cevm.store.codec import decode_profile
 
 _VOLATILE = {"files": {"mtime_s", "ingested_utc_s"}, "trip_masses": {"set_utc_s"}, "routes": {"created_utc_s"}}
 _VECTOR_SCALARS = ("s_me", "s_a", "s_r", "stand_x", "cr0", "duration_s", "distance_m", "idle_s", "n_samples",
@@ -99,7 +99,7 @@ class Diff:
 
 
 def _rows(con: sqlite3.Connection, table: str, key: str) -> dict:
-    cur = con.execute(f"SELECT * FROM {table}")  # noqa: S608 - our own table names
+    cur = con.execute(f"SELECT * FROM {table}")
     names = [c[0] for c in cur.description]
     return {row[names.index(key)]: dict(zip(names, row)) for row in cur}
 
@@ -148,7 +148,7 @@ def _compare_blobs(d: Diff, a: dict, b: dict, ignore_bytes: bool) -> None:
             d.value(f"profile[{k}] arrays", sorted(pa), sorted(pb))
             for s in sorted(set(pa) & set(pb)):
                 d.array(f"profile[{k}].{s}", pa[s], pb[s])
-        except Exception as exc:  # noqa: BLE001 - a damaged blob is a difference to print
+        except Exception as exc:
             d.add(f"profile[{k}]", f"undecodable: {exc}")
         if not ignore_bytes:
             for col in ("vector", "profile"):

@@ -329,3 +329,23 @@ def test_trips_shows_the_start_state_and_sources_carry_it(tmp_path, root):
         for r in rows:
             assert by_id[r["trip_id"]].start_soc_pct == r["start_soc_pct"]
             assert by_id[r["trip_id"]].standstill_before_s == r["standstill_before_s"]
+
+
+def test_a_file_whose_trips_hold_too_many_samples_is_refused_before_they_are_made(tmp_path):
+    """Issue 24: a log ticking every 5 s gives five trip samples a row on the 1 s grid, and
+    a worker holds a file's stored trips until they are written: a 2.5 M-row portal
+    export reached 0.79 GB. The trips' samples are bounded (--max-samples), checked once
+    the trips are cut, before any is made. Here a 1 Hz log of 900 rows: about 900
+    samples, refused at 500, stored at 1,000."""
+    from cevm.ingest.task import IngestOptions, process_file
+    from cevm.ingest.textfile import ReadLimits
+
+    f = tmp_path / "a.csv"
+    write_srf(f, "EB-01", 1_557_820_800, 0, n=900)
+    out = process_file(f, IngestOptions(limits=ReadLimits(max_samples=500)))
+    assert out.error is not None and "samples on the 1 s grid: more than the 500" in out.error
+    assert "--max-samples" in out.error
+    n = process_file(f, IngestOptions(limits=ReadLimits(max_samples=1000))).n_samples
+    assert 500 < n <= 900
+    res = run("ingest", f, "--store", tmp_path / "s.sqlite", "--max-samples", "500", "-q", "--workers", "1")
+    assert res.exit_code == 1 and "--max-samples" in res.output

@@ -11,7 +11,7 @@ import typer
 from cevm.cli.common import EXIT_OK, EXIT_PARTIAL, StoreOption, apply_manifest, check_workers, fail
 from cevm.cli.output import OutputFormat, write_rows
 from cevm.errors import CevmError
-from cevm.ingest.textfile import ReadLimits
+from cevm.ingest.textfile import MAX_SAMPLES, ReadLimits
 from cevm.text import printable
 
 #: The defaults of the per-file limits (the flags show them in --help).
@@ -41,6 +41,9 @@ def ingest(
     max_rows: Annotated[
         Optional[int], typer.Option(min=1, metavar="ROWS", help="Refuse a file of more data rows than this. Default: 2,500,000, and at most 36 million values (rows x columns read), which keeps a worker under 500 MB; given, the rows alone bound a file (memory grows with rows and columns; see the README).")
     ] = None,
+    max_samples: Annotated[
+        int, typer.Option(min=1, metavar="SAMPLES", help="Refuse a file whose trips would hold more samples than this on the 1 s grid (a log every 5 s gives 5 a row): the stored trips are held until written, so this keeps a worker under 500 MB.")
+    ] = MAX_SAMPLES,
     max_file_mb: Annotated[
         float, typer.Option(min=0.001, metavar="MB", help="Refuse a file of more text than this [MB], after decompression.")
     ] = _LIMITS.max_file_mb,
@@ -85,8 +88,10 @@ def ingest(
         raise fail("give --workers (local processes) or --scheduler (a Dask cluster), not both")
     check_workers(workers)
 
-    limits = (ReadLimits(max_file_mb=max_file_mb, max_expansion=max_expansion) if max_rows is None else
-              ReadLimits(max_file_mb=max_file_mb, max_expansion=max_expansion, max_rows=max_rows, max_values=None))
+    limits = (ReadLimits(max_file_mb=max_file_mb, max_expansion=max_expansion, max_samples=max_samples)
+              if max_rows is None else
+              ReadLimits(max_file_mb=max_file_mb, max_expansion=max_expansion, max_rows=max_rows, max_values=None,
+                         max_samples=max_samples))
     options = IngestOptions(dsm=dsm, profile=profile, profiles_dir=str(profiles_dir) if profiles_dir else None,
                             force=force, limits=limits, allow_remote_dsm=True if allow_remote_dsm else None)
     store_path = resolve_store_path(store)
@@ -144,7 +149,7 @@ def ingest(
         with make_executor(workers, scheduler) as executor, TripStore.open(store_path) as st:
             st.require_intact()  # never write into a damaged database
             report = run_ingest(paths, st, options, on_file=on_file, on_start=on_start, executor=executor)
-            if masses is not None:
+            if masses is not None and manifest is not None:
                 with signals_deferred(), open_manifest(manifest, masses) as reader:  # streamed: rows never all held
                     _, not_applied = apply_manifest(st, manifest, reader)
                     manifest_applied = True

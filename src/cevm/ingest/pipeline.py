@@ -30,15 +30,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from cevm.errors import InputError
-from cevm.text import printable
 from cevm.executors import Executor, SerialExecutor, Task, TaskResult
 from cevm.ingest.profiles import load_profiles
-from cevm.ingest.textfile import mb
 from cevm.ingest.task import FileOutcome, IngestOptions, file_sha256, open_sampler, process_file
+from cevm.ingest.textfile import mb
 from cevm.runtime import signals_deferred
 from cevm.store import TripStore
 from cevm.store.failures import StoreAccessError
-
+from cevm.text import printable
 
 #: File names taken from a directory (recursively).
 LOG_PATTERNS = ("*.csv", "*.csv.gz", "*.CSV", "*.CSV.GZ")

@@ -111,14 +111,14 @@ from cevm.units import (
 )
 
 __all__ = [
-    "UNITS",
-    "Unit",
     "CANONICAL_DIMENSIONS",
+    "UNITS",
     "VIRTUAL_COLUMNS",
     "ColumnMap",
     "EnergySpec",
-    "TimeSpec",
     "Profile",
+    "TimeSpec",
+    "Unit",
     "builtin_profile_dirs",
     "load_profile",
     "load_profiles",
@@ -522,7 +522,7 @@ def _time_section(t: dict, k: _Keys) -> TimeSpec:
 def _check_timezone(tz: str, k: _Keys) -> str:
     try:
         pd.Timestamp("2020-01-01").tz_localize(tz)
-    except Exception:  # noqa: BLE001 - any failure means an unknown zone
+    except Exception:
         raise k.fail(f"unknown time zone {tz!r} (use an IANA name such as 'Europe/London')", "time.timezone") from None
     return tz
 

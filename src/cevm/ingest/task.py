@@ -27,7 +27,6 @@ import numpy as np
 from cevm.core.cycle import CR0_DEFAULT, drive_cycle_vector
 from cevm.core.trip import Trip, TripRecord
 from cevm.errors import CevmError, InputError
-from cevm.text import printable
 from cevm.executors import worker_cache
 from cevm.ingest.cleaning import CleanParams, CleanStream, CleanTrip
 from cevm.ingest.dsm import DsmHeaders, DsmSampler
@@ -36,6 +35,7 @@ from cevm.ingest.evidence import EvidenceParams, trip_evidence
 from cevm.ingest.profiles import Profile
 from cevm.ingest.reading import ReadLimits, read_log
 from cevm.store import trip_profile_blob
+from cevm.text import printable
 
 
 @dataclass(frozen=True)
@@ -180,7 +180,7 @@ def speed_jump_warning(jumps: list[dict], n: int) -> str:
     import datetime as dt
 
     j = jumps[0]
-    when = dt.datetime.fromtimestamp(j["utc_s"], dt.timezone.utc).strftime("%Y-%m-%d %H:%M:%S")
+    when = dt.datetime.fromtimestamp(j["utc_s"], dt.UTC).strftime("%Y-%m-%d %H:%M:%S")
     return (f"speed: {max(n, len(jumps))} lasting speed jump(s) the cleaning could not repair, the largest "
             f"{3.6 * (j['to_mps'] - j['from_mps']):+.0f} km/h in {j['dt_s']:g} s at {when} UTC in "
             f"{j['source']} (a spliced recording?); kept as logged, and listed in the trip's quality "
@@ -223,11 +223,13 @@ def process_file(
         blobs: list[bytes] = []
         dropped: list[dict] = []
         warnings: list[str] = []
-        n_rows = 0
+        n_rows = planned = 0
         for log in logs:
-            n_rows += len(log.frame)
+            n_rows += len(log)
             t0 = time.perf_counter()
-            stream = CleanStream(log.frame, log.energy_sources, options.clean, path=path, release_frame=True)
+            stream = CleanStream(log.columns, log.energy_sources, options.clean, path=path, release_frame=True)
+            planned += stream.planned_samples
+            _check_samples(path, planned, options.limits.max_samples)
             cleaned = iter(stream)
             batch: list[CleanTrip] = []
             n_batch = 0
@@ -264,6 +266,15 @@ def process_file(
             error=printable(f"{path}: internal error (a cevm bug, please report): {type(exc).__name__}: {exc} "
                                  f"at {Path(where.filename).name}:{where.lineno}"),
         )
+
+
+def _check_samples(path: Path, planned: int, limit: int | None) -> None:
+    """Refuse a file whose trips would hold more than ``limit`` samples (known once its
+    trips are cut, before any is made)."""
+    if limit is not None and planned > limit:
+        raise InputError(path, f"its trips would hold {planned:,} samples on the 1 s grid: more than the {limit:,} a "
+                               "file may give (--max-samples), which keeps a worker's memory bounded (the stored trips "
+                               "are held until written); split the file (by day or by vehicle)")
 
 
 def open_sampler(dsm: str | None, allow_remote: bool | None = None) -> DsmSampler | None:

@@ -42,6 +42,11 @@ MAX_LINE_BYTES = 1 << 20
 #: log reach 2.25 M rows.
 MAX_VALUES = 36_000_000
 
+#: Default bound on the trip samples a file gives (on the 1 s grid): 6 M (about 100 days
+#: of a bus's driving) keeps a worker under 500 MB with its stored trips held until
+#: written (``python benchmarks/bench_memory.py``).
+MAX_SAMPLES = 6_000_000
+
 
 @dataclass(frozen=True)
 class ReadLimits:
@@ -67,16 +72,24 @@ class ReadLimits:
         at 2.5 M; 0.51 GB at 2 M rows of a 20-column one, 0.59 GB at 2.5 M), and the
         values bound keeps a wide log under 500 MB (1.8 M rows of 20 columns). The
         command line lifts it when ``--max-rows`` is given.
+    max_samples : the most trip samples (on the cleaning's 1 s grid) the trips of a file
+        may hold, or None for no bound (default :data:`MAX_SAMPLES`). A worker holds a
+        file's stored trips until they are written (profiles, vectors: about 25 bytes a
+        sample), and a log that ticks every 5 s, as telematics portals do, gives five
+        samples a row: a 2.5 M-row portal export makes 12 M samples and 0.79 GB. Checked
+        once the trips are cut, before any is made.
     """
 
     max_file_mb: float = 1000.0
     max_expansion: float = 100.0
     max_rows: int = 2_500_000
     max_values: int | None = MAX_VALUES
+    max_samples: int | None = MAX_SAMPLES
 
     def __post_init__(self) -> None:
         if not (self.max_file_mb > 0 and self.max_expansion >= 1 and self.max_rows >= 1
-                and (self.max_values is None or self.max_values >= 1)):
+                and (self.max_values is None or self.max_values >= 1)
+                and (self.max_samples is None or self.max_samples >= 1)):
             raise ValueError(f"read limits must be positive (expansion at least 1): {self}")
 
     def row_limit(self, n_columns: int) -> int:

@@ -3,6 +3,7 @@ selection of their rows that the time repairs, the sort and the duplicates make.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -74,43 +75,30 @@ _FLOATS = (np.dtype(np.float64), np.dtype(np.float32))
 _ROW_SPEED_COLUMNS = ("wheel_speed_mps", "gps_speed_mps", "lat_deg", "lon_deg", "gps_hdop", "gps_alt_m")
 
 
-def _load(frame: pd.DataFrame, path, release: bool = False) -> tuple[np.ndarray, np.ndarray, LogRows, int]:
-    """Time, file lines and the other numeric columns of ``frame`` (the frame's own
-    arrays where they are float64 or float32: no copy); rows without a finite time are left out of
-    the current rows. ``release``: the frame's columns are removed once taken, so that
-    the cleaning holds the only reference to its arrays."""
-    if "time_s" not in frame.columns:
+def _load(frame: pd.DataFrame | Mapping[str, np.ndarray], path, release: bool = False
+          ) -> tuple[np.ndarray, np.ndarray, LogRows, int]:
+    """Time, file lines and the other numeric columns of ``frame`` (a DataFrame, or the
+    reader's columns as a dict of arrays: :attr:`cevm.ingest.reading.ParsedLog.columns`),
+    their own arrays where they are float64 or float32 (no copy); rows without a finite
+    time are left out of the current rows. ``release``: the columns are removed from
+    ``frame`` once taken, so that the cleaning holds the only reference to its arrays."""
+    table = frame if isinstance(frame, pd.DataFrame) else None
+    names = set(frame.columns) if table is not None else set(frame)
+    if "time_s" not in names:
         raise InputError(path, "no time column (canonical 'time_s')", column="time_s")
-    n = len(frame)
-    if "source_line" in frame.columns:
-        s = frame["source_line"]
-        if isinstance(s.dtype, np.dtype) and s.dtype.kind in "iu":  # the reader's integer lines
-            line = s.to_numpy()
-        else:
-            line = pd.to_numeric(s, errors="coerce").to_numpy(dtype=float)
-            line = np.where(np.isfinite(line), line, -1).astype(np.int64)
-    else:
-        line = np.arange(1, n + 1, dtype=np.int64)
+    n = len(frame) if table is not None else len(frame["time_s"])
+    line = _lines(frame["source_line"], n) if "source_line" in names else np.arange(1, n + 1, dtype=np.int64)
     cols: dict[str, np.ndarray] = {}
-    present = set(frame.columns)
     for name in dict.fromkeys((*CANONICAL_COLUMNS, *EVIDENCE_COLUMNS)):
-        if name in ("source_line", "vehicle_id") or name not in present:
+        if name in ("source_line", "vehicle_id") or name not in names:
             continue
-        s = frame[name]
-        try:
-            # float32 columns (values exactly float32) stay so until they are gathered
-            arr = s.to_numpy() if s.dtype in _FLOATS else s.to_numpy(dtype=float, na_value=np.nan)
-        except (TypeError, ValueError):
-            num = pd.to_numeric(s, errors="coerce")
-            bad = np.flatnonzero((num.isna() & s.notna()).to_numpy())
-            i = int(bad[0]) if bad.size else 0
-            raise InputError(
-                path, f"not a number: {s.iloc[i]!r}", line=int(line[i]), column=name
-            ) from None
-        cols[name] = arr
+        cols[name] = _numbers(frame[name], name, line, path)
     if release:
-        for c in list(frame.columns):
-            del frame[c]
+        if table is not None:
+            for c in list(table.columns):
+                del table[c]
+        else:
+            frame.clear()  # type: ignore[union-attr]
     t = cols.pop("time_s").astype(np.float64, copy=False)
     rows = LogRows(cols)
     ok = np.isfinite(t)
@@ -120,6 +108,32 @@ def _load(frame: pd.DataFrame, path, release: bool = False) -> tuple[np.ndarray,
         line = line[ok]
         rows.select(ok)
     return t, line, rows, dropped
+
+
+def _lines(s, n: int) -> np.ndarray:
+    """The file lines of a ``source_line`` column (an array or a Series): the reader's
+    integers as they are, anything else made integers (-1 where unknown)."""
+    a = s.to_numpy() if isinstance(s, pd.Series) and isinstance(s.dtype, np.dtype) else s
+    if isinstance(a, np.ndarray) and a.dtype.kind in "iu":
+        return a
+    x = pd.to_numeric(pd.Series(s), errors="coerce").to_numpy(dtype=float)
+    return np.where(np.isfinite(x), x, -1).astype(np.int64)
+
+
+def _numbers(s, name: str, line: np.ndarray, path) -> np.ndarray:
+    """A column (an array or a Series) as numbers: its own array where it is float64 or
+    float32 (values exactly float32 stay so until they are gathered), else float64; a
+    value that is not a number is an error naming its line and column."""
+    if isinstance(s, np.ndarray) and s.dtype in _FLOATS:
+        return s
+    s = pd.Series(s) if not isinstance(s, pd.Series) else s
+    try:
+        return s.to_numpy() if s.dtype in _FLOATS else s.to_numpy(dtype=float, na_value=np.nan)
+    except (TypeError, ValueError):
+        num = pd.to_numeric(s, errors="coerce")
+        bad = np.flatnonzero((num.isna() & s.notna()).to_numpy())
+        i = int(bad[0]) if bad.size else 0
+        raise InputError(path, f"not a number: {s.iloc[i]!r}", line=int(line[i]), column=name) from None
 
 
 @dataclass(frozen=True, eq=False)

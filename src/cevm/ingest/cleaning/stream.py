@@ -3,7 +3,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -54,11 +54,11 @@ class CleanStream:
     it go. Parameters as :func:`clean_log`.
     """
 
-    def __init__(self, frame: pd.DataFrame, sources: Sequence[EnergySourceLike] = (),
+    def __init__(self, frame: pd.DataFrame | Mapping[str, np.ndarray], sources: Sequence[EnergySourceLike] = (),
                  params: CleanParams = CleanParams(), *, path: str | Path | None = None,
                  release_frame: bool = False) -> None:
         p = params
-        n_in = len(frame)
+        n_in = len(frame) if isinstance(frame, pd.DataFrame) else len(frame.get("time_s", ()))
         t, line, rows, no_time = _load(frame, path, release_frame)
         _require_speed_or_position(rows.cols, path)
         ev = RepairEvents()
@@ -76,6 +76,9 @@ class CleanStream:
         self.quality: dict = {"rows_in": n_in, "rows_without_time": no_time, "rows_clean": int(t.size), **tinfo}
         self._sources, self._params = tuple(sources), p
         self._work: tuple | None = None
+        #: the samples the trips will hold on the grid, at most (dropped trips counted
+        #: too), known before any trip is made: for a caller's bound on a file's trips
+        self.planned_samples = 0
         if t.size < 2:
             ev.finish()
             self.quality.update(ev.totals(), trips=0, trips_dropped=0)
@@ -113,6 +116,7 @@ class CleanStream:
         first = bounds[:-1] if rows_k is None else rows_k[bounds[:-1]]
         last = bounds[1:] - 1 if rows_k is None else rows_k[bounds[1:] - 1]
         lines = [(int(line[a:b + 1].min()), int(line[a:b + 1].max())) for a, b in zip(first.tolist(), last.tolist())]
+        self.planned_samples = _grid_samples(t[first], t[last], p.grid_s)
         del line
         self._work = (CleanedLog(t, cols, fixes, ev), v, src, rows_k, bounds, start_reasons, lines)
 
@@ -151,7 +155,8 @@ def clean_log(
 
     Parameters
     ----------
-    frame : canonical columns (``time_s`` [s, UTC epoch] required), rows in file order.
+    frame : canonical columns (``time_s`` [s, UTC epoch] required), rows in file order:
+        a DataFrame, or a dict of arrays (:attr:`cevm.ingest.reading.ParsedLog.columns`).
     sources : energy sources for the measured consumption (:class:`EnergySourceLike`).
     params : :class:`CleanParams`.
     path : the source file, for error messages.
@@ -180,3 +185,14 @@ def clean_trips(
 ) -> list[CleanTrip]:
     """The kept trips of :func:`clean_log` (dropped segments and file quality dropped)."""
     return list(clean_log(frame, sources, params, path=path).trips)
+
+
+def _grid_samples(first_s: np.ndarray, last_s: np.ndarray, grid_s: float | None) -> int:
+    """The samples of trips from ``first_s`` to ``last_s`` [s] on the grid as
+    :func:`~cevm.ingest.cleaning.grid._grid` makes it (None: no grid, an upper bound of
+    one sample a second is not known: 0)."""
+    if grid_s is None:
+        return 0
+    k0 = np.ceil(first_s / grid_s - 1e-9)
+    k1 = np.floor(last_s / grid_s + 1e-9)
+    return int(np.maximum(k1 - k0 + 1, 0).sum())

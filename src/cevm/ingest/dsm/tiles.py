@@ -247,7 +247,7 @@ class TileIndex:
                 mx, my = 0.01 * (xmax - xmin), 0.01 * (ymax - ymin)
                 box = (xmin - mx, ymin - my, xmax + mx, ymax + my)
                 grp.lonlat_bbox[crs] = box if all(map(math.isfinite, box)) and xmin <= xmax else None
-            except Exception:  # noqa: BLE001 - a pre-filter only
+            except Exception:
                 grp.lonlat_bbox[crs] = None
         box = grp.lonlat_bbox[crs]
         if box is None:

@@ -6,7 +6,6 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-import pandas as pd
 
 from cevm.errors import InputError
 from cevm.ingest.profiles import VIRTUAL_COLUMNS, ColumnMap, EnergySpec, Profile
@@ -58,8 +57,8 @@ def _ns_to_s(ns: np.ndarray) -> np.ndarray:
 
 def _split_vehicles(out: dict[str, np.ndarray], codes: np.ndarray, vehicles: list[str], maps: list[ColumnMap],
                     prof: Profile, path: Path, metadata: dict[str, str], repairs: list[str]) -> list[ParsedLog]:
-    """One :class:`ParsedLog` per vehicle: its rows' canonical columns (a frame built
-    around the arrays, no copy) and the energy sources they hold. With several vehicles
+    """One :class:`ParsedLog` per vehicle: its rows' canonical columns (the arrays
+    themselves) and the energy sources they hold. With several vehicles
     each column is reordered by vehicle once (stable: file order within a vehicle) and
     the vehicles' frames are slices of it."""
     if len(vehicles) == 1:
@@ -74,14 +73,8 @@ def _split_vehicles(out: dict[str, np.ndarray], codes: np.ndarray, vehicles: lis
                 per[k][c] = a[bounds[k]:bounds[k + 1]]
     logs = []
     for vname, arrays in zip(vehicles, per):
-        n = len(arrays["time_s"])
-        names = list(arrays)
-        ids = pd.Categorical.from_codes(np.zeros(n, np.int8), dtype=pd.CategoricalDtype([vname]))
-        # built in column order at once (an insert afterwards costs pandas 3 ms a file)
-        fr = pd.DataFrame({**{c: arrays[c] for c in names[:2]}, "vehicle_id": ids,
-                           **{c: arrays[c] for c in names[2:]}}, copy=False)
-        sources = tuple(_energy_source(e, fr, maps) for e in prof.energy if _has_energy_data(e, arrays))
-        logs.append(ParsedLog(path, prof.name, vname, fr, dict(metadata), sources, list(repairs)))
+        sources = tuple(_energy_source(e, maps) for e in prof.energy if _has_energy_data(e, arrays))
+        logs.append(ParsedLog(path, prof.name, vname, arrays, dict(metadata), sources, list(repairs)))
     return logs
 
 
@@ -91,11 +84,11 @@ def _has_energy_data(e: EnergySpec, arrays: dict[str, np.ndarray]) -> bool:
     if e.column in VIRTUAL_COLUMNS:
         a, b = VIRTUAL_COLUMNS[e.column][0]
         return a in arrays and b in arrays and bool(
-            (np.isfinite(arrays[a]).any() and np.isfinite(arrays[b]).any()))
+            np.isfinite(arrays[a]).any() and np.isfinite(arrays[b]).any())
     return e.column in arrays and bool(np.isfinite(arrays[e.column]).any())
 
 
-def _energy_source(e: EnergySpec, fr: pd.DataFrame, maps: list[ColumnMap]) -> EnergySource:
+def _energy_source(e: EnergySpec, maps: list[ColumnMap]) -> EnergySource:
     cols = VIRTUAL_COLUMNS[e.column][0] if e.column in VIRTUAL_COLUMNS else (e.column,)
     src = "*".join(next(m.source for m in maps if m.canonical == c) for c in cols)
     return EnergySource(e.column, e.kind, e.quantity, e.resolution, e.priority, e.capacity_j, src, e.modulus,

@@ -16,8 +16,8 @@ import pandas as pd
 
 from cevm.errors import InputError
 from cevm.ingest.profiles import Profile
-from cevm.ingest.reading.cells import BadCells, cell_numbers, not_a_number
 from cevm.ingest.reading.blocks import _NUMERIC_NA, ParsedBlock, _drop_empty_rows
+from cevm.ingest.reading.cells import BadCells, cell_numbers, not_a_number
 from cevm.ingest.reading.header import ColumnPlan
 from cevm.ingest.reading.lines import _check_field_counts, _line_stats
 from cevm.ingest.timestamps import fast_first_column

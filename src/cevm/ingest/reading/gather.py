@@ -13,8 +13,8 @@ import pandas as pd
 
 from cevm.errors import InputError, has_control
 from cevm.ingest.profiles import ColumnMap, Profile
-from cevm.ingest.reading.cells import BadCells, check_bad_cells
 from cevm.ingest.reading.blocks import ParsedBlock, ReadRepairs
+from cevm.ingest.reading.cells import BadCells, check_bad_cells
 from cevm.ingest.reading.engine_arrow import _arrow
 from cevm.ingest.reading.header import ColumnPlan, Header
 from cevm.ingest.reading.lines import _line_col_error, _lines_summary

@@ -9,6 +9,7 @@ from functools import cached_property
 from pathlib import Path
 from typing import Literal
 
+import numpy as np
 import pandas as pd
 
 
@@ -56,11 +57,14 @@ class EnergySource:
 class ParsedLog:
     """One vehicle's rows of one logger file, in canonical columns.
 
-    ``frame`` has ``time_s`` (UTC seconds since the Unix epoch, float64),
-    ``source_line`` (1-based line in the file, int32; int64 past 2**31 lines),
-    ``vehicle_id`` (categorical: one id) and every canonical column the profile maps and
-    the file has (SI, NaN = no value; float64, or float32 where the column is SI as
-    logged and every value is exactly a float32: the same values), rows in file order.
+    ``columns`` holds ``time_s`` (UTC seconds since the Unix epoch, float64),
+    ``source_line`` (1-based line in the file, int32; int64 past 2**31 lines) and every
+    canonical column the profile maps and the file has (SI, NaN = no value; float64, or
+    float32 where the column is SI as logged and every value is exactly a float32: the
+    same values), as numpy arrays, rows in file order: what the cleaning takes
+    (:class:`~cevm.ingest.cleaning.CleanStream`), with no frame in between. ``frame`` is
+    the same as a DataFrame (its ``vehicle_id`` column categorical: one id), made on
+    first use around the arrays (no copy).
     ``repairs`` lists every repair made while reading the file (file-wide, so shared by
     the logs of a multi-vehicle file).
     ``sha256`` is the hex digest of the file's bytes on disk (compressed bytes for a .gz
@@ -71,10 +75,24 @@ class ParsedLog:
     path: Path
     profile: str
     vehicle_id: str
-    frame: pd.DataFrame
+    columns: dict[str, np.ndarray]
     metadata: dict[str, str]
     energy_sources: tuple[EnergySource, ...]
     repairs: list[str]
+
+    @cached_property
+    def frame(self) -> pd.DataFrame:
+        """:attr:`columns` as a DataFrame (``time_s``, ``source_line``, ``vehicle_id``,
+        then the others), around the same arrays."""
+        names = list(self.columns)
+        n = len(self.columns["time_s"]) if "time_s" in self.columns else 0
+        ids = pd.Categorical.from_codes(np.zeros(n, np.int8), dtype=pd.CategoricalDtype([self.vehicle_id]))
+        return pd.DataFrame({**{c: self.columns[c] for c in names[:2]}, "vehicle_id": ids,
+                             **{c: self.columns[c] for c in names[2:]}}, copy=False)
+
+    def __len__(self) -> int:
+        """Its rows."""
+        return len(self.columns["time_s"]) if "time_s" in self.columns else 0
 
     @cached_property
     def sha256(self) -> str:
