@@ -333,3 +333,26 @@ def test_store_check_reads_every_trips_row(fleet):
 
     with TripStore(db, readonly=True) as st, pytest.raises(DamagedTripError, match="quality: not JSON"):
         st.load_trip(b)
+
+
+@pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="no FIFOs here")
+def test_a_store_that_is_a_fifo_a_device_or_a_directory_is_refused(tmp_path):
+    """SQLite opens whatever it is given: on a FIFO every command hung where no signal
+    reaches it (SIGTERM could not stop it), /dev/null took writes into nothing and left
+    -wal and -shm files in /dev. Refused in one line (exit 2) before SQLite sees it."""
+    fifo = tmp_path / "store.sqlite"
+    os.mkfifo(fifo)
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(ROOT / "src"), os.environ.get("PYTHONPATH", "")]))
+    for args in (("trips",), ("store", "check"), ("route", "add", "R1", "--cycle", URBAN)):
+        proc = subprocess.run([sys.executable, "-m", "cevm", *map(str, args), "--store", str(fifo)],
+                              capture_output=True, text=True, env=env, timeout=60)
+        assert proc.returncode == EXIT_INPUT, (args, proc.stderr)
+        assert proc.stderr.splitlines() == [f"cevm: error: {fifo}: is a FIFO (named pipe), not a cevm store file"]
+    for store, kind in ((Path("/dev/null"), "a character device"), (tmp_path, "a directory")):
+        if not store.exists():
+            continue
+        before = sorted(p.name for p in store.parent.iterdir())
+        for args in (("store", "info"), ("route", "add", "R1", "--cycle", URBAN)):
+            res = cevm(*args, "--store", store)
+            assert res.exit_code == EXIT_INPUT and f"{store}: is {kind}, not a cevm store file" in one_error_line(res)
+        assert sorted(p.name for p in store.parent.iterdir()) == before  # no -wal, no -shm beside it

@@ -33,7 +33,7 @@ _KINDS = ((stat.S_ISDIR, "a directory"), (stat.S_ISFIFO, "a FIFO (named pipe)"),
           (stat.S_ISBLK, "a block device"), (stat.S_ISSOCK, "a socket"))
 
 
-def _kind(mode: int) -> str | None:
+def file_kind(mode: int) -> str | None:
     """What a non-regular file is, or None for a regular file."""
     if stat.S_ISREG(mode):
         return None
@@ -54,7 +54,7 @@ def open_regular(path: str | Path, what: str = "file") -> BinaryIO:
     names the kind of file in the messages ("vehicle file")."""
     path = Path(path)
     try:
-        kind = _kind(os.stat(path).st_mode)  # refused before it is opened, where possible
+        kind = file_kind(os.stat(path).st_mode)  # refused before it is opened, where possible
         if kind is not None:
             raise FileAccessError(path, f"is {kind}, not a {what}")
         flags = os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_CLOEXEC", 0) | getattr(os, "O_BINARY", 0)
@@ -62,7 +62,7 @@ def open_regular(path: str | Path, what: str = "file") -> BinaryIO:
     except OSError as exc:
         raise _os_error(path, what, exc) from None
     try:
-        kind = _kind(os.fstat(fd).st_mode)  # the file opened, whatever the path now names
+        kind = file_kind(os.fstat(fd).st_mode)  # the file opened, whatever the path now names
         if kind is not None:
             raise FileAccessError(path, f"is {kind}, not a {what}")
         if hasattr(os, "set_blocking"):

@@ -103,8 +103,9 @@ class TripStore(TripWriting, TripQueries):
         self._migrate = migrate
         self._intact = False  # the quick check passed on this connection
         self._con: StoreConnection | None = None
-        if self.path.is_dir():
-            raise CevmError(f"{self.path}: is a directory, not a cevm store file")
+        kind = _not_a_file(self.path)
+        if kind is not None:  # a FIFO would hang the command where no signal reaches it, /dev/null swallow it
+            raise CevmError(f"{self.path}: is {kind}, not a cevm store file")
         if readonly:
             self._open_readonly()
             return
@@ -278,6 +279,20 @@ class TripStore(TripWriting, TripQueries):
 
     def _checkpoint(self, stage: str) -> None:
         _checkpoint(stage)  # the module's hook, looked up at each call (tests replace it)
+
+
+def _not_a_file(path: Path) -> str | None:
+    """What ``path`` is when it exists and is not a regular file (a directory, a FIFO, a
+    device), else None: SQLite would open any of them."""
+    import stat
+
+    from cevm.io.inputs import file_kind
+
+    try:
+        mode = os.stat(path).st_mode
+    except OSError:
+        return None  # missing (a new store), or unreadable: SQLite says so
+    return None if stat.S_ISREG(mode) else file_kind(mode)
 
 
 def _read_only_fs(path: Path) -> bool:
