@@ -160,7 +160,8 @@ def test_an_out_path_that_is_a_device_is_written_not_replaced(fleet, capsys, mon
     except (PermissionError, OSError):
         pytest.skip("cannot make a device node here (needs root)")
     for args in (("simulate", "-v", BUS, "-c", URBAN, "--out", node),
-                 ("predict", "-v", BUS, "-c", URBAN, "-f", "csv", "--out", node)):
+                 ("predict", "-v", BUS, "-c", URBAN, "-f", "csv", "--out", node),
+                 ("simulate", "-v", BUS, "-c", URBAN, "--plot", node)):  # nor removed after a failed plot
         code, err = run_main(capsys, monkeypatch, args, stdout_path=Path(os.devnull))
         assert code == EXIT_STORE_ACCESS and f"{node}: could not be written: the disk is full" in one_line(err)
         assert stat.S_ISCHR(node.stat().st_mode)  # still the device

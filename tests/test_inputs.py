@@ -267,3 +267,12 @@ def test_a_scenario_never_quotes_a_file_it_names(tmp_path):
                 assert said in line and "(named by route 'R1'.leg of" in line, line
     scenario.write_text(SCENARIO.format(vehicle=DIESEL_PAPER, cycle=tmp_path / "missing.csv"))
     assert "missing.csv: cycle file not found (named by route 'R1'.leg" in one_error(cevm("fleet", "plan", scenario))
+
+
+def test_a_vehicle_file_with_a_byte_order_mark_reads_as_without(tmp_path):
+    """A Windows editor's UTF-8 byte order mark is not TOML: dropped, not 'Invalid statement'."""
+    bom = tmp_path / "bom.toml"
+    bom.write_bytes(b"\xef\xbb\xbf" + BUS.read_bytes())
+    a = cevm("predict", "-v", BUS, "-c", URBAN, "-f", "csv")
+    b = cevm("predict", "-v", bom, "-c", URBAN, "-f", "csv")
+    assert a.exit_code == b.exit_code == 0 and a.stdout.replace("electric-bus", "bom") == b.stdout

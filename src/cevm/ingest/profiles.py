@@ -377,7 +377,7 @@ def _read_toml(source: str | Path | dict, path: Path | None) -> tuple[dict, Path
     path = Path(source)
     data = read_bounded(path, MAX_TOML_BYTES, "logger profile")  # a regular file of at most 1 MiB (issue 24)
     try:
-        return tomllib.loads(data.decode("utf-8")), path
+        return tomllib.loads(data.decode("utf-8-sig")), path
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise InputError(path, f"not a valid TOML profile: {exc}") from None
     except RecursionError:

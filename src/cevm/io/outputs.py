@@ -24,16 +24,17 @@ class OutFile:
     """The context manager of the module notes: ``with OutFile(path) as fh: fh.write(...)``
     (text, UTF-8, ``\\n`` line ends as written)."""
 
-    def __init__(self, path: str | Path):
+    def __init__(self, path: str | Path, *, binary: bool = False):
         self.path = Path(path)
+        self.binary = binary  # bytes (a figure), not text
         target = Path(os.path.realpath(self.path))
         self.direct = target.exists() and not target.is_file()
         self.target = target
         self.tmp = target if self.direct else target.with_name(target.name + ".partial")
 
-    def __enter__(self) -> IO[str]:
+    def __enter__(self) -> IO:
         try:
-            self.fh = open(self.tmp, "w", encoding="utf-8", newline="")
+            self.fh = open(self.tmp, "wb") if self.binary else open(self.tmp, "w", encoding="utf-8", newline="")
         except OSError as exc:
             raise CevmError(f"{self.path}: cannot write: {exc.strerror or exc}") from None
         return self.fh

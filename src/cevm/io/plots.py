@@ -86,16 +86,18 @@ def plot_simulation(frame, res, path: Path, title: str) -> None:
 
 
 def _save(fig, path) -> None:
-    """Write the figure to ``path`` (PNG): a failed write (a full disk) is an
+    """Write the figure to ``path`` (PNG, or the format its suffix names) whole or not at
+    all (:class:`cevm.io.outputs.OutFile`): a failed write (a full disk) is an
     :class:`~cevm.errors.OutputError` naming the file (exit 3), and leaves no half-written
-    file."""
+    file. The figure goes to a file cevm opened, not to a path: matplotlib, given a path,
+    wrote to ``/dev/full`` without a word."""
+    from cevm.io.outputs import OutFile
+
+    fmt = Path(path).suffix.lstrip(".").lower() or "png"
     try:
-        fig.savefig(path, dpi=120)
+        with OutFile(path, binary=True) as fh:
+            fig.savefig(fh, format=fmt, dpi=120)
     except OSError as exc:
-        try:
-            Path(path).unlink(missing_ok=True)
-        except OSError:
-            pass
         raise OutputError(os_error_text(exc, str(path))) from None
 
 

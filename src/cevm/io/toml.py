@@ -23,7 +23,7 @@ def read_toml(path: str | Path, what: str = "file") -> dict:
     path = Path(path)
     data = read_bounded(path, MAX_TOML_BYTES, what)
     try:
-        text = data.decode("utf-8")
+        text = data.decode("utf-8-sig")  # a byte order mark (a Windows editor's) is not TOML: dropped
     except UnicodeDecodeError as exc:
         raise InputError(path, f"not UTF-8 text ({exc.reason} at byte {exc.start})") from None
     return parse_toml(text, path)
