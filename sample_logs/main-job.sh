@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # The main job on the shipped sample logs: ingest (with the operator's trip loads),
-# calibrate (the terms chosen by cross-validation), predict.
+# calibrate (the terms chosen by cross-validation), predict, and replay the diesel trucks'
+# days with a candidate electric truck.
 #   bash sample_logs/main-job.sh            (after: pip install -e .)
 # Writes the store and results under "$OUT"/ (CEVM_OUT for another folder, CEVM_STORE for
 # another store).
@@ -32,4 +33,14 @@ $CEVM predict -v "$OUT"/electric-bus-EB-01.toml --vehicle-id EB-02
 $CEVM predict -v "$OUT"/diesel-hgv-HGV-11.toml --vehicle-id HGV-21
 $CEVM predict -v "$OUT"/electric-bus-EB-01.toml --cycle configs/cycles/urban-bus.csv --payload-kg 0:5000:2500 \
       --ambient-c -5 --range
+
+echo "== 4. replay: the diesel trucks' logged days with a candidate battery-electric tractor (590 kWh usable),"
+echo "      charged full at the depot overnight; then without any depot charge (the level carried from day to day);"
+echo "      then with a 120 kWh battery, and with it a 150 kW charger at any stop of 30 min or more"
+TRUCKS=(--vehicle-id HGV-11 --vehicle-id HGV-21 --vehicle-id "KX19 LMR" --vehicle-id "KX19 LMT")
+$CEVM replay -v configs/vehicles/electric-truck.toml "${TRUCKS[@]}" --plot "$OUT"/replay-electric-truck.png \
+      --summary "$OUT"/replay-electric-truck.json
+$CEVM replay -v configs/vehicles/electric-truck.toml "${TRUCKS[@]}" --overnight none
+$CEVM replay -v configs/vehicles/electric-truck.toml "${TRUCKS[@]}" --battery-kwh 120
+$CEVM replay -v configs/vehicles/electric-truck.toml "${TRUCKS[@]}" --battery-kwh 120 --charger-kw 150
 echo "results: $OUT/ (calibrated vehicle files, plots); store: $CEVM_STORE"

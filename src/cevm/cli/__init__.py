@@ -9,7 +9,7 @@ one line on stderr, without a traceback.
 This module creates the app and registers the commands of one module per command (group):
 :mod:`~cevm.cli.ingest`, :mod:`~cevm.cli.trips`, :mod:`~cevm.cli.calibrate`,
 :mod:`~cevm.cli.simulate`, :mod:`~cevm.cli.fleet`, :mod:`~cevm.cli.predict`,
-:mod:`~cevm.cli.feasibility`, :mod:`~cevm.cli.route`, :mod:`~cevm.cli.vehicle`, :mod:`~cevm.cli.store`; what they share is
+:mod:`~cevm.cli.feasibility`, :mod:`~cevm.cli.replay`, :mod:`~cevm.cli.route`, :mod:`~cevm.cli.vehicle`, :mod:`~cevm.cli.store`; what they share is
 :mod:`~cevm.cli.common` and :mod:`~cevm.cli.output`. The command modules never import
 this package's app, nor each other; the library never imports the command line.
 """
@@ -22,7 +22,7 @@ from typing import Annotated
 import typer
 
 from cevm import __version__
-from cevm.cli import calibrate, feasibility, fleet, ingest, predict, route, simulate, store, trips, vehicle
+from cevm.cli import calibrate, feasibility, fleet, ingest, predict, replay, route, simulate, store, trips, vehicle
 from cevm.cli.common import exit_code_for, fail
 from cevm.errors import CevmError
 
@@ -59,6 +59,7 @@ app.command()(simulate.simulate)
 app.add_typer(fleet.app, name="fleet")
 app.command("predict")(predict.predict_cmd)
 app.command("feasibility")(feasibility.feasibility_cmd)
+app.command("replay")(replay.replay_cmd)
 app.add_typer(route.app, name="route")
 app.add_typer(vehicle.app, name="vehicle")
 app.add_typer(store.app, name="store")

@@ -143,6 +143,23 @@ SocStartOption = Annotated[
 ReserveOption = Annotated[
     float, typer.Option("--reserve-pct", help="EV state of charge to keep all along [%] (default 15, the paper's warning level).")
 ]
+IntervalOption = Annotated[
+    float, typer.Option("--interval", metavar="LEVEL", help="Level of each row's interval of energy or fuel "
+                        "(columns *_low, *_high): 0.9 is the central 90 % (default). The interval comes from the "
+                        "vehicle's calibration, or for a file never calibrated from its class's priors "
+                        "(column interval_from).")
+]
+#: The default confidence of feasibility's verdict and largest payload: the verdict
+#: then fails only where the energy (fuel) may land above the default 90 % interval's
+#: upper end (energy_kwh_high), which happens 1 time in 20: a planner's "almost surely",
+#: and the same number predict shows.
+DEFAULT_CONFIDENCE = 0.95
+ConfidenceOption = Annotated[
+    float, typer.Option("--confidence", metavar="P", help="The probability with which the verdict (feasible) and "
+                        "the largest payload keep the reserve or fit the tank. Default 0.95: they fail only where "
+                        "the energy or fuel lands above the default 90 % interval's upper end (1 time in 20); 0.5 "
+                        "is the point prediction's verdict.")
+]
 IceBrakingOption = Annotated[
     Optional[str],
     typer.Option(help=f"Override ICE braking mode: {' or '.join(ICE_BRAKING_MODES)}. Default: the vehicle file's."),
@@ -276,10 +293,13 @@ def check_workers(workers: Optional[int]) -> None:
                    "processes only add memory)")
 
 
-def check_common(ice_braking: Optional[str], soc_start: float, reserve_pct: float) -> None:
+def check_common(ice_braking: Optional[str], soc_start: float, reserve_pct: float,
+                 interval: float | None = None) -> None:
     if ice_braking is not None and ice_braking not in ICE_BRAKING_MODES:
         raise fail(f"--ice-braking must be one of: {', '.join(ICE_BRAKING_MODES)}")
     check_soc(soc_start, reserve_pct)
+    if interval is not None and not 0.0 < interval < 1.0:
+        raise fail(f"--interval must be a level between 0 and 1 (0.9: the central 90 %), got {interval:g}")
 
 
 def check_soc(soc_start: float, reserve_pct: float | None = None) -> None:

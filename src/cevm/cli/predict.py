@@ -37,6 +37,7 @@ from cevm.cli.common import (
     CycleOption,
     FormatOption,
     IceBrakingOption,
+    IntervalOption,
     OutOption,
     ReserveOption,
     RouteOption,
@@ -56,7 +57,7 @@ from cevm.cli.common import (
     with_cycle_options,
 )
 from cevm.cli.output import OutputFormat, vehicle_legend, write_rows
-from cevm.cli.prediction_columns import PREDICT, PREDICT_TABLE, STATUS, BlockRows
+from cevm.cli.prediction_columns import PREDICT, PREDICT_TABLE, STATUS, BlockRows, RangeOptions
 from cevm.cli.values import parse_value_options
 from cevm.core.cycle import CR0_DEFAULT
 from cevm.core.sweep import (
@@ -83,9 +84,11 @@ class PredictWriter:
     """Streams predict blocks as CSV, JSON or a (bounded) table, with the columns of
     :data:`~cevm.cli.prediction_columns.PREDICT`."""
 
-    def __init__(self, fmt: OutputFormat, stream: IO[str], temperature_used: bool = False):
+    def __init__(self, fmt: OutputFormat, stream: IO[str], temperature_used: bool = False,
+                 options: RangeOptions | None = None):
         self.fmt = fmt
         self.stream = stream
+        self.options = options or RangeOptions()
         self.temperature_used = temperature_used
         self.pending: list[tuple[SweepBlock, str]] = []
         self.pending_rows = 0
@@ -108,7 +111,7 @@ class PredictWriter:
     def _flush(self) -> None:
         if not self.pending:
             return
-        cols = concat_columns([PREDICT.values(BlockRows(b, m)) for b, m in self.pending])
+        cols = concat_columns([PREDICT.values(BlockRows(b, m, self.options)) for b, m in self.pending])
         is_ev = np.concatenate([b.pset.is_ev for b, _ in self.pending])
         self.pending, self.pending_rows = [], 0
         for lo in range(0, is_ev.size, WRITE_BATCH_ROWS):  # bounded memory for huge blocks
@@ -124,7 +127,7 @@ class PredictWriter:
             self.started = True
 
     def _table_add(self, block: SweepBlock, mass_source: str) -> None:
-        cols = PREDICT.values(BlockRows(block, mass_source))
+        cols = PREDICT.values(BlockRows(block, mass_source, self.options))
         n = min(block.n, TABLE_MAX_ROWS - len(self.table_rows))
         for i in range(n):
             row = {}
@@ -185,6 +188,8 @@ class Assumptions:
         self.t_hi = np.full(nv, -np.inf)
         self.v_lo = np.inf
         self.v_hi = -np.inf
+        self.i_lo = np.inf  # the sources' share of time at standstill (their duty)
+        self.i_hi = -np.inf
         self.origins: list[set] = [set() for _ in range(nv)]
         self.m_lo = np.full(nv, np.inf)
         self.m_hi = np.full(nv, -np.inf)
@@ -201,6 +206,8 @@ class Assumptions:
         if src.duration_s > 0:
             speed = src.distance_m / src.duration_s
             self.v_lo, self.v_hi = min(self.v_lo, speed), max(self.v_hi, speed)
+            idle = src.vector.idle_s / src.duration_s
+            self.i_lo, self.i_hi = min(self.i_lo, idle), max(self.i_hi, idle)
 
     def lines(self) -> list[str]:
         from cevm.core.energy import uses_temperature
@@ -216,7 +223,9 @@ class Assumptions:
                 out.append(f"cevm: note: {veh.name}: ambient {span} degC ({', '.join(sorted(self.origins[v]))})")
             masses = np.array([self.m_lo[v], self.m_hi[v]])
             speeds = np.array([self.v_lo, self.v_hi]) if np.isfinite(self.v_lo) else None
-            for w in domain_warnings(veh, mass_kg=masses, ambient_c=np.array([lo, hi]), mean_speed_mps=speeds):
+            idle = np.array([self.i_lo, self.i_hi]) if np.isfinite(self.i_lo) else None
+            for w in domain_warnings(veh, mass_kg=masses, ambient_c=np.array([lo, hi]), mean_speed_mps=speeds,
+                                     idle_share=idle):
                 out.append(f"cevm: warning: {w}")
         return out
 
@@ -246,6 +255,9 @@ def with_status(row: dict) -> dict:
     cannot = [what for what, key in (("power", "over_power"), ("speed", "over_speed")) if row.get(key)]
     if cannot:
         status += f" (cannot follow: {', '.join(cannot)})"
+    p = row.get("p_reserve_ok" if ev else "p_tank_ok")
+    if p is not None and row.get("interval_from") in ("posterior", "prior") and 0.005 <= p < 0.995:
+        status += f", P {p:.2f}"  # where the verdict is not sure (column p_reserve_ok / p_tank_ok)
     row["status"] = status
     return row
 
@@ -306,6 +318,7 @@ def predict_cmd(
     ] = None,
     soc_start: SocStartOption = DEFAULT_SOC_START_PCT,
     reserve_pct: ReserveOption = DEFAULT_RESERVE_PCT,
+    interval: IntervalOption = 0.9,
     fmt: FormatOption = OutputFormat.table,
     out: OutOption = None,
     plot: Annotated[
@@ -353,7 +366,7 @@ def predict_cmd(
     if workers is not None and scheduler is not None:
         raise fail("give --workers (local processes) or --scheduler (a Dask cluster), not both")
     check_workers(workers)
-    check_common(ice_braking, soc_start, reserve_pct)
+    check_common(ice_braking, soc_start, reserve_pct, interval)
     try:
         masses = parse_value_options(mass_kg, "--mass-kg")
         payloads = parse_value_options(payload_kg, "--payload-kg")
@@ -373,7 +386,8 @@ def predict_cmd(
             note_flat_cycles(sources)
             executor = stack.enter_context(make_executor(None if scheduler else (workers or 1), scheduler))
             stream = open_out(stack, out)
-            writer = PredictWriter(fmt, stream, temperature_used=any(uses_temperature(v) for v in vehicles))
+            writer = PredictWriter(fmt, stream, temperature_used=any(uses_temperature(v) for v in vehicles),
+                                   options=RangeOptions(interval, soc_start, reserve_pct))
             keep_for_plot = plot is not None and np.bincount(pset.vehicle_index).max() > 1
             flagged = np.zeros(3, dtype=np.int64)
             plot_data, psets = [], []

@@ -31,7 +31,8 @@ from typing import Any
 import numpy as np
 
 from cevm.cli.columns import Column, ColumnSpec
-from cevm.core.sweep import AMBIENT_ORIGINS, SweepBlock
+from cevm.core.intervals import EXTRAPOLATION_TEXTS, INTERVAL_SOURCES, RowRanges, block_ranges, p_reserve_ok, p_tank_ok
+from cevm.core.sweep import AMBIENT_ORIGINS, DEFAULT_RESERVE_PCT, DEFAULT_SOC_START_PCT, SweepBlock
 from cevm.units import J_PER_KWH
 
 EV, ICE = ("ev",), ("ice",)
@@ -40,18 +41,57 @@ EV, ICE = ("ev",), ("ice",)
 # ------------------------------------------------------------------------------ predict
 
 
+class RangeOptions:
+    """What the interval columns need beside a block: the interval's ``level`` and the
+    state of charge at the start and the reserve [%] (predict's options)."""
+
+    def __init__(self, level: float = 0.9, soc_start_pct: float = DEFAULT_SOC_START_PCT,
+                 reserve_pct: float = DEFAULT_RESERVE_PCT):
+        self.level = level
+        self.soc_start_pct = soc_start_pct
+        self.reserve_pct = reserve_pct
+
+
 class BlockRows:
     """What a predict column reads: one block of rows (:class:`~cevm.core.sweep.SweepBlock`)
     and where its masses come from (``mass_source``), with helpers that give arrays of
     the block's rows in output units: numbers and booleans as floats (NaN: no value),
-    text as (codes, categories)."""
+    text as (codes, categories); ``options`` the level of its intervals and the state of
+    charge they are measured against (:class:`RangeOptions`)."""
 
-    def __init__(self, block: SweepBlock, mass_source: str = "vehicle file"):
+    def __init__(self, block: SweepBlock, mass_source: str = "vehicle file", options: RangeOptions | None = None):
         self.block = block
         self.mass_source = mass_source
         self.pset = block.pset
         self.source = block.source
         self.n = block.pset.n
+        self.options = options or RangeOptions()
+
+    @cached_property
+    def ranges(self) -> RowRanges:
+        """Each row's predictive distribution (:func:`cevm.core.intervals.block_ranges`)."""
+        return block_ranges(self.block)
+
+    @cached_property
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """The rows' interval [J (EV) or l (ICE)] at the options' level."""
+        return self.ranges.bounds(self.options.level)
+
+    def bound(self, high: bool, ev: bool) -> np.ndarray:
+        """The interval's low or high end on the rows of one powertrain (NaN on the others)."""
+        return np.where(self.pset.is_ev == ev, self.bounds[int(high)], np.nan)
+
+    def soc_at(self, bound: np.ndarray) -> np.ndarray:
+        """The state of charge at the end [%] with ``bound`` [J] drawn instead of the
+        row's energy: where the row reaches its end, never below 0 (an EV that may run
+        empty: p_reserve_ok says how likely)."""
+        with np.errstate(invalid="ignore"):
+            soc = self.block.soc_end_pct + 100.0 * (self.block.energy_j - bound) / self.pset.battery_j
+            return np.where(np.isfinite(self.block.soc_end_pct), np.maximum(soc, 0.0), np.nan)
+
+    def fuel_left(self, bound: np.ndarray) -> np.ndarray:
+        """tank_l less ``bound`` [l], never below 0 (NaN without tank_l)."""
+        return np.maximum(self.pset.tank_l - bound, 0.0)
 
     @cached_property
     def km(self) -> float:
@@ -170,6 +210,35 @@ PREDICT = ColumnSpec((
            digits=2, value=lambda r: r.truth["measured_energy_kwh"]),
     Column("error_pct", "(modelled - measured) / measured [%], at a stored trip's own mass", header="error %",
            digits=1, value=lambda r: r.truth["error_pct"]),
+    Column("interval", "the level of the row's interval (--interval: 0.9 is the central 90 %)", digits=3,
+           value=lambda r: r.same(r.options.level)),
+    Column("energy_kwh_low", "the interval's low end of the battery energy [kWh]", EV, header="kWh low", digits=2,
+           value=lambda r: r.bound(False, True) / J_PER_KWH),
+    Column("energy_kwh_high", "the interval's high end of the battery energy [kWh]", EV, header="kWh high", digits=2,
+           value=lambda r: r.bound(True, True) / J_PER_KWH),
+    Column("soc_end_pct_low", "state of charge at the end with the interval's high energy [%] (never below 0)", EV,
+           header="SoC end % low", digits=1, value=lambda r: r.soc_at(r.bound(True, True))),
+    Column("soc_end_pct_high", "state of charge at the end with the interval's low energy [%]", EV,
+           header="SoC end % high", digits=1, value=lambda r: r.soc_at(r.bound(False, True))),
+    Column("p_reserve_ok", "the probability of completing the source with --reserve-pct kept all along", EV,
+           header="P reserve ok", digits=3, decimals=6,
+           value=lambda r: p_reserve_ok(r.block, r.ranges, r.options.soc_start_pct, r.options.reserve_pct)),
+    Column("fuel_l_low", "the interval's low end of the fuel [l]", ICE, header="fuel l low", digits=2,
+           value=lambda r: r.bound(False, False)),
+    Column("fuel_l_high", "the interval's high end of the fuel [l]", ICE, header="fuel l high", digits=2,
+           value=lambda r: r.bound(True, False)),
+    Column("fuel_left_l_low", "fuel left in tank_l with the interval's high fuel [l] (never below 0)", ICE,
+           value=lambda r: r.fuel_left(r.bound(True, False))),
+    Column("fuel_left_l_high", "fuel left in tank_l with the interval's low fuel [l]", ICE,
+           value=lambda r: r.fuel_left(r.bound(False, False))),
+    Column("p_tank_ok", "the probability that the fuel fits tank_l (empty without tank_l)", ICE, header="P tank ok",
+           digits=3, decimals=6, value=lambda r: p_tank_ok(r.block, r.ranges)),
+    Column("interval_from", "what the interval comes from: posterior (the vehicle's calibration), prior (its "
+           "class's ranges: a file never calibrated) or none (a vehicle without priors)", kind="text",
+           value=lambda r: (r.ranges.source, list(INTERVAL_SOURCES))),
+    Column("extrapolation", "none, or which of temperature, mass, speed (mean), duty (share of time standing) lie "
+           "outside what the vehicle's calibration saw (never calibrated: none)", kind="text",
+           value=lambda r: (r.ranges.extrapolation, list(EXTRAPOLATION_TEXTS))),
 ), json_lead=("cycle", "vehicle", "powertrain", "mass_kg", "distance_km", "duration_s", "wheel_energy_kwh", "energy_kwh",
               "energy_kwh_per_km", "fuel_l", "fuel_l_per_100km", "ice_braking"))
 
@@ -178,7 +247,8 @@ PREDICT_JSON_LEAD = PREDICT.json_lead
 
 #: Predict's table status: whether the reserve is kept (EV) or the tank is enough (ICE),
 #: and why not (:func:`cevm.cli.predict.with_status`); for people only, not in CSV or JSON.
-STATUS = Column("status", "reserve kept (EV) or tank enough (ICE), and where not, why", kind="text",
+STATUS = Column("status", "reserve kept (EV) or tank enough (ICE), where not why, and where it is not sure (the "
+                "probability rounds to neither 0 nor 1) its probability", kind="text",
                 header="reserve / tank ok", layout="wrap")
 
 #: The columns predict's table may show, in order (those without a value in any row are
@@ -198,9 +268,10 @@ class VehicleRow:
     where the masses come from (``mass_source``). Values are Python values: None where a
     row has none."""
 
-    def __init__(self, res: Any, i: int, ice_braking: str | None, mass_source: str):
+    def __init__(self, res: Any, i: int, ice_braking: str | None, mass_source: str, level: float = 0.9):
         self.res = res
         self.i = i
+        self.level = level
         self.vehicle = res.vehicles[i]
         self.source = res.source
         self.ice_braking = ice_braking
@@ -210,6 +281,34 @@ class VehicleRow:
         """This vehicle's value of a result array; None for NaN."""
         x = float(values[self.i])
         return None if x != x else x
+
+    def bound(self, high: bool) -> float | None:
+        """The interval's end at ``level`` of the energy [J] (EV) or fuel [l] (ICE)."""
+        from scipy.special import ndtri
+
+        if self.res.sd is None:
+            return None
+        mean = self.res.energy_j[self.i] if self.vehicle.is_ev else self.res.fuel_l[self.i]
+        x = float(mean + (1 if high else -1) * float(ndtri(0.5 + 0.5 * self.level)) * self.res.sd[self.i])
+        return None if x != x else x
+
+    def soc_at(self, energy_j: float | None) -> float | None:
+        """The state of charge at the end [%] with ``energy_j`` drawn instead (>= 0)."""
+        end = self.num(self.res.soc_end_pct)
+        if end is None or energy_j is None or not self.vehicle.battery_j:
+            return None
+        return max(0.0, end + 100.0 * (float(self.res.energy_j[self.i]) - energy_j) / self.vehicle.battery_j)
+
+    def extrapolation(self) -> str:
+        from cevm.core.vehicle import extrapolation_mask, extrapolation_text
+
+        vec = self.source.vector
+        speed = vec.distance_m / vec.duration_s if vec.duration_s > 0 else None
+        idle = vec.idle_s / vec.duration_s if vec.duration_s > 0 else None
+        t = None if self.res.ambient_c is None else float(self.res.ambient_c[self.i])
+        mask = extrapolation_mask(self.vehicle.calibration, mass_kg=float(self.res.mass_kg[self.i]),
+                                  ambient_c=t, mean_speed_mps=speed, idle_share=idle)
+        return extrapolation_text(int(mask))
 
     def range_km(self, range_m: np.ndarray) -> float | None:
         """A range in km; None where unknown, and where unlimited (a source that gives back
@@ -236,8 +335,8 @@ FEASIBILITY = ColumnSpec((
            value=lambda r: float(r.res.payload_kg[r.i])),
     Column("over_max_gross", "the gross mass is above max_gross_kg", kind="bool",
            value=lambda r: bool(r.res.over_max_gross[r.i])),
-    Column("feasible", "keeps the reserve (EV) or fits the tank (ICE) within max_gross_kg (empty: ICE without "
-           "tank_l)", kind="bool", value=_feasible),
+    Column("feasible", "keeps the reserve (EV) or fits the tank (ICE) within max_gross_kg, with probability "
+           "--confidence (empty: ICE without tank_l)", kind="bool", value=_feasible),
     Column("energy_kwh", "battery energy over the source [kWh]", EV, value=lambda r: r.num(r.res.energy_j / J_PER_KWH)),
     Column("soc_end_pct", "state of charge at the end [%] (empty when it runs empty on the way)", EV,
            value=lambda r: r.num(r.res.soc_end_pct)),
@@ -249,8 +348,9 @@ FEASIBILITY = ColumnSpec((
     Column("tank_margin_l", "tank less fuel [l]", ICE, value=lambda r: r.num(r.res.tank_margin_l)),
     Column("ice_braking", "the braking mode in force: paper or no-credit", ICE, kind="text",
            value=lambda r: r.ice_braking or r.vehicle.ice_braking),
-    Column("max_payload_kg", "the largest whole-kg payload that keeps the reserve or fits the tank, within "
-           "max_gross_kg or the search cap [kg] (empty: none does)", value=lambda r: r.num(r.res.max_payload_kg)),
+    Column("max_payload_kg", "the largest whole-kg payload that keeps the reserve or fits the tank with "
+           "probability --confidence, within max_gross_kg or the search cap [kg] (empty: none does)",
+           value=lambda r: r.num(r.res.max_payload_kg)),
     Column("min_payload_kg", "the smallest such payload [kg] (above 0 only where the empty vehicle fails)",
            value=lambda r: r.num(r.res.min_payload_kg)),
     Column("limited_by", "what limits the payload: reserve, tank, max_gross_kg, payload_cap or infeasible",
@@ -269,11 +369,33 @@ FEASIBILITY = ColumnSpec((
            value=lambda r: r.range_km(r.res.range_reserve_m)),
     Column("mass_source", "where the mass comes from: --mass-kg, --payload-kg, the vehicle file, or a stored "
            "trip's own", kind="text", value=lambda r: r.mass_source),
+    Column("confidence", "the probability with which feasible and max_payload_kg keep the reserve or fit the "
+           "tank (--confidence)", value=lambda r: r.res.confidence),
+    Column("p_reserve_ok", "at the evaluated load, the probability of keeping --reserve-pct all along", EV,
+           value=lambda r: r.num(r.res.p_ok) if r.res.p_ok is not None else None),
+    Column("p_tank_ok", "at the evaluated load, the probability that the fuel fits tank_l (empty without tank_l)",
+           ICE, value=lambda r: r.num(r.res.p_ok) if r.res.p_ok is not None else None),
+    Column("interval", "the level of the energy's or fuel's interval (--interval)", value=lambda r: r.level),
+    Column("energy_kwh_low", "the interval's low end of the battery energy [kWh]", EV,
+           value=lambda r: None if r.bound(False) is None else r.bound(False) / J_PER_KWH),
+    Column("energy_kwh_high", "the interval's high end of the battery energy [kWh]", EV,
+           value=lambda r: None if r.bound(True) is None else r.bound(True) / J_PER_KWH),
+    Column("soc_end_pct_low", "state of charge at the end with the interval's high energy [%] (never below 0)", EV,
+           value=lambda r: r.soc_at(r.bound(True))),
+    Column("soc_end_pct_high", "state of charge at the end with the interval's low energy [%]", EV,
+           value=lambda r: r.soc_at(r.bound(False))),
+    Column("fuel_l_low", "the interval's low end of the fuel [l]", ICE, value=lambda r: r.bound(False)),
+    Column("fuel_l_high", "the interval's high end of the fuel [l]", ICE, value=lambda r: r.bound(True)),
+    Column("interval_from", "what the interval comes from: posterior, prior (a file never calibrated) or none",
+           kind="text", value=lambda r: r.res.interval_from[r.i] if r.res.interval_from else "none"),
+    Column("extrapolation", "none, or which of temperature, mass, speed, duty lie outside what the vehicle's "
+           "calibration saw", kind="text", value=lambda r: r.extrapolation()),
 ))
 
 
-def feasibility_row(res: Any, i: int, ice_braking: str | None, mass_source: str) -> dict[str, Any]:
+def feasibility_row(res: Any, i: int, ice_braking: str | None, mass_source: str,
+                    level: float = 0.9) -> dict[str, Any]:
     """The output row of vehicle ``i`` of a feasibility result: the columns its powertrain
-    has, in order."""
-    ctx = VehicleRow(res, i, ice_braking, mass_source)
+    has, in order (``level``: its interval's)."""
+    ctx = VehicleRow(res, i, ice_braking, mass_source, level)
     return {c.name: c.value(ctx) for c in FEASIBILITY.for_powertrain(ctx.vehicle.powertrain)}

@@ -17,6 +17,14 @@ tests the empty payload, and if that fails it finds the minimum of the convex fu
 (binary search on the sign of its discrete slope) before bisecting each side, all on
 whole kilograms with the exact model: the answer is the largest whole-kg payload that
 keeps the reserve (EV) or fits the tank (ICE) and respects ``max_gross_kg``.
+
+At a confidence c (:func:`feasibility`'s ``confidence``), "keeps the reserve" means that
+it does so with probability at least c under the vehicle's predictive distribution
+(:mod:`cevm.core.predictive`: its calibration's posterior, or its class's priors): the
+load (the peak energy drawn, or the fuel) plus z_c of its standard deviations must fit
+the budget, z_c = Phi^-1(c), the peak's standard deviation taken as the source total's
+relative one. That load is convex in the mass too where z_c >= 0 (a norm of terms affine
+in the mass, added to a convex one), so the search stands; c = 0.5 is the point estimate.
 """
 
 from __future__ import annotations
@@ -26,14 +34,16 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.special import ndtr, ndtri
 
 from cevm.core import physical_inputs
+from cevm.core.predictive import Features, predictive
 from cevm.core.sweep import (
-    RANGE_FIELDS,
+    AMBIENT_ORIGINS,
     DEFAULT_RESERVE_PCT,
     DEFAULT_SOC_START_PCT,
+    RANGE_FIELDS,
     PredictionSet,
-    AMBIENT_ORIGINS,
     RowTerms,
     Source,
     ce_wheel_energy_j,
@@ -93,6 +103,13 @@ class Feasibility:
     empty_at_s: np.ndarray | None = None
     range_m: np.ndarray | None = None
     range_reserve_m: np.ndarray | None = None
+    # the verdict's and the payload's confidence, and at the evaluated load: the energy's
+    # (EV, J) or fuel's (ICE, l) standard deviation, P(reserve kept / tank enough), and
+    # where the uncertainty comes from (:data:`cevm.core.intervals.INTERVAL_SOURCES`)
+    confidence: float = 0.5
+    sd: np.ndarray | None = None
+    p_ok: np.ndarray | None = None
+    interval_from: tuple[str, ...] = ()
 
 
 class _LoadFunction:
@@ -101,8 +118,10 @@ class _LoadFunction:
     the reserve, or the tank)."""
 
     def __init__(self, source: Source, vehicles: Sequence[Vehicle], base_kg: np.ndarray, soc_start_pct: float,
-                 reserve_pct: float, ice_braking: str | None, ambient_c: float | None = None):
+                 reserve_pct: float, ice_braking: str | None, ambient_c: float | None = None, z: float = 0.0):
         self.source = source
+        self.vehicles = tuple(vehicles)
+        self.z = z
         self.pset = PredictionSet.build(vehicles, ice_braking=ice_braking, ambient_c=ambient_c)  # one row per vehicle
         check_cr(source, self.pset)
         self.base_kg = base_kg
@@ -110,7 +129,34 @@ class _LoadFunction:
         self.budget = np.where(ps.is_ev, (soc_start_pct - reserve_pct) / 100.0 * ps.battery_j, ps.tank_l)
 
     def __call__(self, vi: np.ndarray, payload_kg: np.ndarray) -> np.ndarray:
-        return self.evaluate(vi, payload_kg)[0]
+        """The load at the confidence: the peak energy or fuel plus z of its standard
+        deviations (module notes)."""
+        load, total, terms = self.evaluate(vi, payload_kg)
+        if self.z == 0.0:
+            return load
+        sd = self.sd(vi, self.base_kg[vi] + payload_kg, terms)
+        ev = self.pset.is_ev[vi]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            rel = np.where(ev, sd / np.abs(total), 0.0)
+        return load + self.z * np.where(ev, rel * np.abs(load), sd)
+
+    def sd(self, vi: np.ndarray, mass_kg: np.ndarray, terms: RowTerms) -> np.ndarray:
+        """The standard deviation of the source's total energy [J] or fuel [l] of (vehicle
+        index, mass) pairs (:func:`cevm.core.predictive.predictive`)."""
+        out = np.zeros(vi.size)
+        for v in np.unique(vi):
+            sel = vi == v
+            veh = self.vehicles[int(v)]
+            f = Features.of(self.source.vector, veh, mass_kg[sel], terms.ambient_c[sel, 0])
+            out[sel] = predictive(veh, f, ice_braking=self.pset.braking[int(v)] or None).sd
+        return out
+
+    def source_of(self, v: int) -> str:
+        """Where vehicle ``v``'s uncertainty comes from (posterior, prior, none)."""
+        from cevm.core.predictive import posterior_of
+
+        post = posterior_of(self.vehicles[v])
+        return "none" if post is None else post.label
 
     def evaluate(self, vi: np.ndarray, payload_kg: np.ndarray) -> tuple[np.ndarray, np.ndarray, RowTerms]:
         """(peak battery energy [J] (EV) or fuel [l] (ICE), total battery energy [J] (NaN
@@ -186,6 +232,7 @@ def feasibility(
     payload_cap_kg: float | None = None,
     ice_braking: str | None = None,
     ambient_c: float | None = None,
+    confidence: float = 0.5,
 ) -> Feasibility:
     """Feasibility of ``source`` for each vehicle, and the largest payload.
 
@@ -205,6 +252,8 @@ def feasibility(
     ice_braking : override of the ICE braking mode
     ambient_c : the ambient temperature [degC]; default the source's own, else each
         vehicle's default (:data:`cevm.core.sweep.AMBIENT_ORIGINS`)
+    confidence : the probability with which the verdict and the largest payload keep the
+        reserve (fit the tank), in [0.5, 1); default 0.5: the point estimate (module notes)
 
     The payload search is exact on whole kilograms: see the module notes (convexity).
     An ICE vehicle without ``tank_l`` has no fuel limit: its payload is limited by
@@ -222,10 +271,20 @@ def feasibility(
         mass = np.full(nv, float(physical_inputs.masses_for(vehicles, mass_kg)))
     else:
         mass = np.array([v.mass_kg for v in vehicles], dtype=np.float64)
-    f = _LoadFunction(source, vehicles, base, soc_start_pct, reserve_pct, ice_braking, ambient_c)
+    if not (isinstance(confidence, (int, float)) and 0.5 <= confidence < 1.0):
+        raise CevmError(f"the confidence must be at least 0.5 and below 1, got {confidence!r}")
+    z = float(ndtri(confidence))
+    f = _LoadFunction(source, vehicles, base, soc_start_pct, reserve_pct, ice_braking, ambient_c, z=z)
     ps = f.pset
     vi = np.arange(nv)
     at, total, terms = f.evaluate(vi, mass - base)
+    sd_at = f.sd(vi, mass, terms)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        rel = np.where(ps.is_ev, sd_at / np.abs(total), 0.0)
+        sd_load = np.where(ps.is_ev, rel * np.abs(at), sd_at)
+        zl = (f.budget - at) / sd_load
+    p_ok = np.where(sd_load > 0, ndtr(zl), np.where(at <= f.budget, 1.0, 0.0))
+    p_ok = np.where(ps.is_ev | np.isfinite(ps.tank_l), p_ok, np.nan)
     max_gross = np.array([np.inf if v.max_gross_kg is None else v.max_gross_kg for v in vehicles])
     over = mass > max_gross
     # totals at the evaluated load
@@ -240,7 +299,8 @@ def feasibility(
     fuel[~ev] = at[~ev]
     with np.errstate(invalid="ignore"):
         tank_margin = ps.tank_l - fuel
-        ok_load = np.where(ev, soc_min >= reserve_pct, tank_margin >= 0)
+        ok_load = (np.where(ev, soc_min >= reserve_pct, tank_margin >= 0) if z == 0.0
+                   else p_ok >= confidence)
     known = ev | np.isfinite(ps.tank_l)
     feasible = np.where(known, (ok_load & ~over).astype(float), np.nan)
 
@@ -270,6 +330,10 @@ def feasibility(
         limited_by=tuple(str(s) for s in limited),
         ambient_c=terms.ambient_c[:, 0],
         ambient_from=tuple(AMBIENT_ORIGINS[int(c)] for c in terms.ambient_from[:, 0]),
+        confidence=float(confidence),
+        sd=sd_at,
+        p_ok=p_ok,
+        interval_from=tuple(f.source_of(i) for i in range(nv)),
     )
 
 

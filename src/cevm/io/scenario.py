@@ -469,12 +469,24 @@ def resolve_day(sc: Scenario, spec: str) -> str:
     raise InputError(sc.path, f"unknown day {spec!r}: give a day's name or its number from 1; days: {listing}")
 
 
+def _interval_from(vehicle: Vehicle) -> str:
+    """posterior, prior or none: what a vehicle's probabilities come from."""
+    from cevm.core.predictive import posterior_of
+
+    post = posterior_of(vehicle)
+    return "none" if post is None else post.label
+
+
 def fleet_report(path: str | Path, days: Sequence[str | int] | None = None, *, method: str = "auto",
-                 resolve_leg: LegResolver = default_resolver, ambient_c: float | None = None) -> dict:
+                 resolve_leg: LegResolver = default_resolver, ambient_c: float | None = None,
+                 min_p_complete: float | None = None) -> dict:
     """Everything ``cevm fleet SCENARIO`` shows, JSON-ready: the scenario, one plan per
     day (all days by default), the table-4 rows and a summary row per day
     (total, default, saving, method, status, time). ``ambient_c`` [degC] overrides every
     day's temperature.
+
+    ``min_p_complete``: require every vehicle with a budget to complete its day with at
+    least this probability (:func:`cevm.core.assignment.plan`).
 
     ``days``: names, or strings holding a day's 1-based number as the paper numbers days
     (``"3"`` is the third day; see :func:`resolve_day`), or ints (0-based indices, as
@@ -483,7 +495,7 @@ def fleet_report(path: str | Path, days: Sequence[str | int] | None = None, *, m
     if ambient_c is not None:
         sc = dataclasses.replace(sc, ambient_c=_day_temperatures(Path(path), float(ambient_c), len(sc.days)))
     chosen = [resolve_day(sc, d) if isinstance(d, str) else d for d in days] if days is not None else sc.days
-    plans = [plan(sc, d, method=method) for d in chosen]
+    plans = [plan(sc, d, method=method, min_p_complete=min_p_complete) for d in chosen]
     return {
         "scenario": sc.name,
         "path": str(path),
@@ -496,6 +508,7 @@ def fleet_report(path: str | Path, days: Sequence[str | int] | None = None, *, m
                       "powertrain": fv.vehicle.powertrain,
                       "ice_braking": None if fv.vehicle.is_ev else fv.vehicle.ice_braking,
                       "calibrated": fv.vehicle.calibration is not None,
+                      "interval_from": _interval_from(fv.vehicle),
                       "uses_temperature": energy.uses_temperature(fv.vehicle)} for fv in sc.vehicles],
         "warnings": calibration_warnings(sc, plans),
         "table": table4_rows(plans),
@@ -509,6 +522,8 @@ def fleet_report(path: str | Path, days: Sequence[str | int] | None = None, *, m
                 "method": p.method,
                 "status": p.status,
                 "solve_time_s": p.solve_time_s,
+                "min_p_complete": p.min_p_complete,
+                "lowest_p_complete": min((x for x in (p.p_complete or {}).values() if x is not None), default=None),
             }
             for p in plans
         ],
