@@ -70,6 +70,7 @@ READERS = [
     ("simulate", "-v", BUS, "-c", URBAN, "-f", "csv"),
     ("store", "check", "-f", "json"), ("store", "info"), ("route", "list"),
     ("vehicle", "show", BUS), ("fleet", "plan", SCENARIO),
+    ("replay", "-v", BUS, "--vehicle-id", "EB-09", "-f", "csv"),
 ]
 
 
@@ -136,18 +137,27 @@ OUTS = [
     ("feasibility", "-v", BUS, "-c", URBAN, "-f", "csv", "--out", "{d}/f.csv"),
     ("predict", "-v", BUS, "-v", DIESEL, "-c", URBAN, "--payload-kg", "0:4000:500", "--plot", "{d}/p.png"),
     ("simulate", "-v", BUS, "-c", URBAN, "--plot", "{d}/sim.png"),
+    ("calibrate", "-v", DIESEL, "--vehicle-id", "HGV-77", "--out", "{d}/hgv.toml"),
+    ("calibrate", "-v", DIESEL, "--vehicle-id", "HGV-77", "--plot", "{d}/cal.png"),
+    ("replay", "-v", BUS, "--vehicle-id", "EB-09", "--plot", "{d}/replay.png"),
+    ("replay", "-v", BUS, "--vehicle-id", "EB-09", "--summary", "{d}/summary.json"),
 ]
 
 
 @pytest.mark.parametrize("args", OUTS, ids=["simulate --out", "predict --out", "feasibility --out", "predict --plot",
-                                            "simulate --plot"])
+                                            "simulate --plot", "calibrate --out", "calibrate --plot", "replay --plot",
+                                            "replay --summary"])
 def test_an_out_file_on_a_full_disk_is_one_line_and_leaves_nothing(fleet, capsys, monkeypatch, tmp_path, args):
+    db, ids = fleet
     with mounted(tmp_path / "small", "size=64k") as small:
         fill(small / "filler")
         args = [str(a).format(d=small) for a in args]
+        if args[0] in ("calibrate", "replay"):
+            args += ["--store", str(db)]
         code, err = run_main(capsys, monkeypatch, args, stdout_path=Path(os.devnull))
         assert code == EXIT_STORE_ACCESS, err
-        assert f"{args[-1]}: could not be written: the disk is full" in one_line(err)
+        out = next(a for a in args if a.startswith(str(small)))
+        assert f"{out}: could not be written: the disk is full" in one_line(err)
         assert sorted(p.name for p in small.iterdir()) == ["filler"]  # nothing half-written left
 
 
@@ -159,9 +169,12 @@ def test_an_out_path_that_is_a_device_is_written_not_replaced(fleet, capsys, mon
         os.mknod(node, 0o666 | stat.S_IFCHR, os.makedev(1, 7))
     except (PermissionError, OSError):
         pytest.skip("cannot make a device node here (needs root)")
+    db, ids = fleet
     for args in (("simulate", "-v", BUS, "-c", URBAN, "--out", node),
                  ("predict", "-v", BUS, "-c", URBAN, "-f", "csv", "--out", node),
-                 ("simulate", "-v", BUS, "-c", URBAN, "--plot", node)):  # nor removed after a failed plot
+                 ("simulate", "-v", BUS, "-c", URBAN, "--plot", node),  # nor removed after a failed plot
+                 ("calibrate", "-v", DIESEL, "--vehicle-id", "HGV-77", "--store", db, "--out", node, "--force"),
+                 ("replay", "-v", BUS, "--vehicle-id", "EB-09", "--store", db, "--summary", node)):
         code, err = run_main(capsys, monkeypatch, args, stdout_path=Path(os.devnull))
         assert code == EXIT_STORE_ACCESS and f"{node}: could not be written: the disk is full" in one_line(err)
         assert stat.S_ISCHR(node.stat().st_mode)  # still the device

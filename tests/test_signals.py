@@ -38,6 +38,8 @@ COMMANDS = [
     (("simulate", "-v", BUS, "--trip", "{bus}", "--out", "{tmp}/sim.csv"), "cevm.core.detailed:simulate", False),
     (("store", "check"), "cevm.store.integrity:_trip_problems", False),
     (("fleet", "plan", SCENARIO), "cevm.io.scenario:fleet_report", False),
+    (("replay", "-v", BUS, "--vehicle-id", "EB-09", "--out", "{tmp}/replay.csv"), "cevm.cli.replay:plan_vehicle",
+     False),
     (("trips", "set-mass", "{hgv}", "--gross-kg", "31000"), "cevm.store.masses:set_masses", False),
     (("route", "add", "R7", "--cycle", URBAN), "cevm.store.routes:add_route", False),
 ]
@@ -111,5 +113,5 @@ def test_a_signal_stops_every_command_with_its_code_and_one_line(fleet, tmp_path
     assert lines[-1].startswith(f"cevm {command}: interrupted by {sig.name}: stopped before the end"), lines
     assert sum("interrupted" in ln for ln in lines) == 1 and not any("Traceback" in ln for ln in lines), lines
     assert not any(p.name.endswith((".partial", ".tmp")) for p in tmp_path.iterdir())  # no half-written --out
-    assert not (tmp_path / "out.toml").exists() and not (tmp_path / "sim.csv").exists()
+    assert not any((tmp_path / name).exists() for name in ("out.toml", "sim.csv", "replay.csv"))
     assert snapshot(db) == before

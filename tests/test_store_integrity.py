@@ -91,6 +91,7 @@ READERS = [
     ("route", "list"),
     ("store", "check"),
     ("store", "info"),
+    ("replay", "-v", BUS, "--vehicle-id", "EB-09"),
 ]
 
 

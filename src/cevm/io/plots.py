@@ -87,7 +87,7 @@ def plot_calibration(result: CalibrationResult, path: Path, title: str) -> None:
            ylabel="share of held-out trips inside", title="coverage of the intervals")
     a3.legend(fontsize=8, loc="upper left")
     fig.tight_layout()
-    _save(fig, path)
+    save_figure(fig, path)
 
 
 def plot_simulation(frame, res, path: Path, title: str) -> None:
@@ -109,10 +109,10 @@ def plot_simulation(frame, res, path: Path, title: str) -> None:
         ax2.plot(t_min, frame["elevation_m"], color="0.6", lw=0.8, label="elevation")
         ax2.set_ylabel("elevation [m]")
     fig.tight_layout()
-    _save(fig, path)
+    save_figure(fig, path)
 
 
-def _save(fig, path) -> None:
+def save_figure(fig, path) -> None:
     """Write the figure to ``path`` (PNG, or the format its suffix names) whole or not at
     all (:class:`cevm.io.outputs.OutFile`): a failed write (a full disk) is an
     :class:`~cevm.errors.OutputError` naming the file (exit 3), and leaves no half-written
@@ -208,4 +208,4 @@ def plot_predictions(path: Path, sources: list[Source], pset: PredictionSet | Se
         ax.grid(True, alpha=0.3)
         ax.legend(fontsize=7)
     fig.tight_layout()
-    _save(fig, path)
+    save_figure(fig, path)
