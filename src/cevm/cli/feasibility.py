@@ -47,6 +47,7 @@ from cevm.core.cycle import CR0_DEFAULT
 from cevm.core.feasibility import feasibility
 from cevm.core.sweep import DEFAULT_RESERVE_PCT, DEFAULT_SOC_START_PCT
 from cevm.errors import CevmError
+from cevm.runtime import WHOLE_CYCLE_MMAP_THRESHOLD_BYTES, tune_allocator
 
 
 def _mass_for(src, mass_kg: float | None, payload_kg: float | None) -> tuple[float | None, float | None, str]:
@@ -104,6 +105,7 @@ def feasibility_cmd(
     at the evaluated load, *_low / *_high the interval at --interval."""
     if not (cycle or trip or vehicle_id or route):
         raise fail("give at least one route: --route (or --cycle, --trip, --vehicle-id)")
+    tune_allocator(WHOLE_CYCLE_MMAP_THRESHOLD_BYTES)  # arrays of a cycle's length reused, not mapped anew
     if payload_kg is not None and mass_kg is not None:
         raise fail("give --mass-kg or --payload-kg, not both")
     check_common(ice_braking, soc_start, reserve_pct, interval)

@@ -23,7 +23,7 @@ from __future__ import annotations
 from collections import Counter
 from contextlib import ExitStack
 from pathlib import Path
-from typing import IO, Annotated, Optional
+from typing import IO, Annotated
 
 import numpy as np
 import typer
@@ -69,8 +69,8 @@ from cevm.core.sweep import (
     sweep,
 )
 from cevm.errors import CevmError
-from cevm.executors import make_executor
 from cevm.io.plots import PLOT_MAX_LINES, plot_predictions
+from cevm.runtime import WHOLE_CYCLE_MMAP_THRESHOLD_BYTES, tune_allocator
 from cevm.units import J_PER_KWH
 
 #: Rows formatted at once when writing CSV or JSON.
@@ -307,12 +307,12 @@ def predict_cmd(
     route: RouteOption = None,
     store: StoreOption = None,
     mass_kg: Annotated[
-        Optional[list[str]],
+        list[str] | None,
         typer.Option("--mass-kg", "-m", metavar="KG", help="Gross mass in kg: a value, a list a,b or a range start:stop:step "
                                              "(stop included). Repeatable. Default: each vehicle's mass_kg."),
     ] = None,
     payload_kg: Annotated[
-        Optional[list[str]],
+        list[str] | None,
         typer.Option("--payload-kg", "-p", metavar="KG", help="Payload in kg on each vehicle's kerb mass: a value, a list or a "
                                                 "range such as 0:26000:2000 (14 values, stop included). Repeatable."),
     ] = None,
@@ -322,7 +322,7 @@ def predict_cmd(
     fmt: FormatOption = OutputFormat.table,
     out: OutOption = None,
     plot: Annotated[
-        Optional[Path],
+        Path | None,
         typer.Option(metavar="FILE.png", help="Write a PNG: state of charge along each source (one mass per vehicle), or energy "
                           "against payload (a mass sweep)."),
     ] = None,
@@ -336,12 +336,12 @@ def predict_cmd(
                                            "(about 10x the time of a sweep without it).")
     ] = False,
     workers: Annotated[
-        Optional[int], typer.Option("--workers", "-w", min=1, metavar="N", help="Worker processes, a batch of sources per task "
+        int | None, typer.Option("--workers", "-w", min=1, metavar="N", help="Worker processes, a batch of sources per task "
                                     "(default 1: in this process; a large sweep of many routes runs ~1.3x faster "
                                     "on 2 cores, a small one is slower for the processes' start).")
     ] = None,
     scheduler: Annotated[
-        Optional[str], typer.Option(help="Dask scheduler address (tcp://HOST:8786): evaluate the batches on that "
+        str | None, typer.Option(help="Dask scheduler address (tcp://HOST:8786): evaluate the batches on that "
                                          "cluster (pip install 'cevm[dask]'). Sources are read here and sent.")
     ] = None,
     cycle_fmt=None,
@@ -361,6 +361,7 @@ def predict_cmd(
     calibrated vehicle was fitted on (temperature, mass, duty) is warned about."""
     if not (cycle or trip or vehicle_id or route):
         raise fail("give at least one source: --cycle, --trip, --vehicle-id or --route")
+    tune_allocator(WHOLE_CYCLE_MMAP_THRESHOLD_BYTES)  # arrays of a cycle's length reused, not mapped anew
     if mass_kg and payload_kg:
         raise fail("give --mass-kg or --payload-kg, not both")
     if workers is not None and scheduler is not None:
@@ -384,7 +385,11 @@ def predict_cmd(
                                    cycle_fmt, need_profiles=any(v.is_ev for v in vehicles),
                                    on_damaged=skipped.append)
             note_flat_cycles(sources)
-            executor = stack.enter_context(make_executor(None if scheduler else (workers or 1), scheduler))
+            executor = None  # in this process: the executors are not even imported
+            if scheduler is not None or (workers or 1) > 1:
+                from cevm.executors import make_executor
+
+                executor = stack.enter_context(make_executor(None if scheduler else workers, scheduler))
             stream = open_out(stack, out)
             writer = PredictWriter(fmt, stream, temperature_used=any(uses_temperature(v) for v in vehicles),
                                    options=RangeOptions(interval, soc_start, reserve_pct))

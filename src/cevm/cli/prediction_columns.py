@@ -144,7 +144,7 @@ def _vehicle_names(r: BlockRows) -> tuple[np.ndarray, list[str]]:
 
 
 PREDICT = ColumnSpec((
-    Column("cycle", "the source's name: a cycle file's stem (with --speed-col, stem[column]), a trip id or a route name",
+    Column("cycle", "the source's name: a cycle file's stem (with --speed-col, stem[column]), a trip id, a route",
            kind="text", value=lambda r: r.text(r.source.name)),
     Column("vehicle", "the vehicle's name (its file's name key)", kind="text", value=_vehicle_names),
     Column("mass_kg", "gross mass [kg]", header="mass kg", digits=0, decimals=3, value=lambda r: r.pset.mass_kg),
@@ -163,7 +163,8 @@ PREDICT = ColumnSpec((
            value=lambda r: r.per_km(r.block.fuel_l, 100.0)),
     Column("source_kind", "what the source is: cycle, trip or route", kind="text",
            value=lambda r: r.text(r.source.kind)),
-    Column("powertrain", "ev or ice", kind="text", value=lambda r: r.by_vehicle([v.powertrain for v in r.pset.vehicles])),
+    Column("powertrain", "ev or ice", kind="text",
+           value=lambda r: r.by_vehicle([v.powertrain for v in r.pset.vehicles])),
     Column("payload_kg", "gross mass less the kerb mass [kg] (empty without kerb_mass_kg)", header="payload kg",
            digits=0, decimals=3, value=lambda r: r.pset.payload_kg),
     Column("over_max_gross", "the gross mass is above the vehicle's max_gross_kg", kind="bool",
@@ -239,8 +240,8 @@ PREDICT = ColumnSpec((
     Column("extrapolation", "none, or which of temperature, mass, speed (mean), duty (share of time standing) lie "
            "outside what the vehicle's calibration saw (never calibrated: none)", kind="text",
            value=lambda r: (r.ranges.extrapolation, list(EXTRAPOLATION_TEXTS))),
-), json_lead=("cycle", "vehicle", "powertrain", "mass_kg", "distance_km", "duration_s", "wheel_energy_kwh", "energy_kwh",
-              "energy_kwh_per_km", "fuel_l", "fuel_l_per_100km", "ice_braking"))
+), json_lead=("cycle", "vehicle", "powertrain", "mass_kg", "distance_km", "duration_s", "wheel_energy_kwh",
+              "energy_kwh", "energy_kwh_per_km", "fuel_l", "fuel_l_per_100km", "ice_braking"))
 
 #: The keys every predict JSON object starts with (the first contract).
 PREDICT_JSON_LEAD = PREDICT.json_lead
@@ -398,4 +399,4 @@ def feasibility_row(res: Any, i: int, ice_braking: str | None, mass_source: str,
     """The output row of vehicle ``i`` of a feasibility result: the columns its powertrain
     has, in order (``level``: its interval's)."""
     ctx = VehicleRow(res, i, ice_braking, mass_source, level)
-    return {c.name: c.value(ctx) for c in FEASIBILITY.for_powertrain(ctx.vehicle.powertrain)}
+    return FEASIBILITY.values(ctx, FEASIBILITY.for_powertrain(ctx.vehicle.powertrain))

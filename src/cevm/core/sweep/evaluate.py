@@ -143,7 +143,8 @@ def as_blocks(sources: Sequence[Source], pset: PredictionSet, arrays: tuple[np.n
                first_index: int) -> list[SweepBlock]:
     """One :class:`SweepBlock` per source from the (P, n_sources) arrays of
     :func:`predict_arrays`."""
-    return [SweepBlock(src, first_index + i, pset, **{name: a[:, i].copy() for name, a in zip(BLOCK_ARRAYS, arrays)})
+    return [SweepBlock(src, first_index + i, pset,
+                       **{name: a[:, i].copy() for name, a in zip(BLOCK_ARRAYS, arrays, strict=True)})
             for i, src in enumerate(sources)]
 
 

@@ -10,7 +10,7 @@ from dataclasses import replace
 import numpy as np
 
 from cevm.core.sweep.block import SweepBlock
-from cevm.core.sweep.profiles import StepTable
+from cevm.core.sweep.profiles import StepTable, edges
 
 #: Masses x windows of one chunk of :func:`peak_wheel_power_w` (8 MB of float64).
 _POWER_CHUNK_CELLS = 1 << 20
@@ -35,20 +35,43 @@ def _window_coefficients(st: StepTable, window_s: float = POWER_WINDOW_S):
 
 def _window_sums(st: StepTable, window_s: float):
     mv = st.moving
-    x = np.where(mv, st.x, 0.0)  # standstill: the brakes hold the vehicle, no wheel work
-
-    def csum(v: np.ndarray) -> np.ndarray:  # [0, cumsum...] without a second copy
-        out = np.empty(v.size + 1)
-        out[0] = 0.0
-        np.cumsum(v, out=out[1:])
-        return out
-
-    cx, cr_, ca, ct = csum(x), csum(st.r), csum(st.a), csum(st.dt)
+    ct = st.t_edges
     starts = np.flatnonzero(mv)
-    ends = np.searchsorted(ct, ct[starts] + window_s * (1.0 - 1e-12), side="left")
-    ends = np.minimum(np.maximum(ends, starts + 1), st.n)
-    dur = ct[ends] - ct[starts]
-    return cx[ends] - cx[starts], cr_[ends] - cr_[starts], ca[ends] - ca[starts], dur
+    n = st.n
+    span = window_s * (1.0 - 1e-12)
+    # Each window ends at the first step edge at least span after its start (searchsorted
+    # on the time edges). On a uniform time grid that is w steps on from every start: so
+    # the sums are differences of slices, and the guess is checked exactly (the edge w
+    # on reaches the span, the one before does not); searchsorted where it fails. One
+    # running sum at a time (each 8 bytes a step): the peak memory of a long cycle.
+    w = max(1, math.ceil(span / st.dt[starts[0]])) if starts.size else 1
+    m = n + 1 - w  # the starts i <= n - w whose guess stays within the source
+    good = np.zeros(starts.size, dtype=bool)
+    if m > 0:
+        goal = ct[:m] + span  # where each window must end
+        ok = np.less_equal(goal, ct[w:])
+        ok &= ct[w - 1 : n] < goal
+        del goal
+        good = np.take(ok, starts, mode="clip") & (starts < m)
+        del ok
+    searched = None if good.all() else starts[~good]
+    if searched is not None:
+        ends = np.searchsorted(ct, ct[searched] + span, side="left")
+        ends = np.minimum(np.maximum(ends, searched + 1), n)
+    out = []
+    for values in (lambda: np.where(mv, st.x, 0.0), lambda: st.r, lambda: st.a, None):
+        # x counts on moving steps only (standstill: the brakes hold the vehicle, no wheel work)
+        c = ct if values is None else edges(values())
+        if searched is None:
+            res = np.subtract(c[w:], c[:m]).take(starts)
+        else:
+            res = np.empty(starts.size)
+            sel = starts[good]
+            res[good] = c[sel + w] - c[sel]
+            res[~good] = c[ends] - c[searched]
+        out.append(res)
+        del c
+    return tuple(out)
 
 
 def peak_wheel_power_w(st: StepTable, mass_kg, cda_m2: float, cr: float, window_s: float = POWER_WINDOW_S

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 from functools import cached_property
 
 from cevm.core.cycle import CR0_DEFAULT, PAPER_PHYSICS, CycleVector, DriveCycle, Physics, cycle_vector
-from cevm.core.sweep.compressed import BLOCK_ELEMENTS, SourceSteps, build_steps
+from cevm.core.sweep.compressed import BLOCK_ELEMENTS, SourceSteps, steps_of_table
 from cevm.core.sweep.profiles import LegProfile, StepTable, build_step_table
 
 
@@ -48,8 +48,7 @@ class Source:
     @cached_property
     def steps(self) -> SourceSteps:
         """The compressed step terms (built on first use, then kept)."""
-        return build_steps(self.leg_profiles, cr0=self.vector.cr0, physics=self.vector.physics,
-                           block_elements=self.block_elements)
+        return steps_of_table(self.step_table, cr0=self.vector.cr0, block_elements=self.block_elements)
 
     @cached_property
     def step_table(self) -> StepTable:
