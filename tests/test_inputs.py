@@ -276,3 +276,43 @@ def test_a_vehicle_file_with_a_byte_order_mark_reads_as_without(tmp_path):
     a = cevm("predict", "-v", BUS, "-c", URBAN, "-f", "csv")
     b = cevm("predict", "-v", bom, "-c", URBAN, "-f", "csv")
     assert a.exit_code == b.exit_code == 0 and a.stdout.replace("electric-bus", "bom") == b.stdout
+
+
+# ------------------------------------------------------------------------------ cycles
+
+
+def test_a_cycle_file_with_cr_line_ends_reads_as_with_lf_everywhere(tmp_path):
+    """A classic Mac export (CR alone ends each line) was a _csv.Error traceback in
+    predict, route add and a fleet leg; it reads as the same file with LF."""
+    lf = URBAN.read_bytes().replace(b"\r\n", b"\n")
+    cr = tmp_path / "urban-cr.csv"
+    cr.write_bytes(lf.replace(b"\n", b"\r"))
+    same = tmp_path / "urban-lf.csv"
+    same.write_bytes(lf)
+    a = cevm("predict", "-v", BUS, "-c", same, "-f", "csv")
+    b = cevm("predict", "-v", BUS, "-c", cr, "-f", "csv")
+    assert a.exit_code == b.exit_code == 0 and a.stdout.replace("urban-lf", "urban-cr") == b.stdout
+    res = cevm("route", "add", "R1", "--cycle", cr, "--store", tmp_path / "s.sqlite")
+    assert res.exit_code == 0, res.stderr
+    DIESEL_PAPER = ROOT / "configs" / "vehicles" / "diesel-hgv-paper.toml"
+    scenario = tmp_path / "s.toml"
+    outputs = []
+    for cycle in (same, cr):
+        scenario.write_text(SCENARIO.format(vehicle=DIESEL_PAPER, cycle=cycle))
+        res = cevm("fleet", "plan", scenario, "-f", "json")
+        assert res.exit_code == 0, res.stderr
+        outputs.append([(d["day"], d["total"]) for d in json.loads(res.stdout)["summary"]])
+    assert outputs[0] == outputs[1]
+
+
+def test_a_cycle_or_grade_file_that_is_a_fifo_or_a_device_is_refused(tmp_path):
+    fifo = tmp_path / "pipe.csv"
+    if not hasattr(os, "mkfifo"):
+        pytest.skip("no FIFOs here")
+    os.mkfifo(fifo)
+    for args, said in ((("predict", "-v", BUS, "-c", fifo), f"{fifo}: is a FIFO (named pipe), not a cycle file"),
+                       (("predict", "-v", BUS, "-c", URBAN, "--grade-file", fifo),
+                        f"{fifo}: is a FIFO (named pipe), not a grade file"),
+                       (("route", "add", "R1", "--cycle", "/dev/zero", "--store", tmp_path / "s.sqlite"),
+                        "/dev/zero: is a character device, not a cycle file")):
+        assert one_error(cevm_process(*args, timeout_s=30)).endswith(said)
