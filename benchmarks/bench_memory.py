@@ -43,7 +43,9 @@ default limit or refused before the work:
 - ``scenario``: the same for a fleet scenario (``cevm fleet plan``);
 - ``manifest``: a manifest at its row bound (1,000,000 window rows, none matching a trip,
   so each is reported) given to ``cevm trips set-mass``, and ``/dev/zero``;
-- ``cycle``: a cycle file at its sample bound, predicted (``cevm predict -c``);
+- ``cycle``: a cycle file at its sample bound, predicted (two vehicles, two masses,
+  ``--range``) and simulated (``--out`` and ``--plot``), and the files of one command at
+  their bound (``cevm feasibility``);
 - ``blob``: a stored trip whose profile has a valid checksum but is a zip bomb (12
   million samples, 576 MB inflated; 4 MB stored), read by ``cevm store check`` and
   ``cevm simulate --trip``.
@@ -443,13 +445,14 @@ def log_cases(args, work: Path, lim, wide_rows: int, big_name: str) -> list:
 
 # ------------------------------------------------------------ inputs that are not logs
 def other_limits() -> str:
-    from cevm.io.cycles import MAX_CYCLE_SAMPLES
+    from cevm.io.cycles import MAX_COMMAND_CYCLE_SAMPLES, MAX_CYCLE_SAMPLES
     from cevm.io.inputs import MAX_TOML_BYTES
     from cevm.io.manifest import MAX_MANIFEST_BYTES, MAX_MANIFEST_ROWS
     from cevm.store.codec import MAX_PROFILE_SAMPLES
 
     return (f"default limits (other inputs): TOML {MAX_TOML_BYTES / 2**20:g} MiB; manifest {MAX_MANIFEST_ROWS:,} rows "
-            f"and {MAX_MANIFEST_BYTES / 2**20:g} MiB; cycle file {MAX_CYCLE_SAMPLES:,} samples; stored profile "
+            f"and {MAX_MANIFEST_BYTES / 2**20:g} MiB; cycle file {MAX_CYCLE_SAMPLES:,} samples, "
+            f"{MAX_COMMAND_CYCLE_SAMPLES:,} over a command's files; stored profile "
             f"{MAX_PROFILE_SAMPLES:,} samples (and its trip's own count)")
 
 
@@ -472,7 +475,7 @@ def make_manifest(out: Path, rows: int, vehicle: str) -> Path:
     matching a stored trip: every row is a problem, reported as it is read)."""
     import datetime as dt
 
-    t0 = dt.datetime(2030, 1, 1, tzinfo=dt.timezone.utc)
+    t0 = dt.datetime(2030, 1, 1, tzinfo=dt.UTC)
     with open(out, "w") as fh:
         fh.write("vehicle_id,start,end,gross_kg\n")
         for i in range(rows):
@@ -491,7 +494,7 @@ def make_cycle(out: Path, samples: int) -> Path:
         for a in range(0, samples, 1_000_000):
             t = np.arange(a, min(samples, a + 1_000_000))
             v = 40.0 * (1.0 - np.cos(2 * np.pi * t / 600.0)) / 2.0
-            fh.write("".join(f"{ti},{vi:.2f}\n" for ti, vi in zip(t.tolist(), v.tolist())))
+            fh.write("".join(f"{ti},{vi:.2f}\n" for ti, vi in zip(t.tolist(), v.tolist(), strict=True)))
     return out
 
 
@@ -540,14 +543,20 @@ def other_cases(work: Path) -> list:
     """The cases of the inputs that are not logs (kinds ``vehicle``, ``scenario``,
     ``manifest``, ``cycle``, ``blob``): each at its default limit, or refused before the
     work (a device, a bomb), as the command a user runs."""
-    from cevm.io.cycles import MAX_CYCLE_SAMPLES
+    from cevm.io.cycles import MAX_COMMAND_CYCLE_SAMPLES, MAX_CYCLE_SAMPLES
     from cevm.io.inputs import MAX_TOML_BYTES
     from cevm.io.manifest import MAX_MANIFEST_ROWS
 
     bus = ROOT / "configs" / "vehicles" / "electric-bus.toml"
+    hgv = ROOT / "configs" / "vehicles" / "diesel-hgv.toml"
     urban = ROOT / "configs" / "cycles" / "urban-bus.csv"
     scenario = ROOT / "configs" / "fleet" / "paper-case-study.toml"
     state: dict = {}
+
+    def cycle():
+        if "cycle" not in state:
+            state["cycle"] = make_cycle(work / "cycle.csv", MAX_CYCLE_SAMPLES)
+        return state["cycle"]
 
     def blob_store():
         if "blob" not in state:
@@ -569,8 +578,13 @@ def other_cases(work: Path) -> list:
             "--store", blob_store()[0]]),
         case("manifest /dev/zero", "manifest", lambda: ["trips", "set-mass", "--manifest", "/dev/zero", "--store",
                                                         blob_store()[0]]),
-        case(f"cycle {MAX_CYCLE_SAMPLES / 1e6:g}M", "cycle", lambda: [
-            "predict", "-v", bus, "-c", make_cycle(work / "cycle.csv", MAX_CYCLE_SAMPLES), "-f", "csv"]),
+        case(f"cycle {MAX_CYCLE_SAMPLES / 1e6:g}M predict", "cycle", lambda: [
+            "predict", "-v", bus, "-v", hgv, "-c", cycle(), "--range", "-p", "0,1000", "-f", "csv"]),
+        case(f"cycle {MAX_CYCLE_SAMPLES / 1e6:g}M simulate", "cycle", lambda: [
+            "simulate", "-v", bus, "-c", cycle(), "--out", work / "sim.csv", "--plot", work / "sim.png"]),
+        case(f"cycles {MAX_COMMAND_CYCLE_SAMPLES / 1e6:g}M feasib.", "cycle", lambda: [
+            "feasibility", "-v", bus, "-v", hgv, *[a for _ in range(MAX_COMMAND_CYCLE_SAMPLES // MAX_CYCLE_SAMPLES)
+                                                  for a in ("-c", cycle())], "-f", "csv"]),
         case("blob: store check", "blob", lambda: ["store", "check", "--store", blob_store()[0]]),
         case("blob: simulate", "blob", lambda: ["simulate", "-v", bus, "--trip", blob_store()[1], "--store",
                                                 blob_store()[0]]),

@@ -15,6 +15,7 @@ import sys
 import tracemalloc
 from pathlib import Path
 
+import numpy as np
 import pytest
 from typer.testing import CliRunner
 
@@ -316,3 +317,58 @@ def test_a_cycle_or_grade_file_that_is_a_fifo_or_a_device_is_refused(tmp_path):
                        (("route", "add", "R1", "--cycle", "/dev/zero", "--store", tmp_path / "s.sqlite"),
                         "/dev/zero: is a character device, not a cycle file")):
         assert one_error(cevm_process(*args, timeout_s=30)).endswith(said)
+
+
+def _cycle(path: Path, n: int, columns: int = 1) -> Path:
+    """A plausible 1 Hz cycle of ``n`` samples in ``columns`` speed columns."""
+    t = np.arange(n)
+    v = 20.0 + 10.0 * np.sin(t / 30.0)
+    head = "time_s," + ",".join(f"speed_kmh_{k}" if columns > 1 else "speed_kmh" for k in range(columns))
+    path.write_text(head + "\n" + "".join(f"{ti}," + ",".join([f"{vi:.3f}"] * columns) + "\n"
+                                          for ti, vi in zip(t, v)))
+    return path
+
+
+def test_cycle_samples_are_bounded_per_file_per_command_per_route_and_per_stored_trip(tmp_path, monkeypatch):
+    """The bounds that keep a command under 500 MB (README of the bounds in
+    docs/reference/commands.md), each refused in one line naming the file and line, before
+    the rest is read: a file's samples over its cycles, the files of one command together,
+    a route's legs, a stored trip (as a source). The bounds are lowered here to a few
+    hundred samples; bench_memory.py measures them at their real values."""
+    import cevm.io.cycles as cycles
+    import cevm.store.routes as routes
+    import cevm.store.sources as sources
+
+    db, ids, hgv, starts = make_fleet(tmp_path / "fleet")  # at the real bounds (its route's cycle is longer)
+    monkeypatch.setattr(cycles, "MAX_CYCLE_SAMPLES", 300)
+    monkeypatch.setattr(cycles, "MAX_COMMAND_CYCLE_SAMPLES", 500)
+    ok, long_, wide = _cycle(tmp_path / "ok.csv", 300), _cycle(tmp_path / "long.csv", 301), \
+        _cycle(tmp_path / "wide.csv", 200, columns=2)
+    assert cevm("predict", "-v", BUS, "-c", ok, "-f", "csv").exit_code == 0
+    line = one_error(cevm("predict", "-v", BUS, "-c", long_))
+    assert line.startswith(f"cevm: error: {long_}:302: more than 300 samples: the most a cycle file may hold")
+    line = one_error(cevm("predict", "-v", BUS, "-c", wide, "--speed-col", "speed_kmh_*", "--speed-unit", "km/h"))
+    assert f"{wide}:152: more than 300 samples (2 speed columns: 150 lines each)" in line
+    line = one_error(cevm("predict", "-v", BUS, "-c", ok, "-c", ok))
+    assert f"{ok}:202: more than the 200 samples left: the cycle files of one command hold at most 500" in line
+
+    monkeypatch.setattr(routes, "MAX_ROUTE_SAMPLES", 400)
+    store = tmp_path / "s.sqlite"
+    line = one_error(cevm("route", "add", "R1", "--cycle", ok, "--cycle", ok, "--store", store))
+    assert f"{ok}:102: more than the 100 samples left: a route holds at most 400 samples" in line
+    assert cevm("route", "add", "R1", "--cycle", ok, "--store", store).exit_code == 0
+
+    monkeypatch.setattr(sources, "MAX_SOURCE_SAMPLES", 500)
+    import sqlite3
+
+    con = sqlite3.connect(db)
+    n = dict(con.execute("SELECT trip_id, n_samples FROM trips").fetchall())
+    con.close()
+    long_trip = next(t for t in ids["EB-09"] if n[t] > 500)
+    short = [t for t in ids["EB-09"] if n[t] <= 500]
+    said = f"trip '{long_trip}' holds {n[long_trip]:,} samples, more than the 500 one source may"
+    assert said in one_error(cevm("predict", "-v", BUS, "--trip", long_trip, "--store", db))
+    assert said in one_error(cevm("simulate", "-v", BUS, "--trip", long_trip, "--store", db))
+    res = cevm("predict", "-v", BUS, "--vehicle-id", "EB-09", "--store", db, "-f", "csv")
+    assert res.exit_code == 1 and f"skipped: {said}" in res.stderr
+    assert [r.split(",")[0] for r in res.stdout.splitlines()[1:]] == short

@@ -76,9 +76,13 @@ def simulate(
             from cevm.store.masses import trip_masses
             from cevm.store.queries import row_measurement
 
+            from cevm.store.sources import MAX_SOURCE_SAMPLES, too_long_trip
+
             with TripStore.open(existing_store_path(store), readonly=True) as st:
-                prof = st.load_profile(trip)
                 listed = st.list_trips(trip_ids=[trip])
+                if int(listed["n_samples"].iloc[0]) > MAX_SOURCE_SAMPLES:  # bounded as a cycle file is
+                    raise CevmError(too_long_trip(trip, int(listed["n_samples"].iloc[0])))
+                prof = st.load_profile(trip)
                 own = trip_masses(st, listed)[trip]
             r = listed.iloc[0]
             measured = row_measurement(r["measured_kind"], r["measured_value"], r["measured_source"],
@@ -99,16 +103,17 @@ def simulate(
         raise fail(exc) from None
     except ValueError as exc:  # inconsistent [detailed] parameters or trace
         raise fail(f"{vehicle}: {exc}") from None
-    frame = res.to_frame()
     if out is not None:
         try:
             with OutFile(out) as fh:  # written whole or not at all (a full disk: one line, exit 3)
-                frame.to_csv(fh, index=False, float_format="%.6g")
+                for start in range(0, res.time_s.size, OUT_BLOCK_ROWS):  # in blocks: no frame of it all held
+                    res.to_frame(rows=slice(start, start + OUT_BLOCK_ROWS)).to_csv(
+                        fh, index=False, header=start == 0, float_format="%.6g")
         except CevmError as exc:
             raise fail(exc) from None
     if plot is not None:
         try:
-            plot_simulation(frame, res, plot, f"{veh.name}: {name}")
+            plot_simulation(_plot_columns(res), res, plot, f"{veh.name}: {name}")
         except CevmError as exc:  # a full disk: the plot's, exit 3 (cevm.io.plots leaves no half-written file)
             raise fail(exc) from None
     row = {"cycle": name, "vehicle": veh.name, "mass_kg": res.mass_kg, "mass_source": mass_source,
@@ -156,3 +161,21 @@ def _no_detailed_table(path: Path, is_ev: bool) -> str:
         "defaults, which describe " + ("a 10 m electric bus with a 180 kW motor" if is_ev else
                                        "a 235 kW diesel tractor with a 12-speed gearbox")
         + "; configs/vehicles/*.toml show every key), or use 'cevm predict' (the CE model)")
+
+
+#: Rows of ``--out`` made and written at a time: the per-second frame of a long trace is
+#: never held whole beside the result (a million samples: 200 MB more).
+OUT_BLOCK_ROWS = 100_000
+
+
+def _plot_columns(res) -> dict[str, np.ndarray]:
+    """The columns of :meth:`SimulationResult.to_frame` the figure draws (time, state of
+    charge or fuel used, elevation), without the rest of the frame."""
+    cols = {"time_s": res.time_s}
+    if res.powertrain == "ev":
+        cols["soc_pct"] = res.samples["soc"] * 100.0
+    else:
+        cols["fuel_cum_l"] = res.samples["fuel_cum_l"]
+    if res.elevation_m is not None:
+        cols["elevation_m"] = res.elevation_m
+    return cols

@@ -92,7 +92,8 @@ def plot_calibration(result: CalibrationResult, path: Path, title: str) -> None:
 
 def plot_simulation(frame, res, path: Path, title: str) -> None:
     """State of charge (EV, the paper's figure 4) or fuel used (ICE, figure 6) against
-    time, with the elevation, from :meth:`SimulationResult.to_frame`."""
+    time, with the elevation, from :meth:`SimulationResult.to_frame` (or a mapping of
+    those columns: ``time_s``, ``soc_pct`` or ``fuel_cum_l``, ``elevation_m``)."""
     fig = _figure((10, 4.5))
     ax = fig.subplots()
     t_min = frame["time_s"] / 60.0
