@@ -1,8 +1,10 @@
-"""Benchmark of peak memory of `cevm ingest` on one file: a large valid log and hostile ones.
+"""Benchmark of peak memory of cevm on every kind of input: `cevm ingest` on one file (a large
+valid log and hostile ones), and the inputs that are not logs (vehicle files, scenarios,
+manifests, cycle files, stored blobs).
 
-    python benchmarks/bench_memory.py [--rows N] [--bomb-gib G] [--keep DIR] [--cases NAME...]
+    python benchmarks/bench_memory.py [--rows N] [--bomb-gib G] [--keep DIR] [--cases NAME|KIND...]
 
-Each case runs `cevm ingest FILE --workers 1 -q` (the command as a user runs it, with
+Each log case runs `cevm ingest FILE --workers 1 -q` (the command as a user runs it, with
 its default limits and allocator settings) in a fresh subprocess, and prints that
 process's peak resident memory (``VmHWM`` of ``/proc/self/status``: not ``ru_maxrss``,
 which Linux carries over an ``exec`` from the parent, so that a child reports at least
@@ -33,10 +35,27 @@ and whether the peak meets the goal. The cases:
   bytes.
 - ``all NUL``: a 2 GB sparse file of NUL bytes: must fail without being read whole.
 
+The inputs that are not logs (issue 24), each as the command a user runs, at its
+default limit or refused before the work:
+
+- ``vehicle``: a vehicle file of 1 MiB (its bound) of small keys, the most work for the
+  TOML parser per byte (``cevm predict -v``), and ``/dev/zero`` as a vehicle file;
+- ``scenario``: the same for a fleet scenario (``cevm fleet plan``);
+- ``manifest``: a manifest at its row bound (1,000,000 window rows, none matching a trip,
+  so each is reported) given to ``cevm trips set-mass``, and ``/dev/zero``;
+- ``cycle``: a cycle file at its sample bound, predicted (two vehicles, two masses,
+  ``--range``) and simulated (``--out`` and ``--plot``), and the files of one command at
+  their bound (``cevm feasibility``);
+- ``blob``: a stored trip whose profile has a valid checksum but is a zip bomb (12
+  million samples, 576 MB inflated; 4 MB stored), read by ``cevm store check`` and
+  ``cevm simulate --trip``.
+
 Baseline in the same run: the peak of a Python process that has imported cevm's ingest
 pipeline and done nothing else (``import only``), and the size of the 2M-row file
 itself. The default limits are printed first. The goal (issue 17): under 500 MB per
-worker for any input on the default settings.
+worker for any input on the default settings. ``--cases`` takes case names or kinds
+(``logs``, ``vehicle``, ``scenario``, ``manifest``, ``cycle``, ``blob``; ``big``: the
+large log alone).
 """
 
 from __future__ import annotations
@@ -200,7 +219,7 @@ def _reset_hwm() -> bool:
 
 
 def child(argv: list[str], stages: bool) -> None:
-    """Run ``cevm ingest ARGV`` in this process; print a JSON line with the peak."""
+    """Run ``cevm ARGV`` in this process; print a JSON line with the peak."""
     peaks: dict[str, float] = {}
     if stages and _reset_hwm():
         import contextlib
@@ -251,7 +270,7 @@ def child(argv: list[str], stages: bool) -> None:
         wrap(TripStore, "replace_file_trips", "store")
     from cevm.cli import main as cevm_main
 
-    sys.argv = ["cevm", "ingest", *argv]
+    sys.argv = ["cevm", *argv]
     code = 0
     t0 = time.perf_counter()
     try:
@@ -266,12 +285,22 @@ def child(argv: list[str], stages: bool) -> None:
 
 def run_case(name: str, path: Path | None, store: Path, extra: list[str] = (), stages: bool = False,
              timeout_s: float = 600.0) -> dict:
-    env = dict(os.environ, PYTHONPATH=str(ROOT / "src"), OMP_NUM_THREADS="1", GDAL_NUM_THREADS="1")
+    """``cevm ingest PATH --store STORE --workers 1 -q EXTRA`` (None: the import-only
+    baseline) in a fresh process: its peak, exit code, wall time and first line."""
     if path is None:
+        return run_command(name, None, timeout_s=timeout_s)
+    return run_command(name, ["ingest", str(path), "--store", str(store), "--workers", "1", "-q", *extra],
+                       stages=stages, timeout_s=timeout_s)
+
+
+def run_command(name: str, args: list[str] | None, stages: bool = False, timeout_s: float = 600.0) -> dict:
+    """``cevm ARGS`` (None: the import-only baseline) in a fresh process: its peak
+    resident memory, exit code, wall time and first line of output."""
+    env = dict(os.environ, PYTHONPATH=str(ROOT / "src"), OMP_NUM_THREADS="1", GDAL_NUM_THREADS="1")
+    if args is None:
         cmd = [sys.executable, __file__, "--child", "--import-only"]
     else:
-        cmd = [sys.executable, __file__, "--child", *(["--stages"] if stages else []), "--",
-               str(path), "--store", str(store), "--workers", "1", "-q", *extra]
+        cmd = [sys.executable, __file__, "--child", *(["--stages"] if stages else []), "--", *map(str, args)]
     t0 = time.perf_counter()
     try:
         p = subprocess.run(cmd, capture_output=True, text=True, env=env, timeout=timeout_s)
@@ -293,7 +322,7 @@ def run_case(name: str, path: Path | None, store: Path, extra: list[str] = (), s
 def print_case(c: dict) -> None:
     msg = c["message"] if len(c["message"]) < 130 else c["message"][:127] + "..."
     goal = "met" if c["peak_mb"] < GOAL_MB else "NOT met"
-    print(f"{c['name']:16s} {c['peak_mb']:8.0f} {goal:>8s} {c['code']:4d} {c['wall']:7.2f}  {msg}", flush=True)
+    print(f"{c['name']:20s} {c['peak_mb']:8.0f} {goal:>8s} {c['code']:4d} {c['wall']:7.2f}  {msg}", flush=True)
     if c["stages"]:
         print("  peak during each stage [MB]: " + ", ".join(f"{k} {v:.0f}" for k, v in c["stages"].items()),
               flush=True)
@@ -328,12 +357,36 @@ def main() -> None:
           f"columns read: {lim.row_limit(16):,} rows of the 16-column log, {wide_rows:,} of the 20-column one), "
           f"--max-file-mb {lim.max_file_mb:g}, "
           f"--max-expansion {lim.max_expansion:g}; goal: peak < {GOAL_MB:.0f} MB per worker")
+    print(other_limits())
     with tempfile.TemporaryDirectory(prefix="cevm-mem-") as tmp:
         work = args.keep or Path(tmp)
         work.mkdir(parents=True, exist_ok=True)
+        big_name = f"{args.rows / 1e6:g}M rows"
+        todo = log_cases(args, work, lim, wide_rows, big_name) + other_cases(work)
+        cases = []
+        print(f"{'case':20s} {'peak MB':>8s} {'< ' + format(GOAL_MB, '.0f'):>8s} {'exit':>4s} {'wall s':>7s}  output")
+        for name, kind, run in todo:
+            if args.cases and not ({name, kind} & set(args.cases)) and not (name == big_name and "big" in args.cases):
+                continue
+            cases.append(run())
+            print_case(cases[-1])
+        worst = max(c["peak_mb"] for c in cases)
+        bad = [c["name"] for c in cases if not c["peak_mb"] < GOAL_MB]
+        print(f"worst peak {worst:.0f} MB: goal < {GOAL_MB:.0f} MB per worker "
+              f"{'met' if not bad else 'NOT met (' + ', '.join(bad) + ')'}")
+
+
+def log_cases(args, work: Path, lim, wide_rows: int, big_name: str) -> list:
+    """The logs' cases (kind ``logs``): (name, kind, run), their inputs made when first
+    run (``--keep``: made once, reused)."""
+    made: dict[str, Path] = {}
+
+    def made_logs() -> dict[str, Path]:
+        if made:
+            return made
         t0 = time.perf_counter()
         big, dsm = work / f"big-{args.rows}.csv", work / "sample" / "dsm"
-        if not (args.keep and big.exists() and dsm.is_dir()):  # --keep: made once, reused
+        if not (args.keep and big.exists() and dsm.is_dir()):
             make_large_srf(big, args.rows, work)
         wide, wide_over = work / f"wide-{wide_rows}.csv", work / "wide-2500000.csv"
         for path, n in ((wide, wide_rows), (wide_over, 2_500_000)):
@@ -354,33 +407,188 @@ def main() -> None:
             make_lineless(lineless)
         if not (args.keep and nul.exists()):
             make_nul(nul)
-        print(f"inputs made in {time.perf_counter() - t0:.1f} s: {big.name} {big.stat().st_size / 1e6:.0f} MB "
+        print(f"log inputs made in {time.perf_counter() - t0:.1f} s: {big.name} {big.stat().st_size / 1e6:.0f} MB "
               f"({args.rows:,} rows), {bomb.name} {bomb.stat().st_size / 1e6:.1f} MB -> {args.bomb_gib:g} GiB, "
-              f"{lineless.name} {lineless.stat().st_size / 1e6:.0f} MB, {nul.name} {nul.stat().st_size / 1e9:.1f} GB")
-        print(f"{'case':16s} {'peak MB':>8s} {'< ' + format(GOAL_MB, '.0f'):>8s} {'exit':>4s} {'wall s':>7s}  output")
-        big_name = f"{args.rows / 1e6:g}M rows"
-        todo = [("import only", None, []), (big_name, big, ["--dsm", str(dsm), "--max-rows", str(max(args.rows, lim.max_rows))]),
-                (f"wide {wide_rows / 1e6:g}M", wide, ["--dsm", str(dsm)]),
-                ("wide 2.5M", wide_over, ["--dsm", str(dsm)]),
-                ("portal 2.5M", portal, ["--dsm", str(dsm)]),
-                ("portal 1.2M", portal_half, ["--dsm", str(dsm)]),
-                ("DSM one strip", bus_day, ["--dsm", str(strip_dsm)]),
-                ("DSM 16k tiles", bus_day, ["--dsm", str(tiles_dsm)]),
-                ("gzip bomb", bomb, []),
-                ("no line breaks", lineless, []), ("all NUL", nul, [])]
-        cases = []
-        for k, (name, path, extra) in enumerate(todo):
-            if args.cases and name not in args.cases and not (name == big_name and "big" in args.cases):
-                continue
+              f"{lineless.name} {lineless.stat().st_size / 1e6:.0f} MB, {nul.name} {nul.stat().st_size / 1e9:.1f} GB",
+              flush=True)
+        made.update(big=big, dsm=dsm, wide=wide, wide_over=wide_over, portal=portal, portal_half=portal_half,
+                    strip_dsm=strip_dsm,
+                    tiles_dsm=tiles_dsm, bus_day=bus_day, bomb=bomb, lineless=lineless, nul=nul)
+        return made
+
+    def ingest(k: int, name: str, key: str | None, extra=lambda m: [], stages: bool = False):
+        def run():
+            if key is None:
+                return run_case(name, None, work)
+            m = made_logs()
             store = work / f"s{k}.sqlite"
             for p in store.parent.glob(store.name + "*"):
                 p.unlink()
-            cases.append(run_case(name, path, store, extra, stages=name == big_name))
-            print_case(cases[-1])
-        worst = max(c["peak_mb"] for c in cases)
-        bad = [c["name"] for c in cases if not c["peak_mb"] < GOAL_MB]
-        print(f"worst peak {worst:.0f} MB: goal < {GOAL_MB:.0f} MB per worker "
-              f"{'met' if not bad else 'NOT met (' + ', '.join(bad) + ')'}")
+            return run_case(name, m[key], store, extra(m), stages=stages)
+        return name, "logs", run
+
+    def dsm(key: str = "dsm"):
+        return lambda m: ["--dsm", str(m[key])]
+
+    return [ingest(0, "import only", None),
+            ingest(1, big_name, "big", lambda m: ["--dsm", str(m["dsm"]), "--max-rows", str(max(args.rows,
+                                                                                                 lim.max_rows))],
+                   stages=True),
+            ingest(2, f"wide {wide_rows / 1e6:g}M", "wide", dsm()),
+            ingest(3, "wide 2.5M", "wide_over", dsm()),
+            ingest(4, "portal 2.5M", "portal", dsm()),
+            ingest(5, "portal 1.2M", "portal_half", dsm()),
+            ingest(6, "DSM one strip", "bus_day", dsm("strip_dsm")),
+            ingest(7, "DSM 16k tiles", "bus_day", dsm("tiles_dsm")),
+            ingest(8, "gzip bomb", "bomb"), ingest(9, "no line breaks", "lineless"), ingest(10, "all NUL", "nul")]
+
+
+# ------------------------------------------------------------ inputs that are not logs
+def other_limits() -> str:
+    from cevm.io.cycles import MAX_COMMAND_CYCLE_SAMPLES, MAX_CYCLE_SAMPLES
+    from cevm.io.inputs import MAX_TOML_BYTES
+    from cevm.io.manifest import MAX_MANIFEST_BYTES, MAX_MANIFEST_ROWS
+    from cevm.store.codec import MAX_PROFILE_SAMPLES
+
+    return (f"default limits (other inputs): TOML {MAX_TOML_BYTES / 2**20:g} MiB; manifest {MAX_MANIFEST_ROWS:,} rows "
+            f"and {MAX_MANIFEST_BYTES / 2**20:g} MiB; cycle file {MAX_CYCLE_SAMPLES:,} samples, "
+            f"{MAX_COMMAND_CYCLE_SAMPLES:,} over a command's files; stored profile "
+            f"{MAX_PROFILE_SAMPLES:,} samples (and its trip's own count)")
+
+
+def make_toml_of_keys(out: Path, nbytes: int, head: str = "") -> Path:
+    """A TOML file of just under ``nbytes``: ``head``, then a table of many small keys
+    (the most work and memory for the parser per byte)."""
+    lines, size = [head, "[padding]"], len(head) + 10
+    k = 0
+    while size < nbytes - 64:
+        line = f"k{k} = [1.5, 2]"
+        lines.append(line)
+        size += len(line) + 1
+        k += 1
+    out.write_text("\n".join(lines) + "\n")
+    return out
+
+
+def make_manifest(out: Path, rows: int, vehicle: str) -> Path:
+    """A manifest of ``rows`` window rows of ``vehicle`` (one an hour, none of them
+    matching a stored trip: every row is a problem, reported as it is read)."""
+    import datetime as dt
+
+    t0 = dt.datetime(2030, 1, 1, tzinfo=dt.UTC)
+    with open(out, "w") as fh:
+        fh.write("vehicle_id,start,end,gross_kg\n")
+        for i in range(rows):
+            a = t0 + dt.timedelta(hours=i)
+            fh.write(f"{vehicle},{a:%Y-%m-%dT%H:%M:%SZ},{a + dt.timedelta(minutes=30):%Y-%m-%dT%H:%M:%SZ},30000\n")
+    return out
+
+
+def make_cycle(out: Path, samples: int) -> Path:
+    """A plausible cycle file of ``samples`` 1 Hz samples (time_s, speed_kmh): a smooth
+    stop-and-go, written a million rows at a time."""
+    import numpy as np
+
+    with open(out, "w") as fh:
+        fh.write("time_s,speed_kmh\n")
+        for a in range(0, samples, 1_000_000):
+            t = np.arange(a, min(samples, a + 1_000_000))
+            v = 40.0 * (1.0 - np.cos(2 * np.pi * t / 600.0)) / 2.0
+            fh.write("".join(f"{ti},{vi:.2f}\n" for ti, vi in zip(t.tolist(), v.tolist(), strict=True)))
+    return out
+
+
+def make_blob_store(work: Path) -> tuple[Path, str]:
+    """A store of one sample log's trips, the first trip's profile replaced by a bomb with a
+    valid checksum: its header and streams say 12 million samples (576 MB once inflated),
+    and the trip's row says so too."""
+    import sqlite3
+    import struct
+    import zlib
+
+    import numpy as np
+
+    from cevm.store.codec import PROFILE_DTYPES
+
+    store = work / "blob.sqlite"
+    for p in store.parent.glob(store.name + "*"):
+        p.unlink()
+    log = ROOT / "sample_logs" / "srf" / "EB-01_2019-01-31.csv"
+    subprocess.run([sys.executable, "-m", "cevm", "ingest", str(log), "--store", str(store), "--workers", "1", "-q"],
+                   check=True, capture_output=True, env=dict(os.environ, PYTHONPATH=str(ROOT / "src")))
+    n = 12_000_000
+    entries, payloads = [], []
+    for name, dtype in PROFILE_DTYPES.items():
+        z, left, chunk = zlib.compressobj(9), n * np.dtype(dtype).itemsize, bytes(8 << 20)
+        parts = []
+        while left > 0:
+            parts.append(z.compress(chunk[:min(left, len(chunk))]))
+            left -= len(chunk)
+        parts.append(z.flush())
+        entries.append([name, dtype, sum(map(len, parts))])
+        payloads.append(b"".join(parts))
+    header = json.dumps({"n": n, "codec": "shuffle+zlib", "arrays": entries}).encode()
+    bomb = b"".join([b"CEVMPRF1", struct.pack("<I", len(header)), header, *payloads])
+    con = sqlite3.connect(store)
+    with con:
+        (trip,) = con.execute("SELECT trip_id FROM trips ORDER BY trip_id LIMIT 1").fetchone()
+        con.execute("UPDATE trip_blobs SET profile = ?, profile_crc32 = ? WHERE trip_id = ?",
+                    (bomb, zlib.crc32(bomb), trip))
+        con.execute("UPDATE trips SET n_samples = ? WHERE trip_id = ?", (n, trip))
+    con.close()
+    return store, trip
+
+
+def other_cases(work: Path) -> list:
+    """The cases of the inputs that are not logs (kinds ``vehicle``, ``scenario``,
+    ``manifest``, ``cycle``, ``blob``): each at its default limit, or refused before the
+    work (a device, a bomb), as the command a user runs."""
+    from cevm.io.cycles import MAX_COMMAND_CYCLE_SAMPLES, MAX_CYCLE_SAMPLES
+    from cevm.io.inputs import MAX_TOML_BYTES
+    from cevm.io.manifest import MAX_MANIFEST_ROWS
+
+    bus = ROOT / "configs" / "vehicles" / "electric-bus.toml"
+    hgv = ROOT / "configs" / "vehicles" / "diesel-hgv.toml"
+    urban = ROOT / "configs" / "cycles" / "urban-bus.csv"
+    scenario = ROOT / "configs" / "fleet" / "paper-case-study.toml"
+    state: dict = {}
+
+    def cycle():
+        if "cycle" not in state:
+            state["cycle"] = make_cycle(work / "cycle.csv", MAX_CYCLE_SAMPLES)
+        return state["cycle"]
+
+    def blob_store():
+        if "blob" not in state:
+            state["blob"] = make_blob_store(work)
+        return state["blob"]
+
+    def case(name, kind, args):
+        return name, kind, lambda: run_command(name, args() if callable(args) else args)
+
+    return [
+        case("vehicle 1 MiB", "vehicle", lambda: ["predict", "-v", make_toml_of_keys(
+            work / "vehicle.toml", MAX_TOML_BYTES, bus.read_text()), "-c", urban]),
+        case("vehicle /dev/zero", "vehicle", ["predict", "-v", "/dev/zero", "-c", urban]),
+        case("scenario 1 MiB", "scenario", lambda: ["fleet", "plan", make_toml_of_keys(
+            work / "scenario.toml", MAX_TOML_BYTES, scenario.read_text())]),
+        case("scenario /dev/zero", "scenario", ["fleet", "plan", "/dev/zero"]),
+        case(f"manifest {MAX_MANIFEST_ROWS / 1e6:g}M", "manifest", lambda: [
+            "trips", "set-mass", "--manifest", make_manifest(work / "manifest.csv", MAX_MANIFEST_ROWS, "EB-01"),
+            "--store", blob_store()[0]]),
+        case("manifest /dev/zero", "manifest", lambda: ["trips", "set-mass", "--manifest", "/dev/zero", "--store",
+                                                        blob_store()[0]]),
+        case(f"cycle {MAX_CYCLE_SAMPLES / 1e6:g}M predict", "cycle", lambda: [
+            "predict", "-v", bus, "-v", hgv, "-c", cycle(), "--range", "-p", "0,1000", "-f", "csv"]),
+        case(f"cycle {MAX_CYCLE_SAMPLES / 1e6:g}M simulate", "cycle", lambda: [
+            "simulate", "-v", bus, "-c", cycle(), "--out", work / "sim.csv", "--plot", work / "sim.png"]),
+        case(f"cycles {MAX_COMMAND_CYCLE_SAMPLES / 1e6:g}M feasib.", "cycle", lambda: [
+            "feasibility", "-v", bus, "-v", hgv, *[a for _ in range(MAX_COMMAND_CYCLE_SAMPLES // MAX_CYCLE_SAMPLES)
+                                                  for a in ("-c", cycle())], "-f", "csv"]),
+        case("blob: store check", "blob", lambda: ["store", "check", "--store", blob_store()[0]]),
+        case("blob: simulate", "blob", lambda: ["simulate", "-v", bus, "--trip", blob_store()[1], "--store",
+                                                blob_store()[0]]),
+    ]
 
 
 if __name__ == "__main__":

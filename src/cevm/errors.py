@@ -6,6 +6,7 @@ else that escapes is a bug in cevm and keeps its traceback.
 
 from __future__ import annotations
 
+import errno
 import re
 from dataclasses import dataclass
 from pathlib import Path
@@ -50,3 +51,31 @@ class InputError(CevmError):
         if self.column is not None:
             where += f": column '{self.column}'"
         return printable(f"{where}: {self.message}")
+
+
+class FileAccessError(InputError):
+    """A file that could not be opened as the kind of file asked for: missing, unreadable,
+    not a regular file (a FIFO, a device), over its size bound. Its message never quotes
+    the file's content (:mod:`cevm.io.inputs`)."""
+
+
+class OutputError(CevmError):
+    """An output (stdout, an ``--out`` or ``--plot`` file) that could not be written: a
+    full disk, a read-only file system, an I/O error. The command line exits 3 for it, as
+    for a store that could not be written."""
+
+
+#: errno values that say a write found no room or no write access.
+_NO_ROOM = {errno.ENOSPC: "the disk is full", errno.EDQUOT: "the disk quota is exhausted",
+            errno.EFBIG: "the file-size limit is reached", errno.EROFS: "a read-only file system"}
+
+
+def os_error_text(exc: OSError, what: str | None = None) -> str:
+    """One line for an OSError of writing (or reading) ``what`` (default: its file name,
+    or "the output"): ``FILE: could not be written: the disk is full (No space left on
+    device)``."""
+    where = what or (str(exc.filename) if exc.filename else "the output")
+    reason = exc.strerror or str(exc)
+    if exc.errno in _NO_ROOM:
+        return f"{where}: could not be written: {_NO_ROOM[exc.errno]} ({reason})"
+    return f"{where}: could not be written or read: {reason} (an I/O error)"

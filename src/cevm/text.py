@@ -8,9 +8,19 @@ bidirectional and other format characters) as ``\\n``, ``\\r``, ``\\t``, ``\\xNN
 ``\\uNNNN`` or ``\\UNNNNNNNN``; a backslash itself is kept, so escaping twice changes
 nothing. Every table, CSV and plain line cevm prints goes through it; JSON output escapes
 control characters by its own rules (``\\u000d``), so a JSON reader gets the exact value.
+
+:func:`csv_safe` is what a text cell of cevm's CSV output holds: :func:`printable`, and
+neutralised against spreadsheet formulas (OWASP's "CSV injection"): a text that starts
+with ``=``, ``+``, ``-``, ``@``, a tab or a carriage return (:data:`FORMULA_PREFIXES`)
+gets a leading apostrophe (``'=HYPERLINK(...)``, ``'-EB-07``), which a spreadsheet shows
+as the text itself and never evaluates. Numbers are never touched: number cells are
+written as numbers, and a text that is a plain number (``-3.5``, ``+2``, ``-1e-3``: no
+formula can be one) is kept as it is.
 """
 
 from __future__ import annotations
+
+import re
 
 _NAMED = {"\n": "\\n", "\r": "\\r", "\t": "\\t"}
 
@@ -32,3 +42,20 @@ def printable(text: str) -> str:
     if text.isprintable():
         return text
     return "".join(ch if ch.isprintable() else _escape(ch) for ch in text)
+
+
+#: First characters that make a spreadsheet (Excel, LibreOffice, Google Sheets) read a cell
+#: as a formula or a command (OWASP, "CSV Injection").
+FORMULA_PREFIXES = ("=", "+", "-", "@", "\t", "\r")
+
+_PLAIN_NUMBER = re.compile(r"[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?")
+
+
+def csv_safe(text: str) -> str:
+    """A text cell of CSV output: :func:`printable`, with a leading apostrophe when it
+    would start with one of :data:`FORMULA_PREFIXES` and is not a plain number (see the
+    module notes)."""
+    text = printable(text)
+    if text.startswith(FORMULA_PREFIXES) and not _PLAIN_NUMBER.fullmatch(text):
+        return "'" + text
+    return text

@@ -88,19 +88,33 @@ app.add_typer(store.app, name="store")
 
 
 def main() -> None:
-    """Console entry point."""
+    """Console entry point: the command, then what no command may leave to Python's
+    defaults: a stop signal ends every command the same way (one line, 130 or 143:
+    :func:`cevm.cli.interrupts.stopped`), and an output or file that cannot be written
+    (a full disk, ``> /dev/full``, an I/O error) is one line and exit 3
+    (:func:`cevm.cli.common.os_error_exit`), never a traceback, even when it shows only
+    as the last flush of stdout."""
     from cevm.cli import interrupts
+    from cevm.cli.common import flush_stdout, os_error_exit
     from cevm.runtime import tune_allocator
 
     tune_allocator()
     with interrupts.interrupts_raise():  # SIGTERM stops a command as SIGINT does
         try:
-            app()
-        except CevmError as exc:  # a user's mistake that escaped a command: one line, no traceback
-            fail(exc)
-            sys.exit(exit_code_for(exc))
-        except SystemExit as exc:
-            signum = interrupts.received()
-            if signum is not None and exc.code == 1:  # click's "Aborted!" after an interrupt
-                sys.exit(interrupts.EXIT_SIGNAL_BASE + signum)
-            raise
+            said = False
+            try:
+                app()
+                code: int | str | None = 0
+            except CevmError as exc:  # a user's mistake that escaped a command: one line, no traceback
+                fail(exc)
+                code = exit_code_for(exc)
+            except SystemExit as exc:
+                code = interrupts.stopped(exc, sys.argv[1:])
+            except KeyboardInterrupt as exc:  # one that escaped typer's own handling
+                code = interrupts.stopped(exc, sys.argv[1:])
+            except OSError as exc:  # of the environment (a full disk, an I/O error), not of cevm
+                code, said = os_error_exit(exc), True
+            code = flush_stdout(code, said=said)
+        except KeyboardInterrupt as exc:  # a signal while the above was reporting another end
+            code = interrupts.stopped(exc, sys.argv[1:])
+    sys.exit(code)

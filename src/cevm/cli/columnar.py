@@ -6,7 +6,8 @@ describes them: numbers and booleans as float arrays (NaN: no value), text as a 
 (codes, categories) (an int array indexing a list of strings: one name per vehicle, not
 one per row). CSV: numbers with the column's fixed decimals, trailing zeros (and a bare
 point) dropped, booleans ``true``/``false``, empty cells where a row has no value; text
-quoted as :func:`cevm.cli.output.csv_writer` quotes, control characters escaped. JSON:
+quoted as :func:`cevm.cli.output.csv_writer` quotes, control characters escaped, formula
+prefixes neutralised (:func:`cevm.text.csv_safe`). JSON:
 one object per row with the keys of its powertrain (:meth:`ColumnSpec.json_keys`),
 numbers in full precision (``repr``), ``null`` where a row has no value.
 """
@@ -21,7 +22,7 @@ import numpy as np
 
 from cevm.cli.columns import ColumnSpec
 from cevm.cli.output import csv_writer
-from cevm.text import printable
+from cevm.text import csv_safe
 
 
 def concat_columns(cols: list[dict[str, object]]) -> dict[str, object]:
@@ -91,12 +92,13 @@ def _text_chars(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _csv_quote(s: str) -> bytes:
-    """One text cell as CSV bytes: control characters escaped, quoted as
-    :func:`cevm.cli.output.csv_writer` quotes."""
+    """One text cell as CSV bytes: control characters escaped and formula prefixes
+    neutralised (:func:`cevm.text.csv_safe`), quoted as :func:`cevm.cli.output.csv_writer`
+    quotes."""
     if not s:
         return b""
     buf = io.StringIO()
-    csv_writer(buf).writerow([printable(s)])
+    csv_writer(buf).writerow([csv_safe(s)])
     return buf.getvalue().rstrip("\n").encode("utf-8")
 
 

@@ -4,13 +4,15 @@ Exit codes: 0 success; 1 some inputs of a batch failed (the rest was done: faile
 manifest rows that matched no trip, damaged trips skipped); 2 bad usage or bad input
 (nothing was done); 3 the store could not be written (or read): disk full, read-only,
 locked by another process past the busy timeout, an I/O error; the store is as it was
-before the write that failed; 4 the store is damaged (a damaged database file, or a
-damaged trip or route asked for by name): restore a backup or re-ingest, 'cevm store
-check' says where.
+before the write that failed; likewise an output that could not be written (stdout, an
+--out or --plot file: a full disk, an I/O error; :func:`os_error_exit`); 4 the store is
+damaged (a damaged database file, or a damaged trip or route asked for by name): restore
+a backup or re-ingest, 'cevm store check' says where.
 """
 
 from __future__ import annotations
 
+import errno
 import functools
 import inspect
 import math
@@ -24,7 +26,8 @@ import typer
 
 from cevm.cli.output import OutputFormat
 from cevm.core.model import ICE_BRAKING_MODES
-from cevm.errors import CevmError
+from cevm.errors import CevmError, OutputError, os_error_text
+from cevm.io.outputs import OutFile
 from cevm.text import printable
 
 EXIT_OK = 0
@@ -32,6 +35,9 @@ EXIT_PARTIAL = 1
 EXIT_INPUT = 2
 EXIT_STORE_ACCESS = 3
 EXIT_STORE_DAMAGED = 4
+#: The reader of the output went away (``cevm trips | head``): nothing is said, and the
+#: code is the one a shell gives a process that SIGPIPE ended (128 + 13).
+EXIT_BROKEN_PIPE = 141
 
 
 StoreOption = Annotated[
@@ -45,7 +51,7 @@ def exit_code_for(exc: BaseException) -> int:
     :data:`EXIT_STORE_DAMAGED` for the store's failures, else :data:`EXIT_INPUT`."""
     from cevm.store.failures import DamagedRowError, StoreAccessError, StoreDamagedError
 
-    if isinstance(exc, StoreAccessError):
+    if isinstance(exc, (StoreAccessError, OutputError)):
         return EXIT_STORE_ACCESS
     if isinstance(exc, (StoreDamagedError, DamagedRowError)):
         return EXIT_STORE_DAMAGED
@@ -330,27 +336,56 @@ def check_soc(soc_start: float | None, reserve_pct: float | None = None) -> None
             raise fail(f"--reserve-pct: {exc}") from None
 
 
-class OutFile:
-    """``--out`` as a context manager: written to ``PATH.partial``, renamed to PATH when
-    the command succeeds, deleted when it fails (no truncated output left behind)."""
-
-    def __init__(self, path: Path):
-        self.path = Path(path)
-        self.tmp = self.path.with_name(self.path.name + ".partial")
-
-    def __enter__(self) -> IO[str]:
+def os_error_exit(exc: OSError, what: str | None = None) -> int:
+    """Print :func:`os_error_text` as the one error line; returns exit code 3 (the
+    environment's failure, like a store that could not be written). A broken pipe (the
+    reader went away: ``cevm trips | head``) is no error: nothing is printed, and the code
+    is 141, as a shell reports a process ended by SIGPIPE."""
+    if exc.errno == errno.EPIPE:
+        _quiet_stdout()
+        return EXIT_BROKEN_PIPE
+    if what is None and not exc.filename:  # no file named: was it stdout? (it fails again if so)
         try:
-            self.fh = open(self.tmp, "w", encoding="utf-8", newline="")
-        except OSError as exc:
-            raise CevmError(f"{self.path}: cannot write: {exc.strerror or exc}") from None
-        return self.fh
+            sys.stdout.flush()
+        except OSError:
+            what = "the output (stdout)"
+        except (ValueError, AttributeError):
+            pass
+    fail(os_error_text(exc, what), EXIT_STORE_ACCESS)
+    return EXIT_STORE_ACCESS
 
-    def __exit__(self, exc_type, exc, tb) -> None:
-        self.fh.close()
-        if exc_type is None:
-            os.replace(self.tmp, self.path)
-        else:
-            self.tmp.unlink(missing_ok=True)
+
+def _quiet_stdout() -> None:
+    """Point stdout at /dev/null, so that Python's last flush of what could not be
+    written cannot fail again at exit ("Exception ignored ...")."""
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        os.close(devnull)
+    except (OSError, ValueError, AttributeError):
+        pass
+
+
+def flush_stdout(code, *, said: bool = False):
+    """Flush stdout before the exit: output still buffered (a short table) meets a full
+    device only here. Returns ``code``, or :func:`os_error_exit`'s when the flush
+    fails; ``said``: an output error was printed already (the flush meets the same full
+    device: nothing more is said)."""
+    if code == 1 and type(sys.stdout).__name__ == "PacifyFlushWrapper":  # typer's quiet exit 1 after EPIPE
+        _quiet_stdout()
+        return EXIT_BROKEN_PIPE
+    try:
+        sys.stdout.flush()
+    except OSError as exc:
+        if said:
+            _quiet_stdout()
+            return code
+        new = os_error_exit(exc, "the output (stdout)")
+        _quiet_stdout()
+        return new if code in (0, None) else code
+    except (ValueError, AttributeError):  # closed or replaced
+        pass
+    return code
 
 
 #: What the output options write, by file name ending: the check of
@@ -389,25 +424,25 @@ def open_out(stack: ExitStack, out: Optional[Path]) -> IO[str]:
 
 
 def apply_manifest(st, path: Path, manifest, *, dry_run: bool = False) -> tuple[int, int]:
-    """Match the manifest read from ``path`` (:func:`cevm.io.manifest.read_manifest`) to
-    the trips of the open store ``st`` and give them their masses (unless ``dry_run``);
-    print one warning per row not applied (file and line), one note per mass that
+    """Match the manifest read from ``path`` to the trips of the open store ``st`` and
+    give them their masses (unless ``dry_run``): ``manifest`` read whole
+    (:func:`cevm.io.manifest.read_manifest`) or streamed
+    (:func:`~cevm.io.manifest.open_manifest`, whose rows are never all held). Prints one
+    warning per row not applied (file and line) as it is found, one note per mass that
     disagrees with a logged gross weight, and a summary line. Returns (rows applied, rows
     not applied)."""
     from cevm.store.masses import match_manifest, set_masses
 
-    match = match_manifest(st, manifest)
+    match = match_manifest(st, manifest, on_problem=lambda line, why: warn(f"{path}:{line}: not applied: {why}"))
     new = replaced = 0
     if match.masses and not dry_run:
         new, replaced = set_masses(st, match.masses)
-    for line, why in match.problems:
-        warn(f"{path}:{line}: not applied: {why}")
     for text in match.disagreements:
         typer.echo(f"cevm: note: {path}: {printable(text)}", err=True)
     cols = ", ".join(f"{role} {col!r}" for role, col in manifest.columns.items())
     done = (f"would give {len(match.masses)} trips their masses" if dry_run else
             f"{len(match.masses)} trips given their masses ({new} new, {replaced} replaced)")
-    typer.echo(printable(f"cevm: manifest {path}: {len(manifest.rows) + len(manifest.problems)} rows; {done}; "
-                         f"{len(match.problems)} rows not applied (columns: {cols}; mass in {manifest.mass_unit}, "
+    typer.echo(printable(f"cevm: manifest {path}: {manifest.n_rows} rows; {done}; "
+                         f"{match.n_problems} rows not applied (columns: {cols}; mass in {manifest.mass_unit}, "
                          f"decimal mark {manifest.decimal!r})"), err=True)
-    return len(match.masses), len(match.problems)
+    return len(match.masses), match.n_problems

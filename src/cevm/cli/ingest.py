@@ -133,10 +133,13 @@ def ingest(
 
     masses = None
     if manifest is not None:  # a manifest cevm cannot read stops the run before any work
-        from cevm.io.manifest import ManifestFormat, read_manifest
+        from cevm.io.manifest import ManifestFormat, open_manifest
 
-        try:
-            masses = read_manifest(manifest, ManifestFormat(tz=manifest_tz))
+        masses = ManifestFormat(tz=manifest_tz)
+        try:  # read through once (every line readable, within its bounds), holding no row
+            with open_manifest(manifest, masses) as reader:
+                for _ in reader.items():
+                    pass
         except CevmError as exc:
             raise fail(exc) from None
     not_applied = 0
@@ -147,13 +150,14 @@ def ingest(
             st.require_intact()  # never write into a damaged database
             report = run_ingest(paths, st, options, on_file=on_file, on_start=on_start, executor=executor)
             if masses is not None and manifest is not None:
-                with signals_deferred():  # the masses written are the masses reported
-                    _, not_applied = apply_manifest(st, manifest, masses)
+                with signals_deferred(), open_manifest(manifest, masses) as reader:  # streamed: rows never all held
+                    _, not_applied = apply_manifest(st, manifest, reader)
                     manifest_applied = True
     except StoreAccessError as exc:
         stop = fail(exc)
-        typer.echo("cevm: note: the files written before the failure are stored, the one being written was rolled "
-                   "back; run the same command again once it is fixed (stored files are skipped)", err=True)
+        if done:  # not for a store that could not even be opened or created
+            typer.echo("cevm: note: the files written before the failure are stored, the one being written was "
+                       "rolled back; run the same command again once it is fixed (stored files are skipped)", err=True)
         raise stop from None
     except CevmError as exc:  # bad options found once the store was open (profile, DSM): no store made for them
         if new_store and not done:

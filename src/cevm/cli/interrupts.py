@@ -5,15 +5,18 @@ signals raise :class:`Interrupted` in the main thread, a :class:`KeyboardInterru
 that knows its signal: the command stops dispatching work, the open store transaction
 is finished (:func:`cevm.runtime.signals_deferred`) or rolled back, local workers are
 killed, and the exit code is ``128 + the signal's number``: **130** after SIGINT
-(Ctrl-C), **143** after SIGTERM (``kill``, systemd, a cron job's timeout). ``cevm
-ingest`` says in one line what it stored and what it did not; other commands say
-"Aborted!".
+(Ctrl-C), **143** after SIGTERM (``kill``, systemd, a cron job's timeout), whichever
+command it was and however its libraries handle the interrupt (typer turns it into exit
+130 without a word: :func:`stopped` puts the signal's code and line back). ``cevm
+ingest`` says in one line what it stored and what it did not; every other command says
+``cevm COMMAND: interrupted by SIGTERM: ...`` (:func:`stopped_line`).
 """
 
 from __future__ import annotations
 
 import signal
-from collections.abc import Iterator
+import sys
+from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 
 #: The exit code after a signal is this plus its number (the shells' convention).
@@ -69,6 +72,65 @@ def interrupts_raise() -> Iterator[None]:
     finally:
         for s, handler in saved.items():
             signal.signal(s, handler)
+
+
+def _reported_by_command(exc: BaseException) -> bool:
+    """Whether the command itself handled the interrupt and said so (``cevm ingest``:
+    it raises its exit code from the interrupt it caught, ``from None``), as opposed to
+    typer (which raises exit 130 *from* the KeyboardInterrupt), click ("Aborted!", exit
+    1) or nobody (the KeyboardInterrupt itself)."""
+    if isinstance(exc, KeyboardInterrupt):
+        return False
+    for link in (exc, exc.__context__):  # typer calls sys.exit(code) inside its "except Exit"
+        if link is None:
+            continue
+        if isinstance(link.__cause__, KeyboardInterrupt):
+            return False  # typer's conversion: "raise Exit(130) from e"
+        if isinstance(link.__context__, KeyboardInterrupt) and link.__suppress_context__:
+            return True  # the command's own: "raise typer.Exit(code) from None" in its handler
+    return getattr(exc, "code", None) not in (1, 130)  # click's "Aborted!" (1), a bare 130
+
+
+def command_name(argv: Sequence[str]) -> str:
+    """The command's words from the arguments: ``calibrate``, ``trips set-mass``,
+    ``route add`` (a group's first word, and its subcommand when one follows)."""
+    words = [a for a in argv[:2] if not a.startswith("-")]
+    if words and words[0] in ("trips", "route", "store", "fleet", "vehicle") and len(argv) > 1 and words[1:]:
+        return " ".join(words[:2])
+    return words[0] if words else ""
+
+
+def stopped_line(signum: int, command: str) -> str:
+    """The line a command (other than ingest, which says what it stored) prints when a
+    stop signal ended it."""
+    name = signal.Signals(signum).name
+    return (f"cevm {command}: interrupted by {name}: stopped before the end (each write to the store is made whole "
+            "or not at all; no --out file is left half-written; output on stdout may be cut short)").replace(
+        "cevm :", "cevm:")
+
+
+def stopped(exc: BaseException, argv: Sequence[str]) -> int | str | None:
+    """The exit code of a command that ended with ``exc`` (SystemExit or an interrupt):
+    after a stop signal, ``128 + its number`` (130, 143) and, unless the command said so
+    itself, :func:`stopped_line` on stderr; otherwise the command's own code."""
+    signum = received()
+    code = getattr(exc, "code", None) if isinstance(exc, SystemExit) else EXIT_SIGNAL_BASE + int(
+        getattr(exc, "signum", signal.SIGINT))
+    if signum is None:
+        if isinstance(exc, KeyboardInterrupt):  # an interrupt without the handler (a library's)
+            signum = int(getattr(exc, "signum", signal.SIGINT))
+        else:
+            return code
+    if isinstance(exc, SystemExit) and code in (0, None):
+        return code  # it finished, the signal came too late to stop it
+    if not _reported_by_command(exc):
+        try:
+            sys.stderr.write(stopped_line(signum, command_name(argv)) + "\n")
+            sys.stderr.flush()
+        except OSError:
+            pass
+        return EXIT_SIGNAL_BASE + signum
+    return code
 
 
 @contextmanager

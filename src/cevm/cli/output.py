@@ -2,7 +2,10 @@
 
 Text in tables and CSV goes through :func:`cevm.text.printable` (control characters in
 ids and file names escaped, so no cell can forge a line or break a record); CSV fields
-are quoted where they need it (a comma, a quote); JSON escapes by its own rules.
+are quoted where they need it (a comma, a quote), and a text cell that a spreadsheet
+would take for a formula (starting with ``=``, ``+``, ``-``, ``@``, a tab or a carriage
+return, and not a plain number) gets a leading apostrophe (:func:`cevm.text.csv_safe`);
+numbers are written as numbers. JSON escapes by its own rules and keeps the exact value.
 Identifier columns never wrap: a trip id is read whole. A command that describes its
 columns (:class:`cevm.cli.columns.Column`: ``predict``, ``feasibility``) passes them to
 :func:`write_rows`, which takes each one's header, decimals and layout from it; for plain
@@ -22,7 +25,7 @@ from typing import IO, Any
 import numpy as np
 
 from cevm.cli.columns import Column
-from cevm.text import printable
+from cevm.text import csv_safe, printable
 
 
 class OutputFormat(str, Enum):
@@ -72,7 +75,7 @@ def _csv_cell(value: Any) -> Any:
     if isinstance(value, (bool, np.bool_)):  # as predict's fast CSV path and JSON write them
         return "true" if value else "false"
     if isinstance(value, str):
-        return printable(value)
+        return csv_safe(value)  # control characters escaped, formula prefixes neutralised
     return value
 
 
@@ -120,7 +123,7 @@ def write_rows(
         stream.write("\n")
     elif fmt == OutputFormat.csv:
         w = csv_writer(stream)
-        w.writerow([printable(str(c)) for c in names])
+        w.writerow([csv_safe(str(c)) for c in names])
         for r in rows:
             w.writerow([_csv_cell(r.get(k)) for k in names])
     else:

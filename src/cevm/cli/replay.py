@@ -571,11 +571,13 @@ def _say(o: SimpleNamespace, sm: dict, settings: ReplaySettings, run: Run, vehic
     if run.extrapolating:
         warn(f"{run.extrapolating} duties ask what {vehicle.label}'s calibration did not see (column extrapolation)")
     if o.summary is not None:
-        try:
-            Path(o.summary).write_text(json.dumps({k: (None if isinstance(v, float) and not math.isfinite(v) else v)
-                                                   for k, v in sm.items()}, indent=2) + "\n", encoding="utf-8")
-        except OSError as exc:
-            raise fail(f"{o.summary}: cannot write: {exc.strerror or exc}", 3) from None
+        from cevm.io.outputs import write_text
+
+        try:  # whole or not at all, a device written (never replaced); a full disk: exit 3
+            write_text(o.summary, json.dumps({k: (None if isinstance(v, float) and not math.isfinite(v) else v)
+                                              for k, v in sm.items()}, indent=2) + "\n")
+        except CevmError as exc:
+            raise fail(exc) from None
     if o.plot is not None and run.fleet.n:
         from cevm.io.replay_plot import plot_duties
 

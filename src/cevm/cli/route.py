@@ -44,8 +44,8 @@ def route_add(
     given, or a mix with --leg trip:ID --leg cycle:PATH. Cycle legs are copied into the
     store (vector and profile), so the route does not depend on the files afterwards; a
     file with several selected speed columns (--speed-col) gives one leg per column."""
-    from cevm.store.routes import CycleLeg, TripLeg, add_route
     from cevm.store import TripStore, resolve_store_path
+    from cevm.store.routes import add_route
 
     given = sum(bool(x) for x in (trip, cycle, leg))
     if given == 0:
@@ -63,8 +63,7 @@ def route_add(
     if any(k == "trip" for k, _ in specs) and not path.exists():
         raise fail(f"{path}: no trip store here; run 'cevm ingest' first or give --store")
     try:
-        legs = [leg for kind, ref in specs
-                for leg in ([TripLeg(ref)] if kind == "trip" else CycleLeg.all_from_file(ref, cycle_fmt))]
+        legs = _legs(specs, cycle_fmt)
         with TripStore.open(path) as st:
             info = add_route(st, name, legs, replace=replace, cr0=cr0, note=note)
     except CevmError as exc:
@@ -147,3 +146,32 @@ def route_remove(
     if not gone:
         raise fail(f"no route {name!r} in {path}; 'cevm route list' shows them")
     typer.echo(f"route {name!r} removed from {path}")
+
+
+def _legs(specs: list[tuple[str, str]], cycle_fmt) -> list:
+    """The legs of ``specs`` (kind, ref), cycle files read in order within the samples the
+    files before left (:data:`cevm.store.routes.MAX_ROUTE_SAMPLES` over them all: a
+    large file is refused at its line past the bound, before the rest is read)."""
+    from cevm.io.cycles import MAX_CYCLE_SAMPLES, CycleTooLong
+    from cevm.store.routes import MAX_ROUTE_SAMPLES, CycleLeg, TripLeg
+
+    legs: list = []
+    left = MAX_ROUTE_SAMPLES
+    for kind, ref in specs:
+        if kind == "trip":
+            legs.append(TripLeg(ref))
+            continue
+        if left < 2:
+            raise CevmError(f"{ref}: a route holds at most {MAX_ROUTE_SAMPLES:,} samples, and its cycle legs before "
+                            "this one hold them all: split it into routes")
+        try:
+            read = CycleLeg.all_from_file(ref, cycle_fmt, max_samples=left)
+        except CycleTooLong as exc:
+            if exc.max_samples >= MAX_CYCLE_SAMPLES:  # the file's own bound
+                raise
+            raise CevmError(f"{exc.path}:{exc.line}: more than the {left:,} samples left: a route holds at most "
+                            f"{MAX_ROUTE_SAMPLES:,} samples, and its cycle legs before this one "
+                            f"{MAX_ROUTE_SAMPLES - left:,}: split it into routes") from None
+        left -= sum(leg.cycle.time_s.size for leg in read)
+        legs += read
+    return legs

@@ -11,6 +11,7 @@ import typer
 
 from cevm.cli.common import (
     PNG,
+    OutFile,
     ReserveOption,
     SocStartOption,
     StoreOption,
@@ -84,9 +85,17 @@ def simulate(
             from cevm.store.masses import trip_masses
             from cevm.store.queries import row_measurement
 
+            from cevm.store.codec import MAX_PROFILE_SAMPLES
+            from cevm.store.sources import MAX_SOURCE_SAMPLES, too_long_trip
+
             with TripStore.open(existing_store_path(store), readonly=True) as st:
-                prof = st.load_profile(trip)
                 listed = st.list_trips(trip_ids=[trip])
+                n_listed = int(listed["n_samples"].iloc[0])
+                # bounded as a cycle file is; a count no stored profile can hold is the store's
+                # damage, which load_profile names (exit 4) without inflating anything
+                if MAX_SOURCE_SAMPLES < n_listed <= MAX_PROFILE_SAMPLES:
+                    raise CevmError(too_long_trip(trip, n_listed))
+                prof = st.load_profile(trip)
                 own = trip_masses(st, listed)[trip]
             r = listed.iloc[0]
             measured = row_measurement(r["measured_kind"], r["measured_value"], r["measured_source"],
@@ -109,15 +118,25 @@ def simulate(
         raise fail(exc) from None
     except ValueError as exc:  # inconsistent [detailed] parameters or trace
         raise fail(f"{vehicle}: {exc}") from None
-    frame = res.to_frame()
     verdict = simulation_verdict(veh, res, mass_kg=res.mass_kg, soc_start_pct=soc0, reserve_pct=reserve_pct,
                                  logged=trip is not None, elevation_source=elevation)
-    if veh.is_ev and verdict["empty_at_s"] is not None:  # no charge below 0: the series ends where it runs empty
-        frame.loc[frame["time_s"] > verdict["empty_at_s"], ["soc_pct"]] = np.nan
+    # no charge below 0: the series ends where it runs empty
+    empty_at_s = verdict["empty_at_s"] if veh.is_ev else None
     if out is not None:
-        frame.to_csv(out, index=False, float_format="%.6g")
+        try:
+            with OutFile(out) as fh:  # written whole or not at all (a full disk: one line, exit 3)
+                for start in range(0, res.time_s.size, OUT_BLOCK_ROWS):  # in blocks: no frame of it all held
+                    block = res.to_frame(rows=slice(start, start + OUT_BLOCK_ROWS))
+                    if empty_at_s is not None:
+                        block.loc[block["time_s"] > empty_at_s, ["soc_pct"]] = np.nan
+                    block.to_csv(fh, index=False, header=start == 0, float_format="%.6g")
+        except CevmError as exc:
+            raise fail(exc) from None
     if plot is not None:
-        plot_simulation(frame, res, plot, f"{veh.name}: {name}")
+        try:
+            plot_simulation(_plot_columns(res, empty_at_s), res, plot, f"{veh.name}: {name}")
+        except CevmError as exc:  # a full disk: the plot's, exit 3 (cevm.io.plots leaves no half-written file)
+            raise fail(exc) from None
     row = {"cycle": name, "vehicle": veh.name, "mass_kg": res.mass_kg, "mass_source": mass_source,
            "distance_km": res.distance_m / 1e3,
            "duration_s": res.duration_s, "wheel_work_net_kwh": res.wheel_energy_j / J_PER_KWH,
@@ -227,3 +246,24 @@ def simulation_verdict(veh, res, *, mass_kg: float, soc_start_pct: float, reserv
     out["limits_tolerance"] = (f"log: speed +10 % +4 km/h, elevation sd {demand.elevation_sd_m:g} m" if logged
                                else "exact")
     return out
+
+
+#: Rows of ``--out`` made and written at a time: the per-second frame of a long trace is
+#: never held whole beside the result (a million samples: 200 MB more).
+OUT_BLOCK_ROWS = 100_000
+
+
+def _plot_columns(res, empty_at_s: float | None = None) -> dict[str, np.ndarray]:
+    """The columns of :meth:`SimulationResult.to_frame` the figure draws (time, state of
+    charge or fuel used, elevation), without the rest of the frame."""
+    cols = {"time_s": res.time_s}
+    if res.powertrain == "ev":
+        soc_pct = res.samples["soc"] * 100.0
+        if empty_at_s is not None:  # no charge below 0: the series ends where it runs empty
+            soc_pct = np.where(res.time_s > empty_at_s, np.nan, soc_pct)
+        cols["soc_pct"] = soc_pct
+    else:
+        cols["fuel_cum_l"] = res.samples["fuel_cum_l"]
+    if res.elevation_m is not None:
+        cols["elevation_m"] = res.elevation_m
+    return cols

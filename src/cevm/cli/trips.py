@@ -109,7 +109,7 @@ def set_mass(
     not applied (exit 1); a mass more than 5 % from the trip's logged gross weight is
     reported. Predictions and calibrations then use, for each trip: the mass given here,
     else the logged gross weight, else the vehicle file's mass."""
-    from cevm.io.manifest import GROSS_RANGE_KG, PAYLOAD_RANGE_KG, ManifestFormat, read_manifest
+    from cevm.io.manifest import GROSS_RANGE_KG, PAYLOAD_RANGE_KG, ManifestFormat, open_manifest
     from cevm.store import TripStore
     from cevm.store.masses import AssignedMass, clear_masses, set_masses, trip_masses
 
@@ -132,8 +132,9 @@ def set_mass(
                              start_col=start_col, end_col=end_col, gross_col=gross_col, payload_col=payload_col,
                              mass_unit=mass_unit, tz=tz)
         with TripStore.open(path) as st:
-            if manifest is not None:
-                applied, problems = apply_manifest(st, manifest, read_manifest(manifest, fmt), dry_run=dry_run)
+            if manifest is not None:  # streamed: its rows are matched one at a time, never all held
+                with open_manifest(manifest, fmt) as reader:
+                    applied, problems = apply_manifest(st, manifest, reader, dry_run=dry_run)
                 raise typer.Exit(EXIT_PARTIAL if problems else EXIT_OK)
             ids = list(dict.fromkeys(trip_ids))
             if clear:

@@ -97,7 +97,7 @@ class DaskExecutor(Executor):
                     raise CevmError(f"{address}: a tls:// scheduler needs this client's certificates: set "
                                     f"{', '.join(TLS_CLIENT_SETTINGS)} (or the same in Dask's configuration file)")
             try:
-                client = distributed.Client(address, timeout=timeout_s, set_as_default=False)
+                client = _client_class(distributed)(address, timeout=timeout_s, set_as_default=False)
             except (OSError, TimeoutError, ValueError, TypeError) as exc:  # TypeError: a TLS setting missing
                 raise CevmError(f"cannot reach the Dask scheduler at {address}: {error_text(exc)}") from None
         self.client = client
@@ -193,3 +193,27 @@ def local_dask_cluster(n_workers: int = 2, threads_per_worker: int = 1, *, proce
         return LocalCluster(n_workers=n_workers, threads_per_worker=threads_per_worker, processes=processes,
                             host="127.0.0.1", dashboard_address=None)
 
+
+def _client_class(distributed):
+    """``distributed.Client``, but one whose failed start leaves nothing to close.
+
+    A client that cannot reach its scheduler (an unknown scheme, a refused or timed-out
+    connection) raises from its constructor, and the half-made object closes itself when it
+    is collected, at the latest when the interpreter exits: waiting 40 s on an event loop
+    that will never answer, then printing a TimeoutError traceback, after cevm had already
+    said the one line and chosen its exit code. Here the failed start stops the client's
+    loop at once and leaves ``__del__`` nothing to do."""
+
+    class Client(distributed.Client):
+        def start(self, **kwargs):
+            try:
+                return super().start(**kwargs)
+            except BaseException:
+                self._Client__loop = None  # Client.__del__ closes only a client with a loop
+                try:
+                    self._loop_runner.stop()
+                except Exception:  # a loop that never ran: nothing to stop
+                    pass
+                raise
+
+    return Client

@@ -92,6 +92,7 @@ import pandas as pd
 
 from cevm.configs_dir import shipped_configs_dir
 from cevm.errors import InputError
+from cevm.io.inputs import MAX_TOML_BYTES, read_bounded
 from cevm.ingest.timestamps import EPOCH_FORMATS
 from cevm.units import (
     FT_TO_M,
@@ -374,12 +375,13 @@ def _read_toml(source: str | Path | dict, path: Path | None) -> tuple[dict, Path
     if isinstance(source, dict):
         return source, path
     path = Path(source)
+    data = read_bounded(path, MAX_TOML_BYTES, "logger profile")  # a regular file of at most 1 MiB (issue 24)
     try:
-        return tomllib.loads(path.read_text(encoding="utf-8")), path
-    except OSError as exc:
-        raise InputError(path, f"cannot read profile: {exc.strerror or exc}") from None
+        return tomllib.loads(data.decode("utf-8-sig")), path
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise InputError(path, f"not a valid TOML profile: {exc}") from None
+    except RecursionError:
+        raise InputError(path, "not a valid TOML profile: its arrays or tables nest too deeply") from None
 
 
 @dataclass(frozen=True)

@@ -19,6 +19,7 @@ import tomlkit
 from cevm.core.calibration import TERMS_BY_POWERTRAIN, CalibrationResult
 from cevm.core.calibration.terms import EXTRA_TERMS
 from cevm.errors import CevmError
+from cevm.io.outputs import write_text
 from cevm.io.priors import posterior_table, prior_table
 from cevm.io.vehicles import stem_id
 
@@ -251,11 +252,6 @@ def write_calibrated_vehicle(source: Path, out: Path, result: CalibrationResult,
     text = calibrated_toml(source.read_text(encoding="utf-8"), values, f"{note}\nfitted: {fitted}",
                            neutral=neutral_keys(result), calibration=calibration,
                            sources=changed_sources(result, v.id), prior=prior, posterior=posterior)
-    tmp = out.with_name(out.name + ".tmp")
-    try:
-        tmp.write_text(text, encoding="utf-8")
-        tmp.replace(out)  # atomic: never a half-written vehicle file
-    except OSError as exc:  # a full disk, a folder that is not there or not writable
-        tmp.unlink(missing_ok=True)
-        raise CevmError(f"{out}: the calibrated vehicle file cannot be written: "
-                        f"{exc.strerror or exc}") from None
+    # whole or not at all, a device (--out /dev/stdout) written rather than replaced by a
+    # rename; a full disk is an OutputError naming the file (exit 3)
+    write_text(out, text)

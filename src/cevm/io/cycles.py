@@ -39,7 +39,10 @@ speed at most :data:`MAX_SPEED_KMH`, acceleration and deceleration at most
 :data:`MAX_ACCEL_MPS2` between samples, grade at most :data:`MAX_GRADE` (given, or of
 an elevation profile: each step's rise at most MAX_GRADE times its distance plus
 :data:`ELEVATION_ROUNDING_M`), elevation within +-:data:`MAX_ABS_ELEVATION_M`, at most
-:data:`MAX_CYCLE_SAMPLES` samples, a median sample spacing within
+:data:`MAX_CYCLE_SAMPLES` samples in a file (over its cycles) and
+:data:`MAX_COMMAND_CYCLE_SAMPLES` over the files of one command (:func:`read_cycle_files`),
+which bound the memory a command takes (refused at the line past the bound, before the
+rest is read), a median sample spacing within
 :data:`MAX_MEDIAN_STEP_S` (a time column in milliseconds read as seconds). A grade
 column read in % that looks like fractions (all within :data:`FLAT_GRADE_MAX_PCT` over
 kilometres) is read, with a :class:`CycleWarning`.
@@ -88,9 +91,16 @@ ELEVATION_ROUNDING_M = 1.0
 #: Largest elevation, absolute or relative to the start [m]: no road lies above
 #: 5,800 m or below -430 m.
 MAX_ABS_ELEVATION_M = 10_000.0
-#: Most samples in one cycle file (116 days at 1 Hz), which bounds the memory a file can
-#: take (about 200 bytes per sample while its vector is computed).
-MAX_CYCLE_SAMPLES = 10_000_000
+#: Most samples in one cycle file, over all its cycles (lines x the speed columns read):
+#: 11.6 days at 1 Hz, 28 h at 10 Hz; a drive cycle holds thousands (WLTC 1,800, VECTO's
+#: long haul about 10,000). It bounds what one file costs: at this bound ``cevm simulate``
+#: peaked at 363-405 MB, ``predict`` and ``feasibility`` at 290-330 MB (at 9.9 million
+#: samples, the bound before: 1.75 GB; benchmarks/bench_memory.py).
+MAX_CYCLE_SAMPLES = 1_000_000
+#: Most samples over all the cycle files one command reads (``--cycle`` given several
+#: times): they are held together. Two files at the per-file bound peaked at 370-430 MB
+#: in ``predict`` and ``feasibility`` with three vehicles and ``--range``.
+MAX_COMMAND_CYCLE_SAMPLES = 2_000_000
 #: Widest typical spacing of a cycle's samples [s] (the median step): drive cycles and
 #: loggers sample every 0.1-10 s; a median step of minutes cannot describe driving (a
 #: stop, a start), and is a time column in milliseconds read as seconds (UKBUS6 at
@@ -108,6 +118,7 @@ FLAT_GRADE_MIN_DISTANCE_M = 2000.0
 class CycleWarning(UserWarning):
     """A cycle file that reads, but probably not as meant (a grade in % that looks like
     fractions): the command line prints it as one ``cevm: warning:`` line."""
+
 
 #: Speed units: accepted spellings -> (canonical name, factor to m/s).
 SPEED_UNITS = {"km/h": ("km/h", KMH_TO_MPS), "kmh": ("km/h", KMH_TO_MPS), "kph": ("km/h", KMH_TO_MPS),
@@ -357,7 +368,8 @@ def _require(layout: CsvLayout, values: np.ndarray, n: int, col: int) -> np.ndar
     return part
 
 
-def read_cycles(path: str | Path, fmt: CycleFormat | None = None) -> list[DriveCycle]:
+def read_cycles(path: str | Path, fmt: CycleFormat | None = None, *,
+                max_samples: int | None = None) -> list[DriveCycle]:
     """Every cycle of a cycle file: one per selected speed column (see the module
     docstring). Names: the file's stem, or ``stem[column]`` when the speed columns were
     chosen by :attr:`CycleFormat.speed_columns`.
@@ -365,9 +377,11 @@ def read_cycles(path: str | Path, fmt: CycleFormat | None = None) -> list[DriveC
     Raises :class:`~cevm.errors.InputError` naming file, line (1-based, the header is
     line 1) and column: missing or unreadable file, an undetectable layout or column, a
     cell that is not a number, a gap in a column, time not increasing, fewer than 2
-    samples, and every plausibility bound of the module docstring.
+    samples, and every plausibility bound of the module docstring, and more than
+    ``max_samples`` samples over the file's cycles (default :data:`MAX_CYCLE_SAMPLES`).
     """
     fmt = (fmt or CycleFormat()).check()
+    max_samples = MAX_CYCLE_SAMPLES if max_samples is None else min(max_samples, MAX_CYCLE_SAMPLES)
     path = Path(path)
     layout = sniff_csv(path, sep=fmt.sep, decimal=fmt.decimal, what="cycle file")
     time_col = None
@@ -400,7 +414,13 @@ def read_cycles(path: str | Path, fmt: CycleFormat | None = None) -> list[DriveC
 
     wanted = [c for c in [time_col, *speed_cols, elev_col, grade_col] if c is not None]
     wanted = list(dict.fromkeys(wanted))
-    arrays = dict(zip(wanted, read_numeric_columns(layout, wanted, what="cycle file", max_rows=MAX_CYCLE_SAMPLES)))
+    max_rows = max(max_samples // len(speed_cols), 0)  # every cycle of the file has at most this many samples
+    try:
+        arrays = dict(zip(wanted, read_numeric_columns(layout, wanted, what="cycle file", max_rows=max_rows)))
+    except InputError as exc:
+        if exc.message.startswith("more than "):
+            raise _too_long(layout.path, max_rows, len(speed_cols), max_samples, exc.line) from None
+        raise
 
     grade_layout, grade_cols, grade_time = None, {}, None
     if fmt.grade_file is not None:
@@ -415,7 +435,7 @@ def read_cycles(path: str | Path, fmt: CycleFormat | None = None) -> list[DriveC
                       if time_col is not None and layout.header[time_col] in grade_layout.header else None)
         gcols = list(dict.fromkeys([*grade_cols.values(), *([grade_time] if grade_time is not None else [])]))
         grade_arrays = dict(zip(gcols, read_numeric_columns(grade_layout, gcols, what="grade file",
-                                                            max_rows=MAX_CYCLE_SAMPLES)))
+                                                            max_rows=max_rows)))
     elif grade_col is not None:
         grade_layout, grade_arrays = layout, arrays
         grade_cols = {c: grade_col for c in speed_cols}
@@ -495,8 +515,41 @@ def read_cycle_csv(path: str | Path, fmt: CycleFormat | None = None) -> DriveCyc
 
 
 def read_cycle_files(paths, fmt: CycleFormat | None = None) -> list[DriveCycle]:
-    """:func:`read_cycles` of each path, in order, concatenated."""
-    return [c for p in paths for c in read_cycles(p, fmt)]
+    """:func:`read_cycles` of each path, in order, concatenated: at most
+    :data:`MAX_COMMAND_CYCLE_SAMPLES` samples over them all (they are held together), a
+    file refused at the line past what the files before it left."""
+    out: list[DriveCycle] = []
+    left = MAX_COMMAND_CYCLE_SAMPLES
+    for p in paths:
+        used = MAX_COMMAND_CYCLE_SAMPLES - left
+        together = (f"the cycle files of one command hold at most {MAX_COMMAND_CYCLE_SAMPLES:,} samples together, "
+                    f"and the ones before it {used:,}: give fewer or shorter files")
+        if left < 2:
+            raise InputError(p, together)
+        try:
+            cycles = read_cycles(p, fmt, max_samples=left)
+        except CycleTooLong as exc:
+            if exc.max_samples < MAX_CYCLE_SAMPLES:  # the budget the files before it left, not the file's own
+                raise InputError(exc.path, f"more than the {left:,} samples left: {together}", line=exc.line) from None
+            raise
+        left -= sum(c.time_s.size for c in cycles)
+        out += cycles
+    return out
+
+
+class CycleTooLong(InputError):
+    """A cycle file beyond the samples it may hold (``max_samples``, over its cycles:
+    the file's own bound, or what a command's or a route's files before it left)."""
+
+    max_samples: int = 0
+
+
+def _too_long(path: Path, max_rows: int, n_cycles: int, max_samples: int, line: int | None) -> CycleTooLong:
+    each = f" ({n_cycles} speed columns: {max_rows:,} lines each)" if n_cycles > 1 else ""
+    err = CycleTooLong(path, f"more than {max_samples:,} samples{each}: the most a cycle file may hold (about 400 "
+                         "bytes of memory a sample at the peak of 'cevm simulate'); give a shorter part", line=line)
+    err.max_samples = max_samples
+    return err
 
 
 # ------------------------------------------------------------------------------ checks

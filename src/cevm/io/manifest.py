@@ -29,17 +29,38 @@ and column and that row is left out (:attr:`Manifest.problems`); a file without 
 columns it needs is an :class:`~cevm.errors.InputError`. Masses out of
 :data:`GROSS_RANGE_KG` / :data:`PAYLOAD_RANGE_KG` are refused (a mass in tonnes read as
 kg, a thousands separator read as a decimal mark).
+
+Bounds, checked before the work: a manifest is a regular file (not a FIFO or a device:
+:mod:`cevm.io.inputs`) of at most :data:`MAX_MANIFEST_BYTES` (refused from its size
+before it is read) and :data:`MAX_MANIFEST_ROWS` rows (refused at the row past it); it
+is read as a stream, line by line, and a line (a field) longer than
+:data:`MAX_FIELD_BYTES`, a NUL byte or text that is not UTF-8 is refused with its line.
 """
 
 from __future__ import annotations
 
 import csv
 import datetime as dt
+import heapq
+import io
 import re
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from cevm.errors import InputError
+from cevm.io.inputs import check_size, open_regular
+
+#: Largest manifest read [bytes]: about a million rows of a TMS export (56 MB for a
+#: million window rows of vehicle, start, end and mass).
+MAX_MANIFEST_BYTES = 64 << 20
+#: Most rows a manifest may hold (a fleet of 500 vehicles, 5 trips a day, a year: 0.9 M);
+#: a larger export is given in parts (by month, by depot). Streamed, its rows are never
+#: all held: ``cevm trips set-mass --manifest`` of a million rows peaked at 126 MB
+#: (before: 585-631 MB, and 1.67 GB at 3 M rows), and took 24-37 s.
+MAX_MANIFEST_ROWS = 1_000_000
+#: Longest field of a manifest [bytes] (Python's csv reader's own limit, 128 KiB).
+MAX_FIELD_BYTES = 128 << 10
 
 #: Plausible gross masses [kg] of a road vehicle in a manifest: below, a light
 #: quadricycle's kerb mass; above, nothing that drives on a road.
@@ -88,7 +109,7 @@ class ManifestFormat:
     tz: str | None = None
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class ManifestRow:
     """One usable row: its 1-based ``line`` in the file, the vehicle id (or None), a trip
     id or a window [s since the Unix epoch, UTC], and ``kind`` ('gross' | 'payload')
@@ -115,6 +136,16 @@ class Manifest:
     columns: dict[str, str] = field(default_factory=dict)
     mass_unit: str = "kg"
     decimal: str = "."
+
+    @property
+    def n_rows(self) -> int:
+        """Rows read (usable or not; blank lines not counted)."""
+        return len(self.rows) + len(self.problems)
+
+    def items(self) -> Iterator[ManifestRow | tuple[int, str]]:
+        """The rows and the problems of the others, in the order of their lines (as
+        :meth:`ManifestReader.items` gives them)."""
+        return heapq.merge(self.rows, self.problems, key=lambda x: x.line if isinstance(x, ManifestRow) else x[0])
 
 
 def _norm(name: str) -> str:
@@ -209,68 +240,159 @@ def _number(text: str, decimal: str) -> float:
     return float(s)
 
 
-def read_manifest(path: str | Path, fmt: ManifestFormat | None = None) -> Manifest:
-    """Read the manifest at ``path`` (see the module notes); raises
-    :class:`~cevm.errors.InputError` for a file it cannot use at all."""
-    fmt = fmt or ManifestFormat()
-    path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8-sig")
-    except OSError as exc:
-        raise InputError(path, f"cannot read: {exc.strerror or exc}") from None
-    except UnicodeDecodeError as exc:
-        raise InputError(path, f"not UTF-8 text (byte {exc.start}): export the manifest as UTF-8 CSV") from None
-    lines = text.splitlines()
-    if not lines or not lines[0].strip():
-        raise InputError(path, "empty: a manifest starts with a header line", line=1)
-    sep = {"tab": "\t", "\\t": "\t"}.get(fmt.sep, fmt.sep) if fmt.sep else max(_SEPARATORS, key=lines[0].count)
-    if sep not in _SEPARATORS:
-        raise InputError(path, f"separator {fmt.sep!r}: use one of , ; tab |")
-    decimal = fmt.decimal or ("," if sep == ";" else ".")
-    if decimal not in (".", ","):
-        raise InputError(path, f"decimal mark {decimal!r}: use . or ,")
-    if decimal == sep:
-        raise InputError(path, f"the decimal mark and the separator are both {sep!r}")
-    try:
-        zone = parse_zone(fmt.tz)
-    except ValueError as exc:
-        raise InputError(path, str(exc)) from None
-    reader = csv.reader(lines, delimiter=sep)
-    header = [h.strip() for h in next(reader)]
-    cols = {role: _column(path, header, role, getattr(fmt, f"{role}_col"))
-            for role in ("vehicle", "trip", "start", "end", "gross", "payload")}
-    if fmt.payload_col is not None and fmt.gross_col is None:
-        cols["gross"] = None  # the payload was asked for
-    if fmt.gross_col is not None and fmt.payload_col is None:
-        cols["payload"] = None
-    if cols["gross"] is None and cols["payload"] is None:
-        raise InputError(path, "no mass column: name one gross_kg or payload_kg (or give --gross-col / --payload-col); "
-                               f"the header has: {', '.join(header)}", line=1)
-    if cols["trip"] is None and (cols["start"] is None or cols["end"] is None or cols["vehicle"] is None):
-        raise InputError(path, "a manifest needs a trip id column, or vehicle, start and end columns (give "
-                               f"--trip-col, or --vehicle-col, --start-col, --end-col); the header has: "
-                               f"{', '.join(header)}", line=1)
-    units = {}
-    for role in ("gross", "payload"):
-        if cols[role] is not None:
-            units[role] = fmt.mass_unit or _unit_of(_norm(cols[role])) or "kg"
-            if units[role] not in ("kg", "t"):
-                raise InputError(path, f"mass unit {units[role]!r}: use kg or t")
-    index = {h: i for i, h in enumerate(header)}
-    rows: list[ManifestRow] = []
-    problems: list[tuple[int, str]] = []
-    for line_no, rec in enumerate(reader, start=2):
-        if not any(x.strip() for x in rec):
-            continue  # a blank line
-        cell = {role: (rec[index[c]].strip() if c is not None and index[c] < len(rec) else "")
-                for role, c in cols.items()}
+class ManifestReader:
+    """A manifest opened for reading, as a stream (:func:`open_manifest`): its header
+    read and checked (``path``, ``columns``, ``mass_unit``, ``decimal``), its rows given
+    one at a time by :meth:`items`, so that a manifest of any length within the bounds
+    is matched without holding its rows (:func:`cevm.store.masses.match_manifest`)."""
+
+    def __init__(self, path: Path, raw, fmt: ManifestFormat, max_rows: int):
+        self.path = str(path.resolve())
+        self._file = path
+        self._raw = raw
+        self._text = io.TextIOWrapper(raw, encoding="utf-8-sig", newline="")
+        self.max_rows = max_rows
+        self.n_rows = 0
+        self._guard(lambda: self._header(fmt))
+
+    def __enter__(self) -> ManifestReader:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def close(self) -> None:
+        self._text.close()
+
+    def _guard(self, step):
+        """``step()``, with the file's read errors as :class:`InputError`."""
         try:
-            rows.append(_row(line_no, cell, cols, units, decimal, zone))
+            return step()
+        except UnicodeDecodeError as exc:
+            raise InputError(self._file, f"not UTF-8 text ({exc.reason}): export the manifest as UTF-8 CSV") from None
+        except OSError as exc:
+            raise InputError(self._file, f"cannot read: {exc.strerror or exc}") from None
+
+    def _header(self, fmt: ManifestFormat) -> None:
+        path = self._file
+        first = self._text.readline(MAX_FIELD_BYTES + 1)
+        if len(first) > MAX_FIELD_BYTES:
+            raise InputError(path, f"a header line longer than {MAX_FIELD_BYTES // 1024} KiB: not a manifest", line=1)
+        if not first.strip():
+            raise InputError(path, "empty: a manifest starts with a header line", line=1)
+        sep = {"tab": "\t", "\\t": "\t"}.get(fmt.sep, fmt.sep) if fmt.sep else max(_SEPARATORS, key=first.count)
+        if sep not in _SEPARATORS:
+            raise InputError(path, f"separator {fmt.sep!r}: use one of , ; tab |")
+        decimal = fmt.decimal or ("," if sep == ";" else ".")
+        if decimal not in (".", ","):
+            raise InputError(path, f"decimal mark {decimal!r}: use . or ,")
+        if decimal == sep:
+            raise InputError(path, f"the decimal mark and the separator are both {sep!r}")
+        try:
+            self.zone = parse_zone(fmt.tz)
         except ValueError as exc:
-            problems.append((line_no, str(exc)))
-    return Manifest(str(path.resolve()), tuple(rows), tuple(problems),
-                    {k: v for k, v in cols.items() if v is not None}, units.get("gross", units.get("payload", "kg")),
-                    decimal)
+            raise InputError(path, str(exc)) from None
+        header = [h.strip() for h in _records(path, io.StringIO(first), sep)[0]]
+        cols = {role: _column(path, header, role, getattr(fmt, f"{role}_col"))
+                for role in ("vehicle", "trip", "start", "end", "gross", "payload")}
+        if fmt.payload_col is not None and fmt.gross_col is None:
+            cols["gross"] = None  # the payload was asked for
+        if fmt.gross_col is not None and fmt.payload_col is None:
+            cols["payload"] = None
+        if cols["gross"] is None and cols["payload"] is None:
+            raise InputError(path, "no mass column: name one gross_kg or payload_kg (or give --gross-col / "
+                                   f"--payload-col); the header has: {', '.join(header)}", line=1)
+        if cols["trip"] is None and (cols["start"] is None or cols["end"] is None or cols["vehicle"] is None):
+            raise InputError(path, "a manifest needs a trip id column, or vehicle, start and end columns (give "
+                                   f"--trip-col, or --vehicle-col, --start-col, --end-col); the header has: "
+                                   f"{', '.join(header)}", line=1)
+        units = {}
+        for role in ("gross", "payload"):
+            col = cols[role]
+            if col is not None:
+                units[role] = fmt.mass_unit or _unit_of(_norm(col)) or "kg"
+                if units[role] not in ("kg", "t"):
+                    raise InputError(path, f"mass unit {units[role]!r}: use kg or t")
+        self.sep, self.decimal, self._cols, self._units = sep, decimal, cols, units
+        self._index = {h: i for i, h in enumerate(header)}
+        self.columns = {k: v for k, v in cols.items() if v is not None}
+        self.mass_unit = units.get("gross", units.get("payload", "kg"))
+
+    def items(self) -> Iterator[ManifestRow | tuple[int, str]]:
+        """Each row as a :class:`ManifestRow`, or ``(line, why)`` for a row that cannot
+        be used, in the file's order; :class:`InputError` for a line that is no CSV
+        (a field over :data:`MAX_FIELD_BYTES`, a NUL byte) or past ``max_rows`` rows."""
+        reader = csv.reader(self._text, delimiter=self.sep)
+        cols, index = self._cols, self._index
+        while True:
+            try:
+                rec = self._guard(lambda: next(reader, None))
+            except csv.Error as exc:
+                raise InputError(self._file, f"not a CSV line: {_csv_reason(exc)}", line=reader.line_num + 1) from None
+            if rec is None:
+                return
+            line_no = reader.line_num + 1  # the header was line 1 (a record spanning lines: its last)
+            if not any(x.strip() for x in rec):
+                continue  # a blank line
+            self.n_rows += 1
+            if self.n_rows > self.max_rows:
+                raise InputError(self._file, f"more than {self.max_rows:,} rows: give the manifest in parts (by "
+                                             "month, by depot)", line=line_no)
+            cell = {role: (rec[index[c]].strip() if c is not None and index[c] < len(rec) else "")
+                    for role, c in cols.items()}
+            try:
+                yield _row(line_no, cell, cols, self._units, self.decimal, self.zone)
+            except ValueError as exc:
+                yield line_no, str(exc)
+
+
+def open_manifest(path: str | Path, fmt: ManifestFormat | None = None, *,
+                  max_rows: int | None = None) -> ManifestReader:
+    """Open the manifest at ``path`` for streaming (:class:`ManifestReader`; use it as a
+    context manager): a regular file of at most :data:`MAX_MANIFEST_BYTES`, refused from
+    its size before it is read, its header read and checked now."""
+    path = Path(path)
+    raw = open_regular(path, "manifest")
+    try:
+        check_size(path, raw, MAX_MANIFEST_BYTES, "manifest", ": give it in parts (by month, by depot)")
+        return ManifestReader(path, raw, fmt or ManifestFormat(), MAX_MANIFEST_ROWS if max_rows is None else max_rows)
+    except BaseException:
+        raw.close()
+        raise
+
+
+def read_manifest(path: str | Path, fmt: ManifestFormat | None = None, *,
+                  max_rows: int | None = None) -> Manifest:
+    """Read the manifest at ``path`` whole (see the module notes; :func:`open_manifest`
+    streams it); raises :class:`~cevm.errors.InputError` for a file it cannot use at all,
+    or beyond the bounds (:data:`MAX_MANIFEST_BYTES`, ``max_rows``, default
+    :data:`MAX_MANIFEST_ROWS`, :data:`MAX_FIELD_BYTES`)."""
+    with open_manifest(path, fmt, max_rows=max_rows) as reader:
+        rows: list[ManifestRow] = []
+        problems: list[tuple[int, str]] = []
+        for item in reader.items():
+            if isinstance(item, ManifestRow):
+                rows.append(item)
+            else:
+                problems.append(item)
+    return Manifest(reader.path, tuple(rows), tuple(problems), reader.columns, reader.mass_unit, reader.decimal)
+
+
+def _records(path: Path, stream, sep: str) -> list[list[str]]:
+    """The CSV records of ``stream`` (the header line), errors as :class:`InputError`."""
+    try:
+        return list(csv.reader(stream, delimiter=sep))
+    except csv.Error as exc:
+        raise InputError(path, f"not a CSV line: {_csv_reason(exc)}", line=1) from None
+
+
+def _csv_reason(exc: csv.Error) -> str:
+    text = str(exc)
+    if "field larger than field limit" in text:
+        return f"a field longer than {MAX_FIELD_BYTES // 1024} KiB"
+    if "NUL" in text:
+        return "a NUL byte (a binary file?)"
+    return text
 
 
 def _row(line: int, cell: dict, cols: dict, units: dict, decimal: str, zone) -> ManifestRow:

@@ -41,6 +41,7 @@ from pathlib import Path
 import numpy as np
 
 from cevm.errors import InputError
+from cevm.io.inputs import open_regular
 from cevm.runtime import release_free_memory
 
 #: Separators tried, in the order preferred when several split the lines alike (a
@@ -106,6 +107,10 @@ def _head(path: Path) -> tuple[bytes, str | None, bool]:
     return head[:SNIFF_BYTES], compression, len(head) <= SNIFF_BYTES
 
 
+#: A line end in the sniffed bytes: CRLF, LF or a CR alone.
+_LINE_END = re.compile(rb"\r\n|\n|\r")
+
+
 def _split(line: str, sep: str) -> list[str]:
     return next(csv.reader([line], delimiter=sep), [])
 
@@ -119,10 +124,7 @@ def sniff_csv(path: str | Path, *, sep: str | None = None, decimal: str | None =
     without line breaks or header, or a separator that cannot be told (give ``sep``).
     """
     path = Path(path)
-    if not path.exists():
-        raise InputError(path, f"{what} not found")
-    if path.is_dir():
-        raise InputError(path, f"is a directory, not a {what}")
+    open_regular(path, what).close()  # a regular file: a FIFO would hang the read, /dev/zero never end it
     if sep is not None and sep not in SEPARATORS:
         raise InputError(path, f"separator {sep!r} not supported; use one of {', '.join(map(separator_name, SEPARATORS))}")
     if decimal is not None and decimal not in (".", ","):
@@ -132,7 +134,7 @@ def sniff_csv(path: str | Path, *, sep: str | None = None, decimal: str | None =
     head, compression, whole = _head(path)
     if b"\x00" in head[:4096]:
         raise InputError(path, f"binary data, not a {what} (CSV text)")
-    lines = head.split(b"\n")
+    lines = _LINE_END.split(head)  # LF, CRLF, or CR alone (a classic Mac export; csv raised on it)
     if not whole:
         lines = lines[:-1]  # the last one may be cut
         if not lines:

@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from cevm.errors import CevmError
+from cevm.errors import OutputError, os_error_text
 from cevm.text import printable
 
 if TYPE_CHECKING:
@@ -87,12 +87,13 @@ def plot_calibration(result: CalibrationResult, path: Path, title: str) -> None:
            ylabel="share of held-out trips inside", title="coverage of the intervals")
     a3.legend(fontsize=8, loc="upper left")
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
+    save_figure(fig, path)
 
 
 def plot_simulation(frame, res, path: Path, title: str) -> None:
     """State of charge (EV, the paper's figure 4) or fuel used (ICE, figure 6) against
-    time, with the elevation, from :meth:`SimulationResult.to_frame`."""
+    time, with the elevation, from :meth:`SimulationResult.to_frame` (or a mapping of
+    those columns: ``time_s``, ``soc_pct`` or ``fuel_cum_l``, ``elevation_m``)."""
     fig = _figure((10, 4.5))
     ax = fig.subplots()
     t_min = frame["time_s"] / 60.0
@@ -109,7 +110,23 @@ def plot_simulation(frame, res, path: Path, title: str) -> None:
         ax2.plot(t_min, frame["elevation_m"], color="0.6", lw=0.8, label="elevation")
         ax2.set_ylabel("elevation [m]")
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
+    save_figure(fig, path)
+
+
+def save_figure(fig, path) -> None:
+    """Write the figure to ``path`` (PNG, or the format its suffix names) whole or not at
+    all (:class:`cevm.io.outputs.OutFile`): a failed write (a full disk) is an
+    :class:`~cevm.errors.OutputError` naming the file (exit 3), and leaves no half-written
+    file. The figure goes to a file cevm opened, not to a path: matplotlib, given a path,
+    wrote to ``/dev/full`` without a word."""
+    from cevm.io.outputs import OutFile
+
+    fmt = Path(path).suffix.lstrip(".").lower() or "png"
+    try:
+        with OutFile(path, binary=True) as fh:
+            fig.savefig(fh, format=fmt, dpi=120)
+    except OSError as exc:
+        raise OutputError(os_error_text(exc, str(path))) from None
 
 
 def vehicle_label(vehicle) -> str:
@@ -194,7 +211,4 @@ def plot_predictions(path: Path, sources: list[Source], pset: PredictionSet | Se
         ax.grid(True, alpha=0.3)
         ax.legend(fontsize=7)
     fig.tight_layout()
-    try:
-        fig.savefig(path, dpi=120)
-    except OSError as exc:
-        raise CevmError(f"{path}: cannot write the plot: {exc.strerror or exc}") from None
+    save_figure(fig, path)

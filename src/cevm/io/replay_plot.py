@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from cevm.errors import CevmError
+from cevm.io.plots import save_figure
 from cevm.text import printable
 
 #: Vehicles drawn in their own colour; the rest share one.
@@ -50,7 +50,4 @@ def plot_duties(path: Path, *, vehicle: list[str], start_s: np.ndarray, energy: 
     ax.legend(fontsize=8, loc="best")
     fig.autofmt_xdate()
     fig.tight_layout()
-    try:
-        fig.savefig(path, dpi=120)
-    except OSError as exc:
-        raise CevmError(f"{path}: cannot write the plot: {exc.strerror or exc}") from None
+    save_figure(fig, path)  # whole or not at all; a full disk is exit 3

@@ -5,6 +5,18 @@ files and resolves each leg's source to a CE vector with a *leg resolver*:
 :func:`default_resolver` reads cycle files; :func:`cevm.store.sources.store_resolver`
 also reads stored trips and routes. :func:`fleet_report` is everything
 ``cevm fleet plan`` shows.
+
+**Files a scenario names are never quoted.** A scenario may name any file on the machine
+as a vehicle file or a leg's cycle (or grade) file, and whoever runs ``cevm fleet plan``
+on it may be able to read files its author cannot (a service, an operator's account). So
+an error of such a file says which file, which key of the scenario and at which line,
+and whether it could be opened (missing, unreadable, not a regular file, too large:
+:class:`~cevm.errors.FileAccessError`), but never what the file holds: a cycle reader's
+message quotes the header it found, a vehicle file's the key it did not know (the
+``/etc/shadow`` named as a leg had its first line printed). Each such error says how to
+see the details on a file one may read (``cevm predict -c FILE``, ``cevm vehicle show
+FILE``). Like a VRT's sources (:mod:`cevm.ingest.dsm_sources`), the files are local
+regular files only: a FIFO, a device or a directory is refused before it is read.
 """
 
 from __future__ import annotations
@@ -38,8 +50,9 @@ from cevm.core.assignment import (
 from cevm.core.assignment.verdict import LegDemand, reference_differences, vehicle_verdicts, verdict_warnings
 from cevm.core.cycle import CycleVector, drive_cycle_vector
 from cevm.core.vehicle import Vehicle
-from cevm.errors import InputError
+from cevm.errors import FileAccessError, InputError
 from cevm.io.cycles import CycleFormat, read_cycle_csv
+from cevm.io.inputs import open_regular
 from cevm.io.toml import read_toml
 from cevm.io.vehicles import load_vehicle
 
@@ -66,11 +79,25 @@ def default_resolver(source: LegSource, base_dir: Path) -> CycleVector:
         if not path.is_absolute():
             path = base_dir / path
         fmt = CycleFormat.from_mapping(dict(source.options), path, base_dir) if source.options else None
+        for named in (path, *((fmt.grade_file,) if fmt is not None and fmt.grade_file is not None else ())):
+            open_regular(named, "cycle file").close()  # local regular files only, refused before they are read
         cyc = read_cycle_csv(path, fmt)
         return drive_cycle_vector(cyc.time_s, cyc.speed_mps, cyc.elevation_m, validate=False)
     raise InputError(
         None, f"leg source {source.kind} = {source.ref!r} needs the trip store; this resolver reads cycle files only"
     )
+
+
+def unquoted(exc: InputError, scenario: Path, where: str, what: str, how: str) -> InputError:
+    """The error ``exc`` of a file the ``scenario`` names (at key ``where``), without a word
+    of the file's content (see the module notes): a :class:`FileAccessError` as it is (it
+    quotes nothing), any other as the file, its line and ``what`` it should be, and
+    ``how`` to see what is wrong on a file one may read."""
+    if isinstance(exc, FileAccessError) or exc.path is None or Path(exc.path) == scenario:
+        return InputError(exc.path, f"{exc.message} (named by {where} of {scenario})", line=exc.line,
+                          column=exc.column) if isinstance(exc, FileAccessError) else exc
+    return InputError(exc.path, f"not a usable {what} (named by {where} of {scenario}; what is wrong is not shown, "
+                                f"since a file a scenario names may be anyone's: {how} says it)", line=exc.line)
 
 
 def _read_toml(path: Path) -> dict:
@@ -286,7 +313,10 @@ def _fleet_vehicles(path: Path, data: dict, reserve_default: float) -> list[Flee
         vid = _str(path, f"{where}.id", v.get("id"))
         vfile = path.parent / _str(path, f"{where}.file", v.get("file"))
         if vfile not in vehicle_cache:
-            vehicle_cache[vfile] = load_vehicle(vfile)
+            try:
+                vehicle_cache[vfile] = load_vehicle(vfile)
+            except InputError as exc:
+                raise unquoted(exc, path, f"{where}.file", "vehicle file", f"cevm vehicle show {vfile}") from None
         veh = vehicle_cache[vfile]
         maxg = v.get("max_gross_kg", veh.max_gross_kg)
         vehicles.append(
@@ -320,6 +350,9 @@ class _LegVectors:
             except InputError as exc:
                 if exc.path is None:
                     raise InputError(self.path, f"{where}: {exc.message}") from None
+                if source.kind == "cycle":  # a file the scenario names: never quoted
+                    raise unquoted(exc, self.path, where, "cycle file",
+                                   "cevm predict -v VEHICLE -c FILE with the leg's reading options") from None
                 raise
         if source not in self.repeated:
             self.repeated[source] = self.vectors[key].repeated(source.repeat)

@@ -1,17 +1,30 @@
 """The stored form of a trip's profile arrays: one compact BLOB per trip
 (:func:`encode_profile`, :func:`decode_profile`), made by ingest's workers
-(:func:`trip_profile_blob`) so that the store's single writer does not."""
+(:func:`trip_profile_blob`) so that the store's single writer does not.
+
+Decoding is bounded before any decompression: a profile's header says how many samples
+it holds, and a header above :data:`MAX_PROFILE_SAMPLES` (or, where the caller knows it,
+other than the trip's stored ``n_samples``) is damage, refused before anything is
+inflated; each array is then inflated to exactly the size its header gives and no more
+(a compressed stream that would grow further is damage too), so a blob whose checksum is
+valid but whose content is a zip bomb costs at most the memory of the trip it claims to
+be. A vector in the zip format of version 1 (:func:`decode_vector`) is bounded by the
+sizes its zip directory declares.
+"""
 
 from __future__ import annotations
 
+import io
 import json
 import struct
+import zipfile
 import zlib
 from collections.abc import Mapping
 from functools import lru_cache
 
 import numpy as np
 
+from cevm.core.cycle import CycleVector
 from cevm.core.trip import Trip
 from cevm.errors import CevmError
 
@@ -38,9 +51,11 @@ _ZSTD_LEVEL = 1
 _PROFILE_MAGIC_V1 = b"CEVMPRF1"
 _PROFILE_CODEC_V1 = "shuffle+zlib"
 
-#: The most samples a stored profile may hold: checked from its header before anything
-#: is decompressed, so that a damaged (or forged) header cannot make a reader allocate
-#: gigabytes (a trip of 10 million 1-s samples lasts 16 weeks).
+#: The most samples a stored profile (a trip's, a route's cycle leg's) may hold: checked
+#: from its header before anything is decompressed, so that a damaged (or forged) header
+#: cannot make a reader allocate gigabytes (a trip of 10 million 1-s samples lasts 16
+#: weeks; a cycle file holds at most 10 million samples). A trip's profile decodes to
+#: about 48 bytes a sample.
 MAX_PROFILE_SAMPLES = 10_000_000
 
 
@@ -95,11 +110,14 @@ def trip_profile_blob(trip: Trip) -> bytes:
     return encode_profile({name: getattr(trip, name) for name in PROFILE_DTYPES})
 
 
-def decode_profile(blob: bytes) -> dict[str, np.ndarray]:
+def decode_profile(blob: bytes, n_samples: int | None = None) -> dict[str, np.ndarray]:
     """Unpack :func:`encode_profile`'s BLOB (or one of format 1) into float64 arrays
-    (speed and elevation carry the float32 rounding of their storage). The header's
-    sample count is checked against :data:`MAX_PROFILE_SAMPLES` before anything is
-    decompressed."""
+    (speed and elevation carry the float32 rounding of their storage).
+
+    ``n_samples``: the trip's stored sample count, if known: a header that says another
+    is damage. Any header above :data:`MAX_PROFILE_SAMPLES`, an array's stream that does
+    not decompress to exactly its size, raise :class:`CevmError` before more memory is
+    taken (see the module notes)."""
     blob = bytes(blob)
     magic = blob[: len(_PROFILE_MAGIC)]
     if magic not in (_PROFILE_MAGIC, _PROFILE_MAGIC_V1):
@@ -113,20 +131,79 @@ def decode_profile(blob: bytes) -> dict[str, np.ndarray]:
     if (magic, codec) not in ((_PROFILE_MAGIC, _PROFILE_CODEC), (_PROFILE_MAGIC_V1, _PROFILE_CODEC_V1)):
         raise CevmError(f"profile codec {codec!r} unknown to this cevm")
     n = int(header["n"])
-    if not 0 <= n <= MAX_PROFILE_SAMPLES:
-        raise CevmError(f"corrupt profile in the store: its header says {n:,} samples (at most "
-                        f"{MAX_PROFILE_SAMPLES:,}); re-ingest the file")
+    check_samples(n, n_samples)
     out: dict[str, np.ndarray] = {}
     for name, dtype, nbytes in header["arrays"]:
         dt = np.dtype(dtype)
+        if dt.kind != "f" or dt.itemsize not in (4, 8):
+            raise CevmError(f"profile array {name!r} of dtype {dtype!r}: not a stored profile's")
+        data, size = blob[pos : pos + int(nbytes)], n * dt.itemsize
+        pos += int(nbytes)
         if magic == _PROFILE_MAGIC_V1:
-            raw = zlib.decompress(blob[pos : pos + nbytes])
+            raw = inflate_exactly(data, size)
             a = np.frombuffer(raw, np.uint8).reshape(dt.itemsize, n).T.copy().view(dt).reshape(n)
         else:
-            raw = _zstd().decompress(blob[pos : pos + nbytes], decompressed_size=n * dt.itemsize, asbytes=True)
+            raw = _unzstd_exactly(data, size)
             delta = np.frombuffer(raw, np.uint8).reshape(dt.itemsize, n).T.copy().view(
                 np.uint64 if dt.itemsize == 8 else np.uint32).reshape(n)
             a = np.cumsum(delta, dtype=delta.dtype).view(dt)
-        pos += nbytes
+        del raw
         out[name] = a.astype(np.float64)
     return out
+
+
+def check_samples(n: int, expected: int | None = None) -> None:
+    """Refuse (:class:`CevmError`) a stored blob's sample count ``n`` from its header:
+    negative, above :data:`MAX_PROFILE_SAMPLES`, or other than ``expected`` (the trip's
+    stored count) when given; before anything is inflated."""
+    if n < 0 or n > MAX_PROFILE_SAMPLES:
+        raise CevmError(f"its header says {n:,} samples (at most {MAX_PROFILE_SAMPLES:,} are stored): not inflated")
+    if expected is not None and n != int(expected):
+        raise CevmError(f"its header says {n:,} samples, the trip {int(expected):,}: not inflated")
+
+
+def inflate_exactly(data: bytes, size: int) -> bytes:
+    """``data`` (a zlib stream) inflated to exactly ``size`` bytes: never more (a stream
+    that would grow past it is refused once ``size`` bytes are out), and refused if it
+    ends short (:class:`CevmError`)."""
+    d = zlib.decompressobj()
+    try:
+        out = d.decompress(data, max(size, 1))  # (a max_length of 0 would be no limit)
+        more = len(out) > size or bool(d.unconsumed_tail) or (not d.eof and bool(d.decompress(b"", 1)))
+    except zlib.error as exc:
+        raise CevmError(f"does not inflate: {exc}") from None
+    if len(out) != size or more:
+        raise CevmError(f"inflates to {'more' if more else len(out)} bytes, not the {size:,} of its header")
+    return out
+
+
+def _unzstd_exactly(data: bytes, size: int) -> bytes:
+    """``data`` (a zstd frame) decompressed into exactly ``size`` bytes (pyarrow allocates
+    that much and no more, and fails on a frame of another size: :class:`CevmError`)."""
+    try:
+        return _zstd().decompress(data, decompressed_size=size, asbytes=True)
+    except (OSError, ValueError) as exc:
+        raise CevmError(f"does not decompress to the {size:,} bytes of its header: {exc}") from None
+
+
+#: Most bytes the arrays of a vector in the zip format of version 1 may declare.
+_MAX_NPZ_BYTES = 3 * 8 * MAX_PROFILE_SAMPLES + (1 << 16)
+
+
+def decode_vector(blob: bytes) -> CycleVector:
+    """A stored vector blob as a :class:`~cevm.core.cycle.CycleVector`. The current
+    layout is read as it is (its size is the blob's); one in the zip format of version 1
+    only if its zip directory declares at most :data:`_MAX_NPZ_BYTES` of arrays (else
+    :class:`CevmError`, before anything is inflated; the zip reader inflates no member
+    past its declared size)."""
+    blob = bytes(blob)
+    if blob[:2] == b"PK":
+        try:
+            with zipfile.ZipFile(io.BytesIO(blob)) as z:
+                declared = sum(i.file_size for i in z.infolist())
+        except (zipfile.BadZipFile, ValueError, OSError) as exc:
+            raise CevmError(f"not a readable zip: {exc}") from None
+        if declared > _MAX_NPZ_BYTES:
+            raise CevmError(f"its zip directory declares {declared:,} bytes of arrays (at most "
+                            f"{_MAX_NPZ_BYTES:,}): not inflated")
+    return CycleVector.from_bytes(blob)

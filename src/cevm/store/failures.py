@@ -20,6 +20,7 @@ The command line gives each kind its exit code (:mod:`cevm.cli.common`).
 from __future__ import annotations
 
 import functools
+import re
 import sqlite3
 from pathlib import Path
 
@@ -91,6 +92,10 @@ def translate(exc: sqlite3.Error, path: Path, busy_timeout_s: float) -> CevmErro
     code = getattr(exc, "sqlite_errorcode", None)
     primary = None if code is None else code & 0xFF
     text = str(exc)
+    if code is None and text.startswith("Could not decode to UTF-8"):  # Python's, of damaged text in a row
+        column = re.search(r"column '([^']*)'", text)
+        return StoreDamagedError(f"{path}: the store is damaged (a row's text in column "
+                                 f"{column.group(1) if column else '?'!r} is not UTF-8); {DAMAGED_HINT}")
     if primary == _CORRUPT:
         return StoreDamagedError(f"{path}: the store is damaged ({text}); {DAMAGED_HINT}")
     if primary == _NOTADB:

@@ -4,14 +4,15 @@ holds (``cevm store info``). Both only read."""
 
 from __future__ import annotations
 
+import json
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
-from cevm.core.cycle import CycleVector
 from cevm.errors import CevmError
+from cevm.store.codec import decode_vector
 from cevm.store.failures import StoreDamagedError
 from cevm.store.routes import load_route_legs, route_names
-from cevm.store.schema import SCHEMA_VERSION
+from cevm.store.schema import SCHEMA_VERSION, TRIP_COLUMNS
 from cevm.store.trips import TripStore
 
 
@@ -98,9 +99,9 @@ def check_store(store: TripStore, progress: Callable[[int, int], None] | None = 
 
 
 def _trip_problems(store: TripStore, trip_id: str, n_samples: int) -> list[Problem]:
-    out = []
+    out = _row_problems(store, trip_id)
     try:
-        CycleVector.from_bytes(store.load_vector_bytes(trip_id))
+        decode_vector(store.load_vector_bytes(trip_id))  # a zip of format 1 bounded by its declared sizes
     except CevmError as exc:  # DamagedTripError (checksum, unreadable page) or a store error
         out.append(Problem("trip", trip_id, str(exc)))
     except Exception as exc:  # whatever a damaged vector makes the decoder raise
@@ -112,6 +113,21 @@ def _trip_problems(store: TripStore, trip_id: str, n_samples: int) -> list[Probl
     except CevmError as exc:
         out.append(Problem("trip", trip_id, str(exc)))
     return out
+
+
+def _row_problems(store: TripStore, trip_id: str) -> list[Problem]:
+    """The trip's row read whole, as the commands that list trips read it: text that is
+    not UTF-8 (damaged pages: ``cevm trips`` stopped on it) and a quality summary that is
+    not JSON are damage."""
+    try:
+        row = store.con.execute(f"SELECT {', '.join(TRIP_COLUMNS)} FROM trips WHERE trip_id = ?", (trip_id,)).fetchone()
+    except StoreDamagedError as exc:
+        return [Problem("trip", trip_id, f"its row cannot be read: {exc.__cause__ or exc}")]
+    try:
+        json.loads(row[TRIP_COLUMNS.index("quality_json")])
+    except (TypeError, ValueError) as exc:
+        return [Problem("trip", trip_id, f"its quality summary is not JSON: {exc}")]
+    return []
 
 
 def _journal_mode(store: TripStore) -> str:

@@ -26,9 +26,10 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -209,66 +210,111 @@ def clear_masses(store: TripStore, trip_ids: Sequence[str]) -> int:
 @dataclass(frozen=True)
 class ManifestMatch:
     """A manifest against the store: the masses to give (``masses``), the rows not applied
-    (``problems``: (line, why)), and the trips whose manifest mass and logged gross weight
+    (``problems``: (line, why), sorted by line, unless they were passed on as found; their
+    count ``n_problems``), and the trips whose manifest mass and logged gross weight
     disagree (``disagreements``, sentences)."""
 
     path: str
     masses: tuple[AssignedMass, ...]
     problems: tuple[tuple[int, str], ...]
     disagreements: tuple[str, ...]
+    n_problems: int = 0  #: rows not applied (also those passed to ``on_problem`` rather than kept)
 
 
-def match_manifest(store: TripStore, manifest) -> ManifestMatch:
-    """Match the rows of ``manifest`` (:class:`cevm.io.manifest.Manifest`) to stored trips
-    (see the module notes); its rows' own problems are passed on."""
-    df = store.list_trips()
-    by_id = {tid: i for i, tid in enumerate(df["trip_id"])}
+def match_manifest(store: TripStore, manifest,
+                   on_problem: Callable[[int, str], None] | None = None) -> ManifestMatch:
+    """Match the rows of ``manifest`` (a :class:`cevm.io.manifest.Manifest`, or a
+    :class:`~cevm.io.manifest.ManifestReader` streaming one) to stored trips (see the
+    module notes); its rows' own problems are passed on.
+
+    ``on_problem(line, why)``: called for each row not applied, as it is found (a row's
+    own problem or no trip, in the file's order; rows that contradict each other once all
+    are read), instead of collecting them in :attr:`ManifestMatch.problems`: then only
+    the rows matched are held (memory grows with the trips, not with the manifest)."""
+    df = _trip_times(store)
+    trip_ids = df["trip_id"].to_numpy()
+    by_id = {tid: i for i, tid in enumerate(trip_ids)}
     vehicles = df["vehicle_id"].to_numpy()
     mid = (df["start_utc_s"] + 0.5 * df["duration_s"]).to_numpy(dtype=np.float64)
-    problems = list(manifest.problems)
-    hits: dict[str, list] = {}
-    for row in manifest.rows:
+    # each vehicle's trips by midpoint: a window's trips by binary search, not a scan of all trips per row
+    order = np.lexsort((mid, vehicles))
+    mid_sorted = mid[order]
+    first: dict[str, list[int]] = {}
+    for k, v in enumerate(vehicles[order]):
+        first.setdefault(v, [k, k])[1] = k + 1
+    kept: list[tuple[int, str]] = []
+    n_problems = 0
+
+    def problem(line: int, why: str) -> None:
+        nonlocal n_problems
+        n_problems += 1
+        if on_problem is None:
+            kept.append((line, why))
+        else:
+            on_problem(line, why)
+
+    hits: dict[str, tuple[set, list[int], Any]] = {}  # trip: (its masses, their lines, the last row)
+    for row in manifest.items():
+        if isinstance(row, tuple):
+            problem(*row)
+            continue
         if row.trip_id is not None:
             i = by_id.get(row.trip_id)
             if i is None:
-                problems.append((row.line, f"trip {row.trip_id!r} is not in the store"))
+                problem(row.line, f"trip {row.trip_id!r} is not in the store")
                 continue
             if row.vehicle_id is not None and row.vehicle_id != vehicles[i]:
-                problems.append((row.line, f"trip {row.trip_id!r} is a trip of {vehicles[i]!r}, not of "
-                                           f"{row.vehicle_id!r}"))
+                problem(row.line, f"trip {row.trip_id!r} is a trip of {vehicles[i]!r}, not of {row.vehicle_id!r}")
                 continue
         else:
-            mine = vehicles == row.vehicle_id
-            if not mine.any():
-                problems.append((row.line, f"no stored trips of vehicle {row.vehicle_id!r}"))
+            span = first.get(row.vehicle_id)
+            if span is None:
+                problem(row.line, f"no stored trips of vehicle {row.vehicle_id!r}")
                 continue
-            inside = np.flatnonzero(mine & (mid >= row.start_utc_s) & (mid <= row.end_utc_s))
+            m = mid_sorted[span[0]:span[1]]  # the vehicle's midpoints, sorted (a view)
+            inside = order[span[0] + np.searchsorted(m, row.start_utc_s, side="left"):
+                           span[0] + np.searchsorted(m, row.end_utc_s, side="right")]
             if inside.size != 1:
-                span = f"{_utc(row.start_utc_s)} to {_utc(row.end_utc_s)}"
+                when = f"{_utc(row.start_utc_s)} to {_utc(row.end_utc_s)}"
                 if inside.size == 0:
-                    problems.append((row.line, f"no stored trip of {row.vehicle_id!r} has its midpoint in {span}"))
+                    problem(row.line, f"no stored trip of {row.vehicle_id!r} has its midpoint in {when}")
                 else:
-                    ids = ", ".join(repr(df["trip_id"].iloc[j]) for j in inside[:4]) + (" ..." if inside.size > 4
-                                                                                        else "")
-                    problems.append((row.line, f"{inside.size} stored trips of {row.vehicle_id!r} have their "
-                                               f"midpoint in {span} ({ids}): give trip ids, or one window each"))
+                    ids = ", ".join(repr(trip_ids[j]) for j in inside[:4]) + (" ..." if inside.size > 4 else "")
+                    problem(row.line, f"{inside.size} stored trips of {row.vehicle_id!r} have their midpoint in "
+                                      f"{when} ({ids}): give trip ids, or one window each")
                 continue
             i = int(inside[0])
-        hits.setdefault(df["trip_id"].iloc[i], []).append(row)
+        values, lines, _ = hits.get(trip_ids[i]) or (set(), [], None)
+        values.add((row.kind, row.mass_kg))
+        lines.append(row.line)
+        hits[trip_ids[i]] = (values, lines, row)
     masses, disagreements = [], []
-    for tid, rows in hits.items():
-        if len({(r.kind, r.mass_kg) for r in rows}) > 1:
-            lines = ", ".join(str(r.line) for r in rows)
-            for r in rows:
-                problems.append((r.line, f"trip {tid!r} is given different masses by lines {lines}: none applied"))
+    for tid, (values, lines, r) in hits.items():
+        if len(values) > 1:
+            said = ", ".join(map(str, lines))
+            for line in lines:
+                problem(line, f"trip {tid!r} is given different masses by lines {said}: none applied")
             continue
-        r = rows[-1]
         mass = AssignedMass(tid, r.kind, r.mass_kg, "manifest", manifest.path, r.line)
         masses.append(mass)
         text = TripMass(tid, mass, _logged(df["gross_weight_kg"].iloc[by_id[tid]])).disagreement()
         if text:
             disagreements.append(f"line {r.line}: {text}")
-    return ManifestMatch(manifest.path, tuple(masses), tuple(sorted(problems)), tuple(disagreements))
+    return ManifestMatch(manifest.path, tuple(masses), tuple(sorted(kept)), tuple(disagreements), n_problems)
+
+
+def _trip_times(store: TripStore):
+    """The columns of the stored trips that matching needs (id, vehicle, start, duration,
+    logged gross weight), without their quality and evidence columns."""
+    import pandas as pd
+
+    rows = store.con.execute("SELECT trip_id, vehicle_id, start_utc_s, duration_s, gross_weight_kg FROM trips "
+                             "ORDER BY vehicle_id, start_utc_s, trip_id").fetchall()
+    df = pd.DataFrame.from_records(rows, columns=["trip_id", "vehicle_id", "start_utc_s", "duration_s",
+                                                  "gross_weight_kg"])
+    for c in ("start_utc_s", "duration_s", "gross_weight_kg"):
+        df[c] = df[c].astype(np.float64)
+    return df
 
 
 def _utc(t_s: float) -> str:

@@ -1,7 +1,9 @@
 """Reading the trip store: source files, trips (scalars as DataFrames; vectors, profiles
 and whole trips by id), runs, and SQLite's integrity check. Nothing here writes.
 
-Every blob read is checked against the checksum stored with it; a damaged one raises
+Every blob read is checked against the checksum stored with it (a blob without one, its
+checksum NULL, is damaged too: every writer stores both in one statement, and migration 3
+gave the older blobs theirs); a damaged one raises
 :class:`~cevm.store.failures.DamagedTripError` naming the trip (and its log file, to
 re-ingest), and the readers of many trips can skip such trips and say which
 (``on_damaged``)."""
@@ -19,7 +21,7 @@ import pandas as pd
 from cevm.core.cycle import CycleVector
 from cevm.core.trip import TRIP_EVIDENCE_FIELDS, Measurement, Trip
 from cevm.errors import CevmError
-from cevm.store.codec import decode_profile
+from cevm.store.codec import decode_profile, decode_vector
 from cevm.store.failures import DAMAGED_HINT, DamagedTripError, StoreDamagedError
 from cevm.store.location import file_key
 from cevm.store.schema import FILE_COLUMNS, TRIP_COLUMNS, TRIP_FLOAT_COLUMNS, blob_crc32, in_json, nan_for_null
@@ -196,15 +198,22 @@ class TripQueries:
         """``blob`` if it matches its stored checksum ``crc``, else :class:`DamagedTripError`."""
         if blob is None:
             raise self._damaged(trip_id, part, "missing")
+        if crc is None:
+            raise self._damaged(trip_id, part, "its checksum is missing (NULL)")
         blob = bytes(blob)
-        if crc is not None and blob_crc32(blob) != crc:
+        if blob_crc32(blob) != crc:
             raise self._damaged(trip_id, part, "checksum mismatch")
         return blob
 
     def _blob(self, trip_id: str, column: str) -> bytes:
+        return self._blob_row(trip_id, column)[0]
+
+    def _blob_row(self, trip_id: str, column: str) -> tuple[bytes, int | None]:
+        """A trip's checked blob, and its trip's sample count (None if its trip row is gone)."""
         try:
             row = self.con.execute(
-                f"SELECT {column}, {column}_crc32 FROM trip_blobs WHERE trip_id = ?", (trip_id,)
+                f"SELECT b.{column}, b.{column}_crc32, t.n_samples FROM trip_blobs b LEFT JOIN trips t "
+                "USING (trip_id) WHERE b.trip_id = ?", (trip_id,)
             ).fetchone()
         except StoreDamagedError as exc:  # the page holding it: name the trip
             raise self._damaged(trip_id, column, f"unreadable: {exc.__cause__ or exc}") from exc
@@ -212,7 +221,7 @@ class TripQueries:
             if self.con.execute("SELECT 1 FROM trips WHERE trip_id = ?", (trip_id,)).fetchone() is not None:
                 raise self._damaged(trip_id, column, "missing")
             raise CevmError(f"unknown trip id '{trip_id}'; {self._count_hint()}")
-        return self._checked(trip_id, column, *row)
+        return self._checked(trip_id, column, row[0], row[1]), row[2]
 
     def load_vector_bytes(self, trip_id: str) -> bytes:
         """The drive-cycle vector bytes stored with a trip, as given at ingest, checked
@@ -223,11 +232,13 @@ class TripQueries:
         """A trip's profile: float64 arrays keyed as :data:`PROFILE_DTYPES` (time_s,
         speed_mps, distance_m, elevation_m, lat_deg, lon_deg). A blob that fails its
         checksum or does not decode raises :class:`DamagedTripError`."""
-        return self._decoded_profile(trip_id, self._blob(trip_id, "profile"))
+        return self._decoded_profile(trip_id, *self._blob_row(trip_id, "profile"))
 
-    def _decoded_profile(self, trip_id: str, blob: bytes) -> dict[str, np.ndarray]:
+    def _decoded_profile(self, trip_id: str, blob: bytes, n_samples: int | None) -> dict[str, np.ndarray]:
+        """The profile ``blob`` decoded, no larger than its trip's ``n_samples`` says
+        (:func:`~cevm.store.codec.decode_profile`: a header that says more is damage)."""
         try:
-            return decode_profile(blob)
+            return decode_profile(blob, n_samples)
         except Exception as exc:  # whatever a damaged blob makes the decoder raise
             raise self._damaged(trip_id, "profile", f"does not decode: {exc}") from None
 
@@ -275,7 +286,7 @@ class TripQueries:
         out: dict[str, CycleVector] = {}
         for tid, blob in self.load_vectors(vehicle_id, trip_ids, on_damaged).items():
             try:
-                out[tid] = CycleVector.from_bytes(blob)
+                out[tid] = decode_vector(blob)
             except Exception as exc:  # whatever a damaged blob makes the decoder raise
                 err = self._damaged(tid, "vector", f"does not decode: {exc}")
                 if on_damaged is None:
@@ -292,10 +303,13 @@ class TripQueries:
             ids = in_json(trip_ids)
             bad = {r[0] for r in self.con.execute(
                 "SELECT trip_id FROM trip_blobs WHERE trip_id IN (SELECT value FROM json_each(?)) "
-                "AND crc32(profile) != profile_crc32", (ids,))}
-            present = {r[0] for r in self.con.execute(
-                "SELECT trip_id FROM trip_blobs WHERE trip_id IN (SELECT value FROM json_each(?))", (ids,))}
-            found = [self._damaged(tid, "profile", "checksum mismatch" if tid in present else "missing")
+                "AND crc32(profile) IS NOT profile_crc32", (ids,))}
+            no_crc = {r[0]: bool(r[1]) for r in self.con.execute(
+                "SELECT trip_id, profile_crc32 IS NULL FROM trip_blobs WHERE trip_id IN (SELECT value FROM "
+                "json_each(?))", (ids,))}
+            present = set(no_crc)
+            found = [self._damaged(tid, "profile", "missing" if tid not in present else "checksum mismatch"
+                                   if no_crc.get(tid) is False else "its checksum is missing (NULL)")
                      for tid in dict.fromkeys(trip_ids) if tid in bad or tid not in present]
         except StoreDamagedError:
             found = []
@@ -320,7 +334,7 @@ class TripQueries:
         if row is None:
             raise CevmError(f"unknown trip id '{trip_id}'; {self._count_hint()}")
         r = dict(zip(TRIP_COLUMNS, row[:-2]))
-        prof = self._decoded_profile(trip_id, self._checked(trip_id, "profile", row[-2], row[-1]))
+        prof = self._decoded_profile(trip_id, self._checked(trip_id, "profile", row[-2], row[-1]), r["n_samples"])
         measured = None
         if r["measured_kind"] is not None:
             measured = Measurement(
@@ -330,6 +344,10 @@ class TripQueries:
                 resolution=nan_for_null(r["measured_resolution"]),
                 uncertainty=nan_for_null(r["measured_uncertainty"]),
             )
+        try:
+            quality = json.loads(r["quality_json"])
+        except (TypeError, ValueError) as exc:  # damaged text that is still UTF-8
+            raise self._damaged(trip_id, "quality", f"not JSON: {exc}") from None
         return Trip(
             vehicle_id=r["vehicle_id"],
             source_file=r["source_file"],
@@ -340,7 +358,7 @@ class TripQueries:
             dsm_coverage_pct=nan_for_null(r["dsm_coverage_pct"]),
             measured=measured,
             gross_weight_kg=r["gross_weight_kg"],
-            quality=json.loads(r["quality_json"]),
+            quality=quality,
             **{f: r[f] for f in TRIP_EVIDENCE_FIELDS},
             start_soc_pct=r["start_soc_pct"],
             **prof,
@@ -375,9 +393,17 @@ class TripQueries:
     def require_intact(self) -> None:
         """Raise :class:`StoreDamagedError` unless SQLite's quick check finds the database
         sound: before writing into a store (writing into a damaged database can spread
-        the damage). It reads the whole file: 0.3 s for 530 MB here, from the page cache."""
-        problems = self.integrity_check(quick=True)
+        the damage). It reads the whole file: 0.3 s for 530 MB here, from the page cache;
+        once it passed, a second call on the same connection costs nothing (a writable
+        :class:`~cevm.store.TripStore` runs it when it opens)."""
+        if getattr(self, "_intact", False):
+            return
+        try:
+            problems = self.integrity_check(quick=True)
+        except StoreDamagedError as exc:  # too damaged for the check to run, or not a database
+            raise StoreDamagedError(f"{exc}; nothing was written to it") from exc
         if problems != "ok":
             first = problems.splitlines()[0]
             raise StoreDamagedError(f"{self.path}: the store is damaged ({first}); nothing was written to it; "
                                     f"{DAMAGED_HINT}")
+        self._intact = True

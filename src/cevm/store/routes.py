@@ -41,6 +41,7 @@ import numpy as np
 from cevm.core.cycle import CR0_DEFAULT, CycleVector, DriveCycle, cycle_vector
 from cevm.errors import CevmError, InputError
 from cevm.store import TripStore
+from cevm.store.codec import check_samples, decode_vector, inflate_exactly
 from cevm.store.failures import DamagedRouteError
 from cevm.store.schema import blob_crc32
 
@@ -72,19 +73,30 @@ class CycleLeg:
         return leg
 
     @classmethod
-    def all_from_file(cls, path: str | Path, fmt=None, *, one: bool = False) -> list[CycleLeg]:
+    def all_from_file(cls, path: str | Path, fmt=None, *, one: bool = False,
+                      max_samples: int | None = None) -> list[CycleLeg]:
         """The legs of a cycle file, one per cycle it holds (:func:`cevm.io.cycles.read_cycles`
-        with the :class:`~cevm.io.cycles.CycleFormat` ``fmt``; ``one``: exactly one), each
-        with the file's hash."""
+        with the :class:`~cevm.io.cycles.CycleFormat` ``fmt``, at most ``max_samples``
+        samples; ``one``: exactly one), each with the file's hash."""
         from cevm.io.cycles import read_cycle_csv, read_cycles
 
-        cycles = [read_cycle_csv(path, fmt)] if one else read_cycles(path, fmt)
+        cycles = [read_cycle_csv(path, fmt)] if one else read_cycles(path, fmt, max_samples=max_samples)
         p = Path(path)
-        ref, sha = str(p.expanduser().resolve()), hashlib.sha256(p.read_bytes()).hexdigest()
+        ref, sha = str(p.expanduser().resolve()), _sha256(p)
         return [cls(cycle=cyc, ref=ref, sha256=sha) for cyc in cycles]
 
 
 LegInput = TripLeg | CycleLeg
+
+
+def _sha256(path: Path) -> str:
+    """The SHA-256 of a file's bytes, read 1 MiB at a time (a cycle file is read whole
+    into arrays already: its bytes need not be held too)."""
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for chunk in iter(lambda: fh.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()
 
 
 @dataclass(frozen=True)
@@ -151,21 +163,27 @@ def decode_cycle_profile(blob: bytes) -> dict[str, np.ndarray]:
     if not blob.startswith(_PROFILE_MAGIC):
         raise CevmError("corrupt cycle profile in a route (bad magic); re-create the route")
     n, has_h = struct.unpack_from("<II", blob, len(_PROFILE_MAGIC))
-    raw = np.frombuffer(zlib.decompress(blob[len(_PROFILE_MAGIC) + 8 :]), dtype="<f8")
-    if raw.size != n * (3 if has_h else 2):
-        raise CevmError("corrupt cycle profile in a route (bad length); re-create the route")
+    check_samples(n)  # before inflating: a bomb's header is refused (cevm.store.codec)
+    if has_h not in (0, 1):
+        raise CevmError("corrupt cycle profile in a route (bad flag); re-create the route")
+    raw = np.frombuffer(inflate_exactly(blob[len(_PROFILE_MAGIC) + 8 :], 8 * n * (3 if has_h else 2)), dtype="<f8")
     t = raw[:n].astype(np.float64)
     v = raw[n : 2 * n].astype(np.float64)
     h = raw[2 * n :].astype(np.float64) if has_h else np.zeros(n)
     dist = np.concatenate([[0.0], np.cumsum(0.5 * (v[1:] + v[:-1]) * np.diff(t))])
-    nan = np.full(n, np.nan)
-    return {"time_s": t, "speed_mps": v, "distance_m": dist, "elevation_m": h, "lat_deg": nan, "lon_deg": nan.copy()}
+    nan = np.broadcast_to(np.float64(np.nan), (n,))  # read-only, no memory: a cycle has no positions
+    return {"time_s": t, "speed_mps": v, "distance_m": dist, "elevation_m": h, "lat_deg": nan, "lon_deg": nan}
 
 
 def _checked_blob(route: str, part: str, blob: bytes, crc: int | None) -> bytes:
-    """A cycle leg's ``blob`` if it matches its checksum, else :class:`DamagedRouteError`."""
+    """A cycle leg's ``blob`` if it matches its checksum, else :class:`DamagedRouteError`
+    (also for a missing blob or checksum: every cycle leg is stored with both)."""
+    if blob is None:
+        raise DamagedRouteError(route, part, "missing")
+    if crc is None:
+        raise DamagedRouteError(route, part, "its checksum is missing (NULL)")
     blob = bytes(blob)
-    if crc is not None and blob_crc32(blob) != crc:
+    if blob_crc32(blob) != crc:
         raise DamagedRouteError(route, part, "checksum mismatch")
     return blob
 
@@ -192,6 +210,7 @@ def add_route(
     check_route_name(name)
     if not legs:
         raise CevmError(f"route {name!r}: give at least one leg (--trip or --cycle)")
+    _check_route_samples(store, name, legs)
     trip_ids = [leg.trip_id for leg in legs if isinstance(leg, TripLeg)]
     vectors: dict[str, CycleVector] = {}
     if trip_ids:
@@ -232,6 +251,24 @@ def add_route(
         con.executemany("INSERT INTO route_legs (route, position, kind, ref, label, sha256, vector, profile, "
                         "vector_crc32, profile_crc32) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?)", rows)
     return RouteInfo(name, created, tuple(RouteLegInfo(r[1], r[2], r[3], r[4]) for r in rows), note)
+
+
+#: Most samples a route may hold over its legs (trips' and cycles'): it is predicted as one
+#: source, so it is bounded as one cycle file is (:data:`cevm.io.cycles.MAX_CYCLE_SAMPLES`:
+#: at twice that, ``predict --route`` of two vehicles with ``--range`` peaked at 515 MB).
+MAX_ROUTE_SAMPLES = 1_000_000
+
+
+def _check_route_samples(store: TripStore, name: str, legs: Sequence[LegInput]) -> None:
+    """Refuse (:class:`CevmError`) a route of more than :data:`MAX_ROUTE_SAMPLES` samples."""
+    trip_ids = [leg.trip_id for leg in legs if isinstance(leg, TripLeg)]
+    n_trip = dict(store.con.execute("SELECT trip_id, n_samples FROM trips WHERE trip_id IN (SELECT value FROM "
+                                    "json_each(?))", (json.dumps(trip_ids),)).fetchall()) if trip_ids else {}
+    total = sum(int(n_trip.get(leg.trip_id, 0)) if isinstance(leg, TripLeg) else leg.cycle.time_s.size
+                for leg in legs)
+    if total > MAX_ROUTE_SAMPLES:
+        raise CevmError(f"route {name!r}: its legs hold {total:,} samples, more than the {MAX_ROUTE_SAMPLES:,} a route "
+                        "may hold (its profiles are read together when it is predicted): split it into routes")
 
 
 def remove_route(store: TripStore, name: str) -> bool:
@@ -324,7 +361,7 @@ def load_route_legs(store: TripStore, name: str, *, profiles: bool = True) -> li
             vec = store.load_cycle_vectors(trip_ids=[ref])[ref]
             prof = store.load_profile(ref) if profiles else {}
         else:
-            vec = _decoded(name, "vector", CycleVector.from_bytes, _checked_blob(name, "vector", vblob, vcrc))
+            vec = _decoded(name, "vector", decode_vector, _checked_blob(name, "vector", vblob, vcrc))
             prof = _cycle_profile(name, pblob, pcrc) if profiles else {}
         out.append(StoredLeg(info, vec, prof))
     return out
@@ -346,11 +383,12 @@ def check_route_profiles(store: TripStore, name: str) -> None:
     if a profile of route ``name``'s legs fails its checksum; reads the blobs one at a
     time and keeps none (for a reader that will load them later and must not fail
     half-way)."""
-    rows = _leg_rows(store, name, ", crc32(profile) IS NOT profile_crc32 AND profile_crc32 IS NOT NULL")
-    for _, kind, _, _, bad in rows:
-        if kind == "cycle" and bad:
-            raise DamagedRouteError(name, "profile", "checksum mismatch")
-    trip_ids = [ref for _, kind, ref, _, _ in rows if kind == "trip"]
+    rows = _leg_rows(store, name, ", profile_crc32 IS NULL, crc32(profile) IS NOT profile_crc32")
+    for _, kind, _, _, no_crc, bad in rows:
+        if kind == "cycle" and (no_crc or bad):
+            why = "its checksum is missing (NULL)" if no_crc else "checksum mismatch"
+            raise DamagedRouteError(name, "profile", why)
+    trip_ids = [ref for _, kind, ref, *_ in rows if kind == "trip"]
     for exc in store.damaged_profiles(trip_ids) if trip_ids else []:
         raise exc
 

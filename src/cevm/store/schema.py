@@ -346,10 +346,10 @@ def upgrade_trip_vector(vector: bytes, profile: bytes, decode) -> bytes:
     """A vector blob in format 3: ``vector`` with the k_pos and traction_s of the cycle in
     ``profile`` (decoded by ``decode`` into time_s, speed_mps, elevation_m arrays); an
     undecodable pair is left as it was (``cevm store check`` names it)."""
-    from cevm.core.cycle import CycleVector
+    from cevm.store.codec import decode_vector
 
     try:
-        vec = CycleVector.from_bytes(vector)
+        vec = decode_vector(vector)  # bounded: a zip of version 1 by its declared sizes
         if vec.has_trip_sums:
             return vector
         p = decode(profile)

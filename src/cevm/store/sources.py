@@ -18,8 +18,9 @@ from cevm.core.limits import elevation_sd_m
 from cevm.core.sweep import LegProfile, PredictionSet, Source
 from cevm.core.trip import Measurement
 from cevm.errors import CevmError
-from cevm.io.cycles import CycleFormat, read_cycle_files
+from cevm.io.cycles import MAX_CYCLE_SAMPLES, CycleFormat, read_cycle_files
 from cevm.io.scenario import LegResolver, default_resolver
+from cevm.store.codec import MAX_PROFILE_SAMPLES
 from cevm.store.failures import DamagedTripError
 from cevm.store.masses import TripMass, trip_masses
 from cevm.store.queries import row_measurement
@@ -165,6 +166,17 @@ def load_sources(stack: ExitStack, store: Optional[Path], cycles: Sequence[Path]
     facts: dict[str, tuple] = {}
     if vectors:
         rows = st.list_trips(trip_ids=list(vectors))
+        for tid, n in zip(rows["trip_id"], rows["n_samples"], strict=True):
+            if n > MAX_SOURCE_SAMPLES:  # bounded as a cycle file is: one source's samples are held together
+                # a count no stored profile can hold (cevm.store.codec) is the row's damage, not a long trip
+                exc = (DamagedTripError(tid, "row", f"its row says {int(n):,} samples, more than the "
+                                                    f"{MAX_PROFILE_SAMPLES:,} any stored trip holds")
+                       if n > MAX_PROFILE_SAMPLES else TripTooLong(too_long_trip(tid, int(n))))
+                if tid in trips or on_damaged is None:
+                    raise exc
+                on_damaged(exc)  # a vehicle's trips: left out and named, as a damaged one is
+                del vectors[tid]
+        rows = rows[rows["trip_id"].isin(list(vectors))]
         masses = trip_masses(st, rows)
         for r in rows.itertuples(index=False):
             t_c = r.ambient_temp_c
@@ -197,6 +209,25 @@ def load_sources(stack: ExitStack, store: Optional[Path], cycles: Sequence[Path]
                               ambient_c=route_ambient_c(st, legs), logged=logged,
                               elevation_sd_m=elevation_sd_m(None) if logged else 0.0))
     return sources
+
+
+#: Most samples of one stored trip a command predicts or simulates: a source is held whole
+#: while it is swept, so it is bounded as one cycle file is
+#: (:data:`cevm.io.cycles.MAX_CYCLE_SAMPLES`: 11.6 days at 1 Hz; no vehicle drives that long
+#: without the 30-minute stop that ends a trip). At 2.5 million samples (what a log within
+#: ingest's default limits could make of one endless trip) ``predict`` peaked at 627 MB,
+#: ``simulate`` at 834 MB.
+MAX_SOURCE_SAMPLES = MAX_CYCLE_SAMPLES
+
+
+class TripTooLong(CevmError):
+    """A stored trip of more than :data:`MAX_SOURCE_SAMPLES` samples."""
+
+
+def too_long_trip(trip_id: str, n_samples: int) -> str:
+    """The sentence that refuses a stored trip of ``n_samples`` samples."""
+    return (f"trip {trip_id!r} holds {n_samples:,} samples, more than the {MAX_SOURCE_SAMPLES:,} one source may "
+            "(11.6 days at 1 Hz without the 30-minute stop that ends a trip: not a trip a vehicle drives)")
 
 
 def _finite(x: float) -> float | None:

@@ -18,6 +18,15 @@ Read-only
     ``TripStore(path, readonly=True)`` opens with SQLite's ``mode=ro`` (nothing can be
     written; a read-only file works), falling back to ``immutable=1`` in a read-only
     directory where the WAL's ``-shm`` file cannot be made (see :meth:`_open_readonly`).
+    It never creates a store, nor writes into an empty file (0 bytes, or an SQLite
+    database without tables): that is no store, as a missing file is not. (A store of an
+    older schema is the one exception: it is migrated once, which needs write access.)
+
+Writing
+    A writable opening first runs SQLite's quick check (:meth:`require_intact`) and
+    refuses a damaged store before anything is written into it, migrations included:
+    every writer (ingest, ``trips set-mass``, ``route add``, ``route remove``) checks the
+    store as ingest always did (``intact=False`` skips it, for tools that repair).
 
 Failures
     Every statement's SQLite error is raised as the store's (:mod:`cevm.store.failures`):
@@ -30,6 +39,7 @@ edge that turns rows into what a person reads (ISO 8601 times, km, kWh).
 
 from __future__ import annotations
 
+import os
 import sqlite3
 import time
 from collections.abc import Iterator
@@ -85,24 +95,30 @@ class TripStore(TripWriting, TripQueries):
     :class:`~cevm.store.queries.TripQueries`'.
     """
 
-    def __init__(self, path: str | Path, *, readonly: bool = False, migrate: bool = True):
+    def __init__(self, path: str | Path, *, readonly: bool = False, migrate: bool = True, intact: bool = True):
         self.path = Path(path).expanduser()
         self.readonly = readonly
         self.immutable = False
         self.schema_version = SCHEMA_VERSION
         self._migrate = migrate
+        self._intact = False  # the quick check passed on this connection
         self._con: StoreConnection | None = None
-        if self.path.is_dir():
-            raise CevmError(f"{self.path}: is a directory, not a cevm store file")
+        kind = _not_a_file(self.path)
+        if kind is not None:  # a FIFO would hang the command where no signal reaches it, /dev/null swallow it
+            raise CevmError(f"{self.path}: is {kind}, not a cevm store file")
         if readonly:
             self._open_readonly()
             return
         try:
             self.path.parent.mkdir(parents=True, exist_ok=True)
-        except OSError as exc:
-            raise CevmError(f"{self.path}: cannot create the store's directory: {exc}") from exc
+        except OSError as exc:  # a read-only file system, no permission, a full disk: the store's, exit 3
+            raise StoreAccessError(f"{self.path}: the store could not be created: its directory could not be made "
+                                   f"({exc.strerror or exc}: {exc.filename or self.path.parent}); nothing was "
+                                   "changed. Give a --store on a writable disk", "cantopen") from None
         try:
             self._con = self._connect(str(self.path))
+            if intact:
+                self.require_intact()  # before the first write: WAL, migrations
             self._enable_wal()
             # NORMAL in WAL mode: a power cut may lose the last commits, never corrupts.
             self._con.execute("PRAGMA synchronous=NORMAL")
@@ -116,14 +132,33 @@ class TripStore(TripWriting, TripQueries):
             raise
 
     def _connect(self, database: str, uri: bool = False) -> StoreConnection:
-        con = sqlite3.connect(database, timeout=BUSY_TIMEOUT_S, isolation_level=None, uri=uri,
-                              factory=StoreConnection)
+        try:
+            con = sqlite3.connect(database, timeout=BUSY_TIMEOUT_S, isolation_level=None, uri=uri,
+                                  factory=StoreConnection)
+        except sqlite3.Error as exc:  # the file could not be opened (or created): say why
+            raise self._cannot_open(exc) from exc
         con.store_path = self.path
         con.busy_timeout_s = BUSY_TIMEOUT_S
         con.create_function("crc32", 1, blob_crc32, deterministic=True)
         con.create_function("cevm_trip_vector_v3", 2, _trip_vector_v3, deterministic=True)
         con.create_function("cevm_route_vector_v3", 2, _route_vector_v3, deterministic=True)
         return con
+
+    def _cannot_open(self, exc: sqlite3.Error) -> CevmError:
+        """The error for a store file SQLite could not open, with the reason the file
+        system gives (a read-only file system, a directory without write permission)."""
+        from cevm.store.failures import translate
+
+        err = translate(exc, self.path, BUSY_TIMEOUT_S)
+        if self.readonly or not isinstance(err, StoreAccessError) or err.reason != "cantopen":
+            return err or CevmError(f"{self.path}: not a usable cevm store: {exc}")
+        where = self.path if self.path.exists() else self.path.parent
+        if not os.access(where, os.W_OK):
+            why = ("a read-only file system" if _read_only_fs(where) else "no permission to write there")
+            what = "written" if self.path.exists() else "created"
+            return StoreAccessError(f"{self.path}: the store could not be {what}: {why} ({where}); nothing was "
+                                    "changed. Give a --store on a writable disk", "readonly")
+        return err
 
     def _open_readonly(self) -> None:
         """Open with ``mode=ro``: nothing can be written. A store in WAL mode needs its
@@ -158,6 +193,11 @@ class TripStore(TripWriting, TripQueries):
             self.close()
             raise
         self.schema_version = version
+        if version == 0:  # an empty file: no store, and nothing is written into it
+            self.close()
+            raise CevmError(f"{self.path}: no trip store here: an empty file ("
+                            f"{'0 bytes' if self.path.stat().st_size == 0 else 'an SQLite database without tables'}"
+                            "); run 'cevm ingest' to make one there, or give another --store")
         if version < SCHEMA_VERSION and not self._migrate:
             return  # for SQLite's own checks only: the queries need the current layout
         if version < SCHEMA_VERSION:  # migrated by a writable opening, then read
@@ -239,3 +279,25 @@ class TripStore(TripWriting, TripQueries):
 
     def _checkpoint(self, stage: str) -> None:
         _checkpoint(stage)  # the module's hook, looked up at each call (tests replace it)
+
+
+def _not_a_file(path: Path) -> str | None:
+    """What ``path`` is when it exists and is not a regular file (a directory, a FIFO, a
+    device), else None: SQLite would open any of them."""
+    import stat
+
+    from cevm.io.inputs import file_kind
+
+    try:
+        mode = os.stat(path).st_mode
+    except OSError:
+        return None  # missing (a new store), or unreadable: SQLite says so
+    return None if stat.S_ISREG(mode) else file_kind(mode)
+
+
+def _read_only_fs(path: Path) -> bool:
+    """Whether ``path`` lies on a file system mounted read-only (``statvfs``)."""
+    try:
+        return bool(os.statvfs(path).f_flag & os.ST_RDONLY)
+    except (OSError, AttributeError):
+        return False

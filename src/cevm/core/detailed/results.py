@@ -70,27 +70,34 @@ class SimulationResult:
         """Diesel cumulative fuel per sample [l], None for an EV."""
         return self.samples.get("fuel_cum_l")
 
-    def to_frame(self):
+    def to_frame(self, rows: slice | None = None):
         """A pandas DataFrame, one row per sample, user units in the column names.
 
         Step quantities are on the row of the step's first sample (the last row has
-        none: NaN); cumulative quantities and SoC are at the sample.
+        none: NaN); cumulative quantities and SoC are at the sample. ``rows``: only these
+        samples (a slice: a block of them to write, every k-th to plot), so that the
+        frame of a long trace need not be held whole beside the result.
         """
         import pandas as pd
 
         n = self.time_s.size
+        sel = slice(None) if rows is None else rows
 
         def per_sample(x, scale=1.0):
             out = np.full(n, np.nan)
             out[:-1] = x * scale
-            return out
+            return out if rows is None else out[sel].copy()
+
+        def at(x, scale=None):
+            x = x if rows is None else x[sel]
+            return x if scale is None else x * scale
 
         cols: dict[str, Any] = {
-            "time_s": self.time_s,
-            "speed_kmh": self.speed_mps * MPS_TO_KMH,
+            "time_s": self.time_s if rows is None else self.time_s[sel].copy(),
+            "speed_kmh": at(self.speed_mps, MPS_TO_KMH),
         }
         if self.elevation_m is not None:
-            cols["elevation_m"] = self.elevation_m
+            cols["elevation_m"] = self.elevation_m if rows is None else self.elevation_m[sel].copy()
         s = self.steps
         cols["accel_mps2"] = per_sample(s["accel_mps2"])
         cols["wheel_force_kn"] = per_sample(s["wheel_force_n"], 1e-3)
@@ -105,19 +112,19 @@ class SimulationResult:
             cols["battery_current_a"] = per_sample(s["battery_current_a"])
             cols["battery_ocv_v"] = per_sample(s["battery_ocv_v"])
             cols["friction_brake_power_kw"] = per_sample(s["friction_brake_power_w"], 1e-3)
-            cols["soc_pct"] = self.samples["soc"] * 100.0
-            cols["energy_cum_kwh"] = self.samples["energy_cum_j"] / J_PER_KWH
+            cols["soc_pct"] = at(self.samples["soc"], 100.0)
+            cols["energy_cum_kwh"] = at(self.samples["energy_cum_j"]) / J_PER_KWH
         else:
             gear = pd.array(np.zeros(n, dtype=np.int64), dtype="Int64")
             gear[:-1] = s["gear"]
             gear[-1] = pd.NA
-            cols["gear"] = gear
+            cols["gear"] = gear if rows is None else gear[sel]
             cols["engine_speed_rpm"] = per_sample(s["engine_speed_rad_s"], 1 / RPM)
             cols["engine_torque_nm"] = per_sample(s["engine_torque_nm"])
             cols["engine_power_kw"] = per_sample(s["engine_power_w"], 1e-3)
             cols["fuel_rate_lph"] = per_sample(s["fuel_rate_lps"], S_PER_H)
             cols["friction_brake_power_kw"] = per_sample(s["friction_brake_power_w"], 1e-3)
-            cols["fuel_cum_l"] = self.samples["fuel_cum_l"]
+            cols["fuel_cum_l"] = self.samples["fuel_cum_l"] if rows is None else self.samples["fuel_cum_l"][sel].copy()
         cols["traction_deficit_kw"] = per_sample(s["traction_deficit_w"], 1e-3)
         return pd.DataFrame(cols)
 
