@@ -230,20 +230,15 @@ def process_file(
             stream = CleanStream(log.columns, log.energy_sources, options.clean, path=path, release_frame=True)
             planned += stream.planned_samples
             _check_samples(path, planned, options.limits.max_samples)
-            cleaned = iter(stream)
-            batch: list[CleanTrip] = []
-            n_batch = 0
+            batches = stream.batches(TRIP_BATCH_SAMPLES)
             while True:  # trips a bounded batch at a time: a large file's trips are never all held
-                ct = next(cleaned, None)
+                batch = next(batches, None)
                 stage["clean"] = stage.get("clean", 0.0) + time.perf_counter() - t0
-                if ct is not None:
-                    batch.append(ct)
-                    n_batch += ct.time_s.size
-                if batch and (ct is None or n_batch >= TRIP_BATCH_SAMPLES):
-                    _finish_trips(batch, log, path, sha, sampler, options, stage, trips, vectors, blobs, warnings)
-                    batch, n_batch = [], 0
-                if ct is None:
+                if batch is None:
                     break
+                _finish_trips([batch.trip(i) for i in range(len(batch))], log, path, sha, sampler, options,
+                              stage, trips, vectors, blobs, warnings)
+                del batch
                 t0 = time.perf_counter()
             dropped.extend({"vehicle_id": log.vehicle_id, **d} for d in stream.dropped)
         return FileOutcome(

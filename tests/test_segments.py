@@ -1,0 +1,118 @@
+"""cevm.ingest.segments: each operation over many segments at once equals the numpy call
+on each segment alone, bit for bit (numpy is the reference)."""
+
+from __future__ import annotations
+
+import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from cevm.ingest.segments import (
+    bounds_of,
+    segment_cumsum,
+    segment_diffs,
+    segment_ids,
+    segment_interp,
+    segment_medians,
+    segment_searchsorted,
+    segment_sums,
+)
+
+lengths = st.lists(st.integers(0, 700), min_size=1, max_size=12)
+
+
+def _values(rng, n, kind):
+    if kind == 0:
+        return rng.standard_normal(n) * 10.0 ** rng.integers(-3, 6)
+    if kind == 1:  # signed zeros and repeats
+        return rng.choice(np.array([0.0, -0.0, 1.5, -2.25, 1e16, -1e16]), n)
+    return np.abs(rng.standard_normal(n)).cumsum()
+
+
+@settings(max_examples=200, deadline=None)
+@given(lengths, st.integers(0, 2**32 - 1), st.integers(0, 2))
+def test_segment_sums_equal_numpy_sum(lens, seed, kind):
+    rng = np.random.default_rng(seed)
+    b = bounds_of(lens)
+    x = _values(rng, int(b[-1]), kind)
+    got = segment_sums(x, b)
+    want = np.array([x[a:c].sum() for a, c in zip(b[:-1], b[1:])])
+    assert got.tobytes() == want.tobytes()  # signed zeros too
+
+
+def test_segment_sums_long_segments():
+    rng = np.random.default_rng(3)
+    lens = [1, 129, 1000, 8191, 8192, 8193, 70001, 7]
+    b = bounds_of(lens)
+    x = rng.standard_normal(int(b[-1])) * 1e3
+    want = np.array([x[a:c].sum() for a, c in zip(b[:-1], b[1:])])
+    assert segment_sums(x, b).tobytes() == want.tobytes()
+    starts, n = b[:-1][::-1].copy(), np.diff(b)[::-1].copy()  # any order, as starts and lengths
+    assert segment_sums(x, starts=starts, lengths=n).tobytes() == want[::-1].tobytes()
+
+
+@settings(max_examples=100, deadline=None)
+@given(lengths, st.integers(0, 2**32 - 1))
+def test_segment_cumsum_and_diffs(lens, seed):
+    rng = np.random.default_rng(seed)
+    b = bounds_of(lens)
+    x = rng.standard_normal(int(b[-1]))
+    segs = [x[a:c] for a, c in zip(b[:-1], b[1:])]
+    assert segment_cumsum(x, b).tobytes() == np.concatenate([np.cumsum(s) for s in segs]).tobytes()
+    z = segment_cumsum(x, b, start_zero=True)
+    assert z.tobytes() == np.concatenate([np.concatenate(([0.0], np.cumsum(s))) for s in segs]).tobytes()
+    d, db = segment_diffs(x, b)
+    assert d.tobytes() == np.concatenate([np.diff(s) for s in segs] + [np.empty(0)]).tobytes()
+    assert np.array_equal(np.diff(db), [max(len(s) - 1, 0) for s in segs])
+
+
+@settings(max_examples=100, deadline=None)
+@given(lengths, st.integers(0, 2**32 - 1), st.booleans())
+def test_segment_medians_equal_numpy_median(lens, seed, with_nan):
+    rng = np.random.default_rng(seed)
+    b = bounds_of(lens)
+    x = rng.integers(-5, 5, int(b[-1])).astype(float) * 0.7
+    if with_nan and x.size:
+        x[rng.integers(0, x.size, 3)] = np.nan
+    g = segment_ids(b)
+    got = segment_medians(x, g, len(lens))
+    for i, (a, c) in enumerate(zip(b[:-1], b[1:])):
+        want = np.median(x[a:c]) if c > a else np.nan
+        assert (np.isnan(want) and np.isnan(got[i])) or want == got[i]
+        fin = x[a:c][np.isfinite(x[a:c])]
+        f = segment_medians(x, g, len(lens), finite_only=True)[i]
+        assert (fin.size == 0 and np.isnan(f)) or f == np.median(fin)
+
+
+@settings(max_examples=150, deadline=None)
+@given(st.lists(st.integers(1, 60), min_size=1, max_size=8), st.integers(0, 2**32 - 1), st.booleans(),
+       st.sampled_from(["left", "right"]))
+def test_segment_searchsorted_and_interp_equal_numpy(lens, seed, global_order, side):
+    """Within each segment as numpy on that segment alone: segments that follow each
+    other in the values (trip times) or each starting again from 0 (trip distances),
+    queries inside, outside, on and between the samples, NaN."""
+    rng = np.random.default_rng(seed)
+    b = bounds_of(lens)
+    segs, fps = [], []
+    t0 = 0.0
+    for n in lens:
+        s = np.cumsum(rng.choice([0.25, 1.0, 3.0, 1e-9], n)) + (t0 if global_order else 0.0)
+        if global_order:
+            t0 = s[-1] + rng.choice([0.0, 1e-9, 5.0])
+            s = s + 1e-12  # strictly after the previous segment
+        segs.append(s)
+        fps.append(rng.choice([0.0, -0.0, 1.0, np.inf, 2.5, -3.0], n) if seed % 5 == 0 else rng.standard_normal(n))
+    xp, fp = np.concatenate(segs), np.concatenate(fps)
+    qs, qseg = [], []
+    for i, s in enumerate(segs):
+        q = np.concatenate((s, s - 1e-9, s + 0.5, [s[0] - 10, s[-1] + 10, np.nan]))
+        qs.append(q)
+        qseg.append(np.full(q.size, i))
+    q, qseg = np.concatenate(qs), np.concatenate(qseg)
+    pos = segment_searchsorted(xp, b[:-1], np.diff(b), q, qseg, side)
+    want_pos = np.concatenate([np.searchsorted(s, qq, side) for s, qq in zip(segs, qs)])
+    assert np.array_equal(pos, want_pos)
+    with np.errstate(invalid="ignore"):
+        got = segment_interp(q, qseg, xp, b[:-1], np.diff(b), fp)
+        want = np.concatenate([np.interp(qq, s, f) for s, f, qq in zip(segs, fps, qs)])
+    assert got.tobytes() == want.tobytes()
