@@ -217,7 +217,9 @@ def make_generated(corpus: Path) -> None:
 
 def run_cases(corpus: Path, out: Path, src: Path, cases: list[str]) -> None:
     out.mkdir(parents=True, exist_ok=True)
-    env = {**os.environ, "PYTHONPATH": str(src), "OMP_NUM_THREADS": "1", "COLUMNS": "200"}
+    extra = os.environ.get("PYTHONPATH")  # e.g. a sitecustomize that changes a setting for a comparison
+    env = {**os.environ, "PYTHONPATH": str(src) + (os.pathsep + extra if extra else ""), "OMP_NUM_THREADS": "1",
+           "COLUMNS": "200"}
     env.pop("CEVM_STORE", None)
     for case in cases:
         args = CASES[case]

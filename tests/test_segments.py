@@ -3,10 +3,13 @@ on each segment alone, bit for bit (numpy is the reference)."""
 
 from __future__ import annotations
 
+from contextlib import contextmanager
+
 import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from cevm.ingest import segments
 from cevm.ingest.segments import (
     bounds_of,
     segment_cumsum,
@@ -21,6 +24,18 @@ from cevm.ingest.segments import (
 lengths = st.lists(st.integers(0, 700), min_size=1, max_size=12)
 
 
+@contextmanager
+def whole_batch(on: bool):
+    """With ``on``, the whole-batch steps even for a few segments (else numpy segment by
+    segment, as for up to ``segments._FEW``): both are checked."""
+    few = segments._FEW
+    segments._FEW = -1 if on else few
+    try:
+        yield
+    finally:
+        segments._FEW = few
+
+
 def _values(rng, n, kind):
     if kind == 0:
         return rng.standard_normal(n) * 10.0 ** rng.integers(-3, 6)
@@ -30,12 +45,13 @@ def _values(rng, n, kind):
 
 
 @settings(max_examples=200, deadline=None)
-@given(lengths, st.integers(0, 2**32 - 1), st.integers(0, 2))
-def test_segment_sums_equal_numpy_sum(lens, seed, kind):
+@given(lengths, st.integers(0, 2**32 - 1), st.integers(0, 2), st.booleans())
+def test_segment_sums_equal_numpy_sum(lens, seed, kind, batch):
     rng = np.random.default_rng(seed)
     b = bounds_of(lens)
     x = _values(rng, int(b[-1]), kind)
-    got = segment_sums(x, b)
+    with whole_batch(batch):
+        got = segment_sums(x, b)
     want = np.array([x[a:c].sum() for a, c in zip(b[:-1], b[1:])])
     assert got.tobytes() == want.tobytes()  # signed zeros too
 
@@ -46,9 +62,11 @@ def test_segment_sums_long_segments():
     b = bounds_of(lens)
     x = rng.standard_normal(int(b[-1])) * 1e3
     want = np.array([x[a:c].sum() for a, c in zip(b[:-1], b[1:])])
-    assert segment_sums(x, b).tobytes() == want.tobytes()
     starts, n = b[:-1][::-1].copy(), np.diff(b)[::-1].copy()  # any order, as starts and lengths
-    assert segment_sums(x, starts=starts, lengths=n).tobytes() == want[::-1].tobytes()
+    for batch in (False, True):
+        with whole_batch(batch):
+            assert segment_sums(x, b).tobytes() == want.tobytes()
+            assert segment_sums(x, starts=starts, lengths=n).tobytes() == want[::-1].tobytes()
 
 
 @settings(max_examples=100, deadline=None)
@@ -67,20 +85,22 @@ def test_segment_cumsum_and_diffs(lens, seed):
 
 
 @settings(max_examples=100, deadline=None)
-@given(lengths, st.integers(0, 2**32 - 1), st.booleans())
-def test_segment_medians_equal_numpy_median(lens, seed, with_nan):
+@given(lengths, st.integers(0, 2**32 - 1), st.booleans(), st.booleans())
+def test_segment_medians_equal_numpy_median(lens, seed, with_nan, batch):
     rng = np.random.default_rng(seed)
     b = bounds_of(lens)
     x = rng.integers(-5, 5, int(b[-1])).astype(float) * 0.7
     if with_nan and x.size:
         x[rng.integers(0, x.size, 3)] = np.nan
     g = segment_ids(b)
-    got = segment_medians(x, g, len(lens))
+    with whole_batch(batch):
+        got = segment_medians(x, g, len(lens))
+        fins = segment_medians(x, g, len(lens), finite_only=True)
     for i, (a, c) in enumerate(zip(b[:-1], b[1:])):
         want = np.median(x[a:c]) if c > a else np.nan
         assert (np.isnan(want) and np.isnan(got[i])) or want == got[i]
         fin = x[a:c][np.isfinite(x[a:c])]
-        f = segment_medians(x, g, len(lens), finite_only=True)[i]
+        f = fins[i]
         assert (fin.size == 0 and np.isnan(f)) or f == np.median(fin)
 
 

@@ -43,6 +43,10 @@ __all__ = [
 #: eight accumulators (``PW_BLOCKSIZE`` in numpy's loops).
 _PW_BLOCK = 128
 
+#: Segments up to which :func:`segment_sums` and :func:`segment_medians` call numpy once
+#: per segment (the same values; fewer calls than their whole-batch steps).
+_FEW = 24
+
 #: Elements gathered at a time by :func:`segment_sums` (bounded temporaries).
 _GATHER_ELEMENTS = 1 << 20
 
@@ -82,30 +86,28 @@ def segment_sums(x: np.ndarray, bounds=None, *, starts=None, lengths=None) -> np
     segment sums to 0.0."""
     x = np.ascontiguousarray(x, dtype=np.float64)
     s, n = _starts_lengths(bounds, starts, lengths)
-    out = np.zeros(s.size)
-    if s.size:
-        _pairwise(x, s, n, out, np.arange(s.size))
-    return out
+    if s.size <= _FEW:  # numpy itself, segment by segment: fewer calls than the levels of halves
+        return np.array([x[a:a + k].sum() for a, k in zip(s.tolist(), n.tolist())], dtype=np.float64)
+    return _pairwise(x, s, n)
 
 
-def _pairwise(x: np.ndarray, s: np.ndarray, n: np.ndarray, out: np.ndarray, where: np.ndarray) -> None:
-    """out[where] = numpy's pairwise sum of x[s:s+n] (each); recursive in halves as
-    numpy's ``pairwise_sum``: at most log2(longest / 128) levels."""
+def _pairwise(x: np.ndarray, s: np.ndarray, n: np.ndarray) -> np.ndarray:
+    """numpy's pairwise sum of each x[s:s+n]: the segments over 128 values are split in
+    halves as numpy's ``pairwise_sum`` splits them, all of them at once, level by level
+    (at most log2(longest / 128) levels), and the halves' sums added."""
+    out = np.empty(s.size)
     leaf = n <= _PW_BLOCK
     if leaf.all():
-        out[where] = _leaf_sums(x, s, n)
-        return
+        return _leaf_sums(x, s, n)
     if leaf.any():
-        out[where[leaf]] = _leaf_sums(x, s[leaf], n[leaf])
+        out[leaf] = _leaf_sums(x, s[leaf], n[leaf])
     big = ~leaf
-    sb, nb, wb = s[big], n[big], where[big]
+    sb, nb = s[big], n[big]
     n2 = nb // 2
     n2 -= n2 % 8
-    left = np.empty(sb.size)
-    right = np.empty(sb.size)
-    _pairwise(x, sb, n2, left, np.arange(sb.size))
-    _pairwise(x, sb + n2, nb - n2, right, np.arange(sb.size))
-    out[wb] = left + right
+    halves = _pairwise(x, np.concatenate((sb, sb + n2)), np.concatenate((n2, nb - n2)))
+    out[big] = halves[:sb.size] + halves[sb.size:]
+    return out
 
 
 def _leaf_sums(x: np.ndarray, s: np.ndarray, n: np.ndarray) -> np.ndarray:
@@ -184,6 +186,12 @@ def segment_medians(values: np.ndarray, group: np.ndarray, n_groups: int, *, fin
         values, group = values[ok], group[ok]
     med = np.full(n_groups, np.nan)
     if not values.size:
+        return med
+    if n_groups <= _FEW and (group.size < 2 or bool((group[1:] >= group[:-1]).all())):  # contiguous groups
+        cut = np.searchsorted(group, np.arange(n_groups + 1))
+        for i, (a, b) in enumerate(zip(cut[:-1].tolist(), cut[1:].tolist())):
+            if b > a:
+                med[i] = np.median(values[a:b])
         return med
     order = np.lexsort((values, group))  # NaN sort last within a group
     v = values[order]
