@@ -26,8 +26,9 @@ from cevm.ingest.cleaning.grid import (
 from cevm.ingest.cleaning.jitter import positions_on_grid
 from cevm.ingest.cleaning.params import CleanBatch, CleanParams
 from cevm.ingest.cleaning.rows import CleanedLog
-from cevm.ingest.consumption import EnergySourceLike, measure_trip
+from cevm.ingest.consumption import EnergySourceLike
 from cevm.ingest.evidence import EVIDENCE_COLUMNS
+from cevm.ingest.measured import measure_trips
 from cevm.ingest.segments import bounds_of, ranges, segment_ids, segment_medians
 
 
@@ -115,10 +116,11 @@ def _kept_batch(log: CleanedLog, seg: BatchSpeedRows, trips: np.ndarray, grid_t:
     soc, soc_dt = _start_socs(log, g0, p.start_soc_window_s)
     odo = log.cols.get("odometer_m")
     w = p.consumption.max_gap_s
+    consumption = measure_trips(log.t, log.cols, sources, g0, g1, p.consumption)
     qualities, measured = [], []
     for k, j in enumerate(trips.tolist()):
         gt, d = grid_t[first[k]:last[k] + 1], dist[first[k]:last[k] + 1]
-        meas, mq = measure_trip(log.t, log.cols, sources, float(g0[k]), float(g1[k]), p.consumption)
+        meas, mq = consumption[k]
         measured.append(meas)
         tq = {
             "rows": int(hi[k] - lo[k]),
