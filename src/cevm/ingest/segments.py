@@ -47,6 +47,9 @@ _PW_BLOCK = 128
 #: per segment (the same values; fewer calls than their whole-batch steps).
 _FEW = 24
 
+#: Mean segment length from which :func:`segment_sums` calls numpy once per segment.
+_LONG = 96
+
 #: Elements gathered at a time by :func:`segment_sums` (bounded temporaries).
 _GATHER_ELEMENTS = 1 << 20
 
@@ -57,6 +60,22 @@ def bounds_of(lengths) -> np.ndarray:
     out = np.zeros(lengths.size + 1, dtype=np.int64)
     np.cumsum(lengths, out=out[1:])
     return out
+
+
+#: Batches of at least this many trips of at most :data:`SHORT_TRIP_SAMPLES` samples on
+#: average have their measured consumption and evidence made for all trips at once
+#: (:mod:`cevm.ingest.measured`, :func:`cevm.ingest.evidence.batch_evidence`): there the
+#: fixed cost of numpy calls per trip dominates. Longer trips are done one at a time, on
+#: views of the log's arrays: fewer passes over their samples (measured on the benchmark
+#: fleet's trips of 1,500-3,000 samples: 0.5-0.6x the time of the whole-batch steps).
+MANY_TRIPS = 6
+SHORT_TRIP_SAMPLES = 500
+
+
+def many_short_trips(bounds: np.ndarray) -> bool:
+    """Whether a batch's trips (``bounds``) are many and short (:data:`MANY_TRIPS`)."""
+    n = bounds.size - 1
+    return n >= MANY_TRIPS and int(bounds[-1] - bounds[0]) <= SHORT_TRIP_SAMPLES * n
 
 
 def ranges(starts, lengths) -> np.ndarray:
@@ -86,7 +105,9 @@ def segment_sums(x: np.ndarray, bounds=None, *, starts=None, lengths=None) -> np
     segment sums to 0.0."""
     x = np.ascontiguousarray(x, dtype=np.float64)
     s, n = _starts_lengths(bounds, starts, lengths)
-    if s.size <= _FEW:  # numpy itself, segment by segment: fewer calls than the levels of halves
+    if s.size <= _FEW or (_FEW >= 0 and n.sum() >= _LONG * s.size):
+        # numpy itself, segment by segment: a few segments, or long ones (the whole-batch
+        # steps gather blocks of 128 values: more work per value than numpy's own loop)
         return np.array([x[a:a + k].sum() for a, k in zip(s.tolist(), n.tolist())], dtype=np.float64)
     return _pairwise(x, s, n)
 
@@ -176,10 +197,13 @@ def segment_cumsum(x: np.ndarray, bounds: np.ndarray, *, start_zero: bool = Fals
     return out
 
 
-def segment_medians(values: np.ndarray, group: np.ndarray, n_groups: int, *, finite_only: bool = False) -> np.ndarray:
-    """``np.median`` of the values of each group 0..n_groups-1 (NaN for an empty group;
-    a group holding a NaN has median NaN, as numpy's, unless ``finite_only``: then its
-    finite values only)."""
+def segment_medians(values: np.ndarray, group: np.ndarray, n_groups: int, *, finite_only: bool = False,
+                    plain: bool = False) -> np.ndarray:
+    """``np.median`` of the values of each group 0..n_groups-1, bit for bit (NaN for an
+    empty group; a group holding a NaN has median NaN, as numpy's, unless
+    ``finite_only``: then its finite values only). numpy takes the mean of the middle
+    value or two, a sum from 0.0 (a median of -0.0 is 0.0); ``plain``: ``0.5 * (a + b)``
+    of the middle two (``a`` twice for an odd count) instead, signed zeros kept."""
     values = np.asarray(values, dtype=np.float64)
     if finite_only:
         ok = np.isfinite(values)
@@ -188,20 +212,24 @@ def segment_medians(values: np.ndarray, group: np.ndarray, n_groups: int, *, fin
     if not values.size:
         return med
     if n_groups <= _FEW and (group.size < 2 or bool((group[1:] >= group[:-1]).all())):  # contiguous groups
-        cut = np.searchsorted(group, np.arange(n_groups + 1))
-        for i, (a, b) in enumerate(zip(cut[:-1].tolist(), cut[1:].tolist())):
-            if b > a:
-                med[i] = np.median(values[a:b])
-        return med
-    order = np.lexsort((values, group))  # NaN sort last within a group
-    v = values[order]
+        cut = np.searchsorted(group, np.arange(n_groups + 1)).tolist()
+        v = np.empty_like(values)
+        for a, b in zip(cut[:-1], cut[1:]):
+            v[a:b] = np.sort(values[a:b], kind="stable")
+    else:
+        # values sorted within each group: stably by value, then stably by group (numpy's
+        # radix sort for 16-bit keys): np.lexsort's order, in a fraction of its time; NaN
+        # last in a group
+        order = np.argsort(values, kind="stable")
+        small = group.astype(np.int16 if n_groups < 2**15 else np.int32)
+        v = values[order[np.argsort(small[order], kind="stable")]]
     count = np.bincount(group, minlength=n_groups)
     start = np.zeros(n_groups, dtype=np.int64)
     np.cumsum(count[:-1], out=start[1:])
     has = count > 0
     lo = start[has] + (count[has] - 1) // 2
     hi = start[has] + count[has] // 2
-    m = 0.5 * (v[lo] + v[hi])
+    m = 0.5 * (v[lo] + v[hi]) if plain else ((0.0 + v[lo]) + v[hi]) * 0.5
     if not finite_only:
         nan_in = np.isnan(v[start[has] + count[has] - 1])  # the group's largest: NaN if it has one
         m[nan_in] = np.nan
@@ -260,8 +288,17 @@ def segment_interp(x: np.ndarray, x_seg: np.ndarray, xp: np.ndarray, xp_starts: 
     xp_starts = np.asarray(xp_starts, dtype=np.int64)
     xp_lengths = np.asarray(xp_lengths, dtype=np.int64)
     s, n = xp_starts[x_seg], xp_lengths[x_seg]
-    j = segment_searchsorted(xp, xp_starts, xp_lengths, x, x_seg, "right") - 1  # xp[j] <= x < xp[j+1]
     first, last = s, s + n - 1
+    if _strictly_increasing_within(xp, xp_starts, xp_lengths):
+        # one numpy call over the segments end to end: its bracket of a value inside its
+        # segment is the segment's own; the values outside take the end values (numpy's
+        # per-segment left and right), those at the last sample its value
+        a, b = int(xp_starts[0]), int(xp_starts[-1] + xp_lengths[-1])
+        res = np.interp(x, xp[a:b], fp[a:b])
+        res = np.where(x < xp[first], fp[first], res)
+        res = np.where(x >= xp[last], fp[last], res)
+        return np.where(n == 1, fp[first], res)
+    j = segment_searchsorted(xp, xp_starts, xp_lengths, x, x_seg, "right") - 1  # xp[j] <= x < xp[j+1]
     g = s + np.clip(j, 0, np.maximum(n - 2, 0))  # the bracket's left sample (global)
     g1 = np.minimum(g + 1, last)
     x0, x1, y0, y1 = xp[g], xp[g1], fp[g], fp[g1]
@@ -277,3 +314,16 @@ def segment_interp(x: np.ndarray, x_seg: np.ndarray, xp: np.ndarray, xp_starts: 
     res = np.where(j < 0, fp[first], res)  # before the first sample: its value
     res = np.where((j >= n - 1), fp[last], res)  # at or after the last sample: its value
     return np.where(np.isnan(x) & (n > 1), x, res)  # NaN stays NaN (numpy: but for one sample)
+
+
+def _strictly_increasing_within(xp: np.ndarray, starts: np.ndarray, lengths: np.ndarray) -> bool:
+    """Whether the segments follow each other in ``xp``, each strictly increasing and
+    none starting before the previous one ends (then one ``np.interp`` over them all
+    brackets each value within its own segment)."""
+    if starts.size == 0 or not bool(np.all(starts[1:] == starts[:-1] + lengths[:-1])) or (lengths < 1).any():
+        return False
+    a, b = int(starts[0]), int(starts[-1] + lengths[-1])
+    d = np.diff(xp[a:b])
+    inner = np.ones(d.size, dtype=bool)
+    inner[(starts[1:] - a) - 1] = False
+    return bool((d[inner] > 0).all() and (d[~inner] >= 0).all())

@@ -117,11 +117,11 @@ def speed_source_share(seg: BatchSpeedRows, trips: np.ndarray) -> list[tuple[str
     source's share of the rows."""
     b = seg.bounds
     lens = np.diff(b)[trips]
-    counts = np.zeros((len(seg), len(SPEED_SOURCES)), dtype=np.int64)
-    sid = segment_ids(b)
+    k = len(SPEED_SOURCES)
     code = seg.src.astype(np.int64)
-    ok = (code >= 0) & (code < len(SPEED_SOURCES))
-    np.add.at(counts, (sid[ok], code[ok]), 1)
+    ok = (code >= 0) & (code < k)
+    key = segment_ids(b) * k + code
+    counts = np.bincount(key[ok], minlength=len(seg) * k).reshape(len(seg), k)
     out = []
     for c_row, n in zip(counts[trips].tolist(), lens.tolist()):
         share = {SPEED_SOURCES[c]: k / n for c, k in enumerate(c_row) if k}

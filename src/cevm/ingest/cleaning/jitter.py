@@ -54,6 +54,6 @@ def positions_on_grid(grid_t: np.ndarray, gb: np.ndarray, v: np.ndarray, fixes: 
         starts[first] = 1
         run = (np.cumsum(starts) - 1)[st]
         for a in (lat, lon, alt):
-            a[st] = segment_medians(a[st], run, first.size, finite_only=True)[run]
+            a[st] = segment_medians(a[st], run, first.size, finite_only=True, plain=True)[run]
         frozen = np.bincount(segment_ids(gb)[st], minlength=gb.size - 1)
     return Positions(lat, lon, alt, frozen, raw_still, si)

@@ -17,6 +17,8 @@ Helmert datum shift): degree 4 agrees within 5e-9 m over 0.15 degrees and 2e-6 m
 
 from __future__ import annotations
 
+from functools import lru_cache
+
 import numpy as np
 
 from cevm.ingest.dsm.headers import _transformer
@@ -58,53 +60,66 @@ def _polynomial(tr, x: np.ndarray, y: np.ndarray, tolerance: float) -> tuple[np.
     x0, x1, y0, y1 = float(x.min()), float(x.max()), float(y.min()), float(y.max())
     cx, cy = 0.5 * (x0 + x1), 0.5 * (y0 + y1)
     sx, sy = max(0.5 * (x1 - x0), 1e-9 * max(1.0, abs(cx))), max(0.5 * (y1 - y0), 1e-9 * max(1.0, abs(cy)))
-    nodes = np.cos(np.pi * (np.arange(_NODES) + 0.5) / _NODES)  # Chebyshev nodes in (-1, 1)
-    fu, fv = (a.ravel() for a in np.meshgrid(nodes, nodes))
+    fu, fv = _nodes()
     # held-out points: 64 of the points, spread over them, and the extreme ones
-    pick = np.unique(np.concatenate((np.linspace(0, x.size - 1, 64).astype(np.int64),
-                                     [np.argmin(x), np.argmax(x), np.argmin(y), np.argmax(y)])))
+    pick = np.concatenate((np.linspace(0, x.size - 1, 64).astype(np.int64),
+                           [np.argmin(x), np.argmax(x), np.argmin(y), np.argmax(y)]))
     ku, kv = (x[pick] - cx) / sx, (y[pick] - cy) / sy
     px, py = tr.transform(np.concatenate((cx + sx * fu, x[pick])), np.concatenate((cy + sy * fv, y[pick])))
     px, py = np.asarray(px, dtype=np.float64), np.asarray(py, dtype=np.float64)
     if not (np.isfinite(px).all() and np.isfinite(py).all()):
         return None
     m = fu.size
-    target = np.stack((px[:m], py[:m]), axis=1)
+    target = np.stack((px[:m], py[:m]))  # (2, nodes)
     for degree in _DEGREES:
-        coef = np.linalg.lstsq(_design(fu, fv, degree), target, rcond=None)[0]
+        coef = target @ _fit_matrix(degree)  # (2, terms): least squares at the nodes
         kx, ky = _evaluate(coef, degree, ku, kv)
         if max(float(np.abs(kx - px[m:]).max()), float(np.abs(ky - py[m:]).max())) <= tolerance:
             return _evaluate(coef, degree, (x - cx) / sx, (y - cy) / sy)
     return None
 
 
+@lru_cache(maxsize=1)
+def _nodes() -> tuple[np.ndarray, np.ndarray]:
+    """The fit's nodes: the 8 x 8 Chebyshev nodes of (-1, 1)^2 (read-only)."""
+    nodes = np.cos(np.pi * (np.arange(_NODES) + 0.5) / _NODES)
+    fu, fv = (a.ravel() for a in np.meshgrid(nodes, nodes))
+    fu.setflags(write=False)
+    fv.setflags(write=False)
+    return fu, fv
+
+
 def _terms(degree: int) -> list[tuple[int, int]]:
-    """The monomials u**i v**j of total degree at most ``degree``, in the design's order."""
+    """The monomials u**i v**j of total degree at most ``degree``, in the fit's order."""
     return [(i, j) for i in range(degree + 1) for j in range(degree + 1 - i)]
 
 
-def _design(u: np.ndarray, v: np.ndarray, degree: int) -> np.ndarray:
-    return np.stack([u**i * v**j for i, j in _terms(degree)], axis=1)
+@lru_cache(maxsize=4)
+def _fit_matrix(degree: int) -> np.ndarray:
+    """The least-squares fit at the nodes as a matrix (nodes, terms): the transposed
+    pseudo-inverse of the nodes' design matrix, made once per degree."""
+    fu, fv = _nodes()
+    design = np.stack([fu**i * fv**j for i, j in _terms(degree)], axis=1)
+    return np.linalg.pinv(design).T
 
 
 def _evaluate(coef: np.ndarray, degree: int, u: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The polynomial (``coef``: one row per term of :func:`_terms`, columns x and y) at
-    (u, v), by Horner's rule in v within each power of u, then in u."""
+    """The polynomial (``coef``: rows x and y, one column per term of :func:`_terms`)
+    at (u, v), by Horner's rule in v within each power of u, then in u; x and y side by
+    side (one array of two rows)."""
     index = {t: k for k, t in enumerate(_terms(degree))}
-    out_x = out_y = None
+    out = None
     for i in range(degree, -1, -1):
-        qx = np.full(u.shape, coef[index[(i, degree - i)], 0])
-        qy = np.full(u.shape, coef[index[(i, degree - i)], 1])
+        q = np.multiply.outer(coef[:, index[(i, degree - i)]], v) if degree > i else None
         for j in range(degree - i - 1, -1, -1):
-            qx *= v
-            qx += coef[index[(i, j)], 0]
-            qy *= v
-            qy += coef[index[(i, j)], 1]
-        if out_x is None:
-            out_x, out_y = qx, qy
+            q += coef[:, index[(i, j)], None]
+            if j:
+                q *= v
+        if q is None:
+            q = np.repeat(coef[:, index[(i, 0)], None], u.size, axis=1)
+        if out is None:
+            out = q
         else:
-            out_x *= u
-            out_x += qx
-            out_y *= u
-            out_y += qy
-    return out_x, out_y
+            out *= u
+            out += q
+    return out[0], out[1]
