@@ -141,3 +141,47 @@ def test_segment_searchsorted_and_interp_equal_numpy(lens, seed, global_order, s
         got = segment_interp(q, qseg, xp, b[:-1], np.diff(b), fp)
         want = np.concatenate([np.interp(qq, s, f) for s, f, qq in zip(segs, fps, qs)])
     assert got.tobytes() == want.tobytes()
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.lists(st.integers(0, 300), min_size=1, max_size=6), st.integers(0, 2**32 - 1))
+def test_encode_profiles_equal_encode_profile_of_each(lens, seed):
+    """The stored profiles of a batch's trips, made at once, are each trip's own
+    encode_profile bytes (NaN, infinities, float32 overflow and empty trips too)."""
+    from cevm.store.codec import PROFILE_DTYPES, encode_profile, encode_profiles
+
+    rng = np.random.default_rng(seed)
+    b = bounds_of(lens)
+    n = int(b[-1])
+    arrays = {name: np.cumsum(rng.standard_normal(n)) * 10.0 ** rng.integers(-3, 6) for name in PROFILE_DTYPES}
+    if n:
+        arrays["elevation_m"][rng.integers(0, n)] = 1e39  # beyond float32: inf
+        arrays["lat_deg"][rng.integers(0, n)] = np.nan
+    got = encode_profiles(arrays, b)
+    assert got == [encode_profile({k: v[x:y] for k, v in arrays.items()}) for x, y in zip(b[:-1], b[1:])]
+    for blob, x, y in zip(got, b[:-1], b[1:]):
+        assert blob == _format_2({k: v[x:y] for k, v in arrays.items()})
+
+
+def _format_2(arrays) -> bytes:
+    """Profile format 2 as documented (cevm.store.codec.encode_profile), one trip: each
+    array cast, its bit patterns differenced from 0, byte-shuffled, zstd level 1."""
+    import json
+    import struct
+
+    import pyarrow as pa
+
+    from cevm.store.codec import PROFILE_DTYPES
+
+    zstd = pa.Codec("zstd", compression_level=1)
+    entries, payloads = [], []
+    for name, dtype in PROFILE_DTYPES.items():
+        with np.errstate(over="ignore"):
+            a = np.ascontiguousarray(arrays[name], dtype=dtype)
+        bits = a.view(np.uint64 if a.itemsize == 8 else np.uint32)
+        delta = np.diff(bits, prepend=bits.dtype.type(0))
+        payload = zstd.compress(delta.view(np.uint8).reshape(a.size, a.itemsize).T.tobytes(), asbytes=True)
+        entries.append([name, dtype, len(payload)])
+        payloads.append(payload)
+    header = json.dumps({"n": int(a.size), "codec": "delta+shuffle+zstd", "arrays": entries}).encode()
+    return b"".join([b"CEVMPRF2", struct.pack("<I", len(header)), header, *payloads])

@@ -211,18 +211,27 @@ def segment_medians(values: np.ndarray, group: np.ndarray, n_groups: int, *, fin
     med = np.full(n_groups, np.nan)
     if not values.size:
         return med
+    # The order among equal values matters only to the sign of a zero, and only to the
+    # plain mean of the middle (numpy's sum from 0.0 makes -0.0 a 0.0): a stable sort
+    # (np.lexsort's order, the cleaning's group median) only where that can arise.
+    stable = plain and bool((values == 0).any())
     if n_groups <= _FEW and (group.size < 2 or bool((group[1:] >= group[:-1]).all())):  # contiguous groups
         cut = np.searchsorted(group, np.arange(n_groups + 1)).tolist()
-        v = np.empty_like(values)
-        for a, b in zip(cut[:-1], cut[1:]):
-            v[a:b] = np.sort(values[a:b], kind="stable")
-    else:
-        # values sorted within each group: stably by value, then stably by group (numpy's
-        # radix sort for 16-bit keys): np.lexsort's order, in a fraction of its time; NaN
-        # last in a group
-        order = np.argsort(values, kind="stable")
-        small = group.astype(np.int16 if n_groups < 2**15 else np.int32)
-        v = values[order[np.argsort(small[order], kind="stable")]]
+        for i, (a, b) in enumerate(zip(cut[:-1], cut[1:])):
+            if b > a:
+                if not plain:
+                    med[i] = np.median(values[a:b])
+                    continue
+                k = b - a
+                v = np.sort(values[a:b], kind="stable") if stable else np.partition(values[a:b], ((k - 1) // 2, k // 2))
+                med[i] = 0.5 * (v[(k - 1) // 2] + v[k // 2]) if not np.isnan(v).any() else np.nan
+        return med
+    # values sorted within each group: by value, then stably by group (numpy's radix sort
+    # for 16-bit keys): np.lexsort's order (for ``stable``), at a fraction of its cost; NaN
+    # last in a group
+    order = np.argsort(values, kind="stable" if stable else "quicksort")
+    small = group.astype(np.int16 if n_groups < 2**15 else np.int32)
+    v = values[order[np.argsort(small[order], kind="stable")]]
     count = np.bincount(group, minlength=n_groups)
     start = np.zeros(n_groups, dtype=np.int64)
     np.cumsum(count[:-1], out=start[1:])

@@ -6,7 +6,7 @@ through them: read with a logger profile (:mod:`cevm.ingest.reading`), clean and
 into trips with measured consumption (:mod:`cevm.ingest.cleaning`,
 :mod:`cevm.ingest.consumption`), road elevation from the DSM
 (:mod:`cevm.ingest.elevation`), the trip's drive-cycle vector (:mod:`cevm.core.cycle`)
-and its stored profile (:func:`cevm.store.trip_profile_blob`).
+and its stored profile (:func:`cevm.store.encode_profiles`).
 
 It is the one task of every ingest, serial, in a process pool or on a Dask cluster
 (:mod:`cevm.executors`); a worker opens the DSM once (:func:`worker_sampler`), not once
@@ -35,7 +35,7 @@ from cevm.ingest.evidence import EvidenceParams, batch_evidence, trip_evidence
 from cevm.ingest.profiles import Profile
 from cevm.ingest.reading import ReadLimits, read_log
 from cevm.ingest.segments import many_short_trips
-from cevm.store import trip_profile_blob
+from cevm.store import encode_profiles
 from cevm.text import printable
 
 
@@ -66,7 +66,7 @@ class FileOutcome:
     profile: str | None = None
     trips: tuple[TripRecord, ...] = ()  # the arrays are in vectors and profile_blobs
     vectors: tuple[bytes, ...] = ()
-    profile_blobs: tuple[bytes, ...] = ()  # each trip's stored profile (trip_profile_blob)
+    profile_blobs: tuple[bytes, ...] = ()  # each trip's stored profile (cevm.store.encode_profiles)
     n_rows: int = 0
     n_samples: int = 0
     dropped: tuple[dict, ...] = ()
@@ -120,6 +120,7 @@ def _finish_batch(batch: CleanBatch, log, path: Path, sha: str, sampler: DsmSamp
         evidence = [trip_evidence(start[i] + time_s[bounds[i]:bounds[i + 1]], batch.speed_mps[bounds[i]:bounds[i + 1]],
                                   *batch.evidence_rows(i), standstill, options.evidence) for i in range(len(batch))]
     stage["evidence"] = stage.get("evidence", 0.0) + time.perf_counter() - t1
+    made = []
     for i, (elev, (fields, evidence_q)) in enumerate(zip(elevations, evidence, strict=True)):
         t1 = time.perf_counter()
         a, b = int(bounds[i]), int(bounds[i + 1])
@@ -130,7 +131,7 @@ def _finish_batch(batch: CleanBatch, log, path: Path, sha: str, sampler: DsmSamp
         if log.repairs:
             quality["read_repairs"] = list(log.repairs)
         trip = Trip(
-            vehicle_id=log.vehicle_id, source_file=str(path), source_sha256=sha, trip_index=len(trips),
+            vehicle_id=log.vehicle_id, source_file=str(path), source_sha256=sha, trip_index=len(trips) + i,
             start_utc_s=float(start[i]), time_s=time_s[a:b], speed_mps=batch.speed_mps[a:b],
             distance_m=batch.distance_m[a:b], lat_deg=batch.lat_deg[a:b], lon_deg=batch.lon_deg[a:b],
             elevation_m=elev.elevation_m, elevation_source=elev.source, dsm_coverage_pct=elev.dsm_coverage_pct,
@@ -139,11 +140,15 @@ def _finish_batch(batch: CleanBatch, log, path: Path, sha: str, sampler: DsmSamp
         )
         t2 = time.perf_counter()
         vectors.append(drive_cycle_vector(trip.time_s, trip.speed_mps, trip.elevation_m, cr0=options.cr0).to_bytes())
-        t3 = time.perf_counter()
-        blobs.append(trip_profile_blob(trip))
         stage["elevation"] += t2 - t1
-        stage["vector"] = stage.get("vector", 0.0) + t3 - t2
-        stage["profile"] = stage.get("profile", 0.0) + time.perf_counter() - t3
+        stage["vector"] = stage.get("vector", 0.0) + time.perf_counter() - t2
+        made.append(trip)
+    t1 = time.perf_counter()
+    blobs.extend(encode_profiles({"time_s": time_s, "speed_mps": batch.speed_mps, "distance_m": batch.distance_m,
+                                  "elevation_m": np.concatenate([e.elevation_m for e in elevations]),
+                                  "lat_deg": batch.lat_deg, "lon_deg": batch.lon_deg}, bounds))
+    stage["profile"] = stage.get("profile", 0.0) + time.perf_counter() - t1
+    for trip in made:
         trips.append(trip.record())
         warnings.extend(trip_warnings(trip))
 
