@@ -7,7 +7,6 @@ from collections.abc import Iterator, Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
-import pandas as pd
 
 from cevm.errors import InputError
 from cevm.ingest.cleaning.arrays import _jsonable, _let_go, _nonzero
@@ -22,6 +21,7 @@ from cevm.ingest.cleaning.splitting import _SPLIT_REASONS, _ignition_on, _segmen
 from cevm.ingest.cleaning.trip import clean_batch
 from cevm.ingest.consumption import EnergySourceLike, columns_read
 from cevm.ingest.evidence import EVIDENCE_COLUMNS
+from cevm.lazy import is_pandas, pd
 
 
 def _require_speed_or_position(cols: dict, path) -> None:
@@ -58,7 +58,7 @@ class CleanStream:
                  params: CleanParams = CleanParams(), *, path: str | Path | None = None,
                  release_frame: bool = False) -> None:
         p = params
-        n_in = len(frame) if isinstance(frame, pd.DataFrame) else len(frame.get("time_s", ()))
+        n_in = len(frame) if is_pandas(frame, "DataFrame") else len(frame.get("time_s", ()))
         t, line, rows, no_time = _load(frame, path, release_frame)
         _require_speed_or_position(rows.cols, path)
         ev = RepairEvents()

@@ -7,7 +7,6 @@ from __future__ import annotations
 from functools import lru_cache
 
 import numpy as np
-import pandas as pd
 
 from cevm.ingest.profiles import Profile
 from cevm.ingest.reading.blocks import _NUMERIC_NA, ParsedBlock, _drop_empty_rows
@@ -69,9 +68,10 @@ def _arrow_block(block: bytes, first_line: int, plan: ColumnPlan, prof: Profile,
             has_value |= time_ns != NAT
             continue
         col = pc.if_else(pc.equal(col, ""), pa.scalar(None, pa.string()), col)
-        has_value |= col.is_valid().to_numpy(zero_copy_only=False)
+        valid = col.is_valid().to_numpy(zero_copy_only=False)
+        has_value |= valid
         vals = col.to_numpy(zero_copy_only=False)
-        vals[pd.isna(vals)] = np.nan  # None -> NaN, as pandas gives
+        vals[~valid] = np.nan  # None -> NaN, as pandas gives
         text[c] = vals
     del tbl
     lines = first_line + np.arange(n_lines, dtype=np.int64)

@@ -9,7 +9,6 @@ import re
 from pathlib import Path
 
 import numpy as np
-import pandas as pd
 
 from cevm.errors import InputError, has_control
 from cevm.ingest.profiles import ColumnMap, Profile
@@ -34,6 +33,7 @@ from cevm.ingest.timestamps import (
     epoch_ns,
     parse_datetimes,
 )
+from cevm.lazy import pd
 from cevm.runtime import release_free_memory
 
 
