@@ -32,7 +32,10 @@ def _arrow_block(block: bytes, first_line: int, plan: ColumnPlan, prof: Profile,
     as strings; ``None`` where pyarrow refuses the block (a row with more or fewer
     fields, a value it cannot convert) or its rows do not match the lines."""
     pa, pc, pacsv = _arrow()
-    n_lines = block.count(b"\n") + (0 if block.endswith(b"\n") else 1)
+    if isinstance(block, memoryview):  # a block ending with a line break (blocks._data_blocks)
+        n_lines = block.obj.count(b"\n", 0, len(block))
+    else:
+        n_lines = block.count(b"\n") + (0 if block.endswith(b"\n") else 1)
     types = {c: pa.float64() for c in plan.num_cols}
     types.update({c: pa.string() for c in plan.text_cols})
     tcol = prof.time.columns[0] if len(prof.time.columns) == 1 else None

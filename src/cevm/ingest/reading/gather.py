@@ -319,7 +319,7 @@ class FactorisedValues:
 
 def _first_value(block: bytes, index: int, sep: str, max_lines: int = 50) -> str | None:
     """The first non-empty value of field ``index`` in the first lines of ``block``."""
-    head = block[: 1 << 16].decode("utf-8", errors="replace").splitlines()[:max_lines]
+    head = bytes(block[: 1 << 16]).decode("utf-8", errors="replace").splitlines()[:max_lines]
     for row in csv.reader(head, delimiter=sep):
         if index < len(row) and row[index].strip():
             return row[index].strip()

@@ -92,4 +92,4 @@ def _parse_block(block: bytes, first_line: int, plan: ColumnPlan, prof: Profile,
             return part
     from cevm.ingest.reading.engine_pandas import _pandas_block  # imports pandas: only for such a block
 
-    return _pandas_block(block, first_line, plan, prof, path)
+    return _pandas_block(bytes(block), first_line, plan, prof, path)
