@@ -1,7 +1,8 @@
-"""Real-world accuracy: every vehicle of sample_logs/ and the Twizy logs, calibrated
-with each candidate term set, cross-validated side by side with eta alone and the paper.
+"""Real-world accuracy and honest ranges: every vehicle of sample_logs/ and the Twizy
+logs, calibrated as `cevm calibrate` does, cross-validated with their intervals, and the
+sample buses calibrated on one season and predicting the other.
 
-    python benchmarks/bench_accuracy.py [--twizy PATH] [--markdown] [--no-fleet]
+    python benchmarks/bench_accuracy.py [--twizy PATH] [--markdown] [--no-fleet] [--no-seasons]
 
 For each vehicle the trips are ingested as a user would (``cevm ingest``: sample logs
 with their DSM tiles, the Twizy logs without), then calibrated as ``cevm calibrate``
@@ -10,7 +11,17 @@ cross-validation over days, the one-standard-error choice, nested cross-validati
 the choice). Printed per vehicle: the trips, the cross-validated mean and sigma of the
 per-trip error e = (modelled - measured) / measured of eta alone (the paper's model),
 of the best candidate of each size, of the chosen model, and the nested sigma (the
-honest figure for the procedure); then the paper's tables 1 and 2 for comparison.
+honest figure for the procedure), the share of held-out trips inside their 90 %
+interval (coverage; at 50 / 80 / 95 % too) and the intervals' mean width [% of the
+measured]; then the paper's tables 1 and 2 for comparison.
+
+Season split (the buses, whose six days run from -6 to 30 degC): each bus calibrated on
+its summer days (May to September) predicts its other days with
+:func:`cevm.core.predictive.predictive` (the calibrated file's posterior), and the
+reverse: mean and worst error, and the share of those trips inside their 90 % interval.
+For comparison, the same split with the calibration before priors and intervals
+(issue 22's figures on real logs: a summer-only calibration predicted the winter trips
+27 % low, a winter-only one the summer trips 27 % high).
 
 Vehicles: EB-* with configs/vehicles/electric-bus.toml, HGV-* and the portal trucks
 with diesel-hgv.toml in "no-credit" braking (the trucks of the portal export record no
@@ -26,8 +37,11 @@ choice of who serves the shared stops move?). Nothing is tuned to table 4.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
 import sys
+
+import numpy as np
 import tempfile
 import time
 from pathlib import Path
@@ -71,19 +85,40 @@ def calibrate_store(store_path: Path, label: str) -> list[dict]:
                 continue
             dt = time.perf_counter() - t0
             ok = [c for c in sel.candidates if c.ok]
-            eta = next((c for c in sel.candidates if c.terms == ("eta",)), None)
+            eta = next((c for c in sel.candidates if c.terms == ("eta",)), None) or _eta_only(veh, sel_trips.trips)
             best_by_k = {}
             for c in ok:
                 k = len(c.terms)
                 if k not in best_by_k or c.mse < best_by_k[k].mse:
                     best_by_k[k] = c
             rows.append({
+                "trips_data": sel_trips.trips, "veh": veh, "vehicle_path": path, "braking": braking,
+                "store": str(store_path),
                 "set": label, "vehicle": vid, "powertrain": veh.powertrain, "trips": sel.result.cv.n if sel.result.cv else 0,
                 "eta_only": eta, "best_by_k": best_by_k, "chosen": sel.chosen, "result": sel.result,
                 "nested": sel.nested_cv, "seconds": dt, "n_candidates": len(sel.candidates), "n_ok": len(ok),
+                "standstill": sel.chosen_standstill,
                 "notes": sel_trips.notes + sel.notes,
             })
     return rows
+
+
+def _eta_only(veh, trips):
+    """The paper's model (eta alone, every other term out, no prior) cross-validated as
+    a candidate is, for the comparison column (its standstill check not applied: with
+    priors it is no candidate)."""
+    from types import SimpleNamespace
+
+    from cevm.core.calibration.candidate import Settings, fit_candidate
+    from cevm.core.calibration.data import select_trips
+    from cevm.core.calibration.terms import TermModel, neutral
+    from cevm.core.calibration.validation import ErrorStats
+
+    base = dataclasses.replace(neutral(veh), priors=None)
+    data, _ = select_trips(base, trips, 0.10, 1000.0, 0.001)
+    model = TermModel(base, data)
+    cf = fit_candidate(model, ("eta",), np.arange(data.n), None, Settings())
+    return SimpleNamespace(cv=ErrorStats.of(cf.cv_error_pct()))
 
 
 def _ms(stats) -> str:
@@ -94,33 +129,114 @@ def _ms(stats) -> str:
 
 def print_table(rows: list[dict], markdown: bool) -> None:
     head = ["set", "vehicle", "trips", "eta only (paper's model)", "chosen terms", "chosen CV mu / sigma",
-            "nested sigma", "best 2 / 3 / 4 terms (sigma)", "candidates ok of", "s"]
+            "nested sigma", "90 % interval: held-out inside", "mean width", "at 50 / 80 / 95 %",
+            "candidates ok of", "s"]
     lines = []
     for r in rows:
         if "error" in r:
             lines.append([r["set"], r["vehicle"], "-", r["error"][:60], "", "", "", "", "", ""])
             continue
         res = r["result"]
-        best = " / ".join(f"{'+'.join(r['best_by_k'][k].terms[1:]) or '-'} {r['best_by_k'][k].cv.std_pct:.1f}"
-                          for k in (2, 3, 4) if k in r["best_by_k"])
+        inside = [row.inside for row in res.rows if row.inside is not None]
+        cov = res.coverage
         lines.append([r["set"], r["vehicle"], str(r["trips"]), _ms(r["eta_only"].cv if r["eta_only"] else None),
-                      "+".join(r["chosen"]), _ms(res.cv), "-" if r["nested"] is None else f"{r['nested'].std_pct:.1f} %",
-                      best or "-", f"{r['n_ok']} of {r['n_candidates']}", f"{r['seconds']:.2f}"])
+                      "+".join(r["chosen"]) + (" (standstill)" if r["standstill"] else ""), _ms(res.cv),
+                      "-" if r["nested"] is None else f"{r['nested'].std_pct:.1f} %",
+                      f"{sum(inside)} of {len(inside)} ({100 * cov.get(0.9, float('nan')):.0f} %)",
+                      f"{res.mean_rel_width_pct:.1f} %",
+                      " / ".join(f"{100 * cov[k]:.0f}" for k in (0.5, 0.8, 0.95) if k in cov) + " %",
+                      f"{r['n_ok']} of {r['n_candidates']}", f"{r['seconds']:.2f}"])
     for pt, (name, mu, sd) in PAPER.items():
-        lines.append(["paper", name, "", "", "eta", f"{mu:+.1f} / {sd:.1f} %", "", "", "", ""])
+        lines.append(["paper", name, "", "", "eta", f"{mu:+.1f} / {sd:.1f} %", "", "", "", "", "", ""])
+    _print_lines(head, lines, markdown)
+    for r in rows:
+        for note in r.get("notes", ()):
+            print(f"  {r['vehicle']}: {note}")
+
+
+def _month(trip) -> int:
+    return int(str(np.datetime64(int(trip.start_utc_s), "s"))[5:7])
+
+
+def season_split(rows: list[dict], markdown: bool, baseline_src: Path | None) -> None:
+    """Each bus calibrated on its summer (winter) days predicts its winter (summer) days."""
+    from cevm.core.predictive import Features, predictive
+
+    lines = []
+    for r in rows:
+        if "result" not in r or not r["vehicle"].startswith("EB-"):
+            continue
+        trips, veh = r["trips_data"], r["veh"]
+        summer = [t for t in trips if 5 <= _month(t) <= 9]
+        winter = [t for t in trips if not 5 <= _month(t) <= 9]
+        for name, train, test in (("summer -> winter", summer, winter), ("winter -> summer", winter, summer)):
+            sel = select(veh, train, time_repeats=0, vehicle_id=r["vehicle"], nested=False)
+            v = sel.result.vehicle
+            err, inside, width = [], [], []
+            for t in test:
+                p = predictive(v, Features.of(t.vector, v, [t.mass_kg], [t.ambient_c]))
+                lo, hi = p.interval(0.9)
+                err.append((p.mean[0] - t.measured) / t.measured * 100.0)
+                inside.append(bool(lo[0] <= t.measured <= hi[0]))
+                width.append((hi[0] - lo[0]) / t.measured * 100.0)
+            err = np.array(err)
+            old = _baseline_split(baseline_src, r, train, test)
+            lines.append([r["vehicle"], name, f"{len(train)} / {len(test)}", "+".join(sel.chosen),
+                          f"{err.mean():+.1f} %", f"{err[np.argmax(np.abs(err))]:+.1f} %",
+                          f"{sum(inside)} of {len(inside)}", f"{np.mean(width):.0f} %", old])
+    head = ["bus", "calibrated on -> predicts", "trips", "model", "mean error", "worst", "inside 90 %",
+            "mean width", "before (mean / worst error, no interval)"]
+    print()
+    _print_lines(head, lines, markdown)
+
+
+def _baseline_split(src: Path | None, r: dict, train, test) -> str:
+    """The same split with the calibration of another checkout (``--baseline-src``), in a
+    subprocess: mean and worst error."""
+    if src is None:
+        return "-"
+    import pickle
+    import subprocess
+
+    ids = ({t.trip_id for t in train}, {t.trip_id for t in test})
+    path = Path(r["vehicle_path"]).resolve()
+    with contextlib.suppress(ValueError):  # the baseline's own copy of a shipped file (its format may be older)
+        own = src.resolve().parent / path.relative_to(ROOT.resolve())
+        path = own if own.is_file() else path
+    payload = pickle.dumps((str(path), r["braking"], r["store"], r["vehicle"], ids))
+    code = """
+import pickle, sys, dataclasses
+import numpy as np
+sys.path.insert(0, %r)
+from cevm.core.calibration import select
+from cevm.core.vehicle import predict
+from cevm.io import load_vehicle
+from cevm.store import TripStore
+from cevm.store.calibration import trips_for_calibration
+path, braking, store, vid, (tr, te) = pickle.loads(sys.stdin.buffer.read())
+veh = load_vehicle(path)
+if braking: veh = dataclasses.replace(veh, ice_braking=braking)
+with TripStore.open(store, readonly=True) as st: trips = trips_for_calibration(st, vid, veh).trips
+v = select(veh, [t for t in trips if t.trip_id in tr], time_repeats=0, nested=False).result.vehicle
+e = np.array([(float(predict(t.vector, v, t.mass_kg, ambient_c=t.ambient_c).energy_j) - t.measured) / t.measured * 100
+              for t in trips if t.trip_id in te])
+print(f"{e.mean():+.1f} / {e[np.argmax(np.abs(e))]:+.1f} %")
+""".replace("%r", repr(str(src)))
+    res = subprocess.run([sys.executable, "-c", code], input=payload, capture_output=True)
+    return res.stdout.decode().strip() or ("failed: " + res.stderr.decode().strip().splitlines()[-1][:60])
+
+
+def _print_lines(head, lines, markdown: bool) -> None:
     if markdown:
         print("| " + " | ".join(head) + " |")
         print("|" + "---|" * len(head))
         for line in lines:
             print("| " + " | ".join(line) + " |")
-    else:
-        widths = [max(len(h), *(len(line[i]) for line in lines)) for i, h in enumerate(head)]
-        print("  ".join(h.ljust(w) for h, w in zip(head, widths)))
-        for line in lines:
-            print("  ".join(c.ljust(w) for c, w in zip(line, widths)))
-    for r in rows:
-        for note in r.get("notes", ()):
-            print(f"  {r['vehicle']}: {note}")
+        return
+    widths = [max(len(h), *(len(line[i]) for line in lines)) if lines else len(h) for i, h in enumerate(head)]
+    print("  ".join(h.ljust(w) for h, w in zip(head, widths)))
+    for line in lines:
+        print("  ".join(c.ljust(w) for c, w in zip(line, widths)))
 
 
 def fleet_comparison(hgv_result) -> None:
@@ -153,6 +269,10 @@ def main(argv=None) -> None:
                     help="directory of the Twizy logs (skipped when absent)")
     ap.add_argument("--markdown", action="store_true", help="print the table as Markdown (for the README)")
     ap.add_argument("--no-fleet", action="store_true", help="skip the fleet case study")
+    ap.add_argument("--no-seasons", action="store_true", help="skip the season split of the buses")
+    ap.add_argument("--baseline-src", default=None,
+                    help="a checkout's src/ whose calibration the season split is compared with (e.g. a worktree "
+                         "of the round's starting code)")
     ap.add_argument("--no-manifests", action="store_true",
                     help="calibrate the sample vehicles without the manifests' masses (buses and portal trucks at "
                          "the vehicle file's mass)")
@@ -176,7 +296,9 @@ def main(argv=None) -> None:
             with TripStore.open(tw) as st:
                 ingest([twizy], st, IngestOptions())
             rows += calibrate_store(tw, "twizy (real)")
-    print_table(rows, args.markdown)
+        print_table(rows, args.markdown)
+        if not args.no_seasons:  # in the store's lifetime: the baseline reads it
+            season_split(rows, args.markdown, None if args.baseline_src is None else Path(args.baseline_src))
     if not args.no_fleet:
         hgv = next((r for r in rows if r.get("vehicle") == "HGV-11" and "result" in r), None)
         if hgv is not None:

@@ -80,10 +80,12 @@ def test_noise_free_ice_recovers_eta_idle(pool, braking):
 # --- against independent computations -------------------------------------------------
 
 def test_ice_eta_equals_closed_form_weighted_least_squares(pool):
-    """Paper-mode ICE, eta alone, tau fixed at 0: fuel = c_i x + d_i with x = 1/eta, so
-    the relative-error WLS has a closed form; its standard error too (the least-squares
-    estimator: robust=False; the default Huber estimate differs where trips lie beyond
-    2.5 sigma)."""
+    """Paper-mode ICE, eta alone, the scatter held at 0 (the measurement uncertainties
+    alone weigh the trips): fuel = c_i x + d_i with x = 1/eta, so the posterior mode
+    without a prior is the weighted least-squares estimate, sum (p_i - y_i)^2 /
+    (u_i y_i)^2 minimised, and its standard deviation that of known weights (the
+    least-squares estimator: robust=False; the default Huber estimate differs where
+    trips lie beyond 2.5 sigma)."""
     cycles, vecs = pool
     rng = np.random.default_rng(3)
     prior = replace(TRUCK, idle_fuel_lps=1.8 / 3600)
@@ -94,7 +96,7 @@ def test_ice_eta_equals_closed_form_weighted_least_squares(pool):
     u = rng.uniform(0.01, 0.05, 8)
     trips = [TripData(str(i), v, m, float(yy), float(uu * yy)) for i, (v, m, yy, uu)
              in enumerate(zip(vecs[:8], masses, y, u))]
-    r = fit(prior, trips, cv_folds=0, model_rel_sigma=0.0, time_repeats=0, robust=False)  # least squares
+    r = fit(prior, trips, cv_folds=0, scatter=(0.0, 0.0), time_repeats=0, robust=False)  # least squares
     c = np.empty(8)
     d = np.empty(8)
     for i, (cyc, m) in enumerate(zip(cycles[:8], masses)):
@@ -102,11 +104,10 @@ def test_ice_eta_equals_closed_form_weighted_least_squares(pool):
         c[i] = reference_wheel_energy_j(t, v, h, m, prior.cda_m2, prior.cr, "paper") / prior.fuel_lhv_j_per_l
         stand = sum(t[j + 1] - t[j] for j in range(len(t) - 1) if v[j] == 0 and v[j + 1] == 0)
         d[i] = prior.idle_fuel_lps * stand
-    W = 1.0 / u**2
-    x = np.sum(W * c * (y - d) / y**2) / np.sum(W * c * c / y**2)
+    W = 1.0 / (u * y) ** 2
+    x = np.sum(W * c * (y - d)) / np.sum(W * c * c)
     res = (c * x + d - y) / y
-    s2 = np.sum(W * res**2) / (8 - 1)
-    sd_x = np.sqrt(s2 / np.sum(W * c * c / y**2))
+    sd_x = np.sqrt(1.0 / np.sum(W * c * c))
     assert r.fitted["eta"][0] == pytest.approx(1 / x, rel=1e-9)
     assert r.fitted["eta"][1] == pytest.approx(sd_x / x**2, rel=1e-6)
     assert [row.error_pct_in_sample for row in r.rows] == pytest.approx(list(100 * res), abs=1e-7)
@@ -126,31 +127,32 @@ def test_reported_predictions_match_plain_reference(pool):
 
 # --- honest standard errors ------------------------------------------------------------
 
-@pytest.mark.parametrize("noise, reported, tau", [
-    (0.02, 0.02, None),  # honest measurement uncertainty
-    (0.03, 0.01, None),  # understated: the model error tau absorbs the rest
-    (0.03, 0.01, 0.0),  # understated, tau fixed at 0: the residual scale s corrects it
+@pytest.mark.parametrize("noise, reported", [
+    (0.02, 0.02),  # honest measurement uncertainty
+    (0.03, 0.01),  # understated: the fitted scatter takes the rest
 ])
-def test_standard_errors_are_honest_over_repetitions(pool, noise, reported, tau):
-    """30 noisy data sets: z = (estimate - truth) / reported std has about unit spread."""
+def test_standard_errors_are_honest_over_repetitions(pool, noise, reported):
+    """30 noisy data sets: z = (estimate - truth) / reported std has about unit spread,
+    and the fitted scatter is what the measurement uncertainty leaves unexplained."""
     _, vecs = pool
     rng = np.random.default_rng(5)
     truth = replace(BUS, eta=0.76, aux_power_w=5000.0)
-    z, taus = [], []
+    z, extra = [], []
     for _ in range(30):
         pick = rng.choice(len(vecs), 16, replace=False)
         trips = synth_trips([vecs[i] for i in pick], truth, rng.uniform(9000, 14000, 16), rng, noise,
                             reported=reported)
-        r = fit(BUS, trips, ("eta", "aux_power_w"), cv_folds=0, time_repeats=0, model_rel_sigma=tau)
+        r = fit(BUS, trips, ("eta", "aux_power_w"), cv_folds=0, time_repeats=0)
         assert not r.refused
         z.append([(r.fitted[n][0] - getattr(truth, n)) / r.fitted[n][1] for n in ("eta", "aux_power_w")])
-        taus.append(r.model_rel_sigma)
+        # the fitted scatter at the trips: relative to their predictions
+        sc = r.scatter
+        rel = [np.hypot(sc.aux * v.duration_s / row.predicted_in_sample, sc.share)
+               for row, v in zip(r.rows, [vecs[i] for i in pick])]
+        extra.append(float(np.mean(rel)))
     z = np.array(z)
-    # the model error tau is what the measurement uncertainty leaves unexplained (its
-    # estimate is >= 0, so it scatters above 0 when there is nothing to explain)
-    expected_tau = np.sqrt(noise**2 - reported**2) if tau is None else tau
-    tol = 0.01 if expected_tau == 0 and tau is None else 0.005
-    assert np.sqrt(np.mean(np.square(taus))) == pytest.approx(expected_tau, abs=tol)
+    expected = np.sqrt(noise**2 - reported**2)
+    assert np.sqrt(np.mean(np.square(extra))) == pytest.approx(expected, abs=0.01)
     assert np.all(np.abs(z) < 4.0)
     assert np.all(np.abs(z.mean(axis=0)) < 0.6)
     assert np.all((z.std(axis=0, ddof=1) > 0.6) & (z.std(axis=0, ddof=1) < 1.5))
@@ -179,13 +181,19 @@ def test_quantised_counter_weighs_less_and_coarse_trips_are_excluded(pool):
     assert all("relative uncertainty" in r.excluded[k] and "> 10.0 %" in r.excluded[k] for k in coarse)
     rows = {row.trip_id: row for row in r.rows}
     assert sum(row.weight for row in r.rows) == pytest.approx(1.0)
-    tau = r.model_rel_sigma
+    # each trip weighs 1 / (its measurement's variance + the fitted scatter's there)
+    sc = r.scatter
+    dur = {t.trip_id: t.vector.duration_s for t in trips}
+
+    def variance(row):
+        return (row.rel_uncertainty * row.measured) ** 2 + (sc.aux * dur[row.trip_id]) ** 2 + (
+            sc.share * row.predicted_in_sample) ** 2
+
     flow = [row for row in r.rows if row.trip_id not in counter]
     for k in set(counter) - coarse:
         assert rows[k].weight < min(f.weight for f in flow)
         f = flow[0]
-        expected_ratio = (f.rel_uncertainty**2 + tau**2) / (counter[k] ** 2 + tau**2)
-        assert rows[k].weight / f.weight == pytest.approx(expected_ratio, rel=1e-9)
+        assert rows[k].weight / f.weight == pytest.approx(variance(f) / variance(rows[k]), rel=1e-6)
 
 
 def test_exclusions_name_their_reason(pool):

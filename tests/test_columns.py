@@ -67,7 +67,7 @@ def test_predict_json_objects_keep_the_first_contract_and_have_only_their_powert
     cols = PREDICT.values(BlockRows(block))
     objs = [json.loads(s) for s in json_objects(cols, PREDICT, block.pset.is_ev)]
     assert len(objs) == block.n == 6
-    for obj, ev in zip(objs, block.pset.is_ev):
+    for obj, ev in zip(objs, block.pset.is_ev, strict=True):
         keys = list(obj)
         assert keys[:7] == FIRST_CONTRACT
         if ev:

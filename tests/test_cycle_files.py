@@ -441,3 +441,40 @@ def test_every_command_that_reads_cycles_takes_the_options(vecto, root, tmp_path
     res = runner.invoke(app, ["predict", "-v", hgv, "-c", cyc_file, "--speed-unit", "parsec/s"])
     assert res.exit_code == 2 and "unknown speed unit 'parsec/s'" in res.output
 
+
+
+_RANDOM = np.random.default_rng(5).normal(0, 1e3, 500).tolist()
+
+
+@pytest.mark.parametrize("body, by_arrow", [
+    ("".join(f"{i},{x!r},{x * 1e-7:.25f}\n" for i, x in enumerate(_RANDOM)), True),
+    ("0, 1.5,2\n1 ,+2.25,3\n", True),  # spaces around a number, a plus sign
+    ("0,1.5,2\n1,2.25,3\n2,-,4\n", False),  # a cell that is no number: pandas explains it
+    ('"0","1.5",2\r\n\r\n1,2.25,3e2\r\n', True),
+])
+def test_pyarrow_and_numpy_readers_give_the_same_doubles(tmp_path, monkeypatch, body, by_arrow):
+    """Numbers are parsed by pyarrow where it can and by numpy.loadtxt where it refuses a
+    cell: both to the nearest double, so a file reads the same by either."""
+    import cevm.io.numeric_csv as nc
+
+    path = tmp_path / "c.csv"
+    path.write_text("a,b,c\n" + body)
+    layout = nc.sniff_csv(path)
+    assert (nc._read_arrow(layout, [0, 1, 2], None) is not None) == by_arrow
+
+    def read():
+        try:
+            return [a.tobytes() for a in nc.read_numeric_columns(layout, [0, 1, 2])]
+        except InputError as exc:
+            return str(exc)
+
+    fast = read()
+    monkeypatch.setattr(nc, "_read_arrow", lambda *args: None)
+    assert fast == read()
+    if not by_arrow:
+        assert "line 4" in fast or ":4:" in fast
+        return
+    fast = nc.read_numeric_columns(layout, [0, 1, 2])
+    assert all(a.flags.writeable and a.dtype == np.float64 for a in fast)
+    want_first = [float(x) for x in body.splitlines()[0].replace('"', "").split(",")]
+    assert [a[0] for a in fast] == want_first

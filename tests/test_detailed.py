@@ -13,10 +13,10 @@ from hypothesis import strategies as st
 from cevm.core.cycle import drive_cycle_vector
 from cevm.core.detailed import DieselParams, EvParams, decimate_indices, simulate
 from cevm.core.model import wheel_energy_j
-from cevm.core.vehicle import vehicle_from_mapping
 from cevm.errors import InputError
 from cevm.io import load_vehicle, read_cycle_csv
 from cevm.io.detailed import diesel_params_from_vehicle, ev_params_from_vehicle
+from cevm.io.vehicles import vehicle_from_mapping
 
 RHO, G = 1.225, 9.81
 RPM = 2 * math.pi / 60

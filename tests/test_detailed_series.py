@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from cevm.core.detailed import DieselParams, EvParams, simulate
-from cevm.core.vehicle import vehicle_from_mapping
+from cevm.io.vehicles import vehicle_from_mapping
 
 RPM = 2 * math.pi / 60
 

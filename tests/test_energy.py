@@ -16,7 +16,8 @@ from cevm.core import energy
 from cevm.core.cycle import CycleVector, drive_cycle_vector
 from cevm.core.feasibility import feasibility
 from cevm.core.sweep import LegProfile, PredictionSet, Source, energy_trajectory, predict_sources
-from cevm.core.vehicle import Vehicle, domain_warnings, predict, vehicle_from_mapping
+from cevm.core.vehicle import Vehicle, domain_warnings, predict
+from cevm.io.vehicles import vehicle_from_mapping
 from cevm.core.vehicle import FitDomain
 from reference import G, RHO, reference_consumption
 

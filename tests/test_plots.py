@@ -12,7 +12,7 @@ import matplotlib
 matplotlib.use("svg")  # the caller's choice, which drawing a PNG must not change
 import numpy as np
 from cevm.core.detailed import simulate
-from cevm.core.vehicle import vehicle_from_mapping
+from cevm.io.vehicles import vehicle_from_mapping
 from cevm.io.plots import plot_simulation
 
 veh = vehicle_from_mapping(dict(name="bus", powertrain="ev", mass_kg=9825.0, cda_m2=3.99, cr=0.0066, eta=0.78,

@@ -197,3 +197,34 @@ def test_feasibility_gives_the_range_and_no_negative_charge(tmp_path, root):
     row = json.loads(res.stdout)[0]
     assert row["soc_end_pct"] is None and row["soc_min_pct"] == 0.0 and row["feasible"] is False
     assert row["range_km"] == pytest.approx(row["empty_at_km"]) and row["range_reserve_km"] < row["range_km"]
+
+
+@pytest.mark.parametrize("chunk_steps, chunk_rows", [((7, 7), 2), ((64, 64), 1 << 12), ((1 << 10, 1 << 16), 3)])
+def test_ranges_are_the_same_bit_for_bit_however_the_running_sum_is_cut(monkeypatch, chunk_steps, chunk_rows):
+    """The running sums are made a chunk of steps at a time and stop where every row has
+    crossed its levels: cut anywhere, the crossings are the reference's and the same to
+    the last bit as one sum over the whole source."""
+    import cevm.core.sweep.ranges as ranges
+
+    src = _source(LEGS)
+    ps = PredictionSet.build([EV, ICE], payload_kg=[0.0, 3000.0, 8000.0, 20000.0])
+    whole = predict_source(src, ps, soc_start_pct=90.0, reserve_pct=20.0, ranges=True)
+    assert np.isfinite(whole.empty_at_m).sum() >= 2 and np.isfinite(whole.reserve_at_m).sum() >= 2
+    monkeypatch.setattr(ranges, "_RANGE_CHUNK_STEPS", chunk_steps)
+    monkeypatch.setattr(ranges, "_RANGE_CHUNK_ROWS", chunk_rows)
+    for repeat in (True, False):
+        cut = predict_source(src, ps, soc_start_pct=90.0, reserve_pct=20.0, ranges=repeat)
+        for f in ranges.RANGE_FIELDS:
+            got, want = getattr(cut, f), getattr(whole, f)
+            if not repeat and f.startswith("range"):
+                assert got is None
+            else:
+                assert got.tobytes() == want.tobytes(), f
+    for i in range(ps.n):
+        v = ps.vehicles[ps.vehicle_index[i]]
+        m = float(ps.mass_kg[i])
+        if v.is_ev:
+            want = reference_crossing(LEGS, 0.90 * v.battery_j, repeat=True, **_ev_step(v, m))
+        else:
+            want = reference_crossing(LEGS, v.tank_l, repeat=True, **_ice_step(v, m))
+        _close(whole.range_m[i], want[1])

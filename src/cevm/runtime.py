@@ -41,6 +41,12 @@ TOP_PAD_BYTES = 64 << 20
 #: arrays cannot reuse (the peak of cleaning a 2.5 M-row log: 504 MB at 32 MB, 427 MB at
 #: 4 MB; no change in speed). The arrays a sweep allocates by the thousand are ~100 kB.
 MMAP_THRESHOLD_BYTES = 4 << 20
+#: The mmap threshold of commands that work on whole long cycles (``cevm predict``,
+#: ``cevm feasibility``): they make and free arrays of a cycle's length (16 MB at 2 M
+#: samples) dozens of times, which from the heap are reused and from fresh mappings cost
+#: their page faults every time (on benchmarks/bench_predict_cli.py: 0.1-0.2 s of system
+#: time of 1.1-1.5 s, and the same peak memory).
+WHOLE_CYCLE_MMAP_THRESHOLD_BYTES = 256 << 20
 
 
 #: Set to ``0`` to leave the allocator alone (e.g. workers under a tight memory limit).
@@ -75,11 +81,14 @@ def release_free_memory() -> bool:
     return True
 
 
-def tune_allocator() -> bool:
+def tune_allocator(mmap_threshold_bytes: int = MMAP_THRESHOLD_BYTES) -> bool:
     """Keep freed memory for reuse instead of returning it to the system (glibc only).
 
-    Returns True if the settings were applied, False where they do not apply (another C
-    library or operating system) or ``$CEVM_TUNE_ALLOCATOR`` is ``0``, which is
+    Arrays larger than ``mmap_threshold_bytes`` still get their own mapping (default
+    :data:`MMAP_THRESHOLD_BYTES`; :data:`WHOLE_CYCLE_MMAP_THRESHOLD_BYTES` for the
+    commands on whole long cycles). Returns True if the settings were applied, False
+    where they do not apply (another C library or operating system) or
+    ``$CEVM_TUNE_ALLOCATOR`` is ``0``, which is
     harmless: only speed differs. A process keeps up to :data:`TRIM_THRESHOLD_BYTES`
     of freed memory (plus :data:`TOP_PAD_BYTES`) after a peak.
     """
@@ -92,7 +101,7 @@ def tune_allocator() -> bool:
         return False
     mallopt.argtypes = (ctypes.c_int, ctypes.c_int)
     mallopt.restype = ctypes.c_int
-    settings = ((_M_MMAP_THRESHOLD, MMAP_THRESHOLD_BYTES), (_M_TRIM_THRESHOLD, TRIM_THRESHOLD_BYTES),
+    settings = ((_M_MMAP_THRESHOLD, mmap_threshold_bytes), (_M_TRIM_THRESHOLD, TRIM_THRESHOLD_BYTES),
                 (_M_TOP_PAD, TOP_PAD_BYTES))
     return all([mallopt(param, value) == 1 for param, value in settings])
 

@@ -9,7 +9,7 @@ one line on stderr, without a traceback.
 This module creates the app and registers the commands of one module per command (group):
 :mod:`~cevm.cli.ingest`, :mod:`~cevm.cli.trips`, :mod:`~cevm.cli.calibrate`,
 :mod:`~cevm.cli.simulate`, :mod:`~cevm.cli.fleet`, :mod:`~cevm.cli.predict`,
-:mod:`~cevm.cli.feasibility`, :mod:`~cevm.cli.route`, :mod:`~cevm.cli.vehicle`, :mod:`~cevm.cli.store`; what they share is
+:mod:`~cevm.cli.feasibility`, :mod:`~cevm.cli.replay`, :mod:`~cevm.cli.route`, :mod:`~cevm.cli.vehicle`, :mod:`~cevm.cli.store`; what they share is
 :mod:`~cevm.cli.common` and :mod:`~cevm.cli.output`. The command modules never import
 this package's app, nor each other; the library never imports the command line.
 """
@@ -22,7 +22,7 @@ from typing import Annotated
 import typer
 
 from cevm import __version__
-from cevm.cli import calibrate, feasibility, fleet, ingest, predict, route, simulate, store, trips, vehicle
+from cevm.cli import calibrate, feasibility, fleet, ingest, predict, replay, route, simulate, store, trips, vehicle
 from cevm.cli.common import exit_code_for, fail
 from cevm.errors import CevmError
 
@@ -49,6 +49,28 @@ def _root(
     ] = False,
 ) -> None:
     """cevm: how much diesel or electricity a vehicle uses on a route."""
+    _warnings_as_lines()
+
+
+def _warnings_as_lines() -> None:
+    """Print the library's input warnings (:class:`cevm.io.cycles.CycleWarning`: a file
+    that reads, but probably not as meant) as one ``cevm: warning:`` line each, every
+    time they occur."""
+    import warnings
+
+    from cevm.cli.common import warn
+    from cevm.io.cycles import CycleWarning
+
+    previous = warnings.showwarning
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        if issubclass(category, CycleWarning):
+            warn(str(message))
+        else:
+            previous(message, category, filename, lineno, file, line)
+
+    warnings.showwarning = show
+    warnings.simplefilter("always", CycleWarning)
 
 
 # In the order of 'cevm --help'.
@@ -59,6 +81,7 @@ app.command()(simulate.simulate)
 app.add_typer(fleet.app, name="fleet")
 app.command("predict")(predict.predict_cmd)
 app.command("feasibility")(feasibility.feasibility_cmd)
+app.command("replay")(replay.replay_cmd)
 app.add_typer(route.app, name="route")
 app.add_typer(vehicle.app, name="vehicle")
 app.add_typer(store.app, name="store")

@@ -154,6 +154,6 @@ def json_objects(cols: dict[str, object], spec: ColumnSpec, is_ev: np.ndarray) -
     ev_keys, ice_keys = spec.json_keys("ev"), spec.json_keys("ice")
     ev_fmt = "{" + ", ".join(f'"{k}": %s' for k in ev_keys) + "}"
     ice_fmt = "{" + ", ".join(f'"{k}": %s' for k in ice_keys) + "}"
-    ev_rows = zip(*(vals[k] for k in ev_keys))
-    ice_rows = zip(*(vals[k] for k in ice_keys))
-    return [ev_fmt % ev if e else ice_fmt % ice for e, ev, ice in zip(is_ev.tolist(), ev_rows, ice_rows)]
+    ev_rows = zip(*(vals[k] for k in ev_keys), strict=True)
+    ice_rows = zip(*(vals[k] for k in ice_keys), strict=True)
+    return [ev_fmt % ev if e else ice_fmt % ice for e, ev, ice in zip(is_ev.tolist(), ev_rows, ice_rows, strict=True)]

@@ -137,9 +137,15 @@ class ColumnSpec:
         """The columns a row of ``powertrain`` has, in JSON order."""
         return tuple(c for c in self.json_order() if powertrain in c.powertrains)
 
-    def values(self, context: Any) -> dict[str, Any]:
-        """Every column's values for one row context (``Column.value`` of each)."""
-        return {c.name: c.value(context) for c in self.columns}
+    def values(self, context: Any, columns: Iterable[Column] | None = None) -> dict[str, Any]:
+        """Every column's values (or those of ``columns``) for one row context
+        (``Column.value`` of each)."""
+        out = {}
+        for c in self.columns if columns is None else columns:
+            if c.value is None:
+                raise ValueError(f"column {c.name!r} says not how its values are got")
+            out[c.name] = c.value(context)
+        return out
 
     def table(self, names: Iterable[str], *extra: Column) -> list[Column]:
         """The Columns of a table, by name: this spec's, or ``extra`` columns that only

@@ -132,10 +132,45 @@ RouteOption = Annotated[
     typer.Option("--route", "-r", metavar="NAME", help="A stored route (see 'cevm route list'), or a glob such as 'block-*'. Repeatable."),
 ]
 SocStartOption = Annotated[
-    float, typer.Option("--soc-start", help="EV state of charge at the start [%] (default: full).")
+    Optional[float], typer.Option("--soc-start", help="EV state of charge at the start [%]. Default: a stored trip's "
+                                  "own logged start, else full (100); column soc_start_from says which.")
 ]
+
+#: Where a row's start state of charge comes from (column ``soc_start_from``).
+SOC_FROM_GIVEN, SOC_FROM_LOGGED, SOC_FROM_DEFAULT = "--soc-start", "logged", "default"
+
+
+def start_soc(source, given: float | None) -> tuple[float, str]:
+    """(start state of charge [%], where it comes from) of an EV row on ``source``:
+    ``--soc-start`` when given, else a stored trip's own logged start state of charge
+    (its ``start_soc_pct``), else full (:data:`cevm.core.sweep.DEFAULT_SOC_START_PCT`)."""
+    from cevm.core.sweep import DEFAULT_SOC_START_PCT
+
+    if given is not None:
+        return float(given), SOC_FROM_GIVEN
+    logged = getattr(source, "start_soc_pct", None)
+    if logged is not None and math.isfinite(logged) and 0.0 < logged <= 100.0:
+        return float(logged), SOC_FROM_LOGGED
+    return DEFAULT_SOC_START_PCT, SOC_FROM_DEFAULT
 ReserveOption = Annotated[
     float, typer.Option("--reserve-pct", help="EV state of charge to keep all along [%] (default 15, the paper's warning level).")
+]
+IntervalOption = Annotated[
+    float, typer.Option("--interval", metavar="LEVEL", help="Level of each row's interval of energy or fuel "
+                        "(columns *_low, *_high): 0.9 is the central 90 % (default). The interval comes from the "
+                        "vehicle's calibration, or for a file never calibrated from its class's priors "
+                        "(column interval_from).")
+]
+#: The default confidence of feasibility's verdict and largest payload: the verdict
+#: then fails only where the energy (fuel) may land above the default 90 % interval's
+#: upper end (energy_kwh_high), which happens 1 time in 20: a planner's "almost surely",
+#: and the same number predict shows.
+DEFAULT_CONFIDENCE = 0.95
+ConfidenceOption = Annotated[
+    float, typer.Option("--confidence", metavar="P", help="The probability with which the verdict (feasible) and "
+                        "the largest payload keep the reserve or fit the tank. Default 0.95: they fail only where "
+                        "the energy or fuel lands above the default 90 % interval's upper end (1 time in 20); 0.5 "
+                        "is the point prediction's verdict.")
 ]
 IceBrakingOption = Annotated[
     Optional[str],
@@ -270,19 +305,22 @@ def check_workers(workers: Optional[int]) -> None:
                    "processes only add memory)")
 
 
-def check_common(ice_braking: Optional[str], soc_start: float, reserve_pct: float) -> None:
+def check_common(ice_braking: Optional[str], soc_start: float | None, reserve_pct: float,
+                 interval: float | None = None) -> None:
     if ice_braking is not None and ice_braking not in ICE_BRAKING_MODES:
         raise fail(f"--ice-braking must be one of: {', '.join(ICE_BRAKING_MODES)}")
     check_soc(soc_start, reserve_pct)
+    if interval is not None and not 0.0 < interval < 1.0:
+        raise fail(f"--interval must be a level between 0 and 1 (0.9: the central 90 %), got {interval:g}")
 
 
-def check_soc(soc_start: float, reserve_pct: float | None = None) -> None:
-    """--soc-start and --reserve-pct, with the words of :func:`cevm.core.physical_inputs.soc_pct`
-    (the same message from every command)."""
+def check_soc(soc_start: float | None, reserve_pct: float | None = None) -> None:
+    """--soc-start (None: not given) and --reserve-pct, with the words of
+    :func:`cevm.core.physical_inputs.soc_pct` (the same message from every command)."""
     from cevm.core import physical_inputs
 
     try:
-        physical_inputs.soc_pct(soc_start)
+        physical_inputs.soc_pct(100.0 if soc_start is None else soc_start)
     except CevmError as exc:
         raise fail(f"--soc-start: {exc}") from None
     if reserve_pct is not None:
@@ -313,6 +351,37 @@ class OutFile:
             os.replace(self.tmp, self.path)
         else:
             self.tmp.unlink(missing_ok=True)
+
+
+#: What the output options write, by file name ending: the check of
+#: :func:`check_output_path`.
+PNG, TOML = (".png", "a PNG image"), (".toml", "a vehicle file")
+
+
+def check_output_path(path: Optional[Path], option: str, kind: tuple[str, str] | None = None) -> None:
+    """An output file's path checked before any work, the same for every command's
+    ``--out`` and ``--plot``: a mistake is one line and exit 2 (bad usage). Refused: a
+    folder given as the file, a file in a folder that does not exist (or is not a
+    folder, or cannot be written into), and for ``kind`` ((ending, what), e.g.
+    :data:`PNG`) a name without that ending (``--plot out.txt``: the image format is
+    the ending's). None (the option not given) passes."""
+    if path is None:
+        return
+    p = Path(path)
+    shown = printable(str(p))
+    if p.is_dir():
+        raise fail(f"{option} {shown}: is a folder; give a file name (e.g. {printable(str(p / 'out'))}"
+                   f"{kind[0] if kind else ''})")
+    if kind is not None and p.suffix.lower() != kind[0]:
+        raise fail(f"{option} {shown}: {kind[1]} is written here, so the name must end in {kind[0]}"
+                   + (f" (not {printable(p.suffix)})" if p.suffix else ""))
+    parent = p.parent
+    if not parent.exists():
+        raise fail(f"{option} {shown}: the folder {printable(str(parent))} does not exist (make it first)")
+    if not parent.is_dir():
+        raise fail(f"{option} {shown}: {printable(str(parent))} is not a folder")
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise fail(f"{option} {shown}: cannot write in the folder {printable(str(parent))} (permission denied)")
 
 
 def open_out(stack: ExitStack, out: Optional[Path]) -> IO[str]:

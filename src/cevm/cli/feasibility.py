@@ -7,19 +7,22 @@ from __future__ import annotations
 
 from collections import Counter
 from contextlib import ExitStack
-from typing import IO, Annotated, Optional
+from typing import IO, Annotated
 
 import typer
 
 from cevm.cli.columns import Column
 from cevm.cli.common import (
+    DEFAULT_CONFIDENCE,
     EXIT_PARTIAL,
     TABLE_MAX_ROWS,
     AmbientOption,
+    ConfidenceOption,
     Cr0Option,
     CycleOption,
     FormatOption,
     IceBrakingOption,
+    IntervalOption,
     OutOption,
     ReserveOption,
     RouteOption,
@@ -29,21 +32,24 @@ from cevm.cli.common import (
     VehicleIdOption,
     VehicleOption,
     check_common,
+    check_output_path,
     fail,
     load_sources,
     note_flat_cycles,
     open_out,
+    start_soc,
     warn,
     warn_ambient_unused,
     warn_damaged,
     with_cycle_options,
 )
-from cevm.cli.output import OutputFormat, vehicle_legend, write_rows
-from cevm.cli.prediction_columns import feasibility_row
+from cevm.cli.output import OutputFormat, vehicle_legend, write_lines, write_rows
+from cevm.cli.prediction_columns import assumptions_line, feasibility_row, verdict_text
 from cevm.core.cycle import CR0_DEFAULT
 from cevm.core.feasibility import feasibility
-from cevm.core.sweep import DEFAULT_RESERVE_PCT, DEFAULT_SOC_START_PCT
+from cevm.core.sweep import DEFAULT_RESERVE_PCT
 from cevm.errors import CevmError
+from cevm.runtime import WHOLE_CYCLE_MMAP_THRESHOLD_BYTES, tune_allocator
 
 
 def _mass_for(src, mass_kg: float | None, payload_kg: float | None) -> tuple[float | None, float | None, str]:
@@ -70,17 +76,19 @@ def feasibility_cmd(
     vehicle_id: VehicleIdOption = None,
     store: StoreOption = None,
     payload_kg: Annotated[
-        Optional[float], typer.Option("--payload-kg", "-p", help="Payload in kg at which margins are given. Default: each vehicle's default mass.")
+        float | None, typer.Option("--payload-kg", "-p", help="Payload in kg at which margins are given. Default: each vehicle's default mass.")
     ] = None,
     mass_kg: Annotated[
-        Optional[float], typer.Option("--mass-kg", "-m", help="Gross mass in kg at which margins are given (instead of --payload-kg).")
+        float | None, typer.Option("--mass-kg", "-m", help="Gross mass in kg at which margins are given (instead of --payload-kg).")
     ] = None,
     payload_cap_kg: Annotated[
-        Optional[float],
+        float | None,
         typer.Option(help="Where the payload search stops for vehicles without max_gross_kg, in kg. Default: their kerb mass."),
     ] = None,
-    soc_start: SocStartOption = DEFAULT_SOC_START_PCT,
+    soc_start: SocStartOption = None,
     reserve_pct: ReserveOption = DEFAULT_RESERVE_PCT,
+    confidence: ConfidenceOption = DEFAULT_CONFIDENCE,
+    interval: IntervalOption = 0.9,
     fmt: FormatOption = OutputFormat.table,
     out: OutOption = None,
     ice_braking: IceBrakingOption = None,
@@ -93,12 +101,19 @@ def feasibility_cmd(
     Margins (EV: lowest state of charge above the reserve; ICE: fuel against tank_l) and
     the largest payload that keeps the reserve (or fits the tank) within max_gross_kg,
     exact to the kilogram; where the reserve is first crossed or the battery or tank
-    runs empty, and the range (the route driven again and again)."""
+    runs empty, and the range (the route driven again and again). The verdict and the
+    payload hold with probability --confidence (default 0.95) under the vehicle's
+    calibration (or its class's priors): p_reserve_ok / p_tank_ok give the probability
+    at the evaluated load, *_low / *_high the interval at --interval."""
     if not (cycle or trip or vehicle_id or route):
         raise fail("give at least one route: --route (or --cycle, --trip, --vehicle-id)")
+    tune_allocator(WHOLE_CYCLE_MMAP_THRESHOLD_BYTES)  # arrays of a cycle's length reused, not mapped anew
     if payload_kg is not None and mass_kg is not None:
         raise fail("give --mass-kg or --payload-kg, not both")
-    check_common(ice_braking, soc_start, reserve_pct)
+    check_common(ice_braking, soc_start, reserve_pct, interval)
+    check_output_path(out, "--out")
+    if not 0.5 <= confidence < 1.0:
+        raise fail(f"--confidence must be at least 0.5 and below 1 (0.95: 19 times in 20), got {confidence:g}")
     try:
         from cevm.io import load_vehicles
 
@@ -113,17 +128,20 @@ def feasibility_cmd(
             seen: list[tuple] = []
             for src in sources:
                 src_mass, src_payload, mass_source = _mass_for(src, mass_kg, payload_kg)
+                soc, soc_from = start_soc(src, soc_start)
                 try:
-                    res = feasibility(src, vehicles, soc_start_pct=soc_start, reserve_pct=reserve_pct,
+                    res = feasibility(src, vehicles, soc_start_pct=soc, reserve_pct=reserve_pct,
                                       payload_kg=src_payload, mass_kg=src_mass, payload_cap_kg=payload_cap_kg,
-                                      ice_braking=ice_braking, ambient_c=ambient_c)
+                                      ice_braking=ice_braking, ambient_c=ambient_c, confidence=confidence)
                 except CevmError as exc:
                     if mass_source in ("--mass-kg", "--payload-kg", "vehicle file"):
                         raise
                     raise CevmError(f"trip {src.name!r} ({src.mass.describe()} mass): {exc}") from None
-                rows.extend(feasibility_row(res, i, ice_braking, mass_source) for i in range(len(res.vehicles)))
+                rows.extend(feasibility_row(res, i, ice_braking, mass_source, interval, soc_from)
+                            for i in range(len(res.vehicles)))
                 speed = src.distance_m / src.duration_s if src.duration_s > 0 else float("nan")
-                seen += [(i, res.mass_kg[i], res.ambient_c[i], speed) for i in range(len(vehicles))]
+                idle = src.vector.idle_s / src.duration_s if src.duration_s > 0 else float("nan")
+                seen += [(i, res.mass_kg[i], res.ambient_c[i], speed, idle) for i in range(len(vehicles))]
                 src.release()
             stream = open_out(stack, out)
             if fmt == OutputFormat.table:
@@ -155,12 +173,14 @@ def _warn_outside_calibration(vehicles, seen: list[tuple]) -> None:
     from cevm.core.vehicle import domain_warnings
 
     for i, veh in enumerate(vehicles):
-        pts = np.array([(m, t, v) for j, m, t, v in seen if j == i], dtype=float).reshape(-1, 3)
+        pts = np.array([(m, t, v, s) for j, m, t, v, s in seen if j == i], dtype=float).reshape(-1, 4)
         if pts.size == 0:
             continue
         speeds = pts[:, 2][np.isfinite(pts[:, 2])]
+        idle = pts[:, 3][np.isfinite(pts[:, 3])]
         for w in domain_warnings(veh, mass_kg=pts[:, 0], ambient_c=pts[:, 1],
-                                 mean_speed_mps=speeds if speeds.size else None):
+                                 mean_speed_mps=speeds if speeds.size else None,
+                                 idle_share=idle if idle.size else None):
             typer.echo(f"cevm: warning: {w}", err=True)
 
 
@@ -169,7 +189,9 @@ FEASIBILITY_TABLE = (
     Column("route", "the source", kind="text", layout="id"),
     Column("vehicle", "the vehicle's key", kind="text", layout="id"),
     Column("payload kg", "the payload evaluated [kg]", digits=0),
-    Column("feasible", "yes, NO, or ? (ICE without tank_l)", kind="text", layout="right"),
+    Column("feasible", "the verdict: yes, NO, or ? (ICE without tank_l), the reserve or tank at --confidence, and why "
+           "not (where the energy's verdict is not sure, its probability at the payload evaluated)", kind="text",
+           layout="wrap"),
     Column("state", "EV: lowest / end state of charge [%]; ICE: fuel / tank [l]", kind="text", layout="right",
            header="SoC min/end, fuel/tank"),
     Column("margin", "EV: lowest SoC less the reserve [pp]; ICE: tank less fuel [l]; where it runs empty",
@@ -181,9 +203,6 @@ FEASIBILITY_TABLE = (
 
 
 def _print_feasibility(rows: list[dict], stream: IO[str]) -> None:
-    def mark(f):
-        return "?" if f is None else ("yes" if f else "NO")
-
     table = []
     names: dict[str, tuple[str, str | None]] = {}
     for r in rows[:TABLE_MAX_ROWS]:
@@ -200,22 +219,21 @@ def _print_feasibility(rows: list[dict], stream: IO[str]) -> None:
             margin = "-" if r.get("tank_margin_l") is None else f"{r['tank_margin_l']:+.1f} l"
             if r.get("empty_at_km") is not None:
                 margin += f" (empty at {r['empty_at_km']:,.1f} km)"
-        if r["over_max_gross"]:
-            margin += " (over max gross)"
         mp = r["max_payload_kg"]
         payload = "none" if mp is None else f"{mp:,.0f}"
         if r["min_payload_kg"]:
             payload = f"{r['min_payload_kg']:,.0f} to {payload}"
         table.append({"route": r["source"], "vehicle": r["vehicle_key"], "payload kg": r["payload_kg"],
-                      "feasible": mark(r["feasible"]), "state": state, "margin": margin,
+                      "feasible": verdict_text(r, energy=False), "state": state, "margin": margin,
                       "range km": r["range_km"], "max payload kg": payload, "limited by": r["limited_by"]})
         names[r["vehicle_key"]] = (r["vehicle"], r.get("ice_braking"))
-    title = "cevm feasibility" + (f" (first {len(table)} of {len(rows)})" if len(rows) > len(table) else "")
-    write_rows(table, OutputFormat.table, title=title, columns=FEASIBILITY_TABLE, stream=stream)
-    legend = vehicle_legend(names)
-    if legend:
-        stream.write(legend + "\n")
+    conf = rows[0].get("confidence") if rows else None
+    title = "cevm feasibility" + (f" (first {len(table)} of {len(rows)})" if len(rows) > len(table) else "") + (
+        f": verdicts and payloads at confidence {conf:g}" if conf is not None else "")
+    write_rows(table, OutputFormat.table, title=title, columns=FEASIBILITY_TABLE, stream=stream,
+               keep=("route", "feasible"), drop_order=("range km", "state", "limited by", "payload kg", "vehicle"))
     origins = Counter({r["source"]: r["mass_source"] for r in rows}.values())
-    stream.write("mass from: " + ", ".join(f"{what} ({n} source{'s' if n > 1 else ''})" for what, n in
+    mass_line = ("mass from: " + ", ".join(f"{what} ({n} source{'s' if n > 1 else ''})" for what, n in
                                            sorted(origins.items(), key=lambda kv: (-kv[1], kv[0])))
-                 + " (column mass_source in --format csv or json)\n")
+                 + " (column mass_source in --format csv or json)")
+    write_lines([vehicle_legend(names), assumptions_line(rows, "source")[0], mass_line], stream)

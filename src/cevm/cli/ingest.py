@@ -9,7 +9,7 @@ from typing import Annotated, Optional
 import typer
 
 from cevm.cli.common import EXIT_OK, EXIT_PARTIAL, StoreOption, apply_manifest, check_workers, fail
-from cevm.cli.output import OutputFormat, write_rows
+from cevm.cli.output import OutputFormat, write_lines, write_rows
 from cevm.errors import CevmError
 from cevm.ingest.textfile import MAX_SAMPLES, ReadLimits
 from cevm.text import printable
@@ -236,5 +236,6 @@ def _print_ingest_table(report, summary: dict, store_path: Path) -> None:
     ]
     if len(rows) <= 40:
         write_rows(rows, OutputFormat.table, title="cevm ingest", digits={"km": 1, "s": 2},
-                   columns=["file", "status", "profile", "trips", "samples", "km", "s", "repairs"])
-    typer.echo(_summary_line(summary, store_path))
+                   columns=["file", "status", "profile", "trips", "samples", "km", "s", "repairs"],
+                   keep=("file", "status", "trips"), drop_order=("s", "profile", "samples"))
+    write_lines([_summary_line(summary, store_path)], sys.stdout)  # wrapped on a terminal, whole in a log

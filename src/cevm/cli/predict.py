@@ -22,8 +22,9 @@ from __future__ import annotations
 
 from collections import Counter
 from contextlib import ExitStack
+from dataclasses import replace
 from pathlib import Path
-from typing import IO, Annotated, Optional
+from typing import IO, Annotated
 
 import numpy as np
 import typer
@@ -31,12 +32,14 @@ import typer
 from cevm.cli.columnar import concat_columns, csv_text, json_objects
 from cevm.cli.common import (
     EXIT_PARTIAL,
+    SOC_FROM_DEFAULT,
     TABLE_MAX_ROWS,
     AmbientOption,
     Cr0Option,
     CycleOption,
     FormatOption,
     IceBrakingOption,
+    IntervalOption,
     OutOption,
     ReserveOption,
     RouteOption,
@@ -45,18 +48,33 @@ from cevm.cli.common import (
     TripOption,
     VehicleIdOption,
     VehicleOption,
+    PNG,
     check_common,
+    check_output_path,
     check_workers,
     fail,
     load_sources,
     note_flat_cycles,
     open_out,
+    start_soc,
     warn_ambient_unused,
     warn_damaged,
     with_cycle_options,
 )
-from cevm.cli.output import OutputFormat, vehicle_legend, write_rows
-from cevm.cli.prediction_columns import PREDICT, PREDICT_TABLE, STATUS, BlockRows
+from cevm.cli.output import OutputFormat, vehicle_legend, write_lines, write_rows
+from cevm.cli.prediction_columns import (
+    INTERVAL_TEXT,
+    PREDICT,
+    PREDICT_TABLE,
+    PREDICT_TABLE_DROP,
+    PREDICT_TABLE_KEEP,
+    STATUS,
+    BlockRows,
+    RangeOptions,
+    assumptions_line,
+    interval_text,
+    verdict_text,
+)
 from cevm.cli.values import parse_value_options
 from cevm.core.cycle import CR0_DEFAULT
 from cevm.core.sweep import (
@@ -68,8 +86,8 @@ from cevm.core.sweep import (
     sweep,
 )
 from cevm.errors import CevmError
-from cevm.executors import make_executor
 from cevm.io.plots import PLOT_MAX_LINES, plot_predictions
+from cevm.runtime import WHOLE_CYCLE_MMAP_THRESHOLD_BYTES, tune_allocator
 from cevm.units import J_PER_KWH
 
 #: Rows formatted at once when writing CSV or JSON.
@@ -83,24 +101,26 @@ class PredictWriter:
     """Streams predict blocks as CSV, JSON or a (bounded) table, with the columns of
     :data:`~cevm.cli.prediction_columns.PREDICT`."""
 
-    def __init__(self, fmt: OutputFormat, stream: IO[str], temperature_used: bool = False):
+    def __init__(self, fmt: OutputFormat, stream: IO[str], temperature_used: bool = False,
+                 options: RangeOptions | None = None):
         self.fmt = fmt
         self.stream = stream
+        self.options = options or RangeOptions()
         self.temperature_used = temperature_used
-        self.pending: list[tuple[SweepBlock, str]] = []
+        self.pending: list[tuple[SweepBlock, str, str]] = []
         self.pending_rows = 0
         self.rows = 0
         self.table_rows: list[dict] = []
         self.names: dict[str, tuple[str, str | None]] = {}
         self.started = False
 
-    def add(self, block: SweepBlock, mass_source: str = "vehicle file") -> None:
+    def add(self, block: SweepBlock, mass_source: str = "vehicle file", soc_from: str = SOC_FROM_DEFAULT) -> None:
         self.rows += block.n
         if self.fmt == OutputFormat.table:
             if len(self.table_rows) < TABLE_MAX_ROWS:
-                self._table_add(block, mass_source)
+                self._table_add(block, mass_source, soc_from)
             return
-        self.pending.append((block, mass_source))
+        self.pending.append((block, mass_source, soc_from))
         self.pending_rows += block.n
         if self.pending_rows >= WRITE_BATCH_ROWS:
             self._flush()
@@ -108,8 +128,8 @@ class PredictWriter:
     def _flush(self) -> None:
         if not self.pending:
             return
-        cols = concat_columns([PREDICT.values(BlockRows(b, m)) for b, m in self.pending])
-        is_ev = np.concatenate([b.pset.is_ev for b, _ in self.pending])
+        cols = concat_columns([PREDICT.values(BlockRows(b, m, self.options, f)) for b, m, f in self.pending])
+        is_ev = np.concatenate([b.pset.is_ev for b, _, _ in self.pending])
         self.pending, self.pending_rows = [], 0
         for lo in range(0, is_ev.size, WRITE_BATCH_ROWS):  # bounded memory for huge blocks
             sl = slice(lo, lo + WRITE_BATCH_ROWS)
@@ -123,8 +143,8 @@ class PredictWriter:
                 self.stream.write(("[\n  " if not self.started else ",\n  ") + ",\n  ".join(rows))
             self.started = True
 
-    def _table_add(self, block: SweepBlock, mass_source: str) -> None:
-        cols = PREDICT.values(BlockRows(block, mass_source))
+    def _table_add(self, block: SweepBlock, mass_source: str, soc_from: str) -> None:
+        cols = PREDICT.values(BlockRows(block, mass_source, self.options, soc_from))
         n = min(block.n, TABLE_MAX_ROWS - len(self.table_rows))
         for i in range(n):
             row = {}
@@ -147,14 +167,19 @@ class PredictWriter:
                 columns = [c for c in columns if c not in ("energy_kwh_per_km", "fuel_l_per_100km")]
             else:  # at masses given for every source the measurement is no comparison: csv and json only
                 columns = [c for c in columns if c not in ("measured_energy_kwh", "measured_fuel_l")]
+            if "energy_kwh" in columns and "fuel_l" in columns:  # EV and ICE rows: room for the intervals
+                columns = [c for c in columns if c not in ("energy_kwh_per_km", "fuel_l_per_100km")]
+            assumed, soc_varies = assumptions_line(rows)
+            if not soc_varies and "soc_start_pct" in columns:  # one start for every row: said under the table
+                columns.remove("soc_start_pct")
             if self.temperature_used:
                 columns.insert(3, "ambient_c")
             title = "cevm predict" + (f" (first {len(rows)} of {self.rows} rows)" if self.rows > len(rows) else "")
-            write_rows(rows, OutputFormat.table, columns=PREDICT.table(columns, STATUS), title=title,
-                       stream=self.stream)
-            legend = vehicle_legend(self.names)
-            if legend:
-                self.stream.write(legend + "\n")
+            level = next((r["interval"] for r in rows if r.get("interval") is not None), None)
+            shown = replace(INTERVAL_TEXT, header=f"+- ({100 * level:g} %)") if level else INTERVAL_TEXT
+            write_rows(rows, OutputFormat.table, columns=PREDICT.table(columns, STATUS, shown), title=title,
+                       stream=self.stream, keep=PREDICT_TABLE_KEEP, drop_order=PREDICT_TABLE_DROP)
+            write_lines([vehicle_legend(self.names), assumed], self.stream)
             self.stream.flush()
             if self.rows > len(rows):
                 typer.echo(f"cevm: {self.rows - len(rows)} more rows not shown; use --format csv or json "
@@ -185,6 +210,8 @@ class Assumptions:
         self.t_hi = np.full(nv, -np.inf)
         self.v_lo = np.inf
         self.v_hi = -np.inf
+        self.i_lo = np.inf  # the sources' share of time at standstill (their duty)
+        self.i_hi = -np.inf
         self.origins: list[set] = [set() for _ in range(nv)]
         self.m_lo = np.full(nv, np.inf)
         self.m_hi = np.full(nv, -np.inf)
@@ -201,6 +228,8 @@ class Assumptions:
         if src.duration_s > 0:
             speed = src.distance_m / src.duration_s
             self.v_lo, self.v_hi = min(self.v_lo, speed), max(self.v_hi, speed)
+            idle = src.vector.idle_s / src.duration_s
+            self.i_lo, self.i_hi = min(self.i_lo, idle), max(self.i_hi, idle)
 
     def lines(self) -> list[str]:
         from cevm.core.energy import uses_temperature
@@ -216,7 +245,9 @@ class Assumptions:
                 out.append(f"cevm: note: {veh.name}: ambient {span} degC ({', '.join(sorted(self.origins[v]))})")
             masses = np.array([self.m_lo[v], self.m_hi[v]])
             speeds = np.array([self.v_lo, self.v_hi]) if np.isfinite(self.v_lo) else None
-            for w in domain_warnings(veh, mass_kg=masses, ambient_c=np.array([lo, hi]), mean_speed_mps=speeds):
+            idle = np.array([self.i_lo, self.i_hi]) if np.isfinite(self.i_lo) else None
+            for w in domain_warnings(veh, mass_kg=masses, ambient_c=np.array([lo, hi]), mean_speed_mps=speeds,
+                                     idle_share=idle):
                 out.append(f"cevm: warning: {w}")
         return out
 
@@ -231,22 +262,10 @@ def _count_flags(block: SweepBlock) -> np.ndarray:
 
 
 def with_status(row: dict) -> dict:
-    """A table row with its 'status': reserve kept (EV) or tank enough (ICE), and where
-    it is not, the first kilometre that fails; over max gross; what the vehicle cannot
-    follow."""
-    ev = row["powertrain"] == "ev"
-    ok = row["reserve_ok"] if ev else row["tank_ok"]
-    status = "?" if ok is None else "yes" if ok else "NO"
-    if row.get("empty_at_km") is not None:
-        status += f" (empty at {row['empty_at_km']:,.1f} km)"
-    elif ev and row.get("reserve_at_km") is not None:
-        status += f" (reserve at {row['reserve_at_km']:,.1f} km)"
-    if row["over_max_gross"]:
-        status += " (over max gross)"
-    cannot = [what for what, key in (("power", "over_power"), ("speed", "over_speed")) if row.get(key)]
-    if cannot:
-        status += f" (cannot follow: {', '.join(cannot)})"
-    row["status"] = status
+    """A table row with its 'status': the verdict (column feasible) and why
+    (:func:`cevm.cli.prediction_columns.verdict_text`), and its interval as text."""
+    row["status"] = verdict_text(row)
+    row["interval_text"] = interval_text(row)
     return row
 
 
@@ -267,6 +286,20 @@ def _mass_runs(sources, pset: PredictionSet, vehicles, masses, payloads, ice_bra
         return PredictionSet.build(vehicles, ice_braking=ice_braking, ambient_c=ambient_c, **mass) if mass else pset
 
     return mass_runs(sources, build)
+
+
+def _soc_runs(sources, given: float | None):
+    """(sources, start state of charge [%], where it comes from) runs of consecutive
+    sources that start at the same state of charge (:func:`cevm.cli.common.start_soc`:
+    --soc-start, else a stored trip's logged start, else full)."""
+    runs: list[tuple[list, float, str]] = []
+    for src in sources:
+        soc, origin = start_soc(src, given)
+        if runs and runs[-1][1] == soc and runs[-1][2] == origin:
+            runs[-1][0].append(src)
+        else:
+            runs.append(([src], soc, origin))
+    return runs
 
 
 def _mass_lines(sources, used: Counter) -> list[str]:
@@ -295,21 +328,22 @@ def predict_cmd(
     route: RouteOption = None,
     store: StoreOption = None,
     mass_kg: Annotated[
-        Optional[list[str]],
+        list[str] | None,
         typer.Option("--mass-kg", "-m", metavar="KG", help="Gross mass in kg: a value, a list a,b or a range start:stop:step "
                                              "(stop included). Repeatable. Default: each vehicle's mass_kg."),
     ] = None,
     payload_kg: Annotated[
-        Optional[list[str]],
+        list[str] | None,
         typer.Option("--payload-kg", "-p", metavar="KG", help="Payload in kg on each vehicle's kerb mass: a value, a list or a "
                                                 "range such as 0:26000:2000 (14 values, stop included). Repeatable."),
     ] = None,
-    soc_start: SocStartOption = DEFAULT_SOC_START_PCT,
+    soc_start: SocStartOption = None,
     reserve_pct: ReserveOption = DEFAULT_RESERVE_PCT,
+    interval: IntervalOption = 0.9,
     fmt: FormatOption = OutputFormat.table,
     out: OutOption = None,
     plot: Annotated[
-        Optional[Path],
+        Path | None,
         typer.Option(metavar="FILE.png", help="Write a PNG: state of charge along each source (one mass per vehicle), or energy "
                           "against payload (a mass sweep)."),
     ] = None,
@@ -323,12 +357,12 @@ def predict_cmd(
                                            "(about 10x the time of a sweep without it).")
     ] = False,
     workers: Annotated[
-        Optional[int], typer.Option("--workers", "-w", min=1, metavar="N", help="Worker processes, a batch of sources per task "
+        int | None, typer.Option("--workers", "-w", min=1, metavar="N", help="Worker processes, a batch of sources per task "
                                     "(default 1: in this process; a large sweep of many routes runs ~1.3x faster "
                                     "on 2 cores, a small one is slower for the processes' start).")
     ] = None,
     scheduler: Annotated[
-        Optional[str], typer.Option(help="Dask scheduler address (tcp://HOST:8786): evaluate the batches on that "
+        str | None, typer.Option(help="Dask scheduler address (tcp://HOST:8786): evaluate the batches on that "
                                          "cluster (pip install 'cevm[dask]'). Sources are read here and sent.")
     ] = None,
     cycle_fmt=None,
@@ -348,12 +382,15 @@ def predict_cmd(
     calibrated vehicle was fitted on (temperature, mass, duty) is warned about."""
     if not (cycle or trip or vehicle_id or route):
         raise fail("give at least one source: --cycle, --trip, --vehicle-id or --route")
+    tune_allocator(WHOLE_CYCLE_MMAP_THRESHOLD_BYTES)  # arrays of a cycle's length reused, not mapped anew
     if mass_kg and payload_kg:
         raise fail("give --mass-kg or --payload-kg, not both")
     if workers is not None and scheduler is not None:
         raise fail("give --workers (local processes) or --scheduler (a Dask cluster), not both")
     check_workers(workers)
-    check_common(ice_braking, soc_start, reserve_pct)
+    check_common(ice_braking, soc_start, reserve_pct, interval)
+    check_output_path(out, "--out")
+    check_output_path(plot, "--plot", PNG)
     try:
         masses = parse_value_options(mass_kg, "--mass-kg")
         payloads = parse_value_options(payload_kg, "--payload-kg")
@@ -371,31 +408,46 @@ def predict_cmd(
                                    cycle_fmt, need_profiles=any(v.is_ev for v in vehicles),
                                    on_damaged=skipped.append)
             note_flat_cycles(sources)
-            executor = stack.enter_context(make_executor(None if scheduler else (workers or 1), scheduler))
+            executor = None  # in this process: the executors are not even imported
+            if scheduler is not None or (workers or 1) > 1:
+                from cevm.executors import make_executor
+
+                executor = stack.enter_context(make_executor(None if scheduler else workers, scheduler))
             stream = open_out(stack, out)
-            writer = PredictWriter(fmt, stream, temperature_used=any(uses_temperature(v) for v in vehicles))
+            writer = PredictWriter(fmt, stream, temperature_used=any(uses_temperature(v) for v in vehicles),
+                                   options=RangeOptions(interval, DEFAULT_SOC_START_PCT if soc_start is None else soc_start,
+                                                        reserve_pct))
             keep_for_plot = plot is not None and np.bincount(pset.vehicle_index).max() > 1
             flagged = np.zeros(3, dtype=np.int64)
             plot_data, psets = [], []
             over, used = 0, Counter()
+
+            def yield_block(block: SweepBlock, run_pset: PredictionSet, mass_source: str, soc_from: str) -> None:
+                nonlocal flagged, over
+                flagged += _count_flags(block)
+                writer.add(block, mass_source, soc_from)
+                assumed.add(block)
+                over += int(run_pset.over_max_gross.sum())
+                if block.source.kind == "trip":
+                    used[mass_source] += 1
+                if keep_for_plot and len(psets) < PLOT_MAX_LINES:
+                    plot_data.append({"energy_kwh": block.energy_j / J_PER_KWH, "fuel_l": block.fuel_l})
+                psets.append(run_pset)
+                if plot is None:
+                    block.source.release()  # free its profile: the sweep is past it
+
+            socs = {}
             for run, run_pset, mass_source in _mass_runs(sources, pset, vehicles, masses, payloads, ice_braking,
                                                          ambient_c):
-                for block in sweep(run, run_pset, soc_start_pct=soc_start, reserve_pct=reserve_pct,
-                                   executor=executor, ranges=with_range):
-                    flagged += _count_flags(block)
-                    writer.add(block, mass_source)
-                    assumed.add(block)
-                    over += int(run_pset.over_max_gross.sum())
-                    if block.source.kind == "trip":
-                        used[mass_source] += 1
-                    if keep_for_plot and len(psets) < PLOT_MAX_LINES:
-                        plot_data.append({"energy_kwh": block.energy_j / J_PER_KWH, "fuel_l": block.fuel_l})
-                    psets.append(run_pset)
-                    if plot is None:
-                        block.source.release()  # free its profile: the sweep is past it
+                for group, soc, soc_from in _soc_runs(run, soc_start):
+                    socs.update((src.name, soc) for src in group)
+                    for block in sweep(group, run_pset, soc_start_pct=soc, reserve_pct=reserve_pct,
+                                       executor=executor, ranges=with_range):
+                        yield_block(block, run_pset, mass_source, soc_from)
             writer.close()
             if plot is not None:
-                plot_predictions(plot, sources, pset if keep_for_plot else psets, plot_data, soc_start, reserve_pct,
+                plot_predictions(plot, sources, pset if keep_for_plot else psets, plot_data,
+                                 [socs.get(src.name, DEFAULT_SOC_START_PCT) for src in sources], reserve_pct,
                                  ice_braking, warn=lambda message: typer.echo(message, err=True))
     except CevmError as exc:
         raise fail(exc) from None

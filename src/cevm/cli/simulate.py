@@ -9,9 +9,20 @@ from typing import Annotated, Optional
 import numpy as np
 import typer
 
-from cevm.cli.common import SocStartOption, StoreOption, check_soc, fail, with_cycle_options
+from cevm.cli.common import (
+    PNG,
+    ReserveOption,
+    SocStartOption,
+    StoreOption,
+    check_output_path,
+    check_soc,
+    fail,
+    start_soc,
+    with_cycle_options,
+)
 from cevm.core import physical_inputs
 from cevm.cli.output import OutputFormat, write_rows
+from cevm.core.sweep import DEFAULT_RESERVE_PCT
 from cevm.errors import CevmError
 from cevm.text import printable
 from cevm.units import J_PER_KWH
@@ -25,7 +36,8 @@ def simulate(
     store: StoreOption = None,
     mass_kg: Annotated[Optional[float], typer.Option("--mass-kg", "-m", help="Gross mass [kg]. Default: the vehicle's.")] = None,
     payload_kg: Annotated[Optional[float], typer.Option("--payload-kg", "-p", help="Payload [kg] on the vehicle's kerb mass (instead of --mass-kg).")] = None,
-    soc_start_pct: SocStartOption = 100.0,
+    soc_start_pct: SocStartOption = None,
+    reserve_pct: ReserveOption = DEFAULT_RESERVE_PCT,
     out: Annotated[Optional[Path], typer.Option("--out", "-o", metavar="FILE", help="Per-second output CSV.")] = None,
     plot: Annotated[Optional[Path], typer.Option(metavar="FILE.png", help="PNG: state of charge (EV, the paper's figure 4) or fuel and elevation (ICE, figure 6).")] = None,
     fmt: Annotated[OutputFormat, typer.Option("--format", "-f", help="Format of the summary.")] = OutputFormat.table,
@@ -45,7 +57,9 @@ def simulate(
         raise fail("give exactly one of --cycle or --trip")
     if mass_kg is not None and payload_kg is not None:
         raise fail("give --mass-kg or --payload-kg, not both")
-    check_soc(soc_start_pct)
+    check_soc(soc_start_pct, reserve_pct)
+    check_output_path(out, "--out")
+    check_output_path(plot, "--plot", PNG)
     try:
         veh = load_vehicle(vehicle)
         if "detailed" not in veh.extra:
@@ -58,6 +72,7 @@ def simulate(
         elif mass_kg is not None:
             mass_kg = float(physical_inputs.masses_for([veh], mass_kg))
             mass_source = "--mass-kg"
+        soc0, soc_from, elevation = start_soc(None, soc_start_pct) + (None,)
         if cycle is not None:
             c = read_cycle_csv(cycle, cycle_fmt)
             name, t, v, h = c.name, c.time_s, c.speed_mps, c.elevation_m
@@ -86,20 +101,26 @@ def simulate(
                 except CevmError as exc:
                     raise CevmError(f"trip {trip!r} ({own.describe()} mass): {exc}") from None
             name, t, v, h = trip, prof["time_s"], prof["speed_mps"], prof["elevation_m"]
-        res = run_simulation(veh, t, v, h, mass_kg=mass_kg, soc_start=soc_start_pct / 100.0,
+            soc0, soc_from = start_soc(r, soc_start_pct)  # the trip's logged start unless given
+            elevation = r["elevation_source"]
+        res = run_simulation(veh, t, v, h, mass_kg=mass_kg, soc_start=soc0 / 100.0,
                              params=detailed_params(veh))
     except CevmError as exc:
         raise fail(exc) from None
     except ValueError as exc:  # inconsistent [detailed] parameters or trace
         raise fail(f"{vehicle}: {exc}") from None
     frame = res.to_frame()
+    verdict = simulation_verdict(veh, res, mass_kg=res.mass_kg, soc_start_pct=soc0, reserve_pct=reserve_pct,
+                                 logged=trip is not None, elevation_source=elevation)
+    if veh.is_ev and verdict["empty_at_s"] is not None:  # no charge below 0: the series ends where it runs empty
+        frame.loc[frame["time_s"] > verdict["empty_at_s"], ["soc_pct"]] = np.nan
     if out is not None:
         frame.to_csv(out, index=False, float_format="%.6g")
     if plot is not None:
         plot_simulation(frame, res, plot, f"{veh.name}: {name}")
     row = {"cycle": name, "vehicle": veh.name, "mass_kg": res.mass_kg, "mass_source": mass_source,
            "distance_km": res.distance_m / 1e3,
-           "duration_s": res.duration_s, "wheel_energy_kwh": res.wheel_energy_j / J_PER_KWH,
+           "duration_s": res.duration_s, "wheel_work_net_kwh": res.wheel_energy_j / J_PER_KWH,
            "friction_brake_kwh": res.friction_brake_energy_j / J_PER_KWH,
            "traction_deficit_kwh": res.traction_deficit_j / J_PER_KWH}
     aux_w = res.steps.get("aux_power_w")
@@ -107,8 +128,9 @@ def simulate(
         row["aux_power_kw"] = float(np.sum(aux_w * res.steps["dt_s"]) / res.duration_s) / 1e3
     if veh.is_ev:
         row["energy_kwh"] = res.energy_j / J_PER_KWH
-        row["soc_end_pct"] = float(res.samples["soc"][-1]) * 100.0
-        row["soc_min_pct"] = float(np.min(res.samples["soc"])) * 100.0
+        row["soc_start_pct"], row["soc_start_from"] = soc0, soc_from
+        row["soc_end_pct"], row["soc_min_pct"] = verdict.pop("soc_end_pct"), verdict.pop("soc_min_pct")
+        row["reserve_pct"] = reserve_pct
     else:
         row["fuel_l"] = res.fuel_l
         row["fuel_l_per_100km"] = 100.0 * res.fuel_l / (res.distance_m / 1e3) if res.distance_m > 0 else None
@@ -119,6 +141,8 @@ def simulate(
         modelled = row.get("fuel_l" if fuel else "energy_kwh")  # None on a vehicle of the other powertrain
         own_mass = mass_source not in ("--mass-kg", "--payload-kg")
         row["error_pct"] = 100.0 * (modelled - reference) / reference if own_mass and modelled is not None else None
+    row.update(verdict)
+    row["road"] = "flat" if h is None else (elevation or "elevation")
     if fmt == OutputFormat.table:
         write_rows([{"quantity": k, "value": v} for k, v in row.items()], fmt, title="cevm simulate (detailed model)")
     else:
@@ -142,3 +166,64 @@ def _no_detailed_table(path: Path, is_ev: bool) -> str:
         "defaults, which describe " + ("a 10 m electric bus with a 180 kW motor" if is_ev else
                                        "a 235 kW diesel tractor with a 12-speed gearbox")
         + "; configs/vehicles/*.toml show every key), or use 'cevm predict' (the CE model)")
+
+
+def simulation_verdict(veh, res, *, mass_kg: float, soc_start_pct: float, reserve_pct: float, logged: bool,
+                       elevation_source: str | None) -> dict:
+    """The verdict of a detailed simulation, the flags of every command
+    (:mod:`cevm.core.limits`): over max gross, the power and speed the trace asks against
+    max_power_kw and max_speed_kmh (a stored trip with its log's tolerance), the reserve
+    (EV: where it is first crossed and where the battery runs empty; the state of
+    charge never below 0) or the tank (ICE: where it runs dry), and ``feasible``."""
+    from cevm.core import limits
+    from cevm.core.sweep import LegProfile, build_step_table
+
+    t, v = res.time_s, res.speed_mps
+    d = np.concatenate([[0.0], np.cumsum(0.5 * (v[1:] + v[:-1]) * np.diff(t))])
+    leg = LegProfile(t, v, res.elevation_m)
+    demand = limits.source_demand(build_step_table([leg]), [leg], logged=logged,
+                                  elevation_sd=limits.elevation_sd_m(elevation_source) if logged else 0.0)
+    over_p, over_v, need_w = limits.follow_flags(demand, veh, mass_kg)
+    out: dict = {}
+    crossings = {}
+    if veh.is_ev:
+        soc = res.samples["soc"] * 100.0
+        crossings["reserve"] = limits.first_below(t, d, soc, reserve_pct)
+        crossings["empty"] = limits.first_below(t, d, soc, 0.0)
+        empty = np.isfinite(crossings["empty"][0])
+        out["soc_end_pct"] = None if empty else float(soc[-1])
+        out["soc_min_pct"] = max(0.0, float(np.min(soc)))
+        soc_min = out["soc_min_pct"] if not empty else -1.0
+        fuel = None
+    else:
+        cum = res.samples["fuel_cum_l"]
+        tank = np.nan if veh.tank_l is None else veh.tank_l
+        crossings["empty"] = limits.first_below(t, d, tank - cum, 0.0) if veh.tank_l is not None else (np.nan, np.nan)
+        soc_min, fuel = None, float(cum[-1])
+    flags = limits.verdict(is_ev=veh.is_ev, over_max_gross=float(veh.max_gross_kg is not None and
+                                                                 mass_kg > veh.max_gross_kg),
+                           over_power=over_p[0], over_speed=over_v[0], soc_min_pct=soc_min, reserve_pct=reserve_pct,
+                           fuel_l=fuel, tank_l=np.nan if veh.tank_l is None else veh.tank_l)
+
+    def value(x):
+        x = float(x)
+        return None if x != x else x
+
+    def flag(x):
+        x = value(x)
+        return None if x is None else x == 1.0
+
+    for key in ("over_max_gross", "over_power", "over_speed"):
+        out[key] = flag(flags[key])
+    out["reserve_ok" if veh.is_ev else "tank_ok"] = flag(flags["reserve_ok" if veh.is_ev else "tank_ok"])
+    out["feasible"] = flag(flags["feasible"])
+    if veh.is_ev:
+        out["reserve_at_km"] = value(crossings["reserve"][1] / 1e3)
+        out["reserve_at_s"] = value(crossings["reserve"][0])
+    out["empty_at_km"], out["empty_at_s"] = value(crossings["empty"][1] / 1e3), value(crossings["empty"][0])
+    has_limits = veh.max_power_w is not None or veh.max_speed_mps is not None
+    out["power_demand_kw"] = float(need_w[0]) / 1e3 if has_limits else None
+    out["top_speed_kmh"] = demand.top_speed_mps * 3.6 if has_limits else None
+    out["limits_tolerance"] = (f"log: speed +10 % +4 km/h, elevation sd {demand.elevation_sd_m:g} m" if logged
+                               else "exact")
+    return out

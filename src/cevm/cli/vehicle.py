@@ -123,7 +123,9 @@ def vehicle_show(
     max_gross_kg (else the default mass), with the range and what the vehicle cannot
     follow (max_power_kw, max_speed_kmh); the published ranges the file states
     ([[reference]]); the terms beyond the paper's model (cevm.core.energy) when the file
-    sets them; the [calibration] table when the file has one."""
+    sets them; the [calibration] table when the file has one; where its intervals come
+    from (its calibration's posterior, or its class's priors)."""
+    from cevm.core.predictive import posterior_of
     from cevm.io import load_vehicle, read_toml
 
     try:
@@ -138,10 +140,14 @@ def vehicle_show(
     terms = [{"term": k, "value": data[k], "what": TERM_KEYS[k]} for k in TERM_KEYS
              if k in data and data[k] not in (0, 0.0, None)]
     calibration = data.get("calibration") if isinstance(data.get("calibration"), dict) else None
+    post = posterior_of(vehicle)
+    uncertainty = {"interval_from": "none" if post is None else post.label,
+                   "source": "no priors: no interval" if post is None else post.source,
+                   "priors": None if vehicle.priors is None else vehicle.priors.describe()}
     report: dict[str, Any] = {
         "file": str(file), "id": vehicle.id, "name": vehicle.name, "powertrain": vehicle.powertrain,
         "parameters": params, "consumption": figures, "reference": references, "terms": terms,
-        "calibration": calibration, "detailed": "detailed" in vehicle.extra,
+        "calibration": calibration, "uncertainty": uncertainty, "detailed": "detailed" in vehicle.extra,
     }
     if fmt == OutputFormat.json:
         typer.echo(json.dumps(report, indent=2, default=str))
@@ -150,6 +156,8 @@ def vehicle_show(
         write_rows(figures, fmt)
         return
     typer.echo(printable(f"{vehicle.id}: {vehicle.name} ({vehicle.powertrain}), {file}"))
+    typer.echo(printable(f"intervals from: {uncertainty['interval_from']} ({uncertainty['source']})"
+                         + (f"; priors of {uncertainty['priors']}" if uncertainty["priors"] else "")))
     write_rows(params, OutputFormat.table, title="parameters", columns=["parameter", "value", "basis"],
                headers={"basis": "source"})
     unit = "energy_kwh_per_km" if vehicle.is_ev else "fuel_l_per_100km"

@@ -17,6 +17,14 @@ tests the empty payload, and if that fails it finds the minimum of the convex fu
 (binary search on the sign of its discrete slope) before bisecting each side, all on
 whole kilograms with the exact model: the answer is the largest whole-kg payload that
 keeps the reserve (EV) or fits the tank (ICE) and respects ``max_gross_kg``.
+
+At a confidence c (:func:`feasibility`'s ``confidence``), "keeps the reserve" means that
+it does so with probability at least c under the vehicle's predictive distribution
+(:mod:`cevm.core.predictive`: its calibration's posterior, or its class's priors): the
+load (the peak energy drawn, or the fuel) plus z_c of its standard deviations must fit
+the budget, z_c = Phi^-1(c), the peak's standard deviation taken as the source total's
+relative one. That load is convex in the mass too where z_c >= 0 (a norm of terms affine
+in the mass, added to a convex one), so the search stands; c = 0.5 is the point estimate.
 """
 
 from __future__ import annotations
@@ -26,14 +34,16 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.special import ndtr, ndtri
 
-from cevm.core import physical_inputs
+from cevm.core import limits, physical_inputs
+from cevm.core.predictive import Features, predictive
 from cevm.core.sweep import (
-    RANGE_FIELDS,
+    AMBIENT_ORIGINS,
     DEFAULT_RESERVE_PCT,
     DEFAULT_SOC_START_PCT,
+    RANGE_FIELDS,
     PredictionSet,
-    AMBIENT_ORIGINS,
     RowTerms,
     Source,
     ce_wheel_energy_j,
@@ -53,12 +63,17 @@ class Feasibility:
     Arrays (V,), one per vehicle, at the evaluated load (``mass_kg``, ``payload_kg``):
     ``over_max_gross``; EV: ``soc_end_pct``, ``soc_min_pct``, ``reserve_margin_pct``
     (SoC_min - reserve, percentage points); ICE: ``fuel_l``, ``tank_margin_l`` (tank -
-    fuel, NaN without ``tank_l``); ``feasible`` 1.0 / 0.0 (NaN: ICE without tank_l).
+    fuel, NaN without ``tank_l``); ``feasible`` 1.0 / 0.0 (NaN: ICE without tank_l), the
+    one verdict of every command (:func:`cevm.core.limits.verdict`: the reserve or the
+    tank, max_gross_kg, max_power_kw and max_speed_kmh), with its flags ``over_power``,
+    ``over_speed``, ``reserve_ok``, ``tank_ok``.
     Payload search: ``max_payload_kg`` (largest whole-kg payload keeping the reserve /
-    fitting the tank, within max_gross_kg or the search cap; NaN when none does),
+    fitting the tank, within max_gross_kg or the search cap, and at masses the vehicle
+    can follow the source at (max_power_kw, max_speed_kmh); NaN when none does),
     ``min_payload_kg`` (0 unless the empty vehicle fails and a heavier one passes,
     which convexity allows on descents), ``limited_by``: ``"reserve"``, ``"tank"``,
-    ``"max_gross_kg"``, ``"payload_cap"`` or ``"infeasible"``. Payloads count from
+    ``"max_gross_kg"``, ``"payload_cap"``, ``"max_power_kw"``, ``"max_speed_kmh"`` or
+    ``"infeasible"``. Payloads count from
     ``kerb_mass_kg`` (from ``mass_kg`` for a vehicle without one). ``ambient_c`` the
     temperature each vehicle was evaluated at [degC], ``ambient_from`` its origin. The
     state of charge never goes below 0: an EV that runs empty on the way has
@@ -93,6 +108,25 @@ class Feasibility:
     empty_at_s: np.ndarray | None = None
     range_m: np.ndarray | None = None
     range_reserve_m: np.ndarray | None = None
+    # at the evaluated load (cevm.core.limits): can it follow the source (1.0 / 0.0, NaN:
+    # the vehicle file has no max_power_kw / max_speed_kmh), the power the source asks [W],
+    # and the reserve and the tank at the confidence (1.0 / 0.0, NaN for the other
+    # powertrain or unknown)
+    over_power: np.ndarray | None = None
+    over_speed: np.ndarray | None = None
+    power_demand_w: np.ndarray | None = None
+    reserve_ok: np.ndarray | None = None
+    tank_ok: np.ndarray | None = None
+    # what it assumed of the battery [%]
+    soc_start_pct: float = DEFAULT_SOC_START_PCT
+    reserve_pct: float = DEFAULT_RESERVE_PCT
+    # the verdict's and the payload's confidence, and at the evaluated load: the energy's
+    # (EV, J) or fuel's (ICE, l) standard deviation, P(reserve kept / tank enough), and
+    # where the uncertainty comes from (:data:`cevm.core.intervals.INTERVAL_SOURCES`)
+    confidence: float = 0.5
+    sd: np.ndarray | None = None
+    p_ok: np.ndarray | None = None
+    interval_from: tuple[str, ...] = ()
 
 
 class _LoadFunction:
@@ -101,8 +135,10 @@ class _LoadFunction:
     the reserve, or the tank)."""
 
     def __init__(self, source: Source, vehicles: Sequence[Vehicle], base_kg: np.ndarray, soc_start_pct: float,
-                 reserve_pct: float, ice_braking: str | None, ambient_c: float | None = None):
+                 reserve_pct: float, ice_braking: str | None, ambient_c: float | None = None, z: float = 0.0):
         self.source = source
+        self.vehicles = tuple(vehicles)
+        self.z = z
         self.pset = PredictionSet.build(vehicles, ice_braking=ice_braking, ambient_c=ambient_c)  # one row per vehicle
         check_cr(source, self.pset)
         self.base_kg = base_kg
@@ -110,7 +146,34 @@ class _LoadFunction:
         self.budget = np.where(ps.is_ev, (soc_start_pct - reserve_pct) / 100.0 * ps.battery_j, ps.tank_l)
 
     def __call__(self, vi: np.ndarray, payload_kg: np.ndarray) -> np.ndarray:
-        return self.evaluate(vi, payload_kg)[0]
+        """The load at the confidence: the peak energy or fuel plus z of its standard
+        deviations (module notes)."""
+        load, total, terms = self.evaluate(vi, payload_kg)
+        if self.z == 0.0:
+            return load
+        sd = self.sd(vi, self.base_kg[vi] + payload_kg, terms)
+        ev = self.pset.is_ev[vi]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            rel = np.where(ev, sd / np.abs(total), 0.0)
+        return load + self.z * np.where(ev, rel * np.abs(load), sd)
+
+    def sd(self, vi: np.ndarray, mass_kg: np.ndarray, terms: RowTerms) -> np.ndarray:
+        """The standard deviation of the source's total energy [J] or fuel [l] of (vehicle
+        index, mass) pairs (:func:`cevm.core.predictive.predictive`)."""
+        out = np.zeros(vi.size)
+        for v in np.unique(vi):
+            sel = vi == v
+            veh = self.vehicles[int(v)]
+            f = Features.of(self.source.vector, veh, mass_kg[sel], terms.ambient_c[sel, 0])
+            out[sel] = predictive(veh, f, ice_braking=self.pset.braking[int(v)] or None).sd
+        return out
+
+    def source_of(self, v: int) -> str:
+        """Where vehicle ``v``'s uncertainty comes from (posterior, prior, none)."""
+        from cevm.core.predictive import posterior_of
+
+        post = posterior_of(self.vehicles[v])
+        return "none" if post is None else post.label
 
     def evaluate(self, vi: np.ndarray, payload_kg: np.ndarray) -> tuple[np.ndarray, np.ndarray, RowTerms]:
         """(peak battery energy [J] (EV) or fuel [l] (ICE), total battery energy [J] (NaN
@@ -186,6 +249,7 @@ def feasibility(
     payload_cap_kg: float | None = None,
     ice_braking: str | None = None,
     ambient_c: float | None = None,
+    confidence: float = 0.5,
 ) -> Feasibility:
     """Feasibility of ``source`` for each vehicle, and the largest payload.
 
@@ -205,6 +269,8 @@ def feasibility(
     ice_braking : override of the ICE braking mode
     ambient_c : the ambient temperature [degC]; default the source's own, else each
         vehicle's default (:data:`cevm.core.sweep.AMBIENT_ORIGINS`)
+    confidence : the probability with which the verdict and the largest payload keep the
+        reserve (fit the tank), in [0.5, 1); default 0.5: the point estimate (module notes)
 
     The payload search is exact on whole kilograms: see the module notes (convexity).
     An ICE vehicle without ``tank_l`` has no fuel limit: its payload is limited by
@@ -222,10 +288,20 @@ def feasibility(
         mass = np.full(nv, float(physical_inputs.masses_for(vehicles, mass_kg)))
     else:
         mass = np.array([v.mass_kg for v in vehicles], dtype=np.float64)
-    f = _LoadFunction(source, vehicles, base, soc_start_pct, reserve_pct, ice_braking, ambient_c)
+    if not (isinstance(confidence, (int, float)) and 0.5 <= confidence < 1.0):
+        raise CevmError(f"the confidence must be at least 0.5 and below 1, got {confidence!r}")
+    z = float(ndtri(confidence))
+    f = _LoadFunction(source, vehicles, base, soc_start_pct, reserve_pct, ice_braking, ambient_c, z=z)
     ps = f.pset
     vi = np.arange(nv)
     at, total, terms = f.evaluate(vi, mass - base)
+    sd_at = f.sd(vi, mass, terms)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        rel = np.where(ps.is_ev, sd_at / np.abs(total), 0.0)
+        sd_load = np.where(ps.is_ev, rel * np.abs(at), sd_at)
+        zl = (f.budget - at) / sd_load
+    p_ok = np.where(sd_load > 0, ndtr(zl), np.where(at <= f.budget, 1.0, 0.0))
+    p_ok = np.where(ps.is_ev | np.isfinite(ps.tank_l), p_ok, np.nan)
     max_gross = np.array([np.inf if v.max_gross_kg is None else v.max_gross_kg for v in vehicles])
     over = mass > max_gross
     # totals at the evaluated load
@@ -240,11 +316,17 @@ def feasibility(
     fuel[~ev] = at[~ev]
     with np.errstate(invalid="ignore"):
         tank_margin = ps.tank_l - fuel
-        ok_load = np.where(ev, soc_min >= reserve_pct, tank_margin >= 0)
+        ok_load = (np.where(ev, soc_min >= reserve_pct, tank_margin >= 0) if z == 0.0
+                   else p_ok >= confidence)
     known = ev | np.isfinite(ps.tank_l)
-    feasible = np.where(known, (ok_load & ~over).astype(float), np.nan)
 
     max_p, min_p, limited = _payload_range(f, known, max_gross, base, payload_cap_kg)
+    follow = _follow(source, vehicles, mass)
+    max_p, min_p, limited = _within_follow_limits(source, vehicles, base, max_p, min_p, limited)
+    # the reserve or the tank at the confidence (the point estimate at 0.5), then every flag
+    flags = limits.verdict(is_ev=ev, over_max_gross=over, over_power=follow[0], over_speed=follow[1],
+                           energy_ok=np.where(known, ok_load.astype(float), np.nan))
+    feasible = flags["feasible"]
     at = load_ranges(source, vehicles, mass, soc_start_pct=soc_start_pct, reserve_pct=reserve_pct,
                      ice_braking=ice_braking, ambient_c=ambient_c)
     empty = np.isfinite(at["empty_at_m"]) & ev
@@ -253,6 +335,13 @@ def feasibility(
         soc_min[empty | (soc_min < 0)] = 0.0
     return Feasibility(
         **at,
+        over_power=follow[0],
+        over_speed=follow[1],
+        power_demand_w=follow[2],
+        reserve_ok=flags["reserve_ok"],
+        tank_ok=flags["tank_ok"],
+        soc_start_pct=soc_start_pct,
+        reserve_pct=reserve_pct,
         source=source,
         vehicles=vehicles,
         mass_kg=mass,
@@ -270,6 +359,10 @@ def feasibility(
         limited_by=tuple(str(s) for s in limited),
         ambient_c=terms.ambient_c[:, 0],
         ambient_from=tuple(AMBIENT_ORIGINS[int(c)] for c in terms.ambient_from[:, 0]),
+        confidence=float(confidence),
+        sd=sd_at,
+        p_ok=p_ok,
+        interval_from=tuple(f.source_of(i) for i in range(nv)),
     )
 
 
@@ -333,6 +426,45 @@ def _payload_range(f: _LoadFunction, known: np.ndarray, max_gross: np.ndarray, b
                     vl = vd[lo_ok]
                     max_p[vl] = _last_true(f.ok, vl, pstar[d][lo_ok], plim[vl])
                     limited[vl] = kind[c][d][lo_ok]
+    return max_p, min_p, limited
+
+
+def _follow(source: Source, vehicles: Sequence[Vehicle], mass_kg: np.ndarray
+            ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(over_power, over_speed, power_demand_w) of each vehicle at its mass (arrays (V,):
+    :func:`cevm.core.limits.follow_flags`)."""
+    out = np.full((3, len(vehicles)), np.nan)
+    for i, v in enumerate(vehicles):
+        if v.max_power_w is not None or v.max_speed_mps is not None:
+            out[:, i] = [a[0] for a in limits.follow_flags(source.demand, v, mass_kg[i])]
+    return out[0], out[1], out[2]
+
+
+def _within_follow_limits(source: Source, vehicles: Sequence[Vehicle], base: np.ndarray, max_p: np.ndarray,
+                          min_p: np.ndarray, limited: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The payload range [min_p, max_p] of each vehicle narrowed to the masses at which it
+    can follow the source: within ``max_power_kw`` (an interval of masses,
+    :meth:`cevm.core.limits.Demand.power_mass_window`) and, at any mass, within
+    ``max_speed_kmh``; ``limited`` says ``"max_power_kw"`` or ``"max_speed_kmh"`` where
+    that is what limits the largest payload."""
+    max_p, min_p, limited = max_p.copy(), min_p.copy(), np.array(limited, dtype=object)
+    for i, v in enumerate(vehicles):
+        if not np.isfinite(max_p[i]):
+            continue
+        if v.max_speed_mps is not None and source.demand.over_speed(v.max_speed_mps):
+            max_p[i], min_p[i], limited[i] = np.nan, np.nan, "max_speed_kmh"
+            continue
+        if v.max_power_w is None:
+            continue
+        lo, hi = source.demand.power_mass_window(v.max_power_w, v.cda_m2, v.cr)
+        top = math.floor(hi - base[i] + 1e-9) if math.isfinite(hi) else math.inf
+        bottom = max(0.0, math.ceil(lo - base[i] - 1e-9)) if math.isfinite(lo) else math.inf
+        if math.isnan(lo) or top < max(min_p[i], bottom):
+            max_p[i], min_p[i], limited[i] = np.nan, np.nan, "max_power_kw"
+            continue
+        if top < max_p[i]:
+            max_p[i], limited[i] = top, "max_power_kw"
+        min_p[i] = max(min_p[i], bottom)
     return max_p, min_p, limited
 
 

@@ -165,6 +165,24 @@ def wheel_energy_j(
     return np.asarray(e1 + pos + w * (net - pos))
 
 
+def wheel_energy_parts_j(vector: CycleVector, mass_kg, cda_m2, cr) -> tuple[np.ndarray, np.ndarray]:
+    """The two parts of the wheel energy [J]: P, E_DC1 plus the positive non-simplified
+    steps, and N <= 0, the negative non-simplified steps; E_DC = P + w N for any weight
+    w (:func:`wheel_energy_j`, same broadcasting and checks, one pass for both)."""
+    m, cda, crs = np.broadcast_arrays(np.asarray(mass_kg, dtype=np.float64), np.asarray(cda_m2, dtype=np.float64),
+                                      np.asarray(cr, dtype=np.float64))
+    if np.any(m <= 0):
+        raise ValueError("mass_kg must be > 0")
+    if np.any(cda < 0):
+        raise ValueError("cda_m2 must be >= 0")
+    _check_cr(vector, crs)
+    e1 = m * vector.s_me + cda * vector.s_a + crs * m * vector.s_r
+    sx, sa, sr = vector.ns_sums
+    net = m * (sx + crs * sr) + cda * sa
+    pos = nonsimplified_positive_j(vector, m, cda, crs)
+    return e1 + pos, net - pos
+
+
 def _wheel_energy_scalar(vector: CycleVector, m: float, cda: float, cr: float, w: float) -> np.ndarray:
     """:func:`wheel_energy_j` for plain Python numbers: same result, less overhead."""
     if not m > 0:

@@ -1,23 +1,29 @@
 """The calibrated vehicle file: the input vehicle file with the fitted values written in
-(comments, tables and sources kept), the terms the model leaves out set to zero, and a
-``[calibration]`` table that records what the fit saw; never over an existing file
-silently."""
+(its comments, order, tables and other sources kept: edited with tomlkit), the terms the
+model leaves out set to zero or removed, ``[sources]`` texts for every value calibrate
+changed, and the tables that record what the fit saw (``[calibration]``), the priors it
+started from (``[prior]``) and what it learnt (``[posterior]``: the coefficients'
+standard deviations and correlations, the trips' scatter, :mod:`cevm.io.priors`); never
+over an existing file silently."""
 
 from __future__ import annotations
 
 import math
 import re
 from pathlib import Path
+from typing import Any
 
 import numpy as np
+import tomlkit
 
 from cevm.core.calibration import TERMS_BY_POWERTRAIN, CalibrationResult
 from cevm.core.calibration.terms import EXTRA_TERMS
 from cevm.errors import CevmError
+from cevm.io.priors import posterior_table, prior_table
 from cevm.io.vehicles import stem_id
 
-
-_TOP_KEY = re.compile(r"^(?P<key>[A-Za-z0-9_]+)\s*=\s*(?P<value>[^#\n]*?)(?P<rest>\s*(#.*)?)$")
+#: Leading comment lines an earlier calibrate wrote (dropped before the new header).
+_OLD_HEADER = re.compile(r"^# (calibrated by cevm calibrate|fitted: |removed by cevm calibrate: )")
 
 
 def fitted_keys(result: CalibrationResult) -> dict[str, float | str]:
@@ -35,9 +41,10 @@ def fitted_keys(result: CalibrationResult) -> dict[str, float | str]:
             continue
         key, factor = t.file
         keys[key] = getattr(v, name) * factor
-    if any(fields[n].temperature for n in result.fitted if n in fields) and result.rows:
-        temps = np.array([r.ambient_c for r in result.rows])
-        keys["reference_temp_c"] = round(float(np.median(temps[np.isfinite(temps)])), 1)
+    temps = np.array([r.ambient_c for r in result.rows])
+    temps = temps[np.isfinite(temps)]
+    if any(fields[n].temperature for n in result.fitted if n in fields) and temps.size:
+        keys["reference_temp_c"] = round(float(np.median(temps)), 1)
         keys["heating_below_c"] = v.heating_below_c
         keys["cooling_above_c"] = v.cooling_above_c
     return keys
@@ -61,73 +68,95 @@ def neutral_keys(result: CalibrationResult) -> dict[str, float | None]:
     return out
 
 
-def _toml_value(value) -> str:
-    if isinstance(value, str):
-        return '"' + value.replace("\\", "\\\\").replace('"', '\\"') + '"'
+def _round(value):
+    """Floats to 6 significant digits (what the text form carries); others as they are."""
+    if isinstance(value, float) and math.isfinite(value):
+        return float(f"{value:.6g}")
     if isinstance(value, (list, tuple)):
-        return "[" + ", ".join(_toml_value(x) for x in value) + "]"
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, int):
-        return str(value)
-    return f"{value:.6g}"
+        return [_round(x) for x in value]
+    if isinstance(value, dict):
+        return {k: _round(x) for k, x in value.items()}
+    return value
+
+
+def _table(mapping: dict, comment: str | None = None):
+    t = tomlkit.table()
+    if comment:
+        t.add(tomlkit.comment(comment))
+    for k, v in mapping.items():
+        if v is None:
+            continue
+        if isinstance(v, dict):
+            t.add(k, _table(v))
+        else:
+            t.add(k, _round(v))
+    return t
 
 
 def calibrated_toml(text: str, values: dict[str, float | str], header: str,
-                    neutral: dict[str, float | None] | None = None,
-                    calibration: dict | None = None) -> str:
-    """``text`` (a vehicle TOML file) with top-level ``values`` replaced or added, the
-    keys of ``neutral`` replaced (or, for None, commented out) where present, the
-    ``[calibration]`` table replaced by ``calibration`` (when given), and a comment
-    header; everything else (comments, tables, sources) is kept as it was."""
+                    neutral: dict[str, float | None] | None = None, calibration: dict | None = None, *,
+                    sources: dict[str, str] | None = None, prior: dict | None = None,
+                    posterior: dict | None = None) -> str:
+    """``text`` (a vehicle TOML file) with top-level ``values`` replaced or added (each
+    with a comment saying what it was), the keys of ``neutral`` replaced (or, for None,
+    removed: the header says so) where present, ``sources`` set in ``[sources]``, the
+    ``[calibration]``, ``[prior]`` and ``[posterior]`` tables replaced by the given
+    ones, and a comment header; everything else (comments, order, tables, other
+    sources) is kept as it was."""
     lines = text.splitlines()
-    if calibration is not None:
-        lines = _without_table(lines, "calibration")
-    first_table = next((i for i, line in enumerate(lines) if line.lstrip().startswith("[")), len(lines))
-    todo = dict(values)
-    neutral = dict(neutral or {})
-    for i in range(first_table):
-        m = _TOP_KEY.match(lines[i])
-        if not m:
-            continue
-        key = m.group("key")
-        old = m.group("value").strip()
-        if key in todo:
-            lines[i] = f"{key} = {_toml_value(todo.pop(key))}  # cevm calibrate (was {old})"
-        elif key in neutral:
-            value = neutral.pop(key)
-            lines[i] = (f"# {key} = {old}  # removed by cevm calibrate: not in the calibrated model" if value is None
-                        else f"{key} = {_toml_value(value)}  # cevm calibrate: not in the calibrated model (was {old})")
-    added = [f"{k} = {_toml_value(v)}  # added by cevm calibrate" for k, v in todo.items()]
-    lines[first_table:first_table] = added + ([""] if added and first_table < len(lines) else [])
-    if calibration is not None:
-        while lines and not lines[-1].strip():
-            lines.pop()
-        lines += ["", "# What the calibration saw (cevm calibrate): predictions outside it are warned about.",
-                  "[calibration]"]
-        lines += [f"{k} = {_toml_value(v)}" for k, v in calibration.items() if v is not None]
-    head = [f"# {h}" for h in header.splitlines()]
-    return "\n".join(head + lines) + "\n"
-
-
-def _without_table(lines: list[str], name: str) -> list[str]:
-    """``lines`` without the table ``[name]`` (its header to the next table header)."""
-    out, skip = [], False
-    for line in lines:
-        stripped = line.strip()
-        if stripped.startswith("["):
-            skip = stripped.strip("[] ").split("#")[0].strip() == name and not stripped.startswith("[[")
-            if skip:
-                while out and out[-1].lstrip().startswith("#") and "cevm calibrate" in out[-1]:
-                    out.pop()
+    while lines and _OLD_HEADER.match(lines[0]):
+        lines.pop(0)
+    doc = tomlkit.parse("\n".join(lines) + "\n")
+    removed = []
+    for key, value in values.items():
+        value = _round(value)
+        if key in doc and not isinstance(doc[key], dict):
+            old = doc[key]
+            old_text = old.as_string().strip() if hasattr(old, "as_string") else repr(old)
+            if key == "class" or old_text == tomlkit.item(value).as_string().strip():
+                doc[key] = value
                 continue
-        if not skip:
-            out.append(line)
-    return out
+            doc[key] = value
+            doc[key].comment(f"cevm calibrate (was {old_text})")
+        else:
+            item = tomlkit.item(value)
+            item.comment("added by cevm calibrate")
+            doc.add(key, item)
+    for key, value in (neutral or {}).items():
+        if key not in doc:
+            continue
+        old_text = doc[key].as_string().strip()
+        if value is None:
+            doc.remove(key)
+            removed.append(f"{key} = {old_text}")
+        else:
+            doc[key] = _round(value)
+            doc[key].comment(f"cevm calibrate: not in the calibrated model (was {old_text})")
+    if sources:
+        if "sources" not in doc:
+            doc.add("sources", tomlkit.table())
+        _set_keeping_trailing_comments(doc["sources"], sources)
+    for name, table, comment in (
+            ("calibration", calibration, "What the calibration saw (cevm calibrate): predictions outside it are "
+                                         "warned about."),
+            ("prior", prior, "The priors the calibration started from (cevm calibrate; ranges hold the value with "
+                             "about 95 %); a new calibration starts from them again."),
+            ("posterior", posterior, "What the calibration learnt (cevm calibrate): the fitted values' standard "
+                                     "deviations (each key's unit) and correlations, and the trips' scatter.")):
+        if table is None:
+            continue
+        if name in doc:
+            doc.remove(name)
+        doc.add(name, _table(table, comment))
+    head = [f"# {h}" for h in header.splitlines()]
+    if removed:
+        head.append(f"# removed by cevm calibrate: {', '.join(removed)} (not in the calibrated model: regeneration "
+                    "and kinetic efficiency follow eta)")
+    return "\n".join(head) + "\n" + tomlkit.dumps(doc).rstrip("\n") + "\n"
 
 
 def calibration_table(result: CalibrationResult, *, store: str | None = None, selected_from: int | None = None,
-                      nested_std_pct: float | None = None) -> dict:
+                      nested_std_pct: float | None = None, compared: int | None = None) -> dict:
     """The ``[calibration]`` table of the calibrated file, in file units (see
     :class:`cevm.core.vehicle.FitDomain`, which reads it back)."""
     from cevm import __version__
@@ -140,16 +169,68 @@ def calibration_table(result: CalibrationResult, *, store: str | None = None, se
     def num(x, nd=3):
         return None if x is None or not math.isfinite(x) else round(float(x), nd)
 
+    cov = result.coverage.get(result.interval) if result.coverage else None
     return {
         "by": f"cevm {__version__}",
         "vehicle_id": d.vehicle_id, "store": store, "terms": list(d.terms), "n_trips": d.n_trips,
         "first_trip_utc": d.first_utc, "last_trip_utc": d.last_utc,
         "ambient_c": pair(d.ambient_c, 1.0, 1), "mean_speed_kmh": pair(d.mean_speed_mps, 3.6, 2),
         "mass_kg": pair(d.mass_kg, 1.0, 0), "distance_km": pair(d.distance_m, 1e-3, 2),
+        "idle_share": pair(d.idle_share, 1.0, 3),
         "mass_sources": d.mass_sources, "cv_scheme": d.cv_scheme, "cv_mean_pct": num(d.cv_mean_pct),
         "cv_std_pct": num(d.cv_std_pct), "nested_cv_std_pct": num(nested_std_pct),
-        "candidates_compared": selected_from,
+        "candidates": selected_from, "candidates_compared": compared,
+        "interval": num(result.interval, 3), "cv_coverage": num(cov, 3),
+        "cv_mean_rel_width_pct": num(result.mean_rel_width_pct, 2),
     }
+
+
+def _set_keeping_trailing_comments(table: Any, values: dict[str, str]) -> None:
+    """Set ``values`` in a tomlkit table, new keys after its last key: the comments
+    that end the table (in TOML they introduce the next one) stay at its end."""
+    body = table.value.body
+    last = max((i for i, (k, _) in enumerate(body) if k is not None), default=-1)
+    trailing = body[last + 1:]
+    del body[last + 1:]
+    for key, why in values.items():
+        table[key] = why
+    for _, item in trailing:
+        table.value.append(None, item)
+
+
+def changed_sources(result: CalibrationResult, vehicle_id: str | None) -> dict[str, str]:
+    """[sources] texts for every key calibrate writes: the fitted values (their posterior
+    mean and standard deviation, the trips, the prior), the terms left out, the balance
+    and reference temperatures."""
+    v = result.vehicle
+    pt = v.powertrain
+    post = result.posterior
+    base = post.source if post is not None else f"cevm calibrate on {len(result.rows)} trips"
+    out: dict[str, str] = {}
+    by_field = {t.field: t for (p, _), t in TERMS_BY_POWERTRAIN.items() if p == pt}
+    priors = result.priors
+    for field, (value, sd) in result.fitted.items():
+        t = by_field.get(field)
+        if t is None:
+            continue
+        key, f = t.file
+        unit = t.display[0] if t.display[1] == f else ""
+        u = f" {unit}" if unit else ""
+        text = f"cevm calibrate, {base}: {value * f:.4g} +- {sd * f:.2g}{u} (posterior)"
+        p = priors.get(t.name) if priors is not None else None
+        if p is not None:
+            kept = result.prior_kept.get(field)
+            text += (f"; prior {p.low * f:.4g} to {p.high * f:.4g}{u} ({p.source})" + (f"; {kept}" if kept else ""))
+        out[key] = text
+    for key in neutral_keys(result):
+        out[key] = f"cevm calibrate, {base}: not in the calibrated model"
+    if "heating_below_c" in result.fitted or "cooling_above_c" in result.fitted:
+        out["heating_below_c"] = f"cevm calibrate, {base}: balance temperature chosen on a grid by the evidence"
+        out["cooling_above_c"] = out["heating_below_c"]
+        out["reference_temp_c"] = f"cevm calibrate, {base}: the median of the trips' temperatures"
+    if not v.is_ev:
+        out["ice_braking"] = f"cevm calibrate, {base}: the braking mode the fit was made under"
+    return out
 
 
 def write_calibrated_vehicle(source: Path, out: Path, result: CalibrationResult, *, force: bool, note: str,
@@ -158,12 +239,23 @@ def write_calibrated_vehicle(source: Path, out: Path, result: CalibrationResult,
     if out.exists() and not force:
         what = "the input vehicle file" if out.resolve() == source.resolve() else "an existing file"
         raise CevmError(f"{out}: would overwrite {what}; give another --out or --force")
-    fitted = ", ".join(f"{k} = {_toml_value(v)}" for k, v in fitted_keys(result).items())
+    fitted = ", ".join(f"{k} = {_round(v)}" for k, v in fitted_keys(result).items())
+    v = result.vehicle
     # the calibrated vehicle's id is its own file's stem: never the input file's 'id' key,
     # so the two can be predicted side by side (cevm.io.vehicles)
     values = {**fitted_keys(result), "id": stem_id(out)}
+    if v.vehicle_class is not None:
+        values["class"] = v.vehicle_class
+    prior = None if result.priors is None else prior_table(result.priors, v.powertrain)
+    posterior = None if result.posterior is None else posterior_table(result.posterior, v)
     text = calibrated_toml(source.read_text(encoding="utf-8"), values, f"{note}\nfitted: {fitted}",
-                           neutral=neutral_keys(result), calibration=calibration)
+                           neutral=neutral_keys(result), calibration=calibration,
+                           sources=changed_sources(result, v.id), prior=prior, posterior=posterior)
     tmp = out.with_name(out.name + ".tmp")
-    tmp.write_text(text, encoding="utf-8")
-    tmp.replace(out)  # atomic: never a half-written vehicle file
+    try:
+        tmp.write_text(text, encoding="utf-8")
+        tmp.replace(out)  # atomic: never a half-written vehicle file
+    except OSError as exc:  # a full disk, a folder that is not there or not writable
+        tmp.unlink(missing_ok=True)
+        raise CevmError(f"{out}: the calibrated vehicle file cannot be written: "
+                        f"{exc.strerror or exc}") from None

@@ -39,7 +39,10 @@ speed at most :data:`MAX_SPEED_KMH`, acceleration and deceleration at most
 :data:`MAX_ACCEL_MPS2` between samples, grade at most :data:`MAX_GRADE` (given, or of
 an elevation profile: each step's rise at most MAX_GRADE times its distance plus
 :data:`ELEVATION_ROUNDING_M`), elevation within +-:data:`MAX_ABS_ELEVATION_M`, at most
-:data:`MAX_CYCLE_SAMPLES` samples.
+:data:`MAX_CYCLE_SAMPLES` samples, a median sample spacing within
+:data:`MAX_MEDIAN_STEP_S` (a time column in milliseconds read as seconds). A grade
+column read in % that looks like fractions (all within :data:`FLAT_GRADE_MAX_PCT` over
+kilometres) is read, with a :class:`CycleWarning`.
 """
 
 from __future__ import annotations
@@ -88,6 +91,23 @@ MAX_ABS_ELEVATION_M = 10_000.0
 #: Most samples in one cycle file (116 days at 1 Hz), which bounds the memory a file can
 #: take (about 200 bytes per sample while its vector is computed).
 MAX_CYCLE_SAMPLES = 10_000_000
+#: Widest typical spacing of a cycle's samples [s] (the median step): drive cycles and
+#: loggers sample every 0.1-10 s; a median step of minutes cannot describe driving (a
+#: stop, a start), and is a time column in milliseconds read as seconds (UKBUS6 at
+#: 1,000 "s" a step: 12,125 km).
+MAX_MEDIAN_STEP_S = 60.0
+#: A grade column in % whose largest value is below this [%] over at least
+#: :data:`FLAT_GRADE_MIN_DISTANCE_M` of road is warned about: roads climb 1 % somewhere
+#: in a few km, so such values are likelier fractions (0.02 = 2 %) read as percent, which
+#: flattens the road (``--grade-unit``).
+FLAT_GRADE_MAX_PCT = 1.0
+#: Road a grade column must cover before a flat-looking one in % is warned about [m].
+FLAT_GRADE_MIN_DISTANCE_M = 2000.0
+
+
+class CycleWarning(UserWarning):
+    """A cycle file that reads, but probably not as meant (a grade in % that looks like
+    fractions): the command line prints it as one ``cevm: warning:`` line."""
 
 #: Speed units: accepted spellings -> (canonical name, factor to m/s).
 SPEED_UNITS = {"km/h": ("km/h", KMH_TO_MPS), "kmh": ("km/h", KMH_TO_MPS), "kph": ("km/h", KMH_TO_MPS),
@@ -436,6 +456,7 @@ def read_cycles(path: str | Path, fmt: CycleFormat | None = None) -> list[DriveC
             t = np.arange(n, dtype=np.float64) * fmt.time_step_s
         dt = np.diff(t)
         _check_time(layout, t, dt, time_col)
+        _check_spacing(layout, dt, time_col, time_factor)
         v = v_raw * factor if factor != 1.0 else v_raw
         _check_speed(layout, c, v, v_raw, t, dt, unit)
         elevation = None
@@ -450,6 +471,7 @@ def read_cycles(path: str | Path, fmt: CycleFormat | None = None) -> list[DriveC
             g_raw = _require(grade_layout, grade_arrays[grade_cols[c]], n, grade_cols[c])
             g = g_raw * grade_factor
             _check_grade(grade_layout, grade_cols[c], g, g_raw)
+            _check_grade_unit(grade_layout, grade_cols[c], g_raw, grade_factor, v, dt)
             elevation = elevation_from_grade(t, v, g)
         name = f"{stem}[{layout.header[c]}]" if fmt.speed_columns else stem
         cycles.append(DriveCycle(time_s=t, speed_mps=v, elevation_m=elevation, name=name))
@@ -544,6 +566,41 @@ def _same_rows(grade_layout: CsvLayout, col: int, grade_t: np.ndarray, t: np.nda
                                             f"{t[i]:g} (line {data_line(layout, i)}): the grade file's rows must be "
                                             "the cycle's", line=data_line(grade_layout, i),
                          column=grade_layout.header[col])
+
+
+def _check_spacing(layout: CsvLayout, dt: np.ndarray, col: int | None, factor: float) -> None:
+    """A median sample spacing within :data:`MAX_MEDIAN_STEP_S` (a time column in
+    milliseconds read as seconds is refused, naming the column)."""
+    step = float(np.median(dt)) if dt.size else 0.0
+    if step <= MAX_MEDIAN_STEP_S:
+        return
+    name = None if col is None else layout.header[col]
+    if col is None:
+        raise InputError(layout.path, f"a time step of {step:g} s: drive cycles are sampled every 0.1-10 s "
+                                      f"(at most {MAX_MEDIAN_STEP_S:g} s); give --time-step-s in seconds")
+    unit = "s" if factor == 1.0 else f"s after its unit ({factor:g} s per unit)"
+    raise InputError(layout.path, f"samples are {step:g} {unit} apart (the median step): drive cycles are sampled "
+                                  f"every 0.1-10 s (at most {MAX_MEDIAN_STEP_S:g} s); a time in milliseconds read "
+                                  "as seconds? name the unit in the column (time_ms, 'Time [ms]') or give "
+                                  "--time-step-s", line=data_line(layout, 1), column=name)
+
+
+def _check_grade_unit(layout: CsvLayout, col: int, g_raw: np.ndarray, factor: float, v: np.ndarray,
+                      dt: np.ndarray) -> None:
+    """A warning (:class:`CycleWarning`) for a grade column read in % whose values all
+    stay below :data:`FLAT_GRADE_MAX_PCT` over at least
+    :data:`FLAT_GRADE_MIN_DISTANCE_M` of road: likelier fractions, which % flattens."""
+    import warnings
+
+    if factor != 0.01 or not np.any(g_raw != 0):
+        return
+    distance = float(np.sum(0.5 * (v[1:] + v[:-1]) * dt))
+    top = float(np.max(np.abs(g_raw)))
+    if top < FLAT_GRADE_MAX_PCT and distance >= FLAT_GRADE_MIN_DISTANCE_M:
+        warnings.warn(CycleWarning(
+            f"{layout.path}: column {layout.header[col]!r}: read in %, its grades stay within +-{top:g} % over "
+            f"{distance / 1000:,.1f} km, a nearly flat road; if they are fractions ({top:g} = {top:.0%}), give "
+            "--grade-unit fraction"), stacklevel=2)
 
 
 def _check_grade(layout: CsvLayout, col: int, g: np.ndarray, g_raw: np.ndarray) -> None:

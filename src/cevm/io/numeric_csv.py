@@ -9,8 +9,9 @@ Two steps, for any CSV of numbers a user gives (cycle files, and other numeric t
    when the separator is not a comma and the data show a digit, comma, digit; else
    ``.``), unless given. It refuses binary data and a file without line breaks.
 2. :func:`read_numeric_columns` parses the columns asked for straight into float64
-   arrays in C (``numpy.loadtxt`` for a file of plain numbers, else pandas' C parser with
-   float dtypes; every row's field count checked by the parser). Empty cells are NaN; what they mean is the caller's to say, and
+   arrays in C (pyarrow's typed CSV reader for a file of plain numbers, or
+   ``numpy.loadtxt`` where pyarrow refuses a cell (a number padded with spaces), else
+   pandas' C parser with float dtypes; every row's field count checked by the parser). Empty cells are NaN; what they mean is the caller's to say, and
    :func:`describe_missing` names an empty cell or a short line for its message. A cell
    that is not a finite number, or a line with more fields than the header, raises
    :class:`~cevm.errors.InputError` with the line (1-based, the header is line 1) and
@@ -40,6 +41,7 @@ from pathlib import Path
 import numpy as np
 
 from cevm.errors import InputError
+from cevm.runtime import release_free_memory
 
 #: Separators tried, in the order preferred when several split the lines alike (a
 #: semicolon or a tab is rarely anything but a separator; a comma is also a decimal mark
@@ -286,13 +288,18 @@ def read_numeric_columns(layout: CsvLayout, columns: Sequence[int], *, what: str
     number and a line with more fields than the header; and for more than ``max_rows``
     data lines, when given (memory stays bounded).
 
-    A file of numbers only, with a decimal point, is parsed by numpy's C reader
-    (``numpy.loadtxt``; pandas is then not even imported, which is a third of a short
-    command's time); any other (empty cells, a decimal comma, text columns) by pandas'
-    C parser; the careful path only explains an error.
+    A file of numbers only, with a decimal point, is parsed by pyarrow's typed CSV
+    reader on one thread, in blocks (2.5x faster than ``numpy.loadtxt`` on a 2 M-line
+    cycle; both parse each number to the nearest double, so they give the same values),
+    or where pyarrow refuses a cell by ``numpy.loadtxt`` (pandas is then not even
+    imported, which is a third of a short command's time); any other (empty cells, a
+    decimal comma, text columns) by pandas' C parser; the careful path only explains an
+    error.
     """
     columns = list(columns)
-    out = _read_numpy(layout, columns, max_rows)
+    out = _read_arrow(layout, columns, max_rows)
+    if out is None:
+        out = _read_numpy(layout, columns, max_rows)
     if out is None:
         out = _read_pandas(layout, columns, what, max_rows)
     n = out[0].size if out else 0
@@ -307,6 +314,66 @@ def read_numeric_columns(layout: CsvLayout, columns: Sequence[int], *, what: str
     return out
 
 
+#: Bytes of one block of pyarrow's CSV reader (:func:`_read_arrow`).
+ARROW_BLOCK_BYTES = 1 << 22
+
+
+def _read_arrow(layout: CsvLayout, columns: list[int], max_rows: int | None) -> list[np.ndarray] | None:
+    """Every column with pyarrow's typed CSV reader, a block at a time (at most
+    ``max_rows`` + 1 rows are kept: memory stays bounded; the blocks are allocated by the
+    C library's malloc and returned to the system once joined), or None where it cannot be used
+    or refuses the file (numpy, then pandas, read it and say what is wrong): a decimal
+    comma, a header that is not UTF-8, a row whose field count is not the header's, a
+    cell that is not a plain number, an empty cell, a NaN written out."""
+    if layout.decimal != "." or layout.encoding != "utf-8-sig":
+        return None
+    import pyarrow as pa
+    import pyarrow.csv as pacsv
+
+    names = [f"c{i}" for i in range(len(layout.header))]
+    wanted = [names[j] for j in columns]
+    read = pacsv.ReadOptions(use_threads=False, block_size=ARROW_BLOCK_BYTES, skip_rows=1, column_names=names)
+    parse = pacsv.ParseOptions(delimiter=layout.sep, quote_char='"', double_quote=True)
+    convert = pacsv.ConvertOptions(column_types=dict.fromkeys(wanted, pa.float64()), include_columns=wanted,
+                                   null_values=[""], strings_can_be_null=False, quoted_strings_can_be_null=False)
+    batches = []
+    rows = 0
+    try:
+        with pa.input_stream(str(layout.path), compression=layout.compression) as raw:
+            reader = pacsv.open_csv(raw, read_options=read, parse_options=parse, convert_options=convert,
+                                    memory_pool=pa.system_memory_pool())
+            for batch in reader:
+                if batch.num_rows:
+                    batches.append(batch)
+                rows += batch.num_rows
+                if max_rows is not None and rows > max_rows:
+                    break
+    except (pa.ArrowException, OSError, EOFError, ValueError):
+        return None
+    if not batches:
+        return [np.zeros(0) for _ in columns]
+    out = []
+    for name in wanted:
+        chunks = [b.column(name) for b in batches]
+        if any(c.null_count for c in chunks):
+            return None  # an empty cell: pandas says which
+        arr = np.concatenate([_doubles(c) for c in chunks])
+        if max_rows is not None and arr.size > max_rows + 1:
+            arr = arr[: max_rows + 1].copy()
+        if np.isnan(arr).any():
+            return None  # 'nan' written out: let pandas say
+        out.append(arr)
+    del batches, chunks
+    release_free_memory()  # the blocks, freed, would stay resident beside the joined columns
+    return out
+
+
+def _doubles(values) -> np.ndarray:
+    """A view of the values of a pyarrow double array without nulls (its data buffer;
+    ``Array.to_numpy`` would import pandas, a third of a short command's time)."""
+    return np.frombuffer(values.buffers()[1], dtype=np.float64, count=len(values), offset=8 * values.offset)
+
+
 def _read_numpy(layout: CsvLayout, columns: list[int], max_rows: int | None) -> list[np.ndarray] | None:
     """Every column with numpy's C reader, or None where it cannot be used or fails
     (pandas then reads the file and names what is wrong)."""
@@ -317,6 +384,7 @@ def _read_numpy(layout: CsvLayout, columns: list[int], max_rows: int | None) -> 
     try:
         with warnings.catch_warnings():
             warnings.filterwarnings("ignore", message="Input line", category=UserWarning)  # blank lines: no rows
+            warnings.filterwarnings("ignore", message="loadtxt: input contained no data", category=UserWarning)
             by_name = layout.compression is None or layout.path.suffix.lower() == ".gz"
             if by_name:  # numpy opens it (and .gz) itself: 30 % faster than from a file object
                 table = np.loadtxt(layout.path, **kw)

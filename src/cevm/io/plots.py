@@ -35,30 +35,57 @@ def _figure(figsize: tuple[float, float]):
 
 
 def plot_calibration(result: CalibrationResult, path: Path, title: str) -> None:
-    """Predicted against measured with the 1:1 line (the paper's figures 5 and 7), and the
-    percent error against trip distance, in-sample and cross-validated."""
+    """Three panels: predicted against measured with the 1:1 line (the paper's figures 5
+    and 7), each held-out prediction with its interval; the percent error against trip
+    distance, in-sample and cross-validated; and the calibration of the intervals: the
+    share of held-out trips inside their central interval against its nominal level
+    (on the diagonal when the intervals are honest), with its binomial 95 % band."""
+    from scipy.special import ndtri
+    from scipy.stats import binom
+
     from cevm.core.calibration import display_value
 
     unit = "kWh" if result.unit == "J" else "l"
-    meas = np.array([display_value(result, r.measured) for r in result.rows])
-    ins = np.array([display_value(result, r.predicted_in_sample) for r in result.rows])
-    cv = np.array([display_value(result, r.predicted_cv) for r in result.rows])
-    dist = np.array([r.distance_m for r in result.rows]) / 1e3
-    fig = _figure((11, 4.8))
-    a1, a2 = fig.subplots(1, 2)
-    lim = [0, max(meas.max(), np.nanmax(cv) if np.isfinite(cv).any() else 0, ins.max()) * 1.05]
+    rows = result.rows
+    meas = np.array([display_value(result, r.measured) for r in rows])
+    ins = np.array([display_value(result, r.predicted_in_sample) for r in rows])
+    cv = np.array([display_value(result, r.predicted_cv) for r in rows])
+    lo = np.array([display_value(result, r.predicted_low) for r in rows])
+    hi = np.array([display_value(result, r.predicted_high) for r in rows])
+    dist = np.array([r.distance_m for r in rows]) / 1e3
+    fig = _figure((16, 4.8))
+    a1, a2, a3 = fig.subplots(1, 3)
+    top = max(meas.max(), np.nanmax(hi) if np.isfinite(hi).any() else 0, ins.max()) * 1.05
+    lim = [0, top]
     a1.plot(lim, lim, "k-", lw=1, label="1:1")
     a1.scatter(meas, ins, s=18, label="CE model, in-sample")
-    if np.isfinite(cv).any():
-        a1.scatter(meas, cv, s=18, marker="x", label="CE model, cross-validated")
+    ok = np.isfinite(cv) & np.isfinite(lo) & np.isfinite(hi)
+    if ok.any():
+        a1.errorbar(meas[ok], cv[ok], yerr=[cv[ok] - lo[ok], hi[ok] - cv[ok]], fmt="x", ms=5, lw=0.8, capsize=2,
+                    label=f"cross-validated, {100 * result.interval:g} % interval")
     a1.set(xlim=lim, ylim=lim, xlabel=f"measured [{unit}]", ylabel=f"modelled [{unit}]", title=title)
-    a1.legend()
+    a1.legend(fontsize=8)
     a2.axhline(0, color="k", lw=1)
-    a2.scatter(dist, [r.error_pct_in_sample for r in result.rows], s=18, label="in-sample")
+    a2.scatter(dist, [r.error_pct_in_sample for r in rows], s=18, label="in-sample")
     if np.isfinite(cv).any():
-        a2.scatter(dist, [r.error_pct_cv for r in result.rows], s=18, marker="x", label="cross-validated")
+        a2.scatter(dist, [r.error_pct_cv for r in rows], s=18, marker="x", label="cross-validated")
     a2.set(xlabel="trip distance [km]", ylabel="error (modelled - measured) / measured [%]")
-    a2.legend()
+    a2.legend(fontsize=8)
+    sd = np.array([r.sd_cv for r in rows])
+    zs = (np.array([r.measured for r in rows]) - np.array([r.predicted_cv for r in rows])) / sd
+    zs = np.abs(zs[np.isfinite(zs)])
+    levels = np.linspace(0.05, 0.99, 48)
+    a3.plot([0, 1], [0, 1], "k-", lw=1, label="nominal")
+    if zs.size:
+        emp = np.array([np.mean(zs <= ndtri(0.5 + 0.5 * lv)) for lv in levels])
+        band_lo = binom.ppf(0.025, zs.size, levels) / zs.size
+        band_hi = binom.ppf(0.975, zs.size, levels) / zs.size
+        a3.fill_between(levels, band_lo, band_hi, color="0.85", label=f"binomial 95 % band ({zs.size} trips)")
+        a3.plot(levels, emp, "-", lw=1.5, label="held-out trips inside")
+        a3.axvline(result.interval, color="0.5", lw=0.8, ls="--")
+    a3.set(xlim=(0, 1), ylim=(0, 1), xlabel="nominal level of the central interval",
+           ylabel="share of held-out trips inside", title="coverage of the intervals")
+    a3.legend(fontsize=8, loc="upper left")
     fig.tight_layout()
     fig.savefig(path, dpi=120)
 
@@ -93,12 +120,14 @@ def vehicle_label(vehicle) -> str:
 
 
 def plot_predictions(path: Path, sources: list[Source], pset: PredictionSet | Sequence[PredictionSet],
-                     sweep_data: list, soc_start: float, reserve_pct: float, ice_braking: str | None,
+                     sweep_data: list, soc_start: float | Sequence[float], reserve_pct: float,
+                     ice_braking: str | None,
                      warn: Callable[[str], None] | None = None) -> None:
     """SoC (EV) or fuel (ICE) along each source for each vehicle (one mass each: the
     paper's figure 4), or energy / fuel against payload when vehicles have several
     masses. ``pset``: one prediction set for every source, or one per source (each
-    stored trip at its own mass). ``warn`` is called with a message when only the first
+    stored trip at its own mass); ``soc_start`` [%]: one for every source, or one per
+    source (a stored trip's logged start). ``warn`` is called with a message when only the first
     :data:`PLOT_MAX_LINES` (source, vehicle) pairs are drawn."""
     per_source = list(pset) if isinstance(pset, (list, tuple)) else None
     pset = per_source[0] if per_source else pset
@@ -147,7 +176,7 @@ def plot_predictions(path: Path, sources: list[Source], pset: PredictionSet | Se
             _, dist, e = energy_trajectory(sources[s], veh, m, ice_braking=ice_braking)
             label = f"{vehicle_label(veh)} on {printable(sources[s].name)} ({m:,.0f} kg)"
             if veh.is_ev:
-                soc = soc_start - 100.0 * e / veh.battery_j
+                soc = (soc_start[s] if isinstance(soc_start, (list, tuple)) else soc_start) - 100.0 * e / veh.battery_j
                 empty = np.flatnonzero(soc < 0)
                 if empty.size:  # the line ends where the battery runs empty: no charge below 0
                     soc = soc.copy()

@@ -35,6 +35,7 @@ from cevm.core.assignment import (
     quote_key,
     table4_rows,
 )
+from cevm.core.assignment.verdict import LegDemand, reference_differences, vehicle_verdicts, verdict_warnings
 from cevm.core.cycle import CycleVector, drive_cycle_vector
 from cevm.core.vehicle import Vehicle
 from cevm.errors import InputError
@@ -78,7 +79,7 @@ def _read_toml(path: Path) -> dict:
 
 _TOP_KEYS = {
     "name", "description", "objective", "mass_model", "return_to_depot", "ev_reserve_fraction",
-    "days", "ambient_c", "prices", "depot", "vehicle", "route", "stop", "payload_kg", "notes",
+    "days", "ambient_c", "prices", "depot", "vehicle", "route", "stop", "payload_kg", "notes", "reference",
 }
 _VEHICLE_KEYS = {"id", "file", "max_gross_kg", "ev_reserve_fraction", "soc_start", "notes"}
 _ROUTE_KEYS = {"id", "vehicle", "depot", "stops", "leg", "legs", "return_to_depot", "notes"}
@@ -436,12 +437,84 @@ def resolve_day(sc: Scenario, spec: str) -> str:
     raise InputError(sc.path, f"unknown day {spec!r}: give a day's name or its number from 1; days: {listing}")
 
 
+def cycle_leg_demand(base_dir: Path) -> LegDemand:
+    """What each cycle-file leg asks of a vehicle (:class:`cevm.core.limits.Demand`, read
+    once per file; None for a stored trip or route leg, which needs the store:
+    :func:`cevm.store.sources.store_leg_demand`)."""
+    from cevm.core.sweep import Source
+
+    cache: dict[tuple, object] = {}
+
+    def demand(leg: Leg):
+        src = leg.source
+        if src is None or src.kind != "cycle":
+            return None
+        key = (src.kind, src.ref, src.options)
+        if key not in cache:
+            path = Path(src.ref) if Path(src.ref).is_absolute() else base_dir / src.ref
+            fmt = CycleFormat.from_mapping(dict(src.options), path, base_dir) if src.options else None
+            cache[key] = Source.from_cycle(read_cycle_csv(path, fmt)).demand
+        return cache[key]
+
+    return demand
+
+
+#: Keys of a scenario's [reference] table: choices to compare a plan with (the paper's
+#: table 4), where they come from and why a plan may differ.
+_REFERENCE_KEYS = {"source", "why", "assignment"}
+
+
+def read_reference(path: Path, sc: Scenario) -> dict | None:
+    """A scenario's optional ``[reference]``: ``source`` (what the choices are, e.g. "the
+    paper's table 4"), ``why`` (why a plan here may choose otherwise) and ``assignment``
+    (day -> {stop -> vehicle id}); every day, stop and vehicle checked against the
+    scenario. None without one."""
+    data = _read_toml(path).get("reference")
+    if data is None:
+        return None
+    data = _check_keys(path, "reference", data, _REFERENCE_KEYS)
+    assignment = data.get("assignment", {})
+    if not isinstance(assignment, dict):
+        raise InputError(path, "reference.assignment must be a table: day -> {stop -> vehicle id}")
+    stops, ids = set(sc.stops()), {v.id for v in sc.vehicles}
+    for day, choice in assignment.items():
+        if day not in sc.days:
+            raise InputError(path, f"reference.assignment: unknown day {day!r}; days: {', '.join(sc.days)}")
+        if not isinstance(choice, dict):
+            raise InputError(path, f"reference.assignment.{day!r} must be a table: stop -> vehicle id")
+        for stop, vid in choice.items():
+            if stop not in stops:
+                raise InputError(path, f"reference.assignment.{day!r}: unknown stop {stop!r}")
+            if vid not in ids:
+                raise InputError(path, f"reference.assignment.{day!r}.{stop!r}: unknown vehicle {vid!r}")
+    return {"source": _str(path, "reference.source", data.get("source", "a reference")),
+            "why": _str(path, "reference.why", data["why"]) if "why" in data else None,
+            "assignment": assignment}
+
+
+def _interval_from(vehicle: Vehicle) -> str:
+    """posterior, prior or none: what a vehicle's probabilities come from."""
+    from cevm.core.predictive import posterior_of
+
+    post = posterior_of(vehicle)
+    return "none" if post is None else post.label
+
+
 def fleet_report(path: str | Path, days: Sequence[str | int] | None = None, *, method: str = "auto",
-                 resolve_leg: LegResolver = default_resolver, ambient_c: float | None = None) -> dict:
+                 resolve_leg: LegResolver = default_resolver, ambient_c: float | None = None,
+                 leg_demand: LegDemand | None = None, min_p_complete: float | None = None) -> dict:
     """Everything ``cevm fleet SCENARIO`` shows, JSON-ready: the scenario, one plan per
     day (all days by default), the table-4 rows and a summary row per day
     (total, default, saving, method, status, time). ``ambient_c`` [degC] overrides every
-    day's temperature.
+    day's temperature. A day without a feasible assignment is not planned: it is listed
+    in ``infeasible_days`` with why, and the other days are planned. Each vehicle of a
+    plan has its ``verdict`` (:func:`cevm.core.assignment.verdict.vehicle_verdicts`: the
+    flags of every command, the legs it cannot follow; ``leg_demand`` says what each leg
+    asks, default :func:`cycle_leg_demand` for cycle files), warned about; ``reference``
+    compares the choices with the scenario's ``[reference]`` (the paper's table 4).
+
+    ``min_p_complete``: require every vehicle with a budget to complete its day with at
+    least this probability (:func:`cevm.core.assignment.plan`).
 
     ``days``: names, or strings holding a day's 1-based number as the paper numbers days
     (``"3"`` is the third day; see :func:`resolve_day`), or ints (0-based indices, as
@@ -450,7 +523,19 @@ def fleet_report(path: str | Path, days: Sequence[str | int] | None = None, *, m
     if ambient_c is not None:
         sc = dataclasses.replace(sc, ambient_c=_day_temperatures(Path(path), float(ambient_c), len(sc.days)))
     chosen = [resolve_day(sc, d) if isinstance(d, str) else d for d in days] if days is not None else sc.days
-    plans = [plan(sc, d, method=method) for d in chosen]
+    plans, infeasible = [], []
+    for d in chosen:  # a day without a feasible assignment is named, the others planned
+        try:
+            plans.append(plan(sc, d, method=method, min_p_complete=min_p_complete))
+        except InputError as exc:
+            if not str(exc.message).startswith("day "):
+                raise
+            infeasible.append({"day": sc.days[sc.day_index(d)], "why": exc.message})
+    demand_of = leg_demand if leg_demand is not None else cycle_leg_demand(Path(path).parent)
+    verdicts = [vehicle_verdicts(sc, p, demand_of) for p in plans]
+    fleet = {v.id: v.vehicle for v in sc.vehicles}
+    reference = read_reference(Path(path), sc)
+    differences = reference_differences(plans, reference["assignment"]) if reference else []
     return {
         "scenario": sc.name,
         "path": str(path),
@@ -463,10 +548,15 @@ def fleet_report(path: str | Path, days: Sequence[str | int] | None = None, *, m
                       "powertrain": fv.vehicle.powertrain,
                       "ice_braking": None if fv.vehicle.is_ev else fv.vehicle.ice_braking,
                       "calibrated": fv.vehicle.calibration is not None,
+                      "interval_from": _interval_from(fv.vehicle),
                       "uses_temperature": energy.uses_temperature(fv.vehicle)} for fv in sc.vehicles],
-        "warnings": calibration_warnings(sc, plans),
+        "warnings": calibration_warnings(sc, plans) + [w for p, vd in zip(plans, verdicts, strict=True)
+                                                         for w in verdict_warnings(p.day, vd, fleet)],
+        "infeasible_days": infeasible,
+        "reference": None if reference is None else {
+            "source": reference["source"], "why": reference["why"], "differences": differences},
         "table": table4_rows(plans),
-        "summary": [
+        "summary": sorted([
             {
                 "day": p.day,
                 "total": p.total,
@@ -476,8 +566,20 @@ def fleet_report(path: str | Path, days: Sequence[str | int] | None = None, *, m
                 "method": p.method,
                 "status": p.status,
                 "solve_time_s": p.solve_time_s,
+                "min_p_complete": p.min_p_complete,
+                "lowest_p_complete": min((x for x in (p.p_complete or {}).values() if x is not None), default=None),
             }
             for p in plans
-        ],
-        "plans": [p.to_dict() for p in plans],
+        ] + [{"day": d["day"], "total": None, "default_total": None, "saving": None, "saving_pct": None,
+              "method": None, "status": "infeasible", "solve_time_s": None, "min_p_complete": min_p_complete,
+              "lowest_p_complete": None} for d in infeasible],
+            key=lambda row: sc.day_index(row["day"])),
+        "plans": [_with_verdicts(p.to_dict(), vd) for p, vd in zip(plans, verdicts, strict=True)],
     }
+
+
+def _with_verdicts(plan_dict: dict, verdicts: dict[str, dict]) -> dict:
+    """A plan's dict with each vehicle's ``verdict`` (:func:`vehicle_verdicts`)."""
+    for v in plan_dict["vehicles"]:
+        v["verdict"] = verdicts[v["vehicle"]]
+    return plan_dict

@@ -8,6 +8,8 @@ file is :mod:`cevm.io.calibrated`, the paper's figures 5 and 7 :mod:`cevm.io.plo
 
 from __future__ import annotations
 
+import json
+import math
 from collections import Counter
 from dataclasses import dataclass
 
@@ -51,6 +53,57 @@ def _opt(x) -> float | None:
     return None if x is None or not np.isfinite(x) else float(x)
 
 
+#: A trip whose recording the cleaner found spliced (a lasting speed jump it could not
+#: repair, :mod:`cevm.ingest.cleaning`: its quality's ``speed_jumps``) weighs this share
+#: of its road-profile quality: its model error counts twice (the distance and the energy
+#: of the join are unknown, the rest of the trip is sound).
+SPLICED_WEIGHT = 0.5
+
+
+def _quality(quality_json: str | None) -> dict:
+    if not quality_json:
+        return {}
+    try:
+        q = json.loads(quality_json)
+    except ValueError:
+        return {}
+    return q if isinstance(q, dict) else {}
+
+
+def systematic_uncertainty(quality: dict | str | None) -> float | None:
+    """The chosen consumption source's systematic (meter calibration) uncertainty, from a
+    trip's stored quality (:mod:`cevm.ingest.consumption`); None when it does not say."""
+    q = _quality(quality) if not isinstance(quality, dict) else quality
+    cons = q.get("consumption") or {}
+    if not isinstance(cons, dict):
+        return None
+    chosen = cons.get("source")
+    for src in cons.get("sources") or ():
+        if isinstance(src, dict) and src.get("source") == chosen:
+            v = src.get("systematic_uncertainty")
+            return float(v) if isinstance(v, (int, float)) and math.isfinite(v) and v >= 0 else None
+    return None
+
+
+def splice_flags(quality: dict) -> tuple[str, ...]:
+    """The note a calibration shows beside a trip whose recording was spliced (its
+    quality's ``speed_jumps``), or none."""
+    jumps = quality.get("speed_jumps") or []
+    if not isinstance(jumps, list) or not jumps:
+        return ()
+    big = jumps[0] if isinstance(jumps[0], dict) else {}
+    try:
+        step = abs(float(big["to_mps"]) - float(big["from_mps"])) * 3.6
+        when = np.datetime_as_string(np.datetime64(int(big["utc_s"]), "s"), unit="s")
+        dt = float(big.get("dt_s", 1.0))
+        largest = f", the largest {step:.0f} km/h in {dt:g} s at {when}Z"
+    except (KeyError, TypeError, ValueError):
+        largest = ""
+    n = int(quality.get("speed_unresolved_jumps") or len(jumps))
+    return (f"spliced recording: {n} lasting speed jump{'s' if n != 1 else ''}{largest} (the cleaner could not "
+            f"repair it): weighted {SPLICED_WEIGHT:g}",)
+
+
 def trips_for_calibration(store: TripStore, vehicle_id: str, vehicle: Vehicle) -> TripSelection:
     """The stored trips of ``vehicle_id`` as :class:`TripData`.
 
@@ -84,18 +137,23 @@ def trips_for_calibration(store: TripStore, vehicle_id: str, vehicle: Vehicle) -
         if text:
             disagreements.append(text)
         day = np.datetime_as_string(np.datetime64(int(r.start_utc_s), "s"), unit="D")
+        quality = _quality(r.quality_json)
+        flags = splice_flags(quality)
+        q = elevation_quality(r.elevation_source, r.dsm_coverage_pct) * (SPLICED_WEIGHT if flags else 1.0)
         out.append(TripData.from_measurement(
             r.trip_id, vectors[r.trip_id],
             row_measurement(r.measured_kind, r.measured_value, r.measured_source, r.measured_resolution,
                             r.measured_uncertainty),
             mass_kg=mass.gross_kg(vehicle),
-            quality=elevation_quality(r.elevation_source, r.dsm_coverage_pct),
+            quality=q,
             group=day,
             mass_source=mass.origin,
             ambient_c=_opt(r.ambient_temp_c),
             start_utc_s=float(r.start_utc_s),
             standstill_s=_opt(r.standstill_s),
             standstill_rate=_opt(getattr(r, rate_column)),
+            systematic_uncertainty=systematic_uncertainty(quality),
+            flags=flags,
         ))
     if not out:
         raise CevmError(f"vehicle id {vehicle_id!r}: every stored trip is damaged ({damaged[0]}); "
@@ -108,6 +166,10 @@ def trips_for_calibration(store: TripStore, vehicle_id: str, vehicle: Vehicle) -
         notes = [f"mass: {own} of {len(out)} trips at their own, the other {origins['vehicle file']} at the vehicle "
                  f"file's {vehicle.mass_kg:,.0f} kg ({counts}; give trips their masses with 'cevm trips set-mass' "
                  "for a better fit)"]
+    spliced = [t.trip_id for t in out if t.flags]
+    if spliced:
+        notes.append(f"{len(spliced)} trip(s) with a spliced recording weighted {SPLICED_WEIGHT:g} (column flags): "
+                     + ", ".join(spliced[:10]) + (" ..." if len(spliced) > 10 else ""))
     notes += [f"mass disagreement: {text}" for text in disagreements[:10]]
     if len(disagreements) > 10:
         notes.append(f"mass disagreement: ... and {len(disagreements) - 10} more trips ('cevm trips' shows them)")

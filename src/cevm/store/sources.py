@@ -14,6 +14,7 @@ from typing import Optional
 
 from cevm.core.assignment import LegSource
 from cevm.core.cycle import CycleVector
+from cevm.core.limits import elevation_sd_m
 from cevm.core.sweep import LegProfile, PredictionSet, Source
 from cevm.core.trip import Measurement
 from cevm.errors import CevmError
@@ -179,7 +180,7 @@ def load_sources(stack: ExitStack, store: Optional[Path], cycles: Sequence[Path]
         ambient, mass, measured, elevation, soc, stood = facts[tid]
         sources.append(StoredTrip(name=tid, kind="trip", vector=vec, legs=trip_legs(tid), ambient_c=ambient,
                                   mass=mass, measured=measured, elevation_source=elevation, start_soc_pct=soc,
-                                  standstill_before_s=stood))
+                                  standstill_before_s=stood, logged=True, elevation_sd_m=elevation_sd_m(elevation)))
 
     def route_legs(name: str):
         return lambda: [LegProfile.from_profile(p) for p in load_route_profiles(st, name)]
@@ -191,8 +192,10 @@ def load_sources(stack: ExitStack, store: Optional[Path], cycles: Sequence[Path]
         vec = legs[0].vector
         for leg in legs[1:]:
             vec = vec + leg.vector
+        logged = all(leg.info.kind == "trip" for leg in legs)  # else: a cycle leg, a target held exactly
         sources.append(Source(name=name, kind="route", vector=vec, legs=route_legs(name),
-                              ambient_c=route_ambient_c(st, legs)))
+                              ambient_c=route_ambient_c(st, legs), logged=logged,
+                              elevation_sd_m=elevation_sd_m(None) if logged else 0.0))
     return sources
 
 
@@ -237,3 +240,42 @@ def store_resolver(store: TripStore | Callable[[], TripStore]) -> LegResolver:
         return default_resolver(source, base_dir)
 
     return resolve
+
+
+def store_leg_demand(store: TripStore | Callable[[], TripStore], base_dir: Path):
+    """What each leg of a fleet scenario asks of a vehicle
+    (:class:`cevm.core.limits.Demand`): stored trip and route legs from the store (opened
+    by the callable when the first comes; logged traces, held with their measurement's
+    tolerance), cycle files as :func:`cevm.io.scenario.cycle_leg_demand`."""
+    from cevm.core.limits import elevation_sd_m as sd_of
+    from cevm.io.scenario import cycle_leg_demand
+
+    cycles = cycle_leg_demand(base_dir)
+    opened: list[TripStore] = []
+    cache: dict[tuple[str, str], object] = {}
+
+    def st() -> TripStore:
+        if not opened:
+            opened.append(store() if callable(store) else store)
+        return opened[0]
+
+    def demand(leg):
+        src = leg.source
+        if src is None or src.kind not in ("trip", "route"):
+            return cycles(leg)
+        key = (src.kind, src.ref)
+        if key not in cache:
+            if src.kind == "trip":
+                row = st().list_trips(trip_ids=[src.ref])
+                elevation = row["elevation_source"].iloc[0] if len(row) else None
+                legs = (LegProfile.from_profile(st().load_profile(src.ref)),)
+                sd = sd_of(elevation)
+            else:
+                legs = tuple(LegProfile.from_profile(p) for p in load_route_profiles(st(), src.ref))
+                sd = sd_of(None)
+            cache[key] = Source(src.ref, src.kind, load_route_vector(st(), src.ref) if src.kind == "route" else
+                                st().load_cycle_vectors(trip_ids=[src.ref])[src.ref], legs=legs, logged=True,
+                                elevation_sd_m=sd).demand
+        return cache[key]
+
+    return demand

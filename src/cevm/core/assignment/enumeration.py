@@ -11,9 +11,12 @@ from cevm.core.assignment.scenario import BUDGET_RTOL, Scenario
 from cevm.core.vehicle import predict
 
 
-def solve_enumerate(sc: Scenario, prob: DayProblem) -> tuple[dict[str, int] | None, dict]:
+def solve_enumerate(sc: Scenario, prob: DayProblem, min_p_complete: float | None = None
+                    ) -> tuple[dict[str, int] | None, dict]:
     """Every combination of choices, vectorised: one CE prediction per (leg, unique
-    vector) for all combinations at once."""
+    vector) for all combinations at once; with ``min_p_complete``, only the combinations
+    whose every vehicle with a budget completes its day with at least that probability
+    (:mod:`.chance`)."""
     n_comb = prob.n_combinations
     sizes = [len(o) for o in prob.options]
     choice = np.stack(np.unravel_index(np.arange(n_comb), sizes), axis=1) if sizes else np.zeros((1, 0), dtype=int)
@@ -23,6 +26,11 @@ def solve_enumerate(sc: Scenario, prob: DayProblem) -> tuple[dict[str, int] | No
     vehicle_q = {v.id: np.zeros(n_comb) for v in sc.vehicles}
     feasible = np.ones(n_comb, dtype=bool)
     fv = sc.vehicle_by_id
+    moments = {}
+    if min_p_complete is not None:
+        from cevm.core.assignment.chance import DayMoments, budget_of
+
+        moments = {v.id: DayMoments(v, n_comb) for v in sc.vehicles if budget_of(v) is not None}
     for ri, r in enumerate(sc.routes):
         v = fv[r.vehicle_id]
         served = np.empty((n_comb, len(r.stops)))
@@ -51,15 +59,24 @@ def solve_enumerate(sc: Scenario, prob: DayProblem) -> tuple[dict[str, int] | No
             pred = predict(vec, v.vehicle, uniq, ambient_c=sc.ambient_of(prob.d))
             use = quantity(pred, v.vehicle)[inv].reshape(m.shape)
             q += np.sum(use * driven[:, cols], axis=1)
+            if v.id in moments:
+                moments[v.id].add(vec, m, driven[:, cols], sc.ambient_of(prob.d))
         vehicle_q[v.id] += q
     for v in sc.vehicles:
         total += weights[v.id] * vehicle_q[v.id]
         if v.energy_budget_j is not None:
             feasible &= vehicle_q[v.id] <= v.energy_budget_j * (1 + BUDGET_RTOL)
+        if v.id in moments:
+            from cevm.core.assignment.chance import budget_of
+            from cevm.core.assignment.chance import prob as p_within
+
+            feasible &= p_within(vehicle_q[v.id], moments[v.id].sd(), budget_of(v)) >= min_p_complete
     info = {"method": f"enumeration ({n_comb} combinations)", "n_variables": len(prob.free),
             "n_constraints": 0, "mip_gap": 0.0}
     if not feasible.any():
-        info["why"] = "no assignment satisfies the gross-weight and battery limits" + why_infeasible(sc, prob)
+        info["why"] = ("no assignment satisfies the gross-weight and battery limits"
+                       + (f" with every day completed with probability {min_p_complete:g}" if moments else "")
+                       + why_infeasible(sc, prob))
         info["status"] = "infeasible"
         return None, info
     k = int(np.argmin(np.where(feasible, total, np.inf)))

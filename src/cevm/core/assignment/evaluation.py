@@ -31,6 +31,7 @@ class RouteUse:
     leg_names: tuple[str, ...]
     leg_mass_kg: tuple[float, ...]
     leg_use: tuple[float, ...]
+    leg_index: tuple[int, ...] = ()  # the driven legs' positions in the route
 
 
 @dataclass(frozen=True)
@@ -184,6 +185,7 @@ def evaluate(sc: Scenario, day: str | int, assignment: Mapping[str, int | str]) 
                 leg_names=tuple(names[j] for j in driven),
                 leg_mass_kg=tuple(float(mass[j]) for j in driven),
                 leg_use=tuple(float(use[j]) for j in driven),
+                leg_index=tuple(int(j) for j in driven),
             )
         )
     vehicles = []

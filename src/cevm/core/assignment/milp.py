@@ -285,10 +285,13 @@ def _decode(res, sc: Scenario, prob: DayProblem, xb: Binaries, terms: LegTerms, 
     return best
 
 
-def solve_milp(sc: Scenario, prob: DayProblem, time_limit_s: float | None) -> tuple[dict[str, int] | None, dict]:
+def solve_milp(sc: Scenario, prob: DayProblem, time_limit_s: float | None,
+               min_p_complete: float | None = None) -> tuple[dict[str, int] | None, dict]:
     """The exact MILP of the package docstring, solved with HiGHS: the assignment (None
     if there is none) and what the solver said (``method``, ``status``, ``why`` when
-    infeasible, ``mip_gap``, ``objective``, the model's size)."""
+    infeasible, ``mip_gap``, ``objective``, the model's size); with ``min_p_complete``,
+    re-solved with a no-good cut for each assignment that breaks the chance constraint
+    (:mod:`.chance`)."""
     weights = objective_weights(sc)
     xb = binaries(prob)
     try:
@@ -303,4 +306,37 @@ def solve_milp(sc: Scenario, prob: DayProblem, time_limit_s: float | None) -> tu
                     objective=sum(terms.const[v.id] * weights[v.id] for v in sc.vehicles))
         return dict(prob.fixed), info
     res = _highs(obj, rows, terms, xb.n, time_limit_s)
-    return _decode(res, sc, prob, xb, terms, obj, weights, info), info
+    best = _decode(res, sc, prob, xb, terms, obj, weights, info)
+    if min_p_complete is None or best is None:
+        return best, info
+    return _chance_cuts(sc, prob, xb, terms, obj, rows, weights, info, best, min_p_complete, time_limit_s)
+
+
+def _chance_cuts(sc, prob, xb, terms, obj, rows, weights, info, best, p_min, time_limit_s):
+    """The no-good cut loop of :mod:`.chance`: until HiGHS's assignment completes every
+    budgeted day with probability ``p_min`` (or none is left)."""
+    from cevm.core.assignment.chance import MAX_CUTS, p_complete
+    from cevm.core.assignment.evaluation import evaluate
+
+    cuts = 0
+    while True:
+        ps = p_complete(sc, prob.d, evaluate(sc, prob.d, best))
+        if all(p is None or p >= p_min for p in ps.values()):
+            info["chance_cuts"] = cuts
+            info["method"] = f"{_METHOD}, {cuts} no-good cut{'s' if cuts != 1 else ''} for the chance constraint"
+            return best, info
+        if cuts >= MAX_CUTS:
+            info.update(status="not proven", chance_cuts=cuts,
+                        why=f"the chance constraint still fails after {cuts} no-good cuts")
+            return None, info
+        chosen = [xb.of[(s, best[s])] for s in prob.free]
+        rows.add(np.array(chosen), np.ones(len(chosen)), -np.inf, len(chosen) - 1.0)
+        cuts += 1
+        res = _highs(obj, rows, terms, xb.n, time_limit_s)
+        info["n_constraints"] = rows.n
+        best = _decode(res, sc, prob, xb, terms, obj, weights, info)
+        if best is None:
+            info["chance_cuts"] = cuts
+            info["why"] = (f"no assignment completes every day with probability {p_min:g} "
+                           f"({cuts} assignment{'s' if cuts != 1 else ''} tried and cut)")
+            return None, info

@@ -54,6 +54,8 @@ class Plan:
     n_constraints: int
     solve_time_s: float
     route_vehicle: dict[str, str]
+    p_complete: dict = None  # vehicle -> P(completing the day within its budget) or None
+    min_p_complete: float | None = None
 
     @property
     def saving(self) -> float | None:
@@ -82,6 +84,7 @@ class Plan:
                 "max_gross_used_kg": v.max_gross_used_kg,
                 "max_gross_kg": v.max_gross_kg,
                 "energy_budget_j": v.energy_budget_j,
+                "p_complete": (self.p_complete or {}).get(v.vehicle_id),
                 "routes": [
                     {
                         "route": ru.route_id,
@@ -121,11 +124,12 @@ class Plan:
             "n_variables": self.n_variables,
             "n_constraints": self.n_constraints,
             "solve_time_s": self.solve_time_s,
+            "min_p_complete": self.min_p_complete,
         }
 
 
 def plan(sc: Scenario, day: str | int, *, method: str = "auto", enum_limit: int = AUTO_ENUM_LIMIT,
-         time_limit_s: float | None = None) -> Plan:
+         time_limit_s: float | None = None, min_p_complete: float | None = None) -> Plan:
     """The assignment of shared stops that minimises the day's total objective.
 
     Parameters
@@ -137,9 +141,16 @@ def plan(sc: Scenario, day: str | int, *, method: str = "auto", enum_limit: int 
     enum_limit : "auto"'s enumeration limit, default :data:`AUTO_ENUM_LIMIT` (1,024)
     time_limit_s : MILP time limit [s]; None (default) for none. A MILP stopped by the
         limit reports status "time limit" and its gap: then the answer is not proven.
+    min_p_complete : require every vehicle with a budget (an EV's battery above its
+        reserve, an ICE's tank) to complete its day with at least this probability
+        (:mod:`cevm.core.assignment.chance`; in [0.5, 1)); None: no such requirement.
+        Every plan reports each vehicle's probability (``p_complete``).
 
     Raises InputError when no assignment satisfies the limits (the message says why).
     """
+    from cevm.core.assignment.chance import check_level, p_complete
+
+    check_level(min_p_complete)
     t0 = time.perf_counter()
     d = sc.day_index(day)
     prob = day_problem(sc, d)
@@ -149,9 +160,9 @@ def plan(sc: Scenario, day: str | int, *, method: str = "auto", enum_limit: int 
     if method == "enumerate":
         if n_comb > ENUM_LIMIT:
             raise ValueError(f"{n_comb} combinations: too many to enumerate (limit {ENUM_LIMIT}); use method='milp'")
-        best, info = solve_enumerate(sc, prob)
+        best, info = solve_enumerate(sc, prob, min_p_complete)
     elif method == "milp":
-        best, info = solve_milp(sc, prob, time_limit_s)
+        best, info = solve_milp(sc, prob, time_limit_s, min_p_complete)
     else:
         raise ValueError(f"method must be 'auto', 'enumerate' or 'milp', not {method!r}")
     if best is None:
@@ -181,4 +192,6 @@ def plan(sc: Scenario, day: str | int, *, method: str = "auto", enum_limit: int 
         n_constraints=info.get("n_constraints", 0),
         solve_time_s=time.perf_counter() - t0,
         route_vehicle={r.id: r.vehicle_id for r in sc.routes},
+        p_complete=p_complete(sc, d, ev),
+        min_p_complete=min_p_complete,
     )

@@ -5,19 +5,25 @@ cycles" (section 2.3) and judges the model by the per-cycle relative error
 e = (modelled - measured) / measured (tables 1 and 2). On real fleets one eta misses by
 20-45 %: auxiliary loads that follow the weather, regeneration that is not eta^2, and a
 diesel's fuel per wheel kWh that depends on the duty. This package fits those terms
-(:mod:`cevm.core.energy`) where the data identify them, chooses among them by grouped
-cross-validation, and refuses what physics refuses.
+(:mod:`cevm.core.energy`) as inference: physically informed priors on their
+coefficients (:mod:`cevm.core.uncertainty`), a posterior, and a model of how trips
+scatter around it, so that every prediction comes with its range
+(:mod:`cevm.core.predictive`). It chooses the structural terms by grouped
+cross-validation and refuses what physics refuses.
 
 Modules, in the order a calibration uses them:
 
-- :mod:`.data`       the trips (:class:`TripData`) and their screening into arrays
-- :mod:`.terms`      the fittable terms and the consumption model linear in them
-- :mod:`.solve`      the weighted fit (relative residuals, Paule-Mandel model error)
-- :mod:`.checks`     identifiability and physical plausibility
-- :mod:`.validation` grouped folds, error statistics, predictions, timing
-- :mod:`.fitting`    :func:`fit`: one term set, pruned of what the data cannot support
-- :mod:`.selection`  :func:`select`: every candidate set, the one-standard-error choice,
-                     nested cross-validation of the procedure
+- :mod:`.data`             the trips (:class:`TripData`) and their screening into arrays
+- :mod:`.terms`            the consumption model, linear in the terms' coefficients
+- :mod:`.posterior`        priors x likelihood: the posterior, the trips' scatter
+- :mod:`.identifiability`  which terms the trips can tell
+- :mod:`.plausibility`     which fitted values physics refuses; the standstill evidence
+- :mod:`.candidate`        one candidate: balance temperatures, posterior, held-out scatter
+- :mod:`.validation`       grouped folds, error statistics, predictions, timing
+- :mod:`.fitting`          :func:`fit`: one term set, its cross-validated intervals
+- :mod:`.selection`        :func:`select`: the candidates, the one-standard-error choice,
+                           nested cross-validation of the procedure
+- :mod:`.solve`            helpers of the fit (starting values, bounds, value covariance)
 """
 
 from cevm.core.calibration.data import CalibrationError, TripData, TripSet

@@ -48,6 +48,12 @@ class TripData:
         while standing still: evidence that fitted auxiliary and idle terms are checked
         against, never an input of the model
     mass_source : where ``mass_kg`` comes from ("logged", "manifest", "vehicle file"...)
+    systematic_uncertainty : the part of ``uncertainty`` that is the meter's calibration
+        error, common to every trip it measured (same unit; None: unknown, the whole
+        uncertainty is taken as the trip's own); a calibration absorbs it into its
+        coefficients, so it is no trip-to-trip scatter but an uncertainty of them all
+    flags : notes on the trip that a calibration reports beside it (e.g. a splice the
+        cleaner could not repair)
     """
 
     trip_id: str
@@ -63,6 +69,8 @@ class TripData:
     standstill_s: float | None = None
     standstill_rate: float | None = None
     mass_source: str | None = None
+    systematic_uncertainty: float | None = None
+    flags: tuple[str, ...] = ()
 
     @classmethod
     def from_measurement(cls, trip_id: str, vector: CycleVector, measurement: Measurement | None, *,
@@ -80,9 +88,10 @@ class TripData:
 class TripSet:
     """The usable trips as arrays (one element per trip), SI units.
 
-    ``u`` is the relative 1-sigma measurement error, floored; ``ambient_c`` NaN where not
-    logged; ``traction`` the vectors' traction time [s]; ``standstill_rate`` NaN where
-    not measured.
+    ``u`` is the relative 1-sigma measurement error, floored; ``u_random`` its part that
+    is the trip's own (the meter's systematic part ``u_sys`` taken out, floored);
+    ``ambient_c`` NaN where not logged; ``traction`` the vectors' traction time [s];
+    ``standstill_rate`` NaN where not measured; ``flags`` per trip (:class:`TripData`).
     """
 
     ids: tuple
@@ -103,6 +112,17 @@ class TripSet:
     standstill_s: np.ndarray
     standstill_rate: np.ndarray
     mass_sources: tuple
+    u_random: np.ndarray | None = None
+    u_sys: np.ndarray | None = None
+    flags: tuple = ()
+
+    def __post_init__(self):
+        if self.u_random is None:
+            object.__setattr__(self, "u_random", self.u)
+        if self.u_sys is None:
+            object.__setattr__(self, "u_sys", np.zeros_like(self.u))
+        if not self.flags:
+            object.__setattr__(self, "flags", tuple(() for _ in range(self.y.size)))
 
     @property
     def n(self) -> int:
@@ -126,7 +146,8 @@ class TripSet:
             idle=self.idle[idx], k_pos=self.k_pos[idx], traction=self.traction[idx], distance=self.distance[idx],
             ambient_c=self.ambient_c[idx], start_utc_s=self.start_utc_s[idx],
             standstill_s=self.standstill_s[idx], standstill_rate=self.standstill_rate[idx],
-            mass_sources=tup(self.mass_sources),
+            mass_sources=tup(self.mass_sources), u_random=self.u_random[idx], u_sys=self.u_sys[idx],
+            flags=tup(self.flags),
         )
 
 
@@ -188,6 +209,10 @@ def select_trips(vehicle: Vehicle, trips: Sequence[TripData], max_rel_uncertaint
             excluded[t.trip_id] = reason
     y = np.array([t.measured for t, _ in keep], dtype=np.float64)
     sigma = np.array([t.uncertainty for t, _ in keep], dtype=np.float64)
+    sys_ = np.array([min(t.systematic_uncertainty, t.uncertainty) if _finite(t.systematic_uncertainty) else 0.0
+                     for t, _ in keep], dtype=np.float64)
+    u = np.maximum(sigma / y, rel_uncertainty_floor) if y.size else y
+    u_sys = sys_ / y if y.size else y
     data = TripSet(
         ids=tuple(t.trip_id for t, _ in keep),
         groups=tuple(t.group for t, _ in keep),
@@ -195,7 +220,7 @@ def select_trips(vehicle: Vehicle, trips: Sequence[TripData], max_rel_uncertaint
         mass=np.array([m for _, m in keep], dtype=np.float64),
         y=y,
         sigma=sigma,
-        u=np.maximum(sigma / y, rel_uncertainty_floor) if y.size else y,
+        u=u,
         q=np.array([t.quality for t, _ in keep], dtype=np.float64),
         duration=np.array([t.vector.duration_s for t, _ in keep], dtype=np.float64),
         idle=np.array([t.vector.idle_s for t, _ in keep], dtype=np.float64),
@@ -207,5 +232,8 @@ def select_trips(vehicle: Vehicle, trips: Sequence[TripData], max_rel_uncertaint
         standstill_s=np.array([_opt(t.standstill_s) for t, _ in keep], dtype=np.float64),
         standstill_rate=np.array([_opt(t.standstill_rate) for t, _ in keep], dtype=np.float64),
         mass_sources=tuple(t.mass_source for t, _ in keep),
+        u_random=np.maximum(np.sqrt(np.maximum(u * u - u_sys * u_sys, 0.0)), rel_uncertainty_floor) if y.size else y,
+        u_sys=u_sys,
+        flags=tuple(tuple(t.flags) for t, _ in keep),
     )
     return data, excluded

@@ -1,19 +1,30 @@
-"""Fitting one set of terms, with honest uncertainties and cross-validation (pure)."""
+"""Fitting one set of terms: the posterior, its cross-validated predictions with their
+intervals, and what the fit saw (pure)."""
 
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
-from typing import Sequence
 
 import numpy as np
+from scipy.stats import norm
 
-from cevm.core.calibration import checks
+from cevm.core.calibration import plausibility
+from cevm.core.calibration import posterior as post
+from cevm.core.calibration.candidate import CandidateFit, Settings, fit_candidate
 from cevm.core.calibration.data import CalibrationError, TripData, TripSet, select_trips
-from cevm.core.calibration.solve import HUBER_C, Fit, bounds, condition_number, fit_terms, start, value_covariance
+from cevm.core.calibration.solve import HUBER_C, condition_number, value_covariance
 from cevm.core.calibration.terms import TERMS_BY_POWERTRAIN, TermModel, neutral, normalise
 from cevm.core.calibration.validation import ErrorStats, TripRow, folds, predict_set, time_predictions
+from cevm.core.uncertainty import Posterior, Priors, Scatter
 from cevm.core.vehicle import FitDomain, Vehicle
+
+#: Nominal levels at which the held-out coverage is reported.
+COVERAGE_LEVELS = (0.5, 0.8, 0.9, 0.95)
+#: A term whose posterior standard deviation is above this share of its prior's learnt
+#: next to nothing from the trips: it is reported as kept at its prior.
+PRIOR_KEPT_RATIO = 0.9
 
 
 @dataclass(frozen=True)
@@ -21,27 +32,35 @@ class CalibrationResult:
     """Outcome of :func:`fit` (or the chosen model of :func:`cevm.core.calibration.select`).
 
     vehicle : the calibrated vehicle (fitted values replaced, the rest as given; with
-        :attr:`domain` as its ``calibration``)
-    terms : the fitted terms' short names ("eta", "aux", ...; :mod:`.terms`)
-    fitted : vehicle field -> (value, standard error), SI units (eta [-],
-        aux_power_w [W], idle_fuel_lps [l/s], cda_m2 [m^2], cr [-], ...)
+        :attr:`domain` as its ``calibration`` and :attr:`posterior` as its ``posterior``)
+    terms : the model's terms' short names ("eta", "aux", ...; :mod:`.terms`)
+    fitted : vehicle field -> (value, standard deviation), SI units (eta [-],
+        aux_power_w [W], idle_fuel_lps [l/s], cda_m2 [m^2], cr [-], ...): the posterior
+        mode and its standard deviation
     correlation : (field_a, field_b) -> correlation of the two estimates
-    refused : requested term (vehicle field) -> why it was not fitted (kept at the
-        vehicle's value)
+    refused : requested term (vehicle field) -> why it was not fitted (a term without a
+        prior the trips cannot identify; kept at the vehicle's value)
+    prior_kept : vehicle field -> why the trips taught the term next to nothing (it is in
+        the model at its prior)
     excluded : trip_id -> why the trip was not used
-    rows : one :class:`TripRow` per used trip
+    rows : one :class:`TripRow` per used trip, with its held-out interval
     in_sample, cv : error statistics of in-sample and cross-validated predictions
         (cv is None when cross-validation was off or impossible)
     cv_scheme : e.g. "5-fold", "leave-one-out", "grouped 5-fold (12 groups)", "none"
-    model_rel_sigma : tau, the relative model error used in the weights [-]
-    residual_scale : s = sqrt(chi-square / (n - k)), the factor applied to the errors
+    interval : the level of the rows' intervals (0.9: 90 %)
+    coverage : nominal level -> share of held-out trips inside their interval at it
+    mean_rel_width_pct : mean width of the rows' held-out intervals [% of measured]
+    posterior : :class:`cevm.core.uncertainty.Posterior` of the coefficients, scatter
+    priors : the :class:`cevm.core.uncertainty.Priors` used (None: none, flat)
+    residual_scale : the in-sample weighted residuals' root mean square
     condition_number : of the column-normalised weighted Jacobian at the optimum
     time_per_prediction_s : (mean, std) over trips of the time of one prediction from a
         cached vector [s], or None when not timed
     unit : "l" (ICE fuel) or "J" (EV battery energy)
     warnings : notes on the fit (parameter at a bound, failed folds, ...)
     evidence : the fitted standstill rate against the logs' measured one
-        (:func:`.checks.evidence`), or None
+        (:func:`.plausibility.evidence`), or None
+    standstill_used : whether the logs' standstill rates were observations of the fit
     domain : what the fit saw (:class:`cevm.core.vehicle.FitDomain`)
     """
 
@@ -54,7 +73,6 @@ class CalibrationResult:
     in_sample: ErrorStats
     cv: ErrorStats | None
     cv_scheme: str
-    model_rel_sigma: float
     residual_scale: float
     condition_number: float
     time_per_prediction_s: tuple[float, float] | None
@@ -63,6 +81,17 @@ class CalibrationResult:
     terms: tuple = field(default=())
     evidence: dict | None = None
     domain: FitDomain | None = None
+    posterior: Posterior | None = None
+    priors: Priors | None = None
+    prior_kept: dict = field(default_factory=dict)
+    interval: float = 0.9
+    coverage: dict = field(default_factory=dict)
+    mean_rel_width_pct: float = math.nan
+    standstill_used: bool = False
+
+    @property
+    def scatter(self) -> Scatter | None:
+        return None if self.posterior is None else self.posterior.scatter
 
 
 def _field(model: TermModel, name: str) -> str:
@@ -88,41 +117,16 @@ def fit_domain(data: TripSet, terms: Sequence[str], vehicle_id: str | None = Non
         ambient_c=span(data.ambient_c) if np.all(np.isfinite(data.ambient_c)) and data.n else None,
         mean_speed_mps=span(data.distance / data.duration), mass_kg=span(data.mass), distance_m=span(data.distance),
         mass_sources=", ".join(sources) if sources else None,
+        idle_share=span(data.idle / data.duration) if data.n else None,
     )
 
 
-def _prune(model: TermModel, names: list[str], idx: np.ndarray, tau: float | None, max_correlation: float,
-           max_rel_se: float, *, refuse_implausible: bool, huber_c: float | None) -> tuple[Fit, list[str], dict, list[str]]:
-    """Fit ``names``, refusing (and dropping) terms the data cannot support, one at a
-    time. Returns the fit, the terms kept, the refused ones with reasons, warnings."""
-    data = model.data
-    refused: dict = {}
-    warnings: list[str] = []
-    active = list(names)
-    while True:
-        bad = checks.unsupported(model, active, idx)
-        if bad is None:
-            x0 = start(model, active)
-            tau0 = 0.0 if tau is None else tau
-            w0 = data.q[idx] / (data.u[idx] ** 2 + tau0**2)
-            jw0 = (np.sqrt(w0) / data.y[idx])[:, None] * model.jacobian(active, x0, idx)
-            bad = checks.confounded(jw0, active, max_correlation, model)
-        if bad is None:
-            result = fit_terms(model, active, idx, tau, huber_c=huber_c)
-            bad = (checks.confounded(result.jw, active, max_correlation, model)
-                   or checks.imprecise(model, result, idx, max_rel_se))
-            if bad is None:
-                why = checks.implausible(model, result, idx)
-                if why is not None and why[0] == "eta":
-                    warnings.append(f"eta: {why[1]}")
-                elif why is not None and refuse_implausible:
-                    bad = why
-        if bad is None:
-            return result, active, refused, warnings
-        if bad[0] == "eta":
-            raise CalibrationError(f"eta cannot be fitted: {bad[1]}")
-        refused[bad[0]] = bad[1]
-        active.remove(bad[0])
+def posterior_source(domain: FitDomain) -> str:
+    """"calibrated on N trips of ID, DATE..DATE": the sentence a posterior carries."""
+    who = f" of {domain.vehicle_id}" if domain.vehicle_id else ""
+    when = (f", {domain.first_utc[:10]}..{domain.last_utc[:10]}"
+            if domain.first_utc and domain.last_utc else "")
+    return f"calibrated on {domain.n_trips} trips{who}{when}"
 
 
 def fit(
@@ -130,12 +134,12 @@ def fit(
     trips: Sequence[TripData],
     params: Sequence[str] = ("eta",),
     *,
+    priors: Priors | None = None,
     cv_folds: int = 5,
     loo_below: int = 10,
     max_rel_uncertainty: float = 0.10,
     min_distance_m: float = 1000.0,
     rel_uncertainty_floor: float = 0.001,
-    model_rel_sigma: float | None = None,
     max_correlation: float = 0.98,
     max_rel_se: float = 0.5,
     time_repeats: int = 20,
@@ -143,6 +147,11 @@ def fit(
     neutral_others: bool = False,
     vehicle_id: str | None = None,
     robust: bool = True,
+    interval: float = 0.9,
+    standstill: bool = False,
+    fit_balance: bool = False,
+    scatter: tuple[float, float] | None = None,
+    plausible: Mapping[str, tuple[float, float]] | None = None,
 ) -> CalibrationResult:
     """Fit a vehicle's terms to measured trip consumption and validate the fit.
 
@@ -156,6 +165,10 @@ def fit(
         warm; ICE idle, run, kin, heat, cool, warm) and "cda", "cr"; old names
         ("aux_power_w", "idle_fuel_lps", "cda_m2", ...) are accepted. Default ("eta",),
         the paper's calibration.
+    priors : the terms' priors (:class:`cevm.core.uncertainty.Priors`); default the
+        vehicle's own (``vehicle.priors``, read with its file), else none: each term is
+        then what the trips say, within its physical range, and refused where they
+        cannot say it
     cv_folds : folds of the cross-validation, default 5 (the common choice: 80 % of the
         trips train each fit); 0 or 1 turns cross-validation off
     loo_below : with fewer groups (trips without a group are their own group) than this,
@@ -168,35 +181,41 @@ def fit(
         resolution and the energy of the start (battery or engine warm-up) dominate
     rel_uncertainty_floor : lower bound of the relative uncertainty [-], default 0.001:
         no on-board counter is better than 0.1 %, and a zero would be an infinite weight
-    model_rel_sigma : the model's own relative error tau [-] added to each trip's
-        uncertainty in the weights; default None estimates it from the residuals
-        (Paule-Mandel); 0 weighs by measurement uncertainty alone
-    max_correlation : refuse an extra term whose effect has a multiple correlation above
-        this with the others', default 0.98 (the standard error is then inflated at
-        least 5-fold by the confounding)
-    max_rel_se : refuse an extra term whose standard error exceeds this share of
-        max(|value|, reference), default 0.5 (an estimate of 1 +- 0.5 says little)
+    max_correlation, max_rel_se : the identifiability limits of a term without a prior
+        (:mod:`.identifiability`: refused above a multiple correlation of 0.98 with the
+        others, or a standard error above 50 % of its value)
     time_repeats : predictions timed per trip, default 20; 0 skips the timing
     seed : seed of the fold assignment, default 0 (results are reproducible)
     neutral_others : the terms not in ``params`` are taken out of the model (zero, or
         regeneration at eta) instead of kept at the vehicle's values (model selection)
     vehicle_id : recorded in the result's :attr:`~CalibrationResult.domain`
-    robust : default True, a Huber M-estimate (:func:`.solve.fit_terms`): a trip whose
-        measurement is far off cannot pull the fit more than one 2.5 sigma away; False:
-        weighted least squares
+    robust : default True, Huber's M-estimate (:mod:`.posterior`): a trip whose
+        measurement is far off cannot pull the fit more than one 2.5 sigma away
+    interval : level of the rows' held-out intervals, default 0.9
+    standstill : use the logs' standstill rates as observations (:mod:`.posterior`)
+    fit_balance : search the balance temperatures of temperature terms on a grid
+        (:mod:`.candidate`); default False: the vehicle's
+    scatter : (s_aux [W or l/s], s_share [-]) to hold the trips' scatter at instead of
+        fitting it (:class:`cevm.core.uncertainty.Scatter`); (0, 0): the measurement
+        uncertainties alone weigh the trips
+    plausible : physical ranges {term: (low, high)} of the values (SI, vehicle-field
+        meaning: eta as an efficiency) that replace the terms' own, for research fits on
+        models that are no real vehicle (benchmarks/bench_tables.py fits the detailed
+        model with every loss switched off: eta 0.95, above any real EV's 0.89); a fit
+        on real trips keeps the defaults
 
-    Extra terms the data cannot identify or whose value physics refuses
-    (:mod:`.checks`) are refused with the reason, and the rest are fitted.
+    A forced term set is held to the same physical bounds as a chosen one: a value the
+    data want beyond them refuses the fit (:class:`CalibrationError`, with the reason).
 
     Raises
     ------
     CalibrationError
         when eta itself cannot be fitted (fewer than 3 usable trips), for unknown
-        parameter names and duplicate trip ids.
+        parameter names, duplicate trip ids, and physically implausible fits.
     """
     names = normalise(vehicle, params)
-    if model_rel_sigma is not None and not (math.isfinite(model_rel_sigma) and model_rel_sigma >= 0):
-        raise CalibrationError(f"model_rel_sigma must be None or >= 0, got {model_rel_sigma!r}")
+    _check_interval(interval)
+    priors = vehicle.priors if priors is None else priors
     if neutral_others:
         vehicle = neutral(vehicle, names)
     data, excluded = select_trips(vehicle, trips, max_rel_uncertainty, min_distance_m, rel_uncertainty_floor)
@@ -207,93 +226,180 @@ def fit(
             + (f" (excluded: {why}{' ...' if len(excluded) > 5 else ''})" if excluded else "")
         )
     model = TermModel(vehicle, data)
-    return fit_model(model, names, excluded, cv_folds=cv_folds, loo_below=loo_below, tau=model_rel_sigma,
-                     max_correlation=max_correlation, max_rel_se=max_rel_se, time_repeats=time_repeats, seed=seed,
-                     vehicle_id=vehicle_id, huber_c=HUBER_C if robust else None)
+    settings = Settings(HUBER_C if robust else None, cv_folds, loo_below, seed, fit_balance, max_correlation,
+                        max_rel_se, plausible)
+    cf = fit_candidate(model, names, np.arange(data.n), priors, settings, standstill=standstill,
+                       heldout=cv_folds >= 2, scatter=scatter)
+    refused = plausibility.implausible(cf.model, cf.fit, np.arange(data.n), cf.prior.lb, cf.prior.ub, plausible)
+    if refused is not None:
+        raise CalibrationError(f"{refused[0]}: {refused[1]}")
+    return fit_model(cf, excluded, settings, priors=priors, interval=interval, time_repeats=time_repeats,
+                     vehicle_id=vehicle_id)
 
 
-def fit_model(model: TermModel, names: Sequence[str], excluded: dict, *, cv_folds: int, loo_below: int,
-              tau: float | None, max_correlation: float, max_rel_se: float, time_repeats: int, seed: int,
-              vehicle_id: str | None, refuse_implausible: bool = True,
-              huber_c: float | None = HUBER_C) -> CalibrationResult:
-    """:func:`fit` on a prepared :class:`~.terms.TermModel` (shared by model selection)."""
+def _check_interval(level: float) -> None:
+    if not (isinstance(level, (int, float)) and 0.0 < level < 1.0):
+        raise CalibrationError(f"the interval level must be in (0, 1), got {level!r}")
+
+
+def _prior_kept(cf: CandidateFit, fields: dict) -> dict:
+    """Terms whose posterior standard deviation is still above :data:`PRIOR_KEPT_RATIO`
+    of their prior's: the trips could not tell (with the hint of what they would need)."""
+    from cevm.core.calibration import identifiability
+
+    out = {}
+    sd = cf.fit.sd
+    for j, n in enumerate(cf.names):
+        if n == "eta" or not cf.prior.informative(n):
+            continue
+        if sd[j] > PRIOR_KEPT_RATIO * cf.prior.sd[j]:
+            bad = identifiability.unsupported(cf.model, ["eta", n], cf.fit.idx)
+            reason = bad[1] if bad is not None else "the trips tell it apart from the other terms too little"
+            out[fields[n]] = f"kept its prior: {reason}"
+    return out
+
+
+def cross_validated(cf: CandidateFit, settings: Settings, fold_of: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The held-out mean and variance (against the measurement) of every trip: the
+    candidate's fold posteriors (:attr:`CandidateFit.heldout`), each fold's scatter from
+    its own training trips' held-out residuals (nothing of the test day enters its
+    interval but the balance temperatures, chosen on all trips)."""
+    m, names, cp = cf.model, cf.names, cf.prior
+    d = m.data
+    idx = cf.fit.idx
+    n = idx.size
+    mean = np.full(n, math.nan)
+    var = np.full(n, math.nan)
+    if cf.heldout is None:
+        return mean, var
+    noise = cf.in_sample.noise
+    for f in np.unique(fold_of[fold_of >= 0]):
+        tr_pos = np.flatnonzero(fold_of != f)
+        te_pos = np.flatnonzero(fold_of == f)
+        tr, te = idx[tr_pos], idx[te_pos]
+        if not np.all(np.isfinite(cf.heldout.mean[te_pos])):
+            continue
+        fn = (cf.heldout.fold_noise or {}).get(int(f), noise)
+        inner = post.held_out(m, names, tr, cp, fn, huber_c=settings.huber_c,
+                              fold_of=post.inner_folds(m, tr, settings.cv_folds, settings.loo_below, settings.seed),
+                              theta0=cf.in_sample.theta, fit_noise=False)
+        sc = fn if cf.scatter_fixed else post.heldout_scatter(m, inner, cf.scatter_prior, fn, settings.huber_c)
+        mu = cf.heldout.mean[te_pos]
+        ratio = post._quality_ratio(d.q, tr)[te]
+        mean[te_pos] = mu
+        var[te_pos] = (cf.heldout.param_var[te_pos] + cf.heldout.extra_var[te_pos] + (d.u_random[te] * d.y[te]) ** 2
+                       + ratio * ((sc.aux * d.duration[te]) ** 2 + (sc.share * np.maximum(mu, 0.0)) ** 2))
+    return mean, var
+
+
+def fit_model(cf: CandidateFit, excluded: dict, settings: Settings, *, priors: Priors | None, interval: float,
+              time_repeats: int, vehicle_id: str | None) -> CalibrationResult:
+    """The :class:`CalibrationResult` of a fitted candidate (shared by :func:`fit` and
+    model selection)."""
+    model, result = cf.model, cf.fit
     data = model.data
     vehicle = model.vehicle
+    active = list(cf.names)
     idx_all = np.arange(data.n)
-    result, active, refused_terms, warnings = _prune(model, list(names), idx_all, tau, max_correlation, max_rel_se,
-                                                     refuse_implausible=refuse_implausible, huber_c=huber_c)
+    warnings: list[str] = []
     values, vcov = value_covariance(model, result)
-    fields = {_field(model, n): values[n] for n in active}
-    calibrated = replace(vehicle, **fields)
+    fields = {n: _field(model, n) for n in active}
     sd = np.sqrt(np.maximum(np.diag(vcov), 0.0))
-    fitted = {_field(model, n): (float(values[n]), float(sd[j])) for j, n in enumerate(active)}
+    fitted = {fields[n]: (float(values[n]), float(sd[j])) for j, n in enumerate(active)}
     corr: dict = {}
     for a in range(len(active)):
         for b in range(a + 1, len(active)):
-            d = sd[a] * sd[b]
-            corr[(_field(model, active[a]), _field(model, active[b]))] = float(vcov[a, b] / d) if d > 0 else math.nan
+            dd = sd[a] * sd[b]
+            corr[(fields[active[a]], fields[active[b]])] = float(vcov[a, b] / dd) if dd > 0 else math.nan
     if not result.converged:
         warnings.append("the fit did not converge to the requested tolerance")
-    lb, ub = bounds(model, active)
-    csd = np.sqrt(np.maximum(np.diag(result.cov), 0.0))
+    why = plausibility.implausible(model, result, idx_all, cf.prior.lb, cf.prior.ub, settings.plausible)
+    if why is not None and why[0] == "eta":
+        warnings.append(f"eta: {why[1]}")
+    csd = result.sd
+    lb, ub = cf.prior.lb, cf.prior.ub
     for j, n in enumerate(active):
         tol = max(1e-6 * csd[j], 1e-10 * max(1.0, abs(result.theta[j])))
         if result.theta[j] <= lb[j] + tol or result.theta[j] >= ub[j] - tol:
-            warnings.append(f"{_field(model, n)} = {values[n]:.6g} is at its bound: its standard error assumes it is not")
+            warnings.append(f"{fields[n]} = {values[n]:.6g} is at its physical bound: its posterior is cut there, "
+                            "its standard deviation is that of the Gaussian at the bound")
 
+    fold_of, scheme = folds(data, settings.cv_folds, settings.loo_below, settings.seed)
+    rho, rho_note, _ = post.day_correlation(model, active, idx_all, cf.prior, result.noise,
+                                            huber_c=settings.huber_c, theta0=result.theta)
+    scatter = Scatter(aux=result.noise.aux, share=result.noise.share, day_corr=rho, day_corr_note=rho_note,
+                      standstill=result.noise.standstill)
+    domain = fit_domain(data, active, vehicle_id)
+    calibrated = replace(vehicle, **model.fields_of(active, result.theta))
     pred_in = predict_set(calibrated, data)
-    fold_of, scheme = folds(data, cv_folds, loo_below, seed)
-    pred_cv = np.full(data.n, math.nan)
-    for f in np.unique(fold_of[fold_of >= 0]):
-        train = np.flatnonzero(fold_of != f)
-        test = np.flatnonzero(fold_of == f)
-        if train.size < len(active):
-            warnings.append(f"fold {f}: {train.size} training trips cannot fit {len(active)} parameters")
-            continue
-        ff = fit_terms(model, active, train, tau, huber_c=huber_c)
-        if not ff.converged:
-            warnings.append(f"fold {f}: the fit did not converge to the requested tolerance")
-        vf = replace(vehicle, **model.fields_of(active, ff.theta))
-        pred_cv[test] = predict_set(vf, data, test)
+    _, var_in = result.predictive_var(model, idx_all)
+    mean_cv, var_cv = cross_validated(cf, settings, fold_of)
+    z = norm.ppf(0.5 + 0.5 * interval)
+    sd_cv = np.sqrt(var_cv)
+    low, high = mean_cv - z * sd_cv, mean_cv + z * sd_cv
+    zs = (data.y - mean_cv) / sd_cv
+    coverage = {lvl: float(np.mean(np.abs(zs[np.isfinite(zs)]) <= norm.ppf(0.5 + 0.5 * lvl)))
+                for lvl in COVERAGE_LEVELS} if np.any(np.isfinite(zs)) else {}
+    ok = np.isfinite(sd_cv)
+    width = float(np.mean((high - low)[ok] / data.y[ok]) * 100.0) if np.any(ok) else math.nan
+    warnings += [f"fold {f}: its training trips could not be fitted" for f in np.unique(fold_of[fold_of >= 0])
+                 if not np.all(np.isfinite(mean_cv[fold_of == f]))]
 
     err_in = (pred_in - data.y) / data.y * 100.0
-    err_cv = (pred_cv - data.y) / data.y * 100.0
-    share = result.weights / result.weights.sum()
+    err_cv = (mean_cv - data.y) / data.y * 100.0
+    W = result.weights / np.maximum((data.u_random * data.y) ** 2 + result.scatter_var, 1e-300)
+    share = W / W.sum()
     rows = tuple(
         TripRow(
             trip_id=data.ids[i], group=data.groups[i], mass_kg=float(data.mass[i]),
             distance_m=float(data.distance[i]), measured=float(data.y[i]), uncertainty=float(data.sigma[i]),
             rel_uncertainty=float(data.sigma[i] / data.y[i]), weight=float(share[i]),
-            predicted_in_sample=float(pred_in[i]), predicted_cv=float(pred_cv[i]),
+            predicted_in_sample=float(pred_in[i]), predicted_cv=float(mean_cv[i]),
             error_pct_in_sample=float(err_in[i]), error_pct_cv=float(err_cv[i]), fold=int(fold_of[i]),
             ambient_c=float(data.ambient_c[i]), mass_source=data.mass_sources[i],
+            predicted_low=float(low[i]), predicted_high=float(high[i]), sd_cv=float(sd_cv[i]),
+            flags=tuple(data.flags[i]), sd_in_sample=float(math.sqrt(var_in[i])),
         )
         for i in range(data.n)
     )
     cv = ErrorStats.of(err_cv) if scheme != "none" else None
-    domain = fit_domain(data, active, vehicle_id)
     if cv is not None:
         domain = replace(domain, cv_scheme=scheme, cv_mean_pct=cv.mean_pct, cv_std_pct=cv.std_pct)
-    calibrated = replace(calibrated, calibration=domain)
+    meter = float(np.median(data.u_sys)) if data.n else 0.0
+    posterior = Posterior(terms=tuple(active), cov=result.cov, scatter=scatter, source=posterior_source(domain),
+                          n_trips=data.n, priors=priors, meter_share=meter)
+    calibrated = replace(calibrated, calibration=domain, posterior=posterior)
+    balance = {}
+    if any(n in ("heat", "warm") for n in active):
+        balance["heating_below_c"] = (vehicle.heating_below_c, math.nan)
+    if "cool" in active:
+        balance["cooling_above_c"] = (vehicle.cooling_above_c, math.nan)
+    f_res = (data.y - result.pred) / np.sqrt((data.u_random * data.y) ** 2 + result.scatter_var)
     return CalibrationResult(
         vehicle=calibrated,
-        fitted=fitted,
+        fitted={**fitted, **balance},
         correlation=corr,
-        refused={_field(model, k): v for k, v in refused_terms.items()},
+        refused={_field(model, k): v for k, v in cf.refused.items()},
         excluded=excluded,
         rows=rows,
         in_sample=ErrorStats.of(err_in),
         cv=cv,
         cv_scheme=scheme,
-        model_rel_sigma=float(result.tau),
-        residual_scale=math.sqrt(result.s2) if math.isfinite(result.s2) else math.nan,
+        residual_scale=float(np.sqrt(np.mean(f_res * f_res))) if data.n else math.nan,
         condition_number=condition_number(result.jw),
         time_per_prediction_s=time_predictions(calibrated, data, time_repeats),
         unit="J" if vehicle.is_ev else "l",
         warnings=tuple(warnings),
         terms=tuple(active),
-        evidence=checks.evidence(model, result, idx_all),
+        evidence=plausibility.evidence(model, result, idx_all),
         domain=domain,
+        posterior=posterior,
+        priors=priors,
+        prior_kept=_prior_kept(cf, fields),
+        interval=float(interval),
+        coverage=coverage,
+        mean_rel_width_pct=width,
+        standstill_used=cf.standstill,
     )
 
 

@@ -28,8 +28,9 @@ s^2 = chi-square / (n - k).
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Sequence
+from typing import Protocol
 
 import numpy as np
 from scipy.optimize import brentq, least_squares, lsq_linear
@@ -55,6 +56,20 @@ class Fit:
     pred: np.ndarray
     converged: bool
     free: np.ndarray  # the coefficients without bounds (for messages): same as theta when no bound binds
+
+
+class FitLike(Protocol):
+    """What the checks read of a fit (a :class:`Fit` or a posterior's mode,
+    :class:`cevm.core.calibration.posterior.PosteriorFit`)."""
+
+    @property
+    def names(self) -> tuple[str, ...]: ...
+    @property
+    def theta(self) -> np.ndarray: ...
+    @property
+    def cov(self) -> np.ndarray: ...
+    @property
+    def free(self) -> np.ndarray: ...
 
 
 def bounds(model: TermModel, names: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
@@ -189,7 +204,7 @@ def fit_terms(model: TermModel, names: Sequence[str], idx: np.ndarray, tau_fixed
                free=free)
 
 
-def value_covariance(model: TermModel, fit: Fit) -> tuple[dict[str, float], np.ndarray]:
+def value_covariance(model: TermModel, fit: FitLike) -> tuple[dict[str, float], np.ndarray]:
     """The fitted terms' values (vehicle-field meaning, SI) and their covariance, by the
     delta method from the coefficients' (eta = 1/c, eta_k = 1/(c_kin + c_eta))."""
     names = fit.names

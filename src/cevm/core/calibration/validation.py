@@ -53,7 +53,12 @@ class TripRow:
     """Per-trip outcome of a calibration (consumption in litres or joules).
 
     weight is the trip's share of the fit's total weight (weights of used trips sum to 1);
-    fold is the cross-validation fold that held the trip out (-1 without CV).
+    fold is the cross-validation fold that held the trip out (-1 without CV);
+    predicted_low / predicted_high the held-out prediction's interval (at the
+    calibration's ``interval`` level; NaN without CV) and sd_cv its standard deviation,
+    against the measurement (the measurement's own random uncertainty included);
+    sd_in_sample the same of the in-sample prediction (the posterior of all trips);
+    flags notes on the trip (a splice the cleaner could not repair ...).
     """
 
     trip_id: str
@@ -71,6 +76,18 @@ class TripRow:
     fold: int
     ambient_c: float = math.nan
     mass_source: str | None = None
+    predicted_low: float = math.nan
+    predicted_high: float = math.nan
+    sd_cv: float = math.nan
+    flags: tuple = ()
+    sd_in_sample: float = math.nan
+
+    @property
+    def inside(self) -> bool | None:
+        """Whether the measurement lies inside the held-out interval (None without one)."""
+        if not (math.isfinite(self.predicted_low) and math.isfinite(self.predicted_high)):
+            return None
+        return bool(self.predicted_low <= self.measured <= self.predicted_high)
 
 
 def folds(data: TripSet, cv_folds: int, loo_below: int, seed: int) -> tuple[np.ndarray, str]:

@@ -26,7 +26,9 @@ class SweepBlock:
     rows, and for EVs when not computed); ``reserve_ok`` (EV rows: lowest SoC >=
     reserve); ``tank_ok`` 1.0 / 0.0 for ICE rows with a known tank, else NaN;
     ``ambient_c`` the ambient temperature each row assumed [degC] and ``ambient_from``
-    where it came from (index into :data:`AMBIENT_ORIGINS`, as float).
+    where it came from (index into :data:`AMBIENT_ORIGINS`, as float). ``reserve_ok``,
+    ``tank_ok`` and ``feasible`` are :func:`cevm.core.limits.verdict`'s, the one verdict
+    of every command.
     """
 
     source: Source
@@ -52,6 +54,14 @@ class SweepBlock:
     # whether the vehicle can follow the source (:func:`follow_flags`); None: not known
     over_power: np.ndarray | None = None
     over_speed: np.ndarray | None = None
+    # the power the source asks at each row's mass [W] (its peak mean wheel power over
+    # cevm.core.limits.POWER_WINDOW_S); None: not computed
+    power_demand_w: np.ndarray | None = None
+    # the verdict of each row (cevm.core.limits.verdict): 1.0 / 0.0, NaN unknown
+    feasible: np.ndarray | None = None
+    # what the rows assumed of the battery [%]
+    soc_start_pct: float = DEFAULT_SOC_START_PCT
+    reserve_pct: float = DEFAULT_RESERVE_PCT
 
     @property
     def n(self) -> int:

@@ -6,7 +6,7 @@ with W(D) = D if D > 0 else eta^2 D (eq. 27-31); E_j = sum_{i<=j} g_i; the final
 the CE model's total. The lowest SoC is SoC_start - 100 max(0, max_j E_j) / E_batt.
 
 Per source, once (:func:`build_steps`): the per-step terms x = k + e, a, r, dt of every
-leg (:func:`cevm.core.cycle.step_terms`), in time order. Steps that draw energy for every
+leg, in time order (the source's :class:`~cevm.core.sweep.profiles.StepTable`). Steps that draw energy for every
 admissible vehicle (simplified steps, eq. 8, and standstill on flat ground) have
 g_i >= 0, so a run of them never holds a maximum inside: each maximal run is merged into
 one element (exact). The other steps stay single elements. Elements are cut into blocks
@@ -22,8 +22,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from cevm.core.cycle import CR0_DEFAULT, PAPER_PHYSICS, Physics, step_terms
-from cevm.core.sweep.profiles import LegProfile
+from cevm.core.cycle import CR0_DEFAULT, PAPER_PHYSICS, Physics
+from cevm.core.sweep.profiles import LegProfile, StepTable, build_step_table
 
 #: Target number of elements (merged steps) per block of :class:`SourceSteps`. Smaller
 #: blocks prune more precisely but cost one more bound per block and prediction; 48 and
@@ -76,20 +76,6 @@ class SourceSteps:
         return int(self.block_start.size - 1)
 
 
-def _leg_terms(legs: Sequence[LegProfile], physics: Physics) -> tuple[np.ndarray, ...]:
-    xs, as_, rs, dts = [], [], [], []
-    for leg in legs:
-        st = step_terms(leg.time_s, leg.speed_mps, leg.elevation_m, physics)
-        xs.append(st.k + st.e)
-        as_.append(st.a)
-        rs.append(st.r)
-        dts.append(st.dt)
-    if not xs:
-        z = np.zeros(0)
-        return z, z, z, z
-    return np.concatenate(xs), np.concatenate(as_), np.concatenate(rs), np.concatenate(dts)
-
-
 def _block_sums(values: np.ndarray, bounds: np.ndarray) -> np.ndarray:
     """Sums of ``values`` between consecutive ``bounds`` (empty blocks give 0)."""
     cum = np.concatenate([[0.0], np.cumsum(values)])
@@ -112,7 +98,13 @@ def build_steps(
     physics : air density and gravity (the paper's by default)
     block_elements : target elements per block, default :data:`BLOCK_ELEMENTS`
     """
-    x, a, r, dt = _leg_terms(legs, physics)
+    return steps_of_table(build_step_table(legs, cr0=cr0, physics=physics), cr0=cr0, block_elements=block_elements)
+
+
+def steps_of_table(st: StepTable, *, cr0: float = CR0_DEFAULT, block_elements: int = BLOCK_ELEMENTS) -> SourceSteps:
+    """:func:`build_steps` from a source's :class:`~cevm.core.sweep.profiles.StepTable`
+    (its step terms, computed once for the source)."""
+    x, a, r, dt = st.x, st.a, st.r, st.dt
     n = x.size
     simplified = (x + cr0 * r) > 0
     moving = a > 0

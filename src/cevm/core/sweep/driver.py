@@ -5,13 +5,16 @@ this process or on an executor (worker processes, a Dask cluster), as a stream o
 from __future__ import annotations
 
 from collections.abc import Iterator, Sequence
+from typing import TYPE_CHECKING
 
 from cevm.core.sweep.block import DEFAULT_RESERVE_PCT, DEFAULT_SOC_START_PCT, SweepBlock
 from cevm.core.sweep.evaluate import as_blocks, finish_blocks, predict_arrays, predict_sources
 from cevm.core.sweep.predictions import PredictionSet
 from cevm.core.sweep.sources import Source
 from cevm.errors import CevmError
-from cevm.executors import Executor, Task
+
+if TYPE_CHECKING:  # the executors (multiprocessing, concurrent.futures) are imported by a parallel sweep only
+    from cevm.executors import Executor, Task
 
 
 def _portable(source: Source, lowest_soc: bool) -> Source:
@@ -70,6 +73,8 @@ def sweep(
             yield from predict_sources(sources[i:j], pset, soc_start_pct=soc_start_pct, reserve_pct=reserve_pct,
                                        lowest_soc=lowest_soc, first_index=i, ranges=ranges)
         return
+    from cevm.executors import Task
+
     use_steps = lowest_soc and bool(pset.is_ev.any())
     spans: list[tuple[int, int]] = []
 
@@ -77,7 +82,8 @@ def sweep(
         for i, j in _batches(sources, pset, lowest_soc):
             spans.append((i, j))
             batch = tuple(_portable(src, use_steps) for src in sources[i:j])
-            yield Task(f"sources {i + 1}-{j} ({sources[i].name})", (batch, pset, soc_start_pct, reserve_pct, lowest_soc))
+            yield Task(f"sources {i + 1}-{j} ({sources[i].name})",
+                       (batch, pset, soc_start_pct, reserve_pct, lowest_soc))
 
     for k, res in enumerate(executor.run(predict_arrays, tasks())):
         i, j = spans[k]

@@ -10,9 +10,11 @@ a route (the paper's braking credit lowers the *estimate* of the total, not the 
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import replace
 
 import numpy as np
 
+from cevm.core import limits
 from cevm.core.sweep.block import DEFAULT_RESERVE_PCT, DEFAULT_SOC_START_PCT, SweepBlock
 from cevm.core.sweep.peak import StepsBatch, peak_many
 from cevm.core.sweep.power import follow_flags
@@ -126,10 +128,8 @@ def predict_arrays(sources: Sequence[Source], pset: PredictionSet, soc_start_pct
     if ice.any():
         # fuel L_f = W / (U_f eta) (eq. 26) + the terms of cevm.core.energy.ice_fuel_l
         fuel[ice] = wheel[ice] / (pset.lhv_j_per_l[ice] * pset.eta[ice])[:, None] + terms.fuel_extra_l[ice]
-    tank = pset.tank_l[:, None]
-    with np.errstate(invalid="ignore"):
-        tank_ok = np.where(ice[:, None] & np.isfinite(tank), (fuel <= tank).astype(float), np.nan)
-        reserve_ok = ev[:, None] & (soc_min >= reserve_pct)
+    tank_ok = limits.tank_ok(fuel, pset.tank_l[:, None], ice[:, None])
+    reserve_ok = ev[:, None] & (limits.reserve_ok(soc_min, reserve_pct) == 1.0)
     return (wheel, energy_j, fuel, soc_end, soc_min, reserve_ok, tank_ok, terms.ambient_c,
             terms.ambient_from.astype(np.float64))
 
@@ -143,13 +143,24 @@ def as_blocks(sources: Sequence[Source], pset: PredictionSet, arrays: tuple[np.n
                first_index: int) -> list[SweepBlock]:
     """One :class:`SweepBlock` per source from the (P, n_sources) arrays of
     :func:`predict_arrays`."""
-    return [SweepBlock(src, first_index + i, pset, **{name: a[:, i].copy() for name, a in zip(BLOCK_ARRAYS, arrays)})
+    return [SweepBlock(src, first_index + i, pset,
+                       **{name: a[:, i].copy() for name, a in zip(BLOCK_ARRAYS, arrays, strict=True)})
             for i, src in enumerate(sources)]
 
 
 def finish_blocks(blocks: list[SweepBlock], soc_start_pct: float, reserve_pct: float, ranges: bool) -> list[SweepBlock]:
-    """The blocks with :func:`source_ranges` and :func:`follow_flags` (in this process:
-    the step tables stay with the sources)."""
-    return [follow_flags(source_ranges(b, soc_start_pct=soc_start_pct, reserve_pct=reserve_pct, repeat=ranges))
-            for b in blocks]
+    """The blocks with :func:`source_ranges`, :func:`follow_flags` and the verdict
+    (:func:`cevm.core.limits.verdict`; in this process: the step tables stay with the
+    sources)."""
+    out = []
+    for b in blocks:
+        b = follow_flags(source_ranges(b, soc_start_pct=soc_start_pct, reserve_pct=reserve_pct, repeat=ranges))
+        ps = b.pset
+        flags = limits.verdict(is_ev=ps.is_ev, over_max_gross=ps.over_max_gross,
+                               over_power=np.full(ps.n, np.nan) if b.over_power is None else b.over_power,
+                               over_speed=np.full(ps.n, np.nan) if b.over_speed is None else b.over_speed,
+                               soc_min_pct=b.soc_min_pct, reserve_pct=reserve_pct, fuel_l=b.fuel_l,
+                               tank_l=ps.tank_l)
+        out.append(replace(b, feasible=flags["feasible"], soc_start_pct=soc_start_pct, reserve_pct=reserve_pct))
+    return out
 

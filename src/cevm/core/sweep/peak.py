@@ -67,11 +67,11 @@ class StepsBatch:
             blocks = np.concatenate([st.blocks for st in steps], axis=1)
         else:
             blocks = np.zeros((4, int(kstart[-1]), lmax))
-            for st, k0 in zip(steps, kstart[:-1]):
+            for st, k0 in zip(steps, kstart[:-1], strict=True):
                 blocks[:, k0 : k0 + st.n_blocks, : st.blocks.shape[2]] = st.blocks
         nel = np.array([st.nsel.size for st in steps])
         offs = np.concatenate([[0], np.cumsum(nel)[:-1]])
-        el_bs = np.concatenate([[0]] + [st.nsel_block_start[1:] + off for st, off in zip(steps, offs)])
+        el_bs = np.concatenate([[0]] + [st.nsel_block_start[1:] + off for st, off in zip(steps, offs, strict=True)])
 
         def cat(name):
             return np.concatenate([getattr(st, name) for st in steps])
@@ -85,7 +85,7 @@ class StepsBatch:
             el_x=np.concatenate([st.x[st.nsel] for st in steps]),
             el_a=np.concatenate([st.a[st.nsel] for st in steps]),
             el_r=np.concatenate([st.r[st.nsel] for st in steps]),
-            el_block=np.concatenate([st.nsel_block + k0 for st, k0 in zip(steps, kstart[:-1])]),
+            el_block=np.concatenate([st.nsel_block + k0 for st, k0 in zip(steps, kstart[:-1], strict=True)]),
             el_bs=el_bs,
         )
 

@@ -9,17 +9,10 @@ from dataclasses import replace
 
 import numpy as np
 
+from cevm.core import limits
+from cevm.core.limits import POWER_WINDOW_S
 from cevm.core.sweep.block import SweepBlock
-from cevm.core.sweep.profiles import StepTable
-
-#: Masses x windows of one chunk of :func:`peak_wheel_power_w` (8 MB of float64).
-_POWER_CHUNK_CELLS = 1 << 20
-
-#: The window over which the power a source asks is averaged [s] (:func:`follow_flags`):
-#: a drivetrain delivers its rated power for seconds, and one-second steps of a logged
-#: trace carry speed and elevation noise (1 m of elevation noise in 1 s is 430 kW at
-#: 44 t); over 5 s the kinetic and potential energy of the noise cancel.
-POWER_WINDOW_S = 5.0
+from cevm.core.sweep.profiles import StepTable, edges
 
 
 def _window_coefficients(st: StepTable, window_s: float = POWER_WINDOW_S):
@@ -35,20 +28,43 @@ def _window_coefficients(st: StepTable, window_s: float = POWER_WINDOW_S):
 
 def _window_sums(st: StepTable, window_s: float):
     mv = st.moving
-    x = np.where(mv, st.x, 0.0)  # standstill: the brakes hold the vehicle, no wheel work
-
-    def csum(v: np.ndarray) -> np.ndarray:  # [0, cumsum...] without a second copy
-        out = np.empty(v.size + 1)
-        out[0] = 0.0
-        np.cumsum(v, out=out[1:])
-        return out
-
-    cx, cr_, ca, ct = csum(x), csum(st.r), csum(st.a), csum(st.dt)
+    ct = st.t_edges
     starts = np.flatnonzero(mv)
-    ends = np.searchsorted(ct, ct[starts] + window_s * (1.0 - 1e-12), side="left")
-    ends = np.minimum(np.maximum(ends, starts + 1), st.n)
-    dur = ct[ends] - ct[starts]
-    return cx[ends] - cx[starts], cr_[ends] - cr_[starts], ca[ends] - ca[starts], dur
+    n = st.n
+    span = window_s * (1.0 - 1e-12)
+    # Each window ends at the first step edge at least span after its start (searchsorted
+    # on the time edges). On a uniform time grid that is w steps on from every start: so
+    # the sums are differences of slices, and the guess is checked exactly (the edge w
+    # on reaches the span, the one before does not); searchsorted where it fails. One
+    # running sum at a time (each 8 bytes a step): the peak memory of a long cycle.
+    w = max(1, math.ceil(span / st.dt[starts[0]])) if starts.size else 1
+    m = n + 1 - w  # the starts i <= n - w whose guess stays within the source
+    good = np.zeros(starts.size, dtype=bool)
+    if m > 0:
+        goal = ct[:m] + span  # where each window must end
+        ok = np.less_equal(goal, ct[w:])
+        ok &= ct[w - 1 : n] < goal
+        del goal
+        good = np.take(ok, starts, mode="clip") & (starts < m)
+        del ok
+    searched = None if good.all() else starts[~good]
+    if searched is not None:
+        ends = np.searchsorted(ct, ct[searched] + span, side="left")
+        ends = np.minimum(np.maximum(ends, searched + 1), n)
+    out = []
+    for values in (lambda: np.where(mv, st.x, 0.0), lambda: st.r, lambda: st.a, None):
+        # x counts on moving steps only (standstill: the brakes hold the vehicle, no wheel work)
+        c = ct if values is None else edges(values())
+        if searched is None:
+            res = np.subtract(c[w:], c[:m]).take(starts)
+        else:
+            res = np.empty(starts.size)
+            sel = starts[good]
+            res[good] = c[sel + w] - c[sel]
+            res[~good] = c[ends] - c[searched]
+        out.append(res)
+        del c
+    return tuple(out)
 
 
 def peak_wheel_power_w(st: StepTable, mass_kg, cda_m2: float, cr: float, window_s: float = POWER_WINDOW_S
@@ -56,17 +72,10 @@ def peak_wheel_power_w(st: StepTable, mass_kg, cda_m2: float, cr: float, window_
     """The largest mean wheel power [W] a source asks of a vehicle at each mass, over
     any ``window_s`` of driving (eq. 28 summed over the window, no rotating inertia);
     0 for a source that never moves."""
-    m = np.atleast_1d(np.asarray(mass_kg, dtype=np.float64))
     if not st.moving.any():
-        return np.zeros(m.shape)
+        return np.zeros(np.shape(np.atleast_1d(mass_kg)))
     sx, sr, sa, dur = _window_coefficients(st, window_s)
-    slope = (sx + cr * sr) / dur
-    icpt = cda_m2 * sa / dur
-    out = np.empty(m.shape)
-    step = max(1, _POWER_CHUNK_CELLS // slope.size)
-    for lo in range(0, m.size, step):
-        out[lo:lo + step] = (m[lo:lo + step, None] * slope[None, :] + icpt[None, :]).max(axis=1)
-    return out
+    return limits.affine_peak((sx + cr * sr) / dur, cda_m2 * sa / dur, mass_kg)
 
 
 def power_mass_window(st: StepTable, max_power_w: float, cda_m2: float, cr: float,
@@ -78,40 +87,27 @@ def power_mass_window(st: StepTable, max_power_w: float, cda_m2: float, cr: floa
     if not st.moving.any():
         return 0.0, math.inf
     sx, sr, sa, dur = _window_coefficients(st, window_s)
-    slope = (sx + cr * sr) / dur
-    icpt = cda_m2 * sa / dur
-    if np.any((slope == 0) & (icpt > max_power_w)):
-        return math.nan, math.nan
-    with np.errstate(divide="ignore", invalid="ignore"):
-        bound = (max_power_w - icpt) / slope
-    hi = float(np.min(bound[slope > 0], initial=math.inf))
-    lo = float(np.max(bound[slope < 0], initial=0.0))
-    if lo > hi:
-        return math.nan, math.nan
-    return lo, hi
+    return limits.affine_mass_window((sx + cr * sr) / dur, cda_m2 * sa / dur, max_power_w)
 
 
 def follow_flags(block: SweepBlock) -> SweepBlock:
-    """``block`` with ``over_power`` (the source asks more wheel power than the vehicle's
-    ``max_power_kw`` at the row's mass; see :func:`power_mass_window`) and
-    ``over_speed`` (the source is faster than its ``max_speed_kmh``): 1.0 / 0.0, NaN for
-    rows of vehicles without the key. The power is the mean over any
-    :data:`POWER_WINDOW_S` of driving, and rated power is at the motor or engine shaft,
-    so the test is lenient: the drivetrain's losses and rotating parts ask more still."""
+    """``block`` with ``over_power``, ``over_speed`` (:func:`cevm.core.limits.follow_flags`:
+    the source's power over any :data:`POWER_WINDOW_S` against the vehicle's
+    ``max_power_kw`` at the row's mass, its held top speed against ``max_speed_kmh``,
+    with a logged trace's measurement tolerance; 1.0 / 0.0, NaN for rows of vehicles
+    without the key) and ``power_demand_w`` (the power the source asks at the row's
+    mass), for vehicles with either key. Rated power is at the motor or engine shaft, so
+    the test is lenient: the drivetrain's losses and rotating parts ask more still."""
     ps = block.pset
     if all(v.max_power_w is None and v.max_speed_mps is None for v in ps.vehicles):
         return block
     over_p = np.full(ps.n, np.nan)
     over_v = np.full(ps.n, np.nan)
+    demand_w = np.full(ps.n, np.nan)
+    demand = block.source.demand
     for j, v in enumerate(ps.vehicles):
         if v.max_power_w is None and v.max_speed_mps is None:
             continue
         rows = np.flatnonzero(ps.vehicle_index == j)
-        st = block.source.step_table
-        if v.max_speed_mps is not None:
-            over_v[rows] = float(st.v_max_mps > v.max_speed_mps * (1.0 + 1e-9))
-        if v.max_power_w is not None:
-            lo, hi = power_mass_window(st, v.max_power_w, v.cda_m2, v.cr)
-            m = ps.mass_kg[rows]
-            over_p[rows] = np.where(np.isnan(lo), 1.0, ((m < lo) | (m > hi)).astype(float))
-    return replace(block, over_power=over_p, over_speed=over_v)
+        over_p[rows], over_v[rows], demand_w[rows] = limits.follow_flags(demand, v, ps.mass_kg[rows])
+    return replace(block, over_power=over_p, over_speed=over_v, power_demand_w=demand_w)

@@ -126,7 +126,7 @@ class PredictionSet:
         max_gross = per_vehicle(lambda v: np.inf if v.max_gross_kg is None else v.max_gross_kg)
         is_ev = np.array([v.is_ev for v in vehicles], dtype=bool)[vi]
         eta = per_vehicle(lambda v: v.eta)
-        w_ice = np.array([0.0 if v.is_ev else braking_weight(b) for v, b in zip(vehicles, braking)])[vi]
+        w_ice = np.array([0.0 if v.is_ev else braking_weight(b) for v, b in zip(vehicles, braking, strict=True)])[vi]
         return cls(
             vehicles=vehicles,
             vehicle_index=vi,

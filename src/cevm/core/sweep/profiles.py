@@ -12,6 +12,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -38,42 +39,73 @@ class LegProfile:
 
 
 
+def edges(values: np.ndarray) -> np.ndarray:
+    """[0, cumsum(values)]: the running sum at each step's start and, last, the total
+    (n + 1 values; a sequential sum, so any of its values equals the sum of the steps
+    before it, added in order)."""
+    out = np.empty(values.size + 1)
+    out[0] = 0.0
+    np.cumsum(values, out=out[1:])
+    return out
+
+
 @dataclass(frozen=True, eq=False)
 class StepTable:
     """A source's per-step terms in driving order (legs one after another), SI: ``k``
     (kinetic, J/kg), ``x`` = k + e (J/kg), ``a`` (J/m^2), ``r`` (J/kg per unit Cr),
-    ``dt`` [s], ``dd`` (distance of the step [m]), ``t0`` and ``d0`` (time [s] and
-    distance [m] at the step's start), ``simplified`` (criterion 8 with the source's
-    Cr0), ``moving`` (a > 0); ``v_max_mps`` the source's top speed."""
+    ``dt`` [s], ``simplified`` (criterion 8 with the source's Cr0), ``moving`` (a > 0);
+    ``v_max_mps`` the source's top speed, ``g_mps2`` the gravity r was made with. Built
+    on first use and kept: ``dd`` (distance of the step [m]), ``t_edges`` and
+    ``d_edges`` (time [s] and distance [m] at each step's start, then at the end), ``t0``
+    and ``d0`` (at each step's start)."""
 
     k: np.ndarray
     x: np.ndarray
     a: np.ndarray
     r: np.ndarray
     dt: np.ndarray
-    dd: np.ndarray
-    t0: np.ndarray
-    d0: np.ndarray
     simplified: np.ndarray
     moving: np.ndarray
     v_max_mps: float
+    g_mps2: float = PAPER_PHYSICS.g_mps2
 
     @property
     def n(self) -> int:
         return int(self.dt.size)
 
+    @cached_property
+    def dd(self) -> np.ndarray:
+        return self.r / self.g_mps2
+
+    @cached_property
+    def t_edges(self) -> np.ndarray:
+        return edges(self.dt)
+
+    @cached_property
+    def d_edges(self) -> np.ndarray:
+        return edges(self.dd)
+
+    @property
+    def t0(self) -> np.ndarray:
+        return self.t_edges[:-1]
+
+    @property
+    def d0(self) -> np.ndarray:
+        return self.d_edges[:-1]
+
     @property
     def duration_s(self) -> float:
-        return float(self.t0[-1] + self.dt[-1]) if self.n else 0.0
+        return float(self.t_edges[-1]) if self.n else 0.0
 
     @property
     def distance_m(self) -> float:
-        return float(self.d0[-1] + self.dd[-1]) if self.n else 0.0
+        return float(self.d_edges[-1]) if self.n else 0.0
 
 
 def build_step_table(legs: Sequence[LegProfile], *, cr0: float = CR0_DEFAULT,
                      physics: Physics = PAPER_PHYSICS) -> StepTable:
-    """The :class:`StepTable` of a source's legs."""
+    """The :class:`StepTable` of a source's legs: :func:`cevm.core.cycle.step_terms` of
+    each leg, once."""
     ks, xs, as_, rs, dts = [], [], [], [], []
     vmax = 0.0
     for leg in legs:
@@ -88,9 +120,5 @@ def build_step_table(legs: Sequence[LegProfile], *, cr0: float = CR0_DEFAULT,
     z = np.zeros(0)
     k, x, a, r, dt = (v[0] if len(v) == 1 else np.concatenate(v) if v else z  # one leg: no copy
                       for v in (ks, xs, as_, rs, dts))
-    dd = r / physics.g_mps2
-    t0 = np.concatenate([[0.0], np.cumsum(dt)[:-1]]) if dt.size else z
-    d0 = np.concatenate([[0.0], np.cumsum(dd)[:-1]]) if dd.size else z
-    return StepTable(k=k, x=x, a=a, r=r, dt=dt, dd=dd, t0=t0, d0=d0, simplified=(x + cr0 * r) > 0,
-                     moving=a > 0, v_max_mps=vmax)
-
+    return StepTable(k=k, x=x, a=a, r=r, dt=dt, simplified=(x + cr0 * r) > 0, moving=a > 0, v_max_mps=vmax,
+                     g_mps2=physics.g_mps2)

@@ -18,7 +18,7 @@ takes (S <= 0, a descent) has no range limit: infinite.
 
 from __future__ import annotations
 
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -27,24 +27,76 @@ from cevm.core.sweep.block import DEFAULT_RESERVE_PCT, DEFAULT_SOC_START_PCT, Sw
 from cevm.core.sweep.profiles import StepTable
 from cevm.core.sweep.stepenergy import StepCoefficients, step_coefficients, step_energies
 
-
-def _crossing_point(st: StepTable, cum: np.ndarray, before: np.ndarray, target: np.ndarray,
-                    rows: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """For each row r of ``rows``: the first step j with ``cum[r, j] >= target[r]``
-    (``before[r]`` the sum before the first step), and the time [s] and distance [m]
-    at which it is reached, interpolated inside the step. Returns (found, t, d)."""
-    hit = cum[rows] >= target[:, None]
-    found = hit.any(axis=1)
-    j = np.argmax(hit, axis=1)
-    prev = np.where(j > 0, cum[rows, np.maximum(j - 1, 0)], before)
-    step = cum[rows, j] - prev
-    with np.errstate(invalid="ignore", divide="ignore"):
-        frac = np.clip(np.where(step > 0, (target - prev) / step, 1.0), 0.0, 1.0)
-    return found, st.t0[j] + frac * st.dt[j], st.d0[j] + frac * st.dd[j]
-
-
-#: Rows x steps of one chunk of :func:`crossings` (8 MB of float64).
+#: Cells (rows x steps) of one chunk of :func:`crossings` (8 MB of float64).
 _RANGE_CHUNK_CELLS = 1 << 20
+#: Rows evaluated together by :func:`crossings`.
+_RANGE_CHUNK_ROWS = 1 << 12
+#: Fewest and most steps of one chunk of :func:`crossings`: the running sums are made a
+#: chunk at a time and stop at the chunk where every level is crossed (a row that runs
+#: empty early in a long source costs that early part only).
+_RANGE_CHUNK_STEPS = (1 << 10, 1 << 16)
+
+
+@dataclass(frozen=True, eq=False)
+class _Crossings:
+    """Where each (row, level) target is first reached by the running sum C_j of one
+    pass: ``found`` (R, J), the step ``j`` and the fraction ``frac`` of it at which C
+    reaches the target (linear inside the step); ``per_pass`` C at the end of the pass
+    and ``peak`` its largest value (R,), when asked for (else None)."""
+
+    found: np.ndarray
+    j: np.ndarray
+    frac: np.ndarray
+    per_pass: np.ndarray | None
+    peak: np.ndarray | None
+
+
+def _first_crossings(st: StepTable, c: StepCoefficients, targets: np.ndarray, totals: bool) -> _Crossings:
+    """For each row r and level l with a target (NaN: none, never reached), the first
+    step j with C_j = sum_{i<=j} g_i >= targets[r, l] (g: :func:`step_energies`), and
+    with ``totals`` the pass's end value and peak of C. C is summed in order, a chunk of
+    steps at a time (each chunk's sums continue the last one's: the values are those of
+    one running sum over the whole source), and the scan stops at the chunk where every
+    target is reached unless ``totals`` asks for the whole pass."""
+    r_count, n_levels = targets.shape
+    found = np.zeros((r_count, n_levels), dtype=bool)
+    j_at = np.zeros((r_count, n_levels), dtype=np.int64)
+    frac = np.zeros((r_count, n_levels))
+    search = ~np.isnan(targets)
+    carry = np.zeros(r_count)  # C before the chunk
+    peak = np.full(r_count, -np.inf) if totals else None
+    n = st.n
+    lo_steps, hi_steps = _RANGE_CHUNK_STEPS
+    chunk = min(hi_steps, max(lo_steps, _RANGE_CHUNK_CELLS // max(1, r_count)))
+    for lo in range(0, n, chunk):
+        if not totals and not search.any():
+            break
+        cum = step_energies(st, c, lo, min(n, lo + chunk))
+        if lo:
+            cum[:, 0] += carry
+        np.cumsum(cum, axis=1, out=cum)
+        for jl in range(n_levels):
+            rows = np.flatnonzero(search[:, jl])
+            if not rows.size:
+                continue
+            target = targets[rows, jl]
+            hit = cum[rows] >= target[:, None]
+            now = hit.any(axis=1)
+            if not now.any():
+                continue
+            rows, target = rows[now], target[now]
+            j = np.argmax(hit[now], axis=1)
+            prev = np.where(j > 0, cum[rows, np.maximum(j - 1, 0)], carry[rows])
+            step = cum[rows, j] - prev
+            with np.errstate(invalid="ignore", divide="ignore"):
+                frac[rows, jl] = np.clip(np.where(step > 0, (target - prev) / step, 1.0), 0.0, 1.0)
+            found[rows, jl] = True
+            j_at[rows, jl] = lo + j
+            search[rows, jl] = False
+        if peak is not None:
+            np.maximum(peak, cum.max(axis=1), out=peak)
+        carry = cum[:, -1].copy()
+    return _Crossings(found, j_at, frac, carry if totals else None, peak)
 
 
 def crossings(st: StepTable, c: StepCoefficients, levels: np.ndarray, *, repeat: bool
@@ -64,47 +116,54 @@ def crossings(st: StepTable, c: StepCoefficients, levels: np.ndarray, *, repeat:
     within = np.zeros((r_count, n_levels), dtype=bool)
     if r_count == 0:
         return t_out, d_out, within
-    n = st.n
     at_start = c.lump[:, None] >= levels
     t_out[at_start] = 0.0
     d_out[at_start] = 0.0
     within |= at_start
-    if n == 0:
+    if st.n == 0:
         return t_out, d_out, within
-    step = max(1, _RANGE_CHUNK_CELLS // n)
-    for lo in range(0, r_count, step):
-        sl = slice(lo, lo + step)
+    for lo in range(0, r_count, _RANGE_CHUNK_ROWS):
+        sl = slice(lo, lo + _RANGE_CHUNK_ROWS)
         cc = c.take(np.arange(r_count)[sl])
-        cum = np.cumsum(step_energies(st, cc), axis=1)  # C_j, one pass, without the lump
-        per_pass = cum[:, -1]
-        peak = cum.max(axis=1)
-        lump = cc.lump
-        for jl in range(n_levels):
-            todo = ~at_start[sl, jl]
-            if not todo.any():
-                continue
-            rows = np.flatnonzero(todo)
-            target = levels[sl, jl][rows] - lump[rows]  # C_j must reach this
-            found, t, d = _crossing_point(st, cum, np.zeros(rows.size), target, rows)
-            r_found = lo + rows[found]
-            t_out[r_found, jl], d_out[r_found, jl], within[r_found, jl] = t[found], d[found], True
-            if not repeat:
-                continue
-            rest = rows[~found]
-            target = target[~found]
-            gains = per_pass[rest] > 0
-            t_out[lo + rest[~gains], jl] = np.inf
-            d_out[lo + rest[~gains], jl] = np.inf
-            rest, target = rest[gains], target[gains]
-            if not rest.size:
-                continue
-            s = per_pass[rest]
-            k = np.maximum(1.0, np.ceil((target - peak[rest]) / s))
-            k = np.where(target - k * s > peak[rest], k + 1.0, k)  # rounding
-            found, t, d = _crossing_point(st, cum, np.zeros(rest.size), target - k * s, rest)
-            t_out[lo + rest, jl] = np.where(found, k * st.duration_s + t, np.nan)
-            d_out[lo + rest, jl] = np.where(found, k * st.distance_m + d, np.nan)
+        todo = ~at_start[sl]
+        target = levels[sl] - cc.lump[:, None]  # C_j must reach this (without the lump)
+        first = _first_crossings(st, cc, np.where(todo, target, np.nan), totals=repeat and bool(todo.any()))
+        t, d = _point(st, first)
+        hit = first.found
+        t_out[sl][hit], d_out[sl][hit] = t[hit], d[hit]
+        within[sl] |= hit
+        if not repeat:
+            continue
+        rest = todo & ~hit  # beyond the first pass: lump + k S + C_j >= level
+        s = first.per_pass[:, None] if first.per_pass is not None else np.zeros((cc.lump.size, 1))
+        gives_back = rest & ~(s > 0)
+        t_out[sl][gives_back] = np.inf
+        d_out[sl][gives_back] = np.inf
+        rest &= s > 0
+        if not rest.any():
+            continue
+        assert first.peak is not None  # made whole: the pass was summed to its end (repeat)
+        peak = first.peak[:, None]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            k = np.maximum(1.0, np.ceil((target - peak) / s))
+            k = np.where(target - k * s > peak, k + 1.0, k)  # rounding
+            again = _first_crossings(st, cc, np.where(rest, target - k * s, np.nan), totals=False)
+        t, d = _point(st, again)
+        t_out[sl][rest] = np.where(again.found, k * st.duration_s + t, np.nan)[rest]
+        d_out[sl][rest] = np.where(again.found, k * st.distance_m + d, np.nan)[rest]
     return t_out, d_out, within
+
+
+def _point(st: StepTable, cr: _Crossings) -> tuple[np.ndarray, np.ndarray]:
+    """The time [s] and distance [m] of each crossing found (else NaN), interpolated
+    inside its step."""
+    t = np.full(cr.found.shape, np.nan)
+    d = np.full(cr.found.shape, np.nan)
+    if cr.found.any():
+        j, f = cr.j[cr.found], cr.frac[cr.found]
+        t[cr.found] = st.t0[j] + f * st.dt[j]
+        d[cr.found] = st.d0[j] + f * st.dd[j]
+    return t, d
 
 
 #: The fields :func:`source_ranges` fills (of :class:`SweepBlock`, and of

@@ -14,7 +14,8 @@ from dataclasses import dataclass
 from functools import cached_property
 
 from cevm.core.cycle import CR0_DEFAULT, PAPER_PHYSICS, CycleVector, DriveCycle, Physics, cycle_vector
-from cevm.core.sweep.compressed import BLOCK_ELEMENTS, SourceSteps, build_steps
+from cevm.core.limits import Demand, source_demand
+from cevm.core.sweep.compressed import BLOCK_ELEMENTS, SourceSteps, steps_of_table
 from cevm.core.sweep.profiles import LegProfile, StepTable, build_step_table
 
 
@@ -24,7 +25,10 @@ class Source:
     vector, and its legs' profiles (a sequence, or a callable returning one, called at
     most once and only when the state of charge along the way is needed).
     ``ambient_c``: the source's own ambient temperature [degC] (a stored trip's logged
-    mean), or None (see :data:`AMBIENT_ORIGINS` for what a prediction uses then)."""
+    mean), or None (see :data:`AMBIENT_ORIGINS` for what a prediction uses then).
+    ``logged``: a measured trace (a stored trip, a route of them), held to a vehicle's
+    limits with its measurement's tolerance, and ``elevation_sd_m`` its elevation's
+    uncertainty [m] (:mod:`cevm.core.limits`); a cycle file is a target, held exactly."""
 
     name: str
     kind: str
@@ -32,6 +36,8 @@ class Source:
     legs: Sequence[LegProfile] | Callable[[], Sequence[LegProfile]]
     block_elements: int = BLOCK_ELEMENTS
     ambient_c: float | None = None
+    logged: bool = False
+    elevation_sd_m: float = 0.0
 
     @classmethod
     def from_cycle(cls, cycle: DriveCycle, name: str | None = None, *, cr0: float = CR0_DEFAULT,
@@ -48,8 +54,7 @@ class Source:
     @cached_property
     def steps(self) -> SourceSteps:
         """The compressed step terms (built on first use, then kept)."""
-        return build_steps(self.leg_profiles, cr0=self.vector.cr0, physics=self.vector.physics,
-                           block_elements=self.block_elements)
+        return steps_of_table(self.step_table, cr0=self.vector.cr0, block_elements=self.block_elements)
 
     @cached_property
     def step_table(self) -> StepTable:
@@ -58,12 +63,20 @@ class Source:
         (:func:`follow_flags`)."""
         return build_step_table(self.leg_profiles, cr0=self.vector.cr0, physics=self.vector.physics)
 
+    @cached_property
+    def demand(self) -> Demand:
+        """What the source asks of a vehicle: its held top speed and the power of each
+        window (:func:`cevm.core.limits.source_demand`; built on first use, then kept)."""
+        return source_demand(self.step_table, self.leg_profiles, logged=self.logged,
+                             elevation_sd=self.elevation_sd_m)
+
     def release(self) -> None:
         """Forget the cached profiles and step terms (their memory): for a sweep that is
         done with this source. They are rebuilt if asked for again."""
         self.__dict__.pop("steps", None)
         self.__dict__.pop("step_table", None)
         self.__dict__.pop("leg_profiles", None)
+        self.__dict__.pop("demand", None)
 
     @property
     def distance_m(self) -> float:

@@ -81,24 +81,28 @@ def step_coefficients(pset: PredictionSet, ambient_c) -> StepCoefficients:
     return StepCoefficients(kx=m * scale, kr=m * cr * scale, ka=cda * scale, **out)
 
 
-def step_energies(st: StepTable, c: StepCoefficients) -> np.ndarray:
-    """(R, N) energy of each step for R rows of coefficients ``c`` (J or l)."""
-    g = c.kx[:, None] * st.x[None, :]
-    g += c.kr[:, None] * st.r[None, :]
-    g += c.ka[:, None] * st.a[None, :]
-    ns = ~st.simplified
+def step_energies(st: StepTable, c: StepCoefficients, lo: int = 0, hi: int | None = None) -> np.ndarray:
+    """(R, hi - lo) energy of each step lo..hi-1 (default all) for R rows of coefficients
+    ``c`` (J or l)."""
+    sl = slice(lo, hi)
+    x, r, a, simplified = st.x[sl], st.r[sl], st.a[sl], st.simplified[sl]
+    g = c.kx[:, None] * x[None, :]
+    g += c.kr[:, None] * r[None, :]
+    g += c.ka[:, None] * a[None, :]
+    ns = ~simplified
     if ns.any():
         neg = np.minimum(g[:, ns], 0.0)
         neg *= (c.w - 1.0)[:, None]
         g[:, ns] += neg
     if np.any(c.ck != 0):
-        g += c.ck[:, None] * np.maximum(st.k, 0.0)[None, :]
+        g += c.ck[:, None] * np.maximum(st.k[sl], 0.0)[None, :]
+    dt = st.dt[sl]
     if np.any(c.aux != 0):
-        g += c.aux[:, None] * st.dt[None, :]
+        g += c.aux[:, None] * dt[None, :]
     if np.any(c.run != 0):
-        g += c.run[:, None] * np.where(st.simplified, st.dt, 0.0)[None, :]
+        g += c.run[:, None] * np.where(simplified, dt, 0.0)[None, :]
     if np.any(c.idle != 0):
-        g += c.idle[:, None] * np.where(st.moving, 0.0, st.dt)[None, :]
+        g += c.idle[:, None] * np.where(st.moving[sl], 0.0, dt)[None, :]
     return g
 
 

@@ -1,0 +1,184 @@
+"""``cevm replay`` end to end on a small store: rows in CSV, JSON and the table, the same
+duties as ``cevm predict``'s trips summed, charging at the depot only, the night shift as
+one duty, the summary and the plot, a parallel run writing the bytes of a serial one, and
+one clear message for each wrong input."""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from cevm.cli import app
+from replay_cases import make_replay_store
+
+runner = CliRunner()
+ROOT = Path(__file__).resolve().parents[1]
+TRUCK = str(ROOT / "configs/vehicles/electric-truck.toml")
+DIESEL = str(ROOT / "configs/vehicles/diesel-hgv.toml")
+
+
+@pytest.fixture(scope="module")
+def store(tmp_path_factory) -> Path:
+    d = tmp_path_factory.mktemp("replay")
+    make_replay_store(d / "s.sqlite", d / "logs")
+    return d / "s.sqlite"
+
+
+def replay(store: Path, *args: str):
+    return runner.invoke(app, ["replay", "--store", str(store), "--vehicle-id", "TRK-1", "--vehicle-id", "TRK-2",
+                               *args])
+
+
+def test_rows_in_csv_json_and_table_say_the_same(store):
+    args = ["-v", TRUCK, "--battery-kwh", "40", "--charger-kw", "50"]
+    res = replay(store, *args, "-f", "json")
+    assert res.exit_code == 0, res.output
+    rows = json.loads(res.stdout)
+    assert [(r["vehicle_id"], r["trips"]) for r in rows] == [("TRK-1", 3)] * 3 + [("TRK-2", 2)] * 2
+    assert "fuel_l" not in rows[0] and rows[0]["energy_kwh_low"] <= rows[0]["energy_kwh"] <= rows[0]["energy_kwh_high"]
+    res = replay(store, *args, "-f", "csv")
+    assert res.exit_code == 0, res.output
+    table = list(csv.DictReader(io.StringIO(res.stdout)))
+    assert len(table) == len(rows)
+    for j, c in zip(rows, table, strict=True):
+        for key in ("energy_kwh", "soc_min_pct", "soc_end_pct", "charged_kwh", "p_complete", "battery_needed_kwh"):
+            assert (c[key] == "") if j[key] is None else float(c[key]) == pytest.approx(j[key], abs=2e-6)
+        assert c["completes"] == ("true" if j["completes"] else "false") and c["fuel_l"] == ""
+        assert c["vehicle_key"] == "electric-truck" and c["charge_places"] == "anywhere"
+    res = replay(store, *args)
+    assert res.exit_code == 0 and "TRK-2" in res.stdout and "keep the 15 % reserve" in res.stdout
+
+
+def test_a_duty_is_the_sum_of_the_trips_cevm_predict_gives(store):
+    res = runner.invoke(app, ["predict", "--store", str(store), "-v", TRUCK, "--vehicle-id", "TRK-1", "-f", "json"])
+    assert res.exit_code == 0, res.output
+    trips = json.loads(res.stdout)
+    days = json.loads(replay(store, "-v", TRUCK, "-f", "json").stdout)
+    per_day = np.add.reduceat([t["energy_kwh"] for t in trips], [0, 3, 6])
+    # predict sums an EV's steps from the stored profile (its float32 speeds and heights),
+    # replay takes the trip's vector (its samples' float64): the same model to 1e-7
+    np.testing.assert_allclose([d["energy_kwh"] for d in days if d["vehicle_id"] == "TRK-1"], per_day, rtol=1e-7)
+    assert days[0]["mass_sources"] == "3 logged"
+
+
+def test_the_night_shift_is_one_duty_and_two_calendar_days(store):
+    gap = json.loads(replay(store, "-v", TRUCK, "-f", "json").stdout)
+    assert [r["day"] for r in gap if r["vehicle_id"] == "TRK-2"] == ["2020-09-13", "2020-09-14"]
+    res = replay(store, "-v", TRUCK, "-f", "json", "--duty", "day")
+    days = json.loads(res.stdout)
+    # cut at midnight: the second "day" holds the end of one night and the start of the next
+    assert [r["trips"] for r in days if r["vehicle_id"] == "TRK-2"] == [1, 2, 1]
+    assert days[-1]["duty_rule"] == "calendar day in UTC"
+    local = json.loads(replay(store, "-v", TRUCK, "-f", "json", "--tz", "Asia/Tokyo").stdout)
+    assert local[0]["start_time"].endswith("+09:00")
+
+
+def test_charging_at_the_depot_only(store):
+    anywhere = json.loads(replay(store, "-v", TRUCK, "--battery-kwh", "40", "--charger-kw", "50", "-f", "json").stdout)
+    depot = json.loads(replay(store, "-v", TRUCK, "--battery-kwh", "40", "--charger-kw", "50", "--charge-at", "depot",
+                              "-f", "json").stdout)
+    a1 = [r for r in anywhere if r["vehicle_id"] == "TRK-1"]
+    d1 = [r for r in depot if r["vehicle_id"] == "TRK-1"]
+    assert all(r["charges"] == 2 for r in a1) and all(r["charges"] == 1 for r in d1)  # not at the customer
+    assert d1[0]["charge_places"].startswith("depot 52.06")
+    d2 = [r for r in depot if r["vehicle_id"] == "TRK-2"]
+    assert all(r["charges"] == 0 for r in d2)  # its one stop is at the customer
+
+
+def test_summary_plot_and_a_diesel_candidate(store, tmp_path):
+    png, summary = tmp_path / "days.png", tmp_path / "summary.json"
+    res = replay(store, "-v", TRUCK, "--battery-kwh", "30", "--plot", str(png), "--summary", str(summary), "-f", "csv",
+                 "-o", str(tmp_path / "rows.csv"))
+    assert res.exit_code == 0, res.output
+    sm = json.loads(summary.read_text())
+    assert sm["duties"] == 5 and sm["battery_step_kWh"] == 1.0 and sm["completes"] < 5
+    assert sm["battery_for_target_kWh"] > 30 and png.stat().st_size > 10_000
+    res = replay(store, "-v", DIESEL, "-f", "json")
+    assert res.exit_code == 0, res.output
+    rows = json.loads(res.stdout)
+    assert "energy_kwh" not in rows[0] and rows[0]["fuel_l"] > 0 and rows[0]["tank_l"] == 400.0
+
+
+def test_a_parallel_run_writes_the_bytes_of_a_serial_one(store, monkeypatch):
+    from cevm.core.replay import TripSpread, plan
+
+    def stated(vehicle, trips, *, ice_braking=None):  # a spread, as a calibrated file gives
+        n = trips.n
+        return TripSpread(np.zeros((n, 0)), np.zeros((0, 0)), 0.02, 2000.0 * trips.duration_s,
+                          0.05 * trips.energy, np.zeros(n), 0.5, "posterior", "stated")
+
+    monkeypatch.setattr(plan, "trip_spread", stated)
+    args = ["-v", TRUCK, "--battery-kwh", "36", "-f", "csv", "--draws", "400"]
+    serial = replay(store, *args)
+    par = replay(store, *args, "--workers", "2")
+    assert serial.exit_code == par.exit_code == 0, serial.output + par.output
+    assert serial.stdout == par.stdout
+    p = [float(r["p_complete"]) for r in csv.DictReader(io.StringIO(serial.stdout))]
+    assert any(0 < x < 1 for x in p) and "Monte Carlo, 400 draws" in serial.output
+
+
+@pytest.mark.parametrize("extra, words", [
+    (["--charge-at", "52.1"], "--charge-at '52.1': give LAT,LON,RADIUS_M"),
+    (["--charge-at", "95,0,100"], "latitude 95 is not in [-90, 90]"),
+    (["--refuel-at", "depot"], "--refuel-at is for a diesel candidate"),
+    (["--overnight", "none", "--overnight-kw", "11"], "not both"),
+    (["--overnight", "sometimes"], "--overnight 'sometimes'"),
+    (["--tz", "Mars/Olympus"], "--tz 'Mars/Olympus': not a time zone"),
+    (["--duty", "week"], "--duty 'week'"),
+    (["--confidence", "1.5"], "--confidence 1.5 must be in (0, 1]"),
+    (["--charge-efficiency", "1.2"], "charging efficiency 1.2 must be in (0, 1]"),
+])
+def test_wrong_inputs_get_one_line(store, extra, words):
+    res = replay(store, "-v", TRUCK, *extra)
+    assert res.exit_code == 2 and words in res.output, res.output
+    assert "Traceback" not in res.output
+
+
+def test_unknown_vehicles_and_candidates_that_do_not_fit(store):
+    res = runner.invoke(app, ["replay", "--store", str(store), "-v", TRUCK, "--vehicle-id", "NOPE"])
+    assert res.exit_code == 2 and "no stored trips of vehicle id(s) 'NOPE'" in res.output
+    res = replay(store, "-v", DIESEL, "--charger-kw", "50")
+    assert res.exit_code == 2 and "for an electric candidate" in res.output
+    res = replay(store, "-v", TRUCK, "-v", DIESEL)
+    assert res.exit_code == 2 and "one candidate vehicle file" in res.output
+
+
+def test_a_damaged_trip_is_left_out_said_and_counted(store, tmp_path):
+    import shutil
+    import sqlite3
+
+    db = tmp_path / "damaged.sqlite"
+    shutil.copy(store, db)
+    con = sqlite3.connect(db)
+    with con:
+        tid = con.execute("SELECT trip_id FROM trips WHERE vehicle_id = 'TRK-1' ORDER BY start_utc_s LIMIT 1 OFFSET 4"
+                          ).fetchone()[0]
+        con.execute("UPDATE trip_blobs SET vector = randomblob(400) WHERE trip_id = ?", (tid,))
+        damaged = con.execute("SELECT trip_id FROM trips WHERE vehicle_id = 'TRK-2' ORDER BY start_utc_s LIMIT 1"
+                              ).fetchone()[0]
+        con.execute("UPDATE trip_blobs SET profile = randomblob(900) WHERE trip_id = ?", (damaged,))
+    con.close()
+    res = runner.invoke(app, ["replay", "--store", str(db), "-v", TRUCK, "--vehicle-id", "TRK-1", "--vehicle-id",
+                              "TRK-2", "--charge-at", "depot", "--battery-kwh", "36", "-f", "json"])
+    assert res.exit_code == 1, res.output
+    assert f"skipped: trip {tid!r} is damaged" in res.output  # its vector: left out
+    assert f"trip {damaged!r} is damaged" in res.output and "its start and end positions are unknown" in res.output
+    rows = json.loads(res.stdout)
+    trk1 = [r for r in rows if r["vehicle_id"] == "TRK-1"]
+    assert [r["trips"] for r in trk1] == [3, 2, 3] and all(r["missing_trips"] == 1 for r in trk1)
+
+
+def test_levels_carried_overnight_and_the_logged_trucks_kerb(store):
+    res = replay(store, "-v", TRUCK, "--battery-kwh", "60", "--overnight-kw", "11", "--logged-kerb-kg", "15000",
+                 "-f", "json")
+    assert res.exit_code == 0, res.output
+    rows = [r for r in json.loads(res.stdout) if r["vehicle_id"] == "TRK-1"]
+    assert rows[0]["soc_start_pct"] == 100.0 and all(r["overnight"] == "11 kW" for r in rows)
+    assert rows[1]["soc_start_pct"] <= 100.0 and rows[0]["battery_needed_kwh"] is None  # sized for the fleet
+    assert rows[0]["mass_min_kg"] == 33000.0  # 30 t logged, 15 t of it the logged truck: 15 t on the candidate's 18
