@@ -246,27 +246,30 @@ def child(argv: list[str], stages: bool) -> None:
 
             setattr(owner, name, timed)
 
-        class Stream(task.CleanStream):  # the cleaning: made, then one trip at a time
+        class Stream(task.CleanStream):  # the cleaning: made, then a batch of trips at a time
             def __init__(self, *a, **k):
                 with stage("clean"):
                     super().__init__(*a, **k)
 
-            def __iter__(self):
-                trips = super().__iter__()
+            def batches(self, *a, **k):
+                made = super().batches(*a, **k)
                 while True:
                     with stage("clean"):
-                        ct = next(trips, None)
-                    if ct is None:
+                        batch = next(made, None)
+                    if batch is None:
                         return
-                    yield ct
+                    yield batch
+
+        from cevm.ingest.dsm import DsmSampler
 
         task.CleanStream = Stream
         wrap(task, "read_log", "read")
-        wrap(task, "sample_trips", "dsm")
+        wrap(DsmSampler, "sample", "dsm")
         wrap(task, "trip_elevation", "elevation")
         wrap(task, "trip_evidence", "evidence")
+        wrap(task, "batch_evidence", "evidence")
         wrap(task, "drive_cycle_vector", "vector")
-        wrap(task, "trip_profile_blob", "profile")
+        wrap(task, "encode_profiles", "profile")
         wrap(TripStore, "replace_file_trips", "store")
     from cevm.cli import main as cevm_main
 

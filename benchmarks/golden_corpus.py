@@ -9,7 +9,9 @@ there), ``tests/data``'s logs, and ``hostile/``: logs made from a sample srf log
 portal log with the faults real loggers write (clock steps forward and back, duplicated
 lines and ticks, gaps, junk GPS fixes, corrupt dates, a truncated last line, an energy
 counter that resets and one that wraps, a UTF-8 BOM, UTF-16, mixed zone designators,
-gzip, bad cells in measured and required columns, a spliced speed jump, N/A cells).
+gzip, bad cells in measured and required columns, a spliced speed jump, N/A cells);
+and, generated (:func:`make_generated`), ``fleet/`` (12 vehicle-days of the benchmark
+fleet: many trips, the DSM) and ``large/`` (one log of 600,000 rows: the chunked steps).
 
 Then ingests each case with the ``cevm`` of ``--src`` (default: this checkout's
 ``src``), serially (``--workers 1``) with ``--log-json``, into
@@ -41,7 +43,13 @@ CASES: dict[str, list[str]] = {
     "twizy": ["twizy"],
     "testdata": ["testdata"],
     "hostile": ["hostile", "--dsm", "sample_logs/dsm"],
+    "fleet": ["fleet", "--dsm", "sample_logs/dsm"],
+    "large": ["large", "--dsm", "sample_logs/dsm", "--max-rows", "6000000"],
 }
+
+#: Rows of the ``large`` case's log: more than the cleaning's chunks
+#: (``cevm.ingest.consumption.CHUNK_ROWS``) and the elevation's batches many times over.
+LARGE_ROWS = 600_000
 
 
 def _srf_lines(path: Path) -> tuple[list[str], list[str]]:
@@ -177,9 +185,41 @@ def make_corpus(corpus: Path, shared: Path | None) -> None:
     (corpus / ".done").touch()
 
 
+def make_generated(corpus: Path) -> None:
+    """The generated cases, once each (so that a corpus made before them gains them):
+    ``fleet/``, 12 vehicle-days of the benchmark fleet (buses and trucks, 2-12 trips
+    each, full working days for half of them) on the sample DSM, and ``large/``, one
+    srf log of :data:`LARGE_ROWS` rows (a long-haul truck's working day repeated)."""
+    from cevm_samplegen import fleet_for_benchmark
+
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    from bench_memory import make_large_srf
+
+    if not (corpus / "fleet" / ".done").exists():
+        shutil.rmtree(corpus / "fleet", ignore_errors=True)
+        work = corpus / ".work-fleet"
+        fleet_for_benchmark(4, 2, work / "short")
+        fleet_for_benchmark(4, 1, work / "full", full_days=True, first_date="2019-06-03")
+        (corpus / "fleet").mkdir()
+        for f in sorted(work.rglob("*.csv")):
+            shutil.copy(f, corpus / "fleet" / f"{f.parent.parent.name}-{f.name}")
+        shutil.rmtree(work)
+        (corpus / "fleet" / ".done").touch()
+    if not (corpus / "large" / ".done").exists():
+        shutil.rmtree(corpus / "large", ignore_errors=True)
+        work = corpus / ".work-large"
+        work.mkdir(parents=True, exist_ok=True)
+        (corpus / "large").mkdir()
+        make_large_srf(corpus / "large" / f"srf-{LARGE_ROWS}.csv", LARGE_ROWS, work)
+        shutil.rmtree(work)
+        (corpus / "large" / ".done").touch()
+
+
 def run_cases(corpus: Path, out: Path, src: Path, cases: list[str]) -> None:
     out.mkdir(parents=True, exist_ok=True)
-    env = {**os.environ, "PYTHONPATH": str(src), "OMP_NUM_THREADS": "1", "COLUMNS": "200"}
+    extra = os.environ.get("PYTHONPATH")  # e.g. a sitecustomize that changes a setting for a comparison
+    env = {**os.environ, "PYTHONPATH": str(src) + (os.pathsep + extra if extra else ""), "OMP_NUM_THREADS": "1",
+           "COLUMNS": "200"}
     env.pop("CEVM_STORE", None)
     for case in cases:
         args = CASES[case]
@@ -208,6 +248,7 @@ def main(argv: list[str] | None = None) -> None:
     shared = args.shared or next((p for p in (ROOT.parent / "shared", ROOT.parent.parent / "shared") if p.is_dir()), None)
     corpus = args.dir.resolve() / "corpus"
     make_corpus(corpus, shared)
+    make_generated(corpus)
     run_cases(corpus, args.dir.resolve() / args.label, args.src.resolve(), args.case or list(CASES))
 
 

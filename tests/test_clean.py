@@ -533,10 +533,11 @@ def test_results_do_not_depend_on_the_chunk_size(n, seed):
     assert got.quality == want.quality and got.dropped == want.dropped
 
 
-def test_clean_stream_makes_the_trips_one_at_a_time():
-    """CleanStream: errors when made; the trips as they are asked for; the dropped
-    segments and the file's quality complete once the iteration ends; the caller's
-    frame let go of with release_frame; nothing the second time."""
+def test_clean_stream_makes_the_trips_a_batch_at_a_time():
+    """CleanStream: errors when made; the trips as they are asked for, a bounded batch
+    at a time (here one trip a batch); the dropped segments and the file's quality
+    complete once the iteration ends; the caller's frame let go of with
+    release_frame; nothing the second time; the same trips whatever the batches."""
     from cevm.ingest.cleaning import CleanStream
 
     with pytest.raises(InputError, match="time"):
@@ -546,14 +547,19 @@ def test_clean_stream_makes_the_trips_one_at_a_time():
     frame = drive(tau)
     stream = CleanStream(frame, release_frame=True)
     assert list(frame.columns) == []
-    trips = iter(stream)
-    first = next(trips)
-    assert first.duration_s == 600.0 and stream.dropped == []
-    rest = list(trips)
-    assert [t.start_utc_s for t in rest] == [T0 + 1000.0]
+    batches = stream.batches(max_samples=601)
+    first = next(batches)
+    assert len(first) == 1 and first.trip(0).duration_s == 600.0 and stream.dropped == []
+    rest = list(batches)
+    assert [b.trip(0).start_utc_s for b in rest] == [T0 + 1000.0]
     assert len(stream.dropped) == 1 and stream.dropped[0]["duration_s"] == 20.0
     assert stream.quality["trips"] == 2 and stream.quality["trips_dropped"] == 1
-    assert list(stream) == []
+    assert list(stream) == [] and list(stream.batches()) == []
+    whole = clean_log(drive(tau))  # one batch of both trips
+    for a, b in zip(whole.trips, [first.trip(0), rest[0].trip(0)], strict=True):
+        assert a.quality == b.quality
+        for name in ("time_s", "speed_mps", "distance_m", "lat_deg", "lon_deg", "gps_alt_m"):
+            assert getattr(a, name).tobytes() == getattr(b, name).tobytes()
 
 
 @settings(max_examples=25, deadline=None)

@@ -79,3 +79,17 @@ def test_mutated_srf_logs_give_a_result_or_cevms_own_error(tmp_path, mutations):
         assert not _FOREIGN.search(out.error), out.error  # cevm's own message, not a stray exception
     else:
         assert all(t.n_samples >= 2 for t in out.trips)
+
+
+def test_a_lost_longitude_header_cell_gives_no_positions_not_an_internal_error(tmp_path):
+    """Regression (found by the fuzz test on main): the header's longitude name blanked
+    (the header line duplicated, then a field of it emptied) left a latitude column
+    without its longitude, and the reader failed with KeyError: 'lon_deg'. The file is
+    ingested from its speeds, with a repair note that no positions were read."""
+    seed = tmp_path / "seed.csv"
+    write_srf(seed, "EB-01", 1_557_820_800, 3, n=90)
+    f = tmp_path / "fuzz.csv"
+    f.write_bytes(_mutate(seed.read_bytes(), [("duplicate_line", 0), ("field", 100, 16, "")]))
+    out = process_file(f, IngestOptions())
+    assert out.error is None, out.error
+    assert any("without its longitude column: no GPS positions read" in r for r in out.repairs), out.repairs

@@ -471,17 +471,10 @@ def estimate_source(
     """
     kind, quantity = str(source.kind), str(source.quantity)
     res = float(source.resolution)
-    priority = int(source.priority)
     name = str(source.column)
 
     def invalid(reason: str, raw: _Raw | None = None) -> SourceEstimate:
-        return SourceEstimate(
-            name, kind, quantity, priority,
-            raw.value if raw else math.nan, 0.0,
-            raw.uncertainty if raw else math.nan,
-            raw.coverage if raw else 0.0, raw.gap_share if raw else 1.0,
-            False, reason, raw.counts if raw else {},
-        )
+        return invalid_estimate(source, reason, raw)
 
     if quantity not in ("fuel_l", "energy_j"):
         return invalid(f"unknown quantity {quantity!r}")
@@ -519,19 +512,39 @@ def estimate_source(
         resolution = abs(res) / 100.0 * float(cap)
     else:
         return invalid(f"unknown kind {kind!r}")
+    return finish_estimate(source, raw, resolution, params)
+
+
+def invalid_estimate(source: EnergySourceLike, reason: str, raw: _Raw | None = None) -> SourceEstimate:
+    """The estimate of a source not valid for a trip, and why (with what was measured)."""
+    return SourceEstimate(
+        str(source.column), str(source.kind), str(source.quantity), int(source.priority),
+        raw.value if raw else math.nan, 0.0,
+        raw.uncertainty if raw else math.nan,
+        raw.coverage if raw else 0.0, raw.gap_share if raw else 1.0,
+        False, reason, raw.counts if raw else {},
+    )
+
+
+def finish_estimate(source: EnergySourceLike, raw: _Raw, resolution: float,
+                    params: ConsumptionParams) -> SourceEstimate:
+    """A source's estimate for a trip from its raw figures: invalid (with the reason)
+    where it has none, no finite value, too many gaps or too little coverage; else its
+    value with the systematic uncertainty added."""
     if raw.reason:
-        return invalid(raw.reason, raw)
+        return invalid_estimate(source, raw.reason, raw)
     if not math.isfinite(raw.value):
-        return invalid("no finite value", raw)
-    if kind == "rate" and raw.gap_share > params.max_gap_share:
-        return invalid(f"gap share {raw.gap_share:.3f} > {params.max_gap_share}", raw)
+        return invalid_estimate(source, "no finite value", raw)
+    if str(source.kind) == "rate" and raw.gap_share > params.max_gap_share:
+        return invalid_estimate(source, f"gap share {raw.gap_share:.3f} > {params.max_gap_share}", raw)
     if raw.coverage < params.min_coverage:
-        return invalid(f"coverage {raw.coverage:.3f} < {params.min_coverage}", raw)
+        return invalid_estimate(source, f"coverage {raw.coverage:.3f} < {params.min_coverage}", raw)
     accuracy = accuracy_pct_of(source)
     systematic = accuracy / 100.0 * abs(raw.value)
     return SourceEstimate(
-        name, kind, quantity, priority, raw.value, resolution, math.hypot(raw.uncertainty, systematic),
-        raw.coverage, raw.gap_share, True, "", raw.counts, raw.uncertainty, systematic, accuracy,
+        str(source.column), str(source.kind), str(source.quantity), int(source.priority), raw.value, resolution,
+        math.hypot(raw.uncertainty, systematic), raw.coverage, raw.gap_share, True, "", raw.counts, raw.uncertainty,
+        systematic, accuracy,
     )
 
 
@@ -554,7 +567,13 @@ def measure_trip(
     ``disagreement_sigma``), ``chosen_by`` and, for the chosen source, ``source``,
     ``coverage``, ``gap_share`` and its repair counts.
     """
-    estimates = [estimate_source(time_s, columns, s, t0, t1, params) for s in sources]
+    return choose_measurement([estimate_source(time_s, columns, s, t0, t1, params) for s in sources], params)
+
+
+def choose_measurement(estimates: Sequence[SourceEstimate],
+                       params: ConsumptionParams = ConsumptionParams()) -> tuple[Measurement | None, dict]:
+    """A trip's measured consumption from its sources' estimates (:func:`measure_trip`):
+    the chosen measurement or None, and the quality dict."""
     quality: dict = {"sources": [e.as_dict() for e in estimates], "cross_checks": [], "warnings": []}
     valid = [e for e in estimates if e.valid]
     if not valid:

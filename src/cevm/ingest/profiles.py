@@ -84,16 +84,16 @@ from __future__ import annotations
 import os
 import re
 import tomllib
+import zoneinfo
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal, NamedTuple
-
-import pandas as pd
 
 from cevm.configs_dir import shipped_configs_dir
 from cevm.errors import InputError
 from cevm.io.inputs import MAX_TOML_BYTES, read_bounded
 from cevm.ingest.timestamps import EPOCH_FORMATS
+from cevm.lazy import pd
 from cevm.units import (
     FT_TO_M,
     J_PER_KWH,
@@ -521,7 +521,12 @@ def _time_section(t: dict, k: _Keys) -> TimeSpec:
 
 def _check_timezone(tz: str, k: _Keys) -> str:
     try:
-        pd.Timestamp("2020-01-01").tz_localize(tz)
+        zoneinfo.ZoneInfo(tz)  # an IANA name (no pandas import for it)
+        return tz
+    except Exception:
+        pass
+    try:
+        pd.Timestamp("2020-01-01").tz_localize(tz)  # whatever else pandas takes
     except Exception:
         raise k.fail(f"unknown time zone {tz!r} (use an IANA name such as 'Europe/London')", "time.timezone") from None
     return tz

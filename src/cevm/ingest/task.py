@@ -6,7 +6,7 @@ through them: read with a logger profile (:mod:`cevm.ingest.reading`), clean and
 into trips with measured consumption (:mod:`cevm.ingest.cleaning`,
 :mod:`cevm.ingest.consumption`), road elevation from the DSM
 (:mod:`cevm.ingest.elevation`), the trip's drive-cycle vector (:mod:`cevm.core.cycle`)
-and its stored profile (:func:`cevm.store.trip_profile_blob`).
+and its stored profile (:func:`cevm.store.encode_profiles`).
 
 It is the one task of every ingest, serial, in a process pool or on a Dask cluster
 (:mod:`cevm.executors`); a worker opens the DSM once (:func:`worker_sampler`), not once
@@ -28,13 +28,14 @@ from cevm.core.cycle import CR0_DEFAULT, drive_cycle_vector
 from cevm.core.trip import Trip, TripRecord
 from cevm.errors import CevmError, InputError
 from cevm.executors import worker_cache
-from cevm.ingest.cleaning import CleanParams, CleanStream, CleanTrip
+from cevm.ingest.cleaning import CleanBatch, CleanParams, CleanStream
 from cevm.ingest.dsm import DsmHeaders, DsmSampler
-from cevm.ingest.elevation import ElevationParams, sample_trips, trip_elevation
-from cevm.ingest.evidence import EvidenceParams, trip_evidence
+from cevm.ingest.elevation import ElevationParams, trip_elevation
+from cevm.ingest.evidence import EvidenceParams, batch_evidence, trip_evidence
 from cevm.ingest.profiles import Profile
 from cevm.ingest.reading import ReadLimits, read_log
-from cevm.store import trip_profile_blob
+from cevm.ingest.segments import many_short_trips
+from cevm.store import encode_profiles
 from cevm.text import printable
 
 
@@ -65,7 +66,7 @@ class FileOutcome:
     profile: str | None = None
     trips: tuple[TripRecord, ...] = ()  # the arrays are in vectors and profile_blobs
     vectors: tuple[bytes, ...] = ()
-    profile_blobs: tuple[bytes, ...] = ()  # each trip's stored profile (trip_profile_blob)
+    profile_blobs: tuple[bytes, ...] = ()  # each trip's stored profile (cevm.store.encode_profiles)
     n_rows: int = 0
     n_samples: int = 0
     dropped: tuple[dict, ...] = ()
@@ -86,82 +87,70 @@ def file_sha256(path: Path) -> str:
     return h.hexdigest()
 
 
-def _trip_from_clean(ct: CleanTrip, *, vehicle_id: str, path: Path, sha256: str, index: int,
-                     sampler: DsmSampler | None, options: IngestOptions, repairs: list[str],
-                     raw_dsm_m: np.ndarray | None = None, stage: dict | None = None) -> Trip:
-    """A :class:`Trip` from a clean trip: road elevation (from the DSM samples
-    ``raw_dsm_m`` when given), the evidence fields
-    (:func:`cevm.ingest.evidence.trip_evidence`) and the quality of both."""
-    gps_alt = ct.gps_alt_m if np.isfinite(ct.gps_alt_m).any() else None
-    elev = trip_elevation(ct.distance_m, ct.lon_deg, ct.lat_deg, gps_alt, sampler, options.elevation,
-                          raw_dsm_m=raw_dsm_m)
-    t0 = time.perf_counter()
-    evidence, evidence_q = trip_evidence(ct.start_utc_s + ct.time_s, ct.speed_mps, ct.rows_t_s, ct.rows,
-                                         options.clean.standstill_mps, options.evidence)
-    if stage is not None:
-        stage["evidence"] = stage.get("evidence", 0.0) + time.perf_counter() - t0
-    quality = dict(ct.quality)
-    quality["elevation"] = elev.quality()
-    quality["evidence"] = evidence_q
-    quality["source_lines"] = [ct.first_source_line, ct.last_source_line]
-    if repairs:
-        quality["read_repairs"] = list(repairs)
-    return Trip(
-        vehicle_id=vehicle_id,
-        source_file=str(path),
-        source_sha256=sha256,
-        trip_index=index,
-        start_utc_s=ct.start_utc_s,
-        time_s=ct.time_s,
-        speed_mps=ct.speed_mps,
-        distance_m=ct.distance_m,
-        lat_deg=ct.lat_deg,
-        lon_deg=ct.lon_deg,
-        elevation_m=elev.elevation_m,
-        elevation_source=elev.source,
-        dsm_coverage_pct=elev.dsm_coverage_pct,
-        measured=ct.measured,
-        gross_weight_kg=ct.gross_weight_kg,
-        quality=quality,
-        start_soc_pct=ct.start_soc_pct,
-        **evidence,
-    )
-
-
-#: Samples of trips whose DSM heights are looked up at once (one lookup for many short
-#: trips costs less than one each); past it, the batch is finished and let go.
+#: Samples of trips made at once (steps 6-9 of the cleaning, DSM lookups, elevation,
+#: evidence, profiles): a large file's trips are done a bounded batch at a time, and
+#: each batch is let go of once its trips are made.
 TRIP_BATCH_SAMPLES = 1 << 16
 
 
-def _finish_trips(batch: list[CleanTrip], log, path: Path, sha: str, sampler: DsmSampler | None,
+def _finish_batch(batch: CleanBatch, log, path: Path, sha: str, sampler: DsmSampler | None,
                   options: IngestOptions, stage: dict, trips: list, vectors: list, blobs: list,
                   warnings: list) -> None:
     """Elevation, evidence, vector and stored profile of a batch of clean trips of
-    ``log``, appended to ``trips``, ``vectors``, ``blobs`` and ``warnings``; each trip is
-    let go of once done (the batch is emptied)."""
+    ``log``, appended to ``trips``, ``vectors``, ``blobs`` and ``warnings``."""
     t0 = time.perf_counter()
-    raws = (sample_trips(sampler, [ct.lon_deg for ct in batch], [ct.lat_deg for ct in batch])
-            if sampler is not None else [None] * len(batch))
-    stage["elevation"] = stage.get("elevation", 0.0) + time.perf_counter() - t0
-    for i, ct in enumerate(batch):
-        ev0 = stage.setdefault("evidence", 0.0)
-        t0 = time.perf_counter()
-        trip = _trip_from_clean(
-            ct, vehicle_id=log.vehicle_id, path=path, sha256=sha, index=len(trips),
-            sampler=sampler, options=options, repairs=log.repairs, raw_dsm_m=raws[i], stage=stage,
-        )
-        batch[i] = raws[i] = ct = None
+    bounds = batch.bounds
+    raw = sampler.sample(batch.lon_deg, batch.lat_deg) if sampler is not None else None
+    elevations = []
+    for i in range(len(batch)):
+        a, b = int(bounds[i]), int(bounds[i + 1])
+        alt = batch.gps_alt_m[a:b]
+        elevations.append(trip_elevation(batch.distance_m[a:b], batch.lon_deg[a:b], batch.lat_deg[a:b],
+                                         alt if np.isfinite(alt).any() else None, sampler, options.elevation,
+                                         raw_dsm_m=None if raw is None else raw[a:b]))
+    t1 = time.perf_counter()
+    stage["elevation"] = stage.get("elevation", 0.0) + t1 - t0
+    time_s = batch.time_s()
+    start = batch.start_utc_s
+    standstill = options.clean.standstill_mps
+    if many_short_trips(bounds):
+        evidence = batch_evidence(np.repeat(start, np.diff(bounds)) + time_s, batch.speed_mps, bounds, batch.row_t,
+                                  batch.rows, batch.row_window, standstill, options.evidence)
+    else:  # numpy on each trip's own slices: fewer passes over long trips' samples
+        evidence = [trip_evidence(start[i] + time_s[bounds[i]:bounds[i + 1]], batch.speed_mps[bounds[i]:bounds[i + 1]],
+                                  *batch.evidence_rows(i), standstill, options.evidence) for i in range(len(batch))]
+    stage["evidence"] = stage.get("evidence", 0.0) + time.perf_counter() - t1
+    made = []
+    for i, (elev, (fields, evidence_q)) in enumerate(zip(elevations, evidence, strict=True)):
         t1 = time.perf_counter()
-        vec = drive_cycle_vector(trip.time_s, trip.speed_mps, trip.elevation_m, cr0=options.cr0)
-        vectors.append(vec.to_bytes())
+        a, b = int(bounds[i]), int(bounds[i + 1])
+        quality = dict(batch.quality[i])
+        quality["elevation"] = elev.quality()
+        quality["evidence"] = evidence_q
+        quality["source_lines"] = list(batch.source_lines[i])
+        if log.repairs:
+            quality["read_repairs"] = list(log.repairs)
+        trip = Trip(
+            vehicle_id=log.vehicle_id, source_file=str(path), source_sha256=sha, trip_index=len(trips) + i,
+            start_utc_s=float(start[i]), time_s=time_s[a:b], speed_mps=batch.speed_mps[a:b],
+            distance_m=batch.distance_m[a:b], lat_deg=batch.lat_deg[a:b], lon_deg=batch.lon_deg[a:b],
+            elevation_m=elev.elevation_m, elevation_source=elev.source, dsm_coverage_pct=elev.dsm_coverage_pct,
+            measured=batch.measured[i], gross_weight_kg=batch.gross_weight_kg[i], quality=quality,
+            start_soc_pct=batch.start_soc_pct[i], **fields,
+        )
         t2 = time.perf_counter()
-        blobs.append(trip_profile_blob(trip))
-        stage["elevation"] = stage.get("elevation", 0.0) + t1 - t0 - (stage["evidence"] - ev0)
-        stage["vector"] = stage.get("vector", 0.0) + t2 - t1
-        stage["profile"] = stage.get("profile", 0.0) + time.perf_counter() - t2
+        vectors.append(drive_cycle_vector(trip.time_s, trip.speed_mps, trip.elevation_m, cr0=options.cr0).to_bytes())
+        stage["elevation"] += t2 - t1
+        stage["vector"] = stage.get("vector", 0.0) + time.perf_counter() - t2
+        made.append(trip)
+    t1 = time.perf_counter()
+    blobs.extend(encode_profiles({"time_s": time_s, "speed_mps": batch.speed_mps, "distance_m": batch.distance_m,
+                                  "elevation_m": np.concatenate([e.elevation_m for e in elevations]),
+                                  "lat_deg": batch.lat_deg, "lon_deg": batch.lon_deg}, bounds))
+    stage["profile"] = stage.get("profile", 0.0) + time.perf_counter() - t1
+    for trip in made:
         trips.append(trip.record())
         warnings.extend(trip_warnings(trip))
-    batch.clear()
 
 
 def trip_warnings(trip: Trip) -> list[str]:
@@ -230,20 +219,14 @@ def process_file(
             stream = CleanStream(log.columns, log.energy_sources, options.clean, path=path, release_frame=True)
             planned += stream.planned_samples
             _check_samples(path, planned, options.limits.max_samples)
-            cleaned = iter(stream)
-            batch: list[CleanTrip] = []
-            n_batch = 0
+            batches = stream.batches(TRIP_BATCH_SAMPLES)
             while True:  # trips a bounded batch at a time: a large file's trips are never all held
-                ct = next(cleaned, None)
+                batch = next(batches, None)
                 stage["clean"] = stage.get("clean", 0.0) + time.perf_counter() - t0
-                if ct is not None:
-                    batch.append(ct)
-                    n_batch += ct.time_s.size
-                if batch and (ct is None or n_batch >= TRIP_BATCH_SAMPLES):
-                    _finish_trips(batch, log, path, sha, sampler, options, stage, trips, vectors, blobs, warnings)
-                    batch, n_batch = [], 0
-                if ct is None:
+                if batch is None:
                     break
+                _finish_batch(batch, log, path, sha, sampler, options, stage, trips, vectors, blobs, warnings)
+                del batch
                 t0 = time.perf_counter()
             dropped.extend({"vehicle_id": log.vehicle_id, **d} for d in stream.dropped)
         return FileOutcome(

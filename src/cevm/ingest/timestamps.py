@@ -13,7 +13,8 @@ import re
 from dataclasses import dataclass
 
 import numpy as np
-import pandas as pd
+
+from cevm.lazy import pd
 
 #: Not-a-time, as int64 nanoseconds (numpy's NaT).
 NAT = np.iinfo(np.int64).min

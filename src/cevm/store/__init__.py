@@ -23,7 +23,7 @@
 Re-exported here: what callers use of location, codec and the store.
 """
 
-from cevm.store.codec import PROFILE_DTYPES, decode_profile, encode_profile, trip_profile_blob
+from cevm.store.codec import PROFILE_DTYPES, decode_profile, encode_profile, encode_profiles, trip_profile_blob
 from cevm.store.location import (
     NO_STORE_HINT,
     STORE_ENV_VAR,
@@ -45,6 +45,7 @@ __all__ = [
     "decode_profile",
     "default_store_path",
     "encode_profile",
+    "encode_profiles",
     "existing_store_path",
     "file_key",
     "format_trips",

@@ -83,25 +83,46 @@ def encode_profile(arrays: Mapping[str, np.ndarray]) -> bytes:
     header order. Measured on the sample and Twizy trips against format 1 (shuffle and
     zlib level 1): 14.1 bytes a sample instead of 18.0, in 225 ns instead of 380-445 ns.
     """
+    n = int(np.asarray(arrays["time_s"]).shape[0]) if "time_s" in arrays else 0
+    return encode_profiles(arrays, np.array([0, n]))[0]
+
+
+def encode_profiles(arrays: Mapping[str, np.ndarray], bounds: np.ndarray) -> list[bytes]:
+    """:func:`encode_profile` of several trips whose arrays lie end to end in
+    ``arrays`` (trip ``i``: ``bounds[i]:bounds[i + 1]``), bit for bit: each array is
+    cast and its bit patterns differenced once for all the trips (each trip's first
+    difference is from 0, as its own), then each trip's bytes shuffled and
+    compressed."""
     missing = [k for k in PROFILE_DTYPES if k not in arrays]
     if missing:
         raise ValueError(f"profile lacks arrays {missing}")
-    n = int(np.asarray(arrays["time_s"]).shape[0])
+    bounds = np.asarray(bounds, dtype=np.int64)
+    total = int(bounds[-1])
     zstd = _zstd()
-    entries, payloads = [], []
+    starts = bounds[:-1][np.diff(bounds) > 0]
+    deltas = []
     for name, dtype in PROFILE_DTYPES.items():
         with np.errstate(over="ignore"):  # beyond float32's range is +-inf, as it should
             a = np.ascontiguousarray(arrays[name], dtype=dtype)
-        if a.shape != (n,):
-            raise ValueError(f"profile array {name} has shape {a.shape}, expected ({n},)")
+        if a.shape != (total,):
+            raise ValueError(f"profile array {name} has shape {a.shape}, expected ({total},)")
         bits = a.view(np.uint64 if a.itemsize == 8 else np.uint32)
-        delta = np.diff(bits, prepend=bits.dtype.type(0))  # unsigned: wraps, exactly reversible
-        shuffled = delta.view(np.uint8).reshape(n, a.itemsize).T.tobytes()
-        payload = zstd.compress(shuffled, asbytes=True)
-        entries.append([name, dtype, len(payload)])
-        payloads.append(payload)
-    header = json.dumps({"n": n, "codec": _PROFILE_CODEC, "arrays": entries}).encode()
-    return b"".join([_PROFILE_MAGIC, struct.pack("<I", len(header)), header, *payloads])
+        delta = np.empty_like(bits)
+        np.subtract(bits[1:], bits[:-1], out=delta[1:])  # unsigned: wraps, exactly reversible
+        delta[starts] = bits[starts]  # each trip's first from 0
+        deltas.append((name, dtype, a.itemsize, delta))
+    out = []
+    for a, b in zip(bounds[:-1].tolist(), bounds[1:].tolist()):
+        n = b - a
+        entries, payloads = [], []
+        for name, dtype, size, delta in deltas:
+            shuffled = delta[a:b].view(np.uint8).reshape(n, size).T.tobytes()
+            payload = zstd.compress(shuffled, asbytes=True)
+            entries.append([name, dtype, len(payload)])
+            payloads.append(payload)
+        header = json.dumps({"n": n, "codec": _PROFILE_CODEC, "arrays": entries}).encode()
+        out.append(b"".join([_PROFILE_MAGIC, struct.pack("<I", len(header)), header, *payloads]))
+    return out
 
 
 def trip_profile_blob(trip: Trip) -> bytes:

@@ -6,8 +6,8 @@ from __future__ import annotations
 from collections.abc import Mapping
 
 import numpy as np
-import pandas as pd
 
+from cevm.lazy import pd
 from cevm.units import J_PER_KWH
 
 

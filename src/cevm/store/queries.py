@@ -16,11 +16,11 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-import pandas as pd
 
 from cevm.core.cycle import CycleVector
 from cevm.core.trip import TRIP_EVIDENCE_FIELDS, Measurement, Trip
 from cevm.errors import CevmError
+from cevm.lazy import pd
 from cevm.store.codec import decode_profile, decode_vector
 from cevm.store.failures import DAMAGED_HINT, DamagedTripError, StoreDamagedError
 from cevm.store.location import file_key

@@ -104,6 +104,7 @@ from cevm.ingest.cleaning.geodesy import (
 )
 from cevm.ingest.cleaning.params import (
     SPEED_SOURCES,
+    CleanBatch,
     CleanParams,
     CleanResult,
     CleanTrip,
@@ -113,6 +114,7 @@ from cevm.ingest.cleaning.stream import CleanStream, clean_log, clean_trips
 __all__ = [
     "GEODESIC_MIN_STEP_M",
     "SPEED_SOURCES",
+    "CleanBatch",
     "CleanParams",
     "CleanResult",
     "CleanStream",

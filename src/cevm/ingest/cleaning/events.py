@@ -46,6 +46,11 @@ class RepairEvents:
                 a = np.sort(a)
             self.times[k] = a
 
+    @property
+    def has_jumps(self) -> bool:
+        """Whether any lasting speed jump was recorded."""
+        return bool(self._jumps)
+
     def jumps_between(self, t0: float, t1: float) -> list[dict]:
         """The lasting speed jumps from ``t0`` to ``t1`` [s, UTC], the largest first (at
         most :data:`MAX_JUMPS_LISTED`): ``{"source", "utc_s", "dt_s", "from_mps",

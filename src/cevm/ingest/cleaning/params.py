@@ -128,6 +128,72 @@ class CleanTrip:
 
 
 @dataclass(frozen=True, eq=False)
+class CleanBatch:
+    """Clean trips of one log, their arrays end to end (trip ``i``'s samples are
+    ``bounds[i]:bounds[i + 1]``): what :class:`CleanTrip` holds of each, for the stages
+    after the cleaning to work on all of them at once.
+
+    ``t_abs`` are the samples' times [s, UTC epoch] (a trip's ``time_s`` is ``t_abs``
+    minus its first); the evidence rows of trip ``i`` are ``row_window[i]`` of the log's
+    row times ``row_t`` and evidence columns ``rows`` (the log's own arrays: nothing
+    writes to them).
+    """
+
+    bounds: np.ndarray
+    t_abs: np.ndarray
+    speed_mps: np.ndarray
+    distance_m: np.ndarray
+    lat_deg: np.ndarray
+    lon_deg: np.ndarray
+    gps_alt_m: np.ndarray
+    quality: list[dict]
+    measured: list[Measurement | None]
+    gross_weight_kg: list[float | None]
+    source_lines: list[tuple[int, int]]
+    start_soc_pct: list[float | None]
+    row_t: np.ndarray
+    rows: dict[str, np.ndarray]
+    row_window: np.ndarray
+
+    def __len__(self) -> int:
+        return self.bounds.size - 1
+
+    @property
+    def samples(self) -> int:
+        return int(self.bounds[-1])
+
+    @property
+    def start_utc_s(self) -> np.ndarray:
+        """Each trip's first sample time [s, UTC epoch]."""
+        return self.t_abs[self.bounds[:-1]]
+
+    def time_s(self) -> np.ndarray:
+        """Each trip's sample times from its start [s], end to end."""
+        return self.t_abs - np.repeat(self.start_utc_s, np.diff(self.bounds))
+
+    def evidence_rows(self, i: int) -> tuple[np.ndarray, dict]:
+        """Trip ``i``'s evidence rows: their times and the evidence columns (float64)."""
+        if not self.rows:
+            return np.empty(0), {}
+        a, b = (int(x) for x in self.row_window[i])
+        return self.row_t[a:b], {c: x[a:b].astype(np.float64, copy=False) for c, x in self.rows.items()}
+
+    def trip(self, i: int) -> CleanTrip:
+        """Trip ``i`` as a :class:`CleanTrip` (views of the batch's arrays)."""
+        a, b = int(self.bounds[i]), int(self.bounds[i + 1])
+        t = self.t_abs[a:b]
+        rows_t, rows = self.evidence_rows(i)
+        return CleanTrip(
+            start_utc_s=float(t[0]), time_s=t - t[0], speed_mps=self.speed_mps[a:b],
+            distance_m=self.distance_m[a:b], lat_deg=self.lat_deg[a:b], lon_deg=self.lon_deg[a:b],
+            gps_alt_m=self.gps_alt_m[a:b], gross_weight_kg=self.gross_weight_kg[i], measured=self.measured[i],
+            quality=self.quality[i], first_source_line=self.source_lines[i][0],
+            last_source_line=self.source_lines[i][1], rows_t_s=rows_t, rows=rows,
+            start_soc_pct=self.start_soc_pct[i],
+        )
+
+
+@dataclass(frozen=True, eq=False)
 class CleanResult:
     """Kept trips, dropped (too short) segments with the reason, file-level quality."""
 

@@ -8,12 +8,12 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
-import pandas as pd
 
 from cevm.core.trip import CANONICAL_COLUMNS
 from cevm.errors import InputError
 from cevm.ingest.cleaning.arrays import _let_go
 from cevm.ingest.evidence import EVIDENCE_COLUMNS
+from cevm.lazy import is_pandas, pd
 
 if TYPE_CHECKING:
     from cevm.ingest.cleaning.events import RepairEvents
@@ -82,7 +82,7 @@ def _load(frame: pd.DataFrame | Mapping[str, np.ndarray], path, release: bool = 
     their own arrays where they are float64 or float32 (no copy); rows without a finite
     time are left out of the current rows. ``release``: the columns are removed from
     ``frame`` once taken, so that the cleaning holds the only reference to its arrays."""
-    table = frame if isinstance(frame, pd.DataFrame) else None
+    table = frame if is_pandas(frame, "DataFrame") else None
     names = set(frame.columns) if table is not None else set(frame)
     if "time_s" not in names:
         raise InputError(path, "no time column (canonical 'time_s')", column="time_s")
@@ -113,7 +113,7 @@ def _load(frame: pd.DataFrame | Mapping[str, np.ndarray], path, release: bool = 
 def _lines(s, n: int) -> np.ndarray:
     """The file lines of a ``source_line`` column (an array or a Series): the reader's
     integers as they are, anything else made integers (-1 where unknown)."""
-    a = s.to_numpy() if isinstance(s, pd.Series) and isinstance(s.dtype, np.dtype) else s
+    a = s.to_numpy() if is_pandas(s, "Series") and isinstance(s.dtype, np.dtype) else s
     if isinstance(a, np.ndarray) and a.dtype.kind in "iu":
         return a
     x = pd.to_numeric(pd.Series(s), errors="coerce").to_numpy(dtype=float)
@@ -126,7 +126,7 @@ def _numbers(s, name: str, line: np.ndarray, path) -> np.ndarray:
     value that is not a number is an error naming its line and column."""
     if isinstance(s, np.ndarray) and s.dtype in _FLOATS:
         return s
-    s = pd.Series(s) if not isinstance(s, pd.Series) else s
+    s = pd.Series(s) if not is_pandas(s, "Series") else s
     try:
         return s.to_numpy() if s.dtype in _FLOATS else s.to_numpy(dtype=float, na_value=np.nan)
     except (TypeError, ValueError):

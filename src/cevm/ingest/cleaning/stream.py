@@ -7,21 +7,21 @@ from collections.abc import Iterator, Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
-import pandas as pd
 
 from cevm.errors import InputError
 from cevm.ingest.cleaning.arrays import _jsonable, _let_go, _nonzero
 from cevm.ingest.cleaning.clock import _repair_time, _sort_by_time
 from cevm.ingest.cleaning.duplicates import _merge_ticks
 from cevm.ingest.cleaning.events import RepairEvents
-from cevm.ingest.cleaning.grid import TripSpeedRows
-from cevm.ingest.cleaning.params import CleanParams, CleanResult, CleanTrip
-from cevm.ingest.cleaning.rows import _ROW_SPEED_COLUMNS, _load
+from cevm.ingest.cleaning.grid import BatchSpeedRows, grid_lengths
+from cevm.ingest.cleaning.params import CleanBatch, CleanParams, CleanResult, CleanTrip
+from cevm.ingest.cleaning.rows import _ROW_SPEED_COLUMNS, CleanedLog, _load
 from cevm.ingest.cleaning.speed import _row_speed
 from cevm.ingest.cleaning.splitting import _SPLIT_REASONS, _ignition_on, _segment
-from cevm.ingest.cleaning.trip import CleanedLog, _clean_trip
+from cevm.ingest.cleaning.trip import clean_batch
 from cevm.ingest.consumption import EnergySourceLike, columns_read
 from cevm.ingest.evidence import EVIDENCE_COLUMNS
+from cevm.lazy import is_pandas, pd
 
 
 def _require_speed_or_position(cols: dict, path) -> None:
@@ -58,7 +58,7 @@ class CleanStream:
                  params: CleanParams = CleanParams(), *, path: str | Path | None = None,
                  release_frame: bool = False) -> None:
         p = params
-        n_in = len(frame) if isinstance(frame, pd.DataFrame) else len(frame.get("time_s", ()))
+        n_in = len(frame) if is_pandas(frame, "DataFrame") else len(frame.get("time_s", ()))
         t, line, rows, no_time = _load(frame, path, release_frame)
         _require_speed_or_position(rows.cols, path)
         ev = RepairEvents()
@@ -120,7 +120,11 @@ class CleanStream:
         del line
         self._work = (CleanedLog(t, cols, fixes, ev), v, src, rows_k, bounds, start_reasons, lines)
 
-    def __iter__(self) -> Iterator[CleanTrip]:
+    def batches(self, max_samples: int = 1 << 16) -> Iterator[CleanBatch]:
+        """The kept trips (steps 6 to 9), a :class:`CleanBatch` of consecutive trips at a
+        time, each of at most ``max_samples`` samples on the grid unless one trip alone
+        has more (a batch is made whole, at once: a large log's trips are never all
+        held); the dropped segments are added to ``dropped`` as they are met."""
         work, self._work = self._work, None
         if work is None:
             return
@@ -128,18 +132,40 @@ class CleanStream:
         del work
         n_trips = len(reasons)
         kept = 0
-        for j in range(n_trips):
-            a, b = int(bounds[j]), int(bounds[j + 1])
+        t_first = log.t[bounds[:-1] if rows_k is None else rows_k[bounds[:-1]]]
+        t_last = log.t[bounds[1:] - 1 if rows_k is None else rows_k[bounds[1:] - 1]]
+        size = grid_lengths(t_first, t_last, np.diff(bounds), self._params.grid_s)
+        if self._params.grid_s is None:
+            size = np.diff(bounds)
+        j0 = 0
+        while j0 < n_trips:
+            j1 = _batch_end(size, j0, max_samples)
+            a, b = int(bounds[j0]), int(bounds[j1])
             r = slice(a, b) if rows_k is None else rows_k[a:b]
-            seg = TripSpeedRows(log.t[r], v[r], src[r], reasons[j], reasons[j + 1] if j + 1 < n_trips else "end", lines[j])
-            out = _clean_trip(log, seg, self._sources, self._params)
-            if isinstance(out, CleanTrip):
-                kept += 1
-                yield out
-            else:
-                self.dropped.append(out)
+            seg = BatchSpeedRows(log.t[r], v[r], src[r], bounds[j0:j1 + 1] - a, reasons[j0:j1],
+                                 [*reasons[j0 + 1:j1], *(["end"] if j1 == n_trips else [reasons[j1]])],
+                                 lines[j0:j1])
+            batch, dropped = clean_batch(log, seg, self._sources, self._params)
+            del seg
+            self.dropped.extend(d for _, d in dropped)
+            j0 = j1
+            if batch is not None:
+                kept += len(batch)
+                yield batch
         self.quality.update(trips=kept, trips_dropped=len(self.dropped))
         self.quality = _jsonable(self.quality)
+
+    def __iter__(self) -> Iterator[CleanTrip]:
+        """The kept trips one at a time (made a batch at a time: :meth:`batches`)."""
+        for batch in self.batches():
+            yield from (batch.trip(i) for i in range(len(batch)))
+
+
+def _batch_end(size: np.ndarray, j0: int, max_samples: int) -> int:
+    """The end (exclusive) of the batch of trips from ``j0``: as many as fit in
+    ``max_samples`` samples (``size`` each), at least one."""
+    total = np.cumsum(size[j0:])
+    return j0 + max(1, int(np.searchsorted(total, max_samples, side="right")))
 
 
 def clean_log(

@@ -9,6 +9,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from cevm.ingest.dsm.headers import TileHeader, _transformer
+from cevm.ingest.dsm.projection import TOLERANCE_PX, to_crs
 
 
 def _unique_inverse(keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -63,6 +64,8 @@ class CrsTileGroup:
             self._bptr = np.append(np.flatnonzero(first), ka.size).astype(np.int64)
             self._bcand = ca
         self.lonlat_bbox: dict[str, tuple[float, float, float, float] | None] = {}
+        #: agreement asked of a fitted transform into this CRS (:mod:`.projection`)
+        self.tolerance = TOLERANCE_PX * float(min(min(abs(tiles[i].a), abs(tiles[i].e)) for i in tile_ids))
         self._grid = self._regular_grid(b) if len(tile_ids) > 8 else None
 
     #: Largest table of a regular tile grid [cells] (4 bytes each).
@@ -190,7 +193,7 @@ class TileIndex:
         if len(self.groups) == 1 and bool(finite.all()):
             # Common case, no index arrays: one CRS, every fix finite.
             grp = self.groups[0]
-            px, py = _to_crs(x, y, crs, grp.crs_key)
+            px, py = to_crs(x, y, crs, grp.crs_key, grp.tolerance)
             t = grp.locate(px, py)
             pts = None
             if not (t >= 0).all():
@@ -207,7 +210,7 @@ class TileIndex:
                 break
             if len(self.groups) > 1:
                 todo = todo[self._in_group_bbox(grp, x[todo], y[todo], crs)]
-            gx, gy = _to_crs(x[todo], y[todo], crs, grp.crs_key)
+            gx, gy = to_crs(x[todo], y[todo], crs, grp.crs_key, grp.tolerance)
             found = grp.locate(gx, gy)
             hit = found >= 0
             sel = todo[hit]
@@ -253,10 +256,3 @@ class TileIndex:
         if box is None:
             return np.ones(x.size, dtype=bool)
         return (x >= box[0]) & (x <= box[2]) & (y >= box[1]) & (y <= box[3])
-
-
-def _to_crs(x: np.ndarray, y: np.ndarray, src: str, dst: str) -> tuple[np.ndarray, np.ndarray]:
-    if src == dst:
-        return x, y
-    gx, gy = _transformer(src, dst).transform(x, y)
-    return np.asarray(gx, dtype=np.float64), np.asarray(gy, dtype=np.float64)

@@ -3,6 +3,7 @@ what a parse engine makes of one block (:class:`ParsedBlock`)."""
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Literal
@@ -18,6 +19,9 @@ from cevm.ingest.textfile import MAX_LINE_BYTES, Utf8Stream
 # Text that means "no value" in a numeric column (besides an empty field).
 _NUMERIC_NA = ["", "NA", "N/A", "n/a", "NaN", "nan", "null", "NULL", "None", "-", "--"]
 
+
+#: Any byte but ASCII whitespace (what ``bytes.isspace`` is true of).
+_NON_SPACE = re.compile(rb"[^ \t\n\r\x0b\x0c]")
 
 #: Text parsed at a time: blocks of whole lines of about this many bytes.
 BLOCK_BYTES = 4 << 20
@@ -45,7 +49,8 @@ class ReadRepairs:
 def _data_blocks(text: Utf8Stream, rest: bytes, hdr: Header, names: list[str], prof: Profile, path: Path,
                  repairs: ReadRepairs):
     """Yield (first line number, block, is last) for blocks of whole data lines of about
-    :data:`BLOCK_BYTES`; the last block may end without a line break. A truncated last
+    :data:`BLOCK_BYTES` (bytes, or a memoryview of them); the last block may end without
+    a line break. A truncated last
     line (fewer fields than the header, no line end) is dropped and reported, or an
     error if the profile says so; a body of blank lines only is "header only"; more than
     :data:`MAX_LINE_BYTES` without a line break is refused as soon as it is read."""
@@ -76,12 +81,14 @@ def _data_blocks(text: Utf8Stream, rest: bytes, hdr: Header, names: list[str], p
             yield first_line, data, True
             return
         cut = data.rfind(b"\n") + 1  # > 0: a line break was read
-        block, tail = (data[:cut], data[cut:]) if cut < len(data) else (data, b"")
-        del data
+        # the block as a view of the text read (no copy of its megabytes); the rest
+        # waits for the next block
+        block, tail = (memoryview(data)[:cut], data[cut:]) if cut < len(data) else (data, b"")
         parts, size, has_nl, since_nl = ([tail] if tail else []), len(tail), False, len(tail)
-        seen_data = seen_data or not block.isspace()
+        seen_data = seen_data or _NON_SPACE.search(data, 0, cut) is not None  # not block.isspace(), uncopied
         yield first_line, block, False
-        first_line += block.count(b"\n")
+        first_line += data.count(b"\n", 0, cut)
+        del data, block
 
 
 def _drop_truncated_last_line(data: bytes, first_line: int, names: list[str], prof: Profile, path: Path,

@@ -23,10 +23,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-import pandas as pd
 
 from cevm.errors import InputError
 from cevm.ingest.reading.lines import _line_col_error, _lines_summary
+from cevm.lazy import pd
 
 
 @dataclass

@@ -7,7 +7,6 @@ from __future__ import annotations
 from functools import lru_cache
 
 import numpy as np
-import pandas as pd
 
 from cevm.ingest.profiles import Profile
 from cevm.ingest.reading.blocks import _NUMERIC_NA, ParsedBlock, _drop_empty_rows
@@ -33,7 +32,10 @@ def _arrow_block(block: bytes, first_line: int, plan: ColumnPlan, prof: Profile,
     as strings; ``None`` where pyarrow refuses the block (a row with more or fewer
     fields, a value it cannot convert) or its rows do not match the lines."""
     pa, pc, pacsv = _arrow()
-    n_lines = block.count(b"\n") + (0 if block.endswith(b"\n") else 1)
+    if isinstance(block, memoryview):  # a block ending with a line break (blocks._data_blocks)
+        n_lines = block.obj.count(b"\n", 0, len(block))
+    else:
+        n_lines = block.count(b"\n") + (0 if block.endswith(b"\n") else 1)
     types = {c: pa.float64() for c in plan.num_cols}
     types.update({c: pa.string() for c in plan.text_cols})
     tcol = prof.time.columns[0] if len(prof.time.columns) == 1 else None
@@ -69,9 +71,10 @@ def _arrow_block(block: bytes, first_line: int, plan: ColumnPlan, prof: Profile,
             has_value |= time_ns != NAT
             continue
         col = pc.if_else(pc.equal(col, ""), pa.scalar(None, pa.string()), col)
-        has_value |= col.is_valid().to_numpy(zero_copy_only=False)
+        valid = col.is_valid().to_numpy(zero_copy_only=False)
+        has_value |= valid
         vals = col.to_numpy(zero_copy_only=False)
-        vals[pd.isna(vals)] = np.nan  # None -> NaN, as pandas gives
+        vals[~valid] = np.nan  # None -> NaN, as pandas gives
         text[c] = vals
     del tbl
     lines = first_line + np.arange(n_lines, dtype=np.int64)

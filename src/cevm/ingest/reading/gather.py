@@ -9,7 +9,6 @@ import re
 from pathlib import Path
 
 import numpy as np
-import pandas as pd
 
 from cevm.errors import InputError, has_control
 from cevm.ingest.profiles import ColumnMap, Profile
@@ -34,6 +33,7 @@ from cevm.ingest.timestamps import (
     epoch_ns,
     parse_datetimes,
 )
+from cevm.lazy import pd
 from cevm.runtime import release_free_memory
 
 
@@ -319,7 +319,7 @@ class FactorisedValues:
 
 def _first_value(block: bytes, index: int, sep: str, max_lines: int = 50) -> str | None:
     """The first non-empty value of field ``index`` in the first lines of ``block``."""
-    head = block[: 1 << 16].decode("utf-8", errors="replace").splitlines()[:max_lines]
+    head = bytes(block[: 1 << 16]).decode("utf-8", errors="replace").splitlines()[:max_lines]
     for row in csv.reader(head, delimiter=sep):
         if index < len(row) and row[index].strip():
             return row[index].strip()

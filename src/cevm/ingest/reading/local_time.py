@@ -7,11 +7,11 @@ import re
 from pathlib import Path
 
 import numpy as np
-import pandas as pd
 
 from cevm.errors import InputError
 from cevm.ingest.reading.lines import _fmt_ns, _lines_summary
 from cevm.ingest.timestamps import NAT, NS_PER_DAY
+from cevm.lazy import pd
 
 
 def _repair_dates(date_ns: np.ndarray, tod_ns: np.ndarray, raw_dates: np.ndarray, lines: np.ndarray,

@@ -10,7 +10,8 @@ from pathlib import Path
 from typing import Literal
 
 import numpy as np
-import pandas as pd
+
+from cevm.lazy import pd
 
 
 @dataclass(frozen=True)

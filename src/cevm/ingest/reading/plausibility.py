@@ -100,9 +100,17 @@ def _check_position(out: dict[str, np.ndarray], prof: Profile, lines: np.ndarray
                     repairs: list[str]) -> None:
     """A position is one fix: if latitude or longitude is impossible (|lat| > 90,
     |lon| > 180) or, with ``zero_position_is_no_fix``, exactly 0 (the value GPS modules
-    write without a fix), both become NaN. Zeros are never an error (a logger may have no
+    write without a fix), both become NaN. A latitude column without a longitude column
+    (or the reverse: a header cell lost) gives no positions, with a repair note. Zeros are never an error (a logger may have no
     GPS at all); impossible values follow the absurd-value policy."""
-    if "lat_deg" not in out:
+    if "lat_deg" not in out and "lon_deg" not in out:
+        return
+    if "lat_deg" not in out or "lon_deg" not in out:  # half a position is none: left out, and said
+        have = "lat_deg" if "lat_deg" in out else "lon_deg"
+        src = next((m.source for m in prof.columns if m.canonical == have), have)
+        del out[have]
+        repairs.append(f"position: column {src!r} without its {'longitude' if have == 'lat_deg' else 'latitude'} "
+                       "column: no GPS positions read")
         return
     lat, lon = out["lat_deg"], out["lon_deg"]
     with np.errstate(invalid="ignore"):  # |x| > 90 without an array of |x|

@@ -9,7 +9,6 @@ from cevm.ingest.reading.blocks import Engine, ParsedBlock, ReadRepairs, _data_b
 from cevm.ingest.reading.canonical import _canonical_columns, _split_vehicles
 from cevm.ingest.reading.detection import _open_log
 from cevm.ingest.reading.engine_arrow import _arrow_block
-from cevm.ingest.reading.engine_pandas import _pandas_block
 from cevm.ingest.reading.gather import ColumnGatherer
 from cevm.ingest.reading.header import (
     ColumnPlan,
@@ -91,4 +90,6 @@ def _parse_block(block: bytes, first_line: int, plan: ColumnPlan, prof: Profile,
         part = _arrow_block(block, first_line, plan, prof, gather.arrow_time_type(block, plan, prof))
         if part is not None:
             return part
-    return _pandas_block(block, first_line, plan, prof, path)
+    from cevm.ingest.reading.engine_pandas import _pandas_block  # imports pandas: only for such a block
+
+    return _pandas_block(bytes(block), first_line, plan, prof, path)
