@@ -109,6 +109,25 @@ class WindowReader:
         self._pools.clear()
         self._pool_index.clear()
 
+    def adopt(self, datasets: Sequence) -> None:
+        """Take open datasets of this reader's tiles (by name; opened in that order,
+        the last the most recently used) as if it had opened them; those of no tile
+        and those beyond :attr:`max_open` are closed."""
+        index = {t.name: i for i, t in enumerate(self.tiles)}
+        for ds in datasets:
+            i = index.get(ds.name)
+            if i is None or i in self._open:
+                ds.close()
+                continue
+            self._open[i] = ds
+        self.trim_open()
+
+    def trim_open(self) -> None:
+        """Close the least recently used datasets beyond :attr:`max_open`."""
+        while len(self._open) > self.max_open:
+            _, old = self._open.popitem(last=False)
+            old.close()
+
     def _dataset(self, tile: int):
         ds = self._open.get(tile)
         if ds is not None:
@@ -119,9 +138,7 @@ class WindowReader:
         gdal_cache_bounded()  # in a worker too, which has only the headers
         ds = rasterio.open(self.tiles[tile].name, driver=self.tiles[tile].driver or None)
         self._open[tile] = ds
-        while len(self._open) > self.max_open:
-            _, old = self._open.popitem(last=False)
-            old.close()
+        self.trim_open()
         return ds
 
     def _read_block(self, tile: int, brow: int, bcol: int) -> np.ndarray:
