@@ -114,63 +114,42 @@ def _transformer(src: str, dst: str):
     return pyproj.Transformer.from_crs(src, dst, always_xy=True)
 
 
-def _read_header(name: str, shown: str, driver: str = "", keep: list | None = None) -> TileHeader:
-    """The raster's header; with ``keep``, the open dataset is appended to it (for the
-    sampler's reader, which then need not open it again) instead of being closed."""
+def _read_header(name: str, shown: str, driver: str = "") -> TileHeader:
     import rasterio
     from rasterio.errors import RasterioError
 
     gdal_cache_bounded()
     try:
-        ds = rasterio.open(name, driver=driver or None)
-    except RasterioError as exc:
-        raise InputError(shown, f"cannot open as a raster: {exc}") from None
-    try:
-        header = _header_of(ds, name, shown, driver)
-    except BaseException:
-        ds.close()
-        raise
-    if keep is None:
-        ds.close()
-    else:
-        keep.append(ds)
-    return header
-
-
-def _header_of(ds, name: str, shown: str, driver: str) -> TileHeader:
-    """The :class:`TileHeader` of an open raster, refused where it cannot serve as a DSM."""
-    from rasterio.errors import RasterioError
-
-    try:
-        if ds.count < 1:
-            raise InputError(shown, "raster has no band")
-        if ds.crs is None:
-            raise InputError(shown, "raster has no CRS (georeferencing) to place GPS fixes in")
-        t = ds.transform
-        if t.b != 0 or t.d != 0:
-            raise InputError(shown, "rotated or sheared rasters are not supported")
-        if t.a == 0 or t.e == 0:
-            raise InputError(shown, "raster has a degenerate geotransform")
-        _check_block_size(ds, shown)
-        bh, bw = ds.block_shapes[0]
-        block = bw if bh == bw and bh < ds.height else 0
-        scale = ds.scales[0] if ds.scales and ds.scales[0] is not None else 1.0
-        offset = ds.offsets[0] if ds.offsets and ds.offsets[0] is not None else 0.0
-        return TileHeader(
-            name=name,
-            crs_key=_crs_key_from_wkt(ds.crs.to_wkt()),
-            width=ds.width,
-            height=ds.height,
-            x0=float(t.c),
-            y0=float(t.f),
-            a=float(t.a),
-            e=float(t.e),
-            nodata=None if ds.nodata is None else float(ds.nodata),
-            scale=float(scale),
-            offset=float(offset),
-            block=int(block),
-            driver=driver,
-        )
+        with rasterio.open(name, driver=driver or None) as ds:
+            if ds.count < 1:
+                raise InputError(shown, "raster has no band")
+            if ds.crs is None:
+                raise InputError(shown, "raster has no CRS (georeferencing) to place GPS fixes in")
+            t = ds.transform
+            if t.b != 0 or t.d != 0:
+                raise InputError(shown, "rotated or sheared rasters are not supported")
+            if t.a == 0 or t.e == 0:
+                raise InputError(shown, "raster has a degenerate geotransform")
+            _check_block_size(ds, shown)
+            bh, bw = ds.block_shapes[0]
+            block = bw if bh == bw and bh < ds.height else 0
+            scale = ds.scales[0] if ds.scales and ds.scales[0] is not None else 1.0
+            offset = ds.offsets[0] if ds.offsets and ds.offsets[0] is not None else 0.0
+            return TileHeader(
+                name=name,
+                crs_key=_crs_key_from_wkt(ds.crs.to_wkt()),
+                width=ds.width,
+                height=ds.height,
+                x0=float(t.c),
+                y0=float(t.f),
+                a=float(t.a),
+                e=float(t.e),
+                nodata=None if ds.nodata is None else float(ds.nodata),
+                scale=float(scale),
+                offset=float(offset),
+                block=int(block),
+                driver=driver,
+            )
     except RasterioError as exc:
         raise InputError(shown, f"cannot open as a raster: {exc}") from None
 

@@ -139,21 +139,9 @@ class DsmSampler:
         names = _list_sources(source)
         shown = os.fspath(source) if not isinstance(source, (list, tuple)) else None
         local = not remote_allowed(allow_remote)
-        opened: list = []  # the datasets the headers were read from: the reader's first open ones
-        try:
-            with _gdal_env():  # one GDAL environment for all the headers, not one per raster
-                tiles = []
-                for n in names:
-                    tiles.append(_read_header(n, n, check_local(n) if local else "", keep=opened))
-                    if len(opened) > MAX_OPEN:  # keep the last ones only, as the reader's LRU would
-                        opened.pop(0).close()
-            sampler = cls(tiles, block_px=block_px, cache_mb=cache_mb, label=shown or f"{len(names)} rasters")
-        except BaseException:
-            for ds in opened:
-                ds.close()
-            raise
-        sampler.windows.adopt(opened)
-        return sampler
+        with _gdal_env():  # one GDAL environment for all the headers, not one per raster
+            tiles = [_read_header(n, n, check_local(n) if local else "") for n in names]
+        return cls(tiles, block_px=block_px, cache_mb=cache_mb, label=shown or f"{len(names)} rasters")
 
     @property
     def headers(self) -> DsmHeaders:

@@ -109,19 +109,6 @@ class WindowReader:
         self._pools.clear()
         self._pool_index.clear()
 
-    def adopt(self, datasets: Sequence) -> None:
-        """Take open datasets of this reader's tiles (by name; opened in that order,
-        the last the most recently used) as if it had opened them; those of no tile
-        and those beyond :attr:`max_open` are closed."""
-        index = {t.name: i for i, t in enumerate(self.tiles)}
-        for ds in datasets:
-            i = index.get(ds.name)
-            if i is None or i in self._open:
-                ds.close()
-                continue
-            self._open[i] = ds
-        self.trim_open()
-
     def trim_open(self) -> None:
         """Close the least recently used datasets beyond :attr:`max_open`."""
         while len(self._open) > self.max_open:
