@@ -16,15 +16,15 @@ directory, then times, alternately and ``--repeat`` times each, two fresh proces
    vector, the sweep, the table).
 
 Prints each run, the best and the median of each, and the ratio command / floor (the
-goal of issues 18 and 25: 1.5x or less).
+goal of issues 18 and 25: 1.5x or less). Also, in-process: the cycle reader alone
+(``cevm.io.read_cycle_csv``) against a bare ``pandas.read_csv`` of the file, to show the
+reader's own share. Wall-clock times on a shared 2-core machine: compare within a run.
 
 Both processes run with Python's bytecode cache on, in a directory of the run
 (``PYTHONPYCACHEPREFIX``), whatever ``PYTHONDONTWRITEBYTECODE`` says: cevm is run from
 its source tree, and without the cache every run would compile cevm's modules again
 (about 0.17 s), which an installed cevm (whose modules pip compiles at install) never
-does; the floor's pandas and numpy come with their bytecode. The warm-up runs write it. Also, in-process: the cycle reader alone
-(``cevm.io.read_cycle_csv``) against a bare ``pandas.read_csv`` of the file, to show the
-reader's own share. Wall-clock times on a shared 2-core machine: compare within a run.
+does; the floor's pandas and numpy come with their bytecode. The warm-up runs write it.
 """
 
 from __future__ import annotations

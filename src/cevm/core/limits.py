@@ -272,8 +272,8 @@ def source_demand(st: StepTable, legs: Sequence[LegProfile], *, logged: bool = F
         """c[ends] - c[starts]; on a uniform grid the same differences as slices w
         apart, then the moving steps' (one gather instead of two)."""
         if uniform:
-            return np.subtract(c[w:], c[:-w])[starts]
-        return c[ends] - c[starts]
+            return np.asarray(np.subtract(c[w:], c[:-w])[starts])
+        return np.asarray(c[ends] - c[starts])
 
     def window_sums(values: np.ndarray) -> np.ndarray:
         np.cumsum(values, out=c[1:])

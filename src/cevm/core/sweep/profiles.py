@@ -100,8 +100,8 @@ class StepTable:
         (a crossing a tenth of the way along a long source sums a tenth of it)."""
         j = np.asarray(j)
         if "d_edges" in self.__dict__ or j.size == 0:
-            return self.d0[j]
-        return edges(self.r[: int(j.max())] / self.g_mps2)[j]
+            return np.asarray(self.d0[j])
+        return np.asarray(edges(self.r[: int(j.max())] / self.g_mps2)[j])
 
     @property
     def duration_s(self) -> float:
