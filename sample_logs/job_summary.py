@@ -94,9 +94,12 @@ def replayed(path: Path) -> None:
             f"{sm.get('completes', '?')} complete with the reserve kept, {sm.get('completes_at_confidence', '?')} at "
             f"probability {sm.get('confidence', float('nan')):g}")
     need = sm.get(f"battery_for_target_{unit}")
+    need_c = sm.get(f"battery_for_target_{unit}_at_confidence")
     if need is not None:
-        text += (f"; {100 * sm.get('target_share', 0):.0f} % of them need a {need:,.0f} {unit} battery "
-                 f"(it has {sm.get(f'capacity_{unit}', float('nan')):,.0f})")
+        text += (f"; {100 * sm.get('target_share', 0):.0f} % of them need a {need:,.0f} {unit} battery at the mean"
+                 + (f", {need_c:,.0f} {unit} at probability {sm.get('confidence', float('nan')):g}"
+                    if need_c is not None and need_c == need_c else "")
+                 + f" (it has {sm.get(f'capacity_{unit}', float('nan')):,.0f})")
     say(text)
 
 

@@ -53,7 +53,7 @@ def test_stored_trips_start_at_their_logged_soc_unless_given(twizy_store):
     for r in rows:
         assert float(r["soc_min_pct"]) <= float(r["soc_start_pct"])
     given = _rows(runner.invoke(app, [*args, "--soc-start", "90"]).stdout)
-    assert all(r["soc_start_from"] == "--soc-start" and float(r["soc_start_pct"]) == 90.0 for r in given)
+    assert all(r["soc_start_from"] == "given" and float(r["soc_start_pct"]) == 90.0 for r in given)
 
 
 def test_a_cycle_row_says_every_assumption():
@@ -244,8 +244,8 @@ def test_the_main_jobs_summary_reads_its_outputs(tmp_path):
                                             "urban,bus,cycle,13500,14.4,,,120,true,false,true\n")
     (tmp_path / "replay-t.json").write_text(json.dumps({
         "candidate": "etruck", "vehicles": 2, "duties": 12, "completes": 11, "completes_at_confidence": 10,
-        "confidence": 0.95, "target_share": 0.95, "battery_for_target_kWh": 172.0, "capacity_kWh": 590.0,
-        "unit": "kWh"}))
+        "confidence": 0.95, "target_share": 0.95, "battery_for_target_kWh": 172.0,
+        "battery_for_target_kWh_at_confidence": 201.0, "capacity_kWh": 590.0, "unit": "kWh"}))
     res = subprocess.run([sys.executable, str(ROOT / "sample_logs/job_summary.py"), str(tmp_path)], capture_output=True,
                          text=True, check=True)
     out = res.stdout
@@ -256,7 +256,7 @@ def test_the_main_jobs_summary_reads_its_outputs(tmp_path):
     assert "error against the measured -1.0 % mean" in flat and "feasible 1 of 2 (not: 1 power)" in flat
     assert "bus on urban at 9,000-13,500 kg: 11.10-14.40 kWh, range 120-150 km; feasible 2 of 2" in flat
     assert ("etruck on 2 logged vehicles' 12 duties: 11 complete with the reserve kept, 10 at probability 0.95; "
-            "95 % of them need a 172 kWh battery (it has 590)") in flat
+            "95 % of them need a 172 kWh battery at the mean, 201 kWh at probability 0.95 (it has 590)") in flat
 
 
 def test_the_main_job_ends_with_its_summary():

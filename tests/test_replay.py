@@ -469,3 +469,47 @@ def test_the_candidates_mass_on_each_trip(tmp_path):
     np.testing.assert_array_equal(candidate_masses(trips, veh, None), [30e3, 28e3, 40e3, 23e3])
     # the logged trucks weigh 16 t empty: the candidate carries their payloads on its 18 t
     np.testing.assert_array_equal(candidate_masses(trips, veh, 16e3), [32e3, 28e3, 42e3, 23e3])
+
+
+# ------------------------------------------------------------- sizing at a confidence
+
+
+def test_energy_at_confidence_adds_the_quantile_as_the_trips_draw():
+    """Each duty's total moves to its one-sided quantile (mean + z sd), the addition
+    shared over its trips in proportion to the energy each draws (a trip that gives energy
+    back gets none); a duty whose trips draw nothing shares it equally."""
+    from cevm.core.replay.spread import energy_at_confidence
+
+    mean = np.array([10.0, 30.0, -5.0, 0.0, -2.0])
+    sd = np.array([4.0, 1.0])
+    bounds = np.array([0, 3, 5])
+    z = 1.6448536269514722  # the standard normal's 0.95 quantile
+    got = energy_at_confidence(mean, sd, bounds, 0.95)
+    want = [10.0 + z * 4.0 * 0.25, 30.0 + z * 4.0 * 0.75, -5.0, 0.0 + z * 0.5, -2.0 + z * 0.5]
+    np.testing.assert_allclose(got, want, rtol=1e-12)
+    np.testing.assert_allclose(energy_at_confidence(mean, sd, bounds, 0.5), mean, rtol=0, atol=1e-12)
+    with pytest.raises(ValueError):
+        energy_at_confidence(mean, sd, bounds, 1.0)
+
+
+def test_the_battery_at_a_confidence_runs_the_duty_at_its_quantile(tmp_path):
+    """One trip a duty, no charging, levels at the trips' ends: the battery that keeps the
+    reserve when the duty takes its 0.95 quantile is E_c / (start - reserve) rounded up to
+    1 kWh, E_c = E + z sd (a hand computation); it is never below the mean's battery."""
+    veh = ev(tmp_path)
+    cycles = [cycle(40 + k) for k in range(3)]
+    trips = logged(cycles, [0.0, 86400.0, 2 * 86400.0], masses=[30e3, 35e3, 25e3], temps=[-3.0, 5.0, 15.0])
+    s = ReplaySettings(within_trips=False, size_confidence=0.95)
+    plan = plan_vehicle(trips, veh, s, tables(cycles, trips))
+    if plan.spread.source == "none":
+        pytest.skip("the test vehicle has no predictive distribution")
+    assert plan.duties.n == 3 and (plan.energy_sd > 0).all()
+    z = 1.6448536269514722
+    e_c = plan.energies.energy + z * plan.energy_sd
+    frac = (s.soc_start_pct - s.reserve_pct) / 100.0
+    want = np.ceil(e_c / frac / KWH - 1e-9)
+    np.testing.assert_array_equal(plan.battery_needed_conf / KWH, want)
+    assert (plan.battery_needed_conf >= plan.battery_needed).all()
+    np.testing.assert_array_equal(plan.battery_needed / KWH, np.ceil(plan.energies.energy / frac / KWH - 1e-9))
+    none = plan_vehicle(trips, veh, dataclasses.replace(s, size_confidence=None), tables(cycles, trips))
+    assert np.isnan(none.battery_needed_conf).all()

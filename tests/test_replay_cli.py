@@ -182,3 +182,23 @@ def test_levels_carried_overnight_and_the_logged_trucks_kerb(store):
     assert rows[0]["soc_start_pct"] == 100.0 and all(r["overnight"] == "11 kW" for r in rows)
     assert rows[1]["soc_start_pct"] <= 100.0 and rows[0]["battery_needed_kwh"] is None  # sized for the fleet
     assert rows[0]["mass_min_kg"] == 33000.0  # 30 t logged, 15 t of it the logged truck: 15 t on the candidate's 18
+
+
+def test_sizes_at_the_confidence_are_the_quantile_of_the_duties_needs_at_it(store, tmp_path):
+    """The summary's battery at --confidence is the --target-share quantile of the rows'
+    battery_needed_kwh_conf (the smallest on the 1 kWh grid that completes the share), as
+    the mean's is of battery_needed_kwh; never below it; the lines say both."""
+    summary = tmp_path / "summary.json"
+    res = replay(store, "-v", TRUCK, "--battery-kwh", "30", "--target-share", "0.6", "--summary", str(summary),
+                 "-f", "csv")
+    assert res.exit_code == 0, res.output
+    rows = list(csv.DictReader(io.StringIO(res.stdout)))
+    sm = json.loads(summary.read_text())
+    mean_need = sorted(float(r["battery_needed_kwh"]) for r in rows)
+    conf_need = sorted(float(r["battery_needed_kwh_conf"]) for r in rows)
+    k = int(np.ceil(0.6 * len(rows))) - 1  # the smallest size that completes at least 60 % of the duties
+    assert sm["battery_for_target_kWh"] == mean_need[k]
+    assert sm["battery_for_target_kWh_at_confidence"] == conf_need[k]
+    assert all(c >= m for c, m in zip(conf_need, mean_need, strict=True)) and conf_need[k] > mean_need[k]
+    table = replay(store, "-v", TRUCK, "--battery-kwh", "30", "--target-share", "0.6")
+    assert f"{conf_need[k]:,.0f} kWh with each duty's energy at its 0.95 quantile" in " ".join(table.output.split())

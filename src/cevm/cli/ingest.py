@@ -39,7 +39,7 @@ def ingest(
         Optional[str], typer.Option(help="Dask scheduler address (tcp://HOST:8786): run the per-file work on that cluster (pip install 'cevm[dask]'); the workers must read the log files at the same paths, and the DSM.")
     ] = None,
     max_rows: Annotated[
-        Optional[int], typer.Option(min=1, metavar="ROWS", help="Refuse a file of more data rows than this. Default: 2,500,000, and at most 36 million values (rows x columns read), which keeps a worker under 500 MB; given, the rows alone bound a file (memory grows with rows and columns; see the README).")
+        Optional[int], typer.Option(min=1, metavar="ROWS", help="Refuse a file of more data rows than this. Default: 2,500,000, and at most 36 million values (rows x columns read), which keeps a worker under 500 MB; given, the rows alone bound a file (memory grows with rows and columns; see docs/guide/ingest.md).")
     ] = None,
     max_samples: Annotated[
         int, typer.Option(min=1, metavar="SAMPLES", help="Refuse a file whose trips would hold more samples than this on the 1 s grid (a log every 5 s gives 5 a row): the stored trips are held until written, so this keeps a worker under 500 MB.")

@@ -317,12 +317,19 @@ def fleet_summary(run: Run, vehicle, settings: ReplaySettings, confidence: float
         battery, charger = chained_sizes(run.chains, target, soc_start=s, reserve=r,
                                          efficiency=settings.charging.efficiency, capacity=cap,
                                          battery_step=settings.battery_step, charger_step=settings.charger_step_w)
+        battery_c = charger_c = math.nan  # sized at the mean only: the levels carried across duties
     else:
         battery = size_for_share(f.array("battery"), target)
+        battery_c = size_for_share(f.array("battery_conf"), target)
         need = f.array("charger")  # NaN: the duty's vehicle has no stop that may charge
-        charger = math.nan
+        charger = charger_c = math.nan
         if not np.isnan(need).all():
             charger = size_for_share(np.where(np.isnan(need), np.where(completes, 0.0, np.inf), need), target)
+            need_c = f.array("charger_conf")
+            # a duty without a stop that may charge needs no charger if it keeps the reserve at its confidence
+            # energy with the candidate's battery: where its battery need there is within the battery
+            kept_c = f.array("battery_conf") <= cap
+            charger_c = size_for_share(np.where(np.isnan(need_c), np.where(kept_c, 0.0, np.inf), need_c), target)
     per = "kWh" if ev else "l"
     out = {
         "candidate": vehicle.label, "powertrain": vehicle.powertrain, "vehicles": len(set(f.vehicle)), "duties": n,
@@ -334,14 +341,28 @@ def fleet_summary(run: Run, vehicle, settings: ReplaySettings, confidence: float
                      if run.sources - {"none"} else "none: no predictive distribution, p is 0 or 1 at the mean"),
         "p_standard_error_max": 0.5 / math.sqrt(settings.draws) if run.sources - {"none"} else 0.0,
         "interval_from": ", ".join(sorted(run.sources)), "target_share": target,
-        f"battery_for_target_{per}": battery / scale, f"battery_step_{per}": settings.battery_step / scale,
+        f"battery_for_target_{per}": battery / scale,
+        f"battery_for_target_{per}_at_confidence": battery_c / scale,
+        f"battery_step_{per}": settings.battery_step / scale,
         f"capacity_{per}": cap / scale,
     }
     if ev:
         out["charger_for_target_kw"] = charger / 1e3
+        out["charger_for_target_kw_at_confidence"] = charger_c / 1e3
         out["charger_step_kw"] = settings.charger_step_w / 1e3
     out["unit"] = unit
     return out
+
+
+def _charger_line(c: float, sm: dict, at: str) -> str:
+    """The summary's line on the charger [kW] that completes the target share ``at`` a level."""
+    share = f"{100 * sm['target_share']:.0f} %"
+    if c == 0:
+        return f"no charger is needed to complete {share} of the duties {at}"
+    if math.isfinite(c):
+        return (f"a charger of {c:,.0f} kW (to {sm['charger_step_kw']:g} kW) at the stops that may charge completes "
+                f"{share} of the duties with the candidate's battery {at}")
+    return f"no charger at the stops that may charge completes {share} of the duties with the candidate's battery {at}"
 
 
 def summary_lines(sm: dict, settings: ReplaySettings) -> list[str]:
@@ -359,17 +380,20 @@ def summary_lines(sm: dict, settings: ReplaySettings) -> list[str]:
              f"{sm['confidence']:g}"]
     b = sm[f"battery_for_target_{per}"]
     what = "battery" if unit == "kWh" else "tank"
+    bc = sm[f"battery_for_target_{per}_at_confidence"]
     if math.isfinite(b):
         lines.append(f"a usable {what} of {b:,.0f} {unit} (to {sm[f'battery_step_{per}']:g} {unit}) completes "
-                     f"{pct(sm['target_share'])} of the duties at the mean energies (the candidate has "
-                     f"{sm[f'capacity_{per}']:,.0f} {unit})")
+                     f"{pct(sm['target_share'])} of the duties at the mean energies"
+                     + (f", {bc:,.0f} {unit} with each duty's energy at its {sm['confidence']:g} quantile"
+                        if math.isfinite(bc) else "")
+                     + f" (the candidate has {sm[f'capacity_{per}']:,.0f} {unit})")
     c = sm.get("charger_for_target_kw", math.nan)
+    cc = sm.get("charger_for_target_kw_at_confidence", math.nan)
+    at_c = f"with each duty's energy at its {sm['confidence']:g} quantile"
     if unit == "kWh" and not math.isnan(c):
-        lines.append(f"no charger is needed to complete {pct(sm['target_share'])} of the duties" if c == 0 else
-                     f"a charger of {c:,.0f} kW (to {sm['charger_step_kw']:g} kW) at the stops that may charge "
-                     f"completes {pct(sm['target_share'])} of the duties with the candidate's battery"
-                     if math.isfinite(c) else "no charger at the stops that may charge completes "
-                     f"{pct(sm['target_share'])} of the duties with the candidate's battery")
+        lines.append(_charger_line(c, sm, f"at the mean energies and {at_c}" if c == cc else "at the mean energies"))
+    if unit == "kWh" and not math.isnan(cc) and cc != c:
+        lines.append(_charger_line(cc, sm, at_c))
     lines.append(f"p_complete: {sm['p_method']}" + (f" (standard error at most {sm['p_standard_error_max']:.3f}; "
                                                      f"from the {sm['interval_from']} distribution)"
                                                      if sm["p_standard_error_max"] else ""))
@@ -487,7 +511,7 @@ def _settings(o: SimpleNamespace, vehicle) -> ReplaySettings:
                               reserve_pct=o.reserve_pct, charging=charging, interval=o.interval, draws=o.draws,
                               seed=o.seed, battery_step=J_PER_KWH if vehicle.is_ev else 1.0,
                               ice_braking=o.ice_braking, logged_kerb_kg=o.logged_kerb_kg,
-                              within_trips=o.within_trips == "exact")
+                              within_trips=o.within_trips == "exact", size_confidence=o.confidence)
     except ValueError as exc:
         raise CevmError(str(exc)) from None
 

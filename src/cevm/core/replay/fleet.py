@@ -45,7 +45,8 @@ def duty_extrapolation(plan: VehiclePlan) -> list[str]:
 class Fleet:
     """The duties of a replay, gathered vehicle by vehicle (:meth:`add`): per duty its
     vehicle, start [s], energy and its interval [J or l], whether it completes at the
-    mean, its probability, and its battery and charger needs."""
+    mean, its probability, and its battery and charger needs at the mean energies and at
+    the sizing's confidence (``battery_conf``, ``charger_conf``)."""
 
     vehicle: list
     start_s: list
@@ -56,10 +57,12 @@ class Fleet:
     p: list
     battery: list
     charger: list
+    battery_conf: list
+    charger_conf: list
 
     @classmethod
     def empty(cls) -> Fleet:
-        return cls(*([] for _ in range(9)))
+        return cls(*([] for _ in range(11)))
 
     def add(self, plan: VehiclePlan, p: np.ndarray, low: np.ndarray, high: np.ndarray) -> None:
         first = plan.duties.first
@@ -72,6 +75,8 @@ class Fleet:
         self.p.append(np.asarray(p, dtype=np.float64))
         self.battery.append(plan.battery_needed)
         self.charger.append(plan.charger_needed_w)
+        self.battery_conf.append(plan.battery_needed_conf)
+        self.charger_conf.append(plan.charger_needed_w_conf)
 
     def array(self, name: str) -> np.ndarray:
         parts = getattr(self, name)

@@ -24,7 +24,7 @@ from cevm.core.replay.montecarlo import DrawPlan
 from cevm.core.replay.places import Depot, find_depot, rest_positions, stops_at
 from cevm.core.replay.settings import ReplaySettings
 from cevm.core.replay.sizing import battery_needed, charger_needed, undecided_trips
-from cevm.core.replay.spread import TripSpread, trip_spread
+from cevm.core.replay.spread import TripSpread, energy_at_confidence, trip_spread
 from cevm.core.replay.trips import TripEnergies, trip_crossing, trip_energies, trips_excess
 from cevm.core.sweep import StepTable
 from cevm.core.vehicle import Vehicle
@@ -122,7 +122,10 @@ class VehiclePlan:
     ``excess`` (:class:`Excess`); ``spread``; per duty: ``energy_sd``, ``reserve_trip``
     and ``reserve_at_m`` (the first trip below the reserve and the distance into the
     duty where it is crossed; -1 / NaN if kept), ``empty_trip``, ``empty_at_m``,
-    ``battery_needed`` [J or l] and ``charger_needed_w`` (NaN: not sized); ``depot``
+    ``battery_needed`` [J or l] and ``charger_needed_w`` (NaN: not sized) at the mean
+    energies, ``battery_needed_conf`` and ``charger_needed_w_conf`` with each duty's
+    energy at ``settings.size_confidence`` (NaN: not sized; the mean's where the
+    candidate has no predictive distribution); ``depot``
     (None: not asked or not found); ``unplaced`` stops long enough but with no known
     position (not charged)."""
 
@@ -149,6 +152,8 @@ class VehiclePlan:
     empty_at_m: np.ndarray
     battery_needed: np.ndarray
     charger_needed_w: np.ndarray
+    battery_needed_conf: np.ndarray
+    charger_needed_w_conf: np.ndarray
     depot: Depot | None = None
     unplaced: int = 0
     notes: tuple[str, ...] = field(default=())
@@ -327,13 +332,20 @@ def plan_vehicle(trips: LoggedTrips, vehicle: Vehicle, settings: ReplaySettings,
     empty = _crossing_m(trips, energies, bounds, before, empty_first, 0.0, vehicle, step_table, settings.ice_braking)
     nan = np.full(duties.n, np.nan)
     battery, charger = nan, nan.copy()
+    battery_c, charger_c = nan.copy(), nan.copy()
     if size and not settings.charging.chained:
         battery, charger = _duty_sizes(lanes, bounds, energy, ex, exact, stops, settings, cap, vehicle)
+        if settings.size_confidence is not None and np.any(energy_sd > 0.0):
+            high = energy_at_confidence(energy, energy_sd, bounds, settings.size_confidence)
+            battery_c, charger_c = _duty_sizes(lanes, bounds, high, ex, exact, stops, settings, cap, vehicle)
+        elif settings.size_confidence is not None:  # no spread: the mean's sizes are the confidence's
+            battery_c, charger_c = battery.copy(), charger.copy()
     return VehiclePlan(trips=trips, vehicle=vehicle, settings=settings, energies=energies, duties=duties, stops=stops,
                        before=before, low=low, after=after, gain=gain, levels=lv, capacity=cap, start=start,
                        reserve=reserve, excess=ex, spread=spread, energy_sd=energy_sd,
                        reserve_trip=lv.first_below, reserve_at_m=cross, empty_trip=empty_first, empty_at_m=empty,
-                       battery_needed=battery, charger_needed_w=charger, depot=depot, unplaced=unplaced)
+                       battery_needed=battery, charger_needed_w=charger, battery_needed_conf=battery_c,
+                       charger_needed_w_conf=charger_c, depot=depot, unplaced=unplaced)
 
 
 def _duty_sizes(lanes: Lanes, bounds: np.ndarray, energy: np.ndarray, ex: Excess, exact: Exact, stops: Stops,

@@ -96,7 +96,9 @@ class ReplaySettings:
     carries the trip's payload, gross less this, on its own kerb mass); ``within_trips``:
     look for the lowest level inside the trips where it could decide something (their step
     tables read), else at the trips' ends only (no step table read: a crossing is placed
-    in its trip in proportion to the energy)."""
+    in its trip in proportion to the energy); ``size_confidence``: the battery and charger
+    are sized twice, at the mean energies and with each duty's energy at this one-sided
+    quantile (:func:`cevm.core.replay.spread.energy_at_confidence`; None: at the mean only)."""
 
     rule: str = "gap"
     gap_s: float = DEFAULT_DUTY_GAP_H * 3600.0
@@ -111,12 +113,15 @@ class ReplaySettings:
     ice_braking: str | None = None
     logged_kerb_kg: float | None = None
     within_trips: bool = True
+    size_confidence: float | None = DEFAULT_CONFIDENCE
 
     def __post_init__(self) -> None:
         if self.rule not in DUTY_RULES:
             raise ValueError(f"duty rule must be one of {DUTY_RULES}, not {self.rule!r}")
         if not 0 < self.interval < 1:
             raise ValueError(f"interval {self.interval!r} must be in (0, 1)")
+        if self.size_confidence is not None and not 0 < self.size_confidence < 1:
+            raise ValueError(f"size_confidence {self.size_confidence!r} must be in (0, 1)")
         if self.draws < 1:
             raise ValueError(f"draws must be >= 1, got {self.draws!r}")
         if not 0 <= self.reserve_pct < 100 or not 0 < self.soc_start_pct <= 100:

@@ -104,6 +104,29 @@ class TripSpread:
         return np.asarray(np.sqrt(var), dtype=np.float64)
 
 
+def energy_at_confidence(mean: ArrayLike, duty_sd: ArrayLike, bounds: np.ndarray, confidence: float) -> np.ndarray:
+    """Each trip's energy [J or l] with its duty's total at the duty's one-sided
+    ``confidence`` quantile (Gaussian: the total's mean plus z_c times ``duty_sd``), the
+    z_c x sd added shared over the duty's trips in proportion to the energy each draws
+    (``max(mean, 0)``; equally where none draws). Sizing a battery on these energies gives
+    the one that runs the duty, with its reserve kept, when the duty takes that much: with
+    a probability of at least ``confidence`` (the spread's placement within the duty aside).
+    ``bounds``: the duties' first trips and the end (:attr:`Duties.bounds`)."""
+    mu = np.asarray(mean, dtype=np.float64)
+    sd = np.asarray(duty_sd, dtype=np.float64)
+    if not 0.0 < confidence < 1.0:
+        raise ValueError(f"confidence {confidence!r} must be in (0, 1)")
+    counts = np.diff(bounds)
+    if mu.size == 0 or counts.size == 0:
+        return mu.copy()
+    duty_of = np.repeat(np.arange(counts.size), counts)
+    draws = np.maximum(mu, 0.0)
+    total = np.bincount(duty_of, weights=draws, minlength=counts.size)
+    share = np.where(total[duty_of] > 0.0, draws / np.where(total > 0.0, total, 1.0)[duty_of],
+                     1.0 / np.maximum(counts, 1)[duty_of])
+    return np.asarray(mu + float(ndtri(confidence)) * sd[duty_of] * share, dtype=np.float64)
+
+
 def central_interval(mean: ArrayLike, sd: ArrayLike, level: float) -> tuple[np.ndarray, np.ndarray]:
     """The central interval holding a Gaussian with probability ``level``."""
     z = float(ndtri(0.5 + 0.5 * level))
