@@ -40,11 +40,11 @@ import argparse
 import contextlib
 import dataclasses
 import sys
-
-import numpy as np
 import tempfile
 import time
 from pathlib import Path
+
+import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))

@@ -22,13 +22,13 @@ from pathlib import Path
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-import numpy as np  # noqa: E402
+import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "src"))
 
-from cevm.core.cycle import CR0_DEFAULT, drive_cycle_vector  # noqa: E402
-from cevm.core.model import wheel_energy_j  # noqa: E402
-from cevm_samplegen.cycles import DEMO_CYCLES, micro_trip_cycle  # noqa: E402
+from cevm.core.cycle import CR0_DEFAULT, drive_cycle_vector
+from cevm.core.model import wheel_energy_j
+from cevm_samplegen.cycles import DEMO_CYCLES, micro_trip_cycle
 
 RHO, G = 1.225, 9.81
 

@@ -35,15 +35,15 @@ from pathlib import Path
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-import numpy as np  # noqa: E402
+import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
-from cevm.core.cycle import drive_cycle_vector  # noqa: E402
 from cevm.core.assignment import FleetVehicle, Leg, Route, Scenario, plan  # noqa: E402
-from cevm.io.scenario import load_scenario  # noqa: E402
+from cevm.core.cycle import drive_cycle_vector  # noqa: E402
 from cevm.io import load_vehicle, read_cycle_csv  # noqa: E402
+from cevm.io.scenario import load_scenario  # noqa: E402
 from cevm_samplegen.cycles import MicroTripSpec, micro_trip_cycle  # noqa: E402
 
 RHO, G = 1.225, 9.81

@@ -68,9 +68,8 @@ import pandas as pd  # noqa: E402
 
 from cevm.ingest import IngestOptions, ingest  # noqa: E402
 from cevm.runtime import tune_allocator  # noqa: E402
-from cevm_samplegen import fleet_for_benchmark, generate_sample_logs  # noqa: E402
 from cevm.store import TripStore  # noqa: E402
-
+from cevm_samplegen import fleet_for_benchmark, generate_sample_logs  # noqa: E402
 
 # Ingests ``fleet`` with the DSM into a new store with whatever cevm is first on the path
 # (the baseline checkout's src), one core, and prints the report as JSON.

@@ -77,9 +77,9 @@ for _k in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
+from cevm.executors import TASK_S, DaskExecutor, ProcessExecutor, SerialExecutor, Task, local_dask_cluster  # noqa: E402
 from cevm.ingest import IngestOptions, ingest  # noqa: E402
 from cevm.runtime import tune_allocator  # noqa: E402
-from cevm.executors import TASK_S, DaskExecutor, ProcessExecutor, SerialExecutor, Task, local_dask_cluster  # noqa: E402
 from cevm.store import TripStore  # noqa: E402
 
 try:
@@ -377,7 +377,7 @@ def main() -> None:
             if name in best:
                 rates[name] = line(name.replace("pool", f"pool x{w}"), *best[name], serial_rate, w)
         total_stage = sum(stage.values())
-        print(f"\nserial stages [s]: " + ", ".join(f"{k} {v:.2f}" for k, v in stage.items())
+        print("\nserial stages [s]: " + ", ".join(f"{k} {v:.2f}" for k, v in stage.items())
               + f"; the writer's share (store) {100 * stage.get('store', 0) / max(total_stage, 1e-9):.0f} %")
         ceiling = rates.get("2 x serial", float("nan")) / serial_rate
         print(f"pool: x{rates['pool'] / serial_rate:.2f} vs serial (one file per task: "

@@ -45,19 +45,19 @@ from pathlib import Path
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-import numpy as np  # noqa: E402
+import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
-from cevm.core.cycle import step_terms  # noqa: E402
 from cevm.cli.values import parse_values  # noqa: E402
-from cevm.core.sweep import PredictionSet, Source, predict_source, sweep  # noqa: E402
+from cevm.core.cycle import step_terms  # noqa: E402
 from cevm.core.feasibility import feasibility  # noqa: E402
+from cevm.core.sweep import PredictionSet, Source, predict_source, sweep  # noqa: E402
+from cevm.core.vehicle import Vehicle, predict  # noqa: E402
 from cevm.executors import ProcessExecutor  # noqa: E402
 from cevm.runtime import tune_allocator  # noqa: E402
 from cevm_samplegen.cycles import MicroTripSpec, micro_trip_cycle  # noqa: E402
-from cevm.core.vehicle import Vehicle, predict  # noqa: E402
 
 TYRE_CR = (0.0045, 0.0055, 0.0065, 0.0075)
 
@@ -260,8 +260,8 @@ def main() -> None:
 
     if args.no_cli:
         return
-    from cevm.store.routes import CycleLeg, add_route
     from cevm.store import TripStore
+    from cevm.store.routes import CycleLeg, add_route
 
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)

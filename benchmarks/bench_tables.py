@@ -74,19 +74,15 @@ from pathlib import Path
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-import numpy as np  # noqa: E402
-import pandas as pd  # noqa: E402
+import numpy as np
+import pandas as pd
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
 from cevm.core.calibration import CalibrationError, TripData, fit  # noqa: E402
-from cevm.core.terms import TERMS_BY_POWERTRAIN  # noqa: E402
 from cevm.core.cycle import G_MPS2, RHO_AIR_KG_M3, CycleVector, drive_cycle_vector  # noqa: E402
 from cevm.core.detailed import DieselParams, EvParams, decimate_indices, simulate  # noqa: E402
-from cevm.io import load_vehicle, read_cycle_csv  # noqa: E402
-from cevm.io.detailed import diesel_params_from_vehicle, ev_params_from_vehicle  # noqa: E402
-from cevm.io.cycles import elevation_from_grade  # noqa: E402
 from cevm.core.model import (
     battery_energy_from_wheel_j,
     ev_energy_j,
@@ -94,7 +90,11 @@ from cevm.core.model import (
     ice_fuel_l,
     wheel_energy_j,
 )
+from cevm.core.terms import TERMS_BY_POWERTRAIN  # noqa: E402
 from cevm.core.vehicle import Vehicle, predict  # noqa: E402
+from cevm.io import load_vehicle, read_cycle_csv  # noqa: E402
+from cevm.io.cycles import elevation_from_grade  # noqa: E402
+from cevm.io.detailed import diesel_params_from_vehicle, ev_params_from_vehicle  # noqa: E402
 
 #: The shared public cycles, beside the checkout.
 SHARED_CYCLES = ROOT.parent / "shared" / "cycles"
@@ -597,7 +597,7 @@ def cross_calibrate(vehicle: Vehicle, variant: CeVariant, ce: CeInputs, measured
     errors = np.full((r,) + measured.shape, math.nan)
     extra = [p for p in variant.params if p != "eta"]
     fitted = {p: np.full(r, math.nan) for p in variant.params}
-    refused = {p: 0 for p in extra}
+    refused = dict.fromkeys(extra, 0)
 
     def held_out_errors(idx):
         try:

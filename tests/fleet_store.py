@@ -119,8 +119,8 @@ def unlogged(ids):
 
 
 def iso_local(t_s: float, zone: str) -> str:
-    from zoneinfo import ZoneInfo
     import datetime as dt
+    from zoneinfo import ZoneInfo
 
     return dt.datetime.fromtimestamp(t_s, ZoneInfo(zone)).strftime("%Y-%m-%d %H:%M:%S")
 

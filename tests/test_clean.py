@@ -17,6 +17,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from pyproj import Geod
 
+from cevm.errors import InputError
 from cevm.ingest.cleaning import (
     CleanParams,
     CleanTrip,
@@ -25,7 +26,6 @@ from cevm.ingest.cleaning import (
     geodesic_steps_m,
     local_distance_m,
 )
-from cevm.errors import InputError
 
 GEOD = Geod(ellps="WGS84")
 T0 = 1_600_000_000.0  # a whole second, UTC

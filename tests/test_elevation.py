@@ -18,6 +18,7 @@ from pyproj import Transformer
 from rasterio.io import MemoryFile
 from rasterio.transform import from_origin
 
+from cevm.errors import InputError
 from cevm.ingest.dsm import DsmSampler
 from cevm.ingest.elevation import (
     ElevationParams,
@@ -26,7 +27,6 @@ from cevm.ingest.elevation import (
     road_profile_m,
     trip_elevation,
 )
-from cevm.errors import InputError
 
 # ---------------------------------------------------------------------------- helpers
 

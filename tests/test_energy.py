@@ -15,11 +15,10 @@ from hypothesis import strategies as st
 from cevm.core import energy
 from cevm.core.cycle import CycleVector, drive_cycle_vector
 from cevm.core.feasibility import feasibility
-from cevm.core.sweep import LegProfile, PredictionSet, Source, energy_trajectory, predict_sources
-from cevm.core.vehicle import Vehicle, domain_warnings, predict
+from cevm.core.sweep import PredictionSet, Source, energy_trajectory, predict_sources
+from cevm.core.vehicle import FitDomain, Vehicle, domain_warnings, predict
 from cevm.io.vehicles import vehicle_from_mapping
-from cevm.core.vehicle import FitDomain
-from reference import G, RHO, reference_consumption
+from reference import RHO, G, reference_consumption
 
 EV = Vehicle(name="bus", powertrain="ev", mass_kg=12000.0, cda_m2=4.0, cr=0.007, eta=0.8, kerb_mass_kg=9000.0,
              battery_j=120 * 3.6e6, aux_power_w=3000.0, regen_eta=0.6, aux_heating_w_per_k=250.0,

@@ -13,8 +13,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cevm.core.cycle import drive_cycle_vector
-from cevm.errors import InputError
 from cevm.core.assignment import (
     BUDGET_RTOL,
     FleetVehicle,
@@ -27,7 +25,9 @@ from cevm.core.assignment import (
     plan,
     table4_rows,
 )
+from cevm.core.cycle import drive_cycle_vector
 from cevm.core.vehicle import Vehicle, predict
+from cevm.errors import InputError
 from cevm.io import read_cycle_csv
 from cevm.io.scenario import default_resolver, fleet_report, load_scenario
 from cevm_samplegen.cycles import MicroTripSpec, micro_trip_cycle

@@ -19,7 +19,8 @@ from typer.testing import CliRunner
 from cevm.cli import app
 from cevm.cli.values import parse_values
 from cevm.core.cycle import DriveCycle
-from cevm.errors import InputError
+from cevm.core.feasibility import feasibility
+from cevm.core.model import ev_energy_j, ice_fuel_l
 from cevm.core.sweep import (
     LegProfile,
     PredictionSet,
@@ -29,9 +30,8 @@ from cevm.core.sweep import (
     predict_source,
     sweep,
 )
-from cevm.core.feasibility import feasibility
-from cevm.core.model import ev_energy_j, ice_fuel_l
 from cevm.core.vehicle import Vehicle
+from cevm.errors import InputError
 from cevm.io import read_cycle_csv
 from cevm_samplegen.cycles import MicroTripSpec, micro_trip_cycle
 

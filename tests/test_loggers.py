@@ -11,7 +11,7 @@ import gzip
 import hashlib
 import re
 import shutil
-from datetime import datetime, timedelta, timezone
+from datetime import UTC, datetime, timedelta
 from pathlib import Path
 from zoneinfo import ZoneInfo
 
@@ -30,7 +30,7 @@ DATA = Path(__file__).parent / "data"
 KMH = 1 / 3.6  # m/s per km/h
 MPH = 0.44704  # m/s per mph (exact by definition)
 MILE = 1609.344  # m per mile (exact)
-UTC = timezone.utc
+UTC = UTC
 
 
 @pytest.fixture(scope="module")

@@ -15,7 +15,7 @@ from cevm.core.model import (
     wheel_energy_j,
 )
 from conftest import DATA, shared_or_skip
-from reference import G, RHO, reference_wheel_energy_j
+from reference import RHO, G, reference_wheel_energy_j
 
 MODES = {"paper": lambda eta: 1.0, "no-credit": lambda eta: 0.0, "ev": lambda eta: eta * eta}
 

@@ -17,8 +17,8 @@ import pytest
 from pyproj import Transformer
 from typer.testing import CliRunner
 
-from cevm.cli import app
 import faults
+from cevm.cli import app
 from cevm.executors import (
     DaskExecutor,
     ProcessExecutor,

@@ -164,7 +164,7 @@ def test_refused_heights_are_counted_in_the_pure_profile():
     assert res.filled_short_m == pytest.approx(110.0)  # bridged as a DSM gap (d 490..600)
     assert np.abs(res.elevation_m - (50.0 + 0.01 * d)).max() < 1e-6
     strict = combine_elevation(d, raw, None, ElevationParams(dsm_range_m=(0.0, 55.0)))
-    assert strict.dsm_refused == int(np.sum((raw > 55.0)))
+    assert strict.dsm_refused == int(np.sum(raw > 55.0))
 
 
 def test_grades_are_bounded_and_a_cliff_profile_is_warned():

@@ -12,8 +12,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from cevm.core.sweep import LegProfile, PredictionSet, Source, predict_source
 from cevm.core.cycle import drive_cycle_vector
+from cevm.core.sweep import LegProfile, PredictionSet, Source, predict_source
 from cevm.core.vehicle import Vehicle
 from reference import reference_crossing
 

@@ -14,7 +14,7 @@ import os
 import subprocess
 import sys
 import textwrap
-from datetime import datetime, timedelta, timezone
+from datetime import UTC, datetime, timedelta
 from pathlib import Path
 
 import numpy as np
@@ -30,7 +30,7 @@ from cevm.ingest.reading import ReadLimits, detect_profile, read_log
 
 DATA = Path(__file__).parent / "data"
 ROOT = Path(__file__).resolve().parents[1]
-UTC = timezone.utc
+UTC = UTC
 SRF_HEADER = "timestamp_utc,gps_lat_deg,gps_lon_deg,gps_speed_kmh,fms_wheel_speed_kmh,fms_total_energy_used_kwh"
 
 

@@ -10,8 +10,10 @@ from typer.testing import CliRunner
 
 from cevm.cli import app
 from cevm.core.cycle import CycleVector, drive_cycle_vector
+from cevm.core.trip import Trip
 from cevm.errors import CevmError, InputError
 from cevm.io import read_cycle_csv
+from cevm.store import TripStore
 from cevm.store.routes import (
     CycleLeg,
     TripLeg,
@@ -24,8 +26,6 @@ from cevm.store.routes import (
     remove_route,
     route_names,
 )
-from cevm.core.trip import Trip
-from cevm.store import TripStore
 from cevm_samplegen.cycles import MicroTripSpec, micro_trip_cycle
 
 runner = CliRunner()

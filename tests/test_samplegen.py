@@ -14,7 +14,7 @@ import json
 import math
 import subprocess
 import sys
-from datetime import datetime, timedelta, timezone
+from datetime import UTC, datetime, timedelta
 from pathlib import Path
 from zoneinfo import ZoneInfo
 
@@ -253,7 +253,7 @@ def test_portal_local_time_crosses_dst(small, truth):
         assert local.iloc[i - 1].hour == 1 and local.iloc[i].hour == 1  # the repeated hour
         assert local.iloc[i - 1].strftime("%d/%m/%Y") == "27/10/2019"
         # rows before the step are BST (fold 0), after it GMT (fold 1): UTC increases
-        utc = [local.iloc[k].to_pydatetime().replace(tzinfo=london, fold=int(k >= i)).astimezone(timezone.utc)
+        utc = [local.iloc[k].to_pydatetime().replace(tzinfo=london, fold=int(k >= i)).astimezone(UTC)
                for k in range(len(local))]
         assert all(b > a for a, b in zip(utc, utc[1:]))
         # the truth trips of this vehicle start at these UTC instants (first_line rows)
@@ -327,7 +327,7 @@ def test_truth_trip_times_match_rows(small, truth):
         rows = trip_rows(small, r)
         assert len(rows) > 60
         assert r["end_utc_s"] - r["start_utc_s"] == pytest.approx(r["duration_s"], abs=1.5e-3)  # each to 1 ms
-        assert r["start_utc"] == datetime.fromtimestamp(round(r["start_utc_s"], 3), timezone.utc).strftime("%Y-%m-%dT%H:%M:%S.%f")[:-3] + "Z"
+        assert r["start_utc"] == datetime.fromtimestamp(round(r["start_utc_s"], 3), UTC).strftime("%Y-%m-%dT%H:%M:%S.%f")[:-3] + "Z"
     # layovers: no rows for more than 5 minutes between the trips of a file
     by_file: dict[str, list[dict]] = {}
     for r in truth["trips"]:
@@ -625,8 +625,8 @@ def test_number_formatting_matches_python(values, decimals, strip):
 
 def test_uk_local_time_formatting():
     london = ZoneInfo("Europe/London")
-    base = datetime(2019, 10, 27, 0, 30, tzinfo=timezone.utc)
-    ts = [base + timedelta(minutes=20 * k) for k in range(6)] + [datetime(2019, 3, 31, 0, 59, 59, tzinfo=timezone.utc), datetime(2019, 3, 31, 1, 0, 0, tzinfo=timezone.utc)]
+    base = datetime(2019, 10, 27, 0, 30, tzinfo=UTC)
+    ts = [base + timedelta(minutes=20 * k) for k in range(6)] + [datetime(2019, 3, 31, 0, 59, 59, tzinfo=UTC), datetime(2019, 3, 31, 1, 0, 0, tzinfo=UTC)]
     chars, keep = csvfmt.uk_local(np.array([int(t.timestamp()) for t in ts]))
     got = csvfmt.assemble([(chars, keep)], b";", b"\n").decode().split("\n")[:-1]
     assert got == [t.astimezone(london).strftime("%d/%m/%Y %H:%M:%S") for t in ts]
@@ -719,7 +719,7 @@ def test_temperature_column_follows_the_days_weather(small, truth):
         sun_k = 2.0 * r["solar_w_m2"] / 800.0
         excess = temp.mean() - (r["ambient_c"] + bias)
         assert -0.3 < excess < sun_k + 0.3, (r["vehicle_id"], r["day_index"], r["trip_index"], excess)
-        day = truth["weather"][datetime.fromtimestamp(r["start_utc_s"], timezone.utc).date().isoformat()]
+        day = truth["weather"][datetime.fromtimestamp(r["start_utc_s"], UTC).date().isoformat()]
         assert day["min_c"] - 1.0 <= r["ambient_min_c"] <= r["ambient_max_c"] <= day["max_c"] + 1.0
         seen.add(day["max_c"] < 5.0)
     assert seen == {True, False}  # a cold and a warm day in the small sample

@@ -20,8 +20,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
-from cevm.errors import CevmError
 import cevm.store as store_mod
+from cevm.core.trip import Measurement, Trip
+from cevm.errors import CevmError
 from cevm.store import (
     SCHEMA_VERSION,
     TripStore,
@@ -32,7 +33,6 @@ from cevm.store import (
     resolve_store_path,
     trip_profile_blob,
 )
-from cevm.core.trip import Measurement, Trip
 
 TESTS_DIR = Path(__file__).resolve().parent
 SRC_DIR = TESTS_DIR.parent / "src"

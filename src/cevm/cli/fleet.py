@@ -54,8 +54,8 @@ def fleet_plan(
     from contextlib import ExitStack
 
     from cevm.io.scenario import default_resolver, fleet_report
-    from cevm.store.sources import store_leg_demand, store_resolver
     from cevm.store import TripStore, resolve_store_path
+    from cevm.store.sources import store_leg_demand, store_resolver
 
     if method not in ("auto", "enumerate", "milp"):
         raise fail("--method must be auto, enumerate or milp")

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import sys
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import Annotated
 
 import typer
 
@@ -22,24 +22,24 @@ def ingest(
     paths: Annotated[list[str], typer.Argument(metavar="PATH", help="Log files, directories (recursive) or glob patterns; .csv and .csv.gz.")],
     store: StoreOption = None,
     dsm: Annotated[
-        Optional[str], typer.Option(help="DSM for road elevation: a GeoTIFF, a directory of tiles, a VRT, or a GDAL URL.")
+        str | None, typer.Option(help="DSM for road elevation: a GeoTIFF, a directory of tiles, a VRT, or a GDAL URL.")
     ] = None,
     allow_remote_dsm: Annotated[
         bool, typer.Option(help="Allow a DSM (or VRT sources) that GDAL fetches over a network: URLs, /vsicurl/, /vsis3/ ... (also: CEVM_ALLOW_REMOTE_DSM=1). Off: local GeoTIFFs and VRTs only.")
     ] = False,
-    profile: Annotated[Optional[str], typer.Option(help="Force a logger profile by name (default: detect from the header).")] = None,
-    profiles_dir: Annotated[Optional[Path], typer.Option(metavar="DIR", help="A directory of extra logger profiles (TOML).")] = None,
+    profile: Annotated[str | None, typer.Option(help="Force a logger profile by name (default: detect from the header).")] = None,
+    profiles_dir: Annotated[Path | None, typer.Option(metavar="DIR", help="A directory of extra logger profiles (TOML).")] = None,
     force: Annotated[bool, typer.Option(help="Re-ingest files even when unchanged.")] = False,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar and no table: failures and one summary line only.")] = False,
     log_json: Annotated[bool, typer.Option(help="One JSON object per file on stdout, then a summary object (for cron and scripts).")] = False,
     workers: Annotated[
-        Optional[int], typer.Option("--workers", "-w", min=1, metavar="N", help="Worker processes (default: as many of the machine's cores as the batch's work pays for, none for a small batch; 1: serial, in this process).")
+        int | None, typer.Option("--workers", "-w", min=1, metavar="N", help="Worker processes (default: as many of the machine's cores as the batch's work pays for, none for a small batch; 1: serial, in this process).")
     ] = None,
     scheduler: Annotated[
-        Optional[str], typer.Option(help="Dask scheduler address (tcp://HOST:8786): run the per-file work on that cluster (pip install 'cevm[dask]'); the workers must read the log files at the same paths, and the DSM.")
+        str | None, typer.Option(help="Dask scheduler address (tcp://HOST:8786): run the per-file work on that cluster (pip install 'cevm[dask]'); the workers must read the log files at the same paths, and the DSM.")
     ] = None,
     max_rows: Annotated[
-        Optional[int], typer.Option(min=1, metavar="ROWS", help="Refuse a file of more data rows than this. Default: 2,500,000, and at most 36 million values (rows x columns read), which keeps a worker under 500 MB; given, the rows alone bound a file (memory grows with rows and columns; see the README).")
+        int | None, typer.Option(min=1, metavar="ROWS", help="Refuse a file of more data rows than this. Default: 2,500,000, and at most 36 million values (rows x columns read), which keeps a worker under 500 MB; given, the rows alone bound a file (memory grows with rows and columns; see the README).")
     ] = None,
     max_samples: Annotated[
         int, typer.Option(min=1, metavar="SAMPLES", help="Refuse a file whose trips would hold more samples than this on the 1 s grid (a log every 5 s gives 5 a row): the stored trips are held until written, so this keeps a worker under 500 MB.")
@@ -51,10 +51,10 @@ def ingest(
         float, typer.Option(min=1.0, metavar="RATIO", help="Refuse a gzip file that expands more than this many times (a zip bomb).")
     ] = _LIMITS.max_expansion,
     manifest: Annotated[
-        Optional[Path], typer.Option(metavar="FILE", help="A manifest CSV of trip masses, applied after the logs (its columns detected; for other layouts: 'cevm trips set-mass --manifest' with column options).")
+        Path | None, typer.Option(metavar="FILE", help="A manifest CSV of trip masses, applied after the logs (its columns detected; for other layouts: 'cevm trips set-mass --manifest' with column options).")
     ] = None,
     manifest_tz: Annotated[
-        Optional[str], typer.Option(help="The manifest's zone for times without one (Europe/London, UTC, +01:00).")
+        str | None, typer.Option(help="The manifest's zone for times without one (Europe/London, UTC, +01:00).")
     ] = None,
 ) -> None:
     """Read logger CSV exports into the trip store (clean trips, DSM elevation, vectors).
@@ -76,11 +76,11 @@ def ingest(
     import json
 
     from cevm.cli import interrupts
-    from cevm.ingest import IngestOptions
-    from cevm.runtime import signals_deferred
-    from cevm.ingest.pipeline import discover
-    from cevm.ingest import ingest as run_ingest
     from cevm.executors import make_executor
+    from cevm.ingest import IngestOptions
+    from cevm.ingest import ingest as run_ingest
+    from cevm.ingest.pipeline import discover
+    from cevm.runtime import signals_deferred
     from cevm.store import TripStore, resolve_store_path
     from cevm.store.failures import StoreAccessError
 

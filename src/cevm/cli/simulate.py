@@ -4,7 +4,7 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import Annotated
 
 import numpy as np
 import typer
@@ -21,8 +21,8 @@ from cevm.cli.common import (
     start_soc,
     with_cycle_options,
 )
-from cevm.core import physical_inputs
 from cevm.cli.output import OutputFormat, write_rows
+from cevm.core import physical_inputs
 from cevm.core.sweep import DEFAULT_RESERVE_PCT
 from cevm.errors import CevmError
 from cevm.text import printable
@@ -32,15 +32,15 @@ from cevm.units import J_PER_KWH
 @with_cycle_options
 def simulate(
     vehicle: Annotated[Path, typer.Option("--vehicle", "-v", metavar="FILE", help="Vehicle file with a [detailed] table (the drivetrain; a file without one is refused).")],
-    cycle: Annotated[Optional[Path], typer.Option("--cycle", "-c", metavar="FILE", help="Cycle CSV.")] = None,
-    trip: Annotated[Optional[str], typer.Option("--trip", "-t", metavar="ID", help="A stored trip id.")] = None,
+    cycle: Annotated[Path | None, typer.Option("--cycle", "-c", metavar="FILE", help="Cycle CSV.")] = None,
+    trip: Annotated[str | None, typer.Option("--trip", "-t", metavar="ID", help="A stored trip id.")] = None,
     store: StoreOption = None,
-    mass_kg: Annotated[Optional[float], typer.Option("--mass-kg", "-m", help="Gross mass [kg]. Default: the vehicle's.")] = None,
-    payload_kg: Annotated[Optional[float], typer.Option("--payload-kg", "-p", help="Payload [kg] on the vehicle's kerb mass (instead of --mass-kg).")] = None,
+    mass_kg: Annotated[float | None, typer.Option("--mass-kg", "-m", help="Gross mass [kg]. Default: the vehicle's.")] = None,
+    payload_kg: Annotated[float | None, typer.Option("--payload-kg", "-p", help="Payload [kg] on the vehicle's kerb mass (instead of --mass-kg).")] = None,
     soc_start_pct: SocStartOption = None,
     reserve_pct: ReserveOption = DEFAULT_RESERVE_PCT,
-    out: Annotated[Optional[Path], typer.Option("--out", "-o", metavar="FILE", help="Per-second output CSV.")] = None,
-    plot: Annotated[Optional[Path], typer.Option(metavar="FILE.png", help="PNG: state of charge (EV, the paper's figure 4) or fuel and elevation (ICE, figure 6).")] = None,
+    out: Annotated[Path | None, typer.Option("--out", "-o", metavar="FILE", help="Per-second output CSV.")] = None,
+    plot: Annotated[Path | None, typer.Option(metavar="FILE.png", help="PNG: state of charge (EV, the paper's figure 4) or fuel and elevation (ICE, figure 6).")] = None,
     fmt: Annotated[OutputFormat, typer.Option("--format", "-f", help="Format of the summary.")] = OutputFormat.table,
     cycle_fmt=None,
 ) -> None:
@@ -50,9 +50,9 @@ def simulate(
     It takes no ambient temperature: an EV's auxiliaries are its [detailed] table's
     aux_base_power_kw + hvac_power_kw (the summary's aux_power_kw says what was used)."""
     from cevm.core.detailed import simulate as run_simulation
+    from cevm.io import load_vehicle, read_cycle_csv
     from cevm.io.detailed import detailed_params
     from cevm.io.plots import plot_simulation
-    from cevm.io import load_vehicle, read_cycle_csv
 
     if (cycle is None) == (trip is None):
         raise fail("give exactly one of --cycle or --trip")
@@ -81,11 +81,9 @@ def simulate(
                 typer.echo(f"cevm: note: {printable(name)}: no elevation or grade: a flat road assumed", err=True)
         else:
             from cevm.store import TripStore, existing_store_path
-
+            from cevm.store.codec import MAX_PROFILE_SAMPLES
             from cevm.store.masses import trip_masses
             from cevm.store.queries import row_measurement
-
-            from cevm.store.codec import MAX_PROFILE_SAMPLES
             from cevm.store.sources import MAX_SOURCE_SAMPLES, too_long_trip
 
             with TripStore.open(existing_store_path(store), readonly=True) as st:

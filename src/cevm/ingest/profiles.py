@@ -91,8 +91,8 @@ from typing import Any, Literal, NamedTuple
 
 from cevm.configs_dir import shipped_configs_dir
 from cevm.errors import InputError
-from cevm.io.inputs import MAX_TOML_BYTES, read_bounded
 from cevm.ingest.timestamps import EPOCH_FORMATS
+from cevm.io.inputs import MAX_TOML_BYTES, read_bounded
 from cevm.lazy import pd
 from cevm.units import (
     FT_TO_M,

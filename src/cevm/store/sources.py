@@ -10,7 +10,6 @@ from collections.abc import Callable, Iterator, Sequence
 from contextlib import ExitStack
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Optional
 
 from cevm.core.assignment import LegSource
 from cevm.core.cycle import CycleVector
@@ -22,9 +21,9 @@ from cevm.io.cycles import MAX_CYCLE_SAMPLES, CycleFormat, read_cycle_files
 from cevm.io.scenario import LegResolver, default_resolver
 from cevm.store.codec import MAX_PROFILE_SAMPLES
 from cevm.store.failures import DamagedTripError
+from cevm.store.location import existing_store_path
 from cevm.store.masses import TripMass, trip_masses
 from cevm.store.queries import row_measurement
-from cevm.store.location import existing_store_path
 from cevm.store.routes import (
     check_route_profiles,
     load_route_legs,
@@ -124,7 +123,7 @@ def mass_runs(sources: Sequence[Source], build: Callable[..., PredictionSet]
         yield run, current[0], current[1]
 
 
-def load_sources(stack: ExitStack, store: Optional[Path], cycles: Sequence[Path], trips: Sequence[str],
+def load_sources(stack: ExitStack, store: Path | None, cycles: Sequence[Path], trips: Sequence[str],
                  vehicle_ids: Sequence[str], routes: Sequence[str], cr0: float,
                  cycle_format: CycleFormat | None = None, *, need_profiles: bool = True,
                  on_damaged: Callable[[DamagedTripError], None] | None = None) -> list[Source]:

@@ -36,8 +36,15 @@ from pathlib import Path
 from cevm.core.trip import TRIP_EVIDENCE_FIELDS, Trip, TripRecord
 from cevm.store.codec import trip_profile_blob
 from cevm.store.location import file_key
-from cevm.store.schema import (FILE_COLUMNS, STANDSTILL_BEFORE_SQL, TRIP_COLUMNS, blob_crc32, in_json,
-                               json_default, sql_real)
+from cevm.store.schema import (
+    FILE_COLUMNS,
+    STANDSTILL_BEFORE_SQL,
+    TRIP_COLUMNS,
+    blob_crc32,
+    in_json,
+    json_default,
+    sql_real,
+)
 
 
 @dataclass(frozen=True)

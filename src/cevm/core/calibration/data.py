@@ -11,8 +11,8 @@ whose wheel energy is not positive (a descent: consumption is not driven by it).
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Sequence
 
 import numpy as np
 

@@ -33,8 +33,8 @@ N term is N / c_eta, not linear in c_eta; the fit linearises it (Gauss-Newton).
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import replace
-from typing import Sequence
 
 import numpy as np
 

@@ -98,13 +98,13 @@ def folds(data: TripSet, cv_folds: int, loo_below: int, seed: int) -> tuple[np.n
     G = len(uniq)
     if cv_folds < 2 or G < 2:
         return np.full(data.n, -1), "none"
-    if G < loo_below or cv_folds >= G:
+    if loo_below > G or cv_folds >= G:
         fold_of = {g: i for i, g in enumerate(uniq)}
         scheme = f"leave-one-group-out ({G} groups)" if grouped else "leave-one-out"
     else:
         rng = np.random.default_rng(seed)
         order = [uniq[i] for i in rng.permutation(G)]
-        size = {g: 0 for g in uniq}
+        size = dict.fromkeys(uniq, 0)
         for k in keys:
             size[k] += 1
         order.sort(key=lambda g: -size[g])  # stable: shuffled order among equal sizes
