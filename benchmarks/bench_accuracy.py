@@ -146,7 +146,7 @@ def print_table(rows: list[dict], markdown: bool) -> None:
                       f"{res.mean_rel_width_pct:.1f} %",
                       " / ".join(f"{100 * cov[k]:.0f}" for k in (0.5, 0.8, 0.95) if k in cov) + " %",
                       f"{r['n_ok']} of {r['n_candidates']}", f"{r['seconds']:.2f}"])
-    for pt, (name, mu, sd) in PAPER.items():
+    for name, mu, sd in PAPER.values():
         lines.append(["paper", name, "", "", "eta", f"{mu:+.1f} / {sd:.1f} %", "", "", "", "", "", ""])
     _print_lines(head, lines, markdown)
     for r in rows:
@@ -234,9 +234,9 @@ def _print_lines(head, lines, markdown: bool) -> None:
             print("| " + " | ".join(line) + " |")
         return
     widths = [max(len(h), *(len(line[i]) for line in lines)) if lines else len(h) for i, h in enumerate(head)]
-    print("  ".join(h.ljust(w) for h, w in zip(head, widths)))
+    print("  ".join(h.ljust(w) for h, w in zip(head, widths, strict=True)))
     for line in lines:
-        print("  ".join(c.ljust(w) for c, w in zip(line, widths)))
+        print("  ".join(c.ljust(w) for c, w in zip(line, widths, strict=True)))
 
 
 def fleet_comparison(hgv_result) -> None:

@@ -80,12 +80,12 @@ def baseline_paper_day(sc: Scenario, cycles, d: int):
     import itertools
 
     for combo in itertools.product(*[sc.options(s) for s in shared]):
-        who = {s: sc.options(s)[0] for s in sc.stops()} | dict(zip(shared, combo))
+        who = {s: sc.options(s)[0] for s in sc.stops()} | dict(zip(shared, combo, strict=True))
         total = 0.0
         for ri, r in enumerate(sc.routes):
             veh = sc.vehicle_by_id[r.vehicle_id].vehicle
-            for l, leg in enumerate(r.legs):
-                load = sum(sc.payload_kg[s][d] for k, s in enumerate(r.stops) if k >= l and who[s] == ri)
+            for li, leg in enumerate(r.legs):
+                load = sum(sc.payload_kg[s][d] for k, s in enumerate(r.stops) if k >= li and who[s] == ri)
                 t, v, h = cycles[leg.source.ref]
                 total += leg.source.repeat * loop_fuel_l(t, v, h, veh.kerb_mass_kg + load, veh)
         if total < best[1]:

@@ -151,7 +151,7 @@ def run_two_serial(files, stores: list[Path], dsm: str) -> tuple[int, Meter]:
     together once both have imported cevm; their CPU time is what they report."""
     halves = [files[0::2], files[1::2]]
     procs = [subprocess.Popen([sys.executable, __file__, "--child", str(s), dsm, *map(str, h)],
-                              stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True) for s, h in zip(stores, halves)]
+                              stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True) for s, h in zip(stores, halves, strict=True)]
     for p in procs:
         assert p.stdout.readline().strip() == "ready"
     with Meter() as m:

@@ -239,7 +239,7 @@ def main() -> None:
                     "ns": (st.k + st.e + sources[r].vector.cr0 * st.r) <= 0}
     t0 = time.perf_counter()
     base = [plain_prediction(cache[r], vehicles[pset.vehicle_index[p]], float(pset.mass_kg[p]))
-            for r, p in zip(*picks)]
+            for r, p in zip(*picks, strict=True)]
     t_base = time.perf_counter() - t0
     rate_base = k / t_base
     print(f"baseline per-prediction loop: {rate_base:,.0f} predictions/s "
@@ -249,7 +249,7 @@ def main() -> None:
     for r in set(picks[0].tolist()):
         blocks[r] = predict_source(sources[r], pset)
     diffs_e, diffs_soc = [], []
-    for (r, p), (val, soc) in zip(zip(*picks), base):
+    for (r, p), (val, soc) in zip(zip(*picks, strict=True), base, strict=True):
         b = blocks[r]
         got = b.energy_j[p] if pset.is_ev[p] else b.fuel_l[p]
         diffs_e.append(abs(got - val) / abs(val))

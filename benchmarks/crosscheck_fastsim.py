@@ -733,7 +733,7 @@ def _describe(m: Matched) -> None:
           f"r = {fv.wheel_radius_m} m, wheel inertia {fv.wheel_inertia_total_kgm2:.2f} kg m^2 in all; "
           f"aux {fv.aux_power_w:.0f} W; transmission {fv.transmission_efficiency}; FASTSim's air density "
           f"(measured) {ph.rho_air_kg_m3:.4f} kg/m^3, g {ph.g_mps2:.4f} m/s^2")
-    curve = ", ".join(f"{a:g}: {b:.2f}" for a, b in zip(fv.eff_frac, fv.eff_values))
+    curve = ", ".join(f"{a:g}: {b:.2f}" for a, b in zip(fv.eff_frac, fv.eff_values, strict=True))
     what = "motor" if fv.powertrain == "ev" else "engine"
     print(f"- FASTSim {what} efficiency vs P/P_max: {curve}; P_max = {fv.max_power_w / 1e3:.1f} kW")
     if fv.powertrain == "ev":

@@ -131,7 +131,7 @@ def differences(got: dict, ref: dict) -> list[str]:
                     atol = ATOL[name]
                     for stat, rstat in rs.items():
                         gstat = gs[stat]
-                        pairs = zip(gstat, rstat) if isinstance(rstat, list) else [(gstat, rstat)]
+                        pairs = zip(gstat, rstat, strict=True) if isinstance(rstat, list) else [(gstat, rstat)]
                         if isinstance(rstat, list) and len(gstat) != len(rstat):
                             diffs.append(f"{tid} {name}.{stat}: {len(gstat)} values, reference {len(rstat)}")
                             continue

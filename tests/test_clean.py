@@ -460,7 +460,7 @@ SOURCES = [Src("fuel_rate_lps", "rate", "fuel_l", 0.0, 0)]
 
 def assert_same_trips(a, b):
     assert len(a.trips) == len(b.trips)
-    for x, y in zip(a.trips, b.trips):
+    for x, y in zip(a.trips, b.trips, strict=True):
         assert x.start_utc_s == y.start_utc_s
         for name in ("time_s", "speed_mps", "distance_m", "lat_deg", "lon_deg"):
             np.testing.assert_array_equal(getattr(x, name), getattr(y, name))

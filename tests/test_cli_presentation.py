@@ -46,7 +46,7 @@ def _bracketed(text: str) -> set[str]:
 
 @pytest.mark.parametrize("path", [p for p, _ in COMMANDS], ids=lambda p: " ".join(p) or "cevm")
 def test_help_keeps_its_bracketed_words_and_shows_no_bool_metavar(path):
-    cmd = dict((tuple(p), c) for p, c in COMMANDS)[tuple(path)]
+    cmd = {tuple(p): c for p, c in COMMANDS}[tuple(path)]
     words = _bracketed(cmd.help)
     for param in cmd.params:
         words |= _bracketed(getattr(param, "help", None))

@@ -54,7 +54,7 @@ def ref_bilinear(grid, x0, y0, dx, dy, x, y):
     centres' hull or next to NaN), written independently of the code under test."""
     h, w = grid.shape
     out = []
-    for xi, yi in zip(x, y):
+    for xi, yi in zip(x, y, strict=True):
         cf = (xi - x0) / dx - 0.5
         rf = (y0 - yi) / dy - 0.5
         if not (0 <= cf <= w - 1 and 0 <= rf <= h - 1):
@@ -394,7 +394,7 @@ def test_bad_dsm_inputs(tmp_path):
     with pytest.raises(InputError, match="no GeoTIFF"):
         DsmSampler.open(tmp_path / "empty")
     (tmp_path / "junk.tif").write_text("hello")
-    with pytest.raises(InputError, match="junk.tif: cannot open"):
+    with pytest.raises(InputError, match=r"junk.tif: cannot open"):
         DsmSampler.open(tmp_path / "junk.tif")
     (tmp_path / "nocrs").mkdir()
     write_tif(tmp_path / "nocrs" / "a.tif", np.ones((4, 4)), 0, 4, 1, 1, None)
@@ -656,7 +656,7 @@ def test_tile_index_finds_the_first_tile_holding_each_point(seed, n_tiles):
     x = np.concatenate((rng.uniform(-10, 150, 500), corners[:, 0], [np.nan, 5.0]))
     y = np.concatenate((rng.uniform(-10, 150, 500), corners[:, 1], [5.0, np.inf]))
     want = []
-    for xi, yi in zip(x, y):
+    for xi, yi in zip(x, y, strict=True):
         hit = -1
         for k, t in enumerate(tiles):
             xmin, xmax = t.x0, t.x0 + t.width
@@ -674,8 +674,8 @@ def test_tiles_of_mixed_shapes_and_dtypes_equal_the_mosaic(tmp_path):
     rng = np.random.default_rng(11)
     widths, heights = [7, 19, 12, 30], [9, 14, 21]
     big = rng.normal(100, 20, (sum(heights), sum(widths)))
-    for j, (r0, h) in enumerate(zip(np.cumsum([0] + heights[:-1]), heights)):
-        for i, (c0, w) in enumerate(zip(np.cumsum([0] + widths[:-1]), widths)):
+    for j, (r0, h) in enumerate(zip(np.cumsum([0] + heights[:-1]), heights, strict=True)):
+        for i, (c0, w) in enumerate(zip(np.cumsum([0] + widths[:-1]), widths, strict=True)):
             part = big[r0:r0 + h, c0:c0 + w]
             if (i + j) % 2:
                 part = part.astype(np.float32)

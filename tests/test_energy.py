@@ -174,8 +174,8 @@ def test_sweep_totals_and_lowest_soc_equal_the_reference(seed, ambient):
             assert block.ambient_c[p] == t_c
             if veh.is_ev:
                 run = [_fields(veh)["warmup_j_per_k"] * max(0.0, 16.0 - t_c)]
-                for j in range(1, len(t)):
-                    run.append(reference_consumption(t[: j + 1], v[: j + 1], h[: j + 1], m, _fields(veh), t_c))
+                run.extend(reference_consumption(t[: j + 1], v[: j + 1], h[: j + 1], m, _fields(veh), t_c)
+                           for j in range(1, len(t)))
                 lowest = 100.0 - 100.0 * max(0.0, max(run)) / veh.battery_j
                 assert block.soc_min_pct[p] == pytest.approx(lowest, abs=1e-9)
 

@@ -224,7 +224,7 @@ def reference_optimum(sc: Scenario, d: int):
     choices = [[i for i, r in enumerate(sc.routes) if s in r.stops] for s in stops]
     best = math.inf
     for combo in itertools.product(*choices):
-        who = dict(zip(stops, combo))
+        who = dict(zip(stops, combo, strict=True))
         total = 0.0
         ok = True
         for v in sc.vehicles:
@@ -232,13 +232,13 @@ def reference_optimum(sc: Scenario, d: int):
             for ri, r in enumerate(sc.routes):
                 if r.vehicle_id != v.id:
                     continue
-                for l, leg in enumerate(r.legs):
+                for li, leg in enumerate(r.legs):
                     if sc.mass_model == "carried":
-                        load = sum(sc.payload_kg[s][d] for k, s in enumerate(r.stops) if k >= l and who[s] == ri)
+                        load = sum(sc.payload_kg[s][d] for k, s in enumerate(r.stops) if k >= li and who[s] == ri)
                     else:
-                        if l >= len(r.stops) or who[r.stops[l]] != ri:
+                        if li >= len(r.stops) or who[r.stops[li]] != ri:
                             continue
-                        load = sc.payload_kg[r.stops[l]][d]
+                        load = sc.payload_kg[r.stops[li]][d]
                     mass = v.vehicle.kerb_mass_kg + load
                     if v.max_gross_kg is not None and mass > v.max_gross_kg:
                         ok = False
@@ -630,7 +630,7 @@ def test_cli_fleet_plan_with_legs_from_stored_routes_equals_the_cycle_files(tmp_
     via_routes = json.loads(runner.invoke(app, ["fleet", "plan", str(scen), "--store", str(store), "-f", "json"]).stdout)
     via_files = json.loads(runner.invoke(app, ["fleet", "plan", str(root / "configs/fleet/paper-case-study.toml"),
                                                 "--store", str(tmp_path / "none.sqlite"), "-f", "json"]).stdout)
-    for a, b in zip(via_routes["summary"], via_files["summary"]):
+    for a, b in zip(via_routes["summary"], via_files["summary"], strict=True):
         assert a["total"] == pytest.approx(b["total"], rel=1e-12)
     assert via_routes["table"] == via_files["table"]
     res = runner.invoke(app, ["fleet", "plan", str(scen), "--store", str(tmp_path / "none.sqlite")])

@@ -236,7 +236,7 @@ def test_both_searches_for_the_sign_change_give_the_plain_loop(hilly, monkeypatc
 def test_peak_energy_matches_a_plain_loop(hilly, m, cda, cr, eta, w, aux, which):
     cyc = hilly[which]
     got = peak_energy_j(Source.from_cycle(cyc).steps, [m, m * 1.7], cda, cr, eta, w, aux)
-    for mm, g in zip([m, m * 1.7], got):
+    for mm, g in zip([m, m * 1.7], got, strict=True):
         _, peak = plain_run(legs_of(cyc), mm, cda, cr, eta, w, aux)
         assert g == pytest.approx(peak, rel=1e-9, abs=1e-3)
 
@@ -276,7 +276,7 @@ def test_sweep_streams_one_block_per_source_in_order(root, hilly):
     pset = PredictionSet.build([ev(), ice()], payload_kg=[0.0, 5000.0])
     blocks = list(sweep(sources, pset))
     assert [b.source_index for b in blocks] == [0, 1, 2] and [b.source.name for b in blocks] == ["hilly-a", "hilly-b", "urban-bus"]
-    for src, b in zip(sources, blocks):
+    for src, b in zip(sources, blocks, strict=True):
         one = predict_source(src, pset)
         assert np.allclose(b.wheel_energy_j, one.wheel_energy_j, rtol=1e-13)
         assert np.allclose(b.soc_min_pct, one.soc_min_pct, rtol=1e-13, equal_nan=True)
@@ -391,7 +391,7 @@ def test_cli_payload_sweep_csv_json_and_plot(tmp_path, root):
     assert res.exit_code == 0, res.output
     table = list(csv.DictReader(io.StringIO(out.read_text())))
     assert len(table) == 28 and table[0]["cycle"] == "urban-bus"
-    for j, c in zip(rows, table):
+    for j, c in zip(rows, table, strict=True):
         for key in ("mass_kg", "energy_kwh", "fuel_l", "soc_min_pct", "wheel_energy_kwh"):
             if j.get(key) is None:
                 assert c[key] == ""

@@ -755,7 +755,7 @@ def test_parse_datetimes_matches_strptime(dts, fmt):
 def test_parse_datetimes_rejects_what_strptime_rejects(texts):
     fmt = "%d/%m/%Y %H:%M:%S"
     got = parse_datetimes(np.array(texts, dtype=object), fmt)
-    for s, g in zip(texts, got):
+    for s, g in zip(texts, got, strict=True):
         try:
             datetime.strptime(s, fmt)
             ok = True
@@ -812,5 +812,5 @@ def test_ascii_heads_skip_re_encoding_only_for_ascii_compatible_codecs(tmp_path,
     logs = read_log(f, profiles=profiles)
     assert [g.profile for g in logs] == ["portal", "portal"]
     want = read_log(DATA / "portal_dst.csv", profiles=profiles)
-    for a, b in zip(logs, want):
+    for a, b in zip(logs, want, strict=True):
         pd.testing.assert_frame_equal(a.frame, b.frame)  # no used column held those bytes

@@ -131,7 +131,7 @@ def test_dsm_scaled_by_1e6_is_refused_and_gps_used(tmp_path, how):
     out = process_file(tmp_path / "ev.csv", IngestOptions(dsm=str(bad)))
     ref = process_file(tmp_path / "ev.csv", IngestOptions())
     assert out.ok and ref.ok
-    (trip,), (no_dsm,) = out.trips, ref.trips
+    (trip,), (_no_dsm,) = out.trips, ref.trips
     assert trip.elevation_source == "gps" and trip.dsm_coverage_pct == 0.0
     q = trip.quality["elevation"]
     assert q["dsm_refused_samples"] == trip.n_samples

@@ -124,7 +124,7 @@ def test_a_route_whose_trip_was_replaced_says_so(store):
     with TripStore.open(path) as st:
         add_route(st, "R1", [TripLeg(ids[0]), TripLeg(ids[1])])
         st.forget_file(st.list_trips(trip_ids=[ids[1]])["source_file"].iloc[0])
-        with pytest.raises(CevmError, match="no longer in the store.*--replace"):
+        with pytest.raises(CevmError, match=r"no longer in the store.*--replace"):
             load_route_vector(st, "R1")
 
 

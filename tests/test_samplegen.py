@@ -10,6 +10,7 @@ from __future__ import annotations
 import gzip
 import hashlib
 import io
+import itertools
 import json
 import math
 import subprocess
@@ -159,7 +160,7 @@ def test_srf_missed_and_repeated_ticks(small, truth):
     assert sum(f["repeated_ticks"] for f in srf) > 0
     for f in srf:
         lines = _raw(small / f["path"]).decode().split("\n")
-        assert sum(a == b for a, b in zip(lines, lines[1:])) == f["repeated_ticks"]
+        assert sum(a == b for a, b in itertools.pairwise(lines)) == f["repeated_ticks"]
         df, _ = read_srf(small / f["path"])
         dt = np.diff(utc_s(df.timestamp_utc))
         assert ((dt > 1.5) & (dt < 60)).any()  # missed ticks inside trips
@@ -255,7 +256,7 @@ def test_portal_local_time_crosses_dst(small, truth):
         # rows before the step are BST (fold 0), after it GMT (fold 1): UTC increases
         utc = [local.iloc[k].to_pydatetime().replace(tzinfo=london, fold=int(k >= i)).astimezone(UTC)
                for k in range(len(local))]
-        assert all(b > a for a, b in zip(utc, utc[1:]))
+        assert all(b > a for a, b in itertools.pairwise(utc))
         # the truth trips of this vehicle start at these UTC instants (first_line rows)
         for r in truth["trips"]:
             if r["vehicle_id"] == reg:
@@ -334,7 +335,7 @@ def test_truth_trip_times_match_rows(small, truth):
         by_file.setdefault(r["file"], []).append(r)
     for rs in by_file.values():
         rs.sort(key=lambda r: r["start_utc_s"])
-        for a, b in zip(rs, rs[1:]):
+        for a, b in itertools.pairwise(rs):
             assert b["start_utc_s"] - a["end_utc_s"] > 600
 
 
@@ -611,7 +612,7 @@ def test_number_formatting_matches_python(values, decimals, strip):
     x = np.round(x, decimals)  # the formatter prints numbers already on their grid
     chars, keep = csvfmt.num_field(x, decimals, strip=strip)
     got = csvfmt.assemble([(chars, keep)], b",", b"\n").decode().split("\n")[:-1]
-    for g, v in zip(got, x):
+    for g, v in zip(got, x, strict=True):
         if not np.isfinite(v):
             assert g == ""
             continue

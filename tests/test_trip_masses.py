@@ -9,6 +9,8 @@ rounding and one at the vehicle file's 18 t does not."""
 
 from __future__ import annotations
 
+import csv
+import io
 import json
 
 import pytest
@@ -62,9 +64,9 @@ def test_predict_uses_each_trips_own_mass_and_shows_what_it_measured(fleet, tmp_
         assert rows[t]["mass_kg"] == ids["hgv_mass_kg"][t] and abs(rows[t]["error_pct"]) < 1e-6
     assert {rows[t]["mass_source"] for t in unlogged(ids)} == {"manifest"}
 
-    csv = cevm("predict", "-v", hgv, "--trip", unlogged(ids)[0], "--store", db, "-f", "csv")
-    head, line = csv.stdout.strip().splitlines()
-    row = dict(zip(head.split(","), line.split(",")))
+    out = cevm("predict", "-v", hgv, "--trip", unlogged(ids)[0], "--store", db, "-f", "csv")
+    # a csv reader, not split(","): a quoted field holds commas (zip(strict=True) found the shifted columns)
+    [row] = list(csv.DictReader(io.StringIO(out.stdout)))
     assert row["mass_source"] == "manifest" and float(row["error_pct"]) == pytest.approx(0.0, abs=1e-4)
     table = cevm("predict", "-v", hgv, "--trip", unlogged(ids)[0], "--store", db)
     assert "measured l" in table.stdout and "error %" in table.stdout and "manifest" in table.stdout

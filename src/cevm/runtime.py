@@ -103,7 +103,8 @@ def tune_allocator(mmap_threshold_bytes: int = MMAP_THRESHOLD_BYTES) -> bool:
     mallopt.restype = ctypes.c_int
     settings = ((_M_MMAP_THRESHOLD, mmap_threshold_bytes), (_M_TRIM_THRESHOLD, TRIM_THRESHOLD_BYTES),
                 (_M_TOP_PAD, TOP_PAD_BYTES))
-    return all([mallopt(param, value) == 1 for param, value in settings])
+    # a list, not a generator: every setting is applied even when one fails
+    return all([mallopt(param, value) == 1 for param, value in settings])  # noqa: C419
 
 
 @contextmanager

@@ -28,7 +28,7 @@ from cevm.cli.columns import Column
 from cevm.text import csv_safe, printable
 
 
-class OutputFormat(str, Enum):
+class OutputFormat(str, Enum):  # noqa: UP042 (StrEnum's str() differs: kept as typer sees it today)
     table = "table"
     csv = "csv"
     json = "json"
@@ -275,7 +275,7 @@ def print_table(specs: Sequence[Column], cells: list[list[str]], stream: IO[str]
         _print_vertical(fits, stream, title, width or 80)
         return
     table = Table(title=title)
-    for f, w in zip(shown, widths):
+    for f, w in zip(shown, widths, strict=True):
         header = "\n".join(textwrap.wrap(f.header, w, break_long_words=False)) if len(f.header) > w else f.header
         if f.layout == "wrap":
             table.add_column(header, justify="left", overflow="fold", width=w)

@@ -134,7 +134,7 @@ def set_mass(
         with TripStore.open(path) as st:
             if manifest is not None:  # streamed: its rows are matched one at a time, never all held
                 with open_manifest(manifest, fmt) as reader:
-                    applied, problems = apply_manifest(st, manifest, reader, dry_run=dry_run)
+                    _applied, problems = apply_manifest(st, manifest, reader, dry_run=dry_run)
                 raise typer.Exit(EXIT_PARTIAL if problems else EXIT_OK)
             ids = list(dict.fromkeys(trip_ids))
             if clear:

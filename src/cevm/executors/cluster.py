@@ -15,6 +15,7 @@ Worker deaths
 
 from __future__ import annotations
 
+import contextlib
 import os
 import uuid
 from typing import Any
@@ -210,10 +211,8 @@ def _client_class(distributed):
                 return super().start(**kwargs)
             except BaseException:
                 self._Client__loop = None  # Client.__del__ closes only a client with a loop
-                try:
+                with contextlib.suppress(Exception):  # a loop that never ran: nothing to stop
                     self._loop_runner.stop()
-                except Exception:  # a loop that never ran: nothing to stop
-                    pass
                 raise
 
     return Client

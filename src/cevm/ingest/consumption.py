@@ -257,7 +257,7 @@ def _interp_limited(
         outs = [np.empty(q.shape) for _ in arrays]
         for a, b in chunks(q.size):
             part = _interp_limited(q[a:b], ts, vs, max_gap_s, *more, right=None if right is None else right[a:b])
-            for o, x in zip(outs, part if more else [part]):
+            for o, x in zip(outs, part if more else [part], strict=True):
                 o[a:b] = x
         return outs if more else outs[0]
     if right is None:

@@ -250,7 +250,7 @@ def _find_gaps(d: np.ndarray, valid: np.ndarray, max_gap_m: float) -> _Gaps:
     if vi[0] > 0:
         spans.append((float(d[0]), float(d[vi[0]]), "lead"))
     inner = np.flatnonzero(np.diff(vi) > 1)
-    spans.extend(zip(d[vi[inner]].tolist(), d[vi[inner + 1]].tolist(), ["inner"] * inner.size))
+    spans.extend(zip(d[vi[inner]].tolist(), d[vi[inner + 1]].tolist(), ["inner"] * inner.size, strict=True))
     if vi[-1] < n - 1:
         spans.append((float(d[vi[-1]]), float(d[-1]), "trail"))
     short = sum(b - a for a, b, _ in spans if b - a <= max_gap_m)
@@ -370,7 +370,7 @@ def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
     """[start, stop) index ranges of True runs."""
     m = np.concatenate(([False], mask, [False]))
     edges = np.flatnonzero(m[1:] != m[:-1])
-    return list(zip(edges[::2].tolist(), edges[1::2].tolist()))
+    return list(zip(edges[::2].tolist(), edges[1::2].tolist(), strict=True))
 
 
 def bound_grade(h: np.ndarray, step: float, max_grade: float) -> np.ndarray:

@@ -77,7 +77,7 @@ def _estimates(time_s: np.ndarray, columns: Mapping[str, np.ndarray], source: En
         rejected = np.diff(_kept_bounds(~ok, sb)).tolist()
         raws = integrate_rates(ts[ok], vs[ok], _kept_bounds(ok, sb), t0, t1, max_gap_s=params.max_gap_s,
                                resolution=res)
-        for raw, k in zip(raws, rejected):
+        for raw, k in zip(raws, rejected, strict=True):
             raw.counts["rate_values_rejected"] = k
         resolution = 0.0
     elif kind == "counter":

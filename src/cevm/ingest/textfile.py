@@ -128,7 +128,7 @@ class ByteStream:
         self.path = path
         self.limits = limits
         try:
-            self._fh = open(path, "rb")
+            self._fh = open(path, "rb")  # noqa: SIM115 (held by the reader, closed by its close())
             self.size_on_disk = os.fstat(self._fh.fileno()).st_size
             self.gzip = self._fh.read(2) == _GZIP_MAGIC
             self._fh.seek(0)

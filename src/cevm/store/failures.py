@@ -19,6 +19,7 @@ The command line gives each kind its exit code (:mod:`cevm.cli.common`).
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import re
 import sqlite3
@@ -132,10 +133,8 @@ def _translated(method, connection_of):
         except sqlite3.Error as exc:
             con = connection_of(self)
             if isinstance(self, sqlite3.Cursor):  # finalize its statement now: an exception that
-                try:  # outlives this call (a caller keeps it) must not keep the database's files open
-                    self.close()
-                except sqlite3.Error:
-                    pass
+                with contextlib.suppress(sqlite3.Error):  # outlives this call (a caller keeps it) must
+                    self.close()  # not keep the database's files open
             err = translate(exc, con.store_path, con.busy_timeout_s)
             if err is None:
                 raise

@@ -333,7 +333,7 @@ class TripQueries:
         ).fetchone()
         if row is None:
             raise CevmError(f"unknown trip id '{trip_id}'; {self._count_hint()}")
-        r = dict(zip(TRIP_COLUMNS, row[:-2]))
+        r = dict(zip(TRIP_COLUMNS, row[:-2], strict=True))
         prof = self._decoded_profile(trip_id, self._checked(trip_id, "profile", row[-2], row[-1]), r["n_samples"])
         measured = None
         if r["measured_kind"] is not None:

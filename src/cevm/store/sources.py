@@ -247,7 +247,7 @@ def route_ambient_c(st: TripStore, legs: Sequence) -> float | None:
     weights = [leg.vector.duration_s for leg in legs]
     if not all(math.isfinite(t) for t in temps) or sum(weights) <= 0:
         return None
-    return float(sum(t * w for t, w in zip(temps, weights)) / sum(weights))
+    return float(sum(t * w for t, w in zip(temps, weights, strict=True)) / sum(weights))
 
 
 def store_resolver(store: TripStore | Callable[[], TripStore]) -> LegResolver:

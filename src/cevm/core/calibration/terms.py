@@ -121,7 +121,7 @@ class TermModel:
         if hit is None:
             w01 = np.array([0.0, 1.0])
             e = np.array([wheel_energy_j(v, np.float64(m), key[0], key[1], w01)
-                          for v, m in zip(self.data.vectors, self.data.mass)])
+                          for v, m in zip(self.data.vectors, self.data.mass, strict=True)])
             e = e.reshape(self.data.n, 2)
             hit = (e[:, 0], e[:, 1] - e[:, 0])
             if len(self._components) > 256:
@@ -202,7 +202,7 @@ class TermModel:
         """Term values (SI, vehicle-field meaning) with ``names`` set from coefficients
         ``theta`` and the others at the vehicle's values."""
         vals = self.vehicle_values()
-        coef = dict(zip(names, (float(x) for x in theta)))
+        coef = dict(zip(names, (float(x) for x in theta), strict=True))
         if "eta" in coef:
             vals["eta"] = 1.0 / coef["eta"]
         for name, x in coef.items():
@@ -285,7 +285,7 @@ class TermModel:
         within a linear piece of the wheel energy)."""
         names = tuple(names)
         if "cda" not in names and "cr" not in names and "eta" in names:
-            F, fixed, tied_n, fixed_k = self._linear_parts(names)
+            F, _fixed, tied_n, fixed_k = self._linear_parts(names)
             J = F[idx].copy()
             j = names.index("eta")
             c_eta = float(theta[j])

@@ -92,7 +92,7 @@ class TripRow:
 
 def folds(data: TripSet, cv_folds: int, loo_below: int, seed: int) -> tuple[np.ndarray, str]:
     """Fold index per trip (-1: no CV) and a description; groups never straddle folds."""
-    keys = [g if g is not None else f"\0{tid}" for g, tid in zip(data.groups, data.ids)]
+    keys = [g if g is not None else f"\0{tid}" for g, tid in zip(data.groups, data.ids, strict=True)]
     uniq = list(dict.fromkeys(keys))
     grouped = any(g is not None for g in data.groups)
     G = len(uniq)
@@ -137,7 +137,7 @@ def time_predictions(vehicle: Vehicle, data: TripSet, repeats: int) -> tuple[flo
     if repeats <= 0 or data.n == 0:
         return None
     per_trip = np.empty(data.n)
-    for i, (v, m, t) in enumerate(zip(data.vectors, data.mass, data.ambient_c)):
+    for i, (v, m, t) in enumerate(zip(data.vectors, data.mass, data.ambient_c, strict=True)):
         predict_one(vehicle, v, m, t)  # warm any per-vector cache first
         t0 = time.perf_counter()
         for _ in range(repeats):

@@ -72,7 +72,7 @@ def _split_vehicles(out: dict[str, np.ndarray], codes: np.ndarray, vehicles: lis
             for k in range(len(vehicles)):
                 per[k][c] = a[bounds[k]:bounds[k + 1]]
     logs = []
-    for vname, arrays in zip(vehicles, per):
+    for vname, arrays in zip(vehicles, per, strict=True):
         sources = tuple(_energy_source(e, maps) for e in prof.energy if _has_energy_data(e, arrays))
         logs.append(ParsedLog(path, prof.name, vname, arrays, dict(metadata), sources, list(repairs)))
     return logs

@@ -84,7 +84,7 @@ class ColumnGatherer:
             if src == "metadata" and not metadata.get(prof.vehicle_key or "", "").strip():
                 src = prof.vehicle_fallback
             elif src == "metadata":
-                line = next((ln for c, ln in zip(hdr.comments, hdr.comment_lines)
+                line = next((ln for c, ln in zip(hdr.comments, hdr.comment_lines, strict=True)
                              if c.partition("=")[0].strip() == prof.vehicle_key), None)
             where = {"metadata": f"metadata key {prof.vehicle_key!r}", "fixed": "the profile's vehicle.value",
                      "file_stem": "the file name", "parent_dir": "the directory name"}[src]
