@@ -94,7 +94,8 @@ def calibrate_store(store_path: Path, label: str) -> list[dict]:
             rows.append({
                 "trips_data": sel_trips.trips, "veh": veh, "vehicle_path": path, "braking": braking,
                 "store": str(store_path),
-                "set": label, "vehicle": vid, "powertrain": veh.powertrain, "trips": sel.result.cv.n if sel.result.cv else 0,
+                "set": label, "vehicle": vid, "powertrain": veh.powertrain,
+                "trips": sel.result.cv.n if sel.result.cv else 0,
                 "eta_only": eta, "best_by_k": best_by_k, "chosen": sel.chosen, "result": sel.result,
                 "nested": sel.nested_cv, "seconds": dt, "n_candidates": len(sel.candidates), "n_ok": len(ok),
                 "standstill": sel.chosen_standstill,

@@ -120,8 +120,10 @@ def main() -> None:
     fast = drive_cycle_vector(tb[:loop_n], vb[:loop_n], hb[:loop_n])
     rel_vec = max(abs(x - y) / (abs(y) + 1e-300) for x, y in zip(fast.delta, ref[:3], strict=True))
     print(f"  baseline, Python loop per sample : {loop_rate / 1e6:10.2f} M samples/s")
-    print(f"  cevm, {reps} cycles of {n} samples  : {small_rate / 1e6:10.2f} M samples/s  ({small_rate / loop_rate:,.0f}x)")
-    print(f"  cevm, one array of {big_n / 1e6:.0f} M samples : {big_n / dt_big / 1e6:10.2f} M samples/s  ({big_n / dt_big / loop_rate:,.0f}x)"
+    print(f"  cevm, {reps} cycles of {n} samples  : {small_rate / 1e6:10.2f} M samples/s  "
+          f"({small_rate / loop_rate:,.0f}x)")
+    print(f"  cevm, one array of {big_n / 1e6:.0f} M samples : {big_n / dt_big / 1e6:10.2f} M samples/s  "
+          f"({big_n / dt_big / loop_rate:,.0f}x)"
           f"   with input validation: {big_n / dt_big_val / 1e6:.2f} M samples/s")
     print(f"  max relative difference of the vector vs the loop: {rel_vec:.1e}")
     print("  target: >= 20 M samples/s")

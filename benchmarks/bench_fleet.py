@@ -121,7 +121,8 @@ def bench_paper(quick: bool) -> None:
             routes.append(dataclasses.replace(r, legs=tuple(legs)))
         return plan(dataclasses.replace(sc, routes=tuple(routes)), d)
 
-    print(f"load_scenario (2 cycle files, vectors, vehicles): best {t_load * 1e3:.2f} ms, median {med_load * 1e3:.2f} ms")
+    print(f"load_scenario (2 cycle files, vectors, vehicles): best {t_load * 1e3:.2f} ms, median {med_load * 1e3:.2f} "
+          f"ms")
     print(f"{'day':6} {'plan (cached)':>16} {'+ vectors':>12} {'load + plan':>12} {'MILP':>10} "
           f"{'baseline':>10} {'speed-up':>9}  choice (LH1S1/R1S2, LH2S1/R1S4)  same")
     for d, day in enumerate(sc.days):
@@ -168,7 +169,8 @@ def generated_fleet(n_vehicles=100, n_exclusive=800, n_shared=200, seed=7, braki
         pool.extend([v, v + v, v + v + v])
     hgv = load_vehicle(ROOT / "configs" / "vehicles" / "diesel-hgv.toml")
     hgv = dataclasses.replace(hgv, ice_braking=braking)
-    rigid = dataclasses.replace(hgv, name="rigid", kerb_mass_kg=9000.0, mass_kg=9000.0, max_gross_kg=26000.0, cda_m2=5.5)
+    rigid = dataclasses.replace(hgv, name="rigid", kerb_mass_kg=9000.0, mass_kg=9000.0, max_gross_kg=26000.0,
+                                cda_m2=5.5)
     vehicles = []
     stops: dict[str, list[str]] = {}
     for i in range(n_vehicles):

@@ -775,7 +775,8 @@ def run_table(kind: str, vehicle: Vehicle, cycles: list[Cycle], payloads_kg, *, 
     # The base model decides which trips are usable, for every variant (paired results).
     dfr = measured["base"].deficit_fraction
     valid = (dfr <= MAX_DEFICIT_FRACTION) & (measured["base"].value > 0)
-    excluded = tuple((cycles[i].name, float(payloads_kg[j]), float(dfr[i, j])) for i, j in zip(*np.nonzero(~valid), strict=True))
+    excluded = tuple((cycles[i].name, float(payloads_kg[j]), float(dfr[i, j]))
+                     for i, j in zip(*np.nonzero(~valid), strict=True))
     eligible = np.flatnonzero(valid.any(axis=1))  # cycles with at least one usable trip
     if eligible.size <= n_calib:
         raise ValueError(f"only {eligible.size} cycles have usable trips; need more than {n_calib}")

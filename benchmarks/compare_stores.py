@@ -211,7 +211,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("a", type=Path)
     ap.add_argument("b", type=Path)
     ap.add_argument("--tolerance", type=float, default=0.0, help="relative tolerance of floats (default: exact)")
-    ap.add_argument("--ignore-bytes", action="store_true", help="do not report blobs whose bytes differ but decode equal")
+    ap.add_argument("--ignore-bytes", action="store_true",
+                    help="do not report blobs whose bytes differ but decode equal")
     args = ap.parse_args(argv)
     d = Diff(args.tolerance)
     if args.a.is_dir():

@@ -86,7 +86,8 @@ X0, Y0 = 431000.0, 287000.0  # top-left corner of the test DSMs in British Natio
 
 @pytest.mark.parametrize(
     "crs, x0, y0, dx, dy",
-    [(BNG, X0, Y0, 1.0, 1.0), ("EPSG:32630", 600000.0, 5800000.0, 2.0, 3.0), ("EPSG:3857", -160000.0, 6900000.0, 1.5, 1.5)],
+    [(BNG, X0, Y0, 1.0, 1.0), ("EPSG:32630", 600000.0, 5800000.0, 2.0, 3.0),
+     ("EPSG:3857", -160000.0, 6900000.0, 1.5, 1.5)],
 )
 def test_plane_is_reproduced_exactly(tmp_path, crs, x0, y0, dx, dy):
     w, h = 120, 90
@@ -305,7 +306,8 @@ def test_sampler_from_headers_read_elsewhere_equals_the_opened_one(tmp_path):
 def test_reads_only_windows_and_caches_them(tmp_path):
     n = 2048
     data = np.arange(n * n, dtype=np.float32).reshape(n, n) % 1000
-    write_tif(tmp_path / "big.tif", data, X0, Y0, 1.0, 1.0, BNG, tiled=True, blockxsize=256, blockysize=256, compress="deflate")
+    write_tif(tmp_path / "big.tif", data, X0, Y0, 1.0, 1.0, BNG, tiled=True, blockxsize=256, blockysize=256,
+              compress="deflate")
     # A 300 m drive across two 256-px blocks near the top-left corner.
     t = np.linspace(0, 1, 5000)
     x, y = X0 + 100 + 300 * t, Y0 - 100 - 20 * t
@@ -384,7 +386,8 @@ def test_gdal_names_are_not_checked_on_disk(tmp_path):
             ds.write(data, 1)
         assert mem.name.startswith("/vsimem/")
         with DsmSampler.open(mem.name) as s:
-            assert s.sample_xy([X0 + 5.5], [Y0 - 5.5], BNG)[0] == pytest.approx(0.5 * (X0 + 5.5) + 0.25 * (Y0 - 5.5) + 3, abs=1e-9)
+            want = 0.5 * (X0 + 5.5) + 0.25 * (Y0 - 5.5) + 3
+            assert s.sample_xy([X0 + 5.5], [Y0 - 5.5], BNG)[0] == pytest.approx(want, abs=1e-9)
 
 
 def test_bad_dsm_inputs(tmp_path):

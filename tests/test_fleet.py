@@ -69,7 +69,8 @@ def ebus(**kw) -> Vehicle:
 def scenario(vehicles, routes, payload, **kw) -> Scenario:
     days = kw.pop("days", ("d1",))
     payload = {s: (tuple(p) if isinstance(p, (list, tuple)) else (p,) * len(days)) for s, p in payload.items()}
-    return Scenario(name="t", vehicles=tuple(vehicles), routes=tuple(routes), days=tuple(days), payload_kg=payload, **kw)
+    return Scenario(name="t", vehicles=tuple(vehicles), routes=tuple(routes), days=tuple(days), payload_kg=payload,
+                    **kw)
 
 
 def route(rid, vid, stops, vectors, ret=True):
@@ -164,7 +165,8 @@ def ev_case(reserve: float, battery_kwh: float):
     km = cruise_vector(10.0, 100)
     bus = ebus(battery_j=battery_kwh * 3.6e6)
     fleet = [FleetVehicle("A", bus, None, ev_reserve_fraction=reserve), FleetVehicle("B", ebus(), None)]
-    routes = [route("RA", "A", ["S"], [km + km + km + km + km, km]), route("RB", "B", ["b1", "S"], [km, km + km + km + km + km + km, km])]
+    routes = [route("RA", "A", ["S"], [km + km + km + km + km, km]),
+              route("RB", "B", ["b1", "S"], [km, km + km + km + km + km + km, km])]
     return scenario(fleet, routes, {"S": 5000.0, "b1": 0.0})
 
 
@@ -618,16 +620,19 @@ def test_cli_fleet_plan_with_legs_from_stored_routes_equals_the_cycle_files(tmp_
     runner = CliRunner()
     store = tmp_path / "s.sqlite"
     for name, cyc in (("lh", "long-haul-standin.csv"), ("reg", "regional-standin.csv")):
-        res = runner.invoke(app, ["route", "add", name, "--cycle", str(root / "configs/cycles" / cyc), "--store", str(store)])
+        res = runner.invoke(app, ["route", "add", name, "--cycle", str(root / "configs/cycles" / cyc), "--store",
+                                  str(store)])
         assert res.exit_code == 0, res.output
     text = (root / "configs/fleet/paper-case-study.toml").read_text()
     text = text.replace('leg = { cycle = "../cycles/long-haul-standin.csv" }', 'leg = { route = "lh" }')
-    text = text.replace('leg = { cycle = "../cycles/regional-standin.csv", repeat = 3 }', 'leg = { route = "reg", repeat = 3 }')
+    text = text.replace('leg = { cycle = "../cycles/regional-standin.csv", repeat = 3 }',
+                        'leg = { route = "reg", repeat = 3 }')
     text = text.replace('file = "../vehicles/', f'file = "{root}/configs/vehicles/')
     assert 'route = "lh"' in text and 'route = "reg"' in text
     scen = tmp_path / "routes.toml"
     scen.write_text(text)
-    via_routes = json.loads(runner.invoke(app, ["fleet", "plan", str(scen), "--store", str(store), "-f", "json"]).stdout)
+    via_routes = json.loads(runner.invoke(app,
+                                          ["fleet", "plan", str(scen), "--store", str(store), "-f", "json"]).stdout)
     via_files = json.loads(runner.invoke(app, ["fleet", "plan", str(root / "configs/fleet/paper-case-study.toml"),
                                                 "--store", str(tmp_path / "none.sqlite"), "-f", "json"]).stdout)
     for a, b in zip(via_routes["summary"], via_files["summary"], strict=True):

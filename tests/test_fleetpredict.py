@@ -244,7 +244,8 @@ def test_peak_energy_matches_a_plain_loop(hilly, m, cda, cr, eta, w, aux, which)
 def test_route_legs_follow_each_other_without_a_joining_step(hilly):
     a, b = hilly
     route = Source(name="ab", kind="route", vector=Source.from_cycle(a).vector + Source.from_cycle(b).vector,
-                   legs=[LegProfile(a.time_s, a.speed_mps, a.elevation_m), LegProfile(b.time_s, b.speed_mps, b.elevation_m)])
+                   legs=[LegProfile(a.time_s, a.speed_mps, a.elevation_m),
+                         LegProfile(b.time_s, b.speed_mps, b.elevation_m)])
     veh = ev(kerb=3000.0, cda=2.5, cr=0.008, eta=0.85, battery_kwh=40.0, aux_w=2000.0)
     block = predict_source(route, PredictionSet.build([veh], payload_kg=[0.0, 800.0]))
     for i, m in enumerate([3000.0, 3800.0]):
@@ -272,10 +273,12 @@ def test_payloads_masses_and_the_gross_limit():
 
 
 def test_sweep_streams_one_block_per_source_in_order(root, hilly):
-    sources = [Source.from_cycle(c) for c in hilly] + [Source.from_cycle(read_cycle_csv(root / "configs/cycles/urban-bus.csv"))]
+    sources = [Source.from_cycle(c)
+               for c in hilly] + [Source.from_cycle(read_cycle_csv(root / "configs/cycles/urban-bus.csv"))]
     pset = PredictionSet.build([ev(), ice()], payload_kg=[0.0, 5000.0])
     blocks = list(sweep(sources, pset))
-    assert [b.source_index for b in blocks] == [0, 1, 2] and [b.source.name for b in blocks] == ["hilly-a", "hilly-b", "urban-bus"]
+    assert [b.source_index for b in blocks] == [0, 1, 2] and [b.source.name
+                                                              for b in blocks] == ["hilly-a", "hilly-b", "urban-bus"]
     for src, b in zip(sources, blocks, strict=True):
         one = predict_source(src, pset)
         assert np.allclose(b.wheel_energy_j, one.wheel_energy_j, rtol=1e-13)

@@ -85,7 +85,8 @@ def test_a_spliced_recording_is_reported_with_its_time_and_size_and_kept_in_the_
     out = process_file(f, IngestOptions())
     assert out.error is None
     notes = [r for r in out.repairs if "lasting speed jump" in r]
-    assert len(notes) == 1 and ("+119 km/h in 1 s at 2019-05-14" in notes[0] or "-119 km/h in 1 s at 2019-05-14" in notes[0])
+    assert len(notes) == 1 and ("+119 km/h in 1 s at 2019-05-14" in notes[0]
+                                or "-119 km/h in 1 s at 2019-05-14" in notes[0])
     assert sum(len(t.quality.get("speed_jumps", ())) for t in out.trips) == 2
 
 

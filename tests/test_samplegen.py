@@ -328,7 +328,8 @@ def test_truth_trip_times_match_rows(small, truth):
         rows = trip_rows(small, r)
         assert len(rows) > 60
         assert r["end_utc_s"] - r["start_utc_s"] == pytest.approx(r["duration_s"], abs=1.5e-3)  # each to 1 ms
-        assert r["start_utc"] == datetime.fromtimestamp(round(r["start_utc_s"], 3), UTC).strftime("%Y-%m-%dT%H:%M:%S.%f")[:-3] + "Z"
+        start = datetime.fromtimestamp(round(r["start_utc_s"], 3), UTC)
+        assert r["start_utc"] == start.strftime("%Y-%m-%dT%H:%M:%S.%f")[:-3] + "Z"
     # layovers: no rows for more than 5 minutes between the trips of a file
     by_file: dict[str, list[dict]] = {}
     for r in truth["trips"]:
@@ -456,7 +457,8 @@ def test_detailed_consumption_carries_hvac_and_cold_start():
     hvac_extra = soaked.parts["hvac_fuel_l"] - hot.parts["hvac_fuel_l"]
     assert soaked.cumulative[-1] - hot.cumulative[-1] == pytest.approx(soaked.parts["cold_start_fuel_l"] + hvac_extra,
                                                                          rel=1e-9)
-    assert 0.02 < soaked.parts["cold_start_fuel_l"] < 0.2 * soaked.cumulative[-1]  # a short, light trip: cold throughout
+    # a short, light trip: cold throughout
+    assert 0.02 < soaked.parts["cold_start_fuel_l"] < 0.2 * soaked.cumulative[-1]
 
 
 # --------------------------------------------------------------------------------------
@@ -547,7 +549,8 @@ def mosaic_bilinear(tiles, x, y, nodata=-9999.0):
     ok = (c >= 0) & (r >= 0) & (c + 1 < W) & (r + 1 < H)
     out = np.full(x.shape, np.nan)
     c, r, u, v = c[ok], r[ok], fc[ok] - c[ok], fr[ok] - r[ok]
-    out[ok] = (z[r, c] * (1 - u) * (1 - v) + z[r, c + 1] * u * (1 - v) + z[r + 1, c] * (1 - u) * v + z[r + 1, c + 1] * u * v)
+    out[ok] = (z[r, c] * (1 - u) * (1 - v) + z[r, c + 1] * u * (1 - v)
+               + z[r + 1, c] * (1 - u) * v + z[r + 1, c + 1] * u * v)
     return out
 
 
@@ -627,7 +630,8 @@ def test_number_formatting_matches_python(values, decimals, strip):
 def test_uk_local_time_formatting():
     london = ZoneInfo("Europe/London")
     base = datetime(2019, 10, 27, 0, 30, tzinfo=UTC)
-    ts = [base + timedelta(minutes=20 * k) for k in range(6)] + [datetime(2019, 3, 31, 0, 59, 59, tzinfo=UTC), datetime(2019, 3, 31, 1, 0, 0, tzinfo=UTC)]
+    ts = [base + timedelta(minutes=20 * k) for k in range(6)] + [datetime(2019, 3, 31, 0, 59, 59, tzinfo=UTC),
+                                                                 datetime(2019, 3, 31, 1, 0, 0, tzinfo=UTC)]
     chars, keep = csvfmt.uk_local(np.array([int(t.timestamp()) for t in ts]))
     got = csvfmt.assemble([(chars, keep)], b";", b"\n").decode().split("\n")[:-1]
     assert got == [t.astimezone(london).strftime("%d/%m/%Y %H:%M:%S") for t in ts]

@@ -42,7 +42,8 @@ EXIT_BROKEN_PIPE = 141
 
 StoreOption = Annotated[
     Path | None,
-    typer.Option("--store", envvar="CEVM_STORE", metavar="FILE", help="Trip store (SQLite). Default: $CEVM_STORE, else ~/.local/share/cevm/cevm.sqlite."),
+    typer.Option("--store", envvar="CEVM_STORE", metavar="FILE",
+                 help="Trip store (SQLite). Default: $CEVM_STORE, else ~/.local/share/cevm/cevm.sqlite."),
 ]
 
 
@@ -120,22 +121,27 @@ TABLE_MAX_ROWS = 200
 
 
 VehicleOption = Annotated[
-    list[Path], typer.Option("--vehicle", "-v", metavar="FILE|DIR", help="Vehicle TOML file, or a directory of them. Repeatable.")
+    list[Path],
+    typer.Option("--vehicle", "-v", metavar="FILE|DIR", help="Vehicle TOML file, or a directory of them. Repeatable.")
 ]
 CycleOption = Annotated[
     list[Path] | None,
-    typer.Option("--cycle", "-c", metavar="FILE", help="Cycle file, CSV or .csv.gz: time_s, speed_kmh or speed_mps, elevation_m "
-                                       "(optional), or the columns the cycle options name. Repeatable."),
+    typer.Option("--cycle", "-c", metavar="FILE",
+                 help="Cycle file, CSV or .csv.gz: time_s, speed_kmh or speed_mps, elevation_m "
+                      "(optional), or the columns the cycle options name. Repeatable."),
 ]
 TripOption = Annotated[
-    list[str] | None, typer.Option("--trip", "-t", metavar="ID", help="A stored trip id (see 'cevm trips'). Repeatable.")
+    list[str] | None,
+    typer.Option("--trip", "-t", metavar="ID", help="A stored trip id (see 'cevm trips'). Repeatable.")
 ]
 VehicleIdOption = Annotated[
-    list[str] | None, typer.Option("--vehicle-id", metavar="ID", help="All stored trips of this vehicle id. Repeatable.")
+    list[str] | None,
+    typer.Option("--vehicle-id", metavar="ID", help="All stored trips of this vehicle id. Repeatable.")
 ]
 RouteOption = Annotated[
     list[str] | None,
-    typer.Option("--route", "-r", metavar="NAME", help="A stored route (see 'cevm route list'), or a glob such as 'block-*'. Repeatable."),
+    typer.Option("--route", "-r", metavar="NAME",
+                 help="A stored route (see 'cevm route list'), or a glob such as 'block-*'. Repeatable."),
 ]
 SocStartOption = Annotated[
     float | None, typer.Option("--soc-start", help="EV state of charge at the start [%]. Default: a stored trip's "
@@ -159,7 +165,8 @@ def start_soc(source, given: float | None) -> tuple[float, str]:
         return float(logged), SOC_FROM_LOGGED
     return DEFAULT_SOC_START_PCT, SOC_FROM_DEFAULT
 ReserveOption = Annotated[
-    float, typer.Option("--reserve-pct", help="EV state of charge to keep all along [%] (default 15, the paper's warning level).")
+    float, typer.Option("--reserve-pct",
+                        help="EV state of charge to keep all along [%] (default 15, the paper's warning level).")
 ]
 IntervalOption = Annotated[
     float, typer.Option("--interval", metavar="LEVEL", help="Level of each row's interval of energy or fuel "
@@ -189,9 +196,11 @@ AmbientOption = Annotated[
                                      "reference_temp_c, else 20 degC."),
 ]
 Cr0Option = Annotated[
-    float, typer.Option(help="Cr0 of the simplification criterion, for --cycle files (stored trips and routes keep theirs).")
+    float,
+    typer.Option(help="Cr0 of the simplification criterion, for --cycle files (stored trips and routes keep theirs).")
 ]
-OutOption = Annotated[Path | None, typer.Option("--out", "-o", metavar="FILE", help="Write the output to this file instead of stdout.")]
+OutOption = Annotated[Path | None, typer.Option("--out", "-o", metavar="FILE",
+                                                help="Write the output to this file instead of stdout.")]
 
 # How cycle files (--cycle) are read: every option is detected when not given
 # (cevm.io.cycles). One set applies to every --cycle file of the command.
@@ -203,7 +212,8 @@ CycleDecimalOption = Annotated[
     str | None, typer.Option("--cycle-decimal", help="Decimal mark: '.' or ','.", rich_help_panel=_CYCLE_PANEL)
 ]
 TimeColOption = Annotated[
-    str | None, typer.Option("--time-col", help="Time column, in seconds. Default: time_s, Time, t, ...", rich_help_panel=_CYCLE_PANEL)
+    str | None, typer.Option("--time-col", help="Time column, in seconds. Default: time_s, Time, t, ...",
+                             rich_help_panel=_CYCLE_PANEL)
 ]
 TimeStepOption = Annotated[
     float | None,
@@ -212,8 +222,9 @@ TimeStepOption = Annotated[
 ]
 SpeedColOption = Annotated[
     list[str] | None,
-    typer.Option("--speed-col", metavar="COLUMN", help="Speed column, or a glob such as 'Long haul*': each column is one cycle "
-                                     "(files with one mission per column). Repeatable.", rich_help_panel=_CYCLE_PANEL),
+    typer.Option("--speed-col", metavar="COLUMN",
+                 help="Speed column, or a glob such as 'Long haul*': each column is one cycle "
+                      "(files with one mission per column). Repeatable.", rich_help_panel=_CYCLE_PANEL),
 ]
 SpeedUnitOption = Annotated[
     str | None, typer.Option("--speed-unit", help="km/h, m/s or mph. Default: from the column name (speed_kmh, "
@@ -231,7 +242,8 @@ GradeUnitOption = Annotated[
                                 rich_help_panel=_CYCLE_PANEL)
 ]
 GradeFileOption = Annotated[
-    Path | None, typer.Option("--grade-file", metavar="FILE", help="A second file with the same rows holding the grade: the column "
+    Path | None,
+    typer.Option("--grade-file", metavar="FILE", help="A second file with the same rows holding the grade: the column "
                                                       "named like the speed column, or --grade-col (VECTO's "
                                                       "gradient_*.csv).", rich_help_panel=_CYCLE_PANEL)
 ]

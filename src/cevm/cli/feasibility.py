@@ -76,14 +76,18 @@ def feasibility_cmd(
     vehicle_id: VehicleIdOption = None,
     store: StoreOption = None,
     payload_kg: Annotated[
-        float | None, typer.Option("--payload-kg", "-p", help="Payload in kg at which margins are given. Default: each vehicle's default mass.")
+        float | None,
+        typer.Option("--payload-kg", "-p",
+                     help="Payload in kg at which margins are given. Default: each vehicle's default mass.")
     ] = None,
     mass_kg: Annotated[
-        float | None, typer.Option("--mass-kg", "-m", help="Gross mass in kg at which margins are given (instead of --payload-kg).")
+        float | None,
+        typer.Option("--mass-kg", "-m", help="Gross mass in kg at which margins are given (instead of --payload-kg).")
     ] = None,
     payload_cap_kg: Annotated[
         float | None,
-        typer.Option(help="Where the payload search stops for vehicles without max_gross_kg, in kg. Default: their kerb mass."),
+        typer.Option(help="Where the payload search stops for vehicles without max_gross_kg, in kg. Default: their "
+                          "kerb mass."),
     ] = None,
     soc_start: SocStartOption = None,
     reserve_pct: ReserveOption = DEFAULT_RESERVE_PCT,

@@ -19,39 +19,67 @@ _LIMITS = ReadLimits()
 
 
 def ingest(
-    paths: Annotated[list[str], typer.Argument(metavar="PATH", help="Log files, directories (recursive) or glob patterns; .csv and .csv.gz.")],
+    paths: Annotated[list[str],
+                     typer.Argument(metavar="PATH",
+                                    help="Log files, directories (recursive) or glob patterns; .csv and .csv.gz.")],
     store: StoreOption = None,
     dsm: Annotated[
         str | None, typer.Option(help="DSM for road elevation: a GeoTIFF, a directory of tiles, a VRT, or a GDAL URL.")
     ] = None,
     allow_remote_dsm: Annotated[
-        bool, typer.Option(help="Allow a DSM (or VRT sources) that GDAL fetches over a network: URLs, /vsicurl/, /vsis3/ ... (also: CEVM_ALLOW_REMOTE_DSM=1). Off: local GeoTIFFs and VRTs only.")
+        bool,
+        typer.Option(help="Allow a DSM (or VRT sources) that GDAL fetches over a network: URLs, /vsicurl/, /vsis3/ ... "
+                          "(also: CEVM_ALLOW_REMOTE_DSM=1). Off: local GeoTIFFs and VRTs only.")
     ] = False,
-    profile: Annotated[str | None, typer.Option(help="Force a logger profile by name (default: detect from the header).")] = None,
-    profiles_dir: Annotated[Path | None, typer.Option(metavar="DIR", help="A directory of extra logger profiles (TOML).")] = None,
+    profile: Annotated[str | None,
+                       typer.Option(help="Force a logger profile by name (default: detect from the header).")] = None,
+    profiles_dir: Annotated[Path | None,
+                            typer.Option(metavar="DIR", help="A directory of extra logger profiles (TOML).")] = None,
     force: Annotated[bool, typer.Option(help="Re-ingest files even when unchanged.")] = False,
-    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar and no table: failures and one summary line only.")] = False,
-    log_json: Annotated[bool, typer.Option(help="One JSON object per file on stdout, then a summary object (for cron and scripts).")] = False,
+    quiet: Annotated[bool,
+                     typer.Option("--quiet", "-q",
+                                  help="No progress bar and no table: failures and one summary line only.")] = False,
+    log_json: Annotated[bool,
+                        typer.Option(help="One JSON object per file on stdout, then a summary object (for cron and "
+                                          "scripts).")] = False,
     workers: Annotated[
-        int | None, typer.Option("--workers", "-w", min=1, metavar="N", help="Worker processes (default: as many of the machine's cores as the batch's work pays for, none for a small batch; 1: serial, in this process).")
+        int | None,
+        typer.Option("--workers", "-w", min=1, metavar="N",
+                     help="Worker processes (default: as many of the machine's cores as the batch's work pays for, "
+                          "none for a small batch; 1: serial, in this process).")
     ] = None,
     scheduler: Annotated[
-        str | None, typer.Option(help="Dask scheduler address (tcp://HOST:8786): run the per-file work on that cluster (pip install 'cevm[dask]'); the workers must read the log files at the same paths, and the DSM.")
+        str | None,
+        typer.Option(help="Dask scheduler address (tcp://HOST:8786): run the per-file work on that cluster (pip "
+                          "install 'cevm[dask]'); the workers must read the log files at the same paths, and the DSM.")
     ] = None,
     max_rows: Annotated[
-        int | None, typer.Option(min=1, metavar="ROWS", help="Refuse a file of more data rows than this. Default: 2,500,000, and at most 36 million values (rows x columns read), which keeps a worker under 500 MB; given, the rows alone bound a file (memory grows with rows and columns; see the README).")
+        int | None,
+        typer.Option(min=1, metavar="ROWS",
+                     help="Refuse a file of more data rows than this. Default: 2,500,000, and at most 36 million "
+                          "values (rows x columns read), which keeps a worker under 500 MB; given, the rows alone "
+                          "bound a file (memory grows with rows and columns; see the README).")
     ] = None,
     max_samples: Annotated[
-        int, typer.Option(min=1, metavar="SAMPLES", help="Refuse a file whose trips would hold more samples than this on the 1 s grid (a log every 5 s gives 5 a row): the stored trips are held until written, so this keeps a worker under 500 MB.")
+        int,
+        typer.Option(min=1, metavar="SAMPLES",
+                     help="Refuse a file whose trips would hold more samples than this on the 1 s grid (a log every 5 "
+                          "s gives 5 a row): the stored trips are held until written, so this keeps a worker under 500 "
+                          "MB.")
     ] = MAX_SAMPLES,
     max_file_mb: Annotated[
-        float, typer.Option(min=0.001, metavar="MB", help="Refuse a file of more text than this [MB], after decompression.")
+        float,
+        typer.Option(min=0.001, metavar="MB", help="Refuse a file of more text than this [MB], after decompression.")
     ] = _LIMITS.max_file_mb,
     max_expansion: Annotated[
-        float, typer.Option(min=1.0, metavar="RATIO", help="Refuse a gzip file that expands more than this many times (a zip bomb).")
+        float, typer.Option(min=1.0, metavar="RATIO",
+                            help="Refuse a gzip file that expands more than this many times (a zip bomb).")
     ] = _LIMITS.max_expansion,
     manifest: Annotated[
-        Path | None, typer.Option(metavar="FILE", help="A manifest CSV of trip masses, applied after the logs (its columns detected; for other layouts: 'cevm trips set-mass --manifest' with column options).")
+        Path | None,
+        typer.Option(metavar="FILE",
+                     help="A manifest CSV of trip masses, applied after the logs (its columns detected; for other "
+                          "layouts: 'cevm trips set-mass --manifest' with column options).")
     ] = None,
     manifest_tz: Annotated[
         str | None, typer.Option(help="The manifest's zone for times without one (Europe/London, UTC, +01:00).")
@@ -99,7 +127,8 @@ def ingest(
     if not files:  # nothing to ingest: bad usage, and no store is created for it
         for m in missing[:-1]:
             typer.echo(f"cevm: error: {printable(m)}", err=True)
-        raise fail(missing[-1] + ("" if len(missing) == 1 else f" (none of the {len(missing)} inputs holds a log file)"))
+        raise fail(missing[-1] + ("" if len(missing) == 1
+                                  else f" (none of the {len(missing)} inputs holds a log file)"))
     progress = None
     if not quiet and not log_json and sys.stderr.isatty():
         from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn

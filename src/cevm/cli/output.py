@@ -40,7 +40,10 @@ ID_COLUMNS = {"cycle", "vehicle", "vehicle_key", "trip_id", "vehicle_id", "sourc
               "mass_source",
               "vehicle id", "start_utc", "created_utc"}
 #: Columns printed left-aligned and allowed to wrap in tables.
-TEXT_COLUMNS = {"kind", "problem", "value", "basis", "what", "cycle", "vehicle", "trip_id", "vehicle_id", "source", "route", "file", "status", "profile", "start_utc", "elevation_source", "day", "day 1", "day 2", "day 3", "method", "stops", "item", "parameter", "std", "in-sample", "cross-validated", "quantity", "terms", "parameters"}
+TEXT_COLUMNS = {"kind", "problem", "value", "basis", "what", "cycle", "vehicle", "trip_id", "vehicle_id", "source",
+                "route", "file", "status", "profile", "start_utc", "elevation_source", "day", "day 1", "day 2", "day 3",
+                "method", "stops", "item", "parameter", "std", "in-sample", "cross-validated", "quantity", "terms",
+                "parameters"}
 
 
 #: How a table's legend says an ICE braking mode (:data:`cevm.core.model.ICE_BRAKING_MODES`):

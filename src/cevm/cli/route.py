@@ -31,7 +31,8 @@ def route_add(
     cycle: CycleOption = None,
     leg: Annotated[
         list[str] | None,
-        typer.Option("--leg", metavar="trip:ID|cycle:PATH", help="A leg as trip:ID or cycle:PATH, in order (to mix trips and cycles). Repeatable."),
+        typer.Option("--leg", metavar="trip:ID|cycle:PATH",
+                     help="A leg as trip:ID or cycle:PATH, in order (to mix trips and cycles). Repeatable."),
     ] = None,
     store: StoreOption = None,
     replace: Annotated[bool, typer.Option(help="Overwrite an existing route of this name.")] = False,

@@ -31,16 +31,25 @@ from cevm.units import J_PER_KWH
 
 @with_cycle_options
 def simulate(
-    vehicle: Annotated[Path, typer.Option("--vehicle", "-v", metavar="FILE", help="Vehicle file with a [detailed] table (the drivetrain; a file without one is refused).")],
+    vehicle: Annotated[Path,
+                       typer.Option("--vehicle", "-v", metavar="FILE",
+                                    help="Vehicle file with a [detailed] table (the drivetrain; a file without one is "
+                                         "refused).")],
     cycle: Annotated[Path | None, typer.Option("--cycle", "-c", metavar="FILE", help="Cycle CSV.")] = None,
     trip: Annotated[str | None, typer.Option("--trip", "-t", metavar="ID", help="A stored trip id.")] = None,
     store: StoreOption = None,
-    mass_kg: Annotated[float | None, typer.Option("--mass-kg", "-m", help="Gross mass [kg]. Default: the vehicle's.")] = None,
-    payload_kg: Annotated[float | None, typer.Option("--payload-kg", "-p", help="Payload [kg] on the vehicle's kerb mass (instead of --mass-kg).")] = None,
+    mass_kg: Annotated[float | None,
+                       typer.Option("--mass-kg", "-m", help="Gross mass [kg]. Default: the vehicle's.")] = None,
+    payload_kg: Annotated[float | None,
+                          typer.Option("--payload-kg", "-p",
+                                       help="Payload [kg] on the vehicle's kerb mass (instead of --mass-kg).")] = None,
     soc_start_pct: SocStartOption = None,
     reserve_pct: ReserveOption = DEFAULT_RESERVE_PCT,
     out: Annotated[Path | None, typer.Option("--out", "-o", metavar="FILE", help="Per-second output CSV.")] = None,
-    plot: Annotated[Path | None, typer.Option(metavar="FILE.png", help="PNG: state of charge (EV, the paper's figure 4) or fuel and elevation (ICE, figure 6).")] = None,
+    plot: Annotated[Path | None,
+                    typer.Option(metavar="FILE.png",
+                                 help="PNG: state of charge (EV, the paper's figure 4) or fuel and elevation (ICE, "
+                                      "figure 6).")] = None,
     fmt: Annotated[OutputFormat, typer.Option("--format", "-f", help="Format of the summary.")] = OutputFormat.table,
     cycle_fmt=None,
 ) -> None:

@@ -75,8 +75,9 @@ def set_mass(
     clear: Annotated[bool, typer.Option("--clear", help="Forget the masses given to the trips (they fall back to "
                                                         "the logged gross weight, else the vehicle file's).")] = False,
     manifest: Annotated[Path | None, typer.Option(
-        "--manifest", metavar="FILE", help="A manifest CSV (a transport management system's export): vehicle, and trip id or a "
-                           "start/end window, and gross or payload kg per row.")] = None,
+        "--manifest", metavar="FILE",
+        help="A manifest CSV (a transport management system's export): vehicle, and trip id or a "
+             "start/end window, and gross or payload kg per row.")] = None,
     dry_run: Annotated[bool, typer.Option("--dry-run", help="Say what a manifest would give, store nothing.")] = False,
     store: StoreOption = None,
     vehicle_col: Annotated[str | None, typer.Option(help="Manifest: the vehicle id column.",

@@ -213,7 +213,8 @@ def ice_fuel_l(
 ) -> np.ndarray:
     """ICE fuel over the cycle [l]: L_f = E_DC / (U_f eta) (eq. 26), plus idle fuel.
 
-    ``braking`` defaults to :data:`ICE_BRAKING_DEFAULT` ("no-credit"). ``"paper"`` credits braking energy as eq. (24) does; ``"no-credit"`` counts
+    ``braking`` defaults to :data:`ICE_BRAKING_DEFAULT` ("no-credit"). ``"paper"`` credits braking energy
+    as eq. (24) does; ``"no-credit"`` counts
     only the positive non-simplified steps. ``idle_fuel_lps`` [l/s] is burnt during the
     cycle's time at standstill (0 by default, as in the paper). E_DC < 0 (a long
     descent, paper mode) gives negative fuel from the traction term: the model, not

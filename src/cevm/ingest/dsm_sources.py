@@ -14,8 +14,8 @@ Without that permission (:func:`check_local`), a DSM raster must be a local GeoT
 (opened with the VRT driver only) whose every source, recursively, is such a file; a
 VRT with Python pixel functions is refused as well (code in a data file). Archive
 members (``/vsizip/``, ``/vsitar/``, ``/vsigzip/`` of a local archive) are opened as
-GeoTIFF only, and refused as VRT sources (GDAL would open them unchecked). Anything else is refused with one message naming the file, the
-reference and how to allow it.
+GeoTIFF only, and refused as VRT sources (GDAL would open them unchecked). Anything else is
+refused with one message naming the file, the reference and how to allow it.
 """
 
 from __future__ import annotations

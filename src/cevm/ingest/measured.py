@@ -318,7 +318,8 @@ def counter_increases(ts: np.ndarray, counter: np.ndarray, sb: np.ndarray, t0: n
         var = q * q / 6.0
         var += float(lost_sq[k])
         var += (mr * (dur - cov)) ** 2
-        counts = {"counter_wraps": int(k_wraps[k]), "counter_resets": int(k_resets[k]), "counter_jumps": int(k_jumps[k])}
+        counts = {"counter_wraps": int(k_wraps[k]), "counter_resets": int(k_resets[k]),
+                  "counter_jumps": int(k_jumps[k])}
         out[i] = _Raw(float(value[k]), math.sqrt(var), cov / dur, 1.0 - cov / dur, counts)
     return out
 

@@ -254,7 +254,8 @@ def _work_to_do(files: list[Path], store: TripStore, options: IngestOptions) -> 
         except OSError:
             continue  # reported by _prepare
         state = None if options.force else store.file_state(path)
-        if state is not None and state.status == "ok" and state.size_bytes == st.st_size and state.mtime_s == st.st_mtime:
+        if (state is not None and state.status == "ok" and state.size_bytes == st.st_size
+                and state.mtime_s == st.st_mtime):
             continue
         costs[str(path)] = estimated_work_s(path, st.st_size)
     return costs

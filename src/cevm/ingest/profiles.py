@@ -75,8 +75,8 @@ the drop is reported); timezone UTC; ``date_repair = "none"`` (repairing is opt-
 keeps the next day's date); vehicle id from the file name stem; zero latitude or
 longitude means no fix (GPS modules write 0 without one; a real fix exactly on the
 equator or the Greenwich meridian, to the logged precision, is rare and losing it is
-harmless); ``absurd_error_share = 0.5`` (see :func:`cevm.ingest.reading.plausibility._check_absurd`). Energy ``priority``
-has no default: trust is the profile author's statement.
+harmless); ``absurd_error_share = 0.5`` (see :func:`cevm.ingest.reading.plausibility._check_absurd`).
+Energy ``priority`` has no default: trust is the profile author's statement.
 """
 
 from __future__ import annotations

@@ -108,7 +108,8 @@ def translate(exc: sqlite3.Error, path: Path, busy_timeout_s: float) -> CevmErro
                                 "Free some space (or raise the file-size limit) and run again", "full")
     if primary in (_READONLY, _PERM):
         return StoreAccessError(f"{path}: the store could not be written: it is read-only ({text}: the file, its "
-                                f"directory or the file system); {nothing}. Commands that only read it work", "readonly")
+                                f"directory or the file system); {nothing}. Commands that only read it work",
+                                "readonly")
     if primary in (_BUSY, _LOCKED):
         return StoreAccessError(f"{path}: the store could not be written: another process held its write lock for "
                                 f"more than {busy_timeout_s:g} s ({text}; a hung cevm ingest?); {nothing}. "

@@ -69,7 +69,8 @@ def foreign_mass(mass: TripMass | None, measured: Measurement | None, vehicle) -
         return None
     if measured is not None and (measured.kind == "fuel_l") == vehicle.is_ev:
         return f"it measured {'fuel' if vehicle.is_ev else 'electric energy'}, so another powertrain drove it"
-    if vehicle.max_gross_kg is None and vehicle.kerb_mass_kg and key[1] > FOREIGN_MASS_KERB_RATIO * vehicle.kerb_mass_kg:
+    if (vehicle.max_gross_kg is None and vehicle.kerb_mass_kg
+            and key[1] > FOREIGN_MASS_KERB_RATIO * vehicle.kerb_mass_kg):
         return f"over {FOREIGN_MASS_KERB_RATIO:g} times this vehicle's kerb mass of {vehicle.kerb_mass_kg:,.0f} kg"
     return None
 

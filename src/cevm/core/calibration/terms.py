@@ -333,7 +333,8 @@ class TermModel:
         """Per trip, the modelled rate while standing still [W or l/s]: EV P_aux(T); ICE
         r_idle + r_heat h(T) + r_cool c(T)."""
         vals = self.values_of(names, theta)
-        g = {k: (0.0 if not math.isfinite(vals.get(k, 0.0)) else vals.get(k, 0.0)) for k in ("aux", "heat", "cool", "idle")}
+        g = {k: (0.0 if not math.isfinite(vals.get(k, 0.0)) else vals.get(k, 0.0))
+             for k in ("aux", "heat", "cool", "idle")}
         h = np.nan_to_num(self.h)
         c = np.nan_to_num(self.c)
         base = g["aux"] if self.ev else g["idle"]

@@ -87,7 +87,8 @@ def _check_block_size(ds, shown: str) -> None:
         raise InputError(shown, f"its internal blocks ({kind}s of {bw:,} x {bh:,} pixels, {ds.dtypes[0]}) take "
                                 f"{nbytes / 1e6:,.0f} MB each decoded, over the {MAX_BLOCK_BYTES >> 20} MB a DSM block "
                                 "may take (GDAL decodes a whole block to read one pixel); write it in tiles, e.g. "
-                                "gdal_translate -co TILED=YES -co BLOCKXSIZE=512 -co BLOCKYSIZE=512 -co COMPRESS=DEFLATE")
+                                "gdal_translate -co TILED=YES -co BLOCKXSIZE=512 -co BLOCKYSIZE=512 -co "
+                                "COMPRESS=DEFLATE")
 
 
 def _is_gdal_name(source: str) -> bool:

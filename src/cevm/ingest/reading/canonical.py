@@ -37,7 +37,8 @@ def _canonical_columns(columns: dict[str, np.ndarray], maps: list[ColumnMap], ut
     has_pos = "lat_deg" in out and np.isfinite(out["lat_deg"]).any()
     has_speed = any(c in out and np.isfinite(out[c]).any() for c in ("wheel_speed_mps", "gps_speed_mps"))
     if not (has_pos or has_speed):
-        cands = [m.source for m in prof.columns if m.canonical in ("lat_deg", "lon_deg", "wheel_speed_mps", "gps_speed_mps")]
+        cands = [m.source for m in prof.columns
+                 if m.canonical in ("lat_deg", "lon_deg", "wheel_speed_mps", "gps_speed_mps")]
         raise InputError(path, "no position and no speed values: cannot derive a drive cycle "
                                f"(profile {prof.name!r} looks for {', '.join(cands) or 'none'})")
     return out

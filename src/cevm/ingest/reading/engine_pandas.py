@@ -63,7 +63,8 @@ def _pandas_block(block: bytes, first_line: int, plan: ColumnPlan, prof: Profile
         empty = df.isna().all(axis=1).to_numpy().copy()
     numbers = {c: _writable(df[c].to_numpy(dtype=np.float64)) for c in plan.num_cols}  # copy-on-write views
     text = {c: df[c].to_numpy(dtype=object) for c in plan.text_cols if c in df.columns}
-    part = ParsedBlock(lines, numbers, text, fast.ns if fast is not None else None, bool(fast is not None and fast.is_utc),
+    part = ParsedBlock(lines, numbers, text, fast.ns if fast is not None else None,
+                       bool(fast is not None and fast.is_utc),
                  fewer=fewer, last_line=first_line + len(df) - 1, bad_cells=bad_cells)
     return _drop_empty_rows(part, empty)
 

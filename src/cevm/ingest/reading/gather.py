@@ -346,7 +346,8 @@ def _vehicle_from_profile(prof: Profile, path: Path, metadata: dict[str, str], r
         if prof.vehicle_fallback == "error":
             raise InputError(path, f"no '{prof.vehicle_key}=' metadata line for the vehicle id", line=1)
         src = prof.vehicle_fallback
-        repairs.append(f"vehicle: no '{prof.vehicle_key}' metadata; vehicle id taken from the file's {src.replace('_', ' ')}")
+        repairs.append(f"vehicle: no '{prof.vehicle_key}' metadata; vehicle id taken from the file's "
+                       f"{src.replace('_', ' ')}")
     name = path.name
     for suffix in (".gz", ".csv", ".txt"):
         if name.lower().endswith(suffix):

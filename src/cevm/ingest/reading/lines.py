@@ -61,7 +61,8 @@ def _lines_summary(lines: np.ndarray, limit: int = 6) -> str:
     breaks = np.flatnonzero(np.diff(lines) != 1) + 1
     starts = np.concatenate([[0], breaks])
     ends = np.concatenate([breaks - 1, [len(lines) - 1]])
-    runs = [f"{lines[s]}" if s == e else f"{lines[s]}-{lines[e]}" for s, e in zip(starts[:limit], ends[:limit], strict=True)]
+    runs = [f"{lines[s]}" if s == e else f"{lines[s]}-{lines[e]}"
+            for s, e in zip(starts[:limit], ends[:limit], strict=True)]
     more = f", ... ({len(starts) - limit} more runs)" if len(starts) > limit else ""
     return ("line " if len(lines) == 1 else "lines ") + ", ".join(runs) + more
 
