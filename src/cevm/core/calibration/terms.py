@@ -33,8 +33,9 @@ N term is N / c_eta, not linear in c_eta; the fit linearises it (Gauss-Newton).
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import replace
+from typing import Any
 
 import numpy as np
 
@@ -84,7 +85,7 @@ def neutral(vehicle: Vehicle, keep: Sequence[str] = ()) -> Vehicle:
     return replace(vehicle, **changes)
 
 
-def with_values(vehicle: Vehicle, values: dict[str, float]) -> Vehicle:
+def with_values(vehicle: Vehicle, values: Mapping[str, Any]) -> Vehicle:
     """``vehicle`` with fitted field values (keys: vehicle fields)."""
     return replace(vehicle, **values)
 
@@ -222,7 +223,7 @@ class TermModel:
     # prediction ----------------------------------------------------------------------
 
     def _linear_parts(self, names: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray, np.ndarray | None,
-                                                              np.ndarray | None]:
+                                                              tuple[float, np.ndarray] | None]:
         """For linear ``names`` at the vehicle's CdA and Cr (cached): the features F (n, k)
         of the fitted terms, the fixed terms' consumption (all but those that move with
         eta), and the features that move with eta: the tied regeneration N (EV, divided

@@ -123,7 +123,9 @@ def predict_one(vehicle: Vehicle, vector: CycleVector, mass_kg: float, ambient_c
     temperature means "not logged": the vehicle's default is used (only a vehicle with
     temperature terms depends on it, and those are fitted only on trips with one)."""
     p = predict(vector, vehicle, float(mass_kg), ambient_c=None if not math.isfinite(ambient_c) else float(ambient_c))
-    return float(p.energy_j if vehicle.is_ev else p.fuel_l)
+    q = p.energy_j if vehicle.is_ev else p.fuel_l
+    assert q is not None  # predict() sets the powertrain's quantity
+    return float(q)
 
 
 def predict_set(vehicle: Vehicle, data: TripSet, idx=None) -> np.ndarray:
