@@ -25,6 +25,7 @@ import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
 from functools import lru_cache
+from types import FrameType
 
 #: glibc's mallopt parameters (malloc.h)
 _M_TRIM_THRESHOLD = -1
@@ -122,7 +123,7 @@ def signals_deferred(signums: tuple[int, ...] = (signal.SIGINT, signal.SIGTERM))
     if threading.current_thread() is not threading.main_thread():
         yield
         return
-    arrived: list[tuple[int, object]] = []
+    arrived: list[tuple[int, FrameType | None]] = []
     saved = {}
     for s in signums:
         handler = signal.getsignal(s)

@@ -195,7 +195,7 @@ def local_dask_cluster(n_workers: int = 2, threads_per_worker: int = 1, *, proce
                             host="127.0.0.1", dashboard_address=None)
 
 
-def _client_class(distributed):
+def _client_class(distributed: Any) -> Any:
     """``distributed.Client``, but one whose failed start leaves nothing to close.
 
     A client that cannot reach its scheduler (an unknown scheme, a refused or timed-out

@@ -24,6 +24,7 @@ import functools
 import re
 import sqlite3
 from pathlib import Path
+from typing import cast
 
 from cevm.errors import CevmError
 
@@ -145,7 +146,8 @@ def _translated(method, connection_of):
 
 
 def _cursor_connection(cursor: sqlite3.Cursor) -> StoreConnection:
-    return cursor.connection
+    # the store opens its connections with factory=StoreConnection
+    return cast(StoreConnection, cursor.connection)
 
 
 class _Cursor(sqlite3.Cursor):
