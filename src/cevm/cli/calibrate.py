@@ -152,8 +152,8 @@ def calibrate(
         _print_calibration(report, veh.is_ev)
     if out is not None and fmt == OutputFormat.table:
         typer.echo(f"calibrated vehicle written to {out}")
-    for exc in sel.damaged:
-        warn_damaged(exc)
+    for problem in sel.damaged:
+        warn_damaged(problem)
     if sel.damaged:
         raise typer.Exit(EXIT_PARTIAL)
 
@@ -327,7 +327,7 @@ def _scatter(result: CalibrationResult) -> dict | None:
     aux_text = f"{sc.aux / 1e3:.2f} kW" if ev else f"{sc.aux * 3600:.2f} l/h"
     return {"aux": sc.aux, "aux_unit": "W" if ev else "l/s", "aux_text": aux_text, "share": sc.share,
             "day_correlation": sc.day_corr, "day_correlation_note": sc.day_corr_note, "standstill": sc.standstill,
-            "meter_share": result.posterior.meter_share}
+            "meter_share": None if result.posterior is None else result.posterior.meter_share}
 
 
 def result_json(result: CalibrationResult, vehicle_id: str, notes: tuple[str, ...], selection=None) -> dict:

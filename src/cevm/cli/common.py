@@ -304,8 +304,9 @@ def with_cycle_options(command):
         opts = {name: kwargs.pop(name, None) for name in _CYCLE_OPTIONS}
         return command(*args, cycle_fmt=cycle_format(**opts), **kwargs)
 
-    run.__signature__ = sig.replace(parameters=[p.replace(kind=inspect.Parameter.KEYWORD_ONLY) for p in params] + extra)
-    run.__annotations__ = {p.name: p.annotation for p in run.__signature__.parameters.values()}
+    new_sig = sig.replace(parameters=[p.replace(kind=inspect.Parameter.KEYWORD_ONLY) for p in params] + extra)
+    run.__signature__ = new_sig  # type: ignore[attr-defined]  # typer reads a function's __signature__
+    run.__annotations__ = {p.name: p.annotation for p in new_sig.parameters.values()}
     return run
 FormatOption = Annotated[OutputFormat, typer.Option("--format", "-f", help="Output format.")]
 

@@ -62,7 +62,7 @@ def _mass_for(src, mass_kg: float | None, payload_kg: float | None) -> tuple[flo
         return None, payload_kg, "--payload-kg"
     own = getattr(src, "mass", None)  # a stored trip's (cevm.store.sources.StoredTrip)
     key = None if own is None else own.sweep_key()
-    if key is None:
+    if own is None or key is None:
         return None, None, "vehicle file"
     return (key[1], None, own.origin) if key[0] == "gross" else (None, key[1], own.origin)
 
@@ -145,7 +145,9 @@ def feasibility_cmd(
                             for i in range(len(res.vehicles)))
                 speed = src.distance_m / src.duration_s if src.duration_s > 0 else float("nan")
                 idle = src.vector.idle_s / src.duration_s if src.duration_s > 0 else float("nan")
-                seen += [(i, res.mass_kg[i], res.ambient_c[i], speed, idle) for i in range(len(vehicles))]
+                amb = res.ambient_c
+                seen += [(i, res.mass_kg[i], float("nan") if amb is None else amb[i], speed, idle)
+                         for i in range(len(vehicles))]
                 src.release()
             stream = open_out(stack, out)
             if fmt == OutputFormat.table:
@@ -164,8 +166,8 @@ def feasibility_cmd(
         from cevm.core.energy import uses_temperature
 
         warn_ambient_unused([(v.label, uses_temperature(v)) for v in vehicles], f"--ambient-c {ambient_c:g}")
-    for exc in skipped:
-        warn_damaged(exc)
+    for problem in skipped:
+        warn_damaged(problem)
     if skipped:
         raise typer.Exit(EXIT_PARTIAL)
 

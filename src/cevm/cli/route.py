@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Annotated
+from typing import Annotated, Any
 
 import typer
 
@@ -86,7 +86,7 @@ def route_list(
     from cevm.store.routes import check_route_profiles, list_routes, load_route_legs
 
     path = existing_store(store, "run 'cevm ingest' or 'cevm route add' first, or give --store")
-    rows = []
+    rows: list[dict[str, Any]] = []
     try:
         with TripStore.open(path, readonly=True) as st:
             for info in list_routes(st):

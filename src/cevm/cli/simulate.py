@@ -4,7 +4,7 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Any
 
 import numpy as np
 import typer
@@ -89,6 +89,7 @@ def simulate(
             if h is None:
                 typer.echo(f"cevm: note: {printable(name)}: no elevation or grade: a flat road assumed", err=True)
         else:
+            assert trip is not None  # exactly one of --cycle, --trip (checked above)
             from cevm.store import TripStore, existing_store_path
             from cevm.store.codec import MAX_PROFILE_SAMPLES
             from cevm.store.masses import trip_masses
@@ -144,7 +145,7 @@ def simulate(
             plot_simulation(_plot_columns(res, empty_at_s), res, plot, f"{veh.name}: {name}")
         except CevmError as exc:  # a full disk: the plot's, exit 3 (cevm.io.plots leaves no half-written file)
             raise fail(exc) from None
-    row = {"cycle": name, "vehicle": veh.name, "mass_kg": res.mass_kg, "mass_source": mass_source,
+    row: dict[str, Any] = {"cycle": name, "vehicle": veh.name, "mass_kg": res.mass_kg, "mass_source": mass_source,
            "distance_km": res.distance_m / 1e3,
            "duration_s": res.duration_s, "wheel_work_net_kwh": res.wheel_energy_j / J_PER_KWH,
            "friction_brake_kwh": res.friction_brake_energy_j / J_PER_KWH,
@@ -153,11 +154,13 @@ def simulate(
     if aux_w is not None and res.duration_s > 0:  # what the battery fed besides the motor: an assumption
         row["aux_power_kw"] = float(np.sum(aux_w * res.steps["dt_s"]) / res.duration_s) / 1e3
     if veh.is_ev:
+        assert res.energy_j is not None  # an EV's result
         row["energy_kwh"] = res.energy_j / J_PER_KWH
         row["soc_start_pct"], row["soc_start_from"] = soc0, soc_from
         row["soc_end_pct"], row["soc_min_pct"] = verdict.pop("soc_end_pct"), verdict.pop("soc_min_pct")
         row["reserve_pct"] = reserve_pct
     else:
+        assert res.fuel_l is not None  # an ICE's result
         row["fuel_l"] = res.fuel_l
         row["fuel_l_per_100km"] = 100.0 * res.fuel_l / (res.distance_m / 1e3) if res.distance_m > 0 else None
     if measured is not None and measured.value > 0:  # a stored trip: what it measured beside the model

@@ -137,12 +137,13 @@ def set_mass(
                 with open_manifest(manifest, fmt) as reader:
                     _applied, problems = apply_manifest(st, manifest, reader, dry_run=dry_run)
                 raise typer.Exit(EXIT_PARTIAL if problems else EXIT_OK)
-            ids = list(dict.fromkeys(trip_ids))
+            ids = list(dict.fromkeys(trip_ids or []))  # given (checked above)
             if clear:
                 n = clear_masses(st, ids)
                 typer.echo(f"cevm trips set-mass: cleared the given masses of {n} of {len(ids)} trip(s) in {path}")
                 return
             kind, value = ("gross", gross_kg) if gross_kg is not None else ("payload", payload_kg)
+            assert value is not None  # exactly one of the options (checked above)
             new, replaced = set_masses(st, [AssignedMass(t, kind, float(value), "hand") for t in ids])
             typer.echo(f"cevm trips set-mass: {len(ids)} trip(s) given a {kind} mass of {value:,.0f} kg by hand "
                        f"({new} new, {replaced} replaced) in {path}")

@@ -67,6 +67,7 @@ from __future__ import annotations
 
 import difflib
 import math
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, Literal, overload
 
@@ -348,7 +349,7 @@ def load_vehicle(path: str | Path) -> Vehicle:
     return vehicle_from_mapping(read_toml(path, "vehicle file"), str(path), default_id=stem_id(path))
 
 
-def load_vehicles(paths: list[str | Path]) -> list[Vehicle]:
+def load_vehicles(paths: Sequence[str | Path]) -> list[Vehicle]:
     """Load vehicle files; a directory contributes its ``*.toml`` files, sorted. Raises
     :class:`InputError` when two of them have the same id."""
     out: list[Vehicle] = []
