@@ -299,6 +299,7 @@ def source_samples(
         v = np.asarray(columns[column], dtype=float)
         ok = np.isfinite(v)
         return time_s[ok], v[ok]
+    factors: tuple[str, ...]
     if column == BATTERY_POWER_COLUMN:
         factors = _BATTERY_POWER_FACTORS
     elif "*" in column:

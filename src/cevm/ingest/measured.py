@@ -118,6 +118,7 @@ def window_samples(time_s: np.ndarray, columns: Mapping[str, np.ndarray], column
         v = np.asarray(columns[column])[rows].astype(np.float64, copy=False)
         ok = np.isfinite(v)
         return tw[ok], v[ok], _kept_bounds(ok, wb)
+    factors: tuple[str, ...]
     if column == BATTERY_POWER_COLUMN:
         factors = _BATTERY_POWER_FACTORS
     elif "*" in column:

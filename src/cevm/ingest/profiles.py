@@ -585,7 +585,7 @@ def _column_map(canon: str, spec: Any, k: _Keys) -> ColumnMap:
     map_t = None
     density = _fuel_density(canon, spec, unit, k, key)
     if density is not None:  # fuel by mass: litres through the stated density
-        factor = UNITS[unit].factor / density  # type: ignore[index]
+        factor = UNITS[unit].factor / density
     elif unit is not None:
         factor, offset = _unit_factor(unit, CANONICAL_DIMENSIONS[canon], k.path, f"{key}.unit")
     else:

@@ -26,6 +26,7 @@ array's length, non-decreasing) or as ``starts`` and ``lengths``.
 from __future__ import annotations
 
 import itertools
+from typing import Literal
 
 import numpy as np
 
@@ -249,7 +250,7 @@ def segment_medians(values: np.ndarray, group: np.ndarray, n_groups: int, *, fin
 
 
 def segment_searchsorted(a: np.ndarray, a_starts: np.ndarray, a_lengths: np.ndarray, v: np.ndarray,
-                         v_seg: np.ndarray, side: str = "left") -> np.ndarray:
+                         v_seg: np.ndarray, side: Literal["left", "right"] = "left") -> np.ndarray:
     """``np.searchsorted(a[s:s + n], v, side)`` of each value of ``v`` in its segment
     (``v_seg``: the segment of each value; ``a`` sorted within each segment), as
     positions within the segment. The segments of ``a`` need not be sorted among

@@ -3,6 +3,8 @@ each trip counts its own."""
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 
@@ -55,7 +57,7 @@ class RepairEvents:
         """The lasting speed jumps from ``t0`` to ``t1`` [s, UTC], the largest first (at
         most :data:`MAX_JUMPS_LISTED`): ``{"source", "utc_s", "dt_s", "from_mps",
         "to_mps"}`` each."""
-        found = [{"source": source, "utc_s": float(t[i]), "dt_s": float(dt[i]),
+        found: list[dict[str, Any]] = [{"source": source, "utc_s": float(t[i]), "dt_s": float(dt[i]),
                   "from_mps": float(v0[i]), "to_mps": float(v1[i])}
                  for source, t, dt, v0, v1 in self._jumps
                  for i in np.flatnonzero((t >= t0) & (t <= t1))]

@@ -5,7 +5,6 @@ nodata and scale (:class:`TileHeader`), and the headers sent to workers once
 from __future__ import annotations
 
 import os
-from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
@@ -155,7 +154,7 @@ def _read_header(name: str, shown: str, driver: str = "") -> TileHeader:
         raise InputError(shown, f"cannot open as a raster: {exc}") from None
 
 
-def _list_sources(source: str | os.PathLike | Sequence[str | os.PathLike]) -> list[str]:
+def _list_sources(source: str | os.PathLike | list[str | os.PathLike] | tuple[str | os.PathLike, ...]) -> list[str]:
     """Resolve a DSM argument to raster names GDAL can open (see :meth:`DsmSampler.open`)."""
     if isinstance(source, (list, tuple)):
         names: list[str] = []
