@@ -53,7 +53,7 @@ def test_stored_trips_start_at_their_logged_soc_unless_given(twizy_store):
     for r in rows:
         assert float(r["soc_min_pct"]) <= float(r["soc_start_pct"])
     given = _rows(runner.invoke(app, [*args, "--soc-start", "90"]).stdout)
-    assert all(r["soc_start_from"] == "--soc-start" and float(r["soc_start_pct"]) == 90.0 for r in given)
+    assert all(r["soc_start_from"] == "given" and float(r["soc_start_pct"]) == 90.0 for r in given)
 
 
 def test_a_cycle_row_says_every_assumption():

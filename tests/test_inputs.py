@@ -221,6 +221,23 @@ def test_a_logger_profile_that_is_a_device_or_nested_without_end_is_refused(tmp_
     assert not (tmp_path / "s.sqlite").exists()
 
 
+
+def test_profiles_dir_adds_to_the_shipped_profiles(tmp_path):
+    """``--profiles-dir`` adds its profiles to the shipped ones (its help says "extra"):
+    an srf log still ingests beside a directory holding only a user's own profile (it
+    was read instead of the shipped ones: "no logger profile matches")."""
+    log = ROOT / "sample_logs" / "srf" / "EB-01_2019-01-31.csv"
+    profiles = tmp_path / "profiles"
+    profiles.mkdir()
+    (profiles / "mine.toml").write_text(
+        'name = "mine"\n[detect]\nrequired_columns = ["when", "kmh"]\n[time]\ncolumns = ["when"]\n'
+        'format = "%Y/%m/%d %H:%M:%S"\ntimezone = "UTC"\n[vehicle]\nsource = "parent_dir"\n'
+        '[columns]\nwheel_speed_mps = { source = "kmh", unit = "km/h" }\n')
+    res = cevm("ingest", log, "--profiles-dir", profiles, "--store", tmp_path / "s.sqlite", "-q", "--workers", "1")
+    assert res.exit_code == 0, res.stderr
+    listed = cevm("trips", "--store", tmp_path / "s.sqlite", "-f", "csv")
+    assert listed.exit_code == 0 and "EB-01" in listed.stdout
+
 # ---------------------------------------------------------------------------- scenarios
 
 SCENARIO = """name = "probe"

@@ -148,8 +148,10 @@ SocStartOption = Annotated[
                                   "own logged start, else full (100); column soc_start_from says which.")
 ]
 
-#: Where a row's start state of charge comes from (column ``soc_start_from``).
-SOC_FROM_GIVEN, SOC_FROM_LOGGED, SOC_FROM_DEFAULT = "--soc-start", "logged", "default"
+#: Where a row's start state of charge comes from (column ``soc_start_from``): "given"
+#: (``--soc-start``; not the option's own name, which CSV would write as '--soc-start, a
+#: cell starting with "-" being neutralised as a formula), "logged" or "default".
+SOC_FROM_GIVEN, SOC_FROM_LOGGED, SOC_FROM_DEFAULT = "given", "logged", "default"
 
 
 def start_soc(source, given: float | None) -> tuple[float, str]:

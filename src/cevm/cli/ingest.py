@@ -58,7 +58,7 @@ def ingest(
         typer.Option(min=1, metavar="ROWS",
                      help="Refuse a file of more data rows than this. Default: 2,500,000, and at most 36 million "
                           "values (rows x columns read), which keeps a worker under 500 MB; given, the rows alone "
-                          "bound a file (memory grows with rows and columns; see the README).")
+                          "bound a file (memory grows with rows and columns; see docs/guide/ingest.md).")
     ] = None,
     max_samples: Annotated[
         int,

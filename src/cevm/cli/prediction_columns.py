@@ -50,7 +50,7 @@ TOP_SPEED_MEANING = "the highest speed the source holds for 3 s [km/h] (empty as
 LIMITS_TOLERANCE_MEANING = ("how the source is held to max_power_kw and max_speed_kmh: exact (a cycle file, a "
                             "target) or with a log's measurement tolerance (a logged speed may read up to 10 % + "
                             "4 km/h high, UN ECE R39; its elevation is uncertain by the metres given)")
-SOC_FROM_MEANING = ("where the start state of charge comes from: --soc-start, logged (a stored trip's own logged "
+SOC_FROM_MEANING = ("where the start state of charge comes from: given (--soc-start), logged (a stored trip's own logged "
                     "start) or default (full: 100 %)")
 ROAD_MEANING = ("the road's elevation: flat (none: a flat road assumed), elevation (a cycle's elevation or grade "
                 "column), a stored trip's source of elevation (dsm, gps, ...), or route legs")

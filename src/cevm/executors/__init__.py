@@ -40,8 +40,8 @@ What is the libraries', what is cevm's own
       a Dask task 7-10 ms of CPU here (its scheduler, client and worker event loops), a
       pool task 2-3 ms of pickling and pipes. Ingest files of 25-30 ms each, one per
       task, ran 22-82 % slower on a local Dask cluster than on the pool; in groups of
-      about 0.1 s of work, 2-4 % (``benchmarks/bench_ingest_parallel.py``; the
-      README's "More than one machine"). So a :class:`Task` may say what it costs
+      about 0.1 s of work, 2-4 % (``benchmarks/bench_ingest_parallel.py``;
+      docs/guide/cluster.md). So a :class:`Task` may say what it costs
       (``cost_s``: estimated seconds of work on one core), and a parallel executor
       submits consecutive small tasks together, as one **group** of about ``task_s``
       seconds (default :data:`TASK_S`; at most :data:`MAX_GROUP` tasks). A group runs

@@ -55,7 +55,7 @@ class DaskExecutor(Executor):
     reach the scheduler can run code as the workers (and in this client, through the
     results). Run the cluster on a private network, or with TLS (a ``tls://`` address;
     this client's certificates from Dask's configuration, :data:`TLS_CLIENT_SETTINGS`):
-    README, "More than one machine".
+    docs/guide/cluster.md.
 
     Parameters
     ----------

@@ -177,7 +177,9 @@ def ingest(
             on_file(fr)
     if on_start:
         on_start(len(files))
-    profiles = load_profiles(options.profiles_dir) if options.profiles_dir else load_profiles()
+    profiles = load_profiles()  # the shipped ones, then $CEVM_PROFILES's
+    if options.profiles_dir:  # then --profiles-dir's: added, one of the same name replacing the one before
+        profiles.update(load_profiles(options.profiles_dir, include_env=False))
     if options.profile is not None and options.profile not in profiles:
         raise InputError(options.profile, f"unknown logger profile; available: {', '.join(sorted(profiles))}")
     sampler = open_sampler(options.dsm, options.allow_remote_dsm)  # here too: a bad DSM stops the run before any work

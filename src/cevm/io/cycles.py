@@ -34,7 +34,7 @@ along the distance travelled, as the CE model's rolling term measures it::
 
 (d_i along the road, so the rise is d_i sin(atan s_i)).
 
-**Plausibility bounds** (refused with file, line and column; README "Cycle files"):
+**Plausibility bounds** (refused with file, line and column; docs/reference/formats.md, "Cycle files"):
 speed at most :data:`MAX_SPEED_KMH`, acceleration and deceleration at most
 :data:`MAX_ACCEL_MPS2` between samples, grade at most :data:`MAX_GRADE` (given, or of
 an elevation profile: each step's rise at most MAX_GRADE times its distance plus
