@@ -416,7 +416,8 @@ def read_cycles(path: str | Path, fmt: CycleFormat | None = None, *,
     wanted = list(dict.fromkeys(wanted))
     max_rows = max(max_samples // len(speed_cols), 0)  # every cycle of the file has at most this many samples
     try:
-        arrays = dict(zip(wanted, read_numeric_columns(layout, wanted, what="cycle file", max_rows=max_rows)))
+        arrays = dict(zip(wanted, read_numeric_columns(layout, wanted, what="cycle file", max_rows=max_rows),
+                          strict=True))
     except InputError as exc:
         if exc.message.startswith("more than "):
             raise _too_long(layout.path, max_rows, len(speed_cols), max_samples, exc.line) from None
@@ -435,10 +436,10 @@ def read_cycles(path: str | Path, fmt: CycleFormat | None = None, *,
                       if time_col is not None and layout.header[time_col] in grade_layout.header else None)
         gcols = list(dict.fromkeys([*grade_cols.values(), *([grade_time] if grade_time is not None else [])]))
         grade_arrays = dict(zip(gcols, read_numeric_columns(grade_layout, gcols, what="grade file",
-                                                            max_rows=max_rows)))
+                                                            max_rows=max_rows), strict=True))
     elif grade_col is not None:
         grade_layout, grade_arrays = layout, arrays
-        grade_cols = {c: grade_col for c in speed_cols}
+        grade_cols = dict.fromkeys(speed_cols, grade_col)
     grade_factor = None
     if grade_cols:
         gunits = {_unit_of(grade_layout, g, fmt.grade_unit, GRADE_UNITS, "grade", "--grade-unit")
@@ -451,7 +452,7 @@ def read_cycles(path: str | Path, fmt: CycleFormat | None = None, *,
 
     stem = Path(path.name.removesuffix(".gz")).stem
     cycles = []
-    for c, (unit, factor) in zip(speed_cols, units):
+    for c, (unit, factor) in zip(speed_cols, units, strict=True):
         speed_raw = arrays[c]
         n = _extent(speed_raw)
         if time_col is not None and not fmt.speed_columns:
@@ -593,7 +594,8 @@ def _check_elevation(layout: CsvLayout, col: int, v: np.ndarray, dt: np.ndarray,
     if h.max() > MAX_ABS_ELEVATION_M or h.min() < -MAX_ABS_ELEVATION_M:
         i = int(np.flatnonzero(np.abs(h) > MAX_ABS_ELEVATION_M)[0])
         raise InputError(layout.path, f"elevation {h[i]:g} m is beyond +-{MAX_ABS_ELEVATION_M:g} m (no road is "
-                                      "higher than 5,800 m; wrong unit or scale?)", line=data_line(layout, i), column=name)
+                                      "higher than 5,800 m; wrong unit or scale?)", line=data_line(layout, i),
+                         column=name)
     allowed = v[1:] + v[:-1]
     allowed *= dt
     allowed *= 0.5 * MAX_GRADE
