@@ -147,7 +147,7 @@ def _name_parts(name: str) -> tuple[str, str | None]:
     return re.sub(r"[\s_\-]+", "", base), unit
 
 
-def _norm_unit(text: str | None, table: dict, what: str, where: str) -> tuple[str, float] | None:
+def _norm_unit(text: str | None, table: dict, what: str, where: str | Path) -> tuple[str, float] | None:
     if text is None:
         return None
     key = text.strip().lower().replace(" ", "")
@@ -300,7 +300,7 @@ def _pick_one(layout: CsvLayout, kind: str, option: str) -> int | None:
     return found[0] if found else None
 
 
-def _speed_columns(layout: CsvLayout, fmt: CycleFormat, exclude: set[int]) -> list[int]:
+def _speed_columns(layout: CsvLayout, fmt: CycleFormat, exclude: set[int | None]) -> list[int]:
     """The selected speed columns; patterns do not match the ``exclude``d (time) column."""
     if not fmt.speed_columns:
         i = _pick_one(layout, "speed", "--speed-col")
@@ -442,6 +442,7 @@ def read_cycles(path: str | Path, fmt: CycleFormat | None = None, *,
         grade_cols = dict.fromkeys(speed_cols, grade_col)
     grade_factor = None
     if grade_cols:
+        assert grade_layout is not None  # set with grade_cols
         gunits = {_unit_of(grade_layout, g, fmt.grade_unit, GRADE_UNITS, "grade", "--grade-unit")
                   for g in set(grade_cols.values())}
         if len(gunits) > 1:
@@ -474,6 +475,7 @@ def read_cycles(path: str | Path, fmt: CycleFormat | None = None, *,
             t = _require(layout, arrays[time_col], n, time_col)
             t = t * time_factor if time_factor != 1.0 else t
         else:
+            assert fmt.time_step_s is not None  # CycleFormat.checked: a time column or a time step
             t = np.arange(n, dtype=np.float64) * fmt.time_step_s
         dt = np.diff(t)
         _check_time(layout, t, dt, time_col)
@@ -487,6 +489,7 @@ def read_cycles(path: str | Path, fmt: CycleFormat | None = None, *,
             _check_elevation(layout, elev_col, v, dt, h)
             elevation = h
         elif c in grade_cols:
+            assert grade_layout is not None and grade_factor is not None  # set with grade_cols
             if grade_time is not None:
                 _same_rows(grade_layout, grade_time, grade_arrays[grade_time], t / time_factor, layout)
             g_raw = _require(grade_layout, grade_arrays[grade_cols[c]], n, grade_cols[c])

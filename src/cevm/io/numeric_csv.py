@@ -38,6 +38,7 @@ import warnings
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -383,8 +384,8 @@ def _read_numpy(layout: CsvLayout, columns: list[int], max_rows: int | None) -> 
     (pandas then reads the file and names what is wrong)."""
     if layout.decimal != ".":
         return None
-    kw = dict(delimiter=layout.sep, skiprows=1, dtype=np.float64, comments=None, quotechar='"', ndmin=2,
-              max_rows=None if max_rows is None else max_rows + 1, encoding=layout.encoding)
+    kw: dict[str, Any] = dict(delimiter=layout.sep, skiprows=1, dtype=np.float64, comments=None, quotechar='"',
+                              ndmin=2, max_rows=None if max_rows is None else max_rows + 1, encoding=layout.encoding)
     try:
         with warnings.catch_warnings():
             warnings.filterwarnings("ignore", message="Input line", category=UserWarning)  # blank lines: no rows
