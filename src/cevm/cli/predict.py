@@ -24,7 +24,7 @@ from collections import Counter
 from contextlib import ExitStack
 from dataclasses import replace
 from pathlib import Path
-from typing import IO, Annotated
+from typing import IO, Annotated, Any
 
 import numpy as np
 import typer
@@ -147,7 +147,7 @@ class PredictWriter:
         cols = PREDICT.values(BlockRows(block, mass_source, self.options, soc_from))
         n = min(block.n, TABLE_MAX_ROWS - len(self.table_rows))
         for i in range(n):
-            row = {}
+            row: dict[str, Any] = {}
             for column in PREDICT.columns:
                 k = column.name
                 c = cols[k]
@@ -425,8 +425,9 @@ def predict_cmd(
                                                         reserve_pct))
             keep_for_plot = plot is not None and np.bincount(pset.vehicle_index).max() > 1
             flagged = np.zeros(3, dtype=np.int64)
-            plot_data, psets = [], []
-            over, used = 0, Counter()
+            plot_data: list[dict] = []
+            psets: list[PredictionSet] = []
+            over, used = 0, Counter[str]()
 
             def yield_block(block: SweepBlock, run_pset: PredictionSet, mass_source: str, soc_from: str) -> None:
                 nonlocal flagged, over
@@ -442,7 +443,7 @@ def predict_cmd(
                 if plot is None:
                     block.source.release()  # free its profile: the sweep is past it
 
-            socs = {}
+            socs: dict[str, float] = {}
             for run, run_pset, mass_source in _mass_runs(sources, pset, vehicles, masses, payloads, ice_braking,
                                                          ambient_c):
                 for group, soc, soc_from in _soc_runs(run, soc_start):
@@ -479,8 +480,8 @@ def predict_cmd(
             typer.echo(f"cevm: warning: {n_rows} predictions {what}", err=True)
     if out is not None and fmt != OutputFormat.table:
         typer.echo(f"cevm predict: {writer.rows} rows -> {out}", err=True)
-    for exc in skipped:
-        warn_damaged(exc)
+    for problem in skipped:
+        warn_damaged(problem)
     if skipped:
         raise typer.Exit(EXIT_PARTIAL)
 
