@@ -113,12 +113,19 @@ class EnergySourceLike(Protocol):
     :data:`DEFAULT_ACCURACY_PCT` of its kind).
     """
 
-    column: str
-    kind: str
-    quantity: str
-    resolution: float
-    priority: int
-    capacity_j: float | None
+    # read-only (properties): a frozen dataclass such as reading.EnergySource fits
+    @property
+    def column(self) -> str: ...
+    @property
+    def kind(self) -> str: ...
+    @property
+    def quantity(self) -> str: ...
+    @property
+    def resolution(self) -> float: ...
+    @property
+    def priority(self) -> int: ...
+    @property
+    def capacity_j(self) -> float | None: ...
 
 
 @dataclass(frozen=True)

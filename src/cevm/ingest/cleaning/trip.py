@@ -196,7 +196,8 @@ def _start_socs(log: CleanedLog, t0: np.ndarray, window_s: float) -> tuple[list,
     before = (k >= 0) & (f[np.maximum(k, 0)] >= a) if f.size else np.zeros(t0.size, dtype=bool)
     after = ~before & (k + 1 < f.size) & (f[np.minimum(k + 1, max(f.size - 1, 0))] < b) if f.size \
         else np.zeros(t0.size, dtype=bool)
-    pct, dt = [], []
+    pct: list[float | None] = []
+    dt: list[float | None] = []
     for i in range(t0.size):
         r = int(f[k[i]]) if before[i] else (int(f[k[i] + 1]) if after[i] else None)
         if r is None:

@@ -7,6 +7,7 @@ import math
 from collections import OrderedDict
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -93,7 +94,7 @@ class WindowReader:
         self._cached_bytes = 0
         self._pools: list[BlockPool] = []
         self._pool_index: dict[tuple[int, int, str], int] = {}
-        self._open: OrderedDict[int, object] = OrderedDict()
+        self._open: OrderedDict[int, Any] = OrderedDict()  # rasterio datasets (untyped library)
         self.failed: dict[int, str] = {}  # tile -> why it cannot be read
         self._blk = np.array([block_px or (t.block if 128 <= t.block <= 1024 else 512) for t in self.tiles],
                              dtype=np.int64)

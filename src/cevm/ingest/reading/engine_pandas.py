@@ -10,6 +10,7 @@ from __future__ import annotations
 import io
 import re
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -90,7 +91,7 @@ def _read_table(body: bytes, path: Path, prof: Profile, names: list[str], usecol
               engine="c", encoding="utf-8", quotechar='"', low_memory=False)
     na_values = {c: _NUMERIC_NA for c in num_cols if c in usecols}
     na_values.update({c: [""] for c in text_cols if c in usecols})
-    dtype = {c: "float64" for c in num_cols if c in usecols}
+    dtype: dict[str, Any] = {c: "float64" for c in num_cols if c in usecols}
     dtype.update({c: object for c in text_cols if c in usecols})
     if all_cols:
         dtype.update({c: object for c in names if c not in usecols})

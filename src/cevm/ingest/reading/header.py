@@ -121,7 +121,8 @@ def _plan_columns(prof: Profile, hdr: Header, path: Path) -> ColumnPlan:
     for m in prof.columns:
         if m.required and m.source not in names:
             raise InputError(path, f"header lacks required column {m.source!r}", line=hdr.line, column=m.source)
-    text_cols = list(prof.time.columns) + ([prof.vehicle_key] if prof.vehicle_source == "column" else [])
+    text_cols = list(prof.time.columns) + ([prof.vehicle_key] if prof.vehicle_source == "column" and prof.vehicle_key
+                                           else [])
     text_cols += [m.source for m in maps if m.value_map is not None]
     num_cols = [m.source for m in maps if m.value_map is None]
     used = list(dict.fromkeys(text_cols + num_cols))
