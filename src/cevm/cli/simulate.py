@@ -90,36 +90,8 @@ def simulate(
                 typer.echo(f"cevm: note: {printable(name)}: no elevation or grade: a flat road assumed", err=True)
         else:
             assert trip is not None  # exactly one of --cycle, --trip (checked above)
-            from cevm.store import TripStore, existing_store_path
-            from cevm.store.codec import MAX_PROFILE_SAMPLES
-            from cevm.store.masses import trip_masses
-            from cevm.store.queries import row_measurement
-            from cevm.store.sources import MAX_SOURCE_SAMPLES, too_long_trip
-
-            with TripStore.open(existing_store_path(store), readonly=True) as st:
-                listed = st.list_trips(trip_ids=[trip])
-                n_listed = int(listed["n_samples"].iloc[0])
-                # bounded as a cycle file is; a count no stored profile can hold is the store's
-                # damage, which load_profile names (exit 4) without inflating anything
-                if MAX_SOURCE_SAMPLES < n_listed <= MAX_PROFILE_SAMPLES:
-                    raise CevmError(too_long_trip(trip, n_listed))
-                prof = st.load_profile(trip)
-                own = trip_masses(st, listed)[trip]
-            r = listed.iloc[0]
-            measured = row_measurement(r["measured_kind"], r["measured_value"], r["measured_source"],
-                                       r["measured_resolution"], r["measured_uncertainty"])
-            if mass_kg is None:  # the trip's own mass: given to it, else logged (cevm.store.masses)
-                mass_kg, mass_source = own.gross_kg(veh), own.origin
-                from cevm.store.sources import foreign_mass
-
-                foreign = foreign_mass(own, measured, veh)
-                try:
-                    mass_kg = float(physical_inputs.masses_for([veh], mass_kg))
-                except CevmError as exc:
-                    raise CevmError(f"trip {trip!r} ({own.describe()} mass): {exc}") from None
-            name, t, v, h = trip, prof["time_s"], prof["speed_mps"], prof["elevation_m"]
-            soc0, soc_from = start_soc(r, soc_start_pct)  # the trip's logged start unless given
-            elevation = r["elevation_source"]
+            (name, t, v, h), (mass_kg, mass_source, measured, foreign, own), (soc0, soc_from), elevation = (
+                _stored_trip(store, trip, veh, mass_kg, mass_source, soc_start_pct))
         res = run_simulation(veh, t, v, h, mass_kg=mass_kg, soc_start=soc0 / 100.0,
                              params=detailed_params(veh))
     except CevmError as exc:
@@ -183,6 +155,45 @@ def simulate(
     if res.traction_deficit_j > 0.02 * max(res.wheel_energy_j, 1.0):
         typer.echo(f"cevm: warning: the vehicle could not follow the trace: {row['traction_deficit_kwh']:.2f} kWh "
                    "of wheel work beyond its powertrain's limits", err=True)
+
+
+def _stored_trip(store: Path | None, trip: str, veh, mass_kg: float | None, mass_source: str,
+                 soc_start_pct: float | None) -> tuple[tuple, tuple, tuple[float, str], str]:
+    """A stored trip for ``simulate --trip``: its trace (name, t, v, h), its mass (mass_kg,
+    mass_source, the measurement, a foreign-mass note, its TripMass; the trip's own mass
+    unless one was given), its start state of charge (the logged one unless given) and
+    its elevation source."""
+    from cevm.store import TripStore, existing_store_path
+    from cevm.store.codec import MAX_PROFILE_SAMPLES
+    from cevm.store.masses import trip_masses
+    from cevm.store.queries import row_measurement
+    from cevm.store.sources import MAX_SOURCE_SAMPLES, too_long_trip
+
+    foreign = None
+    with TripStore.open(existing_store_path(store), readonly=True) as st:
+        listed = st.list_trips(trip_ids=[trip])
+        n_listed = int(listed["n_samples"].iloc[0])
+        # bounded as a cycle file is; a count no stored profile can hold is the store's
+        # damage, which load_profile names (exit 4) without inflating anything
+        if MAX_SOURCE_SAMPLES < n_listed <= MAX_PROFILE_SAMPLES:
+            raise CevmError(too_long_trip(trip, n_listed))
+        prof = st.load_profile(trip)
+        own = trip_masses(st, listed)[trip]
+    r = listed.iloc[0]
+    measured = row_measurement(r["measured_kind"], r["measured_value"], r["measured_source"],
+                               r["measured_resolution"], r["measured_uncertainty"])
+    if mass_kg is None:  # the trip's own mass: given to it, else logged (cevm.store.masses)
+        mass_kg, mass_source = own.gross_kg(veh), own.origin
+        from cevm.store.sources import foreign_mass
+
+        foreign = foreign_mass(own, measured, veh)
+        try:
+            mass_kg = float(physical_inputs.masses_for([veh], mass_kg))
+        except CevmError as exc:
+            raise CevmError(f"trip {trip!r} ({own.describe()} mass): {exc}") from None
+    trace = (trip, prof["time_s"], prof["speed_mps"], prof["elevation_m"])
+    return (trace, (mass_kg, mass_source, measured, foreign, own), start_soc(r, soc_start_pct),  # logged unless given
+            r["elevation_source"])
 
 
 def _no_detailed_table(path: Path, is_ev: bool) -> str:
