@@ -295,15 +295,13 @@ def cross_validated(cf: CandidateFit, settings: Settings, fold_of: np.ndarray) -
     return mean, var
 
 
-def fit_model(cf: CandidateFit, excluded: dict, settings: Settings, *, priors: Priors | None, interval: float,
-              time_repeats: int, vehicle_id: str | None) -> CalibrationResult:
-    """The :class:`CalibrationResult` of a fitted candidate (shared by :func:`fit` and
-    model selection)."""
+def _fitted_values(cf: CandidateFit, settings: Settings, idx_all: np.ndarray
+                   ) -> tuple[dict, dict, dict[str, str], list[str]]:
+    """Of a fitted candidate: each field's (value, standard deviation), their correlations,
+    the field of each term, and the fit's warnings (not converged, an implausible eta, a
+    coefficient at its physical bound)."""
     model, result = cf.model, cf.fit
-    data = model.data
-    vehicle = model.vehicle
     active = list(cf.names)
-    idx_all = np.arange(data.n)
     warnings: list[str] = []
     values, vcov = value_covariance(model, result)
     fields = {n: _field(model, n) for n in active}
@@ -326,6 +324,19 @@ def fit_model(cf: CandidateFit, excluded: dict, settings: Settings, *, priors: P
         if result.theta[j] <= lb[j] + tol or result.theta[j] >= ub[j] - tol:
             warnings.append(f"{fields[n]} = {values[n]:.6g} is at its physical bound: its posterior is cut there, "
                             "its standard deviation is that of the Gaussian at the bound")
+    return fitted, corr, fields, warnings
+
+
+def fit_model(cf: CandidateFit, excluded: dict, settings: Settings, *, priors: Priors | None, interval: float,
+              time_repeats: int, vehicle_id: str | None) -> CalibrationResult:
+    """The :class:`CalibrationResult` of a fitted candidate (shared by :func:`fit` and
+    model selection)."""
+    model, result = cf.model, cf.fit
+    data = model.data
+    vehicle = model.vehicle
+    active = list(cf.names)
+    idx_all = np.arange(data.n)
+    fitted, corr, fields, warnings = _fitted_values(cf, settings, idx_all)
 
     fold_of, scheme = folds(data, settings.cv_folds, settings.loo_below, settings.seed)
     rho, rho_note, _ = post.day_correlation(model, active, idx_all, cf.prior, result.noise,
