@@ -368,6 +368,41 @@ def _require(layout: CsvLayout, values: np.ndarray, n: int, col: int) -> np.ndar
     return part
 
 
+def _grade_source(layout: CsvLayout, fmt: CycleFormat, speed_cols: list[int], time_col: int | None,
+                  grade_col: int | None, arrays: dict, max_rows: int) -> tuple:
+    """Where each speed column's road grade comes from: (the grade's layout, its column
+    per speed column, the grade file's own time column, the arrays read, the unit factor);
+    no grade: (None, {}, None, {}, None). A grade file is read here (the columns named as
+    the speed columns, or --grade-col)."""
+    grade_cols: dict[int, int]
+    grade_layout, grade_cols, grade_time, grade_arrays = None, {}, None, {}
+    if fmt.grade_file is not None:
+        grade_layout = sniff_csv(fmt.grade_file, sep=fmt.sep, decimal=fmt.decimal, what="grade file")
+        for c in speed_cols:
+            name = fmt.grade_column if fmt.grade_column is not None else layout.header[c]
+            grade_cols[c] = _find_named(grade_layout, name, "--grade-col" if fmt.grade_column else
+                                        "the speed column's name in the grade file; else give --grade-col")
+        # the grade file's own time column, when it has one of the same name: its rows
+        # must be the cycle's (checked below)
+        grade_time = (grade_layout.header.index(layout.header[time_col])
+                      if time_col is not None and layout.header[time_col] in grade_layout.header else None)
+        gcols = list(dict.fromkeys([*grade_cols.values(), *([grade_time] if grade_time is not None else [])]))
+        grade_arrays = dict(zip(gcols, read_numeric_columns(grade_layout, gcols, what="grade file",
+                                                            max_rows=max_rows), strict=True))
+    elif grade_col is not None:
+        grade_layout, grade_arrays = layout, arrays
+        grade_cols = dict.fromkeys(speed_cols, grade_col)
+    grade_factor = None
+    if grade_cols:
+        assert grade_layout is not None  # set with grade_cols
+        gunits = {_unit_of(grade_layout, g, fmt.grade_unit, GRADE_UNITS, "grade", "--grade-unit")
+                  for g in set(grade_cols.values())}
+        if len(gunits) > 1:
+            raise InputError(grade_layout.path, "the grade columns have different units; give --grade-unit", line=1)
+        grade_factor = gunits.pop()[1]
+    return grade_layout, grade_cols, grade_time, grade_arrays, grade_factor
+
+
 def read_cycles(path: str | Path, fmt: CycleFormat | None = None, *,
                 max_samples: int | None = None) -> list[DriveCycle]:
     """Every cycle of a cycle file: one per selected speed column (see the module
@@ -423,31 +458,8 @@ def read_cycles(path: str | Path, fmt: CycleFormat | None = None, *,
             raise _too_long(layout.path, max_rows, len(speed_cols), max_samples, exc.line) from None
         raise
 
-    grade_layout, grade_cols, grade_time = None, {}, None
-    if fmt.grade_file is not None:
-        grade_layout = sniff_csv(fmt.grade_file, sep=fmt.sep, decimal=fmt.decimal, what="grade file")
-        for c in speed_cols:
-            name = fmt.grade_column if fmt.grade_column is not None else layout.header[c]
-            grade_cols[c] = _find_named(grade_layout, name, "--grade-col" if fmt.grade_column else
-                                        "the speed column's name in the grade file; else give --grade-col")
-        # the grade file's own time column, when it has one of the same name: its rows
-        # must be the cycle's (checked below)
-        grade_time = (grade_layout.header.index(layout.header[time_col])
-                      if time_col is not None and layout.header[time_col] in grade_layout.header else None)
-        gcols = list(dict.fromkeys([*grade_cols.values(), *([grade_time] if grade_time is not None else [])]))
-        grade_arrays = dict(zip(gcols, read_numeric_columns(grade_layout, gcols, what="grade file",
-                                                            max_rows=max_rows), strict=True))
-    elif grade_col is not None:
-        grade_layout, grade_arrays = layout, arrays
-        grade_cols = dict.fromkeys(speed_cols, grade_col)
-    grade_factor = None
-    if grade_cols:
-        assert grade_layout is not None  # set with grade_cols
-        gunits = {_unit_of(grade_layout, g, fmt.grade_unit, GRADE_UNITS, "grade", "--grade-unit")
-                  for g in set(grade_cols.values())}
-        if len(gunits) > 1:
-            raise InputError(grade_layout.path, "the grade columns have different units; give --grade-unit", line=1)
-        grade_factor = gunits.pop()[1]
+    grade_layout, grade_cols, grade_time, grade_arrays, grade_factor = _grade_source(
+        layout, fmt, speed_cols, time_col, grade_col, arrays, max_rows)
     elev_factor = (_unit_of(layout, elev_col, None, {k: (k, f) for k, f in _ELEVATION_UNITS.items()}, "elevation",
                             "", default=("m", 1.0))[1] if elev_col is not None else None)
 
