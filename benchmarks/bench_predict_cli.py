@@ -139,7 +139,8 @@ def main() -> None:
             f = [x[k] for x in floor]
             c = [x[k] for x in cli]
             print(f"{label}: floor (python + pandas.read_csv + numpy sums) best {min(f):.3f} s, median "
-                  f"{statistics.median(f):.3f} s; cevm predict best {min(c):.3f} s, median {statistics.median(c):.3f} s;"
+                  f"{statistics.median(f):.3f} s; cevm predict best {min(c):.3f} s, median {statistics.median(c):.3f} "
+                  f"s;"
                   f" ratio best {min(c) / min(f):.2f}x, median {statistics.median(c) / statistics.median(f):.2f}x "
                   "(goal: 1.5x or less)")
 

@@ -17,6 +17,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from pyproj import Geod
 
+from cevm.errors import InputError
 from cevm.ingest.cleaning import (
     CleanParams,
     CleanTrip,
@@ -25,7 +26,6 @@ from cevm.ingest.cleaning import (
     geodesic_steps_m,
     local_distance_m,
 )
-from cevm.errors import InputError
 
 GEOD = Geod(ellps="WGS84")
 T0 = 1_600_000_000.0  # a whole second, UTC
@@ -460,7 +460,7 @@ SOURCES = [Src("fuel_rate_lps", "rate", "fuel_l", 0.0, 0)]
 
 def assert_same_trips(a, b):
     assert len(a.trips) == len(b.trips)
-    for x, y in zip(a.trips, b.trips):
+    for x, y in zip(a.trips, b.trips, strict=True):
         assert x.start_utc_s == y.start_utc_s
         for name in ("time_s", "speed_mps", "distance_m", "lat_deg", "lon_deg"):
             np.testing.assert_array_equal(getattr(x, name), getattr(y, name))

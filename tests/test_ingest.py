@@ -291,7 +291,7 @@ def test_a_trip_starts_at_the_state_of_charge_its_log_holds_there(root):
 
     path = root / "sample_logs" / "srf" / "EB-01_2019-01-31.csv"
     with open(path) as fh:
-        rows = [r for r in csv.DictReader(line for line in fh if not line.startswith("#"))]
+        rows = list(csv.DictReader(line for line in fh if not line.startswith("#")))
     soc = [(datetime.fromisoformat(r["timestamp_utc"].replace("Z", "+00:00")).timestamp(),
             float(r["fms_battery_soc_pct"])) for r in rows if r["fms_battery_soc_pct"]]
     out = process_file(path, IngestOptions())
@@ -321,7 +321,7 @@ def test_trips_shows_the_start_state_and_sources_carry_it(tmp_path, root):
     rows = json.loads(run("trips", "--store", store, "--format", "json").stdout)
     rows.sort(key=lambda r: r["start_utc"])
     assert rows[0]["standstill_before_s"] is None and rows[0]["start_soc_pct"] == 97.2
-    for a, b in zip(rows, rows[1:]):
+    for b in rows[1:]:
         assert b["standstill_before_s"] > 0 and b["start_soc_pct"] is not None
     with ExitStack() as stack:
         srcs = load_sources(stack, store, [], [], ["EB-01"], [], cr0=0.0, need_profiles=False)

@@ -113,12 +113,19 @@ class EnergySourceLike(Protocol):
     :data:`DEFAULT_ACCURACY_PCT` of its kind).
     """
 
-    column: str
-    kind: str
-    quantity: str
-    resolution: float
-    priority: int
-    capacity_j: float | None
+    # read-only (properties): a frozen dataclass such as reading.EnergySource fits
+    @property
+    def column(self) -> str: ...
+    @property
+    def kind(self) -> str: ...
+    @property
+    def quantity(self) -> str: ...
+    @property
+    def resolution(self) -> float: ...
+    @property
+    def priority(self) -> int: ...
+    @property
+    def capacity_j(self) -> float | None: ...
 
 
 @dataclass(frozen=True)
@@ -257,7 +264,7 @@ def _interp_limited(
         outs = [np.empty(q.shape) for _ in arrays]
         for a, b in chunks(q.size):
             part = _interp_limited(q[a:b], ts, vs, max_gap_s, *more, right=None if right is None else right[a:b])
-            for o, x in zip(outs, part if more else [part]):
+            for o, x in zip(outs, part if more else [part], strict=True):
                 o[a:b] = x
         return outs if more else outs[0]
     if right is None:
@@ -299,6 +306,7 @@ def source_samples(
         v = np.asarray(columns[column], dtype=float)
         ok = np.isfinite(v)
         return time_s[ok], v[ok]
+    factors: tuple[str, ...]
     if column == BATTERY_POWER_COLUMN:
         factors = _BATTERY_POWER_FACTORS
     elif "*" in column:

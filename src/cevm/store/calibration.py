@@ -120,7 +120,8 @@ def trips_for_calibration(store: TripStore, vehicle_id: str, vehicle: Vehicle) -
     df = store.list_trips(vehicle_id=vehicle_id)
     if df.empty:
         known = ", ".join(store.vehicle_ids()[:10]) or "none"
-        raise CevmError(f"vehicle id {vehicle_id!r} has no stored trips (stored vehicle ids: {known}); see 'cevm trips'")
+        raise CevmError(f"vehicle id {vehicle_id!r} has no stored trips (stored vehicle ids: {known}); "
+                        "see 'cevm trips'")
     damaged: list[DamagedTripError] = []
     vectors = store.load_cycle_vectors(vehicle_id=vehicle_id, on_damaged=damaged.append)
     masses = trip_masses(store, df)

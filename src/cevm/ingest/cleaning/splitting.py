@@ -70,12 +70,12 @@ def _split_long_stops(t_kept, v_kept, idx, reason, p: CleanParams):
     long_ = (t_kept[last] - t_kept[first]) > p.stop_s
     if not long_.any():
         return idx, reason
-    f, l = first[long_], last[long_]
+    f, la = first[long_], last[long_]
     diff = np.zeros(k + 1, dtype=np.int8)  # runs are disjoint: the sum is 0 or 1
     np.add.at(diff, f + 1, 1)
-    np.add.at(diff, l, -1)
+    np.add.at(diff, la, -1)
     sel = ~(np.cumsum(diff, dtype=np.int8)[:k] > 0)  # not inside a long stop
-    reason[l[reason[l] == 0]] = 4
+    reason[la[reason[la] == 0]] = 4
     return (_nonzero(sel) if idx is None else idx[sel]), reason[sel]
 
 

@@ -115,7 +115,8 @@ class CleanStream:
         # need not be kept while the trips are made
         first = bounds[:-1] if rows_k is None else rows_k[bounds[:-1]]
         last = bounds[1:] - 1 if rows_k is None else rows_k[bounds[1:] - 1]
-        lines = [(int(line[a:b + 1].min()), int(line[a:b + 1].max())) for a, b in zip(first.tolist(), last.tolist())]
+        lines = [(int(line[a:b + 1].min()), int(line[a:b + 1].max()))
+                 for a, b in zip(first.tolist(), last.tolist(), strict=True)]
         self.planned_samples = _grid_samples(t[first], t[last], p.grid_s)
         del line
         self._work = (CleanedLog(t, cols, fixes, ev), v, src, rows_k, bounds, start_reasons, lines)

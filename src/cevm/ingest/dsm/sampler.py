@@ -44,7 +44,8 @@ class DsmSampler:
     Where tiles overlap, the first in sorted path order wins.
     """
 
-    def __init__(self, tiles: Sequence[TileHeader], *, block_px: int | None = None, cache_mb: float = 256.0, max_open: int = 32, label: str = "DSM"):
+    def __init__(self, tiles: Sequence[TileHeader], *, block_px: int | None = None, cache_mb: float = 256.0,
+                 max_open: int = 32, label: str = "DSM"):
         if block_px is not None and not 2 <= block_px < (1 << 20):
             raise ValueError("block_px must be in [2, 2**20)")
         self.label = label
@@ -88,7 +89,8 @@ class DsmSampler:
     # ---- construction ----------------------------------------------------------------
 
     @classmethod
-    def open(cls, source: str | os.PathLike | Sequence[str | os.PathLike], *, block_px: int | None = None,
+    def open(cls, source: str | os.PathLike | list[str | os.PathLike] | tuple[str | os.PathLike, ...], *,
+             block_px: int | None = None,
              cache_mb: float = 256.0, allow_remote: bool | None = None) -> DsmSampler:
         """Open a DSM.
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 import io
 import re
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -63,7 +64,8 @@ def _pandas_block(block: bytes, first_line: int, plan: ColumnPlan, prof: Profile
         empty = df.isna().all(axis=1).to_numpy().copy()
     numbers = {c: _writable(df[c].to_numpy(dtype=np.float64)) for c in plan.num_cols}  # copy-on-write views
     text = {c: df[c].to_numpy(dtype=object) for c in plan.text_cols if c in df.columns}
-    part = ParsedBlock(lines, numbers, text, fast.ns if fast is not None else None, bool(fast is not None and fast.is_utc),
+    part = ParsedBlock(lines, numbers, text, fast.ns if fast is not None else None,
+                       bool(fast is not None and fast.is_utc),
                  fewer=fewer, last_line=first_line + len(df) - 1, bad_cells=bad_cells)
     return _drop_empty_rows(part, empty)
 
@@ -89,7 +91,7 @@ def _read_table(body: bytes, path: Path, prof: Profile, names: list[str], usecol
               engine="c", encoding="utf-8", quotechar='"', low_memory=False)
     na_values = {c: _NUMERIC_NA for c in num_cols if c in usecols}
     na_values.update({c: [""] for c in text_cols if c in usecols})
-    dtype = {c: "float64" for c in num_cols if c in usecols}
+    dtype: dict[str, Any] = {c: "float64" for c in num_cols if c in usecols}
     dtype.update({c: object for c in text_cols if c in usecols})
     if all_cols:
         dtype.update({c: object for c in names if c not in usecols})
