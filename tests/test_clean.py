@@ -702,3 +702,18 @@ def test_a_hole_between_standstill_rows_that_the_gps_crossed_is_driving_not_a_st
     # the same hole with the GPS where it was: a stop, filled with 0
     lat2, lon2 = north(np.where(tau < 600, 10.0 * tau, 5990.0 + 10.0 * (tau - 840)))
     only(clean_log(make(tau[keep], wheel_speed_mps=v[keep], lat_deg=lat2[keep], lon_deg=lon2[keep])))
+
+
+def test_an_energy_counter_falling_at_a_stop_is_a_charge_without_current_readings():
+    # 20 kW while driving, 100 kW charged in the 300 s stop: the counter (net) falls 8.33 kWh
+    tau = np.arange(0.0, 1501.0)
+    stopped = (tau >= 600) & (tau < 900)
+    p_w = np.where(stopped, -100e3, 20e3)
+    counter = 50e6 + np.concatenate(([0.0], np.cumsum(p_w[:-1])))
+    res = clean_log(make(tau, wheel_speed_mps=np.where(stopped, 0.0, 10.0), total_energy_j=counter),
+                    [Src("total_energy_j", "counter", "energy_j", 0.0, 0)])
+    assert [t.quality["split_before"] for t in res.trips][1:] == ["charging"]
+    a, b = res.trips
+    # a: rows 0-600, 600 s at 20 kW; b: rows 899-1500, its first second the stop's last (charging)
+    assert a.measured.value == pytest.approx(20e3 * 600.0) and b.measured.value == pytest.approx(20e3 * 600.0 - 100e3)
+    assert res.quality["stop_notes"][0]["kwh"] == pytest.approx(100e3 * 299 / 3.6e6, rel=0.01)

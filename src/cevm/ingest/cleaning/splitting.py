@@ -18,19 +18,25 @@ _SPLIT_REASONS = ("start", "ignition", "gap", "speed_gap", "long_stop", "chargin
 class StopSignals:
     """What tells a stop from a charge or from driving the log did not record, per speed
     row (``ts``): the battery power [W, + = discharge] (None: not logged), the state of
-    charge [%] forward-filled (None: not logged), and ``displacement_m(t0, t1)``: the
+    charge [%] and the energy counter net of regeneration [J] forward-filled (None: not
+    logged), and ``displacement_m(t0, t1)``: the
     distance [m] between the GPS fixes at the times ``t0`` and ``t1`` [s] (arrays; NaN
     where no fix is near enough), None without positions."""
 
     battery_power_w: np.ndarray | None = None
     soc_pct: np.ndarray | None = None
     displacement_m: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None
+    energy_counter_j: np.ndarray | None = None
 
     def subset(self, idx: np.ndarray | None) -> StopSignals:
         if idx is None:
             return self
-        return StopSignals(None if self.battery_power_w is None else self.battery_power_w[idx],
-                           None if self.soc_pct is None else self.soc_pct[idx], self.displacement_m)
+
+        def pick(a: np.ndarray | None) -> np.ndarray | None:
+            return None if a is None else a[idx]
+
+        return StopSignals(pick(self.battery_power_w), pick(self.soc_pct), self.displacement_m,
+                           pick(self.energy_counter_j))
 
 
 def _segment(ts, vs, on, p: CleanParams, signals: StopSignals = StopSignals(), notes: list | None = None):
@@ -127,8 +133,9 @@ def _split_long_stops(t_kept, v_kept, idx, reason, p: CleanParams, signals: Stop
 
 def _charging_runs(t_kept, first, last, p: CleanParams, signals: StopSignals, notes: list | None) -> np.ndarray:
     """Which standstill runs (rows ``first[i]`` to ``last[i]``) are charging stops: the
-    battery took in more than ``charge_power_w`` for ``charge_min_s`` in all, or the
-    state of charge rose by ``charge_soc_rise_pct`` (cleaning parameters). Each found
+    battery took in more than ``charge_power_w`` for ``charge_min_s`` in all, the
+    state of charge rose by ``charge_soc_rise_pct``, or the energy counter (net of
+    regeneration) fell by ``charge_counter_kwh`` (cleaning parameters). Each found
     gets a note (energy taken in [kWh] from the power, or the state of charge's rise)."""
     found = np.zeros(first.size, dtype=bool)
     if not first.size:
@@ -149,6 +156,11 @@ def _charging_runs(t_kept, first, last, p: CleanParams, signals: StopSignals, no
         by_soc = r >= p.charge_soc_rise_pct  # NaN: unknown
         found |= by_soc
         rise = np.where(by_soc, r, np.nan)
+    if signals.energy_counter_j is not None:
+        fall = signals.energy_counter_j[first] - signals.energy_counter_j[last]
+        by_counter = ~found & (fall >= p.charge_counter_kwh * 3.6e6)  # NaN: unknown
+        found |= by_counter
+        kwh = np.where(by_counter, fall / 3.6e6, kwh)
     if notes is not None:
         for i in np.flatnonzero(found).tolist():
             notes.append({"kind": "charging", "t0_s": float(t_kept[first[i]]), "t1_s": float(t_kept[last[i]]),

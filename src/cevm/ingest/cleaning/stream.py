@@ -166,9 +166,10 @@ class CleanStream:
 
 
 def _stop_signals(t: np.ndarray, cols: dict, fixes, rows_v: np.ndarray | None, p: CleanParams) -> StopSignals:
-    """The battery power, state of charge and GPS displacement that tell a charging stop
-    or a hole the vehicle drove through (:class:`~cevm.ingest.cleaning.splitting.StopSignals`),
-    at the speed rows ``rows_v`` (None: all) of the log rows at times ``t``."""
+    """The battery power, state of charge, energy counter and GPS displacement that tell
+    a charging stop or a hole the vehicle drove through
+    (:class:`~cevm.ingest.cleaning.splitting.StopSignals`), at the speed rows ``rows_v``
+    (None: all) of the log rows at times ``t``."""
     def at_rows(a: np.ndarray) -> np.ndarray:
         a = _ffill(a)  # a reading holds until the next (loggers write each column at its own rate)
         return a if rows_v is None else a[rows_v]
@@ -178,6 +179,8 @@ def _stop_signals(t: np.ndarray, cols: dict, fixes, rows_v: np.ndarray | None, p
         power = at_rows(cols["battery_voltage_v"])
         power *= at_rows(cols["battery_current_a"])
     soc = at_rows(cols["soc_pct"]) if "soc_pct" in cols and np.isfinite(cols["soc_pct"]).any() else None
+    counter = (at_rows(cols["total_energy_j"]) if "total_energy_j" in cols and np.isfinite(cols["total_energy_j"]).any()
+               else None)
     displacement = None
     if fixes.rows.size >= 2 and "lat_deg" in cols and "lon_deg" in cols:
         lat, lon = cols["lat_deg"], cols["lon_deg"]
@@ -194,7 +197,7 @@ def _stop_signals(t: np.ndarray, cols: dict, fixes, rows_v: np.ndarray | None, p
             ra, rb = fixes.rows[a], fixes.rows[b]
             return np.where(ok, local_distance_m(lat[ra], lon[ra], lat[rb], lon[rb]), np.nan)
 
-    return StopSignals(power, soc, displacement)
+    return StopSignals(power, soc, displacement, counter)
 
 
 def _batch_end(size: np.ndarray, j0: int, max_samples: int) -> int:
