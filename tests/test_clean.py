@@ -681,7 +681,8 @@ def test_a_stop_drawing_auxiliaries_or_charging_too_briefly_stays_in_the_trip():
 
 def test_a_state_of_charge_rising_at_a_stop_is_a_charge_without_current_readings():
     def soc(tau):  # 80 % falling 1 point per 300 s while driving; +5 points during the stop
-        return np.where(tau < 600, 80 - tau / 300, np.where(tau < 900, 78 + 5 * (tau - 600) / 300, 83 - (tau - 900) / 300))
+        return np.where(tau < 600, 80 - tau / 300,
+                        np.where(tau < 900, 78 + 5 * (tau - 600) / 300, 83 - (tau - 900) / 300))
 
     frame = bus_with_a_stop(-100e3, soc=soc).drop(columns=["battery_voltage_v", "battery_current_a"])
     res = clean_log(frame)

@@ -251,10 +251,12 @@ def test_a_logged_soc_that_cannot_measure_for_want_of_a_capacity_is_said():
     m, q = measure_trip(t, {"soc_pct": 50 - t}, [Src("soc_pct", "soc", "energy_j", 0.01, 1)], 0.0, 10.0)
     assert m is None and len(q["warnings"]) == 1 and "capacity" in q["warnings"][0]
     # with its capacity: measured, 10 points of 100 kWh = 10 kWh, and nothing to say
-    m, q = measure_trip(t, {"soc_pct": 50 - t}, [Src("soc_pct", "soc", "energy_j", 0.01, 1, capacity_j=3.6e8)], 0.0, 10.0)
+    m, q = measure_trip(t, {"soc_pct": 50 - t}, [Src("soc_pct", "soc", "energy_j", 0.01, 1, capacity_j=3.6e8)],
+                        0.0, 10.0)
     assert m.value == pytest.approx(3.6e7) and q["warnings"] == []
     # no readings at all: nothing to say either (a column the log does not hold)
-    m, q = measure_trip(t, {"soc_pct": np.full(t.size, np.nan)}, [Src("soc_pct", "soc", "energy_j", 0.01, 1)], 0.0, 10.0)
+    m, q = measure_trip(t, {"soc_pct": np.full(t.size, np.nan)}, [Src("soc_pct", "soc", "energy_j", 0.01, 1)],
+                        0.0, 10.0)
     assert m is None and q["warnings"] == []
 
 

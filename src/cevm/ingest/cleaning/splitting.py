@@ -92,7 +92,7 @@ def _split_points(t_kept, v_kept, on_kept, idx, p: CleanParams, displacement_m=N
         moved[j[far]] = True
         if notes is not None:
             notes.extend({"kind": "moved_hole", "t0_s": float(t_kept[a]), "t1_s": float(t_kept[a + 1]),
-                          "displacement_m": float(x)} for a, x in zip(j[far].tolist(), d[far].tolist()))
+                          "displacement_m": float(x)} for a, x in zip(j[far].tolist(), d[far].tolist(), strict=True))
     sgap = np.concatenate(([False], hole & (~stop | moved)))
     del hole, stop, moved
     reason[sgap] = 3
