@@ -134,7 +134,9 @@ def sniff_csv(path: str | Path, *, sep: str | None = None, decimal: str | None =
     head, compression, whole = _head(path)
     if b"\x00" in head[:4096]:
         raise InputError(path, f"binary data, not a {what} (CSV text)")
-    lines = _LINE_END.split(head)  # LF, CRLF, or CR alone (a classic Mac export; csv raised on it)
+    # LF, CRLF, or CR alone (a classic Mac export; csv raised on it); the header and the
+    # SNIFF_LINES lines after it are all that is looked at, the rest of the head stays one piece
+    lines = _LINE_END.split(head, maxsplit=SNIFF_LINES + 1)
     if not whole:
         lines = lines[:-1]  # the last one may be cut
         if not lines:

@@ -162,7 +162,7 @@ def _point(st: StepTable, cr: _Crossings) -> tuple[np.ndarray, np.ndarray]:
     if cr.found.any():
         j, f = cr.j[cr.found], cr.frac[cr.found]
         t[cr.found] = st.t0[j] + f * st.dt[j]
-        d[cr.found] = st.d0[j] + f * st.dd[j]
+        d[cr.found] = st.d0_at(j) + f * (st.r[j] / st.g_mps2)  # st.dd[j], without the whole dd
     return t, d
 
 
