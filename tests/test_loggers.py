@@ -818,3 +818,17 @@ def test_ascii_heads_skip_re_encoding_only_for_ascii_compatible_codecs(tmp_path,
     want = read_log(DATA / "portal_dst.csv", profiles=profiles)
     for a, b in zip(logs, want, strict=True):
         pd.testing.assert_frame_equal(a.frame, b.frame)  # no used column held those bytes
+
+
+def test_a_file_written_with_dots_under_a_decimal_comma_profile_is_named(tmp_path, profiles):
+    # acceptance: a portal export saved with '.' decimals (another locale) failed with
+    # pandas' "ValueError: cannot safely convert passed user dtype of float64 for object
+    # dtyped data in column 2", no line, no column
+    text = (DATA / "portal_dst.csv").read_bytes().decode("cp1252")
+    head, *rows = text.split("\r\n")
+    dotted = [";".join(f.replace(",", ".") for f in r.split(";")) for r in rows]
+    path = tmp_path / "dots.csv"
+    path.write_bytes("\r\n".join([head, *dotted]).encode("cp1252"))
+    with raises_at("'51.501364' is written with a '.' but the profile 'portal' reads ',' as the decimal mark",
+                   line=2, column="Latitude"):
+        read_log(path, "portal", profiles)

@@ -514,6 +514,8 @@ def estimate_source(
     elif kind == "soc":
         cap = getattr(source, "capacity_j", None)
         if quantity != "energy_j" or cap is None or not cap > 0:
+            if np.count_nonzero((vs >= 0) & (vs <= 100)) >= 2:
+                return invalid(NO_CAPACITY)
             return invalid("SoC source needs quantity 'energy_j' and a capacity_j > 0")
         ok = (vs >= 0) & (vs <= 100)
         raw = soc_energy(ts[ok], vs[ok], t0, t1, resolution_pct=res, capacity_j=float(cap))
@@ -521,6 +523,10 @@ def estimate_source(
     else:
         return invalid(f"unknown kind {kind!r}")
     return finish_estimate(source, raw, resolution, params)
+
+
+#: why a logged state of charge measured nothing: the profile gives no capacity
+NO_CAPACITY = "state of charge logged, but no capacity_j to turn it into energy"
 
 
 def invalid_estimate(source: EnergySourceLike, reason: str, raw: _Raw | None = None) -> SourceEstimate:
@@ -586,6 +592,10 @@ def choose_measurement(estimates: Sequence[SourceEstimate],
     valid = [e for e in estimates if e.valid]
     if not valid:
         quality["source"] = None
+        if any(e.reason == NO_CAPACITY for e in estimates):
+            quality["warnings"].append(
+                "no measured energy: the log's state of charge gives none without the battery's usable capacity; "
+                "give 'capacity' and 'capacity_unit' in the profile's soc [[energy]] entry")
         return None, quality
     quantity = min(valid, key=lambda e: e.priority).quantity  # min() keeps the first of equals
     same = [e for e in valid if e.quantity == quantity]

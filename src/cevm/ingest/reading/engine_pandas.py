@@ -109,7 +109,7 @@ def _read_table(body: bytes, path: Path, prof: Profile, names: list[str], usecol
             # an error in a required one (slow path, blocks with such a cell only)
             df = pd.read_csv(io.BytesIO(body), dtype=object, na_values=na_values, **kw)
             if not _cells_to_numbers(df, path, prof, num_cols, usecols, header_line, required, units, bad_out):
-                raise
+                raise _unparsed(path, prof, df, num_cols, usecols, header_line, exc) from None
     except pd.errors.ParserError as exc:
         m = re.search(r"line (\d+)", str(exc))
         line = header_line + int(m.group(1)) if m else None
@@ -121,6 +121,24 @@ def _read_table(body: bytes, path: Path, prof: Profile, names: list[str], usecol
         df = df[usecols]
     df.columns = [c.split("\x00")[0] for c in df.columns]
     return df
+
+
+def _unparsed(path: Path, prof: Profile, df: pd.DataFrame, num_cols: list[str], usecols: list[str],
+              header_line: int, exc: ValueError) -> InputError:
+    """The error for numeric columns the parser refused though every cell is a number
+    once its decimal mark is read as '.': a file written with '.' under a profile whose
+    decimal mark is another (its first such cell named), else the parser's own words."""
+    for c in num_cols:
+        if c not in usecols or prof.decimal == ".":
+            continue
+        dotted = df[c].astype("string").str.contains(".", regex=False).fillna(False).to_numpy(dtype=bool)
+        if dotted.any():
+            i = int(np.flatnonzero(dotted)[0])
+            return InputError(path, f"'{df[c].iloc[i]}' is written with a '.' but the profile {prof.name!r} reads "
+                                    f"'{prof.decimal}' as the decimal mark ([csv] decimal): a wrong profile, or a "
+                                    "file exported with other settings", line=header_line + 1 + i,
+                              column=c.split("\x00")[0])
+    return InputError(path, f"numeric columns unreadable: {exc}")
 
 
 def _cells_to_numbers(df: pd.DataFrame, path: Path, prof: Profile, num_cols: list[str], usecols: list[str],
