@@ -40,11 +40,11 @@ import argparse
 import contextlib
 import dataclasses
 import sys
-
-import numpy as np
 import tempfile
 import time
 from pathlib import Path
+
+import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
@@ -94,7 +94,8 @@ def calibrate_store(store_path: Path, label: str) -> list[dict]:
             rows.append({
                 "trips_data": sel_trips.trips, "veh": veh, "vehicle_path": path, "braking": braking,
                 "store": str(store_path),
-                "set": label, "vehicle": vid, "powertrain": veh.powertrain, "trips": sel.result.cv.n if sel.result.cv else 0,
+                "set": label, "vehicle": vid, "powertrain": veh.powertrain,
+                "trips": sel.result.cv.n if sel.result.cv else 0,
                 "eta_only": eta, "best_by_k": best_by_k, "chosen": sel.chosen, "result": sel.result,
                 "nested": sel.nested_cv, "seconds": dt, "n_candidates": len(sel.candidates), "n_ok": len(ok),
                 "standstill": sel.chosen_standstill,
@@ -146,7 +147,7 @@ def print_table(rows: list[dict], markdown: bool) -> None:
                       f"{res.mean_rel_width_pct:.1f} %",
                       " / ".join(f"{100 * cov[k]:.0f}" for k in (0.5, 0.8, 0.95) if k in cov) + " %",
                       f"{r['n_ok']} of {r['n_candidates']}", f"{r['seconds']:.2f}"])
-    for pt, (name, mu, sd) in PAPER.items():
+    for name, mu, sd in PAPER.values():
         lines.append(["paper", name, "", "", "eta", f"{mu:+.1f} / {sd:.1f} %", "", "", "", "", "", ""])
     _print_lines(head, lines, markdown)
     for r in rows:
@@ -234,9 +235,9 @@ def _print_lines(head, lines, markdown: bool) -> None:
             print("| " + " | ".join(line) + " |")
         return
     widths = [max(len(h), *(len(line[i]) for line in lines)) if lines else len(h) for i, h in enumerate(head)]
-    print("  ".join(h.ljust(w) for h, w in zip(head, widths)))
+    print("  ".join(h.ljust(w) for h, w in zip(head, widths, strict=True)))
     for line in lines:
-        print("  ".join(c.ljust(w) for c, w in zip(line, widths)))
+        print("  ".join(c.ljust(w) for c, w in zip(line, widths, strict=True)))
 
 
 def fleet_comparison(hgv_result) -> None:

@@ -22,13 +22,13 @@ from pathlib import Path
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-import numpy as np  # noqa: E402
+import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "src"))
 
-from cevm.core.cycle import CR0_DEFAULT, drive_cycle_vector  # noqa: E402
-from cevm.core.model import wheel_energy_j  # noqa: E402
-from cevm_samplegen.cycles import DEMO_CYCLES, micro_trip_cycle  # noqa: E402
+from cevm.core.cycle import CR0_DEFAULT, drive_cycle_vector
+from cevm.core.model import wheel_energy_j
+from cevm_samplegen.cycles import DEMO_CYCLES, micro_trip_cycle
 
 RHO, G = 1.225, 9.81
 
@@ -118,10 +118,12 @@ def main() -> None:
     dt_loop, ref = best_of(lambda: loop_vector(tl, vl, hl), 1)
     loop_rate = loop_n / dt_loop
     fast = drive_cycle_vector(tb[:loop_n], vb[:loop_n], hb[:loop_n])
-    rel_vec = max(abs(x - y) / (abs(y) + 1e-300) for x, y in zip(fast.delta, ref[:3]))
+    rel_vec = max(abs(x - y) / (abs(y) + 1e-300) for x, y in zip(fast.delta, ref[:3], strict=True))
     print(f"  baseline, Python loop per sample : {loop_rate / 1e6:10.2f} M samples/s")
-    print(f"  cevm, {reps} cycles of {n} samples  : {small_rate / 1e6:10.2f} M samples/s  ({small_rate / loop_rate:,.0f}x)")
-    print(f"  cevm, one array of {big_n / 1e6:.0f} M samples : {big_n / dt_big / 1e6:10.2f} M samples/s  ({big_n / dt_big / loop_rate:,.0f}x)"
+    print(f"  cevm, {reps} cycles of {n} samples  : {small_rate / 1e6:10.2f} M samples/s  "
+          f"({small_rate / loop_rate:,.0f}x)")
+    print(f"  cevm, one array of {big_n / 1e6:.0f} M samples : {big_n / dt_big / 1e6:10.2f} M samples/s  "
+          f"({big_n / dt_big / loop_rate:,.0f}x)"
           f"   with input validation: {big_n / dt_big_val / 1e6:.2f} M samples/s")
     print(f"  max relative difference of the vector vs the loop: {rel_vec:.1e}")
     print("  target: >= 20 M samples/s")
@@ -145,7 +147,7 @@ def main() -> None:
         "ICE paper (eq. 24)": 1.0,
         "ICE no-credit": 0.0,
     }
-    sample_idx = [(i, j) for i, j in zip(rng.integers(0, n_veh, 30), rng.integers(0, n_mass, 30))]
+    sample_idx = [(i, j) for i, j in zip(rng.integers(0, n_veh, 30), rng.integers(0, n_mass, 30), strict=True)]
     loop_args = (t.tolist(), v.tolist(), h.tolist())
     for label, w in modes.items():
         def run(w=w):
@@ -167,9 +169,9 @@ def main() -> None:
         loop_rate = 10 / dt_loop
         np_rate = len(sample_idx) / dt_np
         rel = max(
-            abs(out[i, j] - ref) / abs(ref) for (i, j), ref in zip(sample_idx, np_vals)
+            abs(out[i, j] - ref) / abs(ref) for (i, j), ref in zip(sample_idx, np_vals, strict=True)
         )
-        rel_loop = max(abs(out[i, j] - ref) / abs(ref) for (i, j), ref in zip(sample_idx[:10], loop_vals))
+        rel_loop = max(abs(out[i, j] - ref) / abs(ref) for (i, j), ref in zip(sample_idx[:10], loop_vals, strict=True))
         assert np.array_equal(cold, out)
         rate_warm = n_pred / dt_warm
         rate_cold = n_pred / dt_cold

@@ -28,15 +28,15 @@ from pathlib import Path
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-import numpy as np  # noqa: E402
-import rasterio  # noqa: E402
-from pyproj import Transformer  # noqa: E402
-from rasterio.transform import from_origin  # noqa: E402
+import numpy as np
+import rasterio
+from pyproj import Transformer
+from rasterio.transform import from_origin
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "src"))
 
-from cevm.ingest.dsm import DsmSampler  # noqa: E402
-from cevm.ingest.elevation import combine_elevation  # noqa: E402
+from cevm.ingest.dsm import DsmSampler
+from cevm.ingest.elevation import combine_elevation
 
 X0, Y0, TILE = 430000.0, 290000.0, 2000  # top-left corner of the mosaic [m], tile side [px]
 

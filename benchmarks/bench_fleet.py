@@ -35,15 +35,15 @@ from pathlib import Path
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-import numpy as np  # noqa: E402
+import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
-from cevm.core.cycle import drive_cycle_vector  # noqa: E402
 from cevm.core.assignment import FleetVehicle, Leg, Route, Scenario, plan  # noqa: E402
-from cevm.io.scenario import load_scenario  # noqa: E402
+from cevm.core.cycle import drive_cycle_vector  # noqa: E402
 from cevm.io import load_vehicle, read_cycle_csv  # noqa: E402
+from cevm.io.scenario import load_scenario  # noqa: E402
 from cevm_samplegen.cycles import MicroTripSpec, micro_trip_cycle  # noqa: E402
 
 RHO, G = 1.225, 9.81
@@ -80,12 +80,12 @@ def baseline_paper_day(sc: Scenario, cycles, d: int):
     import itertools
 
     for combo in itertools.product(*[sc.options(s) for s in shared]):
-        who = {s: sc.options(s)[0] for s in sc.stops()} | dict(zip(shared, combo))
+        who = {s: sc.options(s)[0] for s in sc.stops()} | dict(zip(shared, combo, strict=True))
         total = 0.0
         for ri, r in enumerate(sc.routes):
             veh = sc.vehicle_by_id[r.vehicle_id].vehicle
-            for l, leg in enumerate(r.legs):
-                load = sum(sc.payload_kg[s][d] for k, s in enumerate(r.stops) if k >= l and who[s] == ri)
+            for li, leg in enumerate(r.legs):
+                load = sum(sc.payload_kg[s][d] for k, s in enumerate(r.stops) if k >= li and who[s] == ri)
                 t, v, h = cycles[leg.source.ref]
                 total += leg.source.repeat * loop_fuel_l(t, v, h, veh.kerb_mass_kg + load, veh)
         if total < best[1]:
@@ -121,7 +121,8 @@ def bench_paper(quick: bool) -> None:
             routes.append(dataclasses.replace(r, legs=tuple(legs)))
         return plan(dataclasses.replace(sc, routes=tuple(routes)), d)
 
-    print(f"load_scenario (2 cycle files, vectors, vehicles): best {t_load * 1e3:.2f} ms, median {med_load * 1e3:.2f} ms")
+    print(f"load_scenario (2 cycle files, vectors, vehicles): best {t_load * 1e3:.2f} ms, median {med_load * 1e3:.2f} "
+          f"ms")
     print(f"{'day':6} {'plan (cached)':>16} {'+ vectors':>12} {'load + plan':>12} {'MILP':>10} "
           f"{'baseline':>10} {'speed-up':>9}  choice (LH1S1/R1S2, LH2S1/R1S4)  same")
     for d, day in enumerate(sc.days):
@@ -168,7 +169,8 @@ def generated_fleet(n_vehicles=100, n_exclusive=800, n_shared=200, seed=7, braki
         pool.extend([v, v + v, v + v + v])
     hgv = load_vehicle(ROOT / "configs" / "vehicles" / "diesel-hgv.toml")
     hgv = dataclasses.replace(hgv, ice_braking=braking)
-    rigid = dataclasses.replace(hgv, name="rigid", kerb_mass_kg=9000.0, mass_kg=9000.0, max_gross_kg=26000.0, cda_m2=5.5)
+    rigid = dataclasses.replace(hgv, name="rigid", kerb_mass_kg=9000.0, mass_kg=9000.0, max_gross_kg=26000.0,
+                                cda_m2=5.5)
     vehicles = []
     stops: dict[str, list[str]] = {}
     for i in range(n_vehicles):

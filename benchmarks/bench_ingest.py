@@ -68,9 +68,8 @@ import pandas as pd  # noqa: E402
 
 from cevm.ingest import IngestOptions, ingest  # noqa: E402
 from cevm.runtime import tune_allocator  # noqa: E402
-from cevm_samplegen import fleet_for_benchmark, generate_sample_logs  # noqa: E402
 from cevm.store import TripStore  # noqa: E402
-
+from cevm_samplegen import fleet_for_benchmark, generate_sample_logs  # noqa: E402
 
 # Ingests ``fleet`` with the DSM into a new store with whatever cevm is first on the path
 # (the baseline checkout's src), one core, and prints the report as JSON.
@@ -362,7 +361,8 @@ def main() -> None:
     ap.add_argument("--vehicles", type=int, default=None)
     ap.add_argument("--days", type=int, default=None)
     ap.add_argument("--baseline-src", default=None, help="another checkout's src/ to ingest the same files with")
-    ap.add_argument("--repeat", type=int, default=1, help="alternating runs of this and the baseline (with --baseline-src)")
+    ap.add_argument("--repeat", type=int, default=1,
+                    help="alternating runs of this and the baseline (with --baseline-src)")
     ap.add_argument("--sizes", action="store_true", help="one file of 1k, 100k, 1M and 5M rows each: cost and memory")
     ap.add_argument("--held-out", action="store_true",
                     help="real logs against a bare typed pyarrow parse of the same bytes (issue 25's held-out check)")
@@ -394,7 +394,8 @@ def main() -> None:
         t0 = time.process_time()
         rows = sum(len(pd.read_csv(f, comment="#")) for f in files)
         dt_read = time.process_time() - t0
-        print(f"baseline pandas.read_csv only: {rows:,} rows in {dt_read:.2f} s CPU = {rows / dt_read / 1e6:.2f} M rows/s")
+        print(f"baseline pandas.read_csv only: {rows:,} rows in {dt_read:.2f} s CPU = {rows / dt_read / 1e6:.2f} M "
+              f"rows/s")
         dt_bare = min(bare_parse_s(files) for _ in range(2))
         print(f"baseline bare typed pyarrow parse (read_csv, ISO 8601 times, one thread): {dt_bare:.2f} s CPU "
               f"= {rows / dt_bare / 1e6:.2f} M rows/s")
@@ -430,7 +431,8 @@ def main() -> None:
         print("  stages (CPU seconds, share of the run):")
         for k, v in sorted(rep.stage_s.items(), key=lambda kv: -kv[1]):
             print(f"    {k:10s} {v:7.2f} s  {100 * v / dt:5.1f} %")
-        print(f"    {'other':10s} {dt - total:7.2f} s  {100 * (dt - total) / dt:5.1f} %  (hashing, discovery, bookkeeping)")
+        print(f"    {'other':10s} {dt - total:7.2f} s  {100 * (dt - total) / dt:5.1f} %  (hashing, discovery, "
+              f"bookkeeping)")
         print("  target: >= 1,000,000 samples/s")
         if args.baseline_src:
             this_src = str(Path(__file__).resolve().parents[1] / "src")

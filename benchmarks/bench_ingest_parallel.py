@@ -77,9 +77,9 @@ for _k in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
+from cevm.executors import TASK_S, DaskExecutor, ProcessExecutor, SerialExecutor, Task, local_dask_cluster  # noqa: E402
 from cevm.ingest import IngestOptions, ingest  # noqa: E402
 from cevm.runtime import tune_allocator  # noqa: E402
-from cevm.executors import TASK_S, DaskExecutor, ProcessExecutor, SerialExecutor, Task, local_dask_cluster  # noqa: E402
 from cevm.store import TripStore  # noqa: E402
 
 try:
@@ -151,7 +151,8 @@ def run_two_serial(files, stores: list[Path], dsm: str) -> tuple[int, Meter]:
     together once both have imported cevm; their CPU time is what they report."""
     halves = [files[0::2], files[1::2]]
     procs = [subprocess.Popen([sys.executable, __file__, "--child", str(s), dsm, *map(str, h)],
-                              stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True) for s, h in zip(stores, halves)]
+                              stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+             for s, h in zip(stores, halves, strict=True)]
     for p in procs:
         assert p.stdout.readline().strip() == "ready"
     with Meter() as m:
@@ -234,7 +235,8 @@ def line(name: str, samples: int, m: Meter, serial_rate: float | None, workers: 
     mach = m.machine
     others = mach.get("busy", float("nan")) - m.cpu
     print(f"  {name:<11} {m.wall:7.2f} s  {rate / 1e3:7.0f} k samples/s{extra:<22}"
-          f" cpu ours {m.cpu:5.2f} s (this process {m.main_cpu:4.2f}), machine busy {mach.get('busy', float('nan')):6.2f} s "
+          f" cpu ours {m.cpu:5.2f} s (this process {m.main_cpu:4.2f}), machine busy "
+          f"{mach.get('busy', float('nan')):6.2f} s "
           f"(others ~{others:5.2f}), steal {mach.get('steal', float('nan')):4.2f} s")
     return rate
 
@@ -377,7 +379,7 @@ def main() -> None:
             if name in best:
                 rates[name] = line(name.replace("pool", f"pool x{w}"), *best[name], serial_rate, w)
         total_stage = sum(stage.values())
-        print(f"\nserial stages [s]: " + ", ".join(f"{k} {v:.2f}" for k, v in stage.items())
+        print("\nserial stages [s]: " + ", ".join(f"{k} {v:.2f}" for k, v in stage.items())
               + f"; the writer's share (store) {100 * stage.get('store', 0) / max(total_stage, 1e-9):.0f} %")
         ceiling = rates.get("2 x serial", float("nan")) / serial_rate
         print(f"pool: x{rates['pool'] / serial_rate:.2f} vs serial (one file per task: "
@@ -403,7 +405,8 @@ def main() -> None:
                   f"{100 * (rates['pool warm'] / rates['dask warm'] - 1):+.0f} % warm (target < 15 %); one file "
                   f"per task: {100 * (rates['pool 1/file'] / rates['dask 1/file'] - 1):+.0f} % cold; extra CPU "
                   f"{cpu_ms:.1f} ms per grouped task, {cpu_ms_1:.1f} ms per file-task of "
-                  f"{best['serial'][0] / len(files):,.0f} samples ({1e3 * best['serial'][1].wall / len(files):.0f} ms serial)")
+                  f"{best['serial'][0] / len(files):,.0f} samples ({1e3 * best['serial'][1].wall / len(files):.0f} ms "
+                  f"serial)")
         print(f"per-core throughput (serial): {serial_rate / 1e3:.0f} k samples/s")
         compared = [n for n in ("pool 1/file", "pool", "dask 1/file", "dask") if n in stores]
         same = [n for n in compared if store_content(stores[n]) == store_content(stores["serial"])]

@@ -343,7 +343,7 @@ def main() -> None:
     ap.add_argument("rest", nargs="*", help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.child and args.import_only:  # the baseline: what the ingest's imports cost
-        import cevm.cli  # noqa: F401
+        import cevm.cli
         import cevm.ingest.pipeline  # noqa: F401
 
         print("\n@@" + json.dumps({"peak_mb": _peak_mb(), "code": 0, "seconds": 0, "stages": {}}))

@@ -45,19 +45,19 @@ from pathlib import Path
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-import numpy as np  # noqa: E402
+import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
-from cevm.core.cycle import step_terms  # noqa: E402
 from cevm.cli.values import parse_values  # noqa: E402
-from cevm.core.sweep import PredictionSet, Source, predict_source, sweep  # noqa: E402
+from cevm.core.cycle import step_terms  # noqa: E402
 from cevm.core.feasibility import feasibility  # noqa: E402
+from cevm.core.sweep import PredictionSet, Source, predict_source, sweep  # noqa: E402
+from cevm.core.vehicle import Vehicle, predict  # noqa: E402
 from cevm.executors import ProcessExecutor  # noqa: E402
 from cevm.runtime import tune_allocator  # noqa: E402
 from cevm_samplegen.cycles import MicroTripSpec, micro_trip_cycle  # noqa: E402
-from cevm.core.vehicle import Vehicle, predict  # noqa: E402
 
 TYRE_CR = (0.0045, 0.0055, 0.0065, 0.0075)
 
@@ -239,7 +239,7 @@ def main() -> None:
                     "ns": (st.k + st.e + sources[r].vector.cr0 * st.r) <= 0}
     t0 = time.perf_counter()
     base = [plain_prediction(cache[r], vehicles[pset.vehicle_index[p]], float(pset.mass_kg[p]))
-            for r, p in zip(*picks)]
+            for r, p in zip(*picks, strict=True)]
     t_base = time.perf_counter() - t0
     rate_base = k / t_base
     print(f"baseline per-prediction loop: {rate_base:,.0f} predictions/s "
@@ -249,7 +249,7 @@ def main() -> None:
     for r in set(picks[0].tolist()):
         blocks[r] = predict_source(sources[r], pset)
     diffs_e, diffs_soc = [], []
-    for (r, p), (val, soc) in zip(zip(*picks), base):
+    for (r, p), (val, soc) in zip(zip(*picks, strict=True), base, strict=True):
         b = blocks[r]
         got = b.energy_j[p] if pset.is_ev[p] else b.fuel_l[p]
         diffs_e.append(abs(got - val) / abs(val))
@@ -260,8 +260,8 @@ def main() -> None:
 
     if args.no_cli:
         return
-    from cevm.store.routes import CycleLeg, add_route
     from cevm.store import TripStore
+    from cevm.store.routes import CycleLeg, add_route
 
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)

@@ -74,27 +74,27 @@ from pathlib import Path
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-import numpy as np  # noqa: E402
-import pandas as pd  # noqa: E402
+import numpy as np
+import pandas as pd
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
 from cevm.core.calibration import CalibrationError, TripData, fit  # noqa: E402
-from cevm.core.terms import TERMS_BY_POWERTRAIN  # noqa: E402
 from cevm.core.cycle import G_MPS2, RHO_AIR_KG_M3, CycleVector, drive_cycle_vector  # noqa: E402
 from cevm.core.detailed import DieselParams, EvParams, decimate_indices, simulate  # noqa: E402
-from cevm.io import load_vehicle, read_cycle_csv  # noqa: E402
-from cevm.io.detailed import diesel_params_from_vehicle, ev_params_from_vehicle  # noqa: E402
-from cevm.io.cycles import elevation_from_grade  # noqa: E402
-from cevm.core.model import (
+from cevm.core.model import (  # noqa: E402
     battery_energy_from_wheel_j,
     ev_energy_j,
     fuel_from_wheel_energy_l,
     ice_fuel_l,
     wheel_energy_j,
 )
+from cevm.core.terms import TERMS_BY_POWERTRAIN  # noqa: E402
 from cevm.core.vehicle import Vehicle, predict  # noqa: E402
+from cevm.io import load_vehicle, read_cycle_csv  # noqa: E402
+from cevm.io.cycles import elevation_from_grade  # noqa: E402
+from cevm.io.detailed import diesel_params_from_vehicle, ev_params_from_vehicle  # noqa: E402
 
 #: The shared public cycles, beside the checkout.
 SHARED_CYCLES = ROOT.parent / "shared" / "cycles"
@@ -411,7 +411,7 @@ def measure(vehicle: Vehicle, traces: list[list[Cycle]], masses_kg, params) -> M
     val = np.empty((len(traces), masses.size))
     dfr = np.empty_like(val)
     for i, row in enumerate(traces):
-        for j, (c, m) in enumerate(zip(row, masses)):
+        for j, (c, m) in enumerate(zip(row, masses, strict=True)):
             r = simulate(vehicle, c.time_s, c.speed_mps, c.elevation_m, mass_kg=float(m), params=params)
             val[i, j] = r.energy_j if vehicle.is_ev else r.fuel_l
             pos = float(np.dot(np.maximum(r.steps["wheel_power_w"], 0.0), r.steps["dt_s"]))
@@ -597,7 +597,7 @@ def cross_calibrate(vehicle: Vehicle, variant: CeVariant, ce: CeInputs, measured
     errors = np.full((r,) + measured.shape, math.nan)
     extra = [p for p in variant.params if p != "eta"]
     fitted = {p: np.full(r, math.nan) for p in variant.params}
-    refused = {p: 0 for p in extra}
+    refused = dict.fromkeys(extra, 0)
 
     def held_out_errors(idx):
         try:
@@ -775,7 +775,8 @@ def run_table(kind: str, vehicle: Vehicle, cycles: list[Cycle], payloads_kg, *, 
     # The base model decides which trips are usable, for every variant (paired results).
     dfr = measured["base"].deficit_fraction
     valid = (dfr <= MAX_DEFICIT_FRACTION) & (measured["base"].value > 0)
-    excluded = tuple((cycles[i].name, float(payloads_kg[j]), float(dfr[i, j])) for i, j in zip(*np.nonzero(~valid)))
+    excluded = tuple((cycles[i].name, float(payloads_kg[j]), float(dfr[i, j]))
+                     for i, j in zip(*np.nonzero(~valid), strict=True))
     eligible = np.flatnonzero(valid.any(axis=1))  # cycles with at least one usable trip
     if eligible.size <= n_calib:
         raise ValueError(f"only {eligible.size} cycles have usable trips; need more than {n_calib}")
@@ -795,7 +796,7 @@ def run_table(kind: str, vehicle: Vehicle, cycles: list[Cycle], payloads_kg, *, 
                 "idle_pct": [idle_share(c) * 100.0 for c in cycles],
                 "valid": valid,
                 "distance_ratio": np.array([[tr.distance_m / c.distance_m for tr in row]
-                                            for c, row in zip(cycles, traces)])},
+                                            for c, row in zip(cycles, traces, strict=True)])},
     )
 
 

@@ -73,7 +73,7 @@ class Diff:
             if len(a) != len(b):
                 self.add(where, f"{len(a)} items -> {len(b)}: {a!r} -> {b!r}"[:2000])
             else:
-                for i, (x, y) in enumerate(zip(a, b)):
+                for i, (x, y) in enumerate(zip(a, b, strict=True)):
                     self.value(f"{where}[{i}]", x, y)
         elif isinstance(a, (int, float)) and isinstance(b, (int, float)) and not isinstance(a, bool):
             self.value(where, float(a), float(b)) if a != b else None
@@ -101,7 +101,7 @@ class Diff:
 def _rows(con: sqlite3.Connection, table: str, key: str) -> dict:
     cur = con.execute(f"SELECT * FROM {table}")
     names = [c[0] for c in cur.description]
-    return {row[names.index(key)]: dict(zip(names, row)) for row in cur}
+    return {row[names.index(key)]: dict(zip(names, row, strict=True)) for row in cur}
 
 
 def _tables(con: sqlite3.Connection) -> set[str]:
@@ -211,7 +211,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("a", type=Path)
     ap.add_argument("b", type=Path)
     ap.add_argument("--tolerance", type=float, default=0.0, help="relative tolerance of floats (default: exact)")
-    ap.add_argument("--ignore-bytes", action="store_true", help="do not report blobs whose bytes differ but decode equal")
+    ap.add_argument("--ignore-bytes", action="store_true",
+                    help="do not report blobs whose bytes differ but decode equal")
     args = ap.parse_args(argv)
     d = Diff(args.tolerance)
     if args.a.is_dir():

@@ -86,9 +86,9 @@ from pathlib import Path
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-import numpy as np  # noqa: E402
-import pandas as pd  # noqa: E402
-from scipy.optimize import nnls  # noqa: E402
+import numpy as np
+import pandas as pd
+from scipy.optimize import nnls
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
@@ -733,7 +733,7 @@ def _describe(m: Matched) -> None:
           f"r = {fv.wheel_radius_m} m, wheel inertia {fv.wheel_inertia_total_kgm2:.2f} kg m^2 in all; "
           f"aux {fv.aux_power_w:.0f} W; transmission {fv.transmission_efficiency}; FASTSim's air density "
           f"(measured) {ph.rho_air_kg_m3:.4f} kg/m^3, g {ph.g_mps2:.4f} m/s^2")
-    curve = ", ".join(f"{a:g}: {b:.2f}" for a, b in zip(fv.eff_frac, fv.eff_values))
+    curve = ", ".join(f"{a:g}: {b:.2f}" for a, b in zip(fv.eff_frac, fv.eff_values, strict=True))
     what = "motor" if fv.powertrain == "ev" else "engine"
     print(f"- FASTSim {what} efficiency vs P/P_max: {curve}; P_max = {fv.max_power_w / 1e3:.1f} kW")
     if fv.powertrain == "ev":

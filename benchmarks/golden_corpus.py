@@ -123,7 +123,8 @@ def make_hostile(srf: Path, portal: Path, out: Path) -> None:
     bad_dates = list(data)
     for k, i in enumerate(range(100, 5000, 700)):
         ts = bad_dates[i].split(",")[0]
-        bad_dates[i] = bad_dates[i].replace(ts, ("2099" + ts[4:], ts[:11] + "25" + ts[13:], ts[:5] + "13" + ts[7:])[k % 3], 1)
+        bad_dates[i] = bad_dates[i].replace(ts, ("2099" + ts[4:], ts[:11] + "25" + ts[13:],
+                                                 ts[:5] + "13" + ts[7:])[k % 3], 1)
     w("corrupt_dates.csv", bad_dates)
     epoch = list(data)
     epoch[100] = "1970-01-01T00:00:07.000Z" + epoch[100][epoch[100].index(","):]
@@ -242,10 +243,12 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("dir", type=Path)
     ap.add_argument("--src", type=Path, default=ROOT / "src", help="the src/ of the checkout to run")
     ap.add_argument("--label", default="this", help="the folder of this run's stores under DIR")
-    ap.add_argument("--shared", type=Path, default=None, help="the shared folder (default: ../shared, or ../../shared from a worktree)")
+    ap.add_argument("--shared", type=Path, default=None,
+                    help="the shared folder (default: ../shared, or ../../shared from a worktree)")
     ap.add_argument("--case", action="append", choices=sorted(CASES), help="only these cases")
     args = ap.parse_args(argv)
-    shared = args.shared or next((p for p in (ROOT.parent / "shared", ROOT.parent.parent / "shared") if p.is_dir()), None)
+    shared = args.shared or next((p for p in (ROOT.parent / "shared", ROOT.parent.parent / "shared") if p.is_dir()),
+                                 None)
     corpus = args.dir.resolve() / "corpus"
     make_corpus(corpus, shared)
     make_generated(corpus)

@@ -109,7 +109,7 @@ def make_fleet(tmp_path: Path):
     hgv.write_text(HGV_FILE.format(eta=HGV_ETA))
     with TripStore(db) as st:
         df = st.list_trips(vehicle_id="HGV-77")
-    starts = dict(zip(df["trip_id"], zip(df["start_utc_s"], df["duration_s"])))
+    starts = dict(zip(df["trip_id"], zip(df["start_utc_s"], df["duration_s"], strict=True), strict=True))
     return db, ids, hgv, starts
 
 
@@ -119,8 +119,8 @@ def unlogged(ids):
 
 
 def iso_local(t_s: float, zone: str) -> str:
-    from zoneinfo import ZoneInfo
     import datetime as dt
+    from zoneinfo import ZoneInfo
 
     return dt.datetime.fromtimestamp(t_s, ZoneInfo(zone)).strftime("%Y-%m-%d %H:%M:%S")
 

@@ -121,7 +121,8 @@ def differences(got: dict, ref: dict) -> list[str]:
     """Human-readable differences of two :func:`summarise` results (empty: equal)."""
     diffs: list[str] = []
     if set(got) != set(ref):
-        diffs.append(f"trip ids differ: missing {sorted(set(ref) - set(got))[:5]}, new {sorted(set(got) - set(ref))[:5]}")
+        diffs.append(f"trip ids differ: missing {sorted(set(ref) - set(got))[:5]}, new "
+                     f"{sorted(set(got) - set(ref))[:5]}")
     for tid in sorted(set(got) & set(ref)):
         g, r = got[tid], ref[tid]
         for k, rv in r.items():
@@ -131,7 +132,7 @@ def differences(got: dict, ref: dict) -> list[str]:
                     atol = ATOL[name]
                     for stat, rstat in rs.items():
                         gstat = gs[stat]
-                        pairs = zip(gstat, rstat) if isinstance(rstat, list) else [(gstat, rstat)]
+                        pairs = zip(gstat, rstat, strict=True) if isinstance(rstat, list) else [(gstat, rstat)]
                         if isinstance(rstat, list) and len(gstat) != len(rstat):
                             diffs.append(f"{tid} {name}.{stat}: {len(gstat)} values, reference {len(rstat)}")
                             continue
@@ -161,7 +162,8 @@ def main() -> None:
     # one trip per line: readable diffs at a third of an indented file's size
     trips = ",\n".join(f"{json.dumps(k)}: {json.dumps(v, sort_keys=True, separators=(',', ':'))}"
                        for k, v in sorted(doc["trips"].items()))
-    REFERENCE.write_text(f'{{"files": {json.dumps(doc["files"], indent=0, sort_keys=True)},\n"trips": {{\n{trips}\n}}}}\n')
+    files = json.dumps(doc["files"], indent=0, sort_keys=True)
+    REFERENCE.write_text(f'{{"files": {files},\n"trips": {{\n{trips}\n}}}}\n')
     print(f"wrote {REFERENCE}: {len(doc['trips'])} trips of {len(doc['files'])} files")
 
 

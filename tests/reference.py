@@ -25,9 +25,7 @@ def reference_wheel_energy_j(t, v, h, m, cda, cr, mode, eta=1.0, cr0=0.004):
     for i in range(len(t) - 1):
         dt, k, a, r, e = step_terms(t, v, h, i)
         delta = m * (k + e) + cda * a + cr * m * r
-        if k + e + cr0 * r > 0:  # simplified step (criterion 8)
-            total += delta
-        elif mode == "paper":
+        if k + e + cr0 * r > 0 or mode == "paper":  # simplified step (criterion 8)
             total += delta
         elif mode == "no-credit":
             if delta > 0:

@@ -72,14 +72,17 @@ def test_calibrate_recovers_eta_and_reports_the_papers_figures(store, root, tmp_
     assert "detailed" in tomllib.loads(out.read_text()) and out.read_text().startswith("# calibrated by cevm")
     assert plot.stat().st_size > 10_000
     # never overwrite silently
-    res = runner.invoke(app, ["calibrate", "-v", str(bus), "--vehicle-id", "EB-09", "--store", str(store), "--out", str(out)])
+    res = runner.invoke(app, ["calibrate", "-v", str(bus), "--vehicle-id", "EB-09", "--store", str(store), "--out",
+                              str(out)])
     assert res.exit_code == 2 and "overwrite" in res.output
-    res = runner.invoke(app, ["calibrate", "-v", str(bus), "--vehicle-id", "EB-09", "--store", str(store), "--out", str(bus)])
+    res = runner.invoke(app, ["calibrate", "-v", str(bus), "--vehicle-id", "EB-09", "--store", str(store), "--out",
+                              str(bus)])
     assert res.exit_code == 2 and "input vehicle file" in res.output
 
 
 def test_calibrate_table_refuses_what_the_data_cannot_identify(store, root):
-    res = runner.invoke(app, ["calibrate", "-v", str(root / "configs/vehicles/electric-bus.toml"), "--vehicle-id", "EB-09",
+    res = runner.invoke(app,
+                        ["calibrate", "-v", str(root / "configs/vehicles/electric-bus.toml"), "--vehicle-id", "EB-09",
                               "--store", str(store), "--fit", "cr"])
     assert res.exit_code == 0, res.output
     assert "sigma(e)" in res.stdout and "cross-validated" in res.stdout and "paper" in res.stdout
@@ -87,7 +90,8 @@ def test_calibrate_table_refuses_what_the_data_cannot_identify(store, root):
 
 
 def test_calibrate_unknown_vehicle_id_is_a_clear_error(store, root):
-    res = runner.invoke(app, ["calibrate", "-v", str(root / "configs/vehicles/electric-bus.toml"), "--vehicle-id", "NOPE",
+    res = runner.invoke(app,
+                        ["calibrate", "-v", str(root / "configs/vehicles/electric-bus.toml"), "--vehicle-id", "NOPE",
                               "--store", str(store)])
     assert res.exit_code == 2 and "NOPE" in res.output and "EB-09" in res.output
 

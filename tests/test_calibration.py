@@ -39,13 +39,13 @@ def synth_trips(vectors, truth, masses, rng, rel_noise, ids=None, groups=None, r
     """Trips measured with Gaussian relative noise of std rel_noise, reported as a
     relative uncertainty ``reported`` (default: rel_noise, at least 1 %)."""
     ids = ids or [f"t{i}" for i in range(len(vectors))]
-    clean = [TripData(i, v, m, None, None) for i, v, m in zip(ids, vectors, masses)]
+    clean = [TripData(i, v, m, None, None) for i, v, m in zip(ids, vectors, masses, strict=True)]
     y = predict_trips(truth, clean)
     meas = y * (1.0 + rel_noise * rng.normal(size=y.size)) if rel_noise > 0 else y
     groups = groups or [None] * len(vectors)
     rep = max(rel_noise, 0.01) if reported is None else reported
     return [replace(t, measured=float(mv), uncertainty=float(rep * yv), group=g)
-            for t, mv, yv, g in zip(clean, meas, y, groups)]
+            for t, mv, yv, g in zip(clean, meas, y, groups, strict=True)]
 
 
 # --- recovery without noise -------------------------------------------------------------
@@ -92,14 +92,14 @@ def test_ice_eta_equals_closed_form_weighted_least_squares(pool):
     masses = rng.uniform(18000, 44000, 8)
     y = rng.uniform(0.9, 1.1, 8) * predict_trips(replace(prior, eta=0.43),
                                                  [TripData(str(i), v, m, None, None)
-                                                  for i, (v, m) in enumerate(zip(vecs[:8], masses))])
+                                                  for i, (v, m) in enumerate(zip(vecs[:8], masses, strict=True))])
     u = rng.uniform(0.01, 0.05, 8)
     trips = [TripData(str(i), v, m, float(yy), float(uu * yy)) for i, (v, m, yy, uu)
-             in enumerate(zip(vecs[:8], masses, y, u))]
+             in enumerate(zip(vecs[:8], masses, y, u, strict=True))]
     r = fit(prior, trips, cv_folds=0, scatter=(0.0, 0.0), time_repeats=0, robust=False)  # least squares
     c = np.empty(8)
     d = np.empty(8)
-    for i, (cyc, m) in enumerate(zip(cycles[:8], masses)):
+    for i, (cyc, m) in enumerate(zip(cycles[:8], masses, strict=True)):
         t, v, h = cyc.time_s, cyc.speed_mps, cyc.elevation_m
         c[i] = reference_wheel_energy_j(t, v, h, m, prior.cda_m2, prior.cr, "paper") / prior.fuel_lhv_j_per_l
         stand = sum(t[j + 1] - t[j] for j in range(len(t) - 1) if v[j] == 0 and v[j + 1] == 0)
@@ -120,7 +120,7 @@ def test_reported_predictions_match_plain_reference(pool):
     trips = synth_trips(vecs[:6], replace(BUS, eta=0.74, aux_power_w=3000.0), masses, rng, 0.02)
     r = fit(BUS, trips, ("eta", "aux_power_w"), cv_folds=0, time_repeats=0)
     eta, aux = r.vehicle.eta, r.vehicle.aux_power_w
-    for row, cyc, m in zip(r.rows, cycles[:6], masses):
+    for row, cyc, m in zip(r.rows, cycles[:6], masses, strict=True):
         e = reference_wheel_energy_j(cyc.time_s, cyc.speed_mps, cyc.elevation_m, m, BUS.cda_m2, BUS.cr, "ev", eta)
         assert row.predicted_in_sample == pytest.approx(e / eta + aux * cyc.duration_s, rel=1e-9)
 
@@ -148,7 +148,7 @@ def test_standard_errors_are_honest_over_repetitions(pool, noise, reported):
         # the fitted scatter at the trips: relative to their predictions
         sc = r.scatter
         rel = [np.hypot(sc.aux * v.duration_s / row.predicted_in_sample, sc.share)
-               for row, v in zip(r.rows, [vecs[i] for i in pick])]
+               for row, v in zip(r.rows, [vecs[i] for i in pick], strict=True)]
         extra.append(float(np.mean(rel)))
     z = np.array(z)
     expected = np.sqrt(noise**2 - reported**2)
@@ -342,7 +342,7 @@ def test_grouped_cv_keeps_each_group_on_one_side(pool):
     trips2 = list(trips)
     trips2[j] = replace(trips[j], measured=trips[j].measured * 1.1)
     r2 = fit(BUS, trips2, cv_folds=3, loo_below=5, time_repeats=0)
-    for a, b in zip(r.rows, r2.rows):
+    for a, b in zip(r.rows, r2.rows, strict=True):
         if a.group == "day3":
             assert a.predicted_cv == pytest.approx(b.predicted_cv, rel=1e-12)
     # leave-one-group-out when there are few groups

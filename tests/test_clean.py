@@ -17,6 +17,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from pyproj import Geod
 
+from cevm.errors import InputError
 from cevm.ingest.cleaning import (
     CleanParams,
     CleanTrip,
@@ -25,7 +26,6 @@ from cevm.ingest.cleaning import (
     geodesic_steps_m,
     local_distance_m,
 )
-from cevm.errors import InputError
 
 GEOD = Geod(ellps="WGS84")
 T0 = 1_600_000_000.0  # a whole second, UTC
@@ -460,7 +460,7 @@ SOURCES = [Src("fuel_rate_lps", "rate", "fuel_l", 0.0, 0)]
 
 def assert_same_trips(a, b):
     assert len(a.trips) == len(b.trips)
-    for x, y in zip(a.trips, b.trips):
+    for x, y in zip(a.trips, b.trips, strict=True):
         assert x.start_utc_s == y.start_utc_s
         for name in ("time_s", "speed_mps", "distance_m", "lat_deg", "lon_deg"):
             np.testing.assert_array_equal(getattr(x, name), getattr(y, name))
@@ -637,3 +637,84 @@ def test_row_interpolation_shortcut_equals_general_interpolation(n, seed, share)
     want = _interp_limited(t, t[ok], v[ok], 15.0)  # the general path: binary search
     np.testing.assert_array_equal(got, want)
     assert np.isnan(_interp_rows(t, None, None, 15.0)).all()
+
+
+# ------------------------------------------------------- stops: charging, holes driven through
+# (acceptance: a charge at a terminus inside a trip made its measured energy the battery's net;
+# a 4-min hole in the log between two standstill readings, with the GPS 1.2 km further on, was
+# taken as a stop and the driving in it lost without a word)
+
+POWER = [Src("battery_power_w", "rate", "energy_j", 0.0, 0)]
+
+
+def bus_with_a_stop(stop_power_w, stop_s=300, soc=None):
+    """Drive 600 s at 10 m/s drawing 20 kW, stand ``stop_s`` at ``stop_power_w``, drive
+    600 s more at 20 kW; 650 V, current positive = discharge."""
+    tau = np.arange(0.0, 1200.0 + stop_s + 1)
+    stopped = (tau >= 600) & (tau < 600 + stop_s)
+    v = np.where(stopped, 0.0, 10.0)
+    p_w = np.where(stopped, stop_power_w, 20e3)
+    cols = dict(wheel_speed_mps=v, battery_voltage_v=np.full(tau.size, 650.0), battery_current_a=p_w / 650.0)
+    if soc is not None:
+        cols["soc_pct"] = soc(tau)
+    return make(tau, **cols)
+
+
+def test_a_charge_at_a_stop_ends_the_trip_and_the_trips_measure_their_driving():
+    res = clean_log(bus_with_a_stop(-100e3), POWER)
+    assert [t.quality["split_before"] for t in res.trips][1:] == ["charging"]
+    a, b = res.trips
+    # the rate is integrated over each trip's own span: 20 kW x its duration, charge excluded
+    assert a.measured.value == pytest.approx(20e3 * a.duration_s, rel=0.01)
+    assert b.measured.value == pytest.approx(20e3 * b.duration_s, rel=0.01)
+    assert a.duration_s == 600.0 and b.start_utc_s == T0 + 899.0
+    (note,) = res.quality["stop_notes"]
+    assert note["kind"] == "charging"
+    assert note["kwh"] == pytest.approx(100e3 * 300 / 3.6e6, rel=0.01)  # 8.33 kWh taken in
+
+
+def test_a_stop_drawing_auxiliaries_or_charging_too_briefly_stays_in_the_trip():
+    only(clean_log(bus_with_a_stop(+5e3), POWER))  # 5 kW of auxiliaries at a stop
+    only(clean_log(bus_with_a_stop(-100e3, stop_s=40), POWER))  # 40 s < charge_min_s
+    only(clean_log(bus_with_a_stop(-1e3), POWER))  # within a current sensor's offset
+
+
+def test_a_state_of_charge_rising_at_a_stop_is_a_charge_without_current_readings():
+    def soc(tau):  # 80 % falling 1 point per 300 s while driving; +5 points during the stop
+        return np.where(tau < 600, 80 - tau / 300,
+                        np.where(tau < 900, 78 + 5 * (tau - 600) / 300, 83 - (tau - 900) / 300))
+
+    frame = bus_with_a_stop(-100e3, soc=soc).drop(columns=["battery_voltage_v", "battery_current_a"])
+    res = clean_log(frame)
+    assert [t.quality["split_before"] for t in res.trips][1:] == ["charging"]
+    assert res.quality["stop_notes"][0]["soc_rise_pct"] == pytest.approx(5.0, abs=0.1)
+
+
+def test_a_hole_between_standstill_rows_that_the_gps_crossed_is_driving_not_a_stop():
+    tau = np.arange(0.0, 1201.0)
+    dist = np.where(tau < 600, 10.0 * tau, 6000.0 + 1200.0 + 10.0 * (tau - 840))  # 1.2 km in the hole
+    v = np.where((tau == 599) | (tau == 840), 0.0, 10.0)  # the readings at the hole's ends: standing
+    keep = (tau < 600) | (tau >= 840)  # 240 s without rows (< gap_s)
+    lat, lon = north(dist)
+    res = clean_log(make(tau[keep], wheel_speed_mps=v[keep], lat_deg=lat[keep], lon_deg=lon[keep]))
+    assert [t.quality["split_before"] for t in res.trips][1:] == ["speed_gap"]
+    (note,) = res.quality["stop_notes"]
+    assert note["displacement_m"] == pytest.approx(GEOD.inv(lon[599], lat[599], lon[840], lat[840])[2], rel=1e-6)
+    # the same hole with the GPS where it was: a stop, filled with 0
+    lat2, lon2 = north(np.where(tau < 600, 10.0 * tau, 5990.0 + 10.0 * (tau - 840)))
+    only(clean_log(make(tau[keep], wheel_speed_mps=v[keep], lat_deg=lat2[keep], lon_deg=lon2[keep])))
+
+
+def test_an_energy_counter_falling_at_a_stop_is_a_charge_without_current_readings():
+    # 20 kW while driving, 100 kW charged in the 300 s stop: the counter (net) falls 8.33 kWh
+    tau = np.arange(0.0, 1501.0)
+    stopped = (tau >= 600) & (tau < 900)
+    p_w = np.where(stopped, -100e3, 20e3)
+    counter = 50e6 + np.concatenate(([0.0], np.cumsum(p_w[:-1])))
+    res = clean_log(make(tau, wheel_speed_mps=np.where(stopped, 0.0, 10.0), total_energy_j=counter),
+                    [Src("total_energy_j", "counter", "energy_j", 0.0, 0)])
+    assert [t.quality["split_before"] for t in res.trips][1:] == ["charging"]
+    a, b = res.trips
+    # a: rows 0-600, 600 s at 20 kW; b: rows 899-1500, its first second the stop's last (charging)
+    assert a.measured.value == pytest.approx(20e3 * 600.0) and b.measured.value == pytest.approx(20e3 * 600.0 - 100e3)
+    assert res.quality["stop_notes"][0]["kwh"] == pytest.approx(100e3 * 299 / 3.6e6, rel=0.01)

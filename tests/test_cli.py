@@ -92,7 +92,8 @@ def test_simulate_writes_per_second_csv_and_plot(files, tmp_path, root):
     import pandas as pd
 
     out, png = tmp_path / "sim.csv", tmp_path / "sim.png"
-    res = runner.invoke(app, ["simulate", "-v", str(root / "configs/vehicles/electric-bus.toml"), "-c", str(files["urban"]), "--out", str(out),
+    res = runner.invoke(app, ["simulate", "-v", str(root / "configs/vehicles/electric-bus.toml"), "-c",
+                              str(files["urban"]), "--out", str(out),
                               "--plot", str(png), "-f", "json"])
     assert res.exit_code == 0, res.output
     summary = json.loads(res.stdout)[0]
@@ -113,6 +114,7 @@ def test_a_worker_count_beyond_the_machine_is_refused(root, tmp_path):
 
     limit = 4 * (os.cpu_count() or 1)
     for cmd in (["predict", "-v", str(root / "configs/vehicles/electric-bus.toml"), "-c",
-                 str(root / "configs/cycles/urban-bus.csv")], ["ingest", str(tmp_path), "--store", str(tmp_path / "s")]):
+                 str(root / "configs/cycles/urban-bus.csv")],
+                ["ingest", str(tmp_path), "--store", str(tmp_path / "s")]):
         res = runner.invoke(app, [*cmd, "--workers", str(limit + 1)])
         assert res.exit_code == 2 and f"at most {limit} on this machine" in res.output, res.output

@@ -46,7 +46,7 @@ def _bracketed(text: str) -> set[str]:
 
 @pytest.mark.parametrize("path", [p for p, _ in COMMANDS], ids=lambda p: " ".join(p) or "cevm")
 def test_help_keeps_its_bracketed_words_and_shows_no_bool_metavar(path):
-    cmd = dict((tuple(p), c) for p, c in COMMANDS)[tuple(path)]
+    cmd = {tuple(p): c for p, c in COMMANDS}[tuple(path)]
     words = _bracketed(cmd.help)
     for param in cmd.params:
         words |= _bracketed(getattr(param, "help", None))
@@ -75,7 +75,8 @@ def test_ingest_of_nothing_is_bad_usage_and_creates_no_store(tmp_path):
 
 @pytest.fixture()
 def paths(root):
-    return {"hgv": str(root / "configs/vehicles/diesel-hgv.toml"), "bus": str(root / "configs/vehicles/electric-bus.toml"),
+    return {"hgv": str(root / "configs/vehicles/diesel-hgv.toml"),
+            "bus": str(root / "configs/vehicles/electric-bus.toml"),
             "urban": str(root / "configs/cycles/urban-bus.csv")}
 
 
@@ -90,7 +91,8 @@ def test_a_negative_payload_gets_one_message_from_every_command(paths):
         "predict": _error_line(runner.invoke(app, ["predict", "-v", paths["hgv"], "-c", paths["urban"], "-p", "-100"])),
         "feasibility": _error_line(runner.invoke(app, ["feasibility", "-v", paths["hgv"], "-c", paths["urban"],
                                                        "-p", "-100"])),
-        "simulate": _error_line(runner.invoke(app, ["simulate", "-v", paths["hgv"], "-c", paths["urban"], "-p", "-100"])),
+        "simulate": _error_line(runner.invoke(app,
+                                              ["simulate", "-v", paths["hgv"], "-c", paths["urban"], "-p", "-100"])),
     }
     assert len(set(got.values())) == 1, got
     assert "payload -100 kg is negative" in got["predict"]
@@ -101,7 +103,8 @@ def test_a_gross_mass_below_the_kerb_mass_gets_one_message_from_every_command(pa
         "predict": _error_line(runner.invoke(app, ["predict", "-v", paths["hgv"], "-c", paths["urban"], "-m", "100"])),
         "feasibility": _error_line(runner.invoke(app, ["feasibility", "-v", paths["hgv"], "-c", paths["urban"],
                                                        "-m", "100"])),
-        "simulate": _error_line(runner.invoke(app, ["simulate", "-v", paths["hgv"], "-c", paths["urban"], "-m", "100"])),
+        "simulate": _error_line(runner.invoke(app,
+                                              ["simulate", "-v", paths["hgv"], "-c", paths["urban"], "-m", "100"])),
     }
     assert len(set(got.values())) == 1, got
     assert "gross mass 100 kg is below the kerb mass 18,000 kg" in got["predict"]
@@ -121,7 +124,8 @@ def test_over_max_gross_stays_a_flag(paths):
 
 
 def test_simulate_refuses_a_file_without_a_detailed_table(root, paths):
-    res = runner.invoke(app, ["simulate", "-v", str(root / "configs/vehicles/renault-twizy.toml"), "-c", paths["urban"]])
+    res = runner.invoke(app,
+                        ["simulate", "-v", str(root / "configs/vehicles/renault-twizy.toml"), "-c", paths["urban"]])
     line = _error_line(res)
     assert "no [detailed] table" in line and "renault-twizy.toml" in line
 
@@ -201,7 +205,8 @@ def test_predict_fast_csv_writer_quotes_and_escapes(tmp_path, root):
 
 def test_a_leg_repeated_past_the_limit_is_refused_at_once(root, tmp_path):
     text = (root / "configs/fleet/paper-case-study.toml").read_text()
-    text = text.replace("../cycles/", str(root / "configs/cycles") + "/").replace("../vehicles/", str(root / "configs/vehicles") + "/")
+    text = text.replace("../cycles/", str(root / "configs/cycles") + "/").replace("../vehicles/",
+                                                                                  str(root / "configs/vehicles") + "/")
     p = tmp_path / "s.toml"
     p.write_text(text.replace("repeat = 3", "repeat = 100000000"))
     line = _error_line(runner.invoke(app, ["fleet", "plan", str(p)]))  # before: never returned

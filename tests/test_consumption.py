@@ -244,6 +244,22 @@ def test_soc_without_capacity_is_invalid():
     assert not est.valid and "capacity" in est.reason
 
 
+def test_a_logged_soc_that_cannot_measure_for_want_of_a_capacity_is_said():
+    # acceptance: an e-bus logging only its state of charge, under a profile whose soc
+    # entry has no capacity (the shipped srf's), got no measured energy without a word
+    t = np.arange(0.0, 11.0)
+    m, q = measure_trip(t, {"soc_pct": 50 - t}, [Src("soc_pct", "soc", "energy_j", 0.01, 1)], 0.0, 10.0)
+    assert m is None and len(q["warnings"]) == 1 and "capacity" in q["warnings"][0]
+    # with its capacity: measured, 10 points of 100 kWh = 10 kWh, and nothing to say
+    m, q = measure_trip(t, {"soc_pct": 50 - t}, [Src("soc_pct", "soc", "energy_j", 0.01, 1, capacity_j=3.6e8)],
+                        0.0, 10.0)
+    assert m.value == pytest.approx(3.6e7) and q["warnings"] == []
+    # no readings at all: nothing to say either (a column the log does not hold)
+    m, q = measure_trip(t, {"soc_pct": np.full(t.size, np.nan)}, [Src("soc_pct", "soc", "energy_j", 0.01, 1)],
+                        0.0, 10.0)
+    assert m is None and q["warnings"] == []
+
+
 # --------------------------------------------------------------------- source choice
 
 

@@ -422,8 +422,8 @@ def test_every_command_that_reads_cycles_takes_the_options(vecto, root, tmp_path
     assert res.exit_code == 0, res.output
     (row,) = json.loads(res.stdout)
     cyc = read_cycle_csv(vecto / "driving_cycles_truck.csv", truck(vecto))
-    from reference import reference_wheel_energy_j
     from cevm.io import load_vehicle
+    from reference import reference_wheel_energy_j
 
     veh = load_vehicle(hgv)
     e = reference_wheel_energy_j(cyc.time_s, cyc.speed_mps, cyc.elevation_m, 30000.0, veh.cda_m2, veh.cr,

@@ -121,7 +121,8 @@ def test_constant_speed_battery_power_by_hand():
     ratio, r = 1.40 * 5.74, 0.466
     torque = force * r / (ratio * 0.95)
     w = v * ratio / r
-    kc, ki, kw, c = 0.06 * 180e3 / 1100**2, 0.015 * 180e3 / (4500 * RPM), 0.005 * 180e3 / (4500 * RPM) ** 3, 0.003 * 180e3
+    kc, ki = 0.06 * 180e3 / 1100**2, 0.015 * 180e3 / (4500 * RPM)
+    kw, c = 0.005 * 180e3 / (4500 * RPM) ** 3, 0.003 * 180e3
     p_el = force * v / 0.95 + kc * torque**2 + ki * w + kw * w**3 + c
     assert 0.85 < force * v / 0.95 / p_el < 0.92  # a light-load motor+inverter efficiency
     np.testing.assert_allclose(res.steps["motor_torque_nm"], torque, rtol=1e-12)
@@ -208,7 +209,7 @@ def test_vectorised_soc_matches_a_plain_per_step_loop():
     q = 3.0 * 3.6e6 / mean_ocv
     soc = 0.95
     socs = [soc]
-    for pw, dt in zip(res.steps["battery_power_w"], np.diff(t)):
+    for pw, dt in zip(res.steps["battery_power_w"], np.diff(t), strict=True):
         vo = float(np.interp(soc, soc_grid, ocv))
         i = (vo - math.sqrt(vo * vo - 4 * 0.08 * pw)) / (2 * 0.08)
         soc -= i * dt / q
@@ -245,7 +246,8 @@ def test_fuel_cut_coasting_down_a_steep_hill():
 
 def test_willans_line_by_hand_at_constant_speed():
     # A pure Willans line: constant indicated efficiency, constant FMEP.
-    p = DieselParams(indicated_efficiency_speed_drop=0.0, indicated_efficiency_load_drop=0.0, fmep1_pa=0.0, fmep2_pa=0.0)
+    p = DieselParams(indicated_efficiency_speed_drop=0.0, indicated_efficiency_load_drop=0.0, fmep1_pa=0.0,
+                     fmep2_pa=0.0)
     v, m, cda, cr = 80 / 3.6, 30000.0, 6.62, 0.0066
     t = np.arange(0.0, 201.0)
     res = simulate(hgv_vehicle(), t, np.full(t.size, v), None, params=p)
@@ -301,7 +303,8 @@ def test_shipped_vehicle_tables_parse(root):
 @pytest.mark.parametrize(
     "table, needle",
     [
-        ({"motor_peak_powr_kw": 100}, "unknown key 'motor_peak_powr_kw' in [detailed] (did you mean 'motor_peak_power_kw'?)"),
+        ({"motor_peak_powr_kw": 100},
+         "unknown key 'motor_peak_powr_kw' in [detailed] (did you mean 'motor_peak_power_kw'?)"),
         ({"motor_peak_power_kw": -5}, "key 'motor_peak_power_kw' = -5 must be > 0"),
         ({"transmission_efficiency": 1.2}, "key 'transmission_efficiency' = 1.2 must be <= 1"),
         ({"internal_resistance_ohm": "low"}, "key 'internal_resistance_ohm' must be a finite number"),
@@ -333,11 +336,13 @@ def test_bad_diesel_table_names_the_key(table, needle):
 
 
 def test_table_values_are_converted_to_si():
-    p = ev_params_from_vehicle(bus_vehicle({"motor_max_speed_rpm": 6000, "regen_fade_low_kmh": 3.6, "aux_base_power_kw": 2}))
+    p = ev_params_from_vehicle(bus_vehicle({"motor_max_speed_rpm": 6000, "regen_fade_low_kmh": 3.6,
+                                            "aux_base_power_kw": 2}))
     assert p.motor_max_speed_rad_s == pytest.approx(200 * math.pi)
     assert p.regen_fade_low_mps == pytest.approx(1.0)
     assert p.aux_base_power_w == pytest.approx(2000.0)
-    d = diesel_params_from_vehicle(hgv_vehicle({"displacement_l": 12.7, "full_load_speed_rpm": [600, 2000], "full_load_torque_nm": [1000, 1000]}))
+    d = diesel_params_from_vehicle(hgv_vehicle({"displacement_l": 12.7, "full_load_speed_rpm": [600, 2000],
+                                                "full_load_torque_nm": [1000, 1000]}))
     assert d.displacement_m3 == pytest.approx(0.0127)
     assert d.full_load_speed_rad_s[1] == pytest.approx(2000 * RPM)
 
@@ -382,7 +387,7 @@ def test_a_3600_sample_cycle_simulates_in_milliseconds():
     t, v, h = random_trace(1, n=3600, irregular=False)
     for veh in (bus_vehicle(), hgv_vehicle()):
         simulate(veh, t, v, h)
-        best = min(_timed(lambda: simulate(veh, t, v, h)) for _ in range(5))
+        best = min(_timed(lambda veh=veh: simulate(veh, t, v, h)) for _ in range(5))
         assert best < 0.02  # typically 1 ms; generous for a loaded machine
 
 
@@ -422,6 +427,7 @@ def test_a_table_is_read_by_io_and_a_vehicle_whose_table_was_not_read_is_refused
     with pytest.raises(TypeError, match="detailed_params"):
         simulate(weak, t, v, h)
     assert detailed_params(weak) == ev_params_from_vehicle(weak)
-    assert detailed_params(hgv_vehicle({"axle_ratio": 3.0})) == diesel_params_from_vehicle(hgv_vehicle({"axle_ratio": 3.0}))
+    hgv = hgv_vehicle({"axle_ratio": 3.0})
+    assert detailed_params(hgv) == diesel_params_from_vehicle(hgv)
     assert detailed_params(weak).motor_peak_power_w == 20e3
     assert simulate(bus_vehicle({}), t, v, h).energy_j == simulate(bus_vehicle(), t, v, h).energy_j

@@ -18,6 +18,7 @@ from pyproj import Transformer
 from rasterio.io import MemoryFile
 from rasterio.transform import from_origin
 
+from cevm.errors import InputError
 from cevm.ingest.dsm import DsmSampler
 from cevm.ingest.elevation import (
     ElevationParams,
@@ -26,7 +27,6 @@ from cevm.ingest.elevation import (
     road_profile_m,
     trip_elevation,
 )
-from cevm.errors import InputError
 
 # ---------------------------------------------------------------------------- helpers
 
@@ -54,7 +54,7 @@ def ref_bilinear(grid, x0, y0, dx, dy, x, y):
     centres' hull or next to NaN), written independently of the code under test."""
     h, w = grid.shape
     out = []
-    for xi, yi in zip(x, y):
+    for xi, yi in zip(x, y, strict=True):
         cf = (xi - x0) / dx - 0.5
         rf = (y0 - yi) / dy - 0.5
         if not (0 <= cf <= w - 1 and 0 <= rf <= h - 1):
@@ -86,7 +86,8 @@ X0, Y0 = 431000.0, 287000.0  # top-left corner of the test DSMs in British Natio
 
 @pytest.mark.parametrize(
     "crs, x0, y0, dx, dy",
-    [(BNG, X0, Y0, 1.0, 1.0), ("EPSG:32630", 600000.0, 5800000.0, 2.0, 3.0), ("EPSG:3857", -160000.0, 6900000.0, 1.5, 1.5)],
+    [(BNG, X0, Y0, 1.0, 1.0), ("EPSG:32630", 600000.0, 5800000.0, 2.0, 3.0),
+     ("EPSG:3857", -160000.0, 6900000.0, 1.5, 1.5)],
 )
 def test_plane_is_reproduced_exactly(tmp_path, crs, x0, y0, dx, dy):
     w, h = 120, 90
@@ -305,7 +306,8 @@ def test_sampler_from_headers_read_elsewhere_equals_the_opened_one(tmp_path):
 def test_reads_only_windows_and_caches_them(tmp_path):
     n = 2048
     data = np.arange(n * n, dtype=np.float32).reshape(n, n) % 1000
-    write_tif(tmp_path / "big.tif", data, X0, Y0, 1.0, 1.0, BNG, tiled=True, blockxsize=256, blockysize=256, compress="deflate")
+    write_tif(tmp_path / "big.tif", data, X0, Y0, 1.0, 1.0, BNG, tiled=True, blockxsize=256, blockysize=256,
+              compress="deflate")
     # A 300 m drive across two 256-px blocks near the top-left corner.
     t = np.linspace(0, 1, 5000)
     x, y = X0 + 100 + 300 * t, Y0 - 100 - 20 * t
@@ -384,7 +386,8 @@ def test_gdal_names_are_not_checked_on_disk(tmp_path):
             ds.write(data, 1)
         assert mem.name.startswith("/vsimem/")
         with DsmSampler.open(mem.name) as s:
-            assert s.sample_xy([X0 + 5.5], [Y0 - 5.5], BNG)[0] == pytest.approx(0.5 * (X0 + 5.5) + 0.25 * (Y0 - 5.5) + 3, abs=1e-9)
+            want = 0.5 * (X0 + 5.5) + 0.25 * (Y0 - 5.5) + 3
+            assert s.sample_xy([X0 + 5.5], [Y0 - 5.5], BNG)[0] == pytest.approx(want, abs=1e-9)
 
 
 def test_bad_dsm_inputs(tmp_path):
@@ -394,7 +397,7 @@ def test_bad_dsm_inputs(tmp_path):
     with pytest.raises(InputError, match="no GeoTIFF"):
         DsmSampler.open(tmp_path / "empty")
     (tmp_path / "junk.tif").write_text("hello")
-    with pytest.raises(InputError, match="junk.tif: cannot open"):
+    with pytest.raises(InputError, match=r"junk.tif: cannot open"):
         DsmSampler.open(tmp_path / "junk.tif")
     (tmp_path / "nocrs").mkdir()
     write_tif(tmp_path / "nocrs" / "a.tif", np.ones((4, 4)), 0, 4, 1, 1, None)
@@ -656,7 +659,7 @@ def test_tile_index_finds_the_first_tile_holding_each_point(seed, n_tiles):
     x = np.concatenate((rng.uniform(-10, 150, 500), corners[:, 0], [np.nan, 5.0]))
     y = np.concatenate((rng.uniform(-10, 150, 500), corners[:, 1], [5.0, np.inf]))
     want = []
-    for xi, yi in zip(x, y):
+    for xi, yi in zip(x, y, strict=True):
         hit = -1
         for k, t in enumerate(tiles):
             xmin, xmax = t.x0, t.x0 + t.width
@@ -674,8 +677,8 @@ def test_tiles_of_mixed_shapes_and_dtypes_equal_the_mosaic(tmp_path):
     rng = np.random.default_rng(11)
     widths, heights = [7, 19, 12, 30], [9, 14, 21]
     big = rng.normal(100, 20, (sum(heights), sum(widths)))
-    for j, (r0, h) in enumerate(zip(np.cumsum([0] + heights[:-1]), heights)):
-        for i, (c0, w) in enumerate(zip(np.cumsum([0] + widths[:-1]), widths)):
+    for j, (r0, h) in enumerate(zip(np.cumsum([0] + heights[:-1]), heights, strict=True)):
+        for i, (c0, w) in enumerate(zip(np.cumsum([0] + widths[:-1]), widths, strict=True)):
             part = big[r0:r0 + h, c0:c0 + w]
             if (i + j) % 2:
                 part = part.astype(np.float32)

@@ -15,11 +15,10 @@ from hypothesis import strategies as st
 from cevm.core import energy
 from cevm.core.cycle import CycleVector, drive_cycle_vector
 from cevm.core.feasibility import feasibility
-from cevm.core.sweep import LegProfile, PredictionSet, Source, energy_trajectory, predict_sources
-from cevm.core.vehicle import Vehicle, domain_warnings, predict
+from cevm.core.sweep import PredictionSet, Source, energy_trajectory, predict_sources
+from cevm.core.vehicle import FitDomain, Vehicle, domain_warnings, predict
 from cevm.io.vehicles import vehicle_from_mapping
-from cevm.core.vehicle import FitDomain
-from reference import G, RHO, reference_consumption
+from reference import RHO, G, reference_consumption
 
 EV = Vehicle(name="bus", powertrain="ev", mass_kg=12000.0, cda_m2=4.0, cr=0.007, eta=0.8, kerb_mass_kg=9000.0,
              battery_j=120 * 3.6e6, aux_power_w=3000.0, regen_eta=0.6, aux_heating_w_per_k=250.0,
@@ -175,8 +174,8 @@ def test_sweep_totals_and_lowest_soc_equal_the_reference(seed, ambient):
             assert block.ambient_c[p] == t_c
             if veh.is_ev:
                 run = [_fields(veh)["warmup_j_per_k"] * max(0.0, 16.0 - t_c)]
-                for j in range(1, len(t)):
-                    run.append(reference_consumption(t[: j + 1], v[: j + 1], h[: j + 1], m, _fields(veh), t_c))
+                run.extend(reference_consumption(t[: j + 1], v[: j + 1], h[: j + 1], m, _fields(veh), t_c)
+                           for j in range(1, len(t)))
                 lowest = 100.0 - 100.0 * max(0.0, max(run)) / veh.battery_j
                 assert block.soc_min_pct[p] == pytest.approx(lowest, abs=1e-9)
 

@@ -13,8 +13,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cevm.core.cycle import drive_cycle_vector
-from cevm.errors import InputError
 from cevm.core.assignment import (
     BUDGET_RTOL,
     FleetVehicle,
@@ -27,7 +25,9 @@ from cevm.core.assignment import (
     plan,
     table4_rows,
 )
+from cevm.core.cycle import drive_cycle_vector
 from cevm.core.vehicle import Vehicle, predict
+from cevm.errors import InputError
 from cevm.io import read_cycle_csv
 from cevm.io.scenario import default_resolver, fleet_report, load_scenario
 from cevm_samplegen.cycles import MicroTripSpec, micro_trip_cycle
@@ -69,7 +69,8 @@ def ebus(**kw) -> Vehicle:
 def scenario(vehicles, routes, payload, **kw) -> Scenario:
     days = kw.pop("days", ("d1",))
     payload = {s: (tuple(p) if isinstance(p, (list, tuple)) else (p,) * len(days)) for s, p in payload.items()}
-    return Scenario(name="t", vehicles=tuple(vehicles), routes=tuple(routes), days=tuple(days), payload_kg=payload, **kw)
+    return Scenario(name="t", vehicles=tuple(vehicles), routes=tuple(routes), days=tuple(days), payload_kg=payload,
+                    **kw)
 
 
 def route(rid, vid, stops, vectors, ret=True):
@@ -164,7 +165,8 @@ def ev_case(reserve: float, battery_kwh: float):
     km = cruise_vector(10.0, 100)
     bus = ebus(battery_j=battery_kwh * 3.6e6)
     fleet = [FleetVehicle("A", bus, None, ev_reserve_fraction=reserve), FleetVehicle("B", ebus(), None)]
-    routes = [route("RA", "A", ["S"], [km + km + km + km + km, km]), route("RB", "B", ["b1", "S"], [km, km + km + km + km + km + km, km])]
+    routes = [route("RA", "A", ["S"], [km + km + km + km + km, km]),
+              route("RB", "B", ["b1", "S"], [km, km + km + km + km + km + km, km])]
     return scenario(fleet, routes, {"S": 5000.0, "b1": 0.0})
 
 
@@ -224,7 +226,7 @@ def reference_optimum(sc: Scenario, d: int):
     choices = [[i for i, r in enumerate(sc.routes) if s in r.stops] for s in stops]
     best = math.inf
     for combo in itertools.product(*choices):
-        who = dict(zip(stops, combo))
+        who = dict(zip(stops, combo, strict=True))
         total = 0.0
         ok = True
         for v in sc.vehicles:
@@ -232,13 +234,13 @@ def reference_optimum(sc: Scenario, d: int):
             for ri, r in enumerate(sc.routes):
                 if r.vehicle_id != v.id:
                     continue
-                for l, leg in enumerate(r.legs):
+                for li, leg in enumerate(r.legs):
                     if sc.mass_model == "carried":
-                        load = sum(sc.payload_kg[s][d] for k, s in enumerate(r.stops) if k >= l and who[s] == ri)
+                        load = sum(sc.payload_kg[s][d] for k, s in enumerate(r.stops) if k >= li and who[s] == ri)
                     else:
-                        if l >= len(r.stops) or who[r.stops[l]] != ri:
+                        if li >= len(r.stops) or who[r.stops[li]] != ri:
                             continue
-                        load = sc.payload_kg[r.stops[l]][d]
+                        load = sc.payload_kg[r.stops[li]][d]
                     mass = v.vehicle.kerb_mass_kg + load
                     if v.max_gross_kg is not None and mass > v.max_gross_kg:
                         ok = False
@@ -292,7 +294,8 @@ def random_scenario(rng: random.Random, vectors, kind: str, mass_model: str) -> 
         legs = [rng.choice(vectors) for _ in range(len(ss) + ret)]
         routes.append(route(f"R{vid}", vid, ss, legs, ret))
     listed = {s for r in routes for s in r.stops}
-    payload = {s: (float(rng.choice([0, 500, 1500, 3000, 4000, 7000])),) for s in listed}
+    # in sorted order: a set's changes with PYTHONHASHSEED, and the draws with it
+    payload = {s: (float(rng.choice([0, 500, 1500, 3000, 4000, 7000])),) for s in sorted(listed)}
     sc = scenario(fleet, routes, payload, mass_model=mass_model)
     if kind == "ev":  # batteries sized so the reserve binds now and then
         ev = evaluate(sc, 0, {s: next(i for i, r in enumerate(routes) if s in r.stops) for s in listed})
@@ -618,19 +621,22 @@ def test_cli_fleet_plan_with_legs_from_stored_routes_equals_the_cycle_files(tmp_
     runner = CliRunner()
     store = tmp_path / "s.sqlite"
     for name, cyc in (("lh", "long-haul-standin.csv"), ("reg", "regional-standin.csv")):
-        res = runner.invoke(app, ["route", "add", name, "--cycle", str(root / "configs/cycles" / cyc), "--store", str(store)])
+        res = runner.invoke(app, ["route", "add", name, "--cycle", str(root / "configs/cycles" / cyc), "--store",
+                                  str(store)])
         assert res.exit_code == 0, res.output
     text = (root / "configs/fleet/paper-case-study.toml").read_text()
     text = text.replace('leg = { cycle = "../cycles/long-haul-standin.csv" }', 'leg = { route = "lh" }')
-    text = text.replace('leg = { cycle = "../cycles/regional-standin.csv", repeat = 3 }', 'leg = { route = "reg", repeat = 3 }')
+    text = text.replace('leg = { cycle = "../cycles/regional-standin.csv", repeat = 3 }',
+                        'leg = { route = "reg", repeat = 3 }')
     text = text.replace('file = "../vehicles/', f'file = "{root}/configs/vehicles/')
     assert 'route = "lh"' in text and 'route = "reg"' in text
     scen = tmp_path / "routes.toml"
     scen.write_text(text)
-    via_routes = json.loads(runner.invoke(app, ["fleet", "plan", str(scen), "--store", str(store), "-f", "json"]).stdout)
+    via_routes = json.loads(runner.invoke(app,
+                                          ["fleet", "plan", str(scen), "--store", str(store), "-f", "json"]).stdout)
     via_files = json.loads(runner.invoke(app, ["fleet", "plan", str(root / "configs/fleet/paper-case-study.toml"),
                                                 "--store", str(tmp_path / "none.sqlite"), "-f", "json"]).stdout)
-    for a, b in zip(via_routes["summary"], via_files["summary"]):
+    for a, b in zip(via_routes["summary"], via_files["summary"], strict=True):
         assert a["total"] == pytest.approx(b["total"], rel=1e-12)
     assert via_routes["table"] == via_files["table"]
     res = runner.invoke(app, ["fleet", "plan", str(scen), "--store", str(tmp_path / "none.sqlite")])

@@ -19,7 +19,8 @@ from typer.testing import CliRunner
 from cevm.cli import app
 from cevm.cli.values import parse_values
 from cevm.core.cycle import DriveCycle
-from cevm.errors import InputError
+from cevm.core.feasibility import feasibility
+from cevm.core.model import ev_energy_j, ice_fuel_l
 from cevm.core.sweep import (
     LegProfile,
     PredictionSet,
@@ -29,9 +30,8 @@ from cevm.core.sweep import (
     predict_source,
     sweep,
 )
-from cevm.core.feasibility import feasibility
-from cevm.core.model import ev_energy_j, ice_fuel_l
 from cevm.core.vehicle import Vehicle
+from cevm.errors import InputError
 from cevm.io import read_cycle_csv
 from cevm_samplegen.cycles import MicroTripSpec, micro_trip_cycle
 
@@ -236,7 +236,7 @@ def test_both_searches_for_the_sign_change_give_the_plain_loop(hilly, monkeypatc
 def test_peak_energy_matches_a_plain_loop(hilly, m, cda, cr, eta, w, aux, which):
     cyc = hilly[which]
     got = peak_energy_j(Source.from_cycle(cyc).steps, [m, m * 1.7], cda, cr, eta, w, aux)
-    for mm, g in zip([m, m * 1.7], got):
+    for mm, g in zip([m, m * 1.7], got, strict=True):
         _, peak = plain_run(legs_of(cyc), mm, cda, cr, eta, w, aux)
         assert g == pytest.approx(peak, rel=1e-9, abs=1e-3)
 
@@ -244,7 +244,8 @@ def test_peak_energy_matches_a_plain_loop(hilly, m, cda, cr, eta, w, aux, which)
 def test_route_legs_follow_each_other_without_a_joining_step(hilly):
     a, b = hilly
     route = Source(name="ab", kind="route", vector=Source.from_cycle(a).vector + Source.from_cycle(b).vector,
-                   legs=[LegProfile(a.time_s, a.speed_mps, a.elevation_m), LegProfile(b.time_s, b.speed_mps, b.elevation_m)])
+                   legs=[LegProfile(a.time_s, a.speed_mps, a.elevation_m),
+                         LegProfile(b.time_s, b.speed_mps, b.elevation_m)])
     veh = ev(kerb=3000.0, cda=2.5, cr=0.008, eta=0.85, battery_kwh=40.0, aux_w=2000.0)
     block = predict_source(route, PredictionSet.build([veh], payload_kg=[0.0, 800.0]))
     for i, m in enumerate([3000.0, 3800.0]):
@@ -272,11 +273,13 @@ def test_payloads_masses_and_the_gross_limit():
 
 
 def test_sweep_streams_one_block_per_source_in_order(root, hilly):
-    sources = [Source.from_cycle(c) for c in hilly] + [Source.from_cycle(read_cycle_csv(root / "configs/cycles/urban-bus.csv"))]
+    sources = [Source.from_cycle(c)
+               for c in hilly] + [Source.from_cycle(read_cycle_csv(root / "configs/cycles/urban-bus.csv"))]
     pset = PredictionSet.build([ev(), ice()], payload_kg=[0.0, 5000.0])
     blocks = list(sweep(sources, pset))
-    assert [b.source_index for b in blocks] == [0, 1, 2] and [b.source.name for b in blocks] == ["hilly-a", "hilly-b", "urban-bus"]
-    for src, b in zip(sources, blocks):
+    assert [b.source_index for b in blocks] == [0, 1, 2] and [b.source.name
+                                                              for b in blocks] == ["hilly-a", "hilly-b", "urban-bus"]
+    for src, b in zip(sources, blocks, strict=True):
         one = predict_source(src, pset)
         assert np.allclose(b.wheel_energy_j, one.wheel_energy_j, rtol=1e-13)
         assert np.allclose(b.soc_min_pct, one.soc_min_pct, rtol=1e-13, equal_nan=True)
@@ -391,7 +394,7 @@ def test_cli_payload_sweep_csv_json_and_plot(tmp_path, root):
     assert res.exit_code == 0, res.output
     table = list(csv.DictReader(io.StringIO(out.read_text())))
     assert len(table) == 28 and table[0]["cycle"] == "urban-bus"
-    for j, c in zip(rows, table):
+    for j, c in zip(rows, table, strict=True):
         for key in ("mass_kg", "energy_kwh", "fuel_l", "soc_min_pct", "wheel_energy_kwh"):
             if j.get(key) is None:
                 assert c[key] == ""

@@ -291,7 +291,7 @@ def test_a_trip_starts_at_the_state_of_charge_its_log_holds_there(root):
 
     path = root / "sample_logs" / "srf" / "EB-01_2019-01-31.csv"
     with open(path) as fh:
-        rows = [r for r in csv.DictReader(line for line in fh if not line.startswith("#"))]
+        rows = list(csv.DictReader(line for line in fh if not line.startswith("#")))
     soc = [(datetime.fromisoformat(r["timestamp_utc"].replace("Z", "+00:00")).timestamp(),
             float(r["fms_battery_soc_pct"])) for r in rows if r["fms_battery_soc_pct"]]
     out = process_file(path, IngestOptions())
@@ -321,7 +321,7 @@ def test_trips_shows_the_start_state_and_sources_carry_it(tmp_path, root):
     rows = json.loads(run("trips", "--store", store, "--format", "json").stdout)
     rows.sort(key=lambda r: r["start_utc"])
     assert rows[0]["standstill_before_s"] is None and rows[0]["start_soc_pct"] == 97.2
-    for a, b in zip(rows, rows[1:]):
+    for b in rows[1:]:
         assert b["standstill_before_s"] > 0 and b["start_soc_pct"] is not None
     with ExitStack() as stack:
         srcs = load_sources(stack, store, [], [], ["EB-01"], [], cr0=0.0, need_profiles=False)
@@ -349,3 +349,26 @@ def test_a_file_whose_trips_hold_too_many_samples_is_refused_before_they_are_mad
     assert 500 < n <= 900
     res = run("ingest", f, "--store", tmp_path / "s.sqlite", "--max-samples", "500", "-q", "--workers", "1")
     assert res.exit_code == 1 and "--max-samples" in res.output
+
+
+def test_a_charge_inside_a_trip_is_named_in_the_files_repairs_and_split_off(tmp_path):
+    # acceptance: a bus's 5-min opportunity charge at a terminus (battery power -100 kW at
+    # standstill) was inside its trip, whose measured energy became the net of the charge
+    import datetime as dt
+
+    t0 = dt.datetime(2026, 6, 11, 5, 0, tzinfo=dt.UTC)
+    lines = ["# vehicle_id=EB-CH", "timestamp_utc,fms_wheel_speed_kmh,fms_battery_voltage_v,fms_battery_current_a"]
+    for i in range(1501):
+        stopped = 600 <= i < 900
+        amps = -100e3 / 650 if stopped else 20e3 / 650
+        stamp = (t0 + dt.timedelta(seconds=i)).strftime("%Y-%m-%dT%H:%M:%S.000Z")
+        lines.append(f"{stamp},{0 if stopped else 36},650,{amps:.4f}")
+    path = tmp_path / "EB-CH.csv"
+    path.write_text("\n".join(lines) + "\n")
+    out = process_file(path, IngestOptions(), PROFILES)
+    assert out.error is None
+    kwh = [t.measured.value / 3.6e6 for t in out.trips]
+    # 20 kW while driving: 600 s and 600 s (+ the row at each end of the stop), charge excluded
+    assert kwh == [pytest.approx(20 * 600 / 3600, rel=0.01), pytest.approx(20 * 600 / 3600, rel=0.01)]
+    (note,) = [r for r in out.repairs if r.startswith("charging:")]
+    assert "2026-06-11 05:10:00 to 2026-06-11 05:14:59 UTC (8.3 kWh taken in)" in note

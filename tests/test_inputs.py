@@ -342,7 +342,7 @@ def _cycle(path: Path, n: int, columns: int = 1) -> Path:
     v = 20.0 + 10.0 * np.sin(t / 30.0)
     head = "time_s," + ",".join(f"speed_kmh_{k}" if columns > 1 else "speed_kmh" for k in range(columns))
     path.write_text(head + "\n" + "".join(f"{ti}," + ",".join([f"{vi:.3f}"] * columns) + "\n"
-                                          for ti, vi in zip(t, v)))
+                                          for ti, vi in zip(t, v, strict=True)))
     return path
 
 

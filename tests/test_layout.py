@@ -103,7 +103,8 @@ def forbidden_calls(source: str) -> list[str]:
         elif isinstance(node, ast.Attribute):
             owner = node.value.id if isinstance(node.value, ast.Name) else None
             banned = FORBIDDEN_MODULE_CALLS.get(owner, set())
-            if "*" in banned or node.attr in banned or any(b.endswith("*") and node.attr.startswith(b[:-1]) for b in banned):
+            if "*" in banned or node.attr in banned or any(b.endswith("*") and node.attr.startswith(b[:-1])
+                                                           for b in banned):
                 found.append(f"line {node.lineno}: {owner}.{node.attr}")
             elif node.attr in FORBIDDEN_METHODS and owner not in FORBIDDEN_MODULE_CALLS:
                 found.append(f"line {node.lineno}: .{node.attr}")

@@ -11,7 +11,7 @@ import gzip
 import hashlib
 import re
 import shutil
-from datetime import datetime, timedelta, timezone
+from datetime import UTC, datetime, timedelta
 from pathlib import Path
 from zoneinfo import ZoneInfo
 
@@ -30,7 +30,7 @@ DATA = Path(__file__).parent / "data"
 KMH = 1 / 3.6  # m/s per km/h
 MPH = 0.44704  # m/s per mph (exact by definition)
 MILE = 1609.344  # m per mile (exact)
-UTC = timezone.utc
+UTC = UTC
 
 
 @pytest.fixture(scope="module")
@@ -138,7 +138,8 @@ BASE_PROFILE = {
         ({"csv": {"encodin": "utf-8"}}, "csv.encodin"),
         ({"csv": {"encoding": "klingon"}}, "csv.encoding"),
         ({"time": {"columns": ["t"], "format": "ISO8601", "timezone": "Mars/Olympus"}}, "time.timezone"),
-        ({"columns": {"wheel_speed_mps": {"source": "v", "unit": "furlong/fortnight"}}}, "columns.wheel_speed_mps.unit"),
+        ({"columns": {"wheel_speed_mps": {"source": "v", "unit": "furlong/fortnight"}}},
+         "columns.wheel_speed_mps.unit"),
         ({"columns": {"wheel_speed_mps": {"source": "v", "unit": "kWh"}}}, "columns.wheel_speed_mps.unit"),
         ({"columns": {"speed": {"source": "v", "unit": "km/h"}}}, "columns.speed"),
         ({"vehicle": {"source": "column"}}, "vehicle.key"),
@@ -236,7 +237,8 @@ def test_srf_sample(profiles):
 
 
 def test_srf_electric_energy_sources(tmp_path, profiles):
-    head = "timestamp_utc,fms_wheel_speed_kmh,fms_battery_voltage_v,fms_battery_current_a,fms_battery_soc_pct,fms_total_energy_used_kwh"
+    head = ("timestamp_utc,fms_wheel_speed_kmh,fms_battery_voltage_v,fms_battery_current_a,fms_battery_soc_pct,"
+            "fms_total_energy_used_kwh")
     rows = ["2020-06-01T10:00:00.000Z,36,650.5,120.0,80.0,1000.0", "2020-06-01T10:00:01.000Z,36,,,,",
             "2020-06-01T10:00:02.000Z,36,650.0,-40.0,79.9,1000.1"]
     [log] = read_log(srf_file(tmp_path, rows, header=head), profiles=profiles)
@@ -428,7 +430,8 @@ def test_twizy_excerpt_junk_gps(profiles):
     assert log.frame["time_s"].iloc[0] == casa_utc_s("6/7/2021", "16:24:32") == utc_s(2021, 6, 7, 15, 24, 32)
 
 
-TWIZY_HEADER = "Date,Time,Soc,Speed,Mode,LAT,LON,ALT,GpsSpeed,Temperature,Humidity,Weather,WindSpeedAv,Traffic,SpeedLimit"
+TWIZY_HEADER = ("Date,Time,Soc,Speed,Mode,LAT,LON,ALT,GpsSpeed,Temperature,Humidity,Weather,WindSpeedAv,Traffic,"
+                "SpeedLimit")
 
 
 def twizy_row(date: str, hms: str, lat: str = "33.98", lon: str = "-6.72") -> str:
@@ -740,7 +743,8 @@ def test_missing_file(tmp_path, profiles):
 # Properties of the vectorised time parser
 # ======================================================================================
 @settings(max_examples=60, deadline=None)
-@given(st.lists(st.datetimes(min_value=datetime(1990, 1, 1), max_value=datetime(2099, 12, 31)), min_size=1, max_size=30),
+@given(st.lists(st.datetimes(min_value=datetime(1990, 1, 1), max_value=datetime(2099, 12, 31)), min_size=1,
+                max_size=30),
        st.sampled_from(["%d/%m/%Y %H:%M:%S", "%Y-%m-%d %H:%M:%S", "%m/%d/%Y", "%H:%M:%S"]))
 def test_parse_datetimes_matches_strptime(dts, fmt):
     texts = np.array([d.strftime(fmt) for d in dts], dtype=object)
@@ -755,7 +759,7 @@ def test_parse_datetimes_matches_strptime(dts, fmt):
 def test_parse_datetimes_rejects_what_strptime_rejects(texts):
     fmt = "%d/%m/%Y %H:%M:%S"
     got = parse_datetimes(np.array(texts, dtype=object), fmt)
-    for s, g in zip(texts, got):
+    for s, g in zip(texts, got, strict=True):
         try:
             datetime.strptime(s, fmt)
             ok = True
@@ -812,5 +816,19 @@ def test_ascii_heads_skip_re_encoding_only_for_ascii_compatible_codecs(tmp_path,
     logs = read_log(f, profiles=profiles)
     assert [g.profile for g in logs] == ["portal", "portal"]
     want = read_log(DATA / "portal_dst.csv", profiles=profiles)
-    for a, b in zip(logs, want):
+    for a, b in zip(logs, want, strict=True):
         pd.testing.assert_frame_equal(a.frame, b.frame)  # no used column held those bytes
+
+
+def test_a_file_written_with_dots_under_a_decimal_comma_profile_is_named(tmp_path, profiles):
+    # acceptance: a portal export saved with '.' decimals (another locale) failed with
+    # pandas' "ValueError: cannot safely convert passed user dtype of float64 for object
+    # dtyped data in column 2", no line, no column
+    text = (DATA / "portal_dst.csv").read_bytes().decode("cp1252")
+    head, *rows = text.split("\r\n")
+    dotted = [";".join(f.replace(",", ".") for f in r.split(";")) for r in rows]
+    path = tmp_path / "dots.csv"
+    path.write_bytes("\r\n".join([head, *dotted]).encode("cp1252"))
+    with raises_at("'51.501364' is written with a '.' but the profile 'portal' reads ',' as the decimal mark",
+                   line=2, column="Latitude"):
+        read_log(path, "portal", profiles)

@@ -15,7 +15,7 @@ from cevm.core.model import (
     wheel_energy_j,
 )
 from conftest import DATA, shared_or_skip
-from reference import G, RHO, reference_wheel_energy_j
+from reference import RHO, G, reference_wheel_energy_j
 
 MODES = {"paper": lambda eta: 1.0, "no-credit": lambda eta: 0.0, "ev": lambda eta: eta * eta}
 
@@ -130,7 +130,8 @@ def test_table_and_direct_paths_agree():
     # many distinct Cr values mixed in one call, broadcast over a 2-D grid
     crs = rng.uniform(0.004, 0.012, 500)
     grid = nonsimplified_positive_j(vec, m[:, None], cda[:, None], np.stack([crs, np.full(500, 0.0066)], 1))
-    np.testing.assert_allclose(grid[:, 0], [_positive_direct(vec, m[i:i+1], cda[i:i+1], crs[i])[0] for i in range(500)], rtol=1e-10, atol=1e-6)
+    np.testing.assert_allclose(grid[:, 0], [_positive_direct(vec, m[i:i+1], cda[i:i+1], crs[i])[0] for i in range(500)],
+                               rtol=1e-10, atol=1e-6)
     np.testing.assert_allclose(grid[:, 1], fast, rtol=1e-10, atol=1e-6)
 
 

@@ -17,8 +17,8 @@ import pytest
 from pyproj import Transformer
 from typer.testing import CliRunner
 
-from cevm.cli import app
 import faults
+from cevm.cli import app
 from cevm.executors import (
     DaskExecutor,
     ProcessExecutor,
@@ -501,7 +501,8 @@ def test_predict_cli_with_workers_writes_what_a_serial_run_writes(monkeypatch):
     import cevm.core.sweep.driver as fp
 
     monkeypatch.setattr(fp, "SWEEP_BATCH_CELLS", 1)
-    args = ["predict", "-v", ROOT / "configs/vehicles/electric-bus.toml", "-v", ROOT / "configs/vehicles/diesel-hgv.toml",
+    args = ["predict", "-v", ROOT / "configs/vehicles/electric-bus.toml", "-v",
+            ROOT / "configs/vehicles/diesel-hgv.toml",
             "-c", ROOT / "configs/cycles/urban-bus.csv", "-c", ROOT / "configs/cycles/regional-delivery.csv",
             "-p", "0:10000:2500", "-f", "csv"]
     serial = run(*args)

@@ -85,7 +85,8 @@ def test_a_spliced_recording_is_reported_with_its_time_and_size_and_kept_in_the_
     out = process_file(f, IngestOptions())
     assert out.error is None
     notes = [r for r in out.repairs if "lasting speed jump" in r]
-    assert len(notes) == 1 and ("+119 km/h in 1 s at 2019-05-14" in notes[0] or "-119 km/h in 1 s at 2019-05-14" in notes[0])
+    assert len(notes) == 1 and ("+119 km/h in 1 s at 2019-05-14" in notes[0]
+                                or "-119 km/h in 1 s at 2019-05-14" in notes[0])
     assert sum(len(t.quality.get("speed_jumps", ())) for t in out.trips) == 2
 
 
@@ -131,7 +132,7 @@ def test_dsm_scaled_by_1e6_is_refused_and_gps_used(tmp_path, how):
     out = process_file(tmp_path / "ev.csv", IngestOptions(dsm=str(bad)))
     ref = process_file(tmp_path / "ev.csv", IngestOptions())
     assert out.ok and ref.ok
-    (trip,), (no_dsm,) = out.trips, ref.trips
+    (trip,), (_no_dsm,) = out.trips, ref.trips
     assert trip.elevation_source == "gps" and trip.dsm_coverage_pct == 0.0
     q = trip.quality["elevation"]
     assert q["dsm_refused_samples"] == trip.n_samples
@@ -164,7 +165,7 @@ def test_refused_heights_are_counted_in_the_pure_profile():
     assert res.filled_short_m == pytest.approx(110.0)  # bridged as a DSM gap (d 490..600)
     assert np.abs(res.elevation_m - (50.0 + 0.01 * d)).max() < 1e-6
     strict = combine_elevation(d, raw, None, ElevationParams(dsm_range_m=(0.0, 55.0)))
-    assert strict.dsm_refused == int(np.sum((raw > 55.0)))
+    assert strict.dsm_refused == int(np.sum(raw > 55.0))
 
 
 def test_grades_are_bounded_and_a_cliff_profile_is_warned():

@@ -12,8 +12,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from cevm.core.sweep import LegProfile, PredictionSet, Source, predict_source
 from cevm.core.cycle import drive_cycle_vector
+from cevm.core.sweep import LegProfile, PredictionSet, Source, predict_source
 from cevm.core.vehicle import Vehicle
 from reference import reference_crossing
 
@@ -47,7 +47,8 @@ ICE = Vehicle(name="truck", id="truck", powertrain="ice", mass_kg=20000.0, kerb_
 def _ev_step(v: Vehicle, m: float, ambient_c: float = 20.0) -> dict:
     regen = v.eta if v.regen_eta is None else v.regen_eta
     heat = max(0.0, v.heating_below_c - ambient_c)
-    return dict(m=m, cda=v.cda_m2, cr=v.cr, eta=v.eta, w=v.eta * regen, aux=v.aux_power_w + v.aux_heating_w_per_k * heat)
+    return dict(m=m, cda=v.cda_m2, cr=v.cr, eta=v.eta, w=v.eta * regen,
+                aux=v.aux_power_w + v.aux_heating_w_per_k * heat)
 
 
 def _ice_step(v: Vehicle, m: float) -> dict:

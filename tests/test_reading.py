@@ -14,7 +14,7 @@ import os
 import subprocess
 import sys
 import textwrap
-from datetime import datetime, timedelta, timezone
+from datetime import UTC, datetime, timedelta
 from pathlib import Path
 
 import numpy as np
@@ -30,7 +30,7 @@ from cevm.ingest.reading import ReadLimits, detect_profile, read_log
 
 DATA = Path(__file__).parent / "data"
 ROOT = Path(__file__).resolve().parents[1]
-UTC = timezone.utc
+UTC = UTC
 SRF_HEADER = "timestamp_utc,gps_lat_deg,gps_lon_deg,gps_speed_kmh,fms_wheel_speed_kmh,fms_total_energy_used_kwh"
 
 
@@ -56,7 +56,7 @@ def write(path: Path, data: str | bytes) -> Path:
 
 def frames_equal(a: list, b: list) -> None:
     assert [x.vehicle_id for x in a] == [y.vehicle_id for y in b]
-    for x, y in zip(a, b):
+    for x, y in zip(a, b, strict=True):
         pd.testing.assert_frame_equal(x.frame, y.frame)
         assert x.repairs == y.repairs and x.energy_sources == y.energy_sources
 
@@ -64,7 +64,8 @@ def frames_equal(a: list, b: list) -> None:
 # ======================================================================================
 # Blocks and parsers: the same result whatever the block size or the parser
 # ======================================================================================
-SAMPLES = sorted(p for d in ("srf", "portal") for p in (ROOT / "sample_logs" / d).rglob("*.csv")) + sorted(DATA.glob("*.csv"))
+SAMPLES = sorted(p for d in ("srf", "portal")
+                 for p in (ROOT / "sample_logs" / d).rglob("*.csv")) + sorted(DATA.glob("*.csv"))
 
 
 @pytest.mark.parametrize("path", SAMPLES[:6] + SAMPLES[-4:], ids=lambda p: p.name)
@@ -177,7 +178,8 @@ def test_columns_of_float32_values_are_float32_with_the_values_written(tmp_path,
     head = "timestamp_utc,fms_wheel_speed_kmh,fms_engine_speed_rpm,fms_brake_switch"
     t0 = datetime(2020, 6, 1, 10, 0, 0)
     rpm = [f"{600 + i / 8:g}" for i in range(300)]
-    rows = [f"{(t0 + timedelta(seconds=i)).strftime('%Y-%m-%dT%H:%M:%S')}Z,{i % 40},{rpm[i]},{i % 2}" for i in range(300)]
+    rows = [f"{(t0 + timedelta(seconds=i)).strftime('%Y-%m-%dT%H:%M:%S')}Z,{i % 40},{rpm[i]},{i % 2}"
+            for i in range(300)]
     [log] = read_log(write(tmp_path / "a.csv", srf_text(rows, header=head)), profiles=profiles)
     fr = log.frame
     assert fr["engine_speed_rpm"].dtype == np.float32 and fr["brake_switch"].dtype == np.float32
@@ -206,7 +208,7 @@ def test_errors_in_a_later_block_name_their_line(tmp_path, profiles, monkeypatch
     assert (ei.value.line, ei.value.column) == (253, "fms_total_energy_used_kwh")
     # in a measured column: missing values, and one note naming both lines
     [log] = read_log(write(tmp_path / "b.csv", srf_text(rows)), profiles=profiles)
-    assert [r for r in log.repairs if "not numbers" in r][0].endswith("lines 253, 263")
+    assert next(r for r in log.repairs if "not numbers" in r).endswith("lines 253, 263")
 
 
 # ======================================================================================
@@ -471,7 +473,8 @@ def temp_profile(unit: str, **extra) -> dict:
 ])
 def test_ambient_temperature_in_affine_units(tmp_path, unit, values, want_c):
     prof = load_profile(temp_profile(unit))
-    body = "".join(f"2020-06-01T10:00:0{i}Z,36,{v},{p}\n" for i, (v, p) in enumerate(zip(values, ["0", "2.5", "12"])))
+    body = "".join(f"2020-06-01T10:00:0{i}Z,36,{v},{p}\n"
+                   for i, (v, p) in enumerate(zip(values, ["0", "2.5", "12"], strict=True)))
     [log] = read_log(write(tmp_path / "t.csv", "t,v,T,P\n" + body), prof)
     assert log.frame["ambient_temp_c"].tolist() == pytest.approx(want_c, abs=1e-9)
     assert log.frame["hvac_power_w"].tolist() == pytest.approx([0.0, 2500.0, 12000.0])
@@ -494,10 +497,11 @@ def test_negate_on_an_offset_scale_is_refused_and_wrong_dimension_named():
 
 def test_shipped_profiles_map_the_ambient_temperature(tmp_path, profiles):
     assert {m.source for m in profiles["srf"].columns if m.canonical == "ambient_temp_c"} == {"fms_ambient_air_temp_c"}
-    rows = [r + f",{t}" for r, t in zip(srf_rows(3), ["-3.25", "-3.21875", ""])]
+    rows = [r + f",{t}" for r, t in zip(srf_rows(3), ["-3.25", "-3.21875", ""], strict=True)]
     f = write(tmp_path / "a.csv", srf_text(rows, header=SRF_HEADER + ",fms_ambient_air_temp_c"))
     [log] = read_log(f, profiles=profiles)
-    assert log.frame["ambient_temp_c"].tolist()[:2] == [-3.25, -3.21875] and np.isnan(log.frame["ambient_temp_c"].iloc[2])
+    ambient = log.frame["ambient_temp_c"]
+    assert ambient.tolist()[:2] == [-3.25, -3.21875] and np.isnan(ambient.iloc[2])
     twizy = DATA / "twizy_excerpt.csv"
     [tw] = read_log(twizy, profiles=profiles)
     first = twizy.read_text().splitlines()

@@ -513,3 +513,18 @@ def test_the_battery_at_a_confidence_runs_the_duty_at_its_quantile(tmp_path):
     np.testing.assert_array_equal(plan.battery_needed / KWH, np.ceil(plan.energies.energy / frac / KWH - 1e-9))
     none = plan_vehicle(trips, veh, dataclasses.replace(s, size_confidence=None), tables(cycles, trips))
     assert np.isnan(none.battery_needed_conf).all()
+
+
+def test_a_trip_mostly_inside_an_earlier_one_is_the_same_driving_logged_twice():
+    from cevm.core.replay.duties import logged_twice
+
+    # [0,100] then: an exact copy; one overlapping by 10 s of 100 (a clock step: kept); one
+    # 60 % inside [0, 100] after the copy; one inside a long trip; one after a gap
+    start = np.array([0.0, 0.0, 90.0, 40.0, 300.0, 310.0, 1000.0])
+    end = np.array([100.0, 100.0, 190.0, 140.0, 900.0, 320.0, 1100.0])
+    order = np.argsort(start, kind="stable")
+    got = logged_twice(start[order], end[order])
+    # sorted: [0,100] [0,100] [40,140] [90,190] [300,900] [310,320] [1000,1100]
+    # [40,140] is 60 s of 100 inside; [90,190] 50 of 100 (not more than half: kept)
+    assert got.tolist() == [False, True, True, False, False, True, False]
+    assert logged_twice([], []).tolist() == [] and logged_twice([5.0], [9.0]).tolist() == [False]

@@ -202,3 +202,56 @@ def test_sizes_at_the_confidence_are_the_quantile_of_the_duties_needs_at_it(stor
     assert all(c >= m for c, m in zip(conf_need, mean_need, strict=True)) and conf_need[k] > mean_need[k]
     table = replay(store, "-v", TRUCK, "--battery-kwh", "30", "--target-share", "0.6")
     assert f"{conf_need[k]:,.0f} kWh with each duty's energy at its 0.95 quantile" in " ".join(table.output.split())
+
+
+def _with_a_day_logged_twice(store: Path, tmp_path: Path) -> Path:
+    """A copy of ``store`` where TRK-1's first day, as make_replay_store logged it, is
+    stored again from a second logger's file."""
+    import shutil
+
+    from cevm.core.cycle import drive_cycle_vector
+    from cevm.store import TripStore
+    from replay_cases import CUSTOMER, DEPOT, _stored_trip, cycle
+
+    db = tmp_path / "twice.sqlite"
+    shutil.copy(store, db)
+    day0 = 1.6e9 - (1.6e9 % 86400)
+    t = day0 + 7.0 * 3600
+    trips, vectors = [], []
+    for k, (frm, to, stop_min) in enumerate([(DEPOT, CUSTOMER, 45), (CUSTOMER, DEPOT, 40), (DEPOT, DEPOT, 0)]):
+        cyc = cycle(200 + k, n_trips=12)
+        trips.append(_stored_trip("TRK-1", "ab" * 32, k, t, cyc, 30e3 + 4e3 * k, 4.0, frm, to,
+                                  tmp_path / "second-logger.csv"))
+        vectors.append(drive_cycle_vector(*cyc).to_bytes())
+        t += cyc[0][-1] + stop_min * 60
+    with TripStore(db) as st:
+        st.replace_file_trips(tmp_path / "second-logger.csv", trips, vectors, sha256="ab" * 32, size_bytes=1,
+                              mtime_s=0.0, profile="test")
+    return db
+
+
+def test_a_day_logged_twice_counts_once_and_is_said(store, tmp_path):
+    # acceptance: a bus carrying two loggers (two formats) had each trip stored twice; a
+    # duty then held both copies, twice its distance and energy, without a word
+    db = _with_a_day_logged_twice(store, tmp_path)
+    once = json.loads(replay(store, "-v", TRUCK, "-f", "json").stdout)
+    res = runner.invoke(app, ["replay", "--store", str(db), "--vehicle-id", "TRK-1", "--vehicle-id", "TRK-2",
+                              "-v", TRUCK, "-f", "json"])
+    assert res.exit_code == 0, res.output
+    twice = json.loads(res.stdout)
+    assert [(r["trips"], r["energy_kwh"]) for r in twice] == [(r["trips"], r["energy_kwh"]) for r in once]
+    assert "TRK-1: 3 trip(s) lie mostly inside an earlier trip of the vehicle" in res.output
+
+
+def test_calibrate_fits_a_trip_logged_twice_once(store, tmp_path):
+    from cevm.io.vehicles import load_vehicle
+    from cevm.store import TripStore
+    from cevm.store.calibration import trips_for_calibration
+
+    db = _with_a_day_logged_twice(store, tmp_path)
+    with TripStore(store) as st:
+        ids = [t.trip_id for t in trips_for_calibration(st, "TRK-1", load_vehicle(DIESEL)).trips]
+    with TripStore(db) as st:
+        sel = trips_for_calibration(st, "TRK-1", load_vehicle(DIESEL))
+    assert sorted(t.trip_id for t in sel.trips) == sorted(ids)  # 9 trips, not 12
+    assert any(n.startswith("3 trip(s) lie mostly inside an earlier trip") for n in sel.notes)

@@ -10,8 +10,10 @@ from typer.testing import CliRunner
 
 from cevm.cli import app
 from cevm.core.cycle import CycleVector, drive_cycle_vector
+from cevm.core.trip import Trip
 from cevm.errors import CevmError, InputError
 from cevm.io import read_cycle_csv
+from cevm.store import TripStore
 from cevm.store.routes import (
     CycleLeg,
     TripLeg,
@@ -24,8 +26,6 @@ from cevm.store.routes import (
     remove_route,
     route_names,
 )
-from cevm.core.trip import Trip
-from cevm.store import TripStore
 from cevm_samplegen.cycles import MicroTripSpec, micro_trip_cycle
 
 runner = CliRunner()
@@ -83,8 +83,10 @@ def test_a_route_vector_is_the_sum_of_its_legs(store, cycles):
                                          CycleLeg.from_file(cycles[1])], note="morning block")
         assert [(x.kind, x.label) for x in info.legs] == [("trip", ids[0]), ("cycle", "urban-bus"),
                                                           ("trip", ids[1]), ("cycle", "regional-delivery")]
-        want = (CycleVector.from_bytes(st.load_vector_bytes(ids[0])) + drive_cycle_vector(c0.time_s, c0.speed_mps, c0.elevation_m)
-                + CycleVector.from_bytes(st.load_vector_bytes(ids[1])) + drive_cycle_vector(c1.time_s, c1.speed_mps, c1.elevation_m))
+        want = (CycleVector.from_bytes(st.load_vector_bytes(ids[0])) + drive_cycle_vector(c0.time_s, c0.speed_mps,
+                                                                                          c0.elevation_m)
+                + CycleVector.from_bytes(st.load_vector_bytes(ids[1])) + drive_cycle_vector(c1.time_s, c1.speed_mps,
+                                                                                            c1.elevation_m))
         assert vectors_equal(load_route_vector(st, "block-1"), want)
         profiles = load_route_profiles(st, "block-1")
         assert len(profiles) == 4
@@ -124,17 +126,19 @@ def test_a_route_whose_trip_was_replaced_says_so(store):
     with TripStore.open(path) as st:
         add_route(st, "R1", [TripLeg(ids[0]), TripLeg(ids[1])])
         st.forget_file(st.list_trips(trip_ids=[ids[1]])["source_file"].iloc[0])
-        with pytest.raises(CevmError, match="no longer in the store.*--replace"):
+        with pytest.raises(CevmError, match=r"no longer in the store.*--replace"):
             load_route_vector(st, "R1")
 
 
 def test_cycle_legs_do_not_need_the_file_afterwards(tmp_path, cycles, root):
     path = tmp_path / "routes.sqlite"
-    res = runner.invoke(app, ["route", "add", "round", "-c", str(cycles[0]), "-c", str(cycles[1]), "--store", str(path)])
+    res = runner.invoke(app,
+                        ["route", "add", "round", "-c", str(cycles[0]), "-c", str(cycles[1]), "--store", str(path)])
     assert res.exit_code == 0, res.output
     assert "copied into the store" in res.stdout
     bus = str(root / "configs/vehicles/electric-bus.toml")
-    before = json.loads(runner.invoke(app, ["predict", "-v", bus, "-r", "round", "--store", str(path), "-f", "json"]).stdout)
+    before = json.loads(runner.invoke(app,
+                                      ["predict", "-v", bus, "-r", "round", "--store", str(path), "-f", "json"]).stdout)
     for c in cycles:
         c.unlink()
     after = runner.invoke(app, ["predict", "-v", bus, "-r", "round", "--store", str(path), "-f", "json"])
@@ -149,10 +153,12 @@ def test_cli_route_equals_the_sum_of_its_parts(store, cycles, root):
     assert res.exit_code == 0, res.output
     listed = json.loads(runner.invoke(app, ["route", "list", "--store", s, "-f", "json"]).stdout)
     assert listed[0]["route"] == "mixed" and listed[0]["legs"] == 3 and listed[0]["status"] == "ok"
-    vehicles = ["-v", str(root / "configs/vehicles/electric-bus.toml"), "-v", str(root / "configs/vehicles/diesel-hgv.toml")]
+    vehicles = ["-v", str(root / "configs/vehicles/electric-bus.toml"), "-v",
+                str(root / "configs/vehicles/diesel-hgv.toml")]
     common = [*vehicles, "--store", s, "-p", "0:10000:5000", "-f", "json"]
     route = json.loads(runner.invoke(app, ["predict", "-r", "mix*", *common]).stdout)
-    parts = json.loads(runner.invoke(app, ["predict", "-t", ids[0], "-c", str(cycles[0]), "-t", ids[1], *common]).stdout)
+    parts = json.loads(runner.invoke(app,
+                                     ["predict", "-t", ids[0], "-c", str(cycles[0]), "-t", ids[1], *common]).stdout)
     assert len(route) == 6 and len(parts) == 18
     assert {r["cycle"] for r in route} == {"mixed"} and {r["source_kind"] for r in route} == {"route"}
     assert listed[0]["distance_km"] == pytest.approx(route[0]["distance_km"], rel=1e-12)

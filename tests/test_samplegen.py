@@ -10,11 +10,12 @@ from __future__ import annotations
 import gzip
 import hashlib
 import io
+import itertools
 import json
 import math
 import subprocess
 import sys
-from datetime import datetime, timedelta, timezone
+from datetime import UTC, datetime, timedelta
 from pathlib import Path
 from zoneinfo import ZoneInfo
 
@@ -159,7 +160,7 @@ def test_srf_missed_and_repeated_ticks(small, truth):
     assert sum(f["repeated_ticks"] for f in srf) > 0
     for f in srf:
         lines = _raw(small / f["path"]).decode().split("\n")
-        assert sum(a == b for a, b in zip(lines, lines[1:])) == f["repeated_ticks"]
+        assert sum(a == b for a, b in itertools.pairwise(lines)) == f["repeated_ticks"]
         df, _ = read_srf(small / f["path"])
         dt = np.diff(utc_s(df.timestamp_utc))
         assert ((dt > 1.5) & (dt < 60)).any()  # missed ticks inside trips
@@ -253,9 +254,9 @@ def test_portal_local_time_crosses_dst(small, truth):
         assert local.iloc[i - 1].hour == 1 and local.iloc[i].hour == 1  # the repeated hour
         assert local.iloc[i - 1].strftime("%d/%m/%Y") == "27/10/2019"
         # rows before the step are BST (fold 0), after it GMT (fold 1): UTC increases
-        utc = [local.iloc[k].to_pydatetime().replace(tzinfo=london, fold=int(k >= i)).astimezone(timezone.utc)
+        utc = [local.iloc[k].to_pydatetime().replace(tzinfo=london, fold=int(k >= i)).astimezone(UTC)
                for k in range(len(local))]
-        assert all(b > a for a, b in zip(utc, utc[1:]))
+        assert all(b > a for a, b in itertools.pairwise(utc))
         # the truth trips of this vehicle start at these UTC instants (first_line rows)
         for r in truth["trips"]:
             if r["vehicle_id"] == reg:
@@ -327,14 +328,15 @@ def test_truth_trip_times_match_rows(small, truth):
         rows = trip_rows(small, r)
         assert len(rows) > 60
         assert r["end_utc_s"] - r["start_utc_s"] == pytest.approx(r["duration_s"], abs=1.5e-3)  # each to 1 ms
-        assert r["start_utc"] == datetime.fromtimestamp(round(r["start_utc_s"], 3), timezone.utc).strftime("%Y-%m-%dT%H:%M:%S.%f")[:-3] + "Z"
+        start = datetime.fromtimestamp(round(r["start_utc_s"], 3), UTC)
+        assert r["start_utc"] == start.strftime("%Y-%m-%dT%H:%M:%S.%f")[:-3] + "Z"
     # layovers: no rows for more than 5 minutes between the trips of a file
     by_file: dict[str, list[dict]] = {}
     for r in truth["trips"]:
         by_file.setdefault(r["file"], []).append(r)
     for rs in by_file.values():
         rs.sort(key=lambda r: r["start_utc_s"])
-        for a, b in zip(rs, rs[1:]):
+        for a, b in itertools.pairwise(rs):
             assert b["start_utc_s"] - a["end_utc_s"] > 600
 
 
@@ -455,7 +457,8 @@ def test_detailed_consumption_carries_hvac_and_cold_start():
     hvac_extra = soaked.parts["hvac_fuel_l"] - hot.parts["hvac_fuel_l"]
     assert soaked.cumulative[-1] - hot.cumulative[-1] == pytest.approx(soaked.parts["cold_start_fuel_l"] + hvac_extra,
                                                                          rel=1e-9)
-    assert 0.02 < soaked.parts["cold_start_fuel_l"] < 0.2 * soaked.cumulative[-1]  # a short, light trip: cold throughout
+    # a short, light trip: cold throughout
+    assert 0.02 < soaked.parts["cold_start_fuel_l"] < 0.2 * soaked.cumulative[-1]
 
 
 # --------------------------------------------------------------------------------------
@@ -546,7 +549,8 @@ def mosaic_bilinear(tiles, x, y, nodata=-9999.0):
     ok = (c >= 0) & (r >= 0) & (c + 1 < W) & (r + 1 < H)
     out = np.full(x.shape, np.nan)
     c, r, u, v = c[ok], r[ok], fc[ok] - c[ok], fr[ok] - r[ok]
-    out[ok] = (z[r, c] * (1 - u) * (1 - v) + z[r, c + 1] * u * (1 - v) + z[r + 1, c] * (1 - u) * v + z[r + 1, c + 1] * u * v)
+    out[ok] = (z[r, c] * (1 - u) * (1 - v) + z[r, c + 1] * u * (1 - v)
+               + z[r + 1, c] * (1 - u) * v + z[r + 1, c + 1] * u * v)
     return out
 
 
@@ -611,7 +615,7 @@ def test_number_formatting_matches_python(values, decimals, strip):
     x = np.round(x, decimals)  # the formatter prints numbers already on their grid
     chars, keep = csvfmt.num_field(x, decimals, strip=strip)
     got = csvfmt.assemble([(chars, keep)], b",", b"\n").decode().split("\n")[:-1]
-    for g, v in zip(got, x):
+    for g, v in zip(got, x, strict=True):
         if not np.isfinite(v):
             assert g == ""
             continue
@@ -625,8 +629,9 @@ def test_number_formatting_matches_python(values, decimals, strip):
 
 def test_uk_local_time_formatting():
     london = ZoneInfo("Europe/London")
-    base = datetime(2019, 10, 27, 0, 30, tzinfo=timezone.utc)
-    ts = [base + timedelta(minutes=20 * k) for k in range(6)] + [datetime(2019, 3, 31, 0, 59, 59, tzinfo=timezone.utc), datetime(2019, 3, 31, 1, 0, 0, tzinfo=timezone.utc)]
+    base = datetime(2019, 10, 27, 0, 30, tzinfo=UTC)
+    ts = [base + timedelta(minutes=20 * k) for k in range(6)] + [datetime(2019, 3, 31, 0, 59, 59, tzinfo=UTC),
+                                                                 datetime(2019, 3, 31, 1, 0, 0, tzinfo=UTC)]
     chars, keep = csvfmt.uk_local(np.array([int(t.timestamp()) for t in ts]))
     got = csvfmt.assemble([(chars, keep)], b";", b"\n").decode().split("\n")[:-1]
     assert got == [t.astimezone(london).strftime("%d/%m/%Y %H:%M:%S") for t in ts]
@@ -719,7 +724,7 @@ def test_temperature_column_follows_the_days_weather(small, truth):
         sun_k = 2.0 * r["solar_w_m2"] / 800.0
         excess = temp.mean() - (r["ambient_c"] + bias)
         assert -0.3 < excess < sun_k + 0.3, (r["vehicle_id"], r["day_index"], r["trip_index"], excess)
-        day = truth["weather"][datetime.fromtimestamp(r["start_utc_s"], timezone.utc).date().isoformat()]
+        day = truth["weather"][datetime.fromtimestamp(r["start_utc_s"], UTC).date().isoformat()]
         assert day["min_c"] - 1.0 <= r["ambient_min_c"] <= r["ambient_max_c"] <= day["max_c"] + 1.0
         seen.add(day["max_c"] < 5.0)
     assert seen == {True, False}  # a cold and a warm day in the small sample

@@ -3,6 +3,7 @@ on each segment alone, bit for bit (numpy is the reference)."""
 
 from __future__ import annotations
 
+import itertools
 from contextlib import contextmanager
 
 import numpy as np
@@ -53,7 +54,7 @@ def test_segment_sums_equal_numpy_sum(lens, seed, kind, batch):
     x = _values(rng, int(b[-1]), kind)
     with whole_batch(batch):
         got = segment_sums(x, b)
-    want = np.array([x[a:c].sum() for a, c in zip(b[:-1], b[1:])])
+    want = np.array([x[a:c].sum() for a, c in itertools.pairwise(b)])
     assert got.tobytes() == want.tobytes()  # signed zeros too
 
 
@@ -62,7 +63,7 @@ def test_segment_sums_long_segments():
     lens = [1, 129, 1000, 8191, 8192, 8193, 70001, 7]
     b = bounds_of(lens)
     x = rng.standard_normal(int(b[-1])) * 1e3
-    want = np.array([x[a:c].sum() for a, c in zip(b[:-1], b[1:])])
+    want = np.array([x[a:c].sum() for a, c in itertools.pairwise(b)])
     starts, n = b[:-1][::-1].copy(), np.diff(b)[::-1].copy()  # any order, as starts and lengths
     for batch in (False, True):
         with whole_batch(batch):
@@ -76,7 +77,7 @@ def test_segment_cumsum_and_diffs(lens, seed):
     rng = np.random.default_rng(seed)
     b = bounds_of(lens)
     x = rng.standard_normal(int(b[-1]))
-    segs = [x[a:c] for a, c in zip(b[:-1], b[1:])]
+    segs = [x[a:c] for a, c in itertools.pairwise(b)]
     assert segment_cumsum(x, b).tobytes() == np.concatenate([np.cumsum(s) for s in segs]).tobytes()
     z = segment_cumsum(x, b, start_zero=True)
     assert z.tobytes() == np.concatenate([np.concatenate(([0.0], np.cumsum(s))) for s in segs]).tobytes()
@@ -99,7 +100,7 @@ def test_segment_medians_equal_numpy_median(lens, seed, with_nan, batch):
         got = segment_medians(x, g, len(lens))
         fins = segment_medians(x, g, len(lens), finite_only=True)
         plain = segment_medians(x, g, len(lens), finite_only=True, plain=True)
-    for i, (a, c) in enumerate(zip(b[:-1], b[1:])):
+    for i, (a, c) in enumerate(itertools.pairwise(b)):
         want = np.median(x[a:c]) if c > a else np.nan
         assert (np.isnan(want) and np.isnan(got[i])) or want.tobytes() == got[i].tobytes()
         fin = x[a:c][np.isfinite(x[a:c])]
@@ -135,11 +136,11 @@ def test_segment_searchsorted_and_interp_equal_numpy(lens, seed, global_order, s
         qseg.append(np.full(q.size, i))
     q, qseg = np.concatenate(qs), np.concatenate(qseg)
     pos = segment_searchsorted(xp, b[:-1], np.diff(b), q, qseg, side)
-    want_pos = np.concatenate([np.searchsorted(s, qq, side) for s, qq in zip(segs, qs)])
+    want_pos = np.concatenate([np.searchsorted(s, qq, side) for s, qq in zip(segs, qs, strict=True)])
     assert np.array_equal(pos, want_pos)
     with np.errstate(invalid="ignore"):
         got = segment_interp(q, qseg, xp, b[:-1], np.diff(b), fp)
-        want = np.concatenate([np.interp(qq, s, f) for s, f, qq in zip(segs, fps, qs)])
+        want = np.concatenate([np.interp(qq, s, f) for s, f, qq in zip(segs, fps, qs, strict=True)])
     assert got.tobytes() == want.tobytes()
 
 
@@ -158,8 +159,8 @@ def test_encode_profiles_equal_encode_profile_of_each(lens, seed):
         arrays["elevation_m"][rng.integers(0, n)] = 1e39  # beyond float32: inf
         arrays["lat_deg"][rng.integers(0, n)] = np.nan
     got = encode_profiles(arrays, b)
-    assert got == [encode_profile({k: v[x:y] for k, v in arrays.items()}) for x, y in zip(b[:-1], b[1:])]
-    for blob, x, y in zip(got, b[:-1], b[1:]):
+    assert got == [encode_profile({k: v[x:y] for k, v in arrays.items()}) for x, y in itertools.pairwise(b)]
+    for blob, x, y in zip(got, b[:-1], b[1:], strict=True):
         assert blob == _format_2({k: v[x:y] for k, v in arrays.items()})
 
 

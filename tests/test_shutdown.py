@@ -5,6 +5,7 @@ of its own (tests/faults.py installs the fault-injecting task), scanned through 
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import signal
@@ -49,7 +50,8 @@ def reference(logs, tmp_path):
 def start(args: list, tmp_path: Path) -> tuple[subprocess.Popen, Path, Path]:
     out, err = tmp_path / "stdout.txt", tmp_path / "stderr.txt"
     proc = subprocess.Popen([sys.executable, str(FAULTS), *map(str, args)], start_new_session=True,
-                            stdout=open(out, "w"), stderr=open(err, "w"), stdin=subprocess.DEVNULL)
+                            stdout=open(out, "w"), stderr=open(err, "w"),  # noqa: SIM115 (the child holds them)
+                            stdin=subprocess.DEVNULL)
     return proc, out, err
 
 
@@ -79,10 +81,8 @@ def left_over(sid: int) -> list[tuple[int, str]]:
     while (procs := faults.session_processes(sid)) and time.monotonic() < t_end:
         time.sleep(0.1)
     for pid, _ in procs:
-        try:
+        with contextlib.suppress(ProcessLookupError):
             os.kill(pid, signal.SIGKILL)
-        except ProcessLookupError:
-            pass
     return procs
 
 

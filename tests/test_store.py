@@ -20,8 +20,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
-from cevm.errors import CevmError
 import cevm.store as store_mod
+from cevm.core.trip import Measurement, Trip
+from cevm.errors import CevmError
 from cevm.store import (
     SCHEMA_VERSION,
     TripStore,
@@ -32,7 +33,6 @@ from cevm.store import (
     resolve_store_path,
     trip_profile_blob,
 )
-from cevm.core.trip import Measurement, Trip
 
 TESTS_DIR = Path(__file__).resolve().parent
 SRC_DIR = TESTS_DIR.parent / "src"
@@ -154,7 +154,7 @@ def test_default_store_path_honours_env(monkeypatch, tmp_path):
 def test_profiles_encoded_by_a_worker_store_the_same_bytes(tmp_path):
     trips, vectors = make_file_trips("w")
     blobs = [trip_profile_blob(t) for t in trips]
-    for t, b in zip(trips, blobs):
+    for t, b in zip(trips, blobs, strict=True):
         np.testing.assert_array_equal(decode_profile(b)["time_s"], t.time_s)
     records = [t.record() for t in trips]  # what a worker sends back: no arrays
     assert [r.trip_id for r in records] == [t.trip_id for t in trips]
@@ -364,7 +364,7 @@ def test_round_trip_every_field(store, tmp_path):
     assert math.isnan(back_bare.dsm_coverage_pct) and back_bare.quality == {}
     assert np.isnan(back_bare.lat_deg).all() and back_bare.time_s.tolist() == [0.0]
 
-    for trip, vec in zip([fuel, ev, bare], vectors):
+    for trip, vec in zip([fuel, ev, bare], vectors, strict=True):
         assert store.load_vector_bytes(trip.trip_id) == vec
     prof = store.load_profile(fuel.trip_id)
     assert set(prof) == {"time_s", "speed_mps", "distance_m", "elevation_m", "lat_deg", "lon_deg"}
@@ -403,7 +403,7 @@ def test_queries_by_vehicle_and_ids(store, tmp_path):
     assert store.list_trips(trip_ids=[a_ids[2], a_ids[0]])["trip_id"].tolist() == [a_ids[0], a_ids[2]]
     vecs = store.load_vectors(vehicle_id="A")
     assert list(vecs) == a_ids  # ordered by start time
-    assert vecs == dict(zip(a_ids, make_file_trips("a", vehicle="A")[1]))
+    assert vecs == dict(zip(a_ids, make_file_trips("a", vehicle="A")[1], strict=True))
     assert len(store.load_vectors()) == 5
     assert list(store.load_vectors(trip_ids=[a_ids[1]])) == [a_ids[1]]
 

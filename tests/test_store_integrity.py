@@ -7,9 +7,9 @@ is damage named in one line. Each through the command line, as an operator meets
 from __future__ import annotations
 
 import json
-import re
 import os
 import random
+import re
 import sqlite3
 import struct
 import subprocess

@@ -253,7 +253,7 @@ def _record(vehicle: str, start_s: float, duration_s: float, sha: str, index: in
 def _starts(st: TripStore, vehicle: str = "EB-1") -> list:
     df = st.list_trips(vehicle_id=vehicle)
     return [(float(s), None if math.isnan(g) else float(g), None if math.isnan(c) else float(c))
-            for s, g, c in zip(df["start_utc_s"], df["standstill_before_s"], df["start_soc_pct"])]
+            for s, g, c in zip(df["start_utc_s"], df["standstill_before_s"], df["start_soc_pct"], strict=True)]
 
 
 def test_migration_6_gives_stored_trips_their_standstill_before(tmp_path):

@@ -76,8 +76,8 @@ def test_bus_table_structure_and_lossless_limit(bt):
 
 def test_truck_variants_and_adapted_traces(bt):
     from cevm.core.detailed import simulate
-    from cevm.io.detailed import diesel_params_from_vehicle
     from cevm.io import load_vehicle
+    from cevm.io.detailed import diesel_params_from_vehicle
 
     hgv = load_vehicle(bt.TRUCK_TOML)
     cycles = _short(bt, ["CYC_CBDTRUCK", "CYC_WVUCITY", "CYC_NYCTRUCK"])

@@ -25,6 +25,7 @@ import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
 from functools import lru_cache
+from types import FrameType
 
 #: glibc's mallopt parameters (malloc.h)
 _M_TRIM_THRESHOLD = -1
@@ -103,7 +104,8 @@ def tune_allocator(mmap_threshold_bytes: int = MMAP_THRESHOLD_BYTES) -> bool:
     mallopt.restype = ctypes.c_int
     settings = ((_M_MMAP_THRESHOLD, mmap_threshold_bytes), (_M_TRIM_THRESHOLD, TRIM_THRESHOLD_BYTES),
                 (_M_TOP_PAD, TOP_PAD_BYTES))
-    return all([mallopt(param, value) == 1 for param, value in settings])
+    # a list, not a generator: every setting is applied even when one fails
+    return all([mallopt(param, value) == 1 for param, value in settings])  # noqa: C419
 
 
 @contextmanager
@@ -121,7 +123,7 @@ def signals_deferred(signums: tuple[int, ...] = (signal.SIGINT, signal.SIGTERM))
     if threading.current_thread() is not threading.main_thread():
         yield
         return
-    arrived: list[tuple[int, object]] = []
+    arrived: list[tuple[int, FrameType | None]] = []
     saved = {}
     for s in signums:
         handler = signal.getsignal(s)

@@ -209,6 +209,61 @@ _DENSITY = {
 }
 
 
+def _route_frame(route: Route, s):
+    """Position (x, y) and unit direction (ux, uy) of ``route`` at distances ``s`` [m]."""
+    x = np.interp(s, route.s_m, route.x_m)
+    y = np.interp(s, route.s_m, route.y_m)
+    ds = 1.0
+    dx = np.interp(s + ds, route.s_m, route.x_m) - np.interp(s - ds, route.s_m, route.x_m)
+    dy = np.interp(s + ds, route.s_m, route.y_m) - np.interp(s - ds, route.s_m, route.y_m)
+    n = np.hypot(dx, dy)
+    return x, y, dx / n, dy / n
+
+
+def _clear_of_roads(tree, cx, cy, extent, clearance):
+    """Whether objects at (cx, cy) of ``extent`` keep ``clearance`` [m] from every road
+    centreline (``tree``: a KD-tree of the routes' points)."""
+    d, _ = tree.query(np.column_stack([cx, cy]))
+    return d > extent + clearance
+
+
+def _beside_road(route: Route, side: float, s_lo: float, s_hi: float, bsp: tuple[float, float],
+                 tsp: tuple[float, float], tree, terrain: Terrain, box,
+                 rng: np.random.Generator, R: dict[str, list[np.ndarray]], T: dict[str, list[np.ndarray]]) -> None:
+    """Buildings (into ``R``) and off-road trees (into ``T``) on one ``side`` of a route's
+    stretch ``s_lo``..``s_hi``, spaced by ``bsp`` and ``tsp`` [m], clear of every road."""
+    span = s_hi - s_lo
+    n = int(span / bsp[0]) + 2
+    s = s_lo + np.cumsum(rng.uniform(*bsp, n))
+    s = s[s < s_hi]
+    m = s.size
+    x, y, ux, uy = _route_frame(route, s)
+    hl, hw = rng.uniform(4.0, 12.0, m), rng.uniform(3.0, 7.0, m)
+    off = rng.uniform(12.0, 35.0, m)
+    cx, cy = x - side * uy * off, y + side * ux * off
+    height = rng.uniform(4.0, 14.0, m)
+    ok = _clear_of_roads(tree, cx, cy, np.hypot(hl, hw), 8.0) & _in_box(cx, cy, box, 50.0)
+    R["kind"].append(np.full(int(ok.sum()), "building"))
+    for k, v in (("cx", cx), ("cy", cy), ("ux", ux), ("uy", uy), ("hl", hl), ("hw", hw)):
+        R[k].append(v[ok])
+    R["top"].append(terrain.elevation_m(cx[ok], cy[ok]) + height[ok])
+    # Off-road trees.
+    n = int(span / tsp[0]) + 2
+    s = s_lo + np.cumsum(rng.uniform(*tsp, n))
+    s = s[s < s_hi]
+    m = s.size
+    x, y, ux, uy = _route_frame(route, s)
+    r = rng.uniform(2.0, 5.0, m)
+    off = rng.uniform(7.0, 30.0, m)
+    cx, cy = x - side * uy * off, y + side * ux * off
+    ok = _clear_of_roads(tree, cx, cy, r, 6.0) & _in_box(cx, cy, box, 50.0)
+    T["cx"].append(cx[ok])
+    T["cy"].append(cy[ok])
+    T["r"].append(r[ok])
+    T["ground"].append(terrain.elevation_m(cx[ok], cy[ok]))
+    T["h"].append(rng.uniform(5.0, 14.0, m)[ok])
+
+
 def _place_objects(seed: int, terrain: Terrain, routes: dict[str, Route], dsm: DsmSpec) -> SurfaceObjects:
     """Draw buildings, trees, bridges and holes beside and over the routes, inside the
     survey box. Buildings and off-road trees keep clear of every road centreline (8 m and
@@ -222,19 +277,6 @@ def _place_objects(seed: int, terrain: Terrain, routes: dict[str, Route], dsm: D
     T: dict[str, list[np.ndarray]] = {k: [] for k in ("cx", "cy", "r", "ground", "h")}
     H: dict[str, list[np.ndarray]] = {k: [] for k in ("cx", "cy", "r")}
 
-    def frame(route: Route, s):
-        x = np.interp(s, route.s_m, route.x_m)
-        y = np.interp(s, route.s_m, route.y_m)
-        ds = 1.0
-        dx = np.interp(s + ds, route.s_m, route.x_m) - np.interp(s - ds, route.s_m, route.x_m)
-        dy = np.interp(s + ds, route.s_m, route.y_m) - np.interp(s - ds, route.s_m, route.y_m)
-        n = np.hypot(dx, dy)
-        return x, y, dx / n, dy / n
-
-    def clear_of_roads(cx, cy, extent, clearance):
-        d, _ = tree.query(np.column_stack([cx, cy]))
-        return d > extent + clearance
-
     for name in sorted(routes):
         route = routes[name]
         rng = _rng(seed, "objects", name)
@@ -244,41 +286,12 @@ def _place_objects(seed: int, terrain: Terrain, routes: dict[str, Route], dsm: D
             continue
         s_lo, s_hi = float(route.s_m[inside].min()), float(route.s_m[inside].max())
         span = s_hi - s_lo
-        # Buildings, both sides.
-        for side in (-1.0, 1.0):
-            n = int(span / bsp[0]) + 2
-            s = s_lo + np.cumsum(rng.uniform(*bsp, n))
-            s = s[s < s_hi]
-            m = s.size
-            x, y, ux, uy = frame(route, s)
-            hl, hw = rng.uniform(4.0, 12.0, m), rng.uniform(3.0, 7.0, m)
-            off = rng.uniform(12.0, 35.0, m)
-            cx, cy = x - side * uy * off, y + side * ux * off
-            height = rng.uniform(4.0, 14.0, m)
-            ok = clear_of_roads(cx, cy, np.hypot(hl, hw), 8.0) & _in_box(cx, cy, box, 50.0)
-            R["kind"].append(np.full(int(ok.sum()), "building"))
-            for k, v in (("cx", cx), ("cy", cy), ("ux", ux), ("uy", uy), ("hl", hl), ("hw", hw)):
-                R[k].append(v[ok])
-            R["top"].append(terrain.elevation_m(cx[ok], cy[ok]) + height[ok])
-            # Off-road trees.
-            n = int(span / tsp[0]) + 2
-            s = s_lo + np.cumsum(rng.uniform(*tsp, n))
-            s = s[s < s_hi]
-            m = s.size
-            x, y, ux, uy = frame(route, s)
-            r = rng.uniform(2.0, 5.0, m)
-            off = rng.uniform(7.0, 30.0, m)
-            cx, cy = x - side * uy * off, y + side * ux * off
-            ok = clear_of_roads(cx, cy, r, 6.0) & _in_box(cx, cy, box, 50.0)
-            T["cx"].append(cx[ok])
-            T["cy"].append(cy[ok])
-            T["r"].append(r[ok])
-            T["ground"].append(terrain.elevation_m(cx[ok], cy[ok]))
-            T["h"].append(rng.uniform(5.0, 14.0, m)[ok])
+        for side in (-1.0, 1.0):  # buildings and off-road trees, both sides
+            _beside_road(route, side, s_lo, s_hi, bsp, tsp, tree, terrain, box, rng, R, T)
         # Trees over the road.
         m = max(1, int(round(span / 1000.0 * trees_per_km)))
         s = rng.uniform(s_lo, s_hi, m)
-        x, y, ux, uy = frame(route, s)
+        x, y, ux, uy = _route_frame(route, s)
         lat = rng.uniform(-2.0, 2.0, m)
         cx, cy = x - uy * lat, y + ux * lat
         T["cx"].append(cx)
@@ -288,7 +301,7 @@ def _place_objects(seed: int, terrain: Terrain, routes: dict[str, Route], dsm: D
         T["h"].append(rng.uniform(7.0, 12.0, m))
         # Bridges: a deck across the road, 6.5-7.5 m above it.
         s = rng.uniform(s_lo + 0.1 * span, s_hi - 0.1 * span, n_bridges)
-        x, y, ux, uy = frame(route, s)
+        x, y, ux, uy = _route_frame(route, s)
         R["kind"].append(np.full(n_bridges, "bridge"))
         R["cx"].append(x)
         R["cy"].append(y)
@@ -300,7 +313,7 @@ def _place_objects(seed: int, terrain: Terrain, routes: dict[str, Route], dsm: D
         # Holes on the road (a LIDAR void over wet tarmac, say).
         m = 2
         s = rng.uniform(s_lo, s_hi, m)
-        x, y, _, _ = frame(route, s)
+        x, y, _, _ = _route_frame(route, s)
         H["cx"].append(x)
         H["cy"].append(y)
         H["r"].append(rng.uniform(3.0, 8.0, m))

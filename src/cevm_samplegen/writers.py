@@ -174,6 +174,90 @@ class _Counters:
     reset_offset: float | None = None  # ECU counter after a reset = offset + bias x consumption
 
 
+def _srf_gps(tr: TruthTrip, at: dict, n: int, T: float, alt_bias: float, transformer,
+             rng: np.random.Generator) -> dict[str, np.ndarray]:
+    """An srf trip's GPS columns: fixes lost at a cold start and in outages (the HDOP
+    rising around them), position and altitude noise growing with the HDOP."""
+    cols_v: dict[str, np.ndarray] = {}
+    fix = rng.random(n) > 0.02
+    cold = int(rng.integers(8, 26)) if tr.trip_index == 0 else int(rng.integers(2, 7))
+    fix[:cold] = False
+    hdop = 0.9 + np.abs(_ar1(n, 60.0, 0.25, rng))
+    for _ in range(int(rng.poisson(T / 1800.0))):
+        i0 = int(rng.integers(0, n))
+        L = int(rng.integers(10, 46))
+        fix[i0 : i0 + L] = False
+        hdop[max(0, i0 - 5) : i0] += np.linspace(0.5, 2.5, len(hdop[max(0, i0 - 5) : i0]))
+        hdop[i0 + L : i0 + L + 8] += np.linspace(2.5, 0.3, len(hdop[i0 + L : i0 + L + 8]))
+    scale = hdop / 0.9
+    ex = _ar1(n, 40.0, 2.5, rng) * scale + rng.normal(0.0, 0.7, n)
+    ny = _ar1(n, 40.0, 2.5, rng) * scale + rng.normal(0.0, 0.7, n)
+    lon, lat = transformer.transform(at["x"] + ex, at["y"] + ny)
+    alt = at["elev"] + GEOID_UNDULATION_M + alt_bias + _ar1(n, 200.0, 12.0, rng) + rng.normal(0.0, 2.0, n)
+    gspeed = np.abs(at["speed"] + rng.normal(0.0, 0.15, n)) * MPS_TO_KMH
+    nan = np.where(fix, 1.0, np.nan)
+    cols_v["gps_lat_deg"], cols_v["gps_lon_deg"] = lat * nan, lon * nan
+    cols_v["gps_alt_m"], cols_v["gps_speed_kmh"] = alt * nan, gspeed * nan
+    cols_v["gps_hdop"] = _round_q(hdop, 0.1) * nan
+    return cols_v
+
+
+def _srf_battery(veh: VehicleSpec, tk: np.ndarray, e_day: np.ndarray, cons: np.ndarray, rate: np.ndarray,
+                 soc0: float, rng: np.random.Generator) -> dict[str, np.ndarray]:
+    """An electric bus's battery columns in an srf trip: voltage and current of a battery
+    with an internal resistance, the state of charge, the FMS energy counter."""
+    n = tk.size
+    cols_v: dict[str, np.ndarray] = {}
+    soc_true = soc0 - 100.0 * e_day / _EV_USABLE_J
+    voc = 560.0 + 1.3 * soc_true
+    r_ohm = 0.1
+    cur = (voc - np.sqrt(voc * voc - 4.0 * r_ohm * rate)) / (2.0 * r_ohm)
+    volt = voc - r_ohm * cur
+    m = np.where(rng.random(n) > 0.01, 1.0, np.nan)
+    cols_v["fms_battery_voltage_v"] = _round_q(volt, 0.1) * m
+    cols_v["fms_battery_current_a"] = _round_q(cur, 0.1) * m
+    cols_v["fms_battery_soc_pct"] = np.where(_arrivals(tk, (9.0, 11.0), rng), _round_q(soc_true, 0.4), np.nan)
+    kwh = veh.energy_counter_start_kwh + cons / J_PER_KWH
+    cols_v["fms_total_energy_used_kwh"] = np.where(_arrivals(tk, (4.0, 6.0), rng), _floor_q(kwh, 0.1), np.nan)
+    return cols_v
+
+
+def _srf_assemble(veh: VehicleSpec, cols: tuple[str, ...], blocks: list[dict], records: list[dict],
+                  faults: list[dict], rng: np.random.Generator) -> tuple[bytes, dict]:
+    """The srf file's bytes from its trips' blocks of columns, with repeated ticks
+    (identical duplicate lines), and its file record; each trip record and fault gets
+    its lines."""
+    allc = {c: np.concatenate([b["cols"][c] for b in blocks]) for c in blocks[0]["cols"]}
+    ntot = allc["timestamp_ms"].size
+    rep = rng.random(ntot) < 0.003
+    order = np.repeat(np.arange(ntot), 1 + rep.astype(int))
+    first_row = np.concatenate(([0], np.cumsum([b["n"] for b in blocks])))
+    # line of row i of the original = header lines + position in `order`
+    started = datetime.fromtimestamp(int(allc["timestamp_ms"][0] // 1000) - int(rng.integers(2, 9)), UTC)
+    header = (
+        f"# vehicle_id={veh.vehicle_id}\n# logger=SRF Logger 2.4.1\n"
+        f"# started={started.strftime('%Y-%m-%dT%H:%M:%SZ')}\n"
+        f"# fms_dongle=FMS-BT 1.7\n{','.join(cols)}\n"
+    ).encode()
+    n_head = header.count(b"\n")
+    pos_first = np.searchsorted(order, np.arange(ntot), side="left")  # first output row of each tick
+    pos_last = np.searchsorted(order, np.arange(ntot), side="right") - 1
+    for j, rec in enumerate(records):
+        rec["first_line"] = int(n_head + 1 + pos_first[first_row[j]])
+        rec["last_line"] = int(n_head + 1 + pos_last[first_row[j + 1] - 1])
+        del rec["_rows"]
+    for f in faults:
+        f["line"] = int(n_head + 1 + pos_first[f.pop("tick")])
+    fields = [iso_utc_ms(allc["timestamp_ms"][order])]
+    for c in cols[1:]:
+        dec, strip = SRF_FORMAT[c]
+        fields.append(num_field(allc[c][order], dec, strip=strip))
+    data = header + assemble(fields, b",", b"\n")
+    info = {"vehicle_id": veh.vehicle_id, "dialect": "srf", "rows": int(order.size), "repeated_ticks": int(rep.sum()),
+            "faults": faults}
+    return data, info
+
+
 def _srf_file(world: World, veh: VehicleSpec, trips: list[TruthTrip], date: str, state: _Counters, fleet: FleetSpec,
               seed: int, transformer) -> tuple[bytes, list[dict], dict]:
     """One srf session file: (bytes, truth records of its trips, file record)."""
@@ -203,27 +287,7 @@ def _srf_file(world: World, veh: VehicleSpec, trips: list[TruthTrip], date: str,
         n = tk.size
         at = tr.at(tk, world)
         cols_v: dict[str, np.ndarray] = {}
-        # ---- GPS
-        fix = rng.random(n) > 0.02
-        cold = int(rng.integers(8, 26)) if tr.trip_index == 0 else int(rng.integers(2, 7))
-        fix[:cold] = False
-        hdop = 0.9 + np.abs(_ar1(n, 60.0, 0.25, rng))
-        for _ in range(int(rng.poisson(T / 1800.0))):
-            i0 = int(rng.integers(0, n))
-            L = int(rng.integers(10, 46))
-            fix[i0 : i0 + L] = False
-            hdop[max(0, i0 - 5) : i0] += np.linspace(0.5, 2.5, len(hdop[max(0, i0 - 5) : i0]))
-            hdop[i0 + L : i0 + L + 8] += np.linspace(2.5, 0.3, len(hdop[i0 + L : i0 + L + 8]))
-        scale = hdop / 0.9
-        ex = _ar1(n, 40.0, 2.5, rng) * scale + rng.normal(0.0, 0.7, n)
-        ny = _ar1(n, 40.0, 2.5, rng) * scale + rng.normal(0.0, 0.7, n)
-        lon, lat = transformer.transform(at["x"] + ex, at["y"] + ny)
-        alt = at["elev"] + GEOID_UNDULATION_M + alt_bias + _ar1(n, 200.0, 12.0, rng) + rng.normal(0.0, 2.0, n)
-        gspeed = np.abs(at["speed"] + rng.normal(0.0, 0.15, n)) * MPS_TO_KMH
-        nan = np.where(fix, 1.0, np.nan)
-        cols_v["gps_lat_deg"], cols_v["gps_lon_deg"] = lat * nan, lon * nan
-        cols_v["gps_alt_m"], cols_v["gps_speed_kmh"] = alt * nan, gspeed * nan
-        cols_v["gps_hdop"] = _round_q(hdop, 0.1) * nan
+        cols_v.update(_srf_gps(tr, at, n, T, alt_bias, transformer, rng))
         # ---- FMS common (three broadcast groups, each missing in 0.5 % of ticks)
         fms = _fms_common(veh, tr, at, rng)
         groups = (("fms_wheel_speed_kmh", "fms_brake_switch"), ("fms_accel_pedal_pct",),
@@ -238,18 +302,7 @@ def _srf_file(world: World, veh: VehicleSpec, trips: list[TruthTrip], date: str,
         cons = state.consumption + at["cons"]
         rate = np.diff(tr.consumption)[at["k"]]  # per 1 s step: l/s or W
         if is_bus:
-            e_day = cons - day_energy0
-            soc_true = soc0 - 100.0 * e_day / _EV_USABLE_J
-            voc = 560.0 + 1.3 * soc_true
-            r_ohm = 0.1
-            cur = (voc - np.sqrt(voc * voc - 4.0 * r_ohm * rate)) / (2.0 * r_ohm)
-            volt = voc - r_ohm * cur
-            m = np.where(rng.random(n) > 0.01, 1.0, np.nan)
-            cols_v["fms_battery_voltage_v"] = _round_q(volt, 0.1) * m
-            cols_v["fms_battery_current_a"] = _round_q(cur, 0.1) * m
-            cols_v["fms_battery_soc_pct"] = np.where(_arrivals(tk, (9.0, 11.0), rng), _round_q(soc_true, 0.4), np.nan)
-            kwh = veh.energy_counter_start_kwh + cons / J_PER_KWH
-            cols_v["fms_total_energy_used_kwh"] = np.where(_arrivals(tk, (4.0, 6.0), rng), _floor_q(kwh, 0.1), np.nan)
+            cols_v.update(_srf_battery(veh, tk, cons - day_energy0, cons, rate, soc0, rng))
         else:
             ecu = veh.fuel_counter_start_l + veh.ecu_fuel_bias * cons
             if fleet.fuel_reset and fleet.fuel_reset[:3] == (veh.vehicle_id, day_index, tr.trip_index):
@@ -304,35 +357,7 @@ def _srf_file(world: World, veh: VehicleSpec, trips: list[TruthTrip], date: str,
             **conditions_record(tr, t_first, t_last), "_rows": n,
         })
         state.consumption += float(tr.consumption[-1])
-    # ---- assemble rows, repeated ticks (identical duplicate lines)
-    allc = {c: np.concatenate([b["cols"][c] for b in blocks]) for c in blocks[0]["cols"]}
-    ntot = allc["timestamp_ms"].size
-    rep = rng.random(ntot) < 0.003
-    order = np.repeat(np.arange(ntot), 1 + rep.astype(int))
-    first_row = np.concatenate(([0], np.cumsum([b["n"] for b in blocks])))
-    # line of row i of the original = header lines + position in `order`
-    started = datetime.fromtimestamp(int(allc["timestamp_ms"][0] // 1000) - int(rng.integers(2, 9)), UTC)
-    header = (
-        f"# vehicle_id={veh.vehicle_id}\n# logger=SRF Logger 2.4.1\n"
-        f"# started={started.strftime('%Y-%m-%dT%H:%M:%SZ')}\n"
-        f"# fms_dongle=FMS-BT 1.7\n{','.join(cols)}\n"
-    ).encode()
-    n_head = header.count(b"\n")
-    pos_first = np.searchsorted(order, np.arange(ntot), side="left")  # first output row of each tick
-    pos_last = np.searchsorted(order, np.arange(ntot), side="right") - 1
-    for j, rec in enumerate(records):
-        rec["first_line"] = int(n_head + 1 + pos_first[first_row[j]])
-        rec["last_line"] = int(n_head + 1 + pos_last[first_row[j + 1] - 1])
-        del rec["_rows"]
-    for f in faults:
-        f["line"] = int(n_head + 1 + pos_first[f.pop("tick")])
-    fields = [iso_utc_ms(allc["timestamp_ms"][order])]
-    for c in cols[1:]:
-        dec, strip = SRF_FORMAT[c]
-        fields.append(num_field(allc[c][order], dec, strip=strip))
-    data = header + assemble(fields, b",", b"\n")
-    info = {"vehicle_id": veh.vehicle_id, "dialect": "srf", "rows": int(order.size), "repeated_ticks": int(rep.sum()),
-            "faults": faults}
+    data, info = _srf_assemble(veh, cols, blocks, records, faults, rng)
     return data, records, info
 
 

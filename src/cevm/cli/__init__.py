@@ -6,33 +6,45 @@ was changed); 4 the store is damaged (see :mod:`cevm.cli.common`); 130 after SIG
 143 after SIGTERM (:mod:`~cevm.cli.interrupts`). Errors caused by input are printed as
 one line on stderr, without a traceback.
 
-This module creates the app and registers the commands of one module per command (group):
+This module makes the app and registers the commands of one module per command (group):
 :mod:`~cevm.cli.ingest`, :mod:`~cevm.cli.trips`, :mod:`~cevm.cli.calibrate`,
 :mod:`~cevm.cli.simulate`, :mod:`~cevm.cli.fleet`, :mod:`~cevm.cli.predict`,
-:mod:`~cevm.cli.feasibility`, :mod:`~cevm.cli.replay`, :mod:`~cevm.cli.route`, :mod:`~cevm.cli.vehicle`, :mod:`~cevm.cli.store`; what they share is
+:mod:`~cevm.cli.feasibility`, :mod:`~cevm.cli.replay`, :mod:`~cevm.cli.route`, :mod:`~cevm.cli.vehicle`,
+:mod:`~cevm.cli.store`; what they share is
 :mod:`~cevm.cli.common` and :mod:`~cevm.cli.output`. The command modules never import
 this package's app, nor each other; the library never imports the command line.
+``app`` (the whole command line) is made on first use; :func:`main` makes one with only
+the command it was asked for when its first argument names one (:func:`make_app`): the
+other commands' modules are not imported nor their options built, a tenth of a second of
+every command's start.
 """
 
 from __future__ import annotations
 
+import importlib
 import sys
 from typing import Annotated
 
 import typer
 
 from cevm import __version__
-from cevm.cli import calibrate, feasibility, fleet, ingest, predict, replay, route, simulate, store, trips, vehicle
 from cevm.cli.common import exit_code_for, fail
 from cevm.errors import CevmError
 
-app = typer.Typer(
-    name="cevm",
-    help="Vehicle energy and fuel from drive cycles, fast: the computationally efficient (CE) model.",
-    no_args_is_help=True,
-    add_completion=False,
-    pretty_exceptions_enable=False,
-    rich_markup_mode=None,  # help texts are plain: "[detailed]", "[kg]", "cevm[dask]" are words, not markup
+#: The commands in the order of 'cevm --help': (name, module in cevm.cli, its command
+#: function or its group's Typer app, whether it is a group).
+COMMANDS = (
+    ("ingest", "ingest", "ingest", False),
+    ("trips", "trips", "app", True),
+    ("calibrate", "calibrate", "calibrate", False),
+    ("simulate", "simulate", "simulate", False),
+    ("fleet", "fleet", "app", True),
+    ("predict", "predict", "predict_cmd", False),
+    ("feasibility", "feasibility", "feasibility_cmd", False),
+    ("replay", "replay", "replay_cmd", False),
+    ("route", "route", "app", True),
+    ("vehicle", "vehicle", "app", True),
+    ("store", "store", "app", True),
 )
 
 
@@ -42,7 +54,6 @@ def _version(value: bool) -> None:
         raise typer.Exit()
 
 
-@app.callback()
 def _root(
     version: Annotated[
         bool, typer.Option("--version", callback=_version, is_eager=True, help="Print the version and exit.")
@@ -73,18 +84,35 @@ def _warnings_as_lines() -> None:
     warnings.simplefilter("always", CycleWarning)
 
 
-# In the order of 'cevm --help'.
-app.command()(ingest.ingest)
-app.add_typer(trips.app, name="trips")
-app.command()(calibrate.calibrate)
-app.command()(simulate.simulate)
-app.add_typer(fleet.app, name="fleet")
-app.command("predict")(predict.predict_cmd)
-app.command("feasibility")(feasibility.feasibility_cmd)
-app.command("replay")(replay.replay_cmd)
-app.add_typer(route.app, name="route")
-app.add_typer(vehicle.app, name="vehicle")
-app.add_typer(store.app, name="store")
+def make_app(only: str | None = None) -> typer.Typer:
+    """The ``cevm`` app: every command of :data:`COMMANDS`, or only the one named
+    ``only`` (its module alone imported; its help, options and errors are the same)."""
+    app = typer.Typer(
+        name="cevm",
+        help="Vehicle energy and fuel from drive cycles, fast: the computationally efficient (CE) model.",
+        no_args_is_help=True,
+        add_completion=False,
+        pretty_exceptions_enable=False,
+        rich_markup_mode=None,  # help texts are plain: "[detailed]", "[kg]", "cevm[dask]" are words, not markup
+    )
+    app.callback()(_root)
+    for name, module, attr, group in COMMANDS:
+        if only is not None and name != only:
+            continue
+        command = getattr(importlib.import_module(f"cevm.cli.{module}"), attr)
+        if group:
+            app.add_typer(command, name=name)
+        else:
+            app.command(name)(command)
+    return app
+
+
+def __getattr__(name: str) -> typer.Typer:
+    """``app``: the whole command line, made on first use (module ``__getattr__``)."""
+    if name == "app":
+        app = globals()["app"] = make_app()
+        return app
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def main() -> None:
@@ -99,6 +127,8 @@ def main() -> None:
     from cevm.runtime import tune_allocator
 
     tune_allocator()
+    first = sys.argv[1] if len(sys.argv) > 1 else None
+    app = make_app(first if first in {c[0] for c in COMMANDS} else None)
     with interrupts.interrupts_raise():  # SIGTERM stops a command as SIGINT does
         try:
             said = False

@@ -36,27 +36,38 @@ def calibrate(
     store: StoreOption = None,
     fit: Annotated[
         list[str] | None,
-        typer.Option("--fit", metavar="NAMES", help="Force a term set instead of choosing one: eta (always) plus any of regen, aux, "
-                                   "heat, cool, warm (EV); idle, run, kin, heat, cool, warm (ICE); cda, cr. "
-                                   "Repeatable or comma-separated."),
+        typer.Option("--fit", metavar="NAMES",
+                     help="Force a term set instead of choosing one: eta (always) plus any of regen, aux, "
+                          "heat, cool, warm (EV); idle, run, kin, heat, cool, warm (ICE); cda, cr. "
+                          "Repeatable or comma-separated."),
     ] = None,
     terms: Annotated[
         list[str] | None,
-        typer.Option("--terms", metavar="NAMES", help="Choose only among these extra terms (default: all of the powertrain's). "
-                                     "Repeatable or comma-separated."),
+        typer.Option("--terms", metavar="NAMES",
+                     help="Choose only among these extra terms (default: all of the powertrain's). "
+                          "Repeatable or comma-separated."),
     ] = None,
     nested: Annotated[bool, typer.Option("--nested/--no-nested", help="Also cross-validate the choice itself "
                                                                         "(nested cross-validation).")] = True,
-    out: Annotated[Path | None, typer.Option("--out", "-o", metavar="FILE", help="Write the calibrated vehicle file here.")] = None,
+    out: Annotated[Path | None,
+                   typer.Option("--out", "-o", metavar="FILE", help="Write the calibrated vehicle file here.")] = None,
     force: Annotated[bool, typer.Option(help="Allow --out to overwrite an existing file.")] = False,
-    cv_folds: Annotated[int, typer.Option(help="Cross-validation folds over days; with fewer than 10 days, or no more days than folds, each day is its own fold (leave-one-day-out).")] = 5,
-    max_rel_uncertainty: Annotated[float, typer.Option(help="Exclude trips measured worse than this (relative 1-sigma).")] = 0.10,
-    plot: Annotated[Path | None, typer.Option(metavar="FILE.png", help="Write predicted-vs-measured and error-vs-distance plots (PNG).")] = None,
+    cv_folds: Annotated[int,
+                        typer.Option(help="Cross-validation folds over days; with fewer than 10 days, or no more days "
+                                          "than folds, each day is its own fold (leave-one-day-out).")] = 5,
+    max_rel_uncertainty: Annotated[
+        float, typer.Option(help="Exclude trips measured worse than this (relative 1-sigma).")] = 0.10,
+    plot: Annotated[Path | None,
+                    typer.Option(metavar="FILE.png",
+                                 help="Write predicted-vs-measured and error-vs-distance plots (PNG).")] = None,
     ice_braking: Annotated[
         str | None,
-        typer.Option(help="ICE: fit under this braking mode (no-credit or paper) and write it to --out. Default: the vehicle file's."),
+        typer.Option(help="ICE: fit under this braking mode (no-credit or paper) and write it to --out. Default: the "
+                          "vehicle file's."),
     ] = None,
-    fmt: Annotated[OutputFormat, typer.Option("--format", "-f", help="table; csv (the per-trip rows); or json (figures plus per-trip rows).")] = OutputFormat.table,
+    fmt: Annotated[OutputFormat,
+                   typer.Option("--format", "-f", help="table; csv (the per-trip rows); or json (figures plus "
+                                                         "per-trip rows).")] = OutputFormat.table,
     interval: Annotated[float, typer.Option(
         metavar="LEVEL", help="Level of the per-trip intervals (predicted_low, predicted_high) and of the coverage "
                               "reported: the share of held-out trips inside their interval.")] = 0.9,
@@ -123,7 +134,8 @@ def calibrate(
             table = calibration_table(
                 result, store=str(path), selected_from=None if selection is None else len(selection.candidates),
                 compared=None if selection is None else selection.n_compared,
-                nested_std_pct=None if selection is None or selection.nested_cv is None else selection.nested_cv.std_pct)
+                nested_std_pct=None if selection is None or selection.nested_cv is None
+                else selection.nested_cv.std_pct)
             write_calibrated_vehicle(vehicle, out, result, force=force, calibration=table,
                                      note=f"calibrated by cevm calibrate on {len(result.rows)} trips of {vehicle_id} "
                                           f"(store {path})")
@@ -140,14 +152,15 @@ def calibrate(
         _print_calibration(report, veh.is_ev)
     if out is not None and fmt == OutputFormat.table:
         typer.echo(f"calibrated vehicle written to {out}")
-    for exc in sel.damaged:
-        warn_damaged(exc)
+    for problem in sel.damaged:
+        warn_damaged(problem)
     if sel.damaged:
         raise typer.Exit(EXIT_PARTIAL)
 
 
 #: The paper's CE-model figures (tables 1 and 2), for comparison.
-PAPER_CE = {True: ("electric bus, table 1", 0.4, 4.0, 19e-3, 2.6e-3), False: ("diesel HGV, table 2", 1.3, 3.7, 16.5e-3, 2.5e-3)}
+PAPER_CE = {True: ("electric bus, table 1", 0.4, 4.0, 19e-3, 2.6e-3),
+            False: ("diesel HGV, table 2", 1.3, 3.7, 16.5e-3, 2.5e-3)}
 
 
 def _pct(x, sign=True) -> str:
@@ -281,14 +294,16 @@ def _parameters(fitted: dict, powertrain: str, priors=None) -> list[dict]:
             what = "heating below" if field == "heating_below_c" else "cooling above"
             out.append({"term": field, "field": field, "label": f"{what} (balance, on a 2 K grid)", "value": value,
                         "std": None, "value_text": f"{value:g} degC", "std_text": "-",
-                        "short": f"{what.split()[0]} < {value:g} C" if field == "heating_below_c" else f"cooling > {value:g} C"})
+                        "short": f"{what.split()[0]} < {value:g} C" if field == "heating_below_c"
+                        else f"cooling > {value:g} C"})
             continue
         t = by_field[field]
         unit, scale = t.display
         p = priors.get(t.name) if priors is not None else None
         prior_text = None if p is None else f"{p.low * scale:.3g} to {p.high * scale:.3g} {unit}".strip()
         out.append({"term": t.name, "field": field, "label": f"{t.label} ({t.name})", "value": value, "std": std,
-                    "value_text": f"{value * scale:.4g} {unit}".strip(), "std_text": f"{std * scale:.2g} {unit}".strip(),
+                    "value_text": f"{value * scale:.4g} {unit}".strip(),
+                    "std_text": f"{std * scale:.2g} {unit}".strip(),
                     "short": f"{t.name} {value * scale:.3g}{(' ' + unit) if unit else ''}",
                     "prior": None if p is None else [p.low, p.high], "prior_text": prior_text,
                     "prior_source": None if p is None else p.source})
@@ -312,7 +327,7 @@ def _scatter(result: CalibrationResult) -> dict | None:
     aux_text = f"{sc.aux / 1e3:.2f} kW" if ev else f"{sc.aux * 3600:.2f} l/h"
     return {"aux": sc.aux, "aux_unit": "W" if ev else "l/s", "aux_text": aux_text, "share": sc.share,
             "day_correlation": sc.day_corr, "day_correlation_note": sc.day_corr_note, "standstill": sc.standstill,
-            "meter_share": result.posterior.meter_share}
+            "meter_share": None if result.posterior is None else result.posterior.meter_share}
 
 
 def result_json(result: CalibrationResult, vehicle_id: str, notes: tuple[str, ...], selection=None) -> dict:

@@ -17,6 +17,7 @@ from __future__ import annotations
 import io
 import json
 import math
+from typing import cast
 
 import numpy as np
 
@@ -24,25 +25,28 @@ from cevm.cli.columns import ColumnSpec
 from cevm.cli.output import csv_writer
 from cevm.text import csv_safe
 
+#: A column of a block: numbers, or text as (codes, categories).
+ColumnValues = np.ndarray | tuple[np.ndarray, list[str]]
 
-def concat_columns(cols: list[dict[str, object]]) -> dict[str, object]:
+
+def concat_columns(cols: list[dict[str, ColumnValues]]) -> dict[str, ColumnValues]:
     """The columns of several blocks one after another (text categories merged)."""
     if len(cols) == 1:
         return cols[0]
-    out: dict[str, object] = {}
+    out: dict[str, ColumnValues] = {}
     for key in cols[0]:
         parts = [c[key] for c in cols]
         if isinstance(parts[0], tuple):
             cats: list[str] = []
             index: dict[str, int] = {}
             codes = []
-            for c, names in parts:
+            for c, names in cast(list[tuple[np.ndarray, list[str]]], parts):  # a column's kind is every block's
                 remap = np.array([index.setdefault(s, len(index)) for s in names], dtype=np.int64)
                 codes.append(remap[c])
             cats = list(index)
             out[key] = (np.concatenate(codes), cats)
         else:
-            out[key] = np.concatenate(parts)
+            out[key] = np.concatenate(cast(list[np.ndarray], parts))
     return out
 
 
@@ -105,7 +109,7 @@ def _csv_quote(s: str) -> bytes:
 _BOOL_CSV = np.array([b"false", b"true", b""])
 
 
-def csv_text(cols: dict[str, object], spec: ColumnSpec) -> str:
+def csv_text(cols: dict[str, ColumnValues], spec: ColumnSpec) -> str:
     """The CSV lines (no header) of the rows of ``cols``, columns in ``spec``'s order."""
     fields = []
     for column in spec.columns:
@@ -149,7 +153,7 @@ def _json_values(col: object, kind: str) -> list[str]:
     return [(repr(x) if math.isfinite(x) else "null") for x in v.tolist()]
 
 
-def json_objects(cols: dict[str, object], spec: ColumnSpec, is_ev: np.ndarray) -> list[str]:
+def json_objects(cols: dict[str, ColumnValues], spec: ColumnSpec, is_ev: np.ndarray) -> list[str]:
     """One JSON object (text) per row of ``cols``: an EV row (``is_ev``) with the keys
     ``spec`` gives EV rows, the others with an ICE row's."""
     vals = {c.name: _json_values(cols[c.name], c.kind) for c in spec.columns}

@@ -20,7 +20,7 @@ import os
 import sys
 from contextlib import ExitStack
 from pathlib import Path
-from typing import IO, Annotated, Optional
+from typing import IO, Annotated
 
 import typer
 
@@ -41,8 +41,9 @@ EXIT_BROKEN_PIPE = 141
 
 
 StoreOption = Annotated[
-    Optional[Path],
-    typer.Option("--store", envvar="CEVM_STORE", metavar="FILE", help="Trip store (SQLite). Default: $CEVM_STORE, else ~/.local/share/cevm/cevm.sqlite."),
+    Path | None,
+    typer.Option("--store", envvar="CEVM_STORE", metavar="FILE",
+                 help="Trip store (SQLite). Default: $CEVM_STORE, else ~/.local/share/cevm/cevm.sqlite."),
 ]
 
 
@@ -105,7 +106,7 @@ def warn_damaged(exc: BaseException) -> None:
     warn(f"skipped: {exc}")
 
 
-def existing_store(store: Optional[Path], hint: Optional[str] = None) -> Path:
+def existing_store(store: Path | None, hint: str | None = None) -> Path:
     """The store a reading command needs, or the usual one-line error (exit 2)."""
     from cevm.store import NO_STORE_HINT, existing_store_path
 
@@ -120,25 +121,30 @@ TABLE_MAX_ROWS = 200
 
 
 VehicleOption = Annotated[
-    list[Path], typer.Option("--vehicle", "-v", metavar="FILE|DIR", help="Vehicle TOML file, or a directory of them. Repeatable.")
+    list[Path],
+    typer.Option("--vehicle", "-v", metavar="FILE|DIR", help="Vehicle TOML file, or a directory of them. Repeatable.")
 ]
 CycleOption = Annotated[
-    Optional[list[Path]],
-    typer.Option("--cycle", "-c", metavar="FILE", help="Cycle file, CSV or .csv.gz: time_s, speed_kmh or speed_mps, elevation_m "
-                                       "(optional), or the columns the cycle options name. Repeatable."),
+    list[Path] | None,
+    typer.Option("--cycle", "-c", metavar="FILE",
+                 help="Cycle file, CSV or .csv.gz: time_s, speed_kmh or speed_mps, elevation_m "
+                      "(optional), or the columns the cycle options name. Repeatable."),
 ]
 TripOption = Annotated[
-    Optional[list[str]], typer.Option("--trip", "-t", metavar="ID", help="A stored trip id (see 'cevm trips'). Repeatable.")
+    list[str] | None,
+    typer.Option("--trip", "-t", metavar="ID", help="A stored trip id (see 'cevm trips'). Repeatable.")
 ]
 VehicleIdOption = Annotated[
-    Optional[list[str]], typer.Option("--vehicle-id", metavar="ID", help="All stored trips of this vehicle id. Repeatable.")
+    list[str] | None,
+    typer.Option("--vehicle-id", metavar="ID", help="All stored trips of this vehicle id. Repeatable.")
 ]
 RouteOption = Annotated[
-    Optional[list[str]],
-    typer.Option("--route", "-r", metavar="NAME", help="A stored route (see 'cevm route list'), or a glob such as 'block-*'. Repeatable."),
+    list[str] | None,
+    typer.Option("--route", "-r", metavar="NAME",
+                 help="A stored route (see 'cevm route list'), or a glob such as 'block-*'. Repeatable."),
 ]
 SocStartOption = Annotated[
-    Optional[float], typer.Option("--soc-start", help="EV state of charge at the start [%]. Default: a stored trip's "
+    float | None, typer.Option("--soc-start", help="EV state of charge at the start [%]. Default: a stored trip's "
                                   "own logged start, else full (100); column soc_start_from says which.")
 ]
 
@@ -161,7 +167,8 @@ def start_soc(source, given: float | None) -> tuple[float, str]:
         return float(logged), SOC_FROM_LOGGED
     return DEFAULT_SOC_START_PCT, SOC_FROM_DEFAULT
 ReserveOption = Annotated[
-    float, typer.Option("--reserve-pct", help="EV state of charge to keep all along [%] (default 15, the paper's warning level).")
+    float, typer.Option("--reserve-pct",
+                        help="EV state of charge to keep all along [%] (default 15, the paper's warning level).")
 ]
 IntervalOption = Annotated[
     float, typer.Option("--interval", metavar="LEVEL", help="Level of each row's interval of energy or fuel "
@@ -181,59 +188,64 @@ ConfidenceOption = Annotated[
                         "is the point prediction's verdict.")
 ]
 IceBrakingOption = Annotated[
-    Optional[str],
+    str | None,
     typer.Option(help=f"Override ICE braking mode: {' or '.join(ICE_BRAKING_MODES)}. Default: the vehicle file's."),
 ]
 AmbientOption = Annotated[
-    Optional[float],
+    float | None,
     typer.Option("--ambient-c", help="Ambient temperature [degC] of every prediction (heating and A/C terms). "
                                      "Default: a stored trip's own logged mean, else the vehicle file's "
                                      "reference_temp_c, else 20 degC."),
 ]
 Cr0Option = Annotated[
-    float, typer.Option(help="Cr0 of the simplification criterion, for --cycle files (stored trips and routes keep theirs).")
+    float,
+    typer.Option(help="Cr0 of the simplification criterion, for --cycle files (stored trips and routes keep theirs).")
 ]
-OutOption = Annotated[Optional[Path], typer.Option("--out", "-o", metavar="FILE", help="Write the output to this file instead of stdout.")]
+OutOption = Annotated[Path | None, typer.Option("--out", "-o", metavar="FILE",
+                                                help="Write the output to this file instead of stdout.")]
 
 # How cycle files (--cycle) are read: every option is detected when not given
 # (cevm.io.cycles). One set applies to every --cycle file of the command.
 _CYCLE_PANEL = "Reading cycle files (detected unless given)"
 CycleSepOption = Annotated[
-    Optional[str], typer.Option("--cycle-sep", help="Separator: ',', ';', 'tab' or '|'.", rich_help_panel=_CYCLE_PANEL)
+    str | None, typer.Option("--cycle-sep", help="Separator: ',', ';', 'tab' or '|'.", rich_help_panel=_CYCLE_PANEL)
 ]
 CycleDecimalOption = Annotated[
-    Optional[str], typer.Option("--cycle-decimal", help="Decimal mark: '.' or ','.", rich_help_panel=_CYCLE_PANEL)
+    str | None, typer.Option("--cycle-decimal", help="Decimal mark: '.' or ','.", rich_help_panel=_CYCLE_PANEL)
 ]
 TimeColOption = Annotated[
-    Optional[str], typer.Option("--time-col", help="Time column, in seconds. Default: time_s, Time, t, ...", rich_help_panel=_CYCLE_PANEL)
+    str | None, typer.Option("--time-col", help="Time column, in seconds. Default: time_s, Time, t, ...",
+                             rich_help_panel=_CYCLE_PANEL)
 ]
 TimeStepOption = Annotated[
-    Optional[float],
+    float | None,
     typer.Option("--time-step-s", help="Samples evenly spaced by this many seconds, from 0 (no time column).",
                  rich_help_panel=_CYCLE_PANEL),
 ]
 SpeedColOption = Annotated[
-    Optional[list[str]],
-    typer.Option("--speed-col", metavar="COLUMN", help="Speed column, or a glob such as 'Long haul*': each column is one cycle "
-                                     "(files with one mission per column). Repeatable.", rich_help_panel=_CYCLE_PANEL),
+    list[str] | None,
+    typer.Option("--speed-col", metavar="COLUMN",
+                 help="Speed column, or a glob such as 'Long haul*': each column is one cycle "
+                      "(files with one mission per column). Repeatable.", rich_help_panel=_CYCLE_PANEL),
 ]
 SpeedUnitOption = Annotated[
-    Optional[str], typer.Option("--speed-unit", help="km/h, m/s or mph. Default: from the column name (speed_kmh, "
+    str | None, typer.Option("--speed-unit", help="km/h, m/s or mph. Default: from the column name (speed_kmh, "
                                                      "'Speed (m/s)').", rich_help_panel=_CYCLE_PANEL)
 ]
 ElevationColOption = Annotated[
-    Optional[str], typer.Option("--elevation-col", help="Elevation column, in metres.", rich_help_panel=_CYCLE_PANEL)
+    str | None, typer.Option("--elevation-col", help="Elevation column, in metres.", rich_help_panel=_CYCLE_PANEL)
 ]
 GradeColOption = Annotated[
-    Optional[str], typer.Option("--grade-col", help="Road grade column, integrated along distance into elevation.",
+    str | None, typer.Option("--grade-col", help="Road grade column, integrated along distance into elevation.",
                                 rich_help_panel=_CYCLE_PANEL)
 ]
 GradeUnitOption = Annotated[
-    Optional[str], typer.Option("--grade-unit", help="'%' or 'fraction'. Default: from the column name (grade_pct).",
+    str | None, typer.Option("--grade-unit", help="'%' or 'fraction'. Default: from the column name (grade_pct).",
                                 rich_help_panel=_CYCLE_PANEL)
 ]
 GradeFileOption = Annotated[
-    Optional[Path], typer.Option("--grade-file", metavar="FILE", help="A second file with the same rows holding the grade: the column "
+    Path | None,
+    typer.Option("--grade-file", metavar="FILE", help="A second file with the same rows holding the grade: the column "
                                                       "named like the speed column, or --grade-col (VECTO's "
                                                       "gradient_*.csv).", rich_help_panel=_CYCLE_PANEL)
 ]
@@ -247,10 +259,10 @@ _CYCLE_OPTIONS = {
 }
 
 
-def cycle_format(cycle_sep: Optional[str] = None, cycle_decimal: Optional[str] = None, time_col: Optional[str] = None,
-                 time_step_s: Optional[float] = None, speed_col: Optional[list[str]] = None,
-                 speed_unit: Optional[str] = None, elevation_col: Optional[str] = None, grade_col: Optional[str] = None,
-                 grade_unit: Optional[str] = None, grade_file: Optional[Path] = None):
+def cycle_format(cycle_sep: str | None = None, cycle_decimal: str | None = None, time_col: str | None = None,
+                 time_step_s: float | None = None, speed_col: list[str] | None = None,
+                 speed_unit: str | None = None, elevation_col: str | None = None, grade_col: str | None = None,
+                 grade_unit: str | None = None, grade_file: Path | None = None):
     """The :class:`cevm.io.cycles.CycleFormat` of the cycle options (bad ones: exit 2)."""
     from cevm.io.cycles import CycleFormat
 
@@ -263,7 +275,7 @@ def cycle_format(cycle_sep: Optional[str] = None, cycle_decimal: Optional[str] =
         raise fail(exc) from None
 
 
-def load_sources(stack: ExitStack, store: Optional[Path], cycles, trips, vehicle_ids, routes, cr0: float, cycle_fmt,
+def load_sources(stack: ExitStack, store: Path | None, cycles, trips, vehicle_ids, routes, cr0: float, cycle_fmt,
                  **stored):
     """:func:`cevm.store.sources.load_sources`, but cycle files are read without the
     store package, which is imported only for stored sources: a command on cycle files
@@ -294,8 +306,9 @@ def with_cycle_options(command):
         opts = {name: kwargs.pop(name, None) for name in _CYCLE_OPTIONS}
         return command(*args, cycle_fmt=cycle_format(**opts), **kwargs)
 
-    run.__signature__ = sig.replace(parameters=[p.replace(kind=inspect.Parameter.KEYWORD_ONLY) for p in params] + extra)
-    run.__annotations__ = {p.name: p.annotation for p in run.__signature__.parameters.values()}
+    new_sig = sig.replace(parameters=[p.replace(kind=inspect.Parameter.KEYWORD_ONLY) for p in params] + extra)
+    run.__signature__ = new_sig  # type: ignore[attr-defined]  # typer reads a function's __signature__
+    run.__annotations__ = {p.name: p.annotation for p in new_sig.parameters.values()}
     return run
 FormatOption = Annotated[OutputFormat, typer.Option("--format", "-f", help="Output format.")]
 
@@ -305,7 +318,7 @@ FormatOption = Annotated[OutputFormat, typer.Option("--format", "-f", help="Outp
 MAX_WORKERS_PER_CORE = 4
 
 
-def check_workers(workers: Optional[int]) -> None:
+def check_workers(workers: int | None) -> None:
     """Refuse a --workers count beyond :data:`MAX_WORKERS_PER_CORE` per core (exit 2)."""
     limit = MAX_WORKERS_PER_CORE * (os.cpu_count() or 1)
     if workers is not None and workers > limit:
@@ -313,7 +326,7 @@ def check_workers(workers: Optional[int]) -> None:
                    "processes only add memory)")
 
 
-def check_common(ice_braking: Optional[str], soc_start: float | None, reserve_pct: float,
+def check_common(ice_braking: str | None, soc_start: float | None, reserve_pct: float,
                  interval: float | None = None) -> None:
     if ice_braking is not None and ice_braking not in ICE_BRAKING_MODES:
         raise fail(f"--ice-braking must be one of: {', '.join(ICE_BRAKING_MODES)}")
@@ -395,7 +408,7 @@ def flush_stdout(code, *, said: bool = False):
 PNG, TOML = (".png", "a PNG image"), (".toml", "a vehicle file")
 
 
-def check_output_path(path: Optional[Path], option: str, kind: tuple[str, str] | None = None) -> None:
+def check_output_path(path: Path | None, option: str, kind: tuple[str, str] | None = None) -> None:
     """An output file's path checked before any work, the same for every command's
     ``--out`` and ``--plot``: a mistake is one line and exit 2 (bad usage). Refused: a
     folder given as the file, a file in a folder that does not exist (or is not a
@@ -421,7 +434,7 @@ def check_output_path(path: Optional[Path], option: str, kind: tuple[str, str] |
         raise fail(f"{option} {shown}: cannot write in the folder {printable(str(parent))} (permission denied)")
 
 
-def open_out(stack: ExitStack, out: Optional[Path]) -> IO[str]:
+def open_out(stack: ExitStack, out: Path | None) -> IO[str]:
     return sys.stdout if out is None else stack.enter_context(OutFile(out))
 
 

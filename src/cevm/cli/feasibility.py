@@ -62,7 +62,7 @@ def _mass_for(src, mass_kg: float | None, payload_kg: float | None) -> tuple[flo
         return None, payload_kg, "--payload-kg"
     own = getattr(src, "mass", None)  # a stored trip's (cevm.store.sources.StoredTrip)
     key = None if own is None else own.sweep_key()
-    if key is None:
+    if own is None or key is None:
         return None, None, "vehicle file"
     return (key[1], None, own.origin) if key[0] == "gross" else (None, key[1], own.origin)
 
@@ -76,14 +76,18 @@ def feasibility_cmd(
     vehicle_id: VehicleIdOption = None,
     store: StoreOption = None,
     payload_kg: Annotated[
-        float | None, typer.Option("--payload-kg", "-p", help="Payload in kg at which margins are given. Default: each vehicle's default mass.")
+        float | None,
+        typer.Option("--payload-kg", "-p",
+                     help="Payload in kg at which margins are given. Default: each vehicle's default mass.")
     ] = None,
     mass_kg: Annotated[
-        float | None, typer.Option("--mass-kg", "-m", help="Gross mass in kg at which margins are given (instead of --payload-kg).")
+        float | None,
+        typer.Option("--mass-kg", "-m", help="Gross mass in kg at which margins are given (instead of --payload-kg).")
     ] = None,
     payload_cap_kg: Annotated[
         float | None,
-        typer.Option(help="Where the payload search stops for vehicles without max_gross_kg, in kg. Default: their kerb mass."),
+        typer.Option(help="Where the payload search stops for vehicles without max_gross_kg, in kg. Default: their "
+                          "kerb mass."),
     ] = None,
     soc_start: SocStartOption = None,
     reserve_pct: ReserveOption = DEFAULT_RESERVE_PCT,
@@ -141,7 +145,9 @@ def feasibility_cmd(
                             for i in range(len(res.vehicles)))
                 speed = src.distance_m / src.duration_s if src.duration_s > 0 else float("nan")
                 idle = src.vector.idle_s / src.duration_s if src.duration_s > 0 else float("nan")
-                seen += [(i, res.mass_kg[i], res.ambient_c[i], speed, idle) for i in range(len(vehicles))]
+                amb = res.ambient_c
+                seen += [(i, res.mass_kg[i], float("nan") if amb is None else amb[i], speed, idle)
+                         for i in range(len(vehicles))]
                 src.release()
             stream = open_out(stack, out)
             if fmt == OutputFormat.table:
@@ -160,8 +166,8 @@ def feasibility_cmd(
         from cevm.core.energy import uses_temperature
 
         warn_ambient_unused([(v.label, uses_temperature(v)) for v in vehicles], f"--ambient-c {ambient_c:g}")
-    for exc in skipped:
-        warn_damaged(exc)
+    for problem in skipped:
+        warn_damaged(problem)
     if skipped:
         raise typer.Exit(EXIT_PARTIAL)
 

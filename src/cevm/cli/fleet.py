@@ -29,8 +29,12 @@ app = typer.Typer(help="Fleet assignment: which vehicle serves the shared stops 
 
 @app.command("plan")
 def fleet_plan(
-    scenario: Annotated[Path, typer.Argument(metavar="SCENARIO", help="Scenario TOML (see configs/fleet/paper-case-study.toml).")],
-    day: Annotated[list[str] | None, typer.Option("--day", "-d", metavar="DAY", help="A day by name, or by its number counted from 1 as the paper numbers days (1 is the first day; 0 is refused). Repeatable. Default: every day.")] = None,
+    scenario: Annotated[Path, typer.Argument(metavar="SCENARIO",
+                                             help="Scenario TOML (see configs/fleet/paper-case-study.toml).")],
+    day: Annotated[list[str] | None,
+                   typer.Option("--day", "-d", metavar="DAY",
+                                help="A day by name, or by its number counted from 1 as the paper numbers days (1 is "
+                                     "the first day; 0 is refused). Repeatable. Default: every day.")] = None,
     method: Annotated[str, typer.Option(help="auto (enumerate when small, else MILP), enumerate, or milp.")] = "auto",
     store: StoreOption = None,
     ambient_c: AmbientOption = None,
@@ -54,8 +58,8 @@ def fleet_plan(
     from contextlib import ExitStack
 
     from cevm.io.scenario import default_resolver, fleet_report
-    from cevm.store.sources import store_leg_demand, store_resolver
     from cevm.store import TripStore, resolve_store_path
+    from cevm.store.sources import store_leg_demand, store_resolver
 
     if method not in ("auto", "enumerate", "milp"):
         raise fail("--method must be auto, enumerate or milp")
@@ -122,7 +126,8 @@ def _write_report(report: dict, fmt: OutputFormat, stream) -> None:
     files: dict[tuple, list[str]] = {}  # the fleet's ids per vehicle file: what the litres assumed
     for v in report["vehicles"]:
         files.setdefault((v["vehicle_key"], v["vehicle"], v["ice_braking"]), []).append(v["id"])
-    legend = vehicle_legend({", ".join(ids): (f"{key}: {name}", braking) for (key, name, braking), ids in files.items()})
+    legend = vehicle_legend({", ".join(ids): (f"{key}: {name}", braking)
+                             for (key, name, braking), ids in files.items()})
     if legend:
         echo(legend)
     temps = {d: t for d, t in report.get("ambient_c", {}).items() if t is not None}

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import sys
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 
@@ -14,47 +14,78 @@ from cevm.errors import CevmError
 from cevm.ingest.textfile import MAX_SAMPLES, ReadLimits
 from cevm.text import printable
 
+if TYPE_CHECKING:
+    from rich.progress import TaskID
+
 #: The defaults of the per-file limits (the flags show them in --help).
 _LIMITS = ReadLimits()
 
 
 def ingest(
-    paths: Annotated[list[str], typer.Argument(metavar="PATH", help="Log files, directories (recursive) or glob patterns; .csv and .csv.gz.")],
+    paths: Annotated[list[str],
+                     typer.Argument(metavar="PATH",
+                                    help="Log files, directories (recursive) or glob patterns; .csv and .csv.gz.")],
     store: StoreOption = None,
     dsm: Annotated[
-        Optional[str], typer.Option(help="DSM for road elevation: a GeoTIFF, a directory of tiles, a VRT, or a GDAL URL.")
+        str | None, typer.Option(help="DSM for road elevation: a GeoTIFF, a directory of tiles, a VRT, or a GDAL URL.")
     ] = None,
     allow_remote_dsm: Annotated[
-        bool, typer.Option(help="Allow a DSM (or VRT sources) that GDAL fetches over a network: URLs, /vsicurl/, /vsis3/ ... (also: CEVM_ALLOW_REMOTE_DSM=1). Off: local GeoTIFFs and VRTs only.")
+        bool,
+        typer.Option(help="Allow a DSM (or VRT sources) that GDAL fetches over a network: URLs, /vsicurl/, /vsis3/ ... "
+                          "(also: CEVM_ALLOW_REMOTE_DSM=1). Off: local GeoTIFFs and VRTs only.")
     ] = False,
-    profile: Annotated[Optional[str], typer.Option(help="Force a logger profile by name (default: detect from the header).")] = None,
-    profiles_dir: Annotated[Optional[Path], typer.Option(metavar="DIR", help="A directory of extra logger profiles (TOML).")] = None,
+    profile: Annotated[str | None,
+                       typer.Option(help="Force a logger profile by name (default: detect from the header).")] = None,
+    profiles_dir: Annotated[Path | None,
+                            typer.Option(metavar="DIR", help="A directory of extra logger profiles (TOML).")] = None,
     force: Annotated[bool, typer.Option(help="Re-ingest files even when unchanged.")] = False,
-    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar and no table: failures and one summary line only.")] = False,
-    log_json: Annotated[bool, typer.Option(help="One JSON object per file on stdout, then a summary object (for cron and scripts).")] = False,
+    quiet: Annotated[bool,
+                     typer.Option("--quiet", "-q",
+                                  help="No progress bar and no table: failures and one summary line only.")] = False,
+    log_json: Annotated[bool,
+                        typer.Option(help="One JSON object per file on stdout, then a summary object (for cron and "
+                                          "scripts).")] = False,
     workers: Annotated[
-        Optional[int], typer.Option("--workers", "-w", min=1, metavar="N", help="Worker processes (default: as many of the machine's cores as the batch's work pays for, none for a small batch; 1: serial, in this process).")
+        int | None,
+        typer.Option("--workers", "-w", min=1, metavar="N",
+                     help="Worker processes (default: as many of the machine's cores as the batch's work pays for, "
+                          "none for a small batch; 1: serial, in this process).")
     ] = None,
     scheduler: Annotated[
-        Optional[str], typer.Option(help="Dask scheduler address (tcp://HOST:8786): run the per-file work on that cluster (pip install 'cevm[dask]'); the workers must read the log files at the same paths, and the DSM.")
+        str | None,
+        typer.Option(help="Dask scheduler address (tcp://HOST:8786): run the per-file work on that cluster (pip "
+                          "install 'cevm[dask]'); the workers must read the log files at the same paths, and the DSM.")
     ] = None,
     max_rows: Annotated[
-        Optional[int], typer.Option(min=1, metavar="ROWS", help="Refuse a file of more data rows than this. Default: 2,500,000, and at most 36 million values (rows x columns read), which keeps a worker under 500 MB; given, the rows alone bound a file (memory grows with rows and columns; see docs/guide/ingest.md).")
+        int | None,
+        typer.Option(min=1, metavar="ROWS",
+                     help="Refuse a file of more data rows than this. Default: 2,500,000, and at most 36 million "
+                          "values (rows x columns read), which keeps a worker under 500 MB; given, the rows alone "
+                          "bound a file (memory grows with rows and columns; see docs/guide/ingest.md).")
     ] = None,
     max_samples: Annotated[
-        int, typer.Option(min=1, metavar="SAMPLES", help="Refuse a file whose trips would hold more samples than this on the 1 s grid (a log every 5 s gives 5 a row): the stored trips are held until written, so this keeps a worker under 500 MB.")
+        int,
+        typer.Option(min=1, metavar="SAMPLES",
+                     help="Refuse a file whose trips would hold more samples than this on the 1 s grid (a log every 5 "
+                          "s gives 5 a row): the stored trips are held until written, so this keeps a worker under 500 "
+                          "MB.")
     ] = MAX_SAMPLES,
     max_file_mb: Annotated[
-        float, typer.Option(min=0.001, metavar="MB", help="Refuse a file of more text than this [MB], after decompression.")
+        float,
+        typer.Option(min=0.001, metavar="MB", help="Refuse a file of more text than this [MB], after decompression.")
     ] = _LIMITS.max_file_mb,
     max_expansion: Annotated[
-        float, typer.Option(min=1.0, metavar="RATIO", help="Refuse a gzip file that expands more than this many times (a zip bomb).")
+        float, typer.Option(min=1.0, metavar="RATIO",
+                            help="Refuse a gzip file that expands more than this many times (a zip bomb).")
     ] = _LIMITS.max_expansion,
     manifest: Annotated[
-        Optional[Path], typer.Option(metavar="FILE", help="A manifest CSV of trip masses, applied after the logs (its columns detected; for other layouts: 'cevm trips set-mass --manifest' with column options).")
+        Path | None,
+        typer.Option(metavar="FILE",
+                     help="A manifest CSV of trip masses, applied after the logs (its columns detected; for other "
+                          "layouts: 'cevm trips set-mass --manifest' with column options).")
     ] = None,
     manifest_tz: Annotated[
-        Optional[str], typer.Option(help="The manifest's zone for times without one (Europe/London, UTC, +01:00).")
+        str | None, typer.Option(help="The manifest's zone for times without one (Europe/London, UTC, +01:00).")
     ] = None,
 ) -> None:
     """Read logger CSV exports into the trip store (clean trips, DSM elevation, vectors).
@@ -76,11 +107,11 @@ def ingest(
     import json
 
     from cevm.cli import interrupts
-    from cevm.ingest import IngestOptions
-    from cevm.runtime import signals_deferred
-    from cevm.ingest.pipeline import discover
-    from cevm.ingest import ingest as run_ingest
     from cevm.executors import make_executor
+    from cevm.ingest import IngestOptions
+    from cevm.ingest import ingest as run_ingest
+    from cevm.ingest.pipeline import discover
+    from cevm.runtime import signals_deferred
     from cevm.store import TripStore, resolve_store_path
     from cevm.store.failures import StoreAccessError
 
@@ -99,49 +130,13 @@ def ingest(
     if not files:  # nothing to ingest: bad usage, and no store is created for it
         for m in missing[:-1]:
             typer.echo(f"cevm: error: {printable(m)}", err=True)
-        raise fail(missing[-1] + ("" if len(missing) == 1 else f" (none of the {len(missing)} inputs holds a log file)"))
-    progress = None
-    if not quiet and not log_json and sys.stderr.isatty():
-        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+        raise fail(missing[-1] + ("" if len(missing) == 1
+                                  else f" (none of the {len(missing)} inputs holds a log file)"))
+    files_seen = _FileEvents(quiet, log_json)  # the progress bar and the per-file lines
+    progress, n_files, done = files_seen.progress, files_seen.n_files, files_seen.done
+    on_start, on_file = files_seen.on_start, files_seen.on_file
 
-        progress = Progress(TextColumn("ingest"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
-                            TextColumn("{task.description}"), transient=True)
-    task = None
-    n_files: list[int] = []
-    done: list = []  # the reports of the files written (or found unchanged, or failed), in order
-
-    def on_start(n: int) -> None:
-        nonlocal task
-        n_files.append(n)
-        if progress is not None:
-            progress.start()
-            task = progress.add_task("", total=n)
-
-    def on_file(fr) -> None:
-        if n_files:  # not an input that matched nothing (those come before on_start)
-            done.append(fr)
-        if log_json:
-            typer.echo(json.dumps({"event": "file", **_file_dict(fr)}))
-        elif fr.status == "failed":
-            message = f"cevm: failed: {printable(str(fr.error))}"
-            if progress is not None:
-                progress.console.print(message, markup=False, highlight=False)
-            else:
-                typer.echo(message, err=True)
-        if progress is not None and task is not None:  # inputs that matched nothing come before the bar
-            progress.update(task, advance=1, description=Path(fr.path).name)
-
-    masses = None
-    if manifest is not None:  # a manifest cevm cannot read stops the run before any work
-        from cevm.io.manifest import ManifestFormat, open_manifest
-
-        masses = ManifestFormat(tz=manifest_tz)
-        try:  # read through once (every line readable, within its bounds), holding no row
-            with open_manifest(manifest, masses) as reader:
-                for _ in reader.items():
-                    pass
-        except CevmError as exc:
-            raise fail(exc) from None
+    masses = _checked_manifest(manifest, manifest_tz)
     not_applied = 0
     manifest_applied = False  # said in the line of an interrupted run: the masses wait for the next one
     new_store = not store_path.exists()
@@ -150,6 +145,8 @@ def ingest(
             st.require_intact()  # never write into a damaged database
             report = run_ingest(paths, st, options, on_file=on_file, on_start=on_start, executor=executor)
             if masses is not None and manifest is not None:
+                from cevm.io.manifest import open_manifest
+
                 with signals_deferred(), open_manifest(manifest, masses) as reader:  # streamed: rows never all held
                     _, not_applied = apply_manifest(st, manifest, reader)
                     manifest_applied = True
@@ -169,12 +166,8 @@ def ingest(
         pending = manifest if masses is not None and not manifest_applied else None
         typer.echo(_interrupted_line(exc, done, n_files, store_path, pending), err=True)
         if log_json:
-            event = {"event": "interrupted", "signal": interrupts.signal_name(exc), "store": str(store_path),
-                     "files": n_files[0] if n_files else None, "done": len(done),
-                     "not_done": n_files[0] - len(done) if n_files else None}
-            if masses is not None:
-                event["manifest"] = "applied" if manifest_applied else "not applied"
-            typer.echo(json.dumps(event))
+            typer.echo(json.dumps(_interrupted_event(exc, done, n_files, store_path,
+                                                     None if masses is None else manifest_applied)))
         raise typer.Exit(interrupts.exit_code(exc)) from None
     finally:
         if progress is not None:
@@ -193,6 +186,79 @@ def ingest(
             typer.echo(f"cevm ingest: {interrupts.signal_name(interrupts.Interrupted(late[0]))} arrived after the "
                        "run had finished: it stopped nothing, the summary above stands", err=True)
     raise typer.Exit(EXIT_PARTIAL if report.failed or not_applied else EXIT_OK)
+
+
+class _FileEvents:
+    """What ``cevm ingest`` shows as files are done: a progress bar on a terminal (unless
+    quiet or --log-json), a JSON event or a failure line per file. ``n_files``: the number
+    the run found (once it starts); ``done``: the reports of the files written (or found
+    unchanged, or failed), in order."""
+
+    def __init__(self, quiet: bool, log_json: bool) -> None:
+        self.log_json = log_json
+        self.progress = None
+        if not quiet and not log_json and sys.stderr.isatty():
+            from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+            self.progress = Progress(TextColumn("ingest"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+                                     TextColumn("{task.description}"), transient=True)
+        self.task: TaskID | None = None
+        self.n_files: list[int] = []
+        self.done: list = []
+
+    def on_start(self, n: int) -> None:
+        self.n_files.append(n)
+        if self.progress is not None:
+            self.progress.start()
+            self.task = self.progress.add_task("", total=n)
+
+    def on_file(self, fr) -> None:
+        import json
+
+        progress = self.progress
+        if self.n_files:  # not an input that matched nothing (those come before on_start)
+            self.done.append(fr)
+        if self.log_json:
+            typer.echo(json.dumps({"event": "file", **_file_dict(fr)}))
+        elif fr.status == "failed":
+            message = f"cevm: failed: {printable(str(fr.error))}"
+            if progress is not None:
+                progress.console.print(message, markup=False, highlight=False)
+            else:
+                typer.echo(message, err=True)
+        if progress is not None and self.task is not None:  # inputs that matched nothing come before the bar
+            progress.update(self.task, advance=1, description=Path(fr.path).name)
+
+
+def _checked_manifest(manifest: Path | None, manifest_tz: str | None):
+    """The ManifestFormat of ``--manifest`` (None without one), the file read through once
+    (every line readable, within its bounds, holding no row): a manifest cevm cannot read
+    stops the run before any work."""
+    if manifest is None:
+        return None
+    from cevm.io.manifest import ManifestFormat, open_manifest
+
+    masses = ManifestFormat(tz=manifest_tz)
+    try:
+        with open_manifest(manifest, masses) as reader:
+            for _ in reader.items():
+                pass
+    except CevmError as exc:
+        raise fail(exc) from None
+    return masses
+
+
+def _interrupted_event(exc: BaseException, done: list, n_files: list[int], store_path: Path,
+                       manifest_applied: bool | None) -> dict:
+    """The --log-json event of an interrupted run (``manifest_applied`` None: no --manifest)."""
+    from cevm.cli import interrupts
+
+    event = {"event": "interrupted", "signal": interrupts.signal_name(exc), "store": str(store_path),
+             "files": n_files[0] if n_files else None, "done": len(done),
+             "not_done": n_files[0] - len(done) if n_files else None}
+    if manifest_applied is not None:
+        event["manifest"] = "applied" if manifest_applied else "not applied"
+    return event
 
 
 def _remove_store_files(store_path: Path) -> None:

@@ -28,7 +28,7 @@ from cevm.cli.columns import Column
 from cevm.text import csv_safe, printable
 
 
-class OutputFormat(str, Enum):
+class OutputFormat(str, Enum):  # noqa: UP042 (StrEnum's str() differs: kept as typer sees it today)
     table = "table"
     csv = "csv"
     json = "json"
@@ -40,7 +40,10 @@ ID_COLUMNS = {"cycle", "vehicle", "vehicle_key", "trip_id", "vehicle_id", "sourc
               "mass_source",
               "vehicle id", "start_utc", "created_utc"}
 #: Columns printed left-aligned and allowed to wrap in tables.
-TEXT_COLUMNS = {"kind", "problem", "value", "basis", "what", "cycle", "vehicle", "trip_id", "vehicle_id", "source", "route", "file", "status", "profile", "start_utc", "elevation_source", "day", "day 1", "day 2", "day 3", "method", "stops", "item", "parameter", "std", "in-sample", "cross-validated", "quantity", "terms", "parameters"}
+TEXT_COLUMNS = {"kind", "problem", "value", "basis", "what", "cycle", "vehicle", "trip_id", "vehicle_id", "source",
+                "route", "file", "status", "profile", "start_utc", "elevation_source", "day", "day 1", "day 2", "day 3",
+                "method", "stops", "item", "parameter", "std", "in-sample", "cross-validated", "quantity", "terms",
+                "parameters"}
 
 
 #: How a table's legend says an ICE braking mode (:data:`cevm.core.model.ICE_BRAKING_MODES`):
@@ -275,7 +278,7 @@ def print_table(specs: Sequence[Column], cells: list[list[str]], stream: IO[str]
         _print_vertical(fits, stream, title, width or 80)
         return
     table = Table(title=title)
-    for f, w in zip(shown, widths):
+    for f, w in zip(shown, widths, strict=True):
         header = "\n".join(textwrap.wrap(f.header, w, break_long_words=False)) if len(f.header) > w else f.header
         if f.layout == "wrap":
             table.add_column(header, justify="left", overflow="fold", width=w)

@@ -24,7 +24,7 @@ from collections import Counter
 from contextlib import ExitStack
 from dataclasses import replace
 from pathlib import Path
-from typing import IO, Annotated
+from typing import IO, Annotated, Any
 
 import numpy as np
 import typer
@@ -32,6 +32,7 @@ import typer
 from cevm.cli.columnar import concat_columns, csv_text, json_objects
 from cevm.cli.common import (
     EXIT_PARTIAL,
+    PNG,
     SOC_FROM_DEFAULT,
     TABLE_MAX_ROWS,
     AmbientOption,
@@ -48,7 +49,6 @@ from cevm.cli.common import (
     TripOption,
     VehicleIdOption,
     VehicleOption,
-    PNG,
     check_common,
     check_output_path,
     check_workers,
@@ -147,7 +147,7 @@ class PredictWriter:
         cols = PREDICT.values(BlockRows(block, mass_source, self.options, soc_from))
         n = min(block.n, TABLE_MAX_ROWS - len(self.table_rows))
         for i in range(n):
-            row = {}
+            row: dict[str, Any] = {}
             for column in PREDICT.columns:
                 k = column.name
                 c = cols[k]
@@ -222,7 +222,7 @@ class Assumptions:
         np.maximum.at(self.m_hi, vi, block.pset.mass_kg)
         np.minimum.at(self.t_lo, vi, block.ambient_c)
         np.maximum.at(self.t_hi, vi, block.ambient_c)
-        for v, code in set(zip(vi.tolist(), block.ambient_from.astype(int).tolist())):
+        for v, code in set(zip(vi.tolist(), block.ambient_from.astype(int).tolist(), strict=True)):
             self.origins[v].add(AMBIENT_ORIGINS[code])
         src = block.source
         if src.duration_s > 0:
@@ -246,9 +246,9 @@ class Assumptions:
             masses = np.array([self.m_lo[v], self.m_hi[v]])
             speeds = np.array([self.v_lo, self.v_hi]) if np.isfinite(self.v_lo) else None
             idle = np.array([self.i_lo, self.i_hi]) if np.isfinite(self.i_lo) else None
-            for w in domain_warnings(veh, mass_kg=masses, ambient_c=np.array([lo, hi]), mean_speed_mps=speeds,
-                                     idle_share=idle):
-                out.append(f"cevm: warning: {w}")
+            out.extend(f"cevm: warning: {w}"
+                       for w in domain_warnings(veh, mass_kg=masses, ambient_c=np.array([lo, hi]),
+                                                mean_speed_mps=speeds, idle_share=idle))
         return out
 
 def _count_flags(block: SweepBlock) -> np.ndarray:
@@ -329,13 +329,15 @@ def predict_cmd(
     store: StoreOption = None,
     mass_kg: Annotated[
         list[str] | None,
-        typer.Option("--mass-kg", "-m", metavar="KG", help="Gross mass in kg: a value, a list a,b or a range start:stop:step "
-                                             "(stop included). Repeatable. Default: each vehicle's mass_kg."),
+        typer.Option("--mass-kg", "-m", metavar="KG",
+                     help="Gross mass in kg: a value, a list a,b or a range start:stop:step "
+                          "(stop included). Repeatable. Default: each vehicle's mass_kg."),
     ] = None,
     payload_kg: Annotated[
         list[str] | None,
-        typer.Option("--payload-kg", "-p", metavar="KG", help="Payload in kg on each vehicle's kerb mass: a value, a list or a "
-                                                "range such as 0:26000:2000 (14 values, stop included). Repeatable."),
+        typer.Option("--payload-kg", "-p", metavar="KG",
+                     help="Payload in kg on each vehicle's kerb mass: a value, a list or a "
+                          "range such as 0:26000:2000 (14 values, stop included). Repeatable."),
     ] = None,
     soc_start: SocStartOption = None,
     reserve_pct: ReserveOption = DEFAULT_RESERVE_PCT,
@@ -344,7 +346,8 @@ def predict_cmd(
     out: OutOption = None,
     plot: Annotated[
         Path | None,
-        typer.Option(metavar="FILE.png", help="Write a PNG: state of charge along each source (one mass per vehicle), or energy "
+        typer.Option(metavar="FILE.png",
+                     help="Write a PNG: state of charge along each source (one mass per vehicle), or energy "
                           "against payload (a mass sweep)."),
     ] = None,
     ice_braking: IceBrakingOption = None,
@@ -357,9 +360,11 @@ def predict_cmd(
                                            "(about 10x the time of a sweep without it).")
     ] = False,
     workers: Annotated[
-        int | None, typer.Option("--workers", "-w", min=1, metavar="N", help="Worker processes, a batch of sources per task "
-                                    "(default 1: in this process; a large sweep of many routes runs ~1.3x faster "
-                                    "on 2 cores, a small one is slower for the processes' start).")
+        int | None,
+        typer.Option("--workers", "-w", min=1, metavar="N",
+                     help="Worker processes, a batch of sources per task "
+                          "(default 1: in this process; a large sweep of many routes runs ~1.3x faster "
+                          "on 2 cores, a small one is slower for the processes' start).")
     ] = None,
     scheduler: Annotated[
         str | None, typer.Option(help="Dask scheduler address (tcp://HOST:8786): evaluate the batches on that "
@@ -415,12 +420,14 @@ def predict_cmd(
                 executor = stack.enter_context(make_executor(None if scheduler else workers, scheduler))
             stream = open_out(stack, out)
             writer = PredictWriter(fmt, stream, temperature_used=any(uses_temperature(v) for v in vehicles),
-                                   options=RangeOptions(interval, DEFAULT_SOC_START_PCT if soc_start is None else soc_start,
+                                   options=RangeOptions(interval,
+                                                        DEFAULT_SOC_START_PCT if soc_start is None else soc_start,
                                                         reserve_pct))
             keep_for_plot = plot is not None and np.bincount(pset.vehicle_index).max() > 1
             flagged = np.zeros(3, dtype=np.int64)
-            plot_data, psets = [], []
-            over, used = 0, Counter()
+            plot_data: list[dict] = []
+            psets: list[PredictionSet] = []
+            over, used = 0, Counter[str]()
 
             def yield_block(block: SweepBlock, run_pset: PredictionSet, mass_source: str, soc_from: str) -> None:
                 nonlocal flagged, over
@@ -436,7 +443,7 @@ def predict_cmd(
                 if plot is None:
                     block.source.release()  # free its profile: the sweep is past it
 
-            socs = {}
+            socs: dict[str, float] = {}
             for run, run_pset, mass_source in _mass_runs(sources, pset, vehicles, masses, payloads, ice_braking,
                                                          ambient_c):
                 for group, soc, soc_from in _soc_runs(run, soc_start):
@@ -468,13 +475,13 @@ def predict_cmd(
     for n_rows, what in zip(flagged.tolist(), ("run empty on the way (columns empty_at_km, empty_at_s)",
                                                 "ask more wheel power than their vehicle's max_power_kw (column "
                                                 "over_power)", "ask more speed than their vehicle's max_speed_kmh "
-                                                "(column over_speed)")):
+                                                "(column over_speed)"), strict=True):
         if n_rows:
             typer.echo(f"cevm: warning: {n_rows} predictions {what}", err=True)
     if out is not None and fmt != OutputFormat.table:
         typer.echo(f"cevm predict: {writer.rows} rows -> {out}", err=True)
-    for exc in skipped:
-        warn_damaged(exc)
+    for problem in skipped:
+        warn_damaged(problem)
     if skipped:
         raise typer.Exit(EXIT_PARTIAL)
 

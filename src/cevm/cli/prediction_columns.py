@@ -50,8 +50,8 @@ TOP_SPEED_MEANING = "the highest speed the source holds for 3 s [km/h] (empty as
 LIMITS_TOLERANCE_MEANING = ("how the source is held to max_power_kw and max_speed_kmh: exact (a cycle file, a "
                             "target) or with a log's measurement tolerance (a logged speed may read up to 10 % + "
                             "4 km/h high, UN ECE R39; its elevation is uncertain by the metres given)")
-SOC_FROM_MEANING = ("where the start state of charge comes from: given (--soc-start), logged (a stored trip's own logged "
-                    "start) or default (full: 100 %)")
+SOC_FROM_MEANING = ("where the start state of charge comes from: given (--soc-start), logged (a stored trip's own "
+                    "logged start) or default (full: 100 %)")
 ROAD_MEANING = ("the road's elevation: flat (none: a flat road assumed), elevation (a cycle's elevation or grade "
                 "column), a stored trip's source of elevation (dsm, gps, ...), or route legs")
 
@@ -407,7 +407,8 @@ PREDICT_TABLE = ("cycle", "vehicle_key", "mass_kg", "mass_source", "soc_start_pc
 #: What predict's table keeps on a narrow terminal (never left out) and what it leaves
 #: out first, in order (:func:`cevm.cli.output.print_table`; the rest go from the right).
 PREDICT_TABLE_KEEP = ("cycle", "energy_kwh", "fuel_l", "status")
-PREDICT_TABLE_DROP = ("ambient_c", "mass_source", "soc_start_pct", "distance_km", "energy_kwh_per_km", "fuel_l_per_100km", "range_km",
+PREDICT_TABLE_DROP = ("ambient_c", "mass_source", "soc_start_pct", "distance_km", "energy_kwh_per_km",
+                      "fuel_l_per_100km", "range_km",
                       "soc_min_pct", "measured_energy_kwh", "measured_fuel_l", "interval_text")
 
 

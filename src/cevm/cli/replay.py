@@ -256,8 +256,13 @@ def _plans(st, vehicle, settings: ReplaySettings, ids: list[str], *, positions: 
         def profile(exc) -> None:
             run.damaged_profiles.setdefault(exc.trip_id, exc)
 
+        def twice(ids: list[str], vid=vid) -> None:
+            run.notes.append(f"{vid}: {len(ids)} trip(s) lie mostly inside an earlier trip of the vehicle, the same "
+                             f"driving logged twice (two loggers, or one log under two names): each counted once, "
+                             f"left out: {', '.join(ids[:3])}{' ...' if len(ids) > 3 else ''}")
+
         trips = logged_trips(st, vid, positions=positions, day_of=day_of, on_damaged=run.skipped.append,
-                             on_damaged_profile=profile)
+                             on_damaged_profile=profile, on_logged_twice=twice)
         read = step_table_reader(st, trips, profile)
         plan = plan_vehicle(trips, vehicle, settings, read)
         plan = dataclasses.replace(plan, trips=dataclasses.replace(trips, vectors=()))  # free the vectors

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Annotated, Optional
+from typing import Annotated, Any
 
 import typer
 
@@ -19,7 +19,6 @@ from cevm.cli.output import OutputFormat, write_rows
 from cevm.core.cycle import CR0_DEFAULT
 from cevm.errors import CevmError
 
-
 app = typer.Typer(help="Named routes (a bus block, a delivery round): sequences of stored trips or cycle files.",
                   no_args_is_help=True, rich_markup_mode=None)
 
@@ -31,12 +30,13 @@ def route_add(
     trip: TripOption = None,
     cycle: CycleOption = None,
     leg: Annotated[
-        Optional[list[str]],
-        typer.Option("--leg", metavar="trip:ID|cycle:PATH", help="A leg as trip:ID or cycle:PATH, in order (to mix trips and cycles). Repeatable."),
+        list[str] | None,
+        typer.Option("--leg", metavar="trip:ID|cycle:PATH",
+                     help="A leg as trip:ID or cycle:PATH, in order (to mix trips and cycles). Repeatable."),
     ] = None,
     store: StoreOption = None,
     replace: Annotated[bool, typer.Option(help="Overwrite an existing route of this name.")] = False,
-    note: Annotated[Optional[str], typer.Option(help="A note kept with the route.")] = None,
+    note: Annotated[str | None, typer.Option(help="A note kept with the route.")] = None,
     cr0: Annotated[float, typer.Option(help="Cr0 for the cycle legs' vectors (trips keep theirs).")] = CR0_DEFAULT,
     cycle_fmt=None,
 ) -> None:
@@ -82,11 +82,11 @@ def route_list(
     fmt: FormatOption = OutputFormat.table,
 ) -> None:
     """List the stored routes: legs, distance, duration."""
-    from cevm.store.routes import check_route_profiles, list_routes, load_route_legs
     from cevm.store import TripStore, format_utc
+    from cevm.store.routes import check_route_profiles, list_routes, load_route_legs
 
     path = existing_store(store, "run 'cevm ingest' or 'cevm route add' first, or give --store")
-    rows = []
+    rows: list[dict[str, Any]] = []
     try:
         with TripStore.open(path, readonly=True) as st:
             for info in list_routes(st):
@@ -134,8 +134,8 @@ def route_remove(
     store: StoreOption = None,
 ) -> None:
     """Delete a stored route (its trips stay in the store)."""
-    from cevm.store.routes import remove_route
     from cevm.store import TripStore
+    from cevm.store.routes import remove_route
 
     path = existing_store(store, "give --store")
     try:

@@ -4,7 +4,7 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import Annotated, Any
 
 import numpy as np
 import typer
@@ -21,8 +21,8 @@ from cevm.cli.common import (
     start_soc,
     with_cycle_options,
 )
-from cevm.core import physical_inputs
 from cevm.cli.output import OutputFormat, write_rows
+from cevm.core import physical_inputs
 from cevm.core.sweep import DEFAULT_RESERVE_PCT
 from cevm.errors import CevmError
 from cevm.text import printable
@@ -31,16 +31,25 @@ from cevm.units import J_PER_KWH
 
 @with_cycle_options
 def simulate(
-    vehicle: Annotated[Path, typer.Option("--vehicle", "-v", metavar="FILE", help="Vehicle file with a [detailed] table (the drivetrain; a file without one is refused).")],
-    cycle: Annotated[Optional[Path], typer.Option("--cycle", "-c", metavar="FILE", help="Cycle CSV.")] = None,
-    trip: Annotated[Optional[str], typer.Option("--trip", "-t", metavar="ID", help="A stored trip id.")] = None,
+    vehicle: Annotated[Path,
+                       typer.Option("--vehicle", "-v", metavar="FILE",
+                                    help="Vehicle file with a [detailed] table (the drivetrain; a file without one is "
+                                         "refused).")],
+    cycle: Annotated[Path | None, typer.Option("--cycle", "-c", metavar="FILE", help="Cycle CSV.")] = None,
+    trip: Annotated[str | None, typer.Option("--trip", "-t", metavar="ID", help="A stored trip id.")] = None,
     store: StoreOption = None,
-    mass_kg: Annotated[Optional[float], typer.Option("--mass-kg", "-m", help="Gross mass [kg]. Default: the vehicle's.")] = None,
-    payload_kg: Annotated[Optional[float], typer.Option("--payload-kg", "-p", help="Payload [kg] on the vehicle's kerb mass (instead of --mass-kg).")] = None,
+    mass_kg: Annotated[float | None,
+                       typer.Option("--mass-kg", "-m", help="Gross mass [kg]. Default: the vehicle's.")] = None,
+    payload_kg: Annotated[float | None,
+                          typer.Option("--payload-kg", "-p",
+                                       help="Payload [kg] on the vehicle's kerb mass (instead of --mass-kg).")] = None,
     soc_start_pct: SocStartOption = None,
     reserve_pct: ReserveOption = DEFAULT_RESERVE_PCT,
-    out: Annotated[Optional[Path], typer.Option("--out", "-o", metavar="FILE", help="Per-second output CSV.")] = None,
-    plot: Annotated[Optional[Path], typer.Option(metavar="FILE.png", help="PNG: state of charge (EV, the paper's figure 4) or fuel and elevation (ICE, figure 6).")] = None,
+    out: Annotated[Path | None, typer.Option("--out", "-o", metavar="FILE", help="Per-second output CSV.")] = None,
+    plot: Annotated[Path | None,
+                    typer.Option(metavar="FILE.png",
+                                 help="PNG: state of charge (EV, the paper's figure 4) or fuel and elevation (ICE, "
+                                      "figure 6).")] = None,
     fmt: Annotated[OutputFormat, typer.Option("--format", "-f", help="Format of the summary.")] = OutputFormat.table,
     cycle_fmt=None,
 ) -> None:
@@ -50,9 +59,9 @@ def simulate(
     It takes no ambient temperature: an EV's auxiliaries are its [detailed] table's
     aux_base_power_kw + hvac_power_kw (the summary's aux_power_kw says what was used)."""
     from cevm.core.detailed import simulate as run_simulation
+    from cevm.io import load_vehicle, read_cycle_csv
     from cevm.io.detailed import detailed_params
     from cevm.io.plots import plot_simulation
-    from cevm.io import load_vehicle, read_cycle_csv
 
     if (cycle is None) == (trip is None):
         raise fail("give exactly one of --cycle or --trip")
@@ -80,38 +89,9 @@ def simulate(
             if h is None:
                 typer.echo(f"cevm: note: {printable(name)}: no elevation or grade: a flat road assumed", err=True)
         else:
-            from cevm.store import TripStore, existing_store_path
-
-            from cevm.store.masses import trip_masses
-            from cevm.store.queries import row_measurement
-
-            from cevm.store.codec import MAX_PROFILE_SAMPLES
-            from cevm.store.sources import MAX_SOURCE_SAMPLES, too_long_trip
-
-            with TripStore.open(existing_store_path(store), readonly=True) as st:
-                listed = st.list_trips(trip_ids=[trip])
-                n_listed = int(listed["n_samples"].iloc[0])
-                # bounded as a cycle file is; a count no stored profile can hold is the store's
-                # damage, which load_profile names (exit 4) without inflating anything
-                if MAX_SOURCE_SAMPLES < n_listed <= MAX_PROFILE_SAMPLES:
-                    raise CevmError(too_long_trip(trip, n_listed))
-                prof = st.load_profile(trip)
-                own = trip_masses(st, listed)[trip]
-            r = listed.iloc[0]
-            measured = row_measurement(r["measured_kind"], r["measured_value"], r["measured_source"],
-                                       r["measured_resolution"], r["measured_uncertainty"])
-            if mass_kg is None:  # the trip's own mass: given to it, else logged (cevm.store.masses)
-                mass_kg, mass_source = own.gross_kg(veh), own.origin
-                from cevm.store.sources import foreign_mass
-
-                foreign = foreign_mass(own, measured, veh)
-                try:
-                    mass_kg = float(physical_inputs.masses_for([veh], mass_kg))
-                except CevmError as exc:
-                    raise CevmError(f"trip {trip!r} ({own.describe()} mass): {exc}") from None
-            name, t, v, h = trip, prof["time_s"], prof["speed_mps"], prof["elevation_m"]
-            soc0, soc_from = start_soc(r, soc_start_pct)  # the trip's logged start unless given
-            elevation = r["elevation_source"]
+            assert trip is not None  # exactly one of --cycle, --trip (checked above)
+            (name, t, v, h), (mass_kg, mass_source, measured, foreign, own), (soc0, soc_from), elevation = (
+                _stored_trip(store, trip, veh, mass_kg, mass_source, soc_start_pct))
         res = run_simulation(veh, t, v, h, mass_kg=mass_kg, soc_start=soc0 / 100.0,
                              params=detailed_params(veh))
     except CevmError as exc:
@@ -137,7 +117,7 @@ def simulate(
             plot_simulation(_plot_columns(res, empty_at_s), res, plot, f"{veh.name}: {name}")
         except CevmError as exc:  # a full disk: the plot's, exit 3 (cevm.io.plots leaves no half-written file)
             raise fail(exc) from None
-    row = {"cycle": name, "vehicle": veh.name, "mass_kg": res.mass_kg, "mass_source": mass_source,
+    row: dict[str, Any] = {"cycle": name, "vehicle": veh.name, "mass_kg": res.mass_kg, "mass_source": mass_source,
            "distance_km": res.distance_m / 1e3,
            "duration_s": res.duration_s, "wheel_work_net_kwh": res.wheel_energy_j / J_PER_KWH,
            "friction_brake_kwh": res.friction_brake_energy_j / J_PER_KWH,
@@ -146,11 +126,13 @@ def simulate(
     if aux_w is not None and res.duration_s > 0:  # what the battery fed besides the motor: an assumption
         row["aux_power_kw"] = float(np.sum(aux_w * res.steps["dt_s"]) / res.duration_s) / 1e3
     if veh.is_ev:
+        assert res.energy_j is not None  # an EV's result
         row["energy_kwh"] = res.energy_j / J_PER_KWH
         row["soc_start_pct"], row["soc_start_from"] = soc0, soc_from
         row["soc_end_pct"], row["soc_min_pct"] = verdict.pop("soc_end_pct"), verdict.pop("soc_min_pct")
         row["reserve_pct"] = reserve_pct
     else:
+        assert res.fuel_l is not None  # an ICE's result
         row["fuel_l"] = res.fuel_l
         row["fuel_l_per_100km"] = 100.0 * res.fuel_l / (res.distance_m / 1e3) if res.distance_m > 0 else None
     if measured is not None and measured.value > 0:  # a stored trip: what it measured beside the model
@@ -173,6 +155,45 @@ def simulate(
     if res.traction_deficit_j > 0.02 * max(res.wheel_energy_j, 1.0):
         typer.echo(f"cevm: warning: the vehicle could not follow the trace: {row['traction_deficit_kwh']:.2f} kWh "
                    "of wheel work beyond its powertrain's limits", err=True)
+
+
+def _stored_trip(store: Path | None, trip: str, veh, mass_kg: float | None, mass_source: str,
+                 soc_start_pct: float | None) -> tuple[tuple, tuple, tuple[float, str], str]:
+    """A stored trip for ``simulate --trip``: its trace (name, t, v, h), its mass (mass_kg,
+    mass_source, the measurement, a foreign-mass note, its TripMass; the trip's own mass
+    unless one was given), its start state of charge (the logged one unless given) and
+    its elevation source."""
+    from cevm.store import TripStore, existing_store_path
+    from cevm.store.codec import MAX_PROFILE_SAMPLES
+    from cevm.store.masses import trip_masses
+    from cevm.store.queries import row_measurement
+    from cevm.store.sources import MAX_SOURCE_SAMPLES, too_long_trip
+
+    foreign = None
+    with TripStore.open(existing_store_path(store), readonly=True) as st:
+        listed = st.list_trips(trip_ids=[trip])
+        n_listed = int(listed["n_samples"].iloc[0])
+        # bounded as a cycle file is; a count no stored profile can hold is the store's
+        # damage, which load_profile names (exit 4) without inflating anything
+        if MAX_SOURCE_SAMPLES < n_listed <= MAX_PROFILE_SAMPLES:
+            raise CevmError(too_long_trip(trip, n_listed))
+        prof = st.load_profile(trip)
+        own = trip_masses(st, listed)[trip]
+    r = listed.iloc[0]
+    measured = row_measurement(r["measured_kind"], r["measured_value"], r["measured_source"],
+                               r["measured_resolution"], r["measured_uncertainty"])
+    if mass_kg is None:  # the trip's own mass: given to it, else logged (cevm.store.masses)
+        mass_kg, mass_source = own.gross_kg(veh), own.origin
+        from cevm.store.sources import foreign_mass
+
+        foreign = foreign_mass(own, measured, veh)
+        try:
+            mass_kg = float(physical_inputs.masses_for([veh], mass_kg))
+        except CevmError as exc:
+            raise CevmError(f"trip {trip!r} ({own.describe()} mass): {exc}") from None
+    trace = (trip, prof["time_s"], prof["speed_mps"], prof["elevation_m"])
+    return (trace, (mass_kg, mass_source, measured, foreign, own), start_soc(r, soc_start_pct),  # logged unless given
+            r["elevation_source"])
 
 
 def _no_detailed_table(path: Path, is_ev: bool) -> str:

@@ -5,7 +5,7 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import Annotated
 
 import typer
 
@@ -21,7 +21,7 @@ _PANEL = "Manifest columns and format (detected when not given)"
 def trips(
     ctx: typer.Context,
     store: StoreOption = None,
-    vehicle_id: Annotated[Optional[str], typer.Option("--vehicle-id", help="Only this vehicle's trips.")] = None,
+    vehicle_id: Annotated[str | None, typer.Option("--vehicle-id", help="Only this vehicle's trips.")] = None,
     fmt: Annotated[OutputFormat, typer.Option("--format", "-f", help="Output format.")] = OutputFormat.table,
 ) -> None:
     """List the stored trips, each with its mass and where it comes from (a manifest, by
@@ -66,37 +66,38 @@ TRIPS_HEADERS = {"vehicle_id": "vehicle", "start_utc": "start (UTC)", "distance_
 
 @app.command("set-mass")
 def set_mass(
-    trip_ids: Annotated[Optional[list[str]], typer.Argument(help="Stored trip ids (see 'cevm trips').",
+    trip_ids: Annotated[list[str] | None, typer.Argument(help="Stored trip ids (see 'cevm trips').",
                                                             show_default=False)] = None,
-    gross_kg: Annotated[Optional[float], typer.Option("--gross-kg", help="The trips' gross mass [kg].")] = None,
-    payload_kg: Annotated[Optional[float], typer.Option(
+    gross_kg: Annotated[float | None, typer.Option("--gross-kg", help="The trips' gross mass [kg].")] = None,
+    payload_kg: Annotated[float | None, typer.Option(
         "--payload-kg", help="The trips' payload [kg]: added to the kerb_mass_kg of the vehicle file each command is "
                              "given.")] = None,
     clear: Annotated[bool, typer.Option("--clear", help="Forget the masses given to the trips (they fall back to "
                                                         "the logged gross weight, else the vehicle file's).")] = False,
-    manifest: Annotated[Optional[Path], typer.Option(
-        "--manifest", metavar="FILE", help="A manifest CSV (a transport management system's export): vehicle, and trip id or a "
-                           "start/end window, and gross or payload kg per row.")] = None,
+    manifest: Annotated[Path | None, typer.Option(
+        "--manifest", metavar="FILE",
+        help="A manifest CSV (a transport management system's export): vehicle, and trip id or a "
+             "start/end window, and gross or payload kg per row.")] = None,
     dry_run: Annotated[bool, typer.Option("--dry-run", help="Say what a manifest would give, store nothing.")] = False,
     store: StoreOption = None,
-    vehicle_col: Annotated[Optional[str], typer.Option(help="Manifest: the vehicle id column.",
+    vehicle_col: Annotated[str | None, typer.Option(help="Manifest: the vehicle id column.",
                                                        rich_help_panel=_PANEL)] = None,
-    trip_col: Annotated[Optional[str], typer.Option(help="Manifest: the trip id column.", rich_help_panel=_PANEL)] = None,
-    start_col: Annotated[Optional[str], typer.Option(help="Manifest: the window's start column (ISO 8601).",
+    trip_col: Annotated[str | None, typer.Option(help="Manifest: the trip id column.", rich_help_panel=_PANEL)] = None,
+    start_col: Annotated[str | None, typer.Option(help="Manifest: the window's start column (ISO 8601).",
                                                      rich_help_panel=_PANEL)] = None,
-    end_col: Annotated[Optional[str], typer.Option(help="Manifest: the window's end column (ISO 8601).",
+    end_col: Annotated[str | None, typer.Option(help="Manifest: the window's end column (ISO 8601).",
                                                    rich_help_panel=_PANEL)] = None,
-    gross_col: Annotated[Optional[str], typer.Option(help="Manifest: the gross mass column.",
+    gross_col: Annotated[str | None, typer.Option(help="Manifest: the gross mass column.",
                                                      rich_help_panel=_PANEL)] = None,
-    payload_col: Annotated[Optional[str], typer.Option(help="Manifest: the payload column.",
+    payload_col: Annotated[str | None, typer.Option(help="Manifest: the payload column.",
                                                        rich_help_panel=_PANEL)] = None,
-    sep: Annotated[Optional[str], typer.Option(help="Manifest: the separator, one of , ; tab | (default: detected).",
+    sep: Annotated[str | None, typer.Option(help="Manifest: the separator, one of , ; tab | (default: detected).",
                                                rich_help_panel=_PANEL)] = None,
-    decimal: Annotated[Optional[str], typer.Option(help="Manifest: the decimal mark, . or , (default: , in a "
+    decimal: Annotated[str | None, typer.Option(help="Manifest: the decimal mark, . or , (default: , in a "
                                                         "';' file, else .).", rich_help_panel=_PANEL)] = None,
-    mass_unit: Annotated[Optional[str], typer.Option(help="Manifest: kg or t (default: from the column name, else "
+    mass_unit: Annotated[str | None, typer.Option(help="Manifest: kg or t (default: from the column name, else "
                                                           "kg).", rich_help_panel=_PANEL)] = None,
-    tz: Annotated[Optional[str], typer.Option(help="Manifest: the zone of times without one: an IANA name "
+    tz: Annotated[str | None, typer.Option(help="Manifest: the zone of times without one: an IANA name "
                                                    "(Europe/London), UTC or +01:00. Without it such times are "
                                                    "refused.", rich_help_panel=_PANEL)] = None,
 ) -> None:
@@ -134,14 +135,15 @@ def set_mass(
         with TripStore.open(path) as st:
             if manifest is not None:  # streamed: its rows are matched one at a time, never all held
                 with open_manifest(manifest, fmt) as reader:
-                    applied, problems = apply_manifest(st, manifest, reader, dry_run=dry_run)
+                    _applied, problems = apply_manifest(st, manifest, reader, dry_run=dry_run)
                 raise typer.Exit(EXIT_PARTIAL if problems else EXIT_OK)
-            ids = list(dict.fromkeys(trip_ids))
+            ids = list(dict.fromkeys(trip_ids or []))  # given (checked above)
             if clear:
                 n = clear_masses(st, ids)
                 typer.echo(f"cevm trips set-mass: cleared the given masses of {n} of {len(ids)} trip(s) in {path}")
                 return
             kind, value = ("gross", gross_kg) if gross_kg is not None else ("payload", payload_kg)
+            assert value is not None  # exactly one of the options (checked above)
             new, replaced = set_masses(st, [AssignedMass(t, kind, float(value), "hand") for t in ids])
             typer.echo(f"cevm trips set-mass: {len(ids)} trip(s) given a {kind} mass of {value:,.0f} kg by hand "
                        f"({new} new, {replaced} replaced) in {path}")

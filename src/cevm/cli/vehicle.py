@@ -78,7 +78,9 @@ def _figures(vehicle, cycles: list[Path]) -> list[dict]:
             if vehicle.is_ev:
                 row["energy_kwh_per_km"] = float(b.energy_j[i] / J_PER_KWH / km)
             else:
+                assert b.fuel_l is not None  # an ICE block's
                 row["fuel_l_per_100km"] = float(100.0 * b.fuel_l[i] / km)
+            assert b.range_m is not None  # asked for (ranges=True)
             rng = float(b.range_m[i])
             row["range_km"] = None if not math.isfinite(rng) else rng / 1e3
             row["cannot_follow"] = ", ".join(cannot) or None

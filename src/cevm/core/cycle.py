@@ -456,4 +456,5 @@ def drive_cycle_vector(
 
 def cycle_vector(cycle: DriveCycle, *, cr0: float = CR0_DEFAULT, physics: Physics = PAPER_PHYSICS) -> CycleVector:
     """:func:`drive_cycle_vector` of a validated :class:`DriveCycle`."""
-    return drive_cycle_vector(cycle.time_s, cycle.speed_mps, cycle.elevation_m, cr0=cr0, physics=physics, validate=False)
+    return drive_cycle_vector(cycle.time_s, cycle.speed_mps, cycle.elevation_m, cr0=cr0, physics=physics,
+                              validate=False)

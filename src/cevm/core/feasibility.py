@@ -327,14 +327,14 @@ def feasibility(
     flags = limits.verdict(is_ev=ev, over_max_gross=over, over_power=follow[0], over_speed=follow[1],
                            energy_ok=np.where(known, ok_load.astype(float), np.nan))
     feasible = flags["feasible"]
-    at = load_ranges(source, vehicles, mass, soc_start_pct=soc_start_pct, reserve_pct=reserve_pct,
+    ranges = load_ranges(source, vehicles, mass, soc_start_pct=soc_start_pct, reserve_pct=reserve_pct,
                      ice_braking=ice_braking, ambient_c=ambient_c)
-    empty = np.isfinite(at["empty_at_m"]) & ev
+    empty = np.isfinite(ranges["empty_at_m"]) & ev
     with np.errstate(invalid="ignore"):
         soc_end[empty | (soc_end < 0)] = np.nan  # it does not reach the end: no charge below 0
         soc_min[empty | (soc_min < 0)] = 0.0
     return Feasibility(
-        **at,
+        **ranges,
         over_power=follow[0],
         over_speed=follow[1],
         power_demand_w=follow[2],

@@ -116,8 +116,7 @@ def held_top_speed_mps(legs: Sequence[LegProfile], hold_s: float = SPEED_HOLD_S)
         t, v = leg.time_s, leg.speed_mps
         if v.size == 0:
             continue
-        ends = np.searchsorted(t, t + hold_s * (1.0 - 1e-12), side="left")
-        k = min(max(int(np.max(ends - np.arange(t.size))) + 1, 1), v.size)
+        k = min(max(_longest_reach(t, hold_s * (1.0 - 1e-12)) + 1, 1), v.size)
         # the minimum over each run of k samples (k covers hold_s on the leg's widest
         # sampling; on a uniform grid, exactly the samples of hold_s): k - 1 passes
         low = v[: v.size - k + 1].copy()
@@ -127,18 +126,34 @@ def held_top_speed_mps(legs: Sequence[LegProfile], hold_s: float = SPEED_HOLD_S)
     return best
 
 
+def _longest_reach(t: np.ndarray, span: float) -> int:
+    """The most samples ahead of any sample ``i`` that the first sample at or after
+    ``t[i] + span`` lies (the end of the series where there is none): the largest
+    ``searchsorted(t, t + span) - arange``. The first sample's reach ``m``, checked for
+    every sample by one comparison (each reaches at most ``m`` ahead when ``t[i + m] >=
+    t[i] + span``): on a regular grid, one pass instead of a binary search per sample;
+    searched for every sample where the check fails."""
+    n = t.size
+    s = t + span
+    m = int(np.searchsorted(t, s[0], side="left"))
+    if 0 < m < n and bool(np.all(t[m:] >= s[: n - m])):
+        return m  # the samples from n - m on reach at most the end, n - i <= m ahead
+    return int(np.max(np.searchsorted(t, s, side="left") - np.arange(n)))
+
+
 def _median3(x: np.ndarray) -> np.ndarray:
     """Each element replaced by the median of itself and its two neighbours (the ends
-    kept): one-sample spikes go, steps and ramps stay. A new array, with two temporary
-    ones (a long source's memory)."""
+    kept): one-sample spikes go, steps and ramps stay. A new array, with one temporary
+    one (a long source's memory)."""
     out = x.copy()
     if x.size < 3:
         return out
     a, b, c = x[:-2], x[1:-1], x[2:]
-    lo = np.minimum(a, b)
+    mid = out[1:-1]
     hi = np.maximum(a, b)
     np.minimum(hi, c, out=hi)
-    np.maximum(lo, hi, out=out[1:-1])
+    np.minimum(a, b, out=mid)
+    np.maximum(mid, hi, out=mid)
     return out
 
 
@@ -239,7 +254,8 @@ def source_demand(st: StepTable, legs: Sequence[LegProfile], *, logged: bool = F
     span = window_s * (1.0 - 1e-12)
     dt0 = float(st.dt[0])
     w = max(1, math.ceil(span / dt0)) if dt0 > 0 else 1
-    if np.all(st.dt == dt0) and (w - 1) * dt0 < span:  # a uniform grid: each window is w steps
+    uniform = bool(np.all(st.dt == dt0)) and (w - 1) * dt0 < span
+    if uniform:  # a uniform grid: each window is w steps
         ends = starts + w
     else:
         ends = np.searchsorted(ct, ct[starts] + span, side="left")
@@ -247,13 +263,21 @@ def source_demand(st: StepTable, legs: Sequence[LegProfile], *, logged: bool = F
     if full.any():
         starts, ends = starts[full], ends[full]
     else:  # a source shorter than a window: itself, whole
+        uniform = False
         starts, ends = starts[:1], np.array([st.n])
+    c = np.empty(st.n + 1)  # one running sum at a time, in one buffer: a long source's peak memory
+    c[0] = 0.0
+
+    def differences(c: np.ndarray) -> np.ndarray:
+        """c[ends] - c[starts]; on a uniform grid the same differences as slices w
+        apart, then the moving steps' (one gather instead of two)."""
+        if uniform:
+            return np.asarray(np.subtract(c[w:], c[:-w])[starts])
+        return np.asarray(c[ends] - c[starts])
 
     def window_sums(values: np.ndarray) -> np.ndarray:
-        c = np.empty(values.size + 1)  # one running sum at a time: a long source's peak memory
-        c[0] = 0.0
         np.cumsum(values, out=c[1:])
-        return c[ends] - c[starts]
+        return differences(c)
 
     # de-spiked kinetic and potential energies; standstill: the brakes hold the vehicle
     still = ~mv
@@ -268,7 +292,7 @@ def source_demand(st: StepTable, legs: Sequence[LegProfile], *, logged: bool = F
     del k
     sx = window_sums(x)
     del x
-    return Demand(top, sx, window_sums(st.r), window_sums(st.a), ct[ends] - ct[starts], logged=logged,
+    return Demand(top, sx, window_sums(st.r), window_sums(st.a), differences(ct), logged=logged,
                   elevation_sd_m=elevation_sd, sk=sk)
 
 

@@ -133,7 +133,7 @@ def wheel_energy_j(
     cda_m2,
     cr,
     negative_weight=1.0,
-) -> np.ndarray:
+) -> np.ndarray | np.float64:  # np.float64 for Python scalar arguments (the fast path)
     """Wheel energy E_DC = E_DC1 + E_DC2 over the cycle [J] (eq. 22, 24/27, 25/30).
 
     Parameters (broadcast together)
@@ -183,7 +183,7 @@ def wheel_energy_parts_j(vector: CycleVector, mass_kg, cda_m2, cr) -> tuple[np.n
     return e1 + pos, net - pos
 
 
-def _wheel_energy_scalar(vector: CycleVector, m: float, cda: float, cr: float, w: float) -> np.ndarray:
+def _wheel_energy_scalar(vector: CycleVector, m: float, cda: float, cr: float, w: float) -> np.float64:
     """:func:`wheel_energy_j` for plain Python numbers: same result, less overhead."""
     if not m > 0:
         raise ValueError("mass_kg must be > 0")
@@ -213,7 +213,8 @@ def ice_fuel_l(
 ) -> np.ndarray:
     """ICE fuel over the cycle [l]: L_f = E_DC / (U_f eta) (eq. 26), plus idle fuel.
 
-    ``braking`` defaults to :data:`ICE_BRAKING_DEFAULT` ("no-credit"). ``"paper"`` credits braking energy as eq. (24) does; ``"no-credit"`` counts
+    ``braking`` defaults to :data:`ICE_BRAKING_DEFAULT` ("no-credit"). ``"paper"`` credits braking energy
+    as eq. (24) does; ``"no-credit"`` counts
     only the positive non-simplified steps. ``idle_fuel_lps`` [l/s] is burnt during the
     cycle's time at standstill (0 by default, as in the paper). E_DC < 0 (a long
     descent, paper mode) gives negative fuel from the traction term: the model, not
@@ -240,8 +241,9 @@ def ev_energy_j(
     return battery_energy_from_wheel_j(e, eta, aux_power_w, vector.duration_s)
 
 
-def braking_weight(braking: IceBraking) -> float:
-    """Weight w of negative non-simplified steps for an ICE braking mode."""
+def braking_weight(braking: str) -> float:
+    """Weight w of negative non-simplified steps for an ICE braking mode (one of
+    :data:`ICE_BRAKING_MODES`, else ValueError)."""
     if braking not in ICE_BRAKING_MODES:
         raise ValueError(f"braking must be one of {ICE_BRAKING_MODES}, not {braking!r}")
     return 1.0 if braking == "paper" else 0.0
@@ -271,7 +273,7 @@ class Prediction:
     """Arrays (broadcast shape of the inputs) of one vehicle model's predictions."""
 
     mass_kg: np.ndarray
-    wheel_energy_j: np.ndarray
+    wheel_energy_j: np.ndarray | np.float64  # np.float64 for scalar arguments
     energy_j: np.ndarray | None  # EV: at the battery
     fuel_l: np.ndarray | None  # ICE
     ambient_c: np.ndarray | None = None  # the ambient temperature used [degC]

@@ -282,7 +282,8 @@ def predictive(vehicle: Vehicle, f: Features, *, measurement_sd: ArrayLike | Non
     return Predictive(np.broadcast_to(mu, shape), np.sqrt(np.broadcast_to(var, shape)), post.label, post.source)
 
 
-def total(vehicle: Vehicle, f: Features, groups: ArrayLike | None = None, *, ice_braking: str | None = None) -> Predictive:
+def total(vehicle: Vehicle, f: Features, groups: ArrayLike | None = None, *,
+          ice_braking: str | None = None) -> Predictive:
     """The predictive distribution of the sum of all predictions of ``f`` (one
     element), or of each group's sum (``groups``: a label per prediction, e.g. its
     day; the result in the order of ``np.unique(groups)``). Within a group the scatter

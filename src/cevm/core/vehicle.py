@@ -141,18 +141,21 @@ def domain_warnings(vehicle: Vehicle, *, mass_kg=None, ambient_c=None, mean_spee
     if mass_kg is not None and d.mass_kg is not None:
         m = np.asarray(mass_kg, dtype=np.float64)
         lo, hi = d.mass_kg
-        if m.size and (float(m.min()) < lo * (1 - DOMAIN_MARGIN_MASS) or float(m.max()) > hi * (1 + DOMAIN_MARGIN_MASS)):
+        if m.size and (float(m.min()) < lo * (1 - DOMAIN_MARGIN_MASS)
+                       or float(m.max()) > hi * (1 + DOMAIN_MARGIN_MASS)):
             out.append(f"{label} at {lo:,.0f} to {hi:,.0f} kg; asked at {_span(m, 0)} kg: an extrapolation")
     if mean_speed_mps is not None and d.mean_speed_mps is not None:
         v = np.asarray(mean_speed_mps, dtype=np.float64)
         lo, hi = d.mean_speed_mps
-        if v.size and (float(v.min()) < lo * (1 - DOMAIN_MARGIN_SPEED) or float(v.max()) > hi * (1 + DOMAIN_MARGIN_SPEED)):
+        if v.size and (float(v.min()) < lo * (1 - DOMAIN_MARGIN_SPEED)
+                       or float(v.max()) > hi * (1 + DOMAIN_MARGIN_SPEED)):
             out.append(f"{label} at mean speeds of {3.6 * lo:.1f} to {3.6 * hi:.1f} km/h; asked at "
                        f"{_span(3.6 * v, 1)} km/h: a different duty")
     if idle_share is not None and d.idle_share is not None:
         x = np.asarray(idle_share, dtype=np.float64)
         lo, hi = d.idle_share
-        if x.size and (float(x.min()) < lo - DOMAIN_MARGIN_IDLE_SHARE or float(x.max()) > hi + DOMAIN_MARGIN_IDLE_SHARE):
+        if x.size and (float(x.min()) < lo - DOMAIN_MARGIN_IDLE_SHARE
+                       or float(x.max()) > hi + DOMAIN_MARGIN_IDLE_SHARE):
             out.append(f"{label} standing still {100 * lo:.0f} to {100 * hi:.0f} % of the time; asked at "
                        f"{_span(100 * x, 0)} %: a different duty")
     return out

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from collections import deque
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Generator, Iterable, Iterator
 from dataclasses import dataclass
 from typing import Any
 
@@ -263,7 +263,7 @@ class Executor(ABC):
 
     # ---- the driver -------------------------------------------------------------------
 
-    def run(self, fn: Callable, items: Iterable, *, window: int | None = None) -> Iterator[TaskResult]:
+    def run(self, fn: Callable, items: Iterable, *, window: int | None = None) -> Generator[TaskResult, None, None]:
         """Run ``fn(*task.args)`` for every :class:`Task` in ``items``; yield one
         :class:`TaskResult` per item, in input order.
 

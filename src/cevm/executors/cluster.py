@@ -15,6 +15,7 @@ Worker deaths
 
 from __future__ import annotations
 
+import contextlib
 import os
 import uuid
 from typing import Any
@@ -194,7 +195,7 @@ def local_dask_cluster(n_workers: int = 2, threads_per_worker: int = 1, *, proce
                             host="127.0.0.1", dashboard_address=None)
 
 
-def _client_class(distributed):
+def _client_class(distributed: Any) -> Any:
     """``distributed.Client``, but one whose failed start leaves nothing to close.
 
     A client that cannot reach its scheduler (an unknown scheme, a refused or timed-out
@@ -210,10 +211,8 @@ def _client_class(distributed):
                 return super().start(**kwargs)
             except BaseException:
                 self._Client__loop = None  # Client.__del__ closes only a client with a loop
-                try:
+                with contextlib.suppress(Exception):  # a loop that never ran: nothing to stop
                     self._loop_runner.stop()
-                except Exception:  # a loop that never ran: nothing to stop
-                    pass
                 raise
 
     return Client

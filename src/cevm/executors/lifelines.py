@@ -60,6 +60,7 @@ def watch_owner(owner_pid: int) -> None:
     def wait_pidfd() -> None:
         import select
 
+        assert fd is not None  # run only when the pidfd opened
         p = select.poll()
         p.register(fd, select.POLLIN)
         while not p.poll():
@@ -112,11 +113,11 @@ def start_forkserver(env: Mapping[str, str]) -> None:
                 os.environ.setdefault(k, v)
         forkserver.ensure_running()
     finally:
-        for k, v in saved.items():
-            if v is None:
+        for k, old in saved.items():
+            if old is None:
                 os.environ.pop(k, None)
             else:
-                os.environ[k] = v
+                os.environ[k] = old
 
 
 def forkserver_lifeline() -> None:

@@ -31,6 +31,7 @@ from collections.abc import Callable
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor
 from concurrent.futures import wait as cf_wait
 from concurrent.futures.process import BrokenProcessPool
+from typing import Any
 
 from cevm.executors.base import (
     MAX_ATTEMPTS,
@@ -66,7 +67,8 @@ PARALLEL_EFFICIENCY = 0.85
 """Speed-up per worker a pool reaches on CPU-bound ingest work, measured here (2
 workers: 1.6-1.9x one process)."""
 
-_SLOTS = None  # shared array: index of the task (or group) each pool worker runs, -1 when idle
+# shared ctypes array (multiprocessing): index of the task (or group) each pool worker runs, -1 when idle
+_SLOTS: Any = None
 _SLOT = -1
 
 
@@ -197,7 +199,7 @@ class ProcessExecutor(Executor):
     def _on_broken(self, first: Entry, state: RunState) -> list[TaskResult]:
         """A worker died: sort the submissions the pool held into done, free to
         resubmit and suspects (running when it broke); recreate the pool lazily."""
-        started = {int(i) for i in self._slots_arr if i >= 0} if self._slots_arr is not None else set()
+        started: set[int] = {int(i) for i in self._slots_arr if i >= 0} if self._slots_arr is not None else set()
         pool, self._pool = self._pool, None
         if pool is not None:
             pool.shutdown(wait=True, cancel_futures=True)  # every future is now done

@@ -34,4 +34,5 @@ class SerialExecutor(Executor):
         exc = handle.exception()
         if exc is not None:
             return [TaskResult(entry.index, entry.task, error=error_text(exc), attempts=entry.attempts)]
-        return self._finished(entry, *handle.result(), state)
+        value, seconds = handle.result()
+        return self._finished(entry, value, seconds, state)

@@ -113,12 +113,19 @@ class EnergySourceLike(Protocol):
     :data:`DEFAULT_ACCURACY_PCT` of its kind).
     """
 
-    column: str
-    kind: str
-    quantity: str
-    resolution: float
-    priority: int
-    capacity_j: float | None
+    # read-only (properties): a frozen dataclass such as reading.EnergySource fits
+    @property
+    def column(self) -> str: ...
+    @property
+    def kind(self) -> str: ...
+    @property
+    def quantity(self) -> str: ...
+    @property
+    def resolution(self) -> float: ...
+    @property
+    def priority(self) -> int: ...
+    @property
+    def capacity_j(self) -> float | None: ...
 
 
 @dataclass(frozen=True)
@@ -257,7 +264,7 @@ def _interp_limited(
         outs = [np.empty(q.shape) for _ in arrays]
         for a, b in chunks(q.size):
             part = _interp_limited(q[a:b], ts, vs, max_gap_s, *more, right=None if right is None else right[a:b])
-            for o, x in zip(outs, part if more else [part]):
+            for o, x in zip(outs, part if more else [part], strict=True):
                 o[a:b] = x
         return outs if more else outs[0]
     if right is None:
@@ -299,6 +306,7 @@ def source_samples(
         v = np.asarray(columns[column], dtype=float)
         ok = np.isfinite(v)
         return time_s[ok], v[ok]
+    factors: tuple[str, ...]
     if column == BATTERY_POWER_COLUMN:
         factors = _BATTERY_POWER_FACTORS
     elif "*" in column:
@@ -506,6 +514,8 @@ def estimate_source(
     elif kind == "soc":
         cap = getattr(source, "capacity_j", None)
         if quantity != "energy_j" or cap is None or not cap > 0:
+            if np.count_nonzero((vs >= 0) & (vs <= 100)) >= 2:
+                return invalid(NO_CAPACITY)
             return invalid("SoC source needs quantity 'energy_j' and a capacity_j > 0")
         ok = (vs >= 0) & (vs <= 100)
         raw = soc_energy(ts[ok], vs[ok], t0, t1, resolution_pct=res, capacity_j=float(cap))
@@ -513,6 +523,10 @@ def estimate_source(
     else:
         return invalid(f"unknown kind {kind!r}")
     return finish_estimate(source, raw, resolution, params)
+
+
+#: why a logged state of charge measured nothing: the profile gives no capacity
+NO_CAPACITY = "state of charge logged, but no capacity_j to turn it into energy"
 
 
 def invalid_estimate(source: EnergySourceLike, reason: str, raw: _Raw | None = None) -> SourceEstimate:
@@ -578,6 +592,10 @@ def choose_measurement(estimates: Sequence[SourceEstimate],
     valid = [e for e in estimates if e.valid]
     if not valid:
         quality["source"] = None
+        if any(e.reason == NO_CAPACITY for e in estimates):
+            quality["warnings"].append(
+                "no measured energy: the log's state of charge gives none without the battery's usable capacity; "
+                "give 'capacity' and 'capacity_unit' in the profile's soc [[energy]] entry")
         return None, quality
     quantity = min(valid, key=lambda e: e.priority).quantity  # min() keeps the first of equals
     same = [e for e in valid if e.quantity == quantity]

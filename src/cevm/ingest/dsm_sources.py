@@ -14,8 +14,8 @@ Without that permission (:func:`check_local`), a DSM raster must be a local GeoT
 (opened with the VRT driver only) whose every source, recursively, is such a file; a
 VRT with Python pixel functions is refused as well (code in a data file). Archive
 members (``/vsizip/``, ``/vsitar/``, ``/vsigzip/`` of a local archive) are opened as
-GeoTIFF only, and refused as VRT sources (GDAL would open them unchecked). Anything else is refused with one message naming the file, the
-reference and how to allow it.
+GeoTIFF only, and refused as VRT sources (GDAL would open them unchecked). Anything else is
+refused with one message naming the file, the reference and how to allow it.
 """
 
 from __future__ import annotations
@@ -131,7 +131,7 @@ def _check_vrt(path: Path, shown: str, ancestors: tuple[str, ...]) -> None:
             raise InputError(shown, f"VRT {str(path)!r} holds a Python pixel function (code in a data file): refused")
         if not _names_a_file(el.tag) or not (el.text or "").strip():
             continue  # texts that GDAL does not open (an SRS may hold a URI, harmlessly)
-        ref = el.text.strip()
+        ref = (el.text or "").strip()
         if is_remote(ref):
             raise _refuse(shown, f"VRT {str(path)!r} refers to {ref!r}")
         if ref.lower().startswith("/vsi"):  # GDAL would open the member by its content, unchecked

@@ -250,7 +250,7 @@ def _find_gaps(d: np.ndarray, valid: np.ndarray, max_gap_m: float) -> _Gaps:
     if vi[0] > 0:
         spans.append((float(d[0]), float(d[vi[0]]), "lead"))
     inner = np.flatnonzero(np.diff(vi) > 1)
-    spans.extend(zip(d[vi[inner]].tolist(), d[vi[inner + 1]].tolist(), ["inner"] * inner.size))
+    spans.extend(zip(d[vi[inner]].tolist(), d[vi[inner + 1]].tolist(), ["inner"] * inner.size, strict=True))
     if vi[-1] < n - 1:
         spans.append((float(d[vi[-1]]), float(d[-1]), "trail"))
     short = sum(b - a for a, b, _ in spans if b - a <= max_gap_m)
@@ -370,7 +370,7 @@ def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
     """[start, stop) index ranges of True runs."""
     m = np.concatenate(([False], mask, [False]))
     edges = np.flatnonzero(m[1:] != m[:-1])
-    return list(zip(edges[::2].tolist(), edges[1::2].tolist()))
+    return list(zip(edges[::2].tolist(), edges[1::2].tolist(), strict=True))
 
 
 def bound_grade(h: np.ndarray, step: float, max_grade: float) -> np.ndarray:
@@ -403,7 +403,8 @@ def _bound_grade_or_same(h: np.ndarray, step: float, max_grade: float) -> np.nda
     return bound_grade(h, step, max_grade)
 
 
-def _profile_grid(d: np.ndarray, z: np.ndarray, params: ElevationParams, grid: np.ndarray, max_gap_m: float) -> tuple[np.ndarray, _Gaps]:
+def _profile_grid(d: np.ndarray, z: np.ndarray, params: ElevationParams, grid: np.ndarray,
+                  max_gap_m: float) -> tuple[np.ndarray, _Gaps]:
     """Smoothed (not yet grade-bounded) profile on ``grid``, NaN inside long gaps."""
     valid = np.isfinite(z)
     gaps = _find_gaps(d, valid, max_gap_m)
@@ -430,7 +431,8 @@ def road_profile_m(distance_m, raw_elevation_m, params: ElevationParams = Elevat
     per cell, linear between cells); (2) bridge runs of NaN samples spanning up to
     ``max_gap_m`` by linear interpolation along distance, leave longer gaps NaN;
     (3) running median of ``median_window_m`` (removes roofs, trees, vehicles, bridge
-    decks), repeated on its residuals to cancel the median's bias on slopes, then Gaussian low-pass of ``lowpass_sigma_m``, each covered stretch apart;
+    decks), repeated on its residuals to cancel the median's bias on slopes, then Gaussian
+    low-pass of ``lowpass_sigma_m``, each covered stretch apart;
     (4) bound the grade to ``max_grade`` with :func:`bound_grade` (no drift);
     (5) interpolate back to the samples by distance, so samples that share a distance
     (standstill) get the same elevation.
@@ -500,7 +502,8 @@ def _gps_usable(gps: np.ndarray | None, params: ElevationParams) -> tuple[np.nda
     return g, ""
 
 
-def combine_elevation(distance_m, raw_dsm_m, gps_alt_m=None, params: ElevationParams = ElevationParams(), *, have_dsm: bool = True) -> ElevationResult:
+def combine_elevation(distance_m, raw_dsm_m, gps_alt_m=None, params: ElevationParams = ElevationParams(), *,
+                      have_dsm: bool = True) -> ElevationResult:
     """Road elevation of a trip from raw DSM samples, with GPS altitude or a flat fill
     as fallback (pure).
 
@@ -669,11 +672,13 @@ def _fill_long_gaps(h: np.ndarray, d: np.ndarray, grid: np.ndarray, step: float,
     source = "dsm"
     if filled_gps > 0:
         source = "dsm+gps"
-        notes.append(f"{int(by_gps.sum())} DSM gap(s) over {_gap_str(params)} ({filled_gps:.0f} m) filled from GPS altitude joined to the DSM")
+        notes.append(f"{int(by_gps.sum())} DSM gap(s) over {_gap_str(params)} ({filled_gps:.0f} m) filled from GPS "
+                     f"altitude joined to the DSM")
     if filled_flat > 0:
         source = "dsm+gps+flat" if filled_gps > 0 else "dsm+flat"
         why = why_not_gps if gps is None else "no GPS altitude there"
-        notes.append(f"{int((~by_gps).sum())} DSM gap(s) over {_gap_str(params)} ({filled_flat:.0f} m) bridged by straight lines ({why})")
+        notes.append(f"{int((~by_gps).sum())} DSM gap(s) over {_gap_str(params)} ({filled_flat:.0f} m) bridged by "
+                     f"straight lines ({why})")
     return _Fill(source, filled_gps, filled_flat)
 
 

@@ -242,7 +242,6 @@ def batch_evidence(t_abs: np.ndarray, speed_mps: np.ndarray, bounds: np.ndarray,
 
     n = bounds.size - 1
     lo, hi = row_window[:, 0], row_window[:, 1]
-    wb = bounds_of(hi - lo)
     cols = {c: rows[c] for c in rows if c in EVIDENCE_COLUMNS}
     out_f: list[dict] = [{} for _ in range(n)]
     out_q: list[dict] = [{} for _ in range(n)]

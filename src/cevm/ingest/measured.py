@@ -77,7 +77,7 @@ def _estimates(time_s: np.ndarray, columns: Mapping[str, np.ndarray], source: En
         rejected = np.diff(_kept_bounds(~ok, sb)).tolist()
         raws = integrate_rates(ts[ok], vs[ok], _kept_bounds(ok, sb), t0, t1, max_gap_s=params.max_gap_s,
                                resolution=res)
-        for raw, k in zip(raws, rejected):
+        for raw, k in zip(raws, rejected, strict=True):
             raw.counts["rate_values_rejected"] = k
         resolution = 0.0
     elif kind == "counter":
@@ -118,6 +118,7 @@ def window_samples(time_s: np.ndarray, columns: Mapping[str, np.ndarray], column
         v = np.asarray(columns[column])[rows].astype(np.float64, copy=False)
         ok = np.isfinite(v)
         return tw[ok], v[ok], _kept_bounds(ok, wb)
+    factors: tuple[str, ...]
     if column == BATTERY_POWER_COLUMN:
         factors = _BATTERY_POWER_FACTORS
     elif "*" in column:
@@ -318,7 +319,8 @@ def counter_increases(ts: np.ndarray, counter: np.ndarray, sb: np.ndarray, t0: n
         var = q * q / 6.0
         var += float(lost_sq[k])
         var += (mr * (dur - cov)) ** 2
-        counts = {"counter_wraps": int(k_wraps[k]), "counter_resets": int(k_resets[k]), "counter_jumps": int(k_jumps[k])}
+        counts = {"counter_wraps": int(k_wraps[k]), "counter_resets": int(k_resets[k]),
+                  "counter_jumps": int(k_jumps[k])}
         out[i] = _Raw(float(value[k]), math.sqrt(var), cov / dur, 1.0 - cov / dur, counts)
     return out
 

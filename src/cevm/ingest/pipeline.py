@@ -256,7 +256,8 @@ def _work_to_do(files: list[Path], store: TripStore, options: IngestOptions) -> 
         except OSError:
             continue  # reported by _prepare
         state = None if options.force else store.file_state(path)
-        if state is not None and state.status == "ok" and state.size_bytes == st.st_size and state.mtime_s == st.st_mtime:
+        if (state is not None and state.status == "ok" and state.size_bytes == st.st_size
+                and state.mtime_s == st.st_mtime):
             continue
         costs[str(path)] = estimated_work_s(path, st.st_size)
     return costs
@@ -296,6 +297,8 @@ def _write_result(res: TaskResult, store: TripStore, options: IngestOptions, rep
     path, sha = Path(res.task.key), res.task.args[4]
     if not res.ok:  # the task itself failed: its worker died max_attempts times, or it raised
         error = printable(f"{path}: {res.error}")
+        size: int | None
+        mtime: float | None
         try:
             st = path.stat()
             size, mtime = st.st_size, st.st_mtime
@@ -316,9 +319,11 @@ def _store_outcome(path: Path, out: FileOutcome, store: TripStore, options: Inge
     if not out.ok:
         if out.sha256 is None:  # could not even be read: nothing to record against
             return FileReport(str(path), "failed", error=out.error)
+        assert out.error is not None  # a failed outcome says why
         store.record_failure(path, out.error, sha256=out.sha256, size_bytes=out.size_bytes,
                              mtime_s=out.mtime_s, profile=out.profile)
         return FileReport(str(path), "failed", error=out.error, profile=out.profile)
+    assert out.sha256 is not None  # a file read has its digest
     t0 = time.perf_counter()
     res = store.replace_file_trips(
         path, list(out.trips), list(out.vectors), sha256=out.sha256, size_bytes=out.size_bytes,

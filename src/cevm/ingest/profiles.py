@@ -75,8 +75,8 @@ the drop is reported); timezone UTC; ``date_repair = "none"`` (repairing is opt-
 keeps the next day's date); vehicle id from the file name stem; zero latitude or
 longitude means no fix (GPS modules write 0 without one; a real fix exactly on the
 equator or the Greenwich meridian, to the logged precision, is rare and losing it is
-harmless); ``absurd_error_share = 0.5`` (see :func:`cevm.ingest.reading.plausibility._check_absurd`). Energy ``priority``
-has no default: trust is the profile author's statement.
+harmless); ``absurd_error_share = 0.5`` (see :func:`cevm.ingest.reading.plausibility._check_absurd`).
+Energy ``priority`` has no default: trust is the profile author's statement.
 """
 
 from __future__ import annotations
@@ -91,8 +91,8 @@ from typing import Any, Literal, NamedTuple
 
 from cevm.configs_dir import shipped_configs_dir
 from cevm.errors import InputError
-from cevm.io.inputs import MAX_TOML_BYTES, read_bounded
 from cevm.ingest.timestamps import EPOCH_FORMATS
+from cevm.io.inputs import MAX_TOML_BYTES, read_bounded
 from cevm.lazy import pd
 from cevm.units import (
     FT_TO_M,
@@ -585,7 +585,7 @@ def _column_map(canon: str, spec: Any, k: _Keys) -> ColumnMap:
     map_t = None
     density = _fuel_density(canon, spec, unit, k, key)
     if density is not None:  # fuel by mass: litres through the stated density
-        factor = UNITS[unit].factor / density  # type: ignore[index]
+        factor = UNITS[unit].factor / density
     elif unit is not None:
         factor, offset = _unit_factor(unit, CANONICAL_DIMENSIONS[canon], k.path, f"{key}.unit")
     else:

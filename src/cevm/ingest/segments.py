@@ -25,6 +25,9 @@ array's length, non-decreasing) or as ``starts`` and ``lengths``.
 
 from __future__ import annotations
 
+import itertools
+from typing import Literal
+
 import numpy as np
 
 __all__ = [
@@ -108,7 +111,7 @@ def segment_sums(x: np.ndarray, bounds=None, *, starts=None, lengths=None) -> np
     if s.size <= _FEW or (_FEW >= 0 and n.sum() >= _LONG * s.size):
         # numpy itself, segment by segment: a few segments, or long ones (the whole-batch
         # steps gather blocks of 128 values: more work per value than numpy's own loop)
-        return np.array([x[a:a + k].sum() for a, k in zip(s.tolist(), n.tolist())], dtype=np.float64)
+        return np.array([x[a:a + k].sum() for a, k in zip(s.tolist(), n.tolist(), strict=True)], dtype=np.float64)
     return _pairwise(x, s, n)
 
 
@@ -188,7 +191,7 @@ def segment_cumsum(x: np.ndarray, bounds: np.ndarray, *, start_zero: bool = Fals
     bounds = np.asarray(bounds, dtype=np.int64)
     n = bounds.size - 1
     out = np.empty(x.size + (n if start_zero else 0))
-    for i, (a, b) in enumerate(zip(bounds[:-1].tolist(), bounds[1:].tolist())):
+    for i, (a, b) in enumerate(zip(bounds[:-1].tolist(), bounds[1:].tolist(), strict=True)):
         o = a + i if start_zero else a
         if start_zero:
             out[o] = 0.0
@@ -217,7 +220,7 @@ def segment_medians(values: np.ndarray, group: np.ndarray, n_groups: int, *, fin
     stable = plain and bool((values == 0).any())
     if n_groups <= _FEW and (group.size < 2 or bool((group[1:] >= group[:-1]).all())):  # contiguous groups
         cut = np.searchsorted(group, np.arange(n_groups + 1)).tolist()
-        for i, (a, b) in enumerate(zip(cut[:-1], cut[1:])):
+        for i, (a, b) in enumerate(itertools.pairwise(cut)):
             if b > a:
                 if not plain:
                     med[i] = np.median(values[a:b])
@@ -247,7 +250,7 @@ def segment_medians(values: np.ndarray, group: np.ndarray, n_groups: int, *, fin
 
 
 def segment_searchsorted(a: np.ndarray, a_starts: np.ndarray, a_lengths: np.ndarray, v: np.ndarray,
-                         v_seg: np.ndarray, side: str = "left") -> np.ndarray:
+                         v_seg: np.ndarray, side: Literal["left", "right"] = "left") -> np.ndarray:
     """``np.searchsorted(a[s:s + n], v, side)`` of each value of ``v`` in its segment
     (``v_seg``: the segment of each value; ``a`` sorted within each segment), as
     positions within the segment. The segments of ``a`` need not be sorted among

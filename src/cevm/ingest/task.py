@@ -176,6 +176,32 @@ def speed_jump_warning(jumps: list[dict], n: int) -> str:
             "('speed_jumps') for calibrate to flag or down-weight the trip")
 
 
+def stop_note_warnings(notes) -> list[str]:
+    """The repair notes of the cleaning's charging stops and of the holes the vehicle
+    drove through (the file quality's ``stop_notes``): one line for each kind."""
+    import datetime as dt
+
+    def when(t_s: float) -> str:
+        return dt.datetime.fromtimestamp(t_s, dt.UTC).strftime("%Y-%m-%d %H:%M:%S")
+
+    out = []
+    charging = [n for n in notes if n["kind"] == "charging"]
+    if charging:
+        n = charging[0]
+        what = (f"{n['kwh']:.1f} kWh taken in" if n.get("kwh") is not None
+                else f"state of charge up {n['soc_rise_pct']:.1f} points")
+        out.append(f"charging: {len(charging)} stop(s) where the battery charged, the first from {when(n['t0_s'])} "
+                   f"to {when(n['t1_s'])} UTC ({what}): each ends its trip, so that a trip's measured energy is "
+                   "what its driving used, not that net of a charge")
+    moved = [n for n in notes if n["kind"] == "moved_hole"]
+    if moved:
+        n = max(moved, key=lambda m: m["displacement_m"])
+        out.append(f"speed: {len(moved)} hole(s) in the log between two standstill readings over which the GPS "
+                   f"position moved, the largest {n['displacement_m']:,.0f} m in {n['t1_s'] - n['t0_s']:,.0f} s from "
+                   f"{when(n['t0_s'])} UTC: not a stop but driving the log did not record; the trip is split there")
+    return out
+
+
 def process_file(
     path: str | Path,
     options: IngestOptions,
@@ -229,6 +255,7 @@ def process_file(
                 del batch
                 t0 = time.perf_counter()
             dropped.extend({"vehicle_id": log.vehicle_id, **d} for d in stream.dropped)
+            warnings.extend(stop_note_warnings(stream.quality.get("stop_notes", ())))
         return FileOutcome(
             str(path), sha, size, mtime,
             profile=logs[0].profile if logs else None,

@@ -146,7 +146,7 @@ class ByteStream:
         self.path = path
         self.limits = limits
         try:
-            self._fh = open(path, "rb")
+            self._fh = open(path, "rb")  # noqa: SIM115 (held by the reader, closed by its close())
             self.size_on_disk = os.fstat(self._fh.fileno()).st_size
             self.gzip = self._fh.read(2) == _GZIP_MAGIC
             self._fh.seek(0)
@@ -204,10 +204,12 @@ class ByteStream:
         return data
 
     def _read_gzip(self) -> bytes:
+        z = self._z
+        assert z is not None  # a gzip file's decompressor
         try:
             while True:
-                if self._z.eof:  # a member ended: another may follow (zero padding is allowed)
-                    rest = self._z.unused_data or self._raw_chunk()
+                if z.eof:  # a member ended: another may follow (zero padding is allowed)
+                    rest = z.unused_data or self._raw_chunk()
                     while rest and not rest.strip(b"\x00"):
                         rest = self._raw_chunk()
                     rest = rest.lstrip(b"\x00")
@@ -215,14 +217,14 @@ class ByteStream:
                         return b""
                     if not rest.startswith(_GZIP_MAGIC[: len(rest)]):
                         raise InputError(self.path, "corrupt gzip data: trailing bytes after the compressed data")
-                    self._z = zlib.decompressobj(31)
+                    z = self._z = zlib.decompressobj(31)
                     self._zin = rest
                 if not self._zin:
                     self._zin = self._raw_chunk()
                     if not self._zin:
                         raise InputError(self.path, "corrupt gzip data: the file ends inside the compressed stream")
-                out = self._z.decompress(self._zin, CHUNK_BYTES)
-                self._zin = self._z.unconsumed_tail
+                out = z.decompress(self._zin, CHUNK_BYTES)
+                self._zin = z.unconsumed_tail
                 if out:
                     return out
         except zlib.error as exc:
@@ -242,7 +244,8 @@ class ByteStream:
                                         f"file (--max-file-mb)")
         if not self.gzip or self.bytes_out <= EXPANSION_FLOOR_BYTES:
             return
-        pending = len(self._z.unused_data) if self._z.eof else len(self._zin)  # read, not yet decompressed
+        z = self._z  # a gzip file's: not None here
+        pending = len(z.unused_data) if z is not None and z.eof else len(self._zin)  # read, not yet decompressed
         consumed = self.bytes_in - pending
         if self.bytes_out > lim.max_expansion * max(consumed, 1):
             raise InputError(self.path, f"gzip data expands more than {lim.max_expansion:g} times "

@@ -226,6 +226,7 @@ def fast_first_column(body: bytes, b: np.ndarray, starts: np.ndarray, sep: str, 
         return None
     first_line = body[: body.find(b"\n") if b"\n" in body else len(body)].decode("utf-8", "replace").strip()
     sample = first_line.split(sep)[0].strip()
+    layout: _Layout | None
     if fmt == "ISO8601":
         got = _iso_layout(sample)
         if got is None:

@@ -108,7 +108,7 @@ def calibrated_toml(text: str, values: dict[str, float | str], header: str,
     while lines and _OLD_HEADER.match(lines[0]):
         lines.pop(0)
     doc = tomlkit.parse("\n".join(lines) + "\n")
-    removed = []
+    removed: list[str] = []
     for key, value in values.items():
         value = _round(value)
         if key in doc and not isinstance(doc[key], dict):
@@ -123,15 +123,15 @@ def calibrated_toml(text: str, values: dict[str, float | str], header: str,
             item = tomlkit.item(value)
             item.comment("added by cevm calibrate")
             doc.add(key, item)
-    for key, value in (neutral or {}).items():
+    for key, neutral_value in (neutral or {}).items():
         if key not in doc:
             continue
         old_text = doc[key].as_string().strip()
-        if value is None:
+        if neutral_value is None:
             doc.remove(key)
             removed.append(f"{key} = {old_text}")
         else:
-            doc[key] = _round(value)
+            doc[key] = _round(neutral_value)
             doc[key].comment(f"cevm calibrate: not in the calibrated model (was {old_text})")
     if sources:
         if "sources" not in doc:
@@ -163,6 +163,8 @@ def calibration_table(result: CalibrationResult, *, store: str | None = None, se
     from cevm import __version__
 
     d = result.domain
+    if d is None:
+        raise ValueError("a calibration result without its fit domain")
 
     def pair(x, f=1.0, nd=3):
         return None if x is None else [round(x[0] * f, nd), round(x[1] * f, nd)]

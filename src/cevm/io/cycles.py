@@ -147,7 +147,7 @@ def _name_parts(name: str) -> tuple[str, str | None]:
     return re.sub(r"[\s_\-]+", "", base), unit
 
 
-def _norm_unit(text: str | None, table: dict, what: str, where: str) -> tuple[str, float] | None:
+def _norm_unit(text: str | None, table: dict, what: str, where: str | Path) -> tuple[str, float] | None:
     if text is None:
         return None
     key = text.strip().lower().replace(" ", "")
@@ -300,7 +300,7 @@ def _pick_one(layout: CsvLayout, kind: str, option: str) -> int | None:
     return found[0] if found else None
 
 
-def _speed_columns(layout: CsvLayout, fmt: CycleFormat, exclude: set[int]) -> list[int]:
+def _speed_columns(layout: CsvLayout, fmt: CycleFormat, exclude: set[int | None]) -> list[int]:
     """The selected speed columns; patterns do not match the ``exclude``d (time) column."""
     if not fmt.speed_columns:
         i = _pick_one(layout, "speed", "--speed-col")
@@ -368,6 +368,41 @@ def _require(layout: CsvLayout, values: np.ndarray, n: int, col: int) -> np.ndar
     return part
 
 
+def _grade_source(layout: CsvLayout, fmt: CycleFormat, speed_cols: list[int], time_col: int | None,
+                  grade_col: int | None, arrays: dict, max_rows: int) -> tuple:
+    """Where each speed column's road grade comes from: (the grade's layout, its column
+    per speed column, the grade file's own time column, the arrays read, the unit factor);
+    no grade: (None, {}, None, {}, None). A grade file is read here (the columns named as
+    the speed columns, or --grade-col)."""
+    grade_cols: dict[int, int]
+    grade_layout, grade_cols, grade_time, grade_arrays = None, {}, None, {}
+    if fmt.grade_file is not None:
+        grade_layout = sniff_csv(fmt.grade_file, sep=fmt.sep, decimal=fmt.decimal, what="grade file")
+        for c in speed_cols:
+            name = fmt.grade_column if fmt.grade_column is not None else layout.header[c]
+            grade_cols[c] = _find_named(grade_layout, name, "--grade-col" if fmt.grade_column else
+                                        "the speed column's name in the grade file; else give --grade-col")
+        # the grade file's own time column, when it has one of the same name: its rows
+        # must be the cycle's (checked below)
+        grade_time = (grade_layout.header.index(layout.header[time_col])
+                      if time_col is not None and layout.header[time_col] in grade_layout.header else None)
+        gcols = list(dict.fromkeys([*grade_cols.values(), *([grade_time] if grade_time is not None else [])]))
+        grade_arrays = dict(zip(gcols, read_numeric_columns(grade_layout, gcols, what="grade file",
+                                                            max_rows=max_rows), strict=True))
+    elif grade_col is not None:
+        grade_layout, grade_arrays = layout, arrays
+        grade_cols = dict.fromkeys(speed_cols, grade_col)
+    grade_factor = None
+    if grade_cols:
+        assert grade_layout is not None  # set with grade_cols
+        gunits = {_unit_of(grade_layout, g, fmt.grade_unit, GRADE_UNITS, "grade", "--grade-unit")
+                  for g in set(grade_cols.values())}
+        if len(gunits) > 1:
+            raise InputError(grade_layout.path, "the grade columns have different units; give --grade-unit", line=1)
+        grade_factor = gunits.pop()[1]
+    return grade_layout, grade_cols, grade_time, grade_arrays, grade_factor
+
+
 def read_cycles(path: str | Path, fmt: CycleFormat | None = None, *,
                 max_samples: int | None = None) -> list[DriveCycle]:
     """Every cycle of a cycle file: one per selected speed column (see the module
@@ -416,42 +451,21 @@ def read_cycles(path: str | Path, fmt: CycleFormat | None = None, *,
     wanted = list(dict.fromkeys(wanted))
     max_rows = max(max_samples // len(speed_cols), 0)  # every cycle of the file has at most this many samples
     try:
-        arrays = dict(zip(wanted, read_numeric_columns(layout, wanted, what="cycle file", max_rows=max_rows)))
+        arrays = dict(zip(wanted, read_numeric_columns(layout, wanted, what="cycle file", max_rows=max_rows),
+                          strict=True))
     except InputError as exc:
         if exc.message.startswith("more than "):
             raise _too_long(layout.path, max_rows, len(speed_cols), max_samples, exc.line) from None
         raise
 
-    grade_layout, grade_cols, grade_time = None, {}, None
-    if fmt.grade_file is not None:
-        grade_layout = sniff_csv(fmt.grade_file, sep=fmt.sep, decimal=fmt.decimal, what="grade file")
-        for c in speed_cols:
-            name = fmt.grade_column if fmt.grade_column is not None else layout.header[c]
-            grade_cols[c] = _find_named(grade_layout, name, "--grade-col" if fmt.grade_column else
-                                        "the speed column's name in the grade file; else give --grade-col")
-        # the grade file's own time column, when it has one of the same name: its rows
-        # must be the cycle's (checked below)
-        grade_time = (grade_layout.header.index(layout.header[time_col])
-                      if time_col is not None and layout.header[time_col] in grade_layout.header else None)
-        gcols = list(dict.fromkeys([*grade_cols.values(), *([grade_time] if grade_time is not None else [])]))
-        grade_arrays = dict(zip(gcols, read_numeric_columns(grade_layout, gcols, what="grade file",
-                                                            max_rows=max_rows)))
-    elif grade_col is not None:
-        grade_layout, grade_arrays = layout, arrays
-        grade_cols = {c: grade_col for c in speed_cols}
-    grade_factor = None
-    if grade_cols:
-        gunits = {_unit_of(grade_layout, g, fmt.grade_unit, GRADE_UNITS, "grade", "--grade-unit")
-                  for g in set(grade_cols.values())}
-        if len(gunits) > 1:
-            raise InputError(grade_layout.path, "the grade columns have different units; give --grade-unit", line=1)
-        grade_factor = gunits.pop()[1]
+    grade_layout, grade_cols, grade_time, grade_arrays, grade_factor = _grade_source(
+        layout, fmt, speed_cols, time_col, grade_col, arrays, max_rows)
     elev_factor = (_unit_of(layout, elev_col, None, {k: (k, f) for k, f in _ELEVATION_UNITS.items()}, "elevation",
                             "", default=("m", 1.0))[1] if elev_col is not None else None)
 
     stem = Path(path.name.removesuffix(".gz")).stem
     cycles = []
-    for c, (unit, factor) in zip(speed_cols, units):
+    for c, (unit, factor) in zip(speed_cols, units, strict=True):
         speed_raw = arrays[c]
         n = _extent(speed_raw)
         if time_col is not None and not fmt.speed_columns:
@@ -473,6 +487,7 @@ def read_cycles(path: str | Path, fmt: CycleFormat | None = None, *,
             t = _require(layout, arrays[time_col], n, time_col)
             t = t * time_factor if time_factor != 1.0 else t
         else:
+            assert fmt.time_step_s is not None  # CycleFormat.checked: a time column or a time step
             t = np.arange(n, dtype=np.float64) * fmt.time_step_s
         dt = np.diff(t)
         _check_time(layout, t, dt, time_col)
@@ -486,6 +501,7 @@ def read_cycles(path: str | Path, fmt: CycleFormat | None = None, *,
             _check_elevation(layout, elev_col, v, dt, h)
             elevation = h
         elif c in grade_cols:
+            assert grade_layout is not None and grade_factor is not None  # set with grade_cols
             if grade_time is not None:
                 _same_rows(grade_layout, grade_time, grade_arrays[grade_time], t / time_factor, layout)
             g_raw = _require(grade_layout, grade_arrays[grade_cols[c]], n, grade_cols[c])
@@ -593,7 +609,8 @@ def _check_elevation(layout: CsvLayout, col: int, v: np.ndarray, dt: np.ndarray,
     if h.max() > MAX_ABS_ELEVATION_M or h.min() < -MAX_ABS_ELEVATION_M:
         i = int(np.flatnonzero(np.abs(h) > MAX_ABS_ELEVATION_M)[0])
         raise InputError(layout.path, f"elevation {h[i]:g} m is beyond +-{MAX_ABS_ELEVATION_M:g} m (no road is "
-                                      "higher than 5,800 m; wrong unit or scale?)", line=data_line(layout, i), column=name)
+                                      "higher than 5,800 m; wrong unit or scale?)", line=data_line(layout, i),
+                         column=name)
     allowed = v[1:] + v[:-1]
     allowed *= dt
     allowed *= 0.5 * MAX_GRADE
@@ -624,6 +641,8 @@ def _same_rows(grade_layout: CsvLayout, col: int, grade_t: np.ndarray, t: np.nda
 def _check_spacing(layout: CsvLayout, dt: np.ndarray, col: int | None, factor: float) -> None:
     """A median sample spacing within :data:`MAX_MEDIAN_STEP_S` (a time column in
     milliseconds read as seconds is refused, naming the column)."""
+    if dt.size and np.count_nonzero(dt <= MAX_MEDIAN_STEP_S) > dt.size // 2:
+        return  # more than half the steps within the bound: so is the median (no sort)
     step = float(np.median(dt)) if dt.size else 0.0
     if step <= MAX_MEDIAN_STEP_S:
         return

@@ -190,7 +190,7 @@ def parse_zone(tz: str | None) -> dt.tzinfo | None:
     if tz is None:
         return None
     if tz.strip().upper() in ("UTC", "Z", "GMT"):
-        return dt.timezone.utc
+        return dt.UTC
     m = _OFFSET.fullmatch(tz.strip())
     if m:
         sign = 1 if m.group(1) == "+" else -1
@@ -219,7 +219,7 @@ def _time(text: str, zone: dt.tzinfo | None) -> float:
         else:  # an IANA zone: refuse the hour that does not exist or happens twice
             naive = t
             t0, t1 = t.replace(tzinfo=zone, fold=0), t.replace(tzinfo=zone, fold=1)
-            if all(x.astimezone(dt.timezone.utc).astimezone(zone).replace(tzinfo=None) != naive for x in (t0, t1)):
+            if all(x.astimezone(dt.UTC).astimezone(zone).replace(tzinfo=None) != naive for x in (t0, t1)):
                 raise ValueError(f"{text!r} does not exist in {zone} (clocks going forward)")
             if t0.utcoffset() != t1.utcoffset():
                 raise ValueError(f"{text!r} happens twice in {zone} (clocks going back); give it with its offset")

@@ -11,7 +11,8 @@ Two steps, for any CSV of numbers a user gives (cycle files, and other numeric t
 2. :func:`read_numeric_columns` parses the columns asked for straight into float64
    arrays in C (pyarrow's typed CSV reader for a file of plain numbers, or
    ``numpy.loadtxt`` where pyarrow refuses a cell (a number padded with spaces), else
-   pandas' C parser with float dtypes; every row's field count checked by the parser). Empty cells are NaN; what they mean is the caller's to say, and
+   pandas' C parser with float dtypes; every row's field count checked by the parser).
+   Empty cells are NaN; what they mean is the caller's to say, and
    :func:`describe_missing` names an empty cell or a short line for its message. A cell
    that is not a finite number, or a line with more fields than the header, raises
    :class:`~cevm.errors.InputError` with the line (1-based, the header is line 1) and
@@ -37,6 +38,7 @@ import warnings
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -126,7 +128,8 @@ def sniff_csv(path: str | Path, *, sep: str | None = None, decimal: str | None =
     path = Path(path)
     open_regular(path, what).close()  # a regular file: a FIFO would hang the read, /dev/zero never end it
     if sep is not None and sep not in SEPARATORS:
-        raise InputError(path, f"separator {sep!r} not supported; use one of {', '.join(map(separator_name, SEPARATORS))}")
+        raise InputError(path,
+                         f"separator {sep!r} not supported; use one of {', '.join(map(separator_name, SEPARATORS))}")
     if decimal is not None and decimal not in (".", ","):
         raise InputError(path, f"decimal mark {decimal!r} not supported; use '.' or ','")
     if sep is not None and sep == decimal:
@@ -134,7 +137,9 @@ def sniff_csv(path: str | Path, *, sep: str | None = None, decimal: str | None =
     head, compression, whole = _head(path)
     if b"\x00" in head[:4096]:
         raise InputError(path, f"binary data, not a {what} (CSV text)")
-    lines = _LINE_END.split(head)  # LF, CRLF, or CR alone (a classic Mac export; csv raised on it)
+    # LF, CRLF, or CR alone (a classic Mac export; csv raised on it); the header and the
+    # SNIFF_LINES lines after it are all that is looked at, the rest of the head stays one piece
+    lines = _LINE_END.split(head, maxsplit=SNIFF_LINES + 1)
     if not whole:
         lines = lines[:-1]  # the last one may be cut
         if not lines:
@@ -170,7 +175,7 @@ def _detect_separator(path: Path, header: str, body: list[str], decimal: str | N
     for s, (nh, nb) in counts.items():  # every line split alike, into more than one field
         if nh > 1 and all(n == nh for n in nb):
             return s
-    for s, (nh, nb) in counts.items():  # a header of one column: a one-column file
+    for nh, nb in counts.values():  # a header of one column: a one-column file
         if nh == 1 and all(n == 1 for n in nb):
             return ","
     best = max(counts, key=lambda s: (counts[s][0] > 1, sum(n == counts[s][0] for n in counts[s][1])))
@@ -184,9 +189,9 @@ def _detect_separator(path: Path, header: str, body: list[str], decimal: str | N
 
 def _text_lines(layout: CsvLayout) -> Iterator[str]:
     """The file's lines as text (decompressed, decoded; undecodable bytes replaced)."""
-    with _open_binary(layout.path, layout.compression) as raw:
-        with io.TextIOWrapper(raw, encoding=layout.encoding, errors="replace", newline="") as fh:
-            yield from fh
+    with (_open_binary(layout.path, layout.compression) as raw,
+          io.TextIOWrapper(raw, encoding=layout.encoding, errors="replace", newline="") as fh):
+        yield from fh
 
 
 def _number_ok(cell: str, decimal: str) -> bool:
@@ -308,7 +313,7 @@ def read_numeric_columns(layout: CsvLayout, columns: Sequence[int], *, what: str
     if max_rows is not None and n > max_rows:
         raise InputError(layout.path, f"more than {max_rows:,} data lines; the limit for a {what}",
                          line=data_line(layout, max_rows))
-    for j, arr in zip(columns, out):
+    for j, arr in zip(columns, out, strict=True):
         if np.isinf(arr).any():  # what the C parsers read as infinite ("inf", 1e999)
             i = int(np.flatnonzero(np.isinf(arr))[0])
             raise InputError(layout.path, f"not a finite number: {arr[i]:g}", line=data_line(layout, i),
@@ -381,8 +386,8 @@ def _read_numpy(layout: CsvLayout, columns: list[int], max_rows: int | None) -> 
     (pandas then reads the file and names what is wrong)."""
     if layout.decimal != ".":
         return None
-    kw = dict(delimiter=layout.sep, skiprows=1, dtype=np.float64, comments=None, quotechar='"', ndmin=2,
-              max_rows=None if max_rows is None else max_rows + 1, encoding=layout.encoding)
+    kw: dict[str, Any] = dict(delimiter=layout.sep, skiprows=1, dtype=np.float64, comments=None, quotechar='"',
+                              ndmin=2, max_rows=None if max_rows is None else max_rows + 1, encoding=layout.encoding)
     try:
         with warnings.catch_warnings():
             warnings.filterwarnings("ignore", message="Input line", category=UserWarning)  # blank lines: no rows
@@ -407,7 +412,7 @@ def _read_pandas(layout: CsvLayout, columns: list[int], what: str, max_rows: int
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("error", pd.errors.ParserWarning)
-            df = pd.read_csv(layout.path, dtype={j: np.float64 for j in columns}, keep_default_na=False,
+            df = pd.read_csv(layout.path, dtype=dict.fromkeys(columns, np.float64), keep_default_na=False,
                              na_values=[""], nrows=None if max_rows is None else max_rows + 1, **kw)
     except pd.errors.ParserError as exc:
         m = _PARSER_LINE.search(str(exc))

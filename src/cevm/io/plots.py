@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 
@@ -19,6 +19,7 @@ from cevm.text import printable
 if TYPE_CHECKING:
     from cevm.core.calibration import CalibrationResult
     from cevm.core.sweep import PredictionSet, Source
+    from cevm.core.vehicle import Vehicle
 
 #: Lines drawn at most by ``--plot`` (one per source and vehicle).
 PLOT_MAX_LINES = 12
@@ -147,39 +148,40 @@ def plot_predictions(path: Path, sources: list[Source], pset: PredictionSet | Se
     source (a stored trip's logged start). ``warn`` is called with a message when only the first
     :data:`PLOT_MAX_LINES` (source, vehicle) pairs are drawn."""
     per_source = list(pset) if isinstance(pset, (list, tuple)) else None
-    pset = per_source[0] if per_source else pset
+    first = cast("PredictionSet", per_source[0] if per_source else pset)  # the first set gives the vehicles
     from cevm.core.sweep import energy_trajectory
 
-    counts = np.bincount(pset.vehicle_index)
-    pairs = [(s, v) for s in range(len(sources)) for v in range(len(pset.vehicles))]
+    counts = np.bincount(first.vehicle_index)
+    pairs = [(s, v) for s in range(len(sources)) for v in range(len(first.vehicles))]
     if len(pairs) > PLOT_MAX_LINES:
         if warn is not None:
             warn(f"cevm: warning: --plot draws the first {PLOT_MAX_LINES} of {len(pairs)} (source, vehicle) pairs")
         pairs = pairs[:PLOT_MAX_LINES]
-    has_ev = any(pset.vehicles[v].is_ev for _, v in pairs)
-    has_ice = any(not pset.vehicles[v].is_ev for _, v in pairs)
+    has_ev = any(first.vehicles[v].is_ev for _, v in pairs)
+    has_ice = any(not first.vehicles[v].is_ev for _, v in pairs)
     n_ax = int(has_ev) + int(has_ice)
     fig = _figure((9, 4.5 * n_ax))
     axes = fig.subplots(n_ax, 1, squeeze=False)
     ax_ev = axes[0, 0] if has_ev else None
     ax_ice = axes[-1, 0] if has_ice else None
+
+    def axis(veh: Vehicle) -> Any:
+        ax = ax_ev if veh.is_ev else ax_ice
+        assert ax is not None  # has_ev / has_ice
+        return ax
     if counts.max() > 1:  # a mass sweep: energy against payload (or mass)
-        use_payload = bool(np.all(np.isfinite(pset.payload_kg)))
+        use_payload = bool(np.all(np.isfinite(first.payload_kg)))
         xname = "payload [kg]" if use_payload else "gross mass [kg]"
         for s, v in pairs:
-            sel = pset.vehicle_index == v
-            x = (pset.payload_kg if use_payload else pset.mass_kg)[sel]
-            veh = pset.vehicles[v]
+            sel = first.vehicle_index == v
+            x = (first.payload_kg if use_payload else first.mass_kg)[sel]
+            veh = first.vehicles[v]
             ys = sweep_data[s]
             label = f"{vehicle_label(veh)} on {printable(sources[s].name)}"
-            if veh.is_ev:
-                ax_ev.plot(x, ys["energy_kwh"][sel], marker="o", ms=3, label=label)
-            else:
-                ax_ice.plot(x, ys["fuel_l"][sel], marker="o", ms=3, label=label)
-            over = pset.over_max_gross[sel]
+            axis(veh).plot(x, ys["energy_kwh" if veh.is_ev else "fuel_l"][sel], marker="o", ms=3, label=label)
+            over = first.over_max_gross[sel]
             if over.any():
-                ax = ax_ev if veh.is_ev else ax_ice
-                ax.plot(x[over], (ys["energy_kwh"] if veh.is_ev else ys["fuel_l"])[sel][over], "x", color="red")
+                axis(veh).plot(x[over], (ys["energy_kwh"] if veh.is_ev else ys["fuel_l"])[sel][over], "x", color="red")
         if ax_ev is not None:
             ax_ev.set(xlabel=xname, ylabel="battery energy [kWh]",
                       title="EV energy against load (x: over max_gross_kg)")
@@ -187,21 +189,22 @@ def plot_predictions(path: Path, sources: list[Source], pset: PredictionSet | Se
             ax_ice.set(xlabel=xname, ylabel="fuel [l]", title="ICE fuel against load (x: over max_gross_kg)")
     else:  # state of charge along the route (the paper's figure 4)
         for s, v in pairs:
-            veh = pset.vehicles[v]
-            ps = per_source[s] if per_source else pset
+            veh = first.vehicles[v]
+            ps = per_source[s] if per_source else first
             m = float(ps.mass_kg[ps.vehicle_index == v][0])
             _, dist, e = energy_trajectory(sources[s], veh, m, ice_braking=ice_braking)
             label = f"{vehicle_label(veh)} on {printable(sources[s].name)} ({m:,.0f} kg)"
             if veh.is_ev:
+                assert veh.battery_j is not None  # an EV's (vehicle files require it)
                 soc = (soc_start[s] if isinstance(soc_start, (list, tuple)) else soc_start) - 100.0 * e / veh.battery_j
                 empty = np.flatnonzero(soc < 0)
                 if empty.size:  # the line ends where the battery runs empty: no charge below 0
                     soc = soc.copy()
                     soc[empty[0]:] = np.nan
                     label += f", empty at {dist[empty[0]] / 1000.0:,.1f} km"
-                ax_ev.plot(dist / 1000.0, soc, label=label)
+                axis(veh).plot(dist / 1000.0, soc, label=label)
             else:
-                ax_ice.plot(dist / 1000.0, e, label=label)
+                axis(veh).plot(dist / 1000.0, e, label=label)
         if ax_ev is not None:
             ax_ev.axhline(reserve_pct, color="red", ls="--", lw=1, label=f"reserve {reserve_pct:g} %")
             ax_ev.set(xlabel="distance [km]", ylabel="state of charge [%]", title="State of charge along the route")

@@ -67,8 +67,9 @@ from __future__ import annotations
 
 import difflib
 import math
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal, overload
 
 from cevm.core import energy
 from cevm.core.model import ICE_BRAKING_DEFAULT, ICE_BRAKING_MODES
@@ -127,6 +128,12 @@ def check_vehicle_id(value: Any, source: str, what: str = "key 'id'") -> str:
     return value
 
 
+@overload
+def _number(data: dict, key: str, source: str, *, required: Literal[True], lo: float | None = None,
+            hi: float | None = None, lo_open: bool = False) -> float: ...
+@overload
+def _number(data: dict, key: str, source: str, *, required: bool, lo: float | None = None,
+            hi: float | None = None, lo_open: bool = False) -> float | None: ...
 def _number(data: dict, key: str, source: str, *, required: bool, lo: float | None = None,
             hi: float | None = None, lo_open: bool = False) -> float | None:
     if key not in data:
@@ -204,15 +211,16 @@ def _vehicle_values(data: dict[str, Any], source: str = "<vehicle>", *,
     kerb = _number(data, "kerb_mass_kg", source, required=False, lo=0.0, lo_open=True)
     payload = _number(data, "payload_kg", source, required=False, lo=0.0)
     mass = _number(data, "mass_kg", source, required=False, lo=0.0, lo_open=True)
-    if mass is None and kerb is None:
-        raise InputError(source, "missing required key 'mass_kg' (or 'kerb_mass_kg')")
     if mass is not None and payload is not None:
         raise InputError(source, "key 'payload_kg' goes with 'kerb_mass_kg', not with 'mass_kg'")
     if mass is None:
+        if kerb is None:
+            raise InputError(source, "missing required key 'mass_kg' (or 'kerb_mass_kg')")
         mass = kerb + (payload or 0.0)
     max_gross = _number(data, "max_gross_kg", source, required=False, lo=0.0, lo_open=True)
     if max_gross is not None and mass > max_gross:
         raise InputError(source, f"default mass {mass:g} kg exceeds key 'max_gross_kg' = {max_gross:g}")
+    vid: str | None
     if "id" in data:
         vid = check_vehicle_id(data["id"], source)
     else:
@@ -341,11 +349,11 @@ def load_vehicle(path: str | Path) -> Vehicle:
     return vehicle_from_mapping(read_toml(path, "vehicle file"), str(path), default_id=stem_id(path))
 
 
-def load_vehicles(paths: list[str | Path]) -> list[Vehicle]:
+def load_vehicles(paths: Sequence[str | Path]) -> list[Vehicle]:
     """Load vehicle files; a directory contributes its ``*.toml`` files, sorted. Raises
     :class:`InputError` when two of them have the same id."""
     out: list[Vehicle] = []
-    where: dict[str, Path] = {}
+    where: dict[str | None, Path] = {}
     for p in paths:
         p = Path(p)
         if p.is_dir():

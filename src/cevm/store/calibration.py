@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from cevm.core.calibration import TripData
+from cevm.core.replay.duties import logged_twice
 from cevm.core.vehicle import Vehicle
 from cevm.errors import CevmError
 from cevm.store.failures import DamagedTripError
@@ -112,7 +113,9 @@ def trips_for_calibration(store: TripStore, vehicle_id: str, vehicle: Vehicle) -
     else the vehicle file's mass; each trip's ``mass_source`` says which, the notes count
     them and name the trips whose given and logged masses disagree by more than 5 %.
     Group: the trip's UTC day, so trips of one day (one driver, one load, one weather)
-    are held out together in cross-validation. Evidence: the trip's logged mean ambient
+    are held out together in cross-validation. A trip lying mostly inside an earlier one
+    (:func:`~cevm.core.replay.duties.logged_twice`: the same driving logged twice) is
+    left out and named in the notes. Evidence: the trip's logged mean ambient
     temperature, its start, its time at standstill and the rate measured then (battery
     power for an EV, fuel rate for an ICE). Trips whose vector is damaged are left out
     and listed in :attr:`TripSelection.damaged`.
@@ -120,7 +123,13 @@ def trips_for_calibration(store: TripStore, vehicle_id: str, vehicle: Vehicle) -
     df = store.list_trips(vehicle_id=vehicle_id)
     if df.empty:
         known = ", ".join(store.vehicle_ids()[:10]) or "none"
-        raise CevmError(f"vehicle id {vehicle_id!r} has no stored trips (stored vehicle ids: {known}); see 'cevm trips'")
+        raise CevmError(f"vehicle id {vehicle_id!r} has no stored trips (stored vehicle ids: {known}); "
+                        "see 'cevm trips'")
+    df = df.sort_values(["start_utc_s", "trip_id"], kind="stable")
+    twice = logged_twice(df["start_utc_s"].to_numpy(dtype=np.float64),
+                         (df["start_utc_s"] + df["duration_s"]).to_numpy(dtype=np.float64))
+    twice_ids = list(df["trip_id"][twice])
+    df = df[~twice]
     damaged: list[DamagedTripError] = []
     vectors = store.load_cycle_vectors(vehicle_id=vehicle_id, on_damaged=damaged.append)
     masses = trip_masses(store, df)
@@ -166,6 +175,10 @@ def trips_for_calibration(store: TripStore, vehicle_id: str, vehicle: Vehicle) -
         notes = [f"mass: {own} of {len(out)} trips at their own, the other {origins['vehicle file']} at the vehicle "
                  f"file's {vehicle.mass_kg:,.0f} kg ({counts}; give trips their masses with 'cevm trips set-mass' "
                  "for a better fit)"]
+    if twice_ids:
+        notes.append(f"{len(twice_ids)} trip(s) lie mostly inside an earlier trip of the vehicle, the same driving "
+                     "logged twice (two loggers, or one log under two names): each fitted once, left out: "
+                     + ", ".join(twice_ids[:10]) + (" ..." if len(twice_ids) > 10 else ""))
     spliced = [t.trip_id for t in out if t.flags]
     if spliced:
         notes.append(f"{len(spliced)} trip(s) with a spliced recording weighted {SPLICED_WEIGHT:g} (column flags): "

@@ -112,7 +112,7 @@ def encode_profiles(arrays: Mapping[str, np.ndarray], bounds: np.ndarray) -> lis
         delta[starts] = bits[starts]  # each trip's first from 0
         deltas.append((name, dtype, a.itemsize, delta))
     out = []
-    for a, b in zip(bounds[:-1].tolist(), bounds[1:].tolist()):
+    for a, b in zip(bounds[:-1].tolist(), bounds[1:].tolist(), strict=True):
         n = b - a
         entries, payloads = [], []
         for name, dtype, size, delta in deltas:

@@ -37,7 +37,7 @@ def format_trips(df: pd.DataFrame, masses: Mapping | None = None) -> pd.DataFram
         {
             "trip_id": df["trip_id"],
             "vehicle_id": df["vehicle_id"],
-            "start_utc": format_utc(df["start_utc_s"]).to_numpy(),
+            "start_utc": np.asarray(format_utc(df["start_utc_s"])),  # a Series in, a Series out
             "duration_s": df["duration_s"].astype(np.float64),
             "distance_km": df["distance_m"].astype(np.float64) / 1000.0,
             "start_soc_pct": df["start_soc_pct"].astype(np.float64),

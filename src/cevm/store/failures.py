@@ -19,10 +19,12 @@ The command line gives each kind its exit code (:mod:`cevm.cli.common`).
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import re
 import sqlite3
 from pathlib import Path
+from typing import cast
 
 from cevm.errors import CevmError
 
@@ -107,7 +109,8 @@ def translate(exc: sqlite3.Error, path: Path, busy_timeout_s: float) -> CevmErro
                                 "Free some space (or raise the file-size limit) and run again", "full")
     if primary in (_READONLY, _PERM):
         return StoreAccessError(f"{path}: the store could not be written: it is read-only ({text}: the file, its "
-                                f"directory or the file system); {nothing}. Commands that only read it work", "readonly")
+                                f"directory or the file system); {nothing}. Commands that only read it work",
+                                "readonly")
     if primary in (_BUSY, _LOCKED):
         return StoreAccessError(f"{path}: the store could not be written: another process held its write lock for "
                                 f"more than {busy_timeout_s:g} s ({text}; a hung cevm ingest?); {nothing}. "
@@ -132,10 +135,8 @@ def _translated(method, connection_of):
         except sqlite3.Error as exc:
             con = connection_of(self)
             if isinstance(self, sqlite3.Cursor):  # finalize its statement now: an exception that
-                try:  # outlives this call (a caller keeps it) must not keep the database's files open
-                    self.close()
-                except sqlite3.Error:
-                    pass
+                with contextlib.suppress(sqlite3.Error):  # outlives this call (a caller keeps it) must
+                    self.close()  # not keep the database's files open
             err = translate(exc, con.store_path, con.busy_timeout_s)
             if err is None:
                 raise
@@ -145,7 +146,8 @@ def _translated(method, connection_of):
 
 
 def _cursor_connection(cursor: sqlite3.Cursor) -> StoreConnection:
-    return cursor.connection
+    # the store opens its connections with factory=StoreConnection
+    return cast(StoreConnection, cursor.connection)
 
 
 class _Cursor(sqlite3.Cursor):

@@ -169,7 +169,8 @@ def trip_masses(store: TripStore, trips) -> dict[str, TripMass]:
     by trip id."""
     ids = list(trips["trip_id"])
     given = assigned_masses(store, ids)
-    return {tid: TripMass(tid, given.get(tid), _logged(gw)) for tid, gw in zip(ids, trips["gross_weight_kg"])}
+    return {tid: TripMass(tid, given.get(tid), _logged(gw))
+            for tid, gw in zip(ids, trips["gross_weight_kg"], strict=True)}
 
 
 # ---------------------------------------------------------------------------- writing

@@ -14,17 +14,21 @@ import json
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 
 from cevm.core.cycle import CycleVector
-from cevm.core.trip import TRIP_EVIDENCE_FIELDS, Measurement, Trip
+from cevm.core.trip import TRIP_EVIDENCE_FIELDS, Measurement, MeasurementKind, Trip
 from cevm.errors import CevmError
 from cevm.lazy import pd
 from cevm.store.codec import decode_profile, decode_vector
 from cevm.store.failures import DAMAGED_HINT, DamagedTripError, StoreDamagedError
 from cevm.store.location import file_key
 from cevm.store.schema import FILE_COLUMNS, TRIP_COLUMNS, TRIP_FLOAT_COLUMNS, blob_crc32, in_json, nan_for_null
+
+if TYPE_CHECKING:
+    from cevm.store.failures import StoreConnection
 
 
 @dataclass(frozen=True)
@@ -54,12 +58,19 @@ def row_measurement(kind, value, source, resolution, uncertainty) -> Measurement
     measured_* columns; None when the trip has none."""
     if not isinstance(kind, str) or value is None or not np.isfinite(value):
         return None
-    return Measurement(kind, float(value), str(source), float(resolution), float(uncertainty))
+    # the kinds the store writes (fuel_l, energy_j): the stored measured_kind as it is
+    return Measurement(cast(MeasurementKind, kind), float(value), str(source), float(resolution), float(uncertainty))
 
 
 class TripQueries:
     """The reads of :class:`~cevm.store.TripStore` (a mixin: it needs the store's ``con``
     and ``path``)."""
+
+    if TYPE_CHECKING:  # what TripStore provides
+        path: Path
+
+        @property
+        def con(self) -> StoreConnection: ...
 
     def _count_hint(self) -> str:
         n = self.count_trips()
@@ -333,8 +344,9 @@ class TripQueries:
         ).fetchone()
         if row is None:
             raise CevmError(f"unknown trip id '{trip_id}'; {self._count_hint()}")
-        r = dict(zip(TRIP_COLUMNS, row[:-2]))
-        prof = self._decoded_profile(trip_id, self._checked(trip_id, "profile", row[-2], row[-1]), r["n_samples"])
+        r = dict(zip(TRIP_COLUMNS, row[:-2], strict=True))
+        prof: dict[str, Any] = self._decoded_profile(trip_id, self._checked(trip_id, "profile", row[-2], row[-1]),
+                                                     r["n_samples"])
         measured = None
         if r["measured_kind"] is not None:
             measured = Measurement(

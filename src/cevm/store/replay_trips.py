@@ -19,6 +19,7 @@ import pandas as pd
 
 from cevm.core.cycle import CycleVector
 from cevm.core.replay import LoggedTrips
+from cevm.core.replay.duties import logged_twice
 from cevm.core.sweep import LegProfile, StepTable, build_step_table
 from cevm.errors import CevmError
 from cevm.store.failures import DamagedTripError
@@ -68,13 +69,16 @@ def trip_positions(st: TripStore, rows: pd.DataFrame,
 def logged_trips(st: TripStore, vehicle_id: str, *, positions: bool = False,
                  day_of: Callable[[np.ndarray], np.ndarray] | None = None,
                  on_damaged: Callable[[DamagedTripError], None] | None = None,
-                 on_damaged_profile: Callable[[DamagedTripError], None] | None = None) -> LoggedTrips:
+                 on_damaged_profile: Callable[[DamagedTripError], None] | None = None,
+                 on_logged_twice: Callable[[list[str]], None] | None = None) -> LoggedTrips:
     """The stored trips of ``vehicle_id`` sorted by start, with their masses (a mass given
     to the trip, else its logged gross weight; :mod:`cevm.store.masses`), temperatures,
     and with ``positions`` their start and end positions; ``day_of`` gives each trip's
     day number from its start [s] (for duties by calendar day). Damaged trips go to
     ``on_damaged`` and are left out (counted in ``missing``); a trip whose profile alone is
-    damaged stays (its positions unknown) and goes to ``on_damaged_profile``."""
+    damaged stays (its positions unknown) and goes to ``on_damaged_profile``. A trip
+    lying mostly inside an earlier one (:func:`~cevm.core.replay.duties.logged_twice`:
+    the same driving logged twice) is left out and its id goes to ``on_logged_twice``."""
     missing: list[DamagedTripError] = []
 
     def damaged(exc: DamagedTripError) -> None:
@@ -88,6 +92,12 @@ def logged_trips(st: TripStore, vehicle_id: str, *, positions: bool = False,
                         + (" (all are damaged; 'cevm store check' lists them)" if missing else ""))
     rows = st.list_trips(vehicle_id=vehicle_id)
     rows = rows[rows["trip_id"].isin(list(vectors))].sort_values(["start_utc_s", "trip_id"], kind="stable")
+    twice = logged_twice(rows["start_utc_s"].to_numpy(dtype=np.float64),
+                         (rows["start_utc_s"] + rows["duration_s"]).to_numpy(dtype=np.float64))
+    if twice.any():
+        if on_logged_twice is not None:
+            on_logged_twice(list(rows["trip_id"][twice]))
+        rows = rows[~twice]
     masses = trip_masses(st, rows)
     gross = np.full(len(rows), np.nan)
     payload = np.full(len(rows), np.nan)

@@ -218,7 +218,7 @@ def add_route(
         damaged = store.damaged_profiles(trip_ids)
         if damaged:
             raise damaged[0]
-    rows = []
+    rows: list[tuple] = []
     total: CycleVector | None = None
     for pos, leg in enumerate(legs):
         if isinstance(leg, TripLeg):

@@ -10,7 +10,6 @@ from collections.abc import Callable, Iterator, Sequence
 from contextlib import ExitStack
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Optional
 
 from cevm.core.assignment import LegSource
 from cevm.core.cycle import CycleVector
@@ -22,9 +21,9 @@ from cevm.io.cycles import MAX_CYCLE_SAMPLES, CycleFormat, read_cycle_files
 from cevm.io.scenario import LegResolver, default_resolver
 from cevm.store.codec import MAX_PROFILE_SAMPLES
 from cevm.store.failures import DamagedTripError
+from cevm.store.location import existing_store_path
 from cevm.store.masses import TripMass, trip_masses
 from cevm.store.queries import row_measurement
-from cevm.store.location import existing_store_path
 from cevm.store.routes import (
     check_route_profiles,
     load_route_legs,
@@ -70,7 +69,8 @@ def foreign_mass(mass: TripMass | None, measured: Measurement | None, vehicle) -
         return None
     if measured is not None and (measured.kind == "fuel_l") == vehicle.is_ev:
         return f"it measured {'fuel' if vehicle.is_ev else 'electric energy'}, so another powertrain drove it"
-    if vehicle.max_gross_kg is None and vehicle.kerb_mass_kg and key[1] > FOREIGN_MASS_KERB_RATIO * vehicle.kerb_mass_kg:
+    if (vehicle.max_gross_kg is None and vehicle.kerb_mass_kg
+            and key[1] > FOREIGN_MASS_KERB_RATIO * vehicle.kerb_mass_kg):
         return f"over {FOREIGN_MASS_KERB_RATIO:g} times this vehicle's kerb mass of {vehicle.kerb_mass_kg:,.0f} kg"
     return None
 
@@ -84,8 +84,11 @@ def foreign_mass_warnings(sources: Sequence[Source], vehicles: Sequence) -> list
                 if isinstance(src, StoredTrip) and (why := foreign_mass(src.mass, src.measured, v))]
         if hits:
             src, why = hits[0]
+            mass = src.mass
+            key = None if mass is None else mass.sweep_key()
+            assert mass is not None and key is not None  # foreign_mass() found its gross mass
             out.append(f"{v.label}: predicted at the own gross mass of {len(hits)} stored trip(s) another vehicle "
-                       f"drove (e.g. {src.name}: {src.mass.describe()} {src.mass.sweep_key()[1]:,.0f} kg; {why}); "
+                       f"drove (e.g. {src.name}: {mass.describe()} {key[1]:,.0f} kg; {why}); "
                        f"give --mass-kg or --payload-kg for what {v.label} would carry")
     return out
 
@@ -108,6 +111,8 @@ def mass_runs(sources: Sequence[Source], build: Callable[..., PredictionSet]
                 made[key] = (build() if key is None else build(mass_kg=[key[1]]) if key[0] == "gross"
                              else build(payload_kg=[key[1]]))
             except CevmError as exc:  # a payload on a vehicle without a kerb mass, a mass below it
+                if mass is None:  # the vehicle file's own mass: its message as it is
+                    raise
                 raise CevmError(f"trip {src.name!r} ({mass.describe()} mass): {exc}") from None
         return made[key], label
 
@@ -120,14 +125,14 @@ def mass_runs(sources: Sequence[Source], build: Callable[..., PredictionSet]
             run = []
         run.append(src)
         current = (ps, label)
-    if run:
+    if run and current is not None:
         yield run, current[0], current[1]
 
 
-def load_sources(stack: ExitStack, store: Optional[Path], cycles: Sequence[Path], trips: Sequence[str],
+def load_sources(stack: ExitStack, store: Path | None, cycles: Sequence[Path], trips: Sequence[str],
                  vehicle_ids: Sequence[str], routes: Sequence[str], cr0: float,
                  cycle_format: CycleFormat | None = None, *, need_profiles: bool = True,
-                 on_damaged: Callable[[DamagedTripError], None] | None = None) -> list[Source]:
+                 on_damaged: Callable[[CevmError], None] | None = None) -> list[Source]:
     """Sources in the order cycles (every cycle of each file, read with ``cycle_format``),
     trips, trips of vehicle ids, routes. A store is opened read-only (and kept open on
     ``stack``) only when a stored source is asked for; profiles are read from it when
@@ -169,12 +174,13 @@ def load_sources(stack: ExitStack, store: Optional[Path], cycles: Sequence[Path]
         for tid, n in zip(rows["trip_id"], rows["n_samples"], strict=True):
             if n > MAX_SOURCE_SAMPLES:  # bounded as a cycle file is: one source's samples are held together
                 # a count no stored profile can hold (cevm.store.codec) is the row's damage, not a long trip
-                exc = (DamagedTripError(tid, "row", f"its row says {int(n):,} samples, more than the "
-                                                    f"{MAX_PROFILE_SAMPLES:,} any stored trip holds")
-                       if n > MAX_PROFILE_SAMPLES else TripTooLong(too_long_trip(tid, int(n))))
+                bad: DamagedTripError | TripTooLong = (
+                    DamagedTripError(tid, "row", f"its row says {int(n):,} samples, more than the "
+                                                 f"{MAX_PROFILE_SAMPLES:,} any stored trip holds")
+                    if n > MAX_PROFILE_SAMPLES else TripTooLong(too_long_trip(tid, int(n))))
                 if tid in trips or on_damaged is None:
-                    raise exc
-                on_damaged(exc)  # a vehicle's trips: left out and named, as a damaged one is
+                    raise bad
+                on_damaged(bad)  # a vehicle's trips: left out and named, as a damaged one is
                 del vectors[tid]
         rows = rows[rows["trip_id"].isin(list(vectors))]
         masses = trip_masses(st, rows)
@@ -248,7 +254,7 @@ def route_ambient_c(st: TripStore, legs: Sequence) -> float | None:
     weights = [leg.vector.duration_s for leg in legs]
     if not all(math.isfinite(t) for t in temps) or sum(weights) <= 0:
         return None
-    return float(sum(t * w for t, w in zip(temps, weights)) / sum(weights))
+    return float(sum(t * w for t, w in zip(temps, weights, strict=True)) / sum(weights))
 
 
 def store_resolver(store: TripStore | Callable[[], TripStore]) -> LegResolver:
@@ -299,7 +305,7 @@ def store_leg_demand(store: TripStore | Callable[[], TripStore], base_dir: Path)
             if src.kind == "trip":
                 row = st().list_trips(trip_ids=[src.ref])
                 elevation = row["elevation_source"].iloc[0] if len(row) else None
-                legs = (LegProfile.from_profile(st().load_profile(src.ref)),)
+                legs: tuple[LegProfile, ...] = (LegProfile.from_profile(st().load_profile(src.ref)),)
                 sd = sd_of(elevation)
             else:
                 legs = tuple(LegProfile.from_profile(p) for p in load_route_profiles(st(), src.ref))

@@ -39,6 +39,7 @@ edge that turns rows into what a person reads (ISO 8601 times, km, kWh).
 
 from __future__ import annotations
 
+import contextlib
 import os
 import sqlite3
 import time
@@ -271,10 +272,9 @@ class TripStore(TripWriting, TripQueries):
             con.execute("COMMIT")
         except BaseException:
             if self._con is not None and self._con.in_transaction:
-                try:
+                # SQLite rolled back already (disk full, I/O error): keep the first error
+                with contextlib.suppress(sqlite3.Error, CevmError):
                     self._con.execute("ROLLBACK")
-                except (sqlite3.Error, CevmError):
-                    pass  # SQLite rolled back already (disk full, I/O error): keep the first error
             raise
 
     def _checkpoint(self, stage: str) -> None:

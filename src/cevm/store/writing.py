@@ -30,14 +30,26 @@ import os
 import socket
 import time
 from collections.abc import Iterable, Mapping, Sequence
+from contextlib import AbstractContextManager
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from cevm.core.trip import TRIP_EVIDENCE_FIELDS, Trip, TripRecord
 from cevm.store.codec import trip_profile_blob
 from cevm.store.location import file_key
-from cevm.store.schema import (FILE_COLUMNS, STANDSTILL_BEFORE_SQL, TRIP_COLUMNS, blob_crc32, in_json,
-                               json_default, sql_real)
+from cevm.store.schema import (
+    FILE_COLUMNS,
+    STANDSTILL_BEFORE_SQL,
+    TRIP_COLUMNS,
+    blob_crc32,
+    in_json,
+    json_default,
+    sql_real,
+)
+
+if TYPE_CHECKING:
+    from cevm.store.failures import StoreConnection
 
 
 @dataclass(frozen=True)
@@ -128,7 +140,7 @@ def _rows(key: str, trips: Sequence[Trip | TripRecord], vectors: Sequence[bytes]
     if profile_blobs is None:
         if not all(isinstance(t, Trip) for t in trips):
             raise ValueError(f"trip records without arrays need their profile_blobs ({key})")
-        profile_blobs = [trip_profile_blob(t) for t in trips]
+        profile_blobs = [trip_profile_blob(t) for t in trips if isinstance(t, Trip)]  # all of them (checked)
     elif len(profile_blobs) != len(trips):
         raise ValueError(f"{len(trips)} trips but {len(profile_blobs)} profiles for {key}")
     for t in trips:
@@ -216,6 +228,14 @@ def _file_ok(con, key: str, sha256: str, size_bytes: int | None, mtime_s: float 
 class TripWriting:
     """The writes of :class:`~cevm.store.TripStore` (a mixin: it needs the store's
     ``con``, ``_write()`` transaction and ``_checkpoint(stage)`` hook)."""
+
+    if TYPE_CHECKING:  # what TripStore provides
+        @property
+        def con(self) -> StoreConnection: ...
+
+        def _write(self) -> AbstractContextManager[StoreConnection]: ...
+
+        def _checkpoint(self, stage: str) -> None: ...
 
     def replace_file_trips(
         self,
@@ -354,6 +374,7 @@ class TripWriting:
                 "INSERT INTO runs (started_utc_s, host, pid) VALUES (?, ?, ?)",
                 (time.time(), socket.gethostname(), os.getpid()),
             )
+        assert cur.lastrowid is not None  # set by the INSERT
         return int(cur.lastrowid)
 
     def finish_run(self, run_id: int, counts: Mapping[str, int | float | str]) -> None:

@@ -98,6 +98,7 @@ class DayMoments:
         self.mu = np.zeros(n_comb)
         self.dur = np.zeros(n_comb)
         self.own = np.zeros(n_comb)
+        self.drawn = np.zeros(n_comb)  # the sum of the legs' max(mean, 0): the scatter's share part
 
     def add(self, vec: CycleVector, masses: np.ndarray, driven: np.ndarray, t_day: float | None) -> None:
         """Legs of one vector at ``masses`` (n_comb x legs), counted where ``driven``."""
@@ -117,6 +118,7 @@ class DayMoments:
         self.dur += vec.duration_s * np.sum(driven, axis=1)
         self.own += np.sum(driven * ((sc_.aux * vec.duration_s) ** 2 + (sc_.share * np.maximum(mu, 0.0)) ** 2),
                            axis=1)
+        self.drawn += np.sum(driven * np.maximum(mu, 0.0), axis=1)
 
     def sd(self) -> np.ndarray:
         if self.post is None:
@@ -124,8 +126,11 @@ class DayMoments:
         sc_ = self.post.scatter
         A = sqrt_cov(self.post.cov) @ self.G
         var = np.einsum("kc,kc->c", A, A) + (self.post.meter_share * self.mu) ** 2
-        m = np.maximum(self.mu, 0.0)
-        var += sc_.day_corr * ((sc_.aux * self.dur) ** 2 + (sc_.share * m) ** 2) + (1.0 - sc_.day_corr) * self.own
+        # the shared scatter's share part is of each leg's energy drawn (max(mean, 0) per leg, as
+        # cevm.core.predictive.total has it), not of the day's net: a leg that gives energy back
+        # does not cancel another's scatter
+        var += (sc_.day_corr * ((sc_.aux * self.dur) ** 2 + (sc_.share * self.drawn) ** 2)
+                + (1.0 - sc_.day_corr) * self.own)
         return np.asarray(np.sqrt(var))
 
 

@@ -70,7 +70,9 @@ def solve_enumerate(sc: Scenario, prob: DayProblem, min_p_complete: float | None
             from cevm.core.assignment.chance import budget_of
             from cevm.core.assignment.chance import prob as p_within
 
-            feasible &= p_within(vehicle_q[v.id], moments[v.id].sd(), budget_of(v)) >= min_p_complete
+            budget = budget_of(v)
+            if budget is not None:
+                feasible &= p_within(vehicle_q[v.id], moments[v.id].sd(), budget) >= min_p_complete
     info = {"method": f"enumeration ({n_comb} combinations)", "n_variables": len(prob.free),
             "n_constraints": 0, "mip_gap": 0.0}
     if not feasible.any():

@@ -55,8 +55,8 @@ class VehicleUse:
     @property
     def feasible(self) -> bool:
         ok = self.max_gross_kg is None or self.max_gross_used_kg <= self.max_gross_kg * (1 + 1e-12)
-        if self.energy_budget_j is not None:
-            ok = ok and self.energy_j <= self.energy_budget_j * (1 + BUDGET_RTOL)
+        if self.energy_budget_j is not None:  # an EV: energy_j is its day's total
+            ok = ok and self.energy_j is not None and self.energy_j <= self.energy_budget_j * (1 + BUDGET_RTOL)
         return ok
 
 
@@ -77,7 +77,8 @@ class Evaluation:
         for v in self.vehicles:
             if v.max_gross_kg is not None and v.max_gross_used_kg > v.max_gross_kg * (1 + 1e-12):
                 out.append(f"{v.vehicle_id} gross {v.max_gross_used_kg:g} kg > {v.max_gross_kg:g} kg")
-            if v.energy_budget_j is not None and v.energy_j > v.energy_budget_j * (1 + BUDGET_RTOL):
+            if v.energy_budget_j is not None and v.energy_j is not None \
+                    and v.energy_j > v.energy_budget_j * (1 + BUDGET_RTOL):
                 out.append(f"{v.vehicle_id} uses {v.energy_j / J_PER_KWH:.1f} kWh > budget "
                            f"{v.energy_budget_j / J_PER_KWH:.1f} kWh")
         return out
@@ -91,10 +92,18 @@ def objective_weights(sc: Scenario) -> dict[str, float]:
         if kind in ("fuel", "energy"):
             out[v.id] = 1.0
         elif v.vehicle.is_ev:
-            out[v.id] = sc.prices.electricity_per_kwh / J_PER_KWH
+            out[v.id] = _price(sc, "electricity_per_kwh") / J_PER_KWH
         else:
-            out[v.id] = sc.prices.fuel_per_l
+            out[v.id] = _price(sc, "fuel_per_l")
     return out
+
+
+def _price(sc: Scenario, name: str) -> float:
+    """A price of the cost objective (the scenario's loading refuses a cost objective without it)."""
+    value = None if sc.prices is None else getattr(sc.prices, name)
+    if value is None:
+        raise ValueError(f"objective 'cost' needs [prices] {name}")
+    return float(value)
 
 
 def vector_groups(legs: Sequence[Leg]) -> list[tuple[CycleVector, list[int]]]:
@@ -126,7 +135,7 @@ def calibration_warnings(sc: Scenario, plans: Sequence[Plan]) -> list[str]:
     for r in sc.routes:
         speeds.setdefault(r.vehicle_id, []).extend(
             leg.vector.distance_m / leg.vector.duration_s for leg in r.legs if leg.vector.duration_s > 0)
-    out = []
+    out: list[str] = []
     for v in sc.vehicles:
         if not masses.get(v.id):
             continue
@@ -176,8 +185,8 @@ def evaluate(sc: Scenario, day: str | int, assignment: Mapping[str, int | str]) 
         mass = v.kerb_mass_kg + carried
         use = np.zeros(len(r.legs))
         for vec, cols in vector_groups(r.legs):
-            cols = np.array(cols)
-            use[cols] = quantity(predict(vec, v.vehicle, mass[cols], ambient_c=sc.ambient_of(d)), v.vehicle)
+            at = np.array(cols)
+            use[at] = quantity(predict(vec, v.vehicle, mass[at], ambient_c=sc.ambient_of(d)), v.vehicle)
         per_vehicle[v.id].append(
             RouteUse(
                 route_id=r.id,

@@ -54,7 +54,7 @@ class Plan:
     n_constraints: int
     solve_time_s: float
     route_vehicle: dict[str, str]
-    p_complete: dict = None  # vehicle -> P(completing the day within its budget) or None
+    p_complete: dict | None = None  # vehicle -> P(completing the day within its budget) or None
     min_p_complete: float | None = None
 
     @property
@@ -65,7 +65,7 @@ class Plan:
     def saving_pct(self) -> float | None:
         if self.default_total is None or self.default_total == 0:
             return None
-        return 100.0 * self.saving / self.default_total
+        return 100.0 * (self.default_total - self.total) / self.default_total
 
     def stops_per_vehicle(self) -> dict[str, list[str]]:
         """The paper's table 4 column for this day: vehicle -> stops served, in order."""

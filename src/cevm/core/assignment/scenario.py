@@ -89,6 +89,8 @@ class FleetVehicle:
         """Battery energy [J] the day may use (EV), None for an ICE vehicle."""
         if not self.vehicle.is_ev:
             return None
+        if self.vehicle.battery_j is None:
+            raise ValueError(f"electric vehicle {self.id!r} has no battery_j")
         return (self.soc_start - self.ev_reserve_fraction) * float(self.vehicle.battery_j)
 
 
@@ -252,17 +254,17 @@ def validate_scenario(sc: Scenario) -> None:
     for s, vs in sc.allowed.items():
         if s not in stops:
             raise bad(f"stop.{quote_key(s)}: no route lists this stop")
-        for v in vs:
-            if v not in vids:
-                raise bad(f"stop.{quote_key(s)}.vehicles: unknown vehicle {v!r}")
-            if not any(r.vehicle_id == v and s in r.stops for r in sc.routes):
-                raise bad(f"stop.{quote_key(s)}.vehicles: vehicle {v!r} has no route through this stop")
+        for vid in vs:
+            if vid not in vids:
+                raise bad(f"stop.{quote_key(s)}.vehicles: unknown vehicle {vid!r}")
+            if not any(r.vehicle_id == vid and s in r.stops for r in sc.routes):
+                raise bad(f"stop.{quote_key(s)}.vehicles: vehicle {vid!r} has no route through this stop")
     for s in stops:
         if not sc.options(s):
             raise bad(f"stop {s!r}: no allowed vehicle drives a route through it")
-    for s, v in sc.default_vehicle.items():
-        if s not in stops or v not in {sc.routes[i].vehicle_id for i in sc.options(s)}:
-            raise bad(f"stop.{quote_key(s)}.default: vehicle {v!r} may not serve this stop")
+    for s, vid in sc.default_vehicle.items():
+        if s not in stops or vid not in {sc.routes[i].vehicle_id for i in sc.options(s)}:
+            raise bad(f"stop.{quote_key(s)}.default: vehicle {vid!r} may not serve this stop")
     kind = sc.objective_kind
     if kind not in OBJECTIVES:
         raise bad(f"objective must be one of {', '.join(OBJECTIVES)}; got {kind!r}")

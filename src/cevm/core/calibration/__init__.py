@@ -34,9 +34,25 @@ from cevm.core.calibration.validation import ErrorStats, TripRow
 from cevm.units import J_PER_KWH
 
 __all__ = [
-    "ALIASES", "Candidate", "CalibrationError", "CalibrationResult", "EXTRA_TERMS", "ErrorStats", "Selection",
-    "TERMS_BY_POWERTRAIN", "Term", "TripData", "TripRow", "TripSet", "candidate_sets", "display_value", "fit",
-    "fit_domain", "predict_trips", "select", "term",
+    "ALIASES",
+    "EXTRA_TERMS",
+    "TERMS_BY_POWERTRAIN",
+    "CalibrationError",
+    "CalibrationResult",
+    "Candidate",
+    "ErrorStats",
+    "Selection",
+    "Term",
+    "TripData",
+    "TripRow",
+    "TripSet",
+    "candidate_sets",
+    "display_value",
+    "fit",
+    "fit_domain",
+    "predict_trips",
+    "select",
+    "term",
 ]
 
 

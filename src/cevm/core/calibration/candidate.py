@@ -121,7 +121,8 @@ def balanced(model: TermModel, names: Sequence[str], idx: np.ndarray, priors: Pr
     # points apart
     centre = None if priors is None else priors.scatter
     with contextlib.suppress(np.linalg.LinAlgError):
-        noise = post.solve(model, names, idx, prior_for(model, names, priors, settings.plausible), noise, huber_c=settings.huber_c,
+        noise = post.solve(model, names, idx, prior_for(model, names, priors, settings.plausible), noise,
+                           huber_c=settings.huber_c,
                            fit_noise=True, scatter_prior=centre, noise_rounds=2).noise
     for axis, grid in (("heat", HEATING_GRID_C if heats else ()), ("cool", COOLING_GRID_C if cools else ())):
         best = None

@@ -11,8 +11,9 @@ whose wheel energy is not positive (a descent: consumption is not driven by it).
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Sequence
+from typing import TypeGuard
 
 import numpy as np
 
@@ -136,8 +137,9 @@ class TripSet:
         """The trips at positions ``idx``."""
         idx = np.asarray(idx)
         pick = [int(i) for i in idx]
+        assert self.u_random is not None and self.u_sys is not None  # set by __post_init__
 
-        def tup(t):
+        def tup(t: tuple) -> tuple:
             return tuple(t[i] for i in pick)
 
         return TripSet(
@@ -151,11 +153,11 @@ class TripSet:
         )
 
 
-def _finite(x) -> bool:
+def _finite(x: object) -> TypeGuard[float]:
     return x is not None and isinstance(x, (int, float, np.floating, np.integer)) and math.isfinite(x)
 
 
-def _opt(x) -> float:
+def _opt(x: object) -> float:
     return float(x) if _finite(x) else math.nan
 
 
@@ -173,15 +175,15 @@ def select_trips(vehicle: Vehicle, trips: Sequence[TripData], max_rel_uncertaint
             raise CalibrationError(f"trip id {t.trip_id!r} appears twice")
         seen.add(t.trip_id)
         mass = vehicle.mass_kg if t.mass_kg is None else t.mass_kg
-        y, s = t.measured, t.uncertainty
+        meas, s = _opt(t.measured), _opt(t.uncertainty)  # NaN where missing
         reason = None
         if t.kind is not None and t.kind != want_kind:
             reason = (f"measurement kind {t.kind!r} does not fit an {'EV' if vehicle.is_ev else 'ICE'} "
                       f"(needs {want_kind!r})")
-        elif not _finite(y):
+        elif not _finite(meas):
             reason = "no measured consumption"
-        elif y <= 0:
-            reason = f"measured consumption {y:g} <= 0"
+        elif meas <= 0:
+            reason = f"measured consumption {meas:g} <= 0"
         elif not _finite(s) or s < 0:
             reason = "no valid measurement uncertainty" if not _finite(s) else f"uncertainty {s:g} < 0"
         elif not (_finite(t.quality) and 0 < t.quality <= 1):
@@ -190,9 +192,9 @@ def select_trips(vehicle: Vehicle, trips: Sequence[TripData], max_rel_uncertaint
             reason = f"mass {mass!r} kg is not > 0"
         elif t.vector.distance_m < min_distance_m:
             reason = f"distance {t.vector.distance_m:.0f} m < {min_distance_m:.0f} m"
-        elif s / y > max_rel_uncertainty:
-            reason = (f"relative uncertainty {100 * s / y:.1f} % > {100 * max_rel_uncertainty:.1f} % "
-                      f"({s:g} on {y:g})")
+        elif s / meas > max_rel_uncertainty:
+            reason = (f"relative uncertainty {100 * s / meas:.1f} % > {100 * max_rel_uncertainty:.1f} % "
+                      f"({s:g} on {meas:g})")
         elif vehicle.cr < t.vector.cr0:
             reason = (f"the vector's Cr0 = {t.vector.cr0:g} is above the vehicle's Cr = {vehicle.cr:g}: "
                       "recompute the vector with a lower cr0")

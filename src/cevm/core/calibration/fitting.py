@@ -15,7 +15,7 @@ from cevm.core.calibration import posterior as post
 from cevm.core.calibration.candidate import CandidateFit, Settings, fit_candidate
 from cevm.core.calibration.data import CalibrationError, TripData, TripSet, select_trips
 from cevm.core.calibration.solve import HUBER_C, condition_number, value_covariance
-from cevm.core.calibration.terms import TERMS_BY_POWERTRAIN, TermModel, neutral, normalise
+from cevm.core.calibration.terms import TERMS_BY_POWERTRAIN, TermModel, neutral, normalise, with_values
 from cevm.core.calibration.validation import ErrorStats, TripRow, folds, predict_set, time_predictions
 from cevm.core.uncertainty import Posterior, Priors, Scatter
 from cevm.core.vehicle import FitDomain, Vehicle
@@ -287,20 +287,21 @@ def cross_validated(cf: CandidateFit, settings: Settings, fold_of: np.ndarray) -
         mu = cf.heldout.mean[te_pos]
         ratio = post._quality_ratio(d.q, tr)[te]
         mean[te_pos] = mu
-        var[te_pos] = (cf.heldout.param_var[te_pos] + cf.heldout.extra_var[te_pos] + (d.u_random[te] * d.y[te]) ** 2
+        extra = cf.heldout.extra_var
+        assert extra is not None  # set by HeldOut.__post_init__
+        var[te_pos] = (cf.heldout.param_var[te_pos] + extra[te_pos]
+                       + (post._u_random(d)[te] * d.y[te]) ** 2
                        + ratio * ((sc.aux * d.duration[te]) ** 2 + (sc.share * np.maximum(mu, 0.0)) ** 2))
     return mean, var
 
 
-def fit_model(cf: CandidateFit, excluded: dict, settings: Settings, *, priors: Priors | None, interval: float,
-              time_repeats: int, vehicle_id: str | None) -> CalibrationResult:
-    """The :class:`CalibrationResult` of a fitted candidate (shared by :func:`fit` and
-    model selection)."""
+def _fitted_values(cf: CandidateFit, settings: Settings, idx_all: np.ndarray
+                   ) -> tuple[dict, dict, dict[str, str], list[str]]:
+    """Of a fitted candidate: each field's (value, standard deviation), their correlations,
+    the field of each term, and the fit's warnings (not converged, an implausible eta, a
+    coefficient at its physical bound)."""
     model, result = cf.model, cf.fit
-    data = model.data
-    vehicle = model.vehicle
     active = list(cf.names)
-    idx_all = np.arange(data.n)
     warnings: list[str] = []
     values, vcov = value_covariance(model, result)
     fields = {n: _field(model, n) for n in active}
@@ -323,6 +324,19 @@ def fit_model(cf: CandidateFit, excluded: dict, settings: Settings, *, priors: P
         if result.theta[j] <= lb[j] + tol or result.theta[j] >= ub[j] - tol:
             warnings.append(f"{fields[n]} = {values[n]:.6g} is at its physical bound: its posterior is cut there, "
                             "its standard deviation is that of the Gaussian at the bound")
+    return fitted, corr, fields, warnings
+
+
+def fit_model(cf: CandidateFit, excluded: dict, settings: Settings, *, priors: Priors | None, interval: float,
+              time_repeats: int, vehicle_id: str | None) -> CalibrationResult:
+    """The :class:`CalibrationResult` of a fitted candidate (shared by :func:`fit` and
+    model selection)."""
+    model, result = cf.model, cf.fit
+    data = model.data
+    vehicle = model.vehicle
+    active = list(cf.names)
+    idx_all = np.arange(data.n)
+    fitted, corr, fields, warnings = _fitted_values(cf, settings, idx_all)
 
     fold_of, scheme = folds(data, settings.cv_folds, settings.loo_below, settings.seed)
     rho, rho_note, _ = post.day_correlation(model, active, idx_all, cf.prior, result.noise,
@@ -330,7 +344,7 @@ def fit_model(cf: CandidateFit, excluded: dict, settings: Settings, *, priors: P
     scatter = Scatter(aux=result.noise.aux, share=result.noise.share, day_corr=rho, day_corr_note=rho_note,
                       standstill=result.noise.standstill)
     domain = fit_domain(data, active, vehicle_id)
-    calibrated = replace(vehicle, **model.fields_of(active, result.theta))
+    calibrated = with_values(vehicle, model.fields_of(active, result.theta))
     pred_in = predict_set(calibrated, data)
     _, var_in = result.predictive_var(model, idx_all)
     mean_cv, var_cv = cross_validated(cf, settings, fold_of)
@@ -365,7 +379,7 @@ def fit_model(cf: CandidateFit, excluded: dict, settings: Settings, *, priors: P
     cv = ErrorStats.of(err_cv) if scheme != "none" else None
     if cv is not None:
         domain = replace(domain, cv_scheme=scheme, cv_mean_pct=cv.mean_pct, cv_std_pct=cv.std_pct)
-    meter = float(np.median(data.u_sys)) if data.n else 0.0
+    meter = float(np.median(data.u_sys)) if data.n and data.u_sys is not None else 0.0
     posterior = Posterior(terms=tuple(active), cov=result.cov, scatter=scatter, source=posterior_source(domain),
                           n_trips=data.n, priors=priors, meter_share=meter)
     calibrated = replace(calibrated, calibration=domain, posterior=posterior)

@@ -120,7 +120,8 @@ class PosteriorFit:
     def sd(self) -> np.ndarray:
         return np.sqrt(np.maximum(np.diag(self.cov), 0.0))
 
-    def predictive_var(self, model: TermModel, idx: ArrayLike, measurement: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    def predictive_var(self, model: TermModel, idx: ArrayLike,
+                       measurement: bool = True) -> tuple[np.ndarray, np.ndarray]:
         """(mean, variance) of trips ``idx`` of ``model`` under this posterior: the
         parameters' part, the scatter (a new day: both its parts), and the measurement's
         own uncertainty when ``measurement``."""

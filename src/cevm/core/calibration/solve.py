@@ -150,10 +150,10 @@ def fit_terms(model: TermModel, names: Sequence[str], idx: np.ndarray, tau_fixed
         sw = np.sqrt(W) / y
         if nonlinear:
             def fun(th):
-                return sw * (model.predict(names, th, idx) - y)
+                return sw * (model.predict(names, th, idx) - y)  # noqa: B023 (called only in this iteration)
 
             def jac(th):
-                return sw[:, None] * model.jacobian(names, th, idx)
+                return sw[:, None] * model.jacobian(names, th, idx)  # noqa: B023 (called only in this iteration)
 
             res = least_squares(fun, x, jac=jac, bounds=(lb, ub), method="trf", x_scale="jac",
                                 ftol=1e-12, xtol=1e-12, gtol=1e-12, max_nfev=200 * k)

@@ -33,8 +33,9 @@ N term is N / c_eta, not linear in c_eta; the fit linearises it (Gauss-Newton).
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping, Sequence
 from dataclasses import replace
-from typing import Sequence
+from typing import Any
 
 import numpy as np
 
@@ -84,7 +85,7 @@ def neutral(vehicle: Vehicle, keep: Sequence[str] = ()) -> Vehicle:
     return replace(vehicle, **changes)
 
 
-def with_values(vehicle: Vehicle, values: dict[str, float]) -> Vehicle:
+def with_values(vehicle: Vehicle, values: Mapping[str, Any]) -> Vehicle:
     """``vehicle`` with fitted field values (keys: vehicle fields)."""
     return replace(vehicle, **values)
 
@@ -121,7 +122,7 @@ class TermModel:
         if hit is None:
             w01 = np.array([0.0, 1.0])
             e = np.array([wheel_energy_j(v, np.float64(m), key[0], key[1], w01)
-                          for v, m in zip(self.data.vectors, self.data.mass)])
+                          for v, m in zip(self.data.vectors, self.data.mass, strict=True)])
             e = e.reshape(self.data.n, 2)
             hit = (e[:, 0], e[:, 1] - e[:, 0])
             if len(self._components) > 256:
@@ -202,7 +203,7 @@ class TermModel:
         """Term values (SI, vehicle-field meaning) with ``names`` set from coefficients
         ``theta`` and the others at the vehicle's values."""
         vals = self.vehicle_values()
-        coef = dict(zip(names, (float(x) for x in theta)))
+        coef = dict(zip(names, (float(x) for x in theta), strict=True))
         if "eta" in coef:
             vals["eta"] = 1.0 / coef["eta"]
         for name, x in coef.items():
@@ -222,7 +223,7 @@ class TermModel:
     # prediction ----------------------------------------------------------------------
 
     def _linear_parts(self, names: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray, np.ndarray | None,
-                                                              np.ndarray | None]:
+                                                              tuple[float, np.ndarray] | None]:
         """For linear ``names`` at the vehicle's CdA and Cr (cached): the features F (n, k)
         of the fitted terms, the fixed terms' consumption (all but those that move with
         eta), and the features that move with eta: the tied regeneration N (EV, divided
@@ -285,7 +286,7 @@ class TermModel:
         within a linear piece of the wheel energy)."""
         names = tuple(names)
         if "cda" not in names and "cr" not in names and "eta" in names:
-            F, fixed, tied_n, fixed_k = self._linear_parts(names)
+            F, _fixed, tied_n, fixed_k = self._linear_parts(names)
             J = F[idx].copy()
             j = names.index("eta")
             c_eta = float(theta[j])
@@ -333,7 +334,8 @@ class TermModel:
         """Per trip, the modelled rate while standing still [W or l/s]: EV P_aux(T); ICE
         r_idle + r_heat h(T) + r_cool c(T)."""
         vals = self.values_of(names, theta)
-        g = {k: (0.0 if not math.isfinite(vals.get(k, 0.0)) else vals.get(k, 0.0)) for k in ("aux", "heat", "cool", "idle")}
+        g = {k: (0.0 if not math.isfinite(vals.get(k, 0.0)) else vals.get(k, 0.0))
+             for k in ("aux", "heat", "cool", "idle")}
         h = np.nan_to_num(self.h)
         c = np.nan_to_num(self.c)
         base = g["aux"] if self.ev else g["idle"]

@@ -92,19 +92,19 @@ class TripRow:
 
 def folds(data: TripSet, cv_folds: int, loo_below: int, seed: int) -> tuple[np.ndarray, str]:
     """Fold index per trip (-1: no CV) and a description; groups never straddle folds."""
-    keys = [g if g is not None else f"\0{tid}" for g, tid in zip(data.groups, data.ids)]
+    keys = [g if g is not None else f"\0{tid}" for g, tid in zip(data.groups, data.ids, strict=True)]
     uniq = list(dict.fromkeys(keys))
     grouped = any(g is not None for g in data.groups)
     G = len(uniq)
     if cv_folds < 2 or G < 2:
         return np.full(data.n, -1), "none"
-    if G < loo_below or cv_folds >= G:
+    if loo_below > G or cv_folds >= G:
         fold_of = {g: i for i, g in enumerate(uniq)}
         scheme = f"leave-one-group-out ({G} groups)" if grouped else "leave-one-out"
     else:
         rng = np.random.default_rng(seed)
         order = [uniq[i] for i in rng.permutation(G)]
-        size = {g: 0 for g in uniq}
+        size = dict.fromkeys(uniq, 0)
         for k in keys:
             size[k] += 1
         order.sort(key=lambda g: -size[g])  # stable: shuffled order among equal sizes
@@ -123,7 +123,9 @@ def predict_one(vehicle: Vehicle, vector: CycleVector, mass_kg: float, ambient_c
     temperature means "not logged": the vehicle's default is used (only a vehicle with
     temperature terms depends on it, and those are fitted only on trips with one)."""
     p = predict(vector, vehicle, float(mass_kg), ambient_c=None if not math.isfinite(ambient_c) else float(ambient_c))
-    return float(p.energy_j if vehicle.is_ev else p.fuel_l)
+    q = p.energy_j if vehicle.is_ev else p.fuel_l
+    assert q is not None  # predict() sets the powertrain's quantity
+    return float(q)
 
 
 def predict_set(vehicle: Vehicle, data: TripSet, idx=None) -> np.ndarray:
@@ -137,7 +139,7 @@ def time_predictions(vehicle: Vehicle, data: TripSet, repeats: int) -> tuple[flo
     if repeats <= 0 or data.n == 0:
         return None
     per_trip = np.empty(data.n)
-    for i, (v, m, t) in enumerate(zip(data.vectors, data.mass, data.ambient_c)):
+    for i, (v, m, t) in enumerate(zip(data.vectors, data.mass, data.ambient_c, strict=True)):
         predict_one(vehicle, v, m, t)  # warm any per-vector cache first
         t0 = time.perf_counter()
         for _ in range(repeats):

@@ -76,7 +76,7 @@ def simulate_diesel(params: DieselParams, time_s, speed_mps, elevation_m, *, mas
         sl = slice(lo, min(n, lo + _GEAR_CHUNK))
         gear_idx[sl], any_ok[sl], any_engageable[sl] = _choose_gears(
             p, ratios, eta_gears, inertia_coef, w_wheel[sl], road.power[sl], road.k_per_dt[sl], w_req[sl],
-            aux if np.ndim(aux) == 0 else aux[sl],
+            aux[sl] if isinstance(aux, np.ndarray) and aux.ndim else aux,
         )
     # No gear at the preferred speeds with enough torque. Driving slower than first gear
     # turns at the preferred speed: launch, clutch slipping, engine at that speed.

@@ -84,6 +84,28 @@ class Duties:
         return out
 
 
+#: A trip lying more than this share of its duration inside earlier trips of its vehicle
+#: is the same driving logged twice (two loggers on one vehicle, one log under two names):
+#: a vehicle drives one trip at a time, while a clock step or a split log overlaps its
+#: neighbour by seconds.
+DUPLICATE_OVERLAP_SHARE = 0.5
+
+
+def logged_twice(start_s: ArrayLike, end_s: ArrayLike, share: float = DUPLICATE_OVERLAP_SHARE) -> np.ndarray:
+    """Which trips (sorted by start) lie more than ``share`` of their duration inside the
+    trips before them (the latest end so far): the same driving logged again, to be
+    counted once. A trip of no duration is never one."""
+    start = np.asarray(start_s, dtype=np.float64)
+    end = np.asarray(end_s, dtype=np.float64)
+    out = np.zeros(start.size, dtype=bool)
+    if start.size > 1:
+        before = np.maximum.accumulate(end)[:-1]
+        inside = np.minimum(end[1:], before) - start[1:]
+        dur = end[1:] - start[1:]
+        out[1:] = (dur > 0) & (inside > share * dur)
+    return out
+
+
 def stop_dwell_s(start_s: ArrayLike, end_s: ArrayLike) -> np.ndarray:
     """The stop after each trip [s] (trips sorted by start): the next trip's start less
     the latest end so far, never negative; NaN after the last trip."""

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import replace
+from typing import Any
 
 import numpy as np
 
@@ -143,9 +144,10 @@ def as_blocks(sources: Sequence[Source], pset: PredictionSet, arrays: tuple[np.n
                first_index: int) -> list[SweepBlock]:
     """One :class:`SweepBlock` per source from the (P, n_sources) arrays of
     :func:`predict_arrays`."""
-    return [SweepBlock(src, first_index + i, pset,
-                       **{name: a[:, i].copy() for name, a in zip(BLOCK_ARRAYS, arrays, strict=True)})
-            for i, src in enumerate(sources)]
+    def columns(i: int) -> dict[str, Any]:  # SweepBlock's array fields
+        return {name: a[:, i].copy() for name, a in zip(BLOCK_ARRAYS, arrays, strict=True)}
+
+    return [SweepBlock(src, first_index + i, pset, **columns(i)) for i, src in enumerate(sources)]
 
 
 def finish_blocks(blocks: list[SweepBlock], soc_start_pct: float, reserve_pct: float, ranges: bool) -> list[SweepBlock]:

@@ -93,6 +93,16 @@ class StepTable:
     def d0(self) -> np.ndarray:
         return self.d_edges[:-1]
 
+    def d0_at(self, j: np.ndarray) -> np.ndarray:
+        """``d0[j]``, the distance [m] at the start of steps ``j``, without the running
+        distance of the whole source unless it was made already: the running sum of the
+        steps up to the last of ``j``, the same sum in the same order, so the same values
+        (a crossing a tenth of the way along a long source sums a tenth of it)."""
+        j = np.asarray(j)
+        if "d_edges" in self.__dict__ or j.size == 0:
+            return np.asarray(self.d0[j])
+        return np.asarray(edges(self.r[: int(j.max())] / self.g_mps2)[j])
+
     @property
     def duration_s(self) -> float:
         return float(self.t_edges[-1]) if self.n else 0.0

@@ -19,6 +19,7 @@ takes (S <= 0, a descent) has no range limit: infinite.
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 
@@ -162,7 +163,7 @@ def _point(st: StepTable, cr: _Crossings) -> tuple[np.ndarray, np.ndarray]:
     if cr.found.any():
         j, f = cr.j[cr.found], cr.frac[cr.found]
         t[cr.found] = st.t0[j] + f * st.dt[j]
-        d[cr.found] = st.d0[j] + f * st.dd[j]
+        d[cr.found] = st.d0_at(j) + f * (st.r[j] / st.g_mps2)  # st.dd[j], without the whole dd
     return t, d
 
 
@@ -213,7 +214,7 @@ def source_ranges(block: SweepBlock, *, soc_start_pct: float = DEFAULT_SOC_START
         clean = not (np.any(block.soc_end_pct < 0) or np.any(block.soc_min_pct < 0))
     if not rows.size and not repeat and clean:
         return block  # nothing crosses anything: the common case costs no copy
-    out = {f: np.full(n, np.nan) for f in RANGE_FIELDS}
+    out: dict[str, Any] = {f: np.full(n, np.nan) for f in RANGE_FIELDS}  # SweepBlock fields (None: not asked)
     if rows.size:
         coef = step_coefficients(ps, block.ambient_c)
         levels = np.stack([l_res[rows], l_empty[rows]], axis=1)

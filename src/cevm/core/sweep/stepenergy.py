@@ -73,6 +73,7 @@ def step_coefficients(pset: PredictionSet, ambient_c) -> StepCoefficients:
             out["lump"][rows] = energy.ev_start_energy_j(v, t[rows])
         else:
             out["w"][rows] = braking_weight(pset.braking[j] or v.ice_braking)
+            assert v.fuel_lhv_j_per_l is not None  # an ICE's (vehicle files require it)
             out["ck"][rows] = energy.ice_kinetic_coefficient(v) * m[rows] / v.fuel_lhv_j_per_l
             out["aux"][rows] = energy.ice_time_fuel_lps(v, t[rows])
             out["run"][rows] = v.running_fuel_lps
@@ -134,6 +135,8 @@ def energy_trajectory(
         e0 = float(energy.ice_start_fuel_l(vehicle, t_c))
         rate_t = float(energy.ice_time_fuel_lps(vehicle, t_c))
         c_kin = energy.ice_kinetic_coefficient(vehicle)
+        assert vehicle.fuel_lhv_j_per_l is not None  # an ICE's (vehicle files require it)
+        lhv: float = vehicle.fuel_lhv_j_per_l
     ts, ds, es = [np.zeros(1)], [np.zeros(1)], [np.full(1, e0)]
     t0 = d0 = 0.0
     for leg in source.leg_profiles:
@@ -144,7 +147,6 @@ def energy_trajectory(
         if vehicle.is_ev:
             g = d / vehicle.eta + aux * st.dt
         else:
-            lhv = vehicle.fuel_lhv_j_per_l
             g = (d / (lhv * vehicle.eta) + c_kin * mass_kg * np.maximum(st.k, 0.0) / lhv
                  + vehicle.running_fuel_lps * st.dt * simplified + vehicle.idle_fuel_lps * st.dt * (st.a <= 0)
                  + rate_t * st.dt)

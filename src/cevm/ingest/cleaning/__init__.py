@@ -61,9 +61,12 @@ The steps, in order (parameters in :class:`CleanParams`):
    "off" row ends its trip), no speed for more than ``gap_s`` (``"gap"``), a hole longer
    than ``max_fill_s`` in the speed with the vehicle moving at either end
    (``"speed_gap"``: the profile inside is unknown; a hole between two standstill rows
-   is a stop and is filled with 0), and standstill (speed <= ``standstill_mps``) lasting
-   more than ``stop_s`` (``"long_stop"``: the trip ends where the stop starts, the next
-   starts where it ends). Trips shorter than ``min_duration_s`` or ``min_distance_m`` are
+   is a stop and is filled with 0, unless the GPS fixes at its ends are more than
+   ``stop_max_displacement_m`` apart), and standstill (speed <= ``standstill_mps``)
+   lasting more than ``stop_s`` (``"long_stop"``: the trip ends where the stop starts,
+   the next starts where it ends) or during which the battery charged (``"charging"``:
+   ``charge_power_w`` taken in for ``charge_min_s``, or the state of charge up
+   ``charge_soc_rise_pct``), split the same way. Trips shorter than ``min_duration_s`` or ``min_distance_m`` are
    dropped and reported.
 6. **Grid.** Each trip is resampled onto a regular grid of ``grid_s`` seconds aligned to
    whole multiples of ``grid_s`` in UTC, inside the trip's first and last sample (no

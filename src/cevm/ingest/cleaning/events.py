@@ -3,6 +3,8 @@ each trip counts its own."""
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 
@@ -55,11 +57,10 @@ class RepairEvents:
         """The lasting speed jumps from ``t0`` to ``t1`` [s, UTC], the largest first (at
         most :data:`MAX_JUMPS_LISTED`): ``{"source", "utc_s", "dt_s", "from_mps",
         "to_mps"}`` each."""
-        found = []
-        for source, t, dt, v0, v1 in self._jumps:
-            for i in np.flatnonzero((t >= t0) & (t <= t1)):
-                found.append({"source": source, "utc_s": float(t[i]), "dt_s": float(dt[i]),
-                              "from_mps": float(v0[i]), "to_mps": float(v1[i])})
+        found: list[dict[str, Any]] = [{"source": source, "utc_s": float(t[i]), "dt_s": float(dt[i]),
+                  "from_mps": float(v0[i]), "to_mps": float(v1[i])}
+                 for source, t, dt, v0, v1 in self._jumps
+                 for i in np.flatnonzero((t >= t0) & (t <= t1))]
         found.sort(key=lambda j: (-abs(j["to_mps"] - j["from_mps"]), j["utc_s"]))
         return found[: self.MAX_JUMPS_LISTED]
 

@@ -123,7 +123,7 @@ def speed_source_share(seg: BatchSpeedRows, trips: np.ndarray) -> list[tuple[str
     key = segment_ids(b) * k + code
     counts = np.bincount(key[ok], minlength=len(seg) * k).reshape(len(seg), k)
     out = []
-    for c_row, n in zip(counts[trips].tolist(), lens.tolist()):
+    for c_row, n in zip(counts[trips].tolist(), lens.tolist(), strict=True):
         share = {SPEED_SOURCES[c]: k / n for c, k in enumerate(c_row) if k}
-        out.append(((max(share, key=share.get) if share else None), share))
+        out.append(((max(share, key=lambda s: share[s]) if share else None), share))
     return out

@@ -57,6 +57,20 @@ class CleanParams:
     - ``start_soc_window_s = 60``: a trip's start state of charge is the reading at or
       last before its start within 60 s, else the first within 60 s after it (a BMS
       reports every few seconds; in a minute a vehicle's SoC moves by well under 1 %).
+    - ``charge_power_w = 2000``, ``charge_min_s = 60``, ``charge_soc_rise_pct = 2``,
+      ``charge_counter_kwh = 0.5``: a stop during which the battery takes in more than
+      2 kW (V x I below -2 kW) for at least 60 s, its state of charge rises by 2 points
+      or more, or its energy counter (net of regeneration) falls by 0.5 kWh (five of
+      an FMS counter's 0.1 kWh steps) is a charging stop
+      (an opportunity charger at a terminus): it ends the trip like a long stop, since a
+      trip's measured energy is the battery's net and would otherwise lose what was
+      charged. At standstill nothing else makes the battery take in power (regeneration
+      needs motion; an idle vehicle draws its auxiliaries), and 2 kW is above a current
+      sensor's offset (1-2 A at 650 V) and below the slowest charger (a 10 A socket).
+    - ``stop_max_displacement_m = 100``: a hole in the log between two standstill rows is
+      a stop only if the GPS fixes at its ends are within 100 m (a consumer GPS at rest
+      scatters by metres, by tens in a street canyon); farther, the vehicle drove in the
+      hole, whose profile is unknown: a ``speed_gap``.
     - ``consumption``: :class:`cevm.ingest.consumption.ConsumptionParams`.
     """
 
@@ -81,6 +95,11 @@ class CleanParams:
     unordered_share: float = 0.05
     time_outlier_max_rows: int = 3
     start_soc_window_s: float = 60.0
+    charge_power_w: float = 2000.0
+    charge_min_s: float = 60.0
+    charge_soc_rise_pct: float = 2.0
+    charge_counter_kwh: float = 0.5
+    stop_max_displacement_m: float = 100.0
     consumption: ConsumptionParams = field(default_factory=ConsumptionParams)
 
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -82,8 +82,8 @@ def _load(frame: pd.DataFrame | Mapping[str, np.ndarray], path, release: bool = 
     their own arrays where they are float64 or float32 (no copy); rows without a finite
     time are left out of the current rows. ``release``: the columns are removed from
     ``frame`` once taken, so that the cleaning holds the only reference to its arrays."""
-    table = frame if is_pandas(frame, "DataFrame") else None
-    names = set(frame.columns) if table is not None else set(frame)
+    table: Any = frame if is_pandas(frame, "DataFrame") else None  # a pandas DataFrame (pandas is untyped here)
+    names = set(table.columns) if table is not None else set(frame)
     if "time_s" not in names:
         raise InputError(path, "no time column (canonical 'time_s')", column="time_s")
     n = len(frame) if table is not None else len(frame["time_s"])

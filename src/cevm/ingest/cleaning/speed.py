@@ -22,6 +22,7 @@ def _interp_rows(t: np.ndarray, ok: np.ndarray | None, v: np.ndarray | None, max
     them at a time between the samples around the chunk."""
     if ok is None:
         return np.full(t.shape if at is None else at.shape, np.nan)
+    assert v is not None  # a column's values come with its ok mask
     if at is None:
         if ok.all():  # every row is a sample: its own value (exact times)
             return v.copy()
@@ -49,12 +50,14 @@ def _speed_from_positions(t: np.ndarray, fixes: GpsFixes, rows: np.ndarray, p: C
     consecutive fixes over their time step, at its midpoint time, for steps of at most
     ``max_fill_s`` and ``max_speed_mps``, interpolated over at most ``max_fill_s``."""
     m = fixes.rows.size - 1
+    step_m = fixes.step_m
+    assert step_m is not None  # set while the row speeds are made
     tm, vm = np.empty(m), np.empty(m)
     k = 0
     for a, b in chunks(m):
         ft = t[fixes.rows[a:b + 1]]
         dt = np.diff(ft)
-        v = fixes.step_m[a:b] / dt
+        v = step_m[a:b] / dt
         ok = (dt <= p.max_fill_s) & (v <= p.max_speed_mps)
         j = k + int(ok.sum())
         tm[k:j] = (0.5 * (ft[1:] + ft[:-1]))[ok]

@@ -9,15 +9,16 @@ from pathlib import Path
 import numpy as np
 
 from cevm.errors import InputError
-from cevm.ingest.cleaning.arrays import _jsonable, _let_go, _nonzero
+from cevm.ingest.cleaning.arrays import _ffill, _jsonable, _let_go, _nonzero
 from cevm.ingest.cleaning.clock import _repair_time, _sort_by_time
 from cevm.ingest.cleaning.duplicates import _merge_ticks
 from cevm.ingest.cleaning.events import RepairEvents
+from cevm.ingest.cleaning.geodesy import local_distance_m
 from cevm.ingest.cleaning.grid import BatchSpeedRows, grid_lengths
 from cevm.ingest.cleaning.params import CleanBatch, CleanParams, CleanResult, CleanTrip
 from cevm.ingest.cleaning.rows import _ROW_SPEED_COLUMNS, CleanedLog, _load
 from cevm.ingest.cleaning.speed import _row_speed
-from cevm.ingest.cleaning.splitting import _SPLIT_REASONS, _ignition_on, _segment
+from cevm.ingest.cleaning.splitting import _SPLIT_REASONS, StopSignals, _ignition_on, _segment
 from cevm.ingest.cleaning.trip import clean_batch
 from cevm.ingest.consumption import EnergySourceLike, columns_read
 from cevm.ingest.evidence import EVIDENCE_COLUMNS
@@ -92,7 +93,9 @@ class CleanStream:
         rows_v = None if fin.all() else _nonzero(fin)  # the rows with a speed (None: all)
         del fin
         ts, vs = (t, v) if rows_v is None else (t[rows_v], v[rows_v])
-        keep_idx, starts, start_reasons = _segment(ts, vs, _ignition_on(cols, rows_v, t.size), p)
+        notes: list[dict] = []
+        keep_idx, starts, start_reasons = _segment(ts, vs, _ignition_on(cols, rows_v, t.size), p,
+                                                   _stop_signals(t, cols, fixes, rows_v, p), notes)
         del ts, vs
         # the log rows of the kept speed rows, in trip order (None: every row)
         if keep_idx is None:
@@ -109,13 +112,15 @@ class CleanStream:
             trips_dropped=0,
             speed_rows=int(t.size if rows_v is None else rows_v.size),
             gps_fixes_kept=int(fixes.rows.size),
+            stop_notes=notes,
         )
         bounds = np.append(starts, n_kept)
         # each trip's lowest and highest file line (its rows' span), so that the lines
         # need not be kept while the trips are made
         first = bounds[:-1] if rows_k is None else rows_k[bounds[:-1]]
         last = bounds[1:] - 1 if rows_k is None else rows_k[bounds[1:] - 1]
-        lines = [(int(line[a:b + 1].min()), int(line[a:b + 1].max())) for a, b in zip(first.tolist(), last.tolist())]
+        lines = [(int(line[a:b + 1].min()), int(line[a:b + 1].max()))
+                 for a, b in zip(first.tolist(), last.tolist(), strict=True)]
         self.planned_samples = _grid_samples(t[first], t[last], p.grid_s)
         del line
         self._work = (CleanedLog(t, cols, fixes, ev), v, src, rows_k, bounds, start_reasons, lines)
@@ -159,6 +164,43 @@ class CleanStream:
         """The kept trips one at a time (made a batch at a time: :meth:`batches`)."""
         for batch in self.batches():
             yield from (batch.trip(i) for i in range(len(batch)))
+
+
+def _stop_signals(t: np.ndarray, cols: dict, fixes, rows_v: np.ndarray | None, p: CleanParams) -> StopSignals:
+    """The battery power, state of charge, energy counter and GPS displacement that tell
+    a charging stop or a hole the vehicle drove through
+    (:class:`~cevm.ingest.cleaning.splitting.StopSignals`), at the speed rows ``rows_v``
+    (None: all) of the log rows at times ``t``."""
+    def at_rows(a: np.ndarray) -> np.ndarray:
+        # a reading holds until the next (loggers write each column at its own rate); float32
+        # (7 digits: a 1e11 J counter to 0.02 MJ) to hold the signals in half the memory
+        a = _ffill(a)
+        return (a if rows_v is None else a[rows_v]).astype(np.float32)
+
+    power = None
+    if "battery_voltage_v" in cols and "battery_current_a" in cols:
+        power = at_rows(cols["battery_voltage_v"])
+        power *= at_rows(cols["battery_current_a"])
+    soc = at_rows(cols["soc_pct"]) if "soc_pct" in cols and np.isfinite(cols["soc_pct"]).any() else None
+    counter = (at_rows(cols["total_energy_j"]) if "total_energy_j" in cols and np.isfinite(cols["total_energy_j"]).any()
+               else None)
+    displacement = None
+    if fixes.rows.size >= 2 and "lat_deg" in cols and "lon_deg" in cols:
+        lat, lon = cols["lat_deg"], cols["lon_deg"]
+
+        def displacement(t0: np.ndarray, t1: np.ndarray) -> np.ndarray:
+            """Distance [m] from the last fix at or before ``t0`` to the first at or after
+            ``t1``, each within ``gps_max_fill_s`` of its time (else NaN)."""
+            ft = t[fixes.rows]
+            a = np.searchsorted(ft, t0, "right") - 1
+            b = np.searchsorted(ft, t1, "left")
+            ok = (a >= 0) & (b < ft.size)
+            a, b = np.clip(a, 0, ft.size - 1), np.clip(b, 0, ft.size - 1)
+            ok &= (t0 - ft[a] <= p.gps_max_fill_s) & (ft[b] - t1 <= p.gps_max_fill_s)
+            ra, rb = fixes.rows[a], fixes.rows[b]
+            return np.where(ok, local_distance_m(lat[ra], lon[ra], lat[rb], lon[rb]), np.nan)
+
+    return StopSignals(power, soc, displacement, counter)
 
 
 def _batch_end(size: np.ndarray, j0: int, max_samples: int) -> int:

@@ -53,15 +53,13 @@ def clean_batch(log: CleanedLog, seg: BatchSpeedRows, sources: Sequence[EnergySo
     """The trips of ``seg`` (steps 6-9 of the module docstring): the kept ones as a
     :class:`CleanBatch` (None if none is kept) and, for each dropped one (too short),
     its place among the batch's trips and its record."""
-    n = len(seg)
     b = seg.bounds
     n_rows = np.diff(b)
     t_first, t_last = seg.t[b[:-1]], seg.t[b[1:] - 1]
     glen = grid_lengths(t_first, t_last, n_rows, p.grid_s)
-    dropped: list[tuple[int, dict]] = []
-    for j in np.flatnonzero(glen < 2).tolist():
-        dropped.append((j, _dropped(float(t_first[j]), float(t_last[j] - t_first[j]), 0.0, seg.lines[j],
-                                    "shorter than one grid step")))
+    dropped: list[tuple[int, dict]] = [
+        (j, _dropped(float(t_first[j]), float(t_last[j] - t_first[j]), 0.0, seg.lines[j], "shorter than one grid step"))
+        for j in np.flatnonzero(glen < 2).tolist()]
     gi = np.flatnonzero(glen >= 2)
     if not gi.size:
         return None, dropped
@@ -72,10 +70,10 @@ def clean_batch(log: CleanedLog, seg: BatchSpeedRows, sources: Sequence[EnergySo
     duration = grid_t[gb[1:] - 1] - grid_t[gb[:-1]]
     dist_end = dist[gb[1:] - 1]
     short = (duration < p.min_duration_s) | (dist_end < p.min_distance_m)
-    for k in np.flatnonzero(short).tolist():
-        dropped.append((int(gi[k]), _dropped(float(grid_t[gb[k]]), float(duration[k]), float(dist_end[k]),
-                                             seg.lines[gi[k]],
-                                             f"shorter than {p.min_duration_s:g} s or {p.min_distance_m:g} m")))
+    dropped.extend((int(gi[k]), _dropped(float(grid_t[gb[k]]), float(duration[k]), float(dist_end[k]),
+                                         seg.lines[gi[k]],
+                                         f"shorter than {p.min_duration_s:g} s or {p.min_distance_m:g} m"))
+                   for k in np.flatnonzero(short).tolist())
     dropped.sort(key=lambda d: d[0])
     keep = np.flatnonzero(~short)
     if not keep.size:
@@ -120,7 +118,7 @@ def _kept_batch(log: CleanedLog, seg: BatchSpeedRows, trips: np.ndarray, grid_t:
         consumption = measure_trips(log.t, log.cols, sources, g0, g1, p.consumption)
     else:  # numpy on each trip's own slices: fewer passes over long trips' samples
         consumption = [measure_trip(log.t, log.cols, sources, a, b, p.consumption)
-                       for a, b in zip(g0.tolist(), g1.tolist())]
+                       for a, b in zip(g0.tolist(), g1.tolist(), strict=True)]
     qualities, measured = [], []
     for k, j in enumerate(trips.tolist()):
         gt, d = grid_t[first[k]:last[k] + 1], dist[first[k]:last[k] + 1]
@@ -198,7 +196,8 @@ def _start_socs(log: CleanedLog, t0: np.ndarray, window_s: float) -> tuple[list,
     before = (k >= 0) & (f[np.maximum(k, 0)] >= a) if f.size else np.zeros(t0.size, dtype=bool)
     after = ~before & (k + 1 < f.size) & (f[np.minimum(k + 1, max(f.size - 1, 0))] < b) if f.size \
         else np.zeros(t0.size, dtype=bool)
-    pct, dt = [], []
+    pct: list[float | None] = []
+    dt: list[float | None] = []
     for i in range(t0.size):
         r = int(f[k[i]]) if before[i] else (int(f[k[i] + 1]) if after[i] else None)
         if r is None:

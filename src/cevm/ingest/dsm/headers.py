@@ -5,7 +5,6 @@ nodata and scale (:class:`TileHeader`), and the headers sent to workers once
 from __future__ import annotations
 
 import os
-from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
@@ -87,7 +86,8 @@ def _check_block_size(ds, shown: str) -> None:
         raise InputError(shown, f"its internal blocks ({kind}s of {bw:,} x {bh:,} pixels, {ds.dtypes[0]}) take "
                                 f"{nbytes / 1e6:,.0f} MB each decoded, over the {MAX_BLOCK_BYTES >> 20} MB a DSM block "
                                 "may take (GDAL decodes a whole block to read one pixel); write it in tiles, e.g. "
-                                "gdal_translate -co TILED=YES -co BLOCKXSIZE=512 -co BLOCKYSIZE=512 -co COMPRESS=DEFLATE")
+                                "gdal_translate -co TILED=YES -co BLOCKXSIZE=512 -co BLOCKYSIZE=512 -co "
+                                "COMPRESS=DEFLATE")
 
 
 def _is_gdal_name(source: str) -> bool:
@@ -154,7 +154,7 @@ def _read_header(name: str, shown: str, driver: str = "") -> TileHeader:
         raise InputError(shown, f"cannot open as a raster: {exc}") from None
 
 
-def _list_sources(source: str | os.PathLike | Sequence[str | os.PathLike]) -> list[str]:
+def _list_sources(source: str | os.PathLike | list[str | os.PathLike] | tuple[str | os.PathLike, ...]) -> list[str]:
     """Resolve a DSM argument to raster names GDAL can open (see :meth:`DsmSampler.open`)."""
     if isinstance(source, (list, tuple)):
         names: list[str] = []

@@ -122,4 +122,5 @@ def _evaluate(coef: np.ndarray, degree: int, u: np.ndarray, v: np.ndarray) -> tu
         else:
             out *= u
             out += q
+    assert out is not None  # the loop ran (a polynomial has a term)
     return out[0], out[1]

@@ -34,8 +34,6 @@ def _gdal_env():
     return rasterio.Env()
 
 
-
-
 class DsmSampler:
     """Bilinear lookup of a DSM (one raster, a VRT, or many tiles in any CRSs).
 
@@ -105,7 +103,8 @@ class DsmSampler:
     # ---- construction ----------------------------------------------------------------
 
     @classmethod
-    def open(cls, source: str | os.PathLike | Sequence[str | os.PathLike], *, block_px: int | None = None,
+    def open(cls, source: str | os.PathLike | list[str | os.PathLike] | tuple[str | os.PathLike, ...], *,
+             block_px: int | None = None,
              cache_mb: float = 256.0, allow_remote: bool | None = None) -> DsmSampler:
         """Open a DSM.
 

@@ -101,6 +101,7 @@ class CrsTileGroup:
         tile's exact bounds; ``undecided`` marks points within rounding of a cell edge
         (or failing the check), which the general index decides."""
         grid = self._grid
+        assert grid is not None  # built for a regular layout
         ny, nx = grid.shape
         fc = (x - self.bbox[0]) / self._tw
         fr = (self.bbox[3] - y) / self._th
@@ -148,8 +149,10 @@ class CrsTileGroup:
         cx, cy = self._cell(x, y)
         ok = np.isfinite(cx) & np.isfinite(cy)
         keys = np.where(ok, self._key(np.where(ok, cx, 0), np.where(ok, cy, 0)), -1)
-        pos = np.minimum(np.searchsorted(self._bkeys, keys), self._bkeys.size - 1)
-        idx = np.flatnonzero(ok & (self._bkeys[pos] == keys))
+        bkeys = self._bkeys
+        assert bkeys is not None  # built with the bucket index
+        pos = np.minimum(np.searchsorted(bkeys, keys), bkeys.size - 1)
+        idx = np.flatnonzero(ok & (bkeys[pos] == keys))
         if idx.size == 0:
             return out
         b = pos[idx]
@@ -248,8 +251,8 @@ class TileIndex:
                 tr = _transformer(grp.crs_key, crs)
                 xmin, ymin, xmax, ymax = tr.transform_bounds(*grp.bbox, densify_pts=21)
                 mx, my = 0.01 * (xmax - xmin), 0.01 * (ymax - ymin)
-                box = (xmin - mx, ymin - my, xmax + mx, ymax + my)
-                grp.lonlat_bbox[crs] = box if all(map(math.isfinite, box)) and xmin <= xmax else None
+                padded = (xmin - mx, ymin - my, xmax + mx, ymax + my)
+                grp.lonlat_bbox[crs] = padded if all(map(math.isfinite, padded)) and xmin <= xmax else None
             except Exception:
                 grp.lonlat_bbox[crs] = None
         box = grp.lonlat_bbox[crs]

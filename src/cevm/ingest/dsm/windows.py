@@ -7,6 +7,7 @@ import math
 from collections import OrderedDict
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -93,9 +94,10 @@ class WindowReader:
         self._cached_bytes = 0
         self._pools: list[BlockPool] = []
         self._pool_index: dict[tuple[int, int, str], int] = {}
-        self._open: OrderedDict[int, object] = OrderedDict()
+        self._open: OrderedDict[int, Any] = OrderedDict()  # rasterio datasets (untyped library)
         self.failed: dict[int, str] = {}  # tile -> why it cannot be read
-        self._blk = np.array([block_px or (t.block if 128 <= t.block <= 1024 else 512) for t in self.tiles], dtype=np.int64)
+        self._blk = np.array([block_px or (t.block if 128 <= t.block <= 1024 else 512) for t in self.tiles],
+                             dtype=np.int64)
         self._h = np.array([t.height for t in self.tiles], dtype=np.int64)
         self._w = np.array([t.width for t in self.tiles], dtype=np.int64)
 
@@ -248,7 +250,8 @@ class WindowReader:
             stride = pool.shape[1]
             sel = slice(None) if len(pools) == 1 else np.flatnonzero(pool_of[inv] == pi)
             ii = inv[sel]
-            flat = slot_of[ii] * pool.size + (row[sel] - brow[sel] * blk[sel]) * stride + (col[sel] - bcol[sel] * blk[sel])
+            flat = (slot_of[ii] * pool.size + (row[sel] - brow[sel] * blk[sel]) * stride
+                    + (col[sel] - bcol[sel] * blk[sel]))
             data = pool.data.reshape(-1)
             if quad:
                 out[0, sel] = data[flat]

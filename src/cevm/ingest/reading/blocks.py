@@ -105,7 +105,8 @@ def _drop_truncated_last_line(data: bytes, first_line: int, names: list[str], pr
             if prof.truncated_last_line == "error":
                 raise InputError(path, f"truncated last line: {n_fields} of {len(names)} fields",
                                  line=line_no, column=names[n_fields - 1] if n_fields else names[0])
-            repairs.read.append(f"read: truncated last line ({n_fields} of {len(names)} fields) dropped: line {line_no}")
+            repairs.read.append(f"read: truncated last line ({n_fields} of {len(names)} fields) dropped: "
+                                f"line {line_no}")
             return data[:last_start]
     return data
 

@@ -37,7 +37,8 @@ def _canonical_columns(columns: dict[str, np.ndarray], maps: list[ColumnMap], ut
     has_pos = "lat_deg" in out and np.isfinite(out["lat_deg"]).any()
     has_speed = any(c in out and np.isfinite(out[c]).any() for c in ("wheel_speed_mps", "gps_speed_mps"))
     if not (has_pos or has_speed):
-        cands = [m.source for m in prof.columns if m.canonical in ("lat_deg", "lon_deg", "wheel_speed_mps", "gps_speed_mps")]
+        cands = [m.source for m in prof.columns
+                 if m.canonical in ("lat_deg", "lon_deg", "wheel_speed_mps", "gps_speed_mps")]
         raise InputError(path, "no position and no speed values: cannot derive a drive cycle "
                                f"(profile {prof.name!r} looks for {', '.join(cands) or 'none'})")
     return out
@@ -72,7 +73,7 @@ def _split_vehicles(out: dict[str, np.ndarray], codes: np.ndarray, vehicles: lis
             for k in range(len(vehicles)):
                 per[k][c] = a[bounds[k]:bounds[k + 1]]
     logs = []
-    for vname, arrays in zip(vehicles, per):
+    for vname, arrays in zip(vehicles, per, strict=True):
         sources = tuple(_energy_source(e, maps) for e in prof.energy if _has_energy_data(e, arrays))
         logs.append(ParsedLog(path, prof.name, vname, arrays, dict(metadata), sources, list(repairs)))
     return logs

@@ -95,7 +95,8 @@ def _detect_in_head(path: Path, head: bytes, profiles: dict[str, Profile]) -> Pr
     best = max(len(p.required_columns) for p in matches)
     top = [p for p in matches if len(p.required_columns) == best]
     if len(top) > 1:
-        raise InputError(path, f"header matches several profiles equally well: {', '.join(p.name for p in top)}; force one")
+        raise InputError(path,
+                         f"header matches several profiles equally well: {', '.join(p.name for p in top)}; force one")
     return top[0]
 
 

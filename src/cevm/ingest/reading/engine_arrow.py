@@ -40,7 +40,7 @@ def _arrow_block(block: bytes, first_line: int, plan: ColumnPlan, prof: Profile,
     types = {c: pa.float64() for c in plan.num_cols}
     types.update({c: pa.string() for c in plan.text_cols})
     tcol = prof.time.columns[0] if len(prof.time.columns) == 1 else None
-    if time_type is not None:
+    if time_type is not None and tcol is not None:  # time_type: the single ISO 8601 time column's
         types[tcol] = time_type
     try:
         tbl = pacsv.read_csv(

@@ -10,6 +10,7 @@ from __future__ import annotations
 import io
 import re
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -63,7 +64,8 @@ def _pandas_block(block: bytes, first_line: int, plan: ColumnPlan, prof: Profile
         empty = df.isna().all(axis=1).to_numpy().copy()
     numbers = {c: _writable(df[c].to_numpy(dtype=np.float64)) for c in plan.num_cols}  # copy-on-write views
     text = {c: df[c].to_numpy(dtype=object) for c in plan.text_cols if c in df.columns}
-    part = ParsedBlock(lines, numbers, text, fast.ns if fast is not None else None, bool(fast is not None and fast.is_utc),
+    part = ParsedBlock(lines, numbers, text, fast.ns if fast is not None else None,
+                       bool(fast is not None and fast.is_utc),
                  fewer=fewer, last_line=first_line + len(df) - 1, bad_cells=bad_cells)
     return _drop_empty_rows(part, empty)
 
@@ -89,7 +91,7 @@ def _read_table(body: bytes, path: Path, prof: Profile, names: list[str], usecol
               engine="c", encoding="utf-8", quotechar='"', low_memory=False)
     na_values = {c: _NUMERIC_NA for c in num_cols if c in usecols}
     na_values.update({c: [""] for c in text_cols if c in usecols})
-    dtype = {c: "float64" for c in num_cols if c in usecols}
+    dtype: dict[str, Any] = {c: "float64" for c in num_cols if c in usecols}
     dtype.update({c: object for c in text_cols if c in usecols})
     if all_cols:
         dtype.update({c: object for c in names if c not in usecols})
@@ -107,7 +109,7 @@ def _read_table(body: bytes, path: Path, prof: Profile, names: list[str], usecol
             # an error in a required one (slow path, blocks with such a cell only)
             df = pd.read_csv(io.BytesIO(body), dtype=object, na_values=na_values, **kw)
             if not _cells_to_numbers(df, path, prof, num_cols, usecols, header_line, required, units, bad_out):
-                raise
+                raise _unparsed(path, prof, df, num_cols, usecols, header_line, exc) from None
     except pd.errors.ParserError as exc:
         m = re.search(r"line (\d+)", str(exc))
         line = header_line + int(m.group(1)) if m else None
@@ -119,6 +121,24 @@ def _read_table(body: bytes, path: Path, prof: Profile, names: list[str], usecol
         df = df[usecols]
     df.columns = [c.split("\x00")[0] for c in df.columns]
     return df
+
+
+def _unparsed(path: Path, prof: Profile, df: pd.DataFrame, num_cols: list[str], usecols: list[str],
+              header_line: int, exc: ValueError) -> InputError:
+    """The error for numeric columns the parser refused though every cell is a number
+    once its decimal mark is read as '.': a file written with '.' under a profile whose
+    decimal mark is another (its first such cell named), else the parser's own words."""
+    for c in num_cols:
+        if c not in usecols or prof.decimal == ".":
+            continue
+        dotted = df[c].astype("string").str.contains(".", regex=False).fillna(False).to_numpy(dtype=bool)
+        if dotted.any():
+            i = int(np.flatnonzero(dotted)[0])
+            return InputError(path, f"'{df[c].iloc[i]}' is written with a '.' but the profile {prof.name!r} reads "
+                                    f"'{prof.decimal}' as the decimal mark ([csv] decimal): a wrong profile, or a "
+                                    "file exported with other settings", line=header_line + 1 + i,
+                              column=c.split("\x00")[0])
+    return InputError(path, f"numeric columns unreadable: {exc}")
 
 
 def _cells_to_numbers(df: pd.DataFrame, path: Path, prof: Profile, num_cols: list[str], usecols: list[str],

@@ -80,11 +80,12 @@ class ColumnGatherer:
             _check_vehicle_id(vid, path, None, None, "the vehicle id given")
         else:
             vid = _vehicle_from_profile(prof, path, metadata, self.repairs.vehicle)
-            src, line = prof.vehicle_source, None
+            src: str = prof.vehicle_source
+            line = None
             if src == "metadata" and not metadata.get(prof.vehicle_key or "", "").strip():
                 src = prof.vehicle_fallback
             elif src == "metadata":
-                line = next((ln for c, ln in zip(hdr.comments, hdr.comment_lines)
+                line = next((ln for c, ln in zip(hdr.comments, hdr.comment_lines, strict=True)
                              if c.partition("=")[0].strip() == prof.vehicle_key), None)
             where = {"metadata": f"metadata key {prof.vehicle_key!r}", "fixed": "the profile's vehicle.value",
                      "file_stem": "the file name", "parent_dir": "the directory name"}[src]
@@ -144,6 +145,7 @@ class ColumnGatherer:
 
     def _vehicle_part(self, part: ParsedBlock, upto: int | None) -> np.ndarray:
         key = self.prof.vehicle_key
+        assert key is not None  # a vehicle column's profile names it
         raw_codes, raw_ids = pd.factorize(part.text[key], sort=False)  # hash, no per-row strip
         stripped = pd.Series(np.asarray(raw_ids, dtype=object)).str.strip()
         bad = (raw_codes < 0) | (np.asarray(stripped == "")[np.maximum(raw_codes, 0)] if len(stripped) else True)
@@ -346,7 +348,8 @@ def _vehicle_from_profile(prof: Profile, path: Path, metadata: dict[str, str], r
         if prof.vehicle_fallback == "error":
             raise InputError(path, f"no '{prof.vehicle_key}=' metadata line for the vehicle id", line=1)
         src = prof.vehicle_fallback
-        repairs.append(f"vehicle: no '{prof.vehicle_key}' metadata; vehicle id taken from the file's {src.replace('_', ' ')}")
+        repairs.append(f"vehicle: no '{prof.vehicle_key}' metadata; vehicle id taken from the file's "
+                       f"{src.replace('_', ' ')}")
     name = path.name
     for suffix in (".gz", ".csv", ".txt"):
         if name.lower().endswith(suffix):
@@ -358,15 +361,17 @@ def _map_values(vals: np.ndarray, m: ColumnMap, lines: np.ndarray, path: Path, u
     """A value-map column's text (e.g. ``On``/``Off``) as float64 (NaN = no value);
     matched exactly, else ignoring case and surrounding space; other text is an error."""
     s = pd.Series(vals, dtype=object)
-    mapping = dict(m.value_map)  # type: ignore[arg-type]
+    value_map = m.value_map
+    assert value_map is not None  # a value-map column
+    mapping = dict(value_map)
     res = s.map(mapping)
     todo = (res.isna() & s.notna()).to_numpy()
     if todo.any():
-        folded = {k.strip().casefold(): v for k, v in m.value_map}  # type: ignore[union-attr]
+        folded = {k.strip().casefold(): v for k, v in value_map}
         res2 = s[todo].str.strip().str.casefold().map(folded)
         res[todo] = res2
         still = (res.isna() & s.notna()).to_numpy()
         if still.any():
-            raise _line_col_error(path, f"value not in the profile's map ({', '.join(k for k, _ in m.value_map)}):",
+            raise _line_col_error(path, f"value not in the profile's map ({', '.join(k for k, _ in value_map)}):",
                                   lines, still, m.source, vals, upto)
     return res.to_numpy(dtype=np.float64)

@@ -112,20 +112,24 @@ def _plan_columns(prof: Profile, hdr: Header, path: Path) -> ColumnPlan:
                          line=hdr.line, column=missing_req[0])
     for c in prof.time.columns:
         if c not in names:
-            raise InputError(path, f"no time column: header lacks {c!r} (profile {prof.name!r})", line=hdr.line, column=c)
+            raise InputError(path, f"no time column: header lacks {c!r} (profile {prof.name!r})", line=hdr.line,
+                             column=c)
     if prof.vehicle_source == "column" and prof.vehicle_key not in names:
-        raise InputError(path, f"header lacks the vehicle column {prof.vehicle_key!r}", line=hdr.line, column=prof.vehicle_key)
+        raise InputError(path, f"header lacks the vehicle column {prof.vehicle_key!r}", line=hdr.line,
+                         column=prof.vehicle_key)
     maps = [m for m in prof.columns if m.source in names]
     for m in prof.columns:
         if m.required and m.source not in names:
             raise InputError(path, f"header lacks required column {m.source!r}", line=hdr.line, column=m.source)
-    text_cols = list(prof.time.columns) + ([prof.vehicle_key] if prof.vehicle_source == "column" else [])
+    text_cols = list(prof.time.columns) + ([prof.vehicle_key] if prof.vehicle_source == "column" and prof.vehicle_key
+                                           else [])
     text_cols += [m.source for m in maps if m.value_map is not None]
     num_cols = [m.source for m in maps if m.value_map is None]
     used = list(dict.fromkeys(text_cols + num_cols))
     dups = sorted({c for c in used if names.count(c) > 1})
     if dups:
-        raise InputError(path, f"column name(s) {dups} appear more than once in the header", line=hdr.line, column=dups[0])
+        raise InputError(path, f"column name(s) {dups} appear more than once in the header", line=hdr.line,
+                         column=dups[0])
     unique_names = [f"{n}\x00{i}" if names.count(n) > 1 else n for i, n in enumerate(names)]
     required_num = frozenset(m.source for m in maps if m.value_map is None and
                              (m.required or m.source in prof.required_columns))

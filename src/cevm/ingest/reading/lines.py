@@ -20,8 +20,7 @@ def _line_stats(b: np.ndarray, sep: int) -> tuple[np.ndarray, np.ndarray]:
     over blocks, not rows): counts per line by ``np.add.reduceat`` of the separator
     mask, no array of separator positions."""
     parts = [np.zeros(1, np.int64)]
-    for lo in range(0, len(b), _CHUNK_BYTES):
-        parts.append(np.flatnonzero(b[lo:lo + _CHUNK_BYTES] == 10) + (lo + 1))
+    parts.extend(np.flatnonzero(b[lo:lo + _CHUNK_BYTES] == 10) + (lo + 1) for lo in range(0, len(b), _CHUNK_BYTES))
     starts = np.concatenate(parts)
     if starts[-1] >= len(b):
         starts = starts[:-1]
@@ -62,7 +61,8 @@ def _lines_summary(lines: np.ndarray, limit: int = 6) -> str:
     breaks = np.flatnonzero(np.diff(lines) != 1) + 1
     starts = np.concatenate([[0], breaks])
     ends = np.concatenate([breaks - 1, [len(lines) - 1]])
-    runs = [f"{lines[s]}" if s == e else f"{lines[s]}-{lines[e]}" for s, e in zip(starts[:limit], ends[:limit])]
+    runs = [f"{lines[s]}" if s == e else f"{lines[s]}-{lines[e]}"
+            for s, e in zip(starts[:limit], ends[:limit], strict=True)]
     more = f", ... ({len(starts) - limit} more runs)" if len(starts) > limit else ""
     return ("line " if len(lines) == 1 else "lines ") + ", ".join(runs) + more
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import re
 from pathlib import Path
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -14,7 +15,13 @@ from cevm.ingest.timestamps import NAT, NS_PER_DAY
 from cevm.lazy import pd
 
 
-def _repair_dates(date_ns: np.ndarray, tod_ns: np.ndarray, raw_dates: np.ndarray, lines: np.ndarray,
+class RowValues(Protocol):
+    """The text of a column by row: an array, or :class:`cevm.ingest.reading.gather.FactorisedValues`."""
+
+    def __getitem__(self, idx: Any) -> Any: ...
+
+
+def _repair_dates(date_ns: np.ndarray, tod_ns: np.ndarray, raw_dates: RowValues, lines: np.ndarray,
                   max_days: float, path: Path, col: str, repairs: list[str]) -> np.ndarray:
     """Replace corrupt dates (unparseable, or more than ``max_days`` from the file's
     most common date) by the date of the nearest preceding good row (following row for

@@ -101,8 +101,8 @@ def _check_position(out: dict[str, np.ndarray], prof: Profile, lines: np.ndarray
     """A position is one fix: if latitude or longitude is impossible (|lat| > 90,
     |lon| > 180) or, with ``zero_position_is_no_fix``, exactly 0 (the value GPS modules
     write without a fix), both become NaN. A latitude column without a longitude column
-    (or the reverse: a header cell lost) gives no positions, with a repair note. Zeros are never an error (a logger may have no
-    GPS at all); impossible values follow the absurd-value policy."""
+    (or the reverse: a header cell lost) gives no positions, with a repair note. Zeros are never
+    an error (a logger may have no GPS at all); impossible values follow the absurd-value policy."""
     if "lat_deg" not in out and "lon_deg" not in out:
         return
     if "lat_deg" not in out or "lon_deg" not in out:  # half a position is none: left out, and said
