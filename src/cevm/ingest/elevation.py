@@ -692,8 +692,9 @@ def _gps_fill(h: np.ndarray, d: np.ndarray, gps: np.ndarray, grid: np.ndarray, l
     g = _gps_around(d, gps, params, grid, lo, hi, span)
     off_l = _mean_finite(h[max(0, lo - span) : lo] - g[max(0, lo - span) : lo])
     off_r = _mean_finite(h[hi : hi + span] - g[hi : hi + span])
-    inside = (d >= grid[lo]) & (d <= grid[hi - 1])
-    gps_inside = np.isfinite(gps[inside]).mean() if inside.any() else 0.0
+    # the samples at grid[lo] .. grid[hi - 1]: a slice, as distance never decreases
+    inside = slice(int(np.searchsorted(d, grid[lo], side="left")), int(np.searchsorted(d, grid[hi - 1], side="right")))
+    gps_inside = np.isfinite(gps[inside]).mean() if inside.stop > inside.start else 0.0
     if gps_inside < 0.5 or not np.isfinite(g[lo:hi]).all() or (off_l is None and off_r is None):
         return False
     if off_l is None or off_r is None:

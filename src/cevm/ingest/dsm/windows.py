@@ -111,6 +111,12 @@ class WindowReader:
         self._pools.clear()
         self._pool_index.clear()
 
+    def trim_open(self) -> None:
+        """Close the least recently used datasets beyond :attr:`max_open`."""
+        while len(self._open) > self.max_open:
+            _, old = self._open.popitem(last=False)
+            old.close()
+
     def _dataset(self, tile: int):
         ds = self._open.get(tile)
         if ds is not None:
@@ -121,9 +127,7 @@ class WindowReader:
         gdal_cache_bounded()  # in a worker too, which has only the headers
         ds = rasterio.open(self.tiles[tile].name, driver=self.tiles[tile].driver or None)
         self._open[tile] = ds
-        while len(self._open) > self.max_open:
-            _, old = self._open.popitem(last=False)
-            old.close()
+        self.trim_open()
         return ds
 
     def _read_block(self, tile: int, brow: int, bcol: int) -> np.ndarray:

@@ -14,7 +14,7 @@ from cevm.errors import InputError
 from cevm.ingest.profiles import Profile
 from cevm.ingest.reading.header import Header
 from cevm.ingest.reading.lines import _count_fields
-from cevm.ingest.textfile import MAX_LINE_BYTES, Utf8Stream
+from cevm.ingest.textfile import MAX_LINE_BYTES, Utf8Stream, count_newlines
 
 # Text that means "no value" in a numeric column (besides an empty field).
 _NUMERIC_NA = ["", "NA", "N/A", "n/a", "NaN", "nan", "null", "NULL", "None", "-", "--"]
@@ -87,7 +87,7 @@ def _data_blocks(text: Utf8Stream, rest: bytes, hdr: Header, names: list[str], p
         parts, size, has_nl, since_nl = ([tail] if tail else []), len(tail), False, len(tail)
         seen_data = seen_data or _NON_SPACE.search(data, 0, cut) is not None  # not block.isspace(), uncopied
         yield first_line, block, False
-        first_line += data.count(b"\n", 0, cut)
+        first_line += count_newlines(data, 0, cut)
         del data, block
 
 

@@ -11,6 +11,7 @@ import numpy as np
 from cevm.ingest.profiles import Profile
 from cevm.ingest.reading.blocks import _NUMERIC_NA, ParsedBlock, _drop_empty_rows
 from cevm.ingest.reading.header import ColumnPlan
+from cevm.ingest.textfile import count_newlines
 from cevm.ingest.timestamps import NAT
 
 
@@ -33,9 +34,9 @@ def _arrow_block(block: bytes, first_line: int, plan: ColumnPlan, prof: Profile,
     fields, a value it cannot convert) or its rows do not match the lines."""
     pa, pc, pacsv = _arrow()
     if isinstance(block, memoryview):  # a block ending with a line break (blocks._data_blocks)
-        n_lines = block.obj.count(b"\n", 0, len(block))
+        n_lines = count_newlines(block.obj, 0, len(block))
     else:
-        n_lines = block.count(b"\n") + (0 if block.endswith(b"\n") else 1)
+        n_lines = count_newlines(block) + (0 if block.endswith(b"\n") else 1)
     types = {c: pa.float64() for c in plan.num_cols}
     types.update({c: pa.string() for c in plan.text_cols})
     tcol = prof.time.columns[0] if len(prof.time.columns) == 1 else None
