@@ -291,6 +291,17 @@ def columns_read(column: str) -> set[str]:
     return {column, *_BATTERY_POWER_FACTORS, *(part.strip() for part in column.split("*"))}
 
 
+def product_factors(column: str) -> tuple[str, ...]:
+    """The factor columns of a source column that is a product (``"battery_power_w"``:
+    voltage times current; ``"a*b"``: its parts); KeyError for any other column (one
+    that is absent from the log)."""
+    if column == BATTERY_POWER_COLUMN:
+        return _BATTERY_POWER_FACTORS
+    if "*" in column:
+        return tuple(part.strip() for part in column.split("*"))
+    raise KeyError(column)
+
+
 def source_samples(
     time_s: np.ndarray, columns: Mapping[str, np.ndarray], column: str, max_gap_s: float
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -306,14 +317,7 @@ def source_samples(
         v = np.asarray(columns[column], dtype=float)
         ok = np.isfinite(v)
         return time_s[ok], v[ok]
-    factors: tuple[str, ...]
-    if column == BATTERY_POWER_COLUMN:
-        factors = _BATTERY_POWER_FACTORS
-    elif "*" in column:
-        factors = tuple(part.strip() for part in column.split("*"))
-    else:
-        raise KeyError(column)
-    arrays = [np.asarray(columns[f], dtype=float) for f in factors]  # KeyError if absent
+    arrays = [np.asarray(columns[f], dtype=float) for f in product_factors(column)]  # KeyError if absent
     any_ok = np.zeros(time_s.shape, dtype=bool)
     for a in arrays:
         any_ok |= np.isfinite(a)

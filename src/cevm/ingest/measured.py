@@ -20,8 +20,6 @@ import numpy as np
 
 from cevm.core.trip import Measurement
 from cevm.ingest.consumption import (
-    _BATTERY_POWER_FACTORS,
-    BATTERY_POWER_COLUMN,
     ConsumptionParams,
     EnergySourceLike,
     SourceEstimate,
@@ -29,6 +27,7 @@ from cevm.ingest.consumption import (
     choose_measurement,
     finish_estimate,
     invalid_estimate,
+    product_factors,
 )
 from cevm.ingest.segments import (
     bounds_of,
@@ -118,14 +117,8 @@ def window_samples(time_s: np.ndarray, columns: Mapping[str, np.ndarray], column
         v = np.asarray(columns[column])[rows].astype(np.float64, copy=False)
         ok = np.isfinite(v)
         return tw[ok], v[ok], _kept_bounds(ok, wb)
-    factors: tuple[str, ...]
-    if column == BATTERY_POWER_COLUMN:
-        factors = _BATTERY_POWER_FACTORS
-    elif "*" in column:
-        factors = tuple(part.strip() for part in column.split("*"))
-    else:
-        raise KeyError(column)
-    arrays = [np.asarray(columns[f])[rows].astype(np.float64, copy=False) for f in factors]  # KeyError if absent
+    arrays = [np.asarray(columns[f])[rows].astype(np.float64, copy=False)
+              for f in product_factors(column)]  # KeyError if absent
     any_ok = np.zeros(tw.shape, dtype=bool)
     for a in arrays:
         any_ok |= np.isfinite(a)
