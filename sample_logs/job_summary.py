@@ -56,6 +56,10 @@ def predicted(path: Path) -> None:
     vehicles = sorted({r["vehicle_key"] for r in rows})
     sources = sorted({r["cycle"] for r in rows})
     what = sources[0] if len(sources) == 1 else f"{len(sources)} {rows[0]['source_kind']}s"
+    if rows[0].get("source_kind") == "trip":  # whose trips: a trip id is VEHICLE:start:hash
+        owners = sorted({src.rsplit(":", 2)[0] for src in sources if src.count(":") >= 2})
+        if owners:
+            what = f"{', '.join(owners)}'s {what}"
     text = f"{', '.join(vehicles)} on {what}"
     errors = [x for x in (number(r.get("error_pct")) for r in rows) if x is not None]
     if errors:

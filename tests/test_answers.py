@@ -240,6 +240,8 @@ def test_the_main_jobs_summary_reads_its_outputs(tmp_path):
     header = "cycle,vehicle_key,source_kind,mass_kg,energy_kwh,fuel_l,error_pct,range_km,feasible,over_power,reserve_ok"
     (tmp_path / "predict-a.csv").write_text(header + "\nT1,bus,trip,9000,5,,2,,true,false,true\n"
                                             "T2,bus,trip,9500,6,,-4,,false,true,true\n")
+    (tmp_path / "predict-c.csv").write_text(header + "\nHGV-21:1559552580:a6e794c5,hgv,trip,30000,,40,-4,,true,false,\n"
+                                            "HGV-21:1559562580:a6e794c5,hgv,trip,32000,,42,-2,,true,false,\n")
     (tmp_path / "predict-b.csv").write_text(header + "\nurban,bus,cycle,9000,11.1,,,150,true,false,true\n"
                                             "urban,bus,cycle,13500,14.4,,,120,true,false,true\n")
     (tmp_path / "replay-t.json").write_text(json.dumps({
@@ -254,6 +256,7 @@ def test_the_main_jobs_summary_reads_its_outputs(tmp_path):
     assert "X -> bus-X.toml: eta+heat on 12 trips; cross-validated error -0.3 % mean, 6.2 % sigma" in flat
     assert "90% intervals held 88% of the held-out trips" in flat
     assert "error against the measured -1.0 % mean" in flat and "feasible 1 of 2 (not: 1 power)" in flat
+    assert "hgv on HGV-21's 2 trips: error against the measured -3.0 % mean" in flat
     assert "bus on urban at 9,000-13,500 kg: 11.10-14.40 kWh, range 120-150 km; feasible 2 of 2" in flat
     assert ("etruck on 2 logged vehicles' 12 duties: 11 complete with the reserve kept, 10 at probability 0.95; "
             "95 % of them need a 172 kWh battery at the mean, 201 kWh at probability 0.95 (it has 590)") in flat
