@@ -108,7 +108,8 @@ def simulate(
                 for start in range(0, res.time_s.size, OUT_BLOCK_ROWS):  # in blocks: no frame of it all held
                     block = res.to_frame(rows=slice(start, start + OUT_BLOCK_ROWS))
                     if empty_at_s is not None:
-                        block.loc[block["time_s"] > empty_at_s, ["soc_pct"]] = np.nan
+                        block["soc_pct"] = _soc_until_empty(block["time_s"].to_numpy(), block["soc_pct"].to_numpy(),
+                                                            empty_at_s)
                     block.to_csv(fh, index=False, header=start == 0, float_format="%.6g")
         except CevmError as exc:
             raise fail(exc) from None
@@ -274,15 +275,19 @@ def simulation_verdict(veh, res, *, mass_kg: float, soc_start_pct: float, reserv
 OUT_BLOCK_ROWS = 100_000
 
 
+def _soc_until_empty(time_s: np.ndarray, soc_pct: np.ndarray, empty_at_s: float) -> np.ndarray:
+    """The state of charge [%] with no value after ``empty_at_s``: no charge below 0, the
+    series ends where the battery runs empty (``--out`` and ``--plot`` alike)."""
+    return np.where(time_s > empty_at_s, np.nan, soc_pct)
+
+
 def _plot_columns(res, empty_at_s: float | None = None) -> dict[str, np.ndarray]:
     """The columns of :meth:`SimulationResult.to_frame` the figure draws (time, state of
     charge or fuel used, elevation), without the rest of the frame."""
     cols = {"time_s": res.time_s}
     if res.powertrain == "ev":
         soc_pct = res.samples["soc"] * 100.0
-        if empty_at_s is not None:  # no charge below 0: the series ends where it runs empty
-            soc_pct = np.where(res.time_s > empty_at_s, np.nan, soc_pct)
-        cols["soc_pct"] = soc_pct
+        cols["soc_pct"] = soc_pct if empty_at_s is None else _soc_until_empty(res.time_s, soc_pct, empty_at_s)
     else:
         cols["fuel_cum_l"] = res.samples["fuel_cum_l"]
     if res.elevation_m is not None:

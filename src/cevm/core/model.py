@@ -151,14 +151,7 @@ def wheel_energy_j(
     cda = np.asarray(cda_m2, dtype=np.float64)
     crs = np.asarray(cr, dtype=np.float64)
     w = np.asarray(negative_weight, dtype=np.float64)
-    if np.any(m <= 0):
-        raise ValueError("mass_kg must be > 0")
-    if np.any(cda < 0):
-        raise ValueError("cda_m2 must be >= 0")
-    _check_cr(vector, crs)
-    e1 = m * vector.s_me + cda * vector.s_a + crs * m * vector.s_r
-    sx, sa, sr = vector.ns_sums
-    net = m * (sx + crs * sr) + cda * sa
+    e1, net = _simplified_and_net_j(vector, m, cda, crs)
     if np.all(w == 1.0):
         return np.asarray(e1 + net + 0.0 * w)
     pos = nonsimplified_positive_j(vector, m, cda, crs)
@@ -171,6 +164,15 @@ def wheel_energy_parts_j(vector: CycleVector, mass_kg, cda_m2, cr) -> tuple[np.n
     w (:func:`wheel_energy_j`, same broadcasting and checks, one pass for both)."""
     m, cda, crs = np.broadcast_arrays(np.asarray(mass_kg, dtype=np.float64), np.asarray(cda_m2, dtype=np.float64),
                                       np.asarray(cr, dtype=np.float64))
+    e1, net = _simplified_and_net_j(vector, m, cda, crs)
+    pos = nonsimplified_positive_j(vector, m, cda, crs)
+    return e1 + pos, net - pos
+
+
+def _simplified_and_net_j(vector: CycleVector, m: np.ndarray, cda: np.ndarray,
+                          crs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """E_DC1 and the net sum of the non-simplified steps [J] (eq. 22, 25) of the arrays
+    given, after the checks of every caller (mass > 0, CdA >= 0, Cr within the vector's)."""
     if np.any(m <= 0):
         raise ValueError("mass_kg must be > 0")
     if np.any(cda < 0):
@@ -178,9 +180,7 @@ def wheel_energy_parts_j(vector: CycleVector, mass_kg, cda_m2, cr) -> tuple[np.n
     _check_cr(vector, crs)
     e1 = m * vector.s_me + cda * vector.s_a + crs * m * vector.s_r
     sx, sa, sr = vector.ns_sums
-    net = m * (sx + crs * sr) + cda * sa
-    pos = nonsimplified_positive_j(vector, m, cda, crs)
-    return e1 + pos, net - pos
+    return e1, m * (sx + crs * sr) + cda * sa
 
 
 def _wheel_energy_scalar(vector: CycleVector, m: float, cda: float, cr: float, w: float) -> np.float64:
