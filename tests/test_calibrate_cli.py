@@ -77,7 +77,7 @@ def test_calibrate_recovers_eta_and_reports_the_papers_figures(store, root, tmp_
     assert res.exit_code == 2 and "overwrite" in res.output
     res = runner.invoke(app, ["calibrate", "-v", str(bus), "--vehicle-id", "EB-09", "--store", str(store), "--out",
                               str(bus)])
-    assert res.exit_code == 2 and "input vehicle file" in res.output
+    assert res.exit_code == 2 and "is the input --vehicle" in res.output
 
 
 def test_calibrate_table_refuses_what_the_data_cannot_identify(store, root):

@@ -29,6 +29,7 @@ import typer
 
 from cevm import __version__
 from cevm.cli.common import exit_code_for, fail
+from cevm.cli.paths import guard_app
 from cevm.errors import CevmError
 
 #: The commands in the order of 'cevm --help': (name, module in cevm.cli, its command
@@ -104,6 +105,7 @@ def make_app(only: str | None = None) -> typer.Typer:
             app.add_typer(command, name=name)
         else:
             app.command(name)(command)
+    guard_app(app)  # no output onto an input or the store, for every command (cevm.cli.paths)
     return app
 
 

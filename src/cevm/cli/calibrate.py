@@ -104,9 +104,8 @@ def calibrate(
         raise fail(f"--interval must be a level between 0 and 1 (0.9: 90 %), got {interval:g}")
     check_output_path(out, "--out", TOML)
     check_output_path(plot, "--plot", PNG)
-    if out is not None and out.exists() and not force:  # said before the fit, not after it
-        what = "the input vehicle file" if out.resolve() == vehicle.resolve() else "an existing file"
-        raise fail(f"--out {out}: would overwrite {what}; give another --out or --force")
+    if out is not None and out.exists() and not force:  # said before the fit, not after it (onto -v: cevm.cli.paths)
+        raise fail(f"--out {out}: would overwrite an existing file; give another --out or --force")
     path = existing_store(store)
     if ice_braking is not None and ice_braking not in ICE_BRAKING_MODES:
         raise fail(f"--ice-braking must be one of: {', '.join(ICE_BRAKING_MODES)}")

@@ -29,6 +29,42 @@ from cevm.errors import FileAccessError
 #: is bounded too (:func:`cevm.io.toml.read_toml`).
 MAX_TOML_BYTES = 1 << 20
 
+#: The files read in this process, when :func:`remember_reads` turned it on (the command
+#: line does): (what it is, (real path, (device, inode))). :class:`cevm.io.outputs.OutFile`
+#: refuses to write onto any of them.
+_READ: list[tuple[str, tuple[str, tuple[int, int] | None]]] | None = None
+
+
+def remember_reads(on: bool = True) -> None:
+    """Start (or stop) keeping the files :func:`open_regular` opens and the stores
+    :func:`remember_file` is given: :func:`read_files`."""
+    global _READ
+    _READ = [] if on else None
+
+
+def remember_file(path: str | Path, what: str) -> None:
+    """Add ``path`` (``what`` it is: "the trip store") to :func:`read_files`, when on."""
+    if _READ is not None:
+        _READ.append((what, file_identity(path)))
+
+
+def file_identity(path: str | Path) -> tuple[str, tuple[int, int] | None]:
+    """(the real path: absolute, symlinks and ``.``/``..`` resolved; (device, inode) when
+    the file exists): two paths name the same file when either agrees
+    (:func:`cevm.io.outputs.same_file`)."""
+    real = os.path.realpath(os.path.expanduser(os.fspath(path)))
+    try:
+        st = os.stat(real)
+    except (OSError, ValueError):
+        return real, None
+    return real, (st.st_dev, st.st_ino)
+
+
+def read_files() -> list[tuple[str, tuple[str, tuple[int, int] | None]]]:
+    """The files read (and stores opened) since :func:`remember_reads`; empty when off."""
+    return list(_READ or ())
+
+
 _KINDS = ((stat.S_ISDIR, "a directory"), (stat.S_ISFIFO, "a FIFO (named pipe)"), (stat.S_ISCHR, "a character device"),
           (stat.S_ISBLK, "a block device"), (stat.S_ISSOCK, "a socket"))
 
@@ -67,6 +103,8 @@ def open_regular(path: str | Path, what: str = "file") -> BinaryIO:
             raise FileAccessError(path, f"is {kind}, not a {what}")
         if hasattr(os, "set_blocking"):
             os.set_blocking(fd, True)
+        if _READ is not None:
+            remember_file(path, f"the {what} {path}")
         return open(fd, "rb", closefd=True)
     except BaseException:
         os.close(fd)

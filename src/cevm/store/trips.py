@@ -104,6 +104,7 @@ class TripStore(TripWriting, TripQueries):
         self._migrate = migrate
         self._intact = False  # the quick check passed on this connection
         self._con: StoreConnection | None = None
+        _remember_store(self.path)
         kind = _not_a_file(self.path)
         if kind is not None:  # a FIFO would hang the command where no signal reaches it, /dev/null swallow it
             raise CevmError(f"{self.path}: is {kind}, not a cevm store file")
@@ -279,6 +280,16 @@ class TripStore(TripWriting, TripQueries):
 
     def _checkpoint(self, stage: str) -> None:
         _checkpoint(stage)  # the module's hook, looked up at each call (tests replace it)
+
+
+def _remember_store(path: Path) -> None:
+    """The store and its SQLite files among the files no output of this process may
+    overwrite (:func:`cevm.io.inputs.remember_file`, on under the command line)."""
+    from cevm.io.inputs import remember_file
+    from cevm.io.outputs import store_files
+
+    for what, p in store_files(path):
+        remember_file(p, f"{what} {p}")
 
 
 def _not_a_file(path: Path) -> str | None:
