@@ -28,7 +28,7 @@ from cevm.cli.output import OutputFormat
 from cevm.core.model import ICE_BRAKING_MODES
 from cevm.errors import CevmError, OutputError, os_error_text
 from cevm.io.outputs import OutFile
-from cevm.text import printable
+from cevm.text import one_line, printable
 
 EXIT_OK = 0
 EXIT_PARTIAL = 1
@@ -65,13 +65,13 @@ def fail(message: str | BaseException, code: int | None = None) -> typer.Exit:
     picks the code for the error (:func:`exit_code_for`), ``fail(text)`` is bad input (2)."""
     if code is None:
         code = exit_code_for(message) if isinstance(message, BaseException) else EXIT_INPUT
-    typer.echo(f"cevm: error: {printable(str(message))}", err=True)
+    typer.echo(f"cevm: error: {one_line(str(message))}", err=True)
     return typer.Exit(code)
 
 
 def warn(message: str) -> None:
     """A one-line warning on stderr (control characters escaped)."""
-    typer.echo(f"cevm: warning: {printable(message)}", err=True)
+    typer.echo(f"cevm: warning: {one_line(message)}", err=True)
 
 
 def note_flat_cycles(sources) -> None:
@@ -453,7 +453,7 @@ def apply_manifest(st, path: Path, manifest, *, dry_run: bool = False) -> tuple[
     if match.masses and not dry_run:
         new, replaced = set_masses(st, match.masses)
     for text in match.disagreements:
-        typer.echo(f"cevm: note: {path}: {printable(text)}", err=True)
+        typer.echo(f"cevm: note: {path}: {one_line(text)}", err=True)
     cols = ", ".join(f"{role} {col!r}" for role, col in manifest.columns.items())
     done = (f"would give {len(match.masses)} trips their masses" if dry_run else
             f"{len(match.masses)} trips given their masses ({new} new, {replaced} replaced)")

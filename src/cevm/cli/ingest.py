@@ -12,7 +12,7 @@ from cevm.cli.common import EXIT_OK, EXIT_PARTIAL, StoreOption, apply_manifest, 
 from cevm.cli.output import OutputFormat, write_lines, write_rows
 from cevm.errors import CevmError
 from cevm.ingest.textfile import MAX_SAMPLES, ReadLimits
-from cevm.text import printable
+from cevm.text import one_line, printable
 
 if TYPE_CHECKING:
     from rich.progress import TaskID
@@ -221,7 +221,7 @@ class _FileEvents:
         if self.log_json:
             typer.echo(json.dumps({"event": "file", **_file_dict(fr)}))
         elif fr.status == "failed":
-            message = f"cevm: failed: {printable(str(fr.error))}"
+            message = f"cevm: failed: {one_line(str(fr.error))}"
             if progress is not None:
                 progress.console.print(message, markup=False, highlight=False)
             else:
