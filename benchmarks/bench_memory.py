@@ -29,6 +29,11 @@ and whether the peak meets the goal. The cases:
 - ``DSM one strip``, ``DSM 16k tiles``: a sample srf log with a DSM of one 40,000 x
   40,000 float32 deflate strip (sparse: kilobytes on disk, 6.4 GB decoded), or of
   16,384-pixel tiles (1.07 GB each decoded): refused from the raster's header.
+- ``one trip 2.2M``: a log of 2.2 million rows at 1 Hz (12 srf columns, under the default
+  row and values bounds) that forms one trip: a battery bus driving laps of a 2 km circle
+  over the sample DSM for 25 days without a stop, a gap or a charge (the cleaning, the
+  elevation, the vector and the stored profile of one trip of 2.2 M samples); the peak
+  of each stage is printed as for the large log.
 - ``gzip bomb``: about 10 MB of gzip expanding to ``--bomb-gib`` GiB (default 3) of
   valid, identical srf rows: it must fail fast with a clear message.
 - ``no line breaks``: 415 MB of text without a line break: must fail from its first
@@ -151,6 +156,43 @@ def make_portal(out: Path, rows: int, sample: Path) -> Path:
             fh.write(b"\n".join(ln.replace(first, stamp, 1) for ln in chunk) + b"\n")
             n += len(chunk)
             d += dt.timedelta(days=1)
+    return out
+
+
+def make_long_trip(out: Path, rows: int) -> Path:
+    """A valid srf log of ``rows`` rows at 1 Hz that forms one trip: a battery bus driving
+    laps of a 2 km circle over the sample DSM without a stop of 30 min, a gap of 5 min or a
+    charge (25 days for 2.2 M rows), with GPS, wheel speed, battery and energy counter."""
+    import numpy as np
+    import pyarrow as pa
+    import pyarrow.csv as pacsv
+
+    t = np.arange(rows, dtype=np.float64)
+    speed = 9.0 + 7.0 * np.sin(t / 97.0) + 2.0 * np.sin(t / 13.0)  # 0-18 m/s, never long at rest
+    speed = np.clip(speed, 0.0, None)
+    dist = np.cumsum(speed)
+    r = 2000.0
+    ang = dist / r
+    lat0, lon0 = 52.04, -0.76
+    lat = lat0 + np.degrees(r * np.sin(ang) / 6_371_000.0)
+    lon = lon0 + np.degrees(r * (1 - np.cos(ang)) / (6_371_000.0 * np.cos(np.radians(lat0))))
+    power_w = 20_000.0 + 1_500.0 * speed * np.maximum(np.gradient(speed), 0) * 12.0 + 150.0 * speed
+    energy_kwh = 48_000.0 + np.round(np.cumsum(power_w) / 3.6e6, 1)
+    volt = np.full(rows, 680.0)
+    amp = np.round(power_w / volt, 1)
+    soc = np.round(95.0 - 60.0 * (t / rows), 1)  # a pack swapped out of sight: only drifts
+    stamps = np.datetime64("2019-05-13T00:00:00", "ms") + (t * 1000).astype("timedelta64[ms]")
+    ts = np.char.add(np.datetime_as_string(stamps, unit="ms"), "Z")
+    table = pa.table({
+        "timestamp_utc": pa.array(ts), "gps_lat_deg": np.round(lat, 6), "gps_lon_deg": np.round(lon, 6),
+        "gps_alt_m": np.round(100.0 + 5 * np.sin(ang), 1), "gps_speed_kmh": np.round(speed * 3.6, 1),
+        "gps_hdop": np.full(rows, 0.9), "fms_wheel_speed_kmh": np.round(speed * 3.6, 1),
+        "fms_battery_soc_pct": soc, "fms_battery_voltage_v": volt, "fms_battery_current_a": amp,
+        "fms_total_energy_used_kwh": energy_kwh, "fms_ambient_air_temp_c": np.full(rows, 12.5),
+    })
+    with open(out, "wb") as fh:
+        fh.write(b"# vehicle_id=LT-01\n")
+        pacsv.write_csv(table, fh, pacsv.WriteOptions(quoting_style="none"))
     return out
 
 
@@ -433,6 +475,15 @@ def log_cases(args, work: Path, lim, wide_rows: int, big_name: str) -> list:
     def dsm(key: str = "dsm"):
         return lambda m: ["--dsm", str(m[key])]
 
+    def long_trip():  # made alone: ``--cases "one trip 2.2M"`` does not make the others
+        m = {"dsm": ROOT / "sample_logs" / "dsm", "long": work / "long-trip-2200000.csv"}
+        if not (args.keep and m["long"].exists()):
+            make_long_trip(m["long"], 2_200_000)
+        store = work / "s11.sqlite"
+        for p in store.parent.glob(store.name + "*"):
+            p.unlink()
+        return run_case("one trip 2.2M", m["long"], store, ["--dsm", str(m["dsm"])], stages=True)
+
     return [ingest(0, "import only", None),
             ingest(1, big_name, "big", lambda m: ["--dsm", str(m["dsm"]), "--max-rows", str(max(args.rows,
                                                                                                  lim.max_rows))],
@@ -443,7 +494,8 @@ def log_cases(args, work: Path, lim, wide_rows: int, big_name: str) -> list:
             ingest(5, "portal 1.2M", "portal_half", dsm()),
             ingest(6, "DSM one strip", "bus_day", dsm("strip_dsm")),
             ingest(7, "DSM 16k tiles", "bus_day", dsm("tiles_dsm")),
-            ingest(8, "gzip bomb", "bomb"), ingest(9, "no line breaks", "lineless"), ingest(10, "all NUL", "nul")]
+            ingest(8, "gzip bomb", "bomb"), ingest(9, "no line breaks", "lineless"), ingest(10, "all NUL", "nul"),
+            ("one trip 2.2M", "logs", long_trip)]
 
 
 # ------------------------------------------------------------ inputs that are not logs

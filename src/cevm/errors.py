@@ -11,7 +11,7 @@ import re
 from dataclasses import dataclass
 from pathlib import Path
 
-from cevm.text import printable
+from cevm.text import one_line
 
 #: Control characters: C0 (line feed, carriage return, tab, escape, ...), DEL, C1, and
 #: the Unicode line and paragraph separators.
@@ -44,13 +44,14 @@ class InputError(CevmError):
     def __str__(self) -> str:
         """``file:line: column 'c': message``, non-printable characters escaped
         (:func:`cevm.text.printable`: a file name or value holding a line break cannot
-        forge a second line of output)."""
+        forge a second line of output), bounded (:func:`cevm.text.one_line`: a message
+        quoting megabytes of a user's text stays one readable line)."""
         where = str(self.path) if self.path is not None else "<input>"
         if self.line is not None:
             where += f":{self.line}"
         if self.column is not None:
             where += f": column '{self.column}'"
-        return printable(f"{where}: {self.message}")
+        return one_line(f"{where}: {self.message}")
 
 
 class FileAccessError(InputError):

@@ -16,6 +16,7 @@ work that must not be split (a store write and its report).
 
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import ctypes.util
 import os
@@ -138,3 +139,54 @@ def signals_deferred(signums: tuple[int, ...] = (signal.SIGINT, signal.SIGTERM))
         if arrived:
             signum, frame = arrived[0]
             saved[signum](signum, frame)
+
+
+def warnings_as_lines(stream=None, own: tuple[type[Warning], ...] = ()) -> None:
+    """Show every warning of this process as one ``cevm: warning:`` line on stderr (or
+    ``stream``), never as Python's two lines with a source file and its code line: a
+    NumPy ``RuntimeWarning`` that escapes the places where the result is handled (an
+    infinite value in a user's file) says what it is and nothing of cevm's source. The
+    command line applies it, and so does a worker of its local process pool (whose
+    stderr is the command's). Each distinct message is shown once per place, as
+    Python's default filter does. Where a host installed its own display (a test
+    runner's recorder), warnings other than the ``own`` categories (cevm's words to the
+    user, always lines) still go to it."""
+    import warnings
+
+    from cevm.text import one_line
+
+    previous = warnings.showwarning
+    # a host's display: showwarning replaced, or the recorder of catch_warnings(record=True)
+    # (pytest's) in place of the warnings module's own writer
+    impl = getattr(warnings, "_showwarnmsg_impl", None)
+    hosted = (previous is not getattr(warnings, "_showwarning_orig", previous)
+              or getattr(impl, "__module__", "warnings") != "warnings")
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        if hosted and not issubclass(category, own):
+            previous(message, category, filename, lineno, file, line)
+            return
+        out = stream or file or sys.stderr
+        text = str(message)
+        if not issubclass(category, own) and category is not UserWarning:
+            text += f" ({category.__name__})"
+        try:
+            out.write(f"cevm: warning: {one_line(text)}\n")
+            out.flush()
+        except (OSError, ValueError):  # a closed or broken stderr: nowhere to say it
+            pass
+
+    warnings.showwarning = show
+
+
+def text_streams_replace() -> None:
+    """Reconfigure stdout and stderr to replace what their encoding cannot take (a
+    vehicle id in Greek on a terminal or pipe that takes only ASCII: ``\\u03b1``
+    escaped) instead of ending the command with a UnicodeEncodeError: stdout with
+    ``backslashreplace`` (the value can still be told), stderr likewise."""
+    for stream in (sys.stdout, sys.stderr):
+        reconfigure = getattr(stream, "reconfigure", None)
+        if reconfigure is None:
+            continue
+        with contextlib.suppress(ValueError, OSError):  # a stream already detached or closed
+            reconfigure(errors="backslashreplace")

@@ -59,3 +59,32 @@ def csv_safe(text: str) -> str:
     if text.startswith(FORMULA_PREFIXES) and not _PLAIN_NUMBER.fullmatch(text):
         return "'" + text
     return text
+
+
+#: The most characters of one piece of a user's text (a cell, a header name, a comment,
+#: a key) quoted in a message: a 2 MB comment must not make a 2 MB error line.
+QUOTE_CHARS = 200
+
+#: The most characters of one line of cevm's own messages (errors, warnings, notes):
+#: what a message still holds beyond this (a long list, a path quoted in full) is left
+#: out in the middle, so that its start (what and where) and end (the remedy) stay.
+LINE_CHARS = 2000
+
+
+def shorten(text: str, limit: int = QUOTE_CHARS) -> str:
+    """``text`` cut to its first ``limit`` characters, with ``...`` and the length it had
+    when it was longer: what a message quotes of a user's text."""
+    if len(text) <= limit:
+        return text
+    return f"{text[:limit]}... ({len(text):,} characters)"
+
+
+def one_line(text: str, limit: int = LINE_CHARS) -> str:
+    """A message as one bounded printable line: :func:`printable`, and when longer than
+    ``limit`` characters its middle left out (its start and end kept, and how many
+    characters were left out)."""
+    text = printable(text)
+    if len(text) <= limit:
+        return text
+    head, tail = limit * 2 // 3, limit // 3
+    return f"{text[:head]} ... ({len(text) - head - tail:,} characters left out) ... {text[-tail:]}"

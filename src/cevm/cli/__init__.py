@@ -66,24 +66,35 @@ def _root(
 
 
 def _warnings_as_lines() -> None:
-    """Print the library's input warnings (:class:`cevm.io.cycles.CycleWarning`: a file
-    that reads, but probably not as meant) as one ``cevm: warning:`` line each, every
-    time they occur."""
+    """Print every warning as one ``cevm: warning:`` line (:func:`cevm.runtime.warnings_as_lines`:
+    never Python's source file and code line), and the library's input warnings
+    (:class:`cevm.io.cycles.CycleWarning`: a file that reads, but probably not as meant)
+    every time they occur."""
     import warnings
 
-    from cevm.cli.common import warn
     from cevm.io.cycles import CycleWarning
+    from cevm.runtime import warnings_as_lines
 
-    previous = warnings.showwarning
-
-    def show(message, category, filename, lineno, file=None, line=None):
-        if issubclass(category, CycleWarning):
-            warn(str(message))
-        else:
-            previous(message, category, filename, lineno, file, line)
-
-    warnings.showwarning = show
+    warnings_as_lines(own=(CycleWarning,))
     warnings.simplefilter("always", CycleWarning)
+
+
+def _usage_errors_one_line() -> None:
+    """A usage error (an option value out of its range, a value that is not a number, an
+    unknown option) is one ``cevm: error:`` line and exit 2, as every other error of
+    the command line, not click's three lines of usage, hint and error."""
+    from cevm.text import one_line
+
+    try:  # typer 0.29 carries its own copy of click
+        from typer._click import exceptions as click_exceptions
+    except ImportError:  # pragma: no cover - an older typer on click itself
+        from click import exceptions as click_exceptions
+
+    def show(self, file=None) -> None:
+        hint = f" (see '{self.ctx.command_path} --help')" if self.ctx is not None else ""
+        typer.echo(f"cevm: error: {one_line(self.format_message())}{hint}", err=True)
+
+    click_exceptions.UsageError.show = show  # type: ignore[method-assign]
 
 
 def make_app(only: str | None = None) -> typer.Typer:
@@ -98,6 +109,7 @@ def make_app(only: str | None = None) -> typer.Typer:
         rich_markup_mode=None,  # help texts are plain: "[detailed]", "[kg]", "cevm[dask]" are words, not markup
     )
     app.callback()(_root)
+    _usage_errors_one_line()
     for name, module, attr, group in COMMANDS:
         if only is not None and name != only:
             continue
@@ -132,8 +144,9 @@ def main() -> None:
     stops.install()  # a signal before the command starts: its line and code (the entry point did this already)
     from cevm.cli import interrupts
     from cevm.cli.common import flush_stdout, os_error_exit
-    from cevm.runtime import tune_allocator
+    from cevm.runtime import text_streams_replace, tune_allocator
 
+    text_streams_replace()  # a character the terminal cannot take is escaped, not a UnicodeEncodeError
     tune_allocator()
     first = sys.argv[1] if len(sys.argv) > 1 else None
     app = make_app(first if first in {c[0] for c in COMMANDS} else None)

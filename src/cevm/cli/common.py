@@ -28,7 +28,7 @@ from cevm.cli.output import OutputFormat
 from cevm.core.model import ICE_BRAKING_MODES
 from cevm.errors import CevmError, OutputError, os_error_text
 from cevm.io.outputs import OutFile
-from cevm.text import printable
+from cevm.text import one_line, printable
 
 EXIT_OK = 0
 EXIT_PARTIAL = 1
@@ -65,13 +65,13 @@ def fail(message: str | BaseException, code: int | None = None) -> typer.Exit:
     picks the code for the error (:func:`exit_code_for`), ``fail(text)`` is bad input (2)."""
     if code is None:
         code = exit_code_for(message) if isinstance(message, BaseException) else EXIT_INPUT
-    typer.echo(f"cevm: error: {printable(str(message))}", err=True)
+    typer.echo(f"cevm: error: {one_line(str(message))}", err=True)
     return typer.Exit(code)
 
 
 def warn(message: str) -> None:
     """A one-line warning on stderr (control characters escaped)."""
-    typer.echo(f"cevm: warning: {printable(message)}", err=True)
+    typer.echo(f"cevm: warning: {one_line(message)}", err=True)
 
 
 def note_flat_cycles(sources) -> None:
@@ -197,9 +197,20 @@ AmbientOption = Annotated[
                                      "Default: a stored trip's own logged mean, else the vehicle file's "
                                      "reference_temp_c, else 20 degC."),
 ]
+def cr0_check(ctx: typer.Context, param: typer.CallbackParam, value: float) -> float:
+    """--cr0 is a rolling resistance coefficient: finite and at least 0 (one line, exit 2)."""
+    if value is not None and not (math.isfinite(value) and value >= 0):
+        from cevm.core.cycle import CR0_DEFAULT
+
+        raise fail(f"{param.opts[0] if param.opts else '--cr0'} {value:g}: must be a finite number of at least 0 "
+                   f"(Cr0 of the simplification criterion; default {CR0_DEFAULT:g})")
+    return value
+
+
 Cr0Option = Annotated[
     float,
-    typer.Option(help="Cr0 of the simplification criterion, for --cycle files (stored trips and routes keep theirs).")
+    typer.Option(help="Cr0 of the simplification criterion, for --cycle files (stored trips and routes keep theirs).",
+                 callback=cr0_check)
 ]
 OutOption = Annotated[Path | None, typer.Option("--out", "-o", metavar="FILE",
                                                 help="Write the output to this file instead of stdout.")]
@@ -453,7 +464,7 @@ def apply_manifest(st, path: Path, manifest, *, dry_run: bool = False) -> tuple[
     if match.masses and not dry_run:
         new, replaced = set_masses(st, match.masses)
     for text in match.disagreements:
-        typer.echo(f"cevm: note: {path}: {printable(text)}", err=True)
+        typer.echo(f"cevm: note: {path}: {one_line(text)}", err=True)
     cols = ", ".join(f"{role} {col!r}" for role, col in manifest.columns.items())
     done = (f"would give {len(match.masses)} trips their masses" if dry_run else
             f"{len(match.masses)} trips given their masses ({new} new, {replaced} replaced)")

@@ -12,7 +12,7 @@ from cevm.cli.common import EXIT_OK, EXIT_PARTIAL, StoreOption, apply_manifest, 
 from cevm.cli.output import OutputFormat, write_lines, write_rows
 from cevm.errors import CevmError
 from cevm.ingest.textfile import MAX_SAMPLES, ReadLimits
-from cevm.text import printable
+from cevm.text import one_line, printable
 
 if TYPE_CHECKING:
     from rich.progress import TaskID
@@ -72,7 +72,8 @@ def ingest(
     ] = MAX_SAMPLES,
     max_file_mb: Annotated[
         float,
-        typer.Option(min=0.001, metavar="MB", help="Refuse a file of more text than this [MB], after decompression.")
+        typer.Option(min=0.001, max=1e9, metavar="MB",  # a finite bound: inf is no size in bytes
+                     help="Refuse a file of more text than this [MB], after decompression.")
     ] = _LIMITS.max_file_mb,
     max_expansion: Annotated[
         float, typer.Option(min=1.0, metavar="RATIO",
@@ -221,7 +222,7 @@ class _FileEvents:
         if self.log_json:
             typer.echo(json.dumps({"event": "file", **_file_dict(fr)}))
         elif fr.status == "failed":
-            message = f"cevm: failed: {printable(str(fr.error))}"
+            message = f"cevm: failed: {one_line(str(fr.error))}"
             if progress is not None:
                 progress.console.print(message, markup=False, highlight=False)
             else:

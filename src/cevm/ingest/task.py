@@ -199,6 +199,11 @@ def stop_note_warnings(notes) -> list[str]:
         out.append(f"speed: {len(moved)} hole(s) in the log between two standstill readings over which the GPS "
                    f"position moved, the largest {n['displacement_m']:,.0f} m in {n['t1_s'] - n['t0_s']:,.0f} s from "
                    f"{when(n['t0_s'])} UTC: not a stop but driving the log did not record; the trip is split there")
+    for n in (n for n in notes if n["kind"] == "max_duration"):
+        hours = n["max_trip_s"] / 3600
+        out.append(f"trips: {n['splits']} cut(s) of trips longer than {hours:g} h without a long stop, the first at "
+                   f"{when(n['t0_s'])} UTC: each such trip is cut into pieces of at most {hours:g} h (a day's "
+                   "driving without a stop is a log whose stops were not seen; and a worker holds a trip whole)")
     return out
 
 

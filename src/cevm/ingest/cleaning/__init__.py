@@ -66,7 +66,9 @@ The steps, in order (parameters in :class:`CleanParams`):
    lasting more than ``stop_s`` (``"long_stop"``: the trip ends where the stop starts,
    the next starts where it ends) or during which the battery charged (``"charging"``:
    ``charge_power_w`` taken in for ``charge_min_s``, or the state of charge up
-   ``charge_soc_rise_pct``), split the same way. Trips shorter than ``min_duration_s`` or ``min_distance_m`` are
+   ``charge_soc_rise_pct``), split the same way; and a trip longer than ``max_trip_s``
+   (a day) is cut into pieces of that long (``"max_duration"``: a log whose stops were
+   not seen; a worker's memory bound). Trips shorter than ``min_duration_s`` or ``min_distance_m`` are
    dropped and reported.
 6. **Grid.** Each trip is resampled onto a regular grid of ``grid_s`` seconds aligned to
    whole multiples of ``grid_s`` in UTC, inside the trip's first and last sample (no

@@ -71,6 +71,14 @@ class CleanParams:
       a stop only if the GPS fixes at its ends are within 100 m (a consumer GPS at rest
       scatters by metres, by tens in a street canyon); farther, the vehicle drove in the
       hole, whose profile is unknown: a ``speed_gap``.
+    - ``max_trip_s = 86400``: a trip longer than a day is split into pieces of a day
+      (``"max_duration"``; None: never). No vehicle drives a day without a stop of
+      ``stop_s`` (drivers' hours rules and charging see to it), so such a trip is a log
+      whose stops were not seen (a speed that never reads zero); and a worker holds a
+      trip's samples whole through its elevation, vector and stored profile, so a trip
+      of weeks (2.2 M samples: 0.87 GB) would break the 500 MB a worker is kept within
+      (``python benchmarks/bench_memory.py --cases "one trip 2.2M"``). The second of
+      driving between two pieces belongs to neither.
     - ``consumption``: :class:`cevm.ingest.consumption.ConsumptionParams`.
     """
 
@@ -100,6 +108,7 @@ class CleanParams:
     charge_soc_rise_pct: float = 2.0
     charge_counter_kwh: float = 0.5
     stop_max_displacement_m: float = 100.0
+    max_trip_s: float | None = 86_400.0
     consumption: ConsumptionParams = field(default_factory=ConsumptionParams)
 
 

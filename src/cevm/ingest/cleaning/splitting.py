@@ -11,7 +11,7 @@ import numpy as np
 from cevm.ingest.cleaning.arrays import _ffill, _nonzero, _runs
 from cevm.ingest.cleaning.params import CleanParams
 
-_SPLIT_REASONS = ("start", "ignition", "gap", "speed_gap", "long_stop", "charging")
+_SPLIT_REASONS = ("start", "ignition", "gap", "speed_gap", "long_stop", "charging", "max_duration")
 
 
 @dataclass(frozen=True)
@@ -46,7 +46,7 @@ def _segment(ts, vs, on, p: CleanParams, signals: StopSignals = StopSignals(), n
 
     Returns the kept row indices (into ts; None: every row), the position of each
     trip's first row among the kept rows, and the reason each trip started ('start',
-    'ignition', 'gap', 'speed_gap', 'long_stop', 'charging'). ``notes``, a list, gets a
+    'ignition', 'gap', 'speed_gap', 'long_stop', 'charging', 'max_duration'). ``notes``, a list, gets a
     dict for each charging stop and each hole between standstill rows over which the
     vehicle moved (``kind`` 'charging' or 'moved_hole', ``t0_s``, ``t1_s`` [s, UTC], and
     ``kwh``, ``soc_rise_pct`` or ``displacement_m``), for the file's repairs."""
@@ -65,6 +65,13 @@ def _segment(ts, vs, on, p: CleanParams, signals: StopSignals = StopSignals(), n
     notes = [] if notes is None else notes
     reason = _split_points(t_kept, v_kept, on_kept, idx, p, signals.displacement_m, notes)
     idx, reason = _split_long_stops(t_kept, v_kept, idx, reason, p, signals.subset(idx), notes)
+    if p.max_trip_s is not None:
+        t_now = t_kept if idx is None else ts[idx]
+        cut = _split_long_trips(t_now, reason, p.max_trip_s)
+        if cut.size:
+            notes.append({"kind": "max_duration", "t0_s": float(t_now[cut[0]]), "splits": int(cut.size),
+                          "max_trip_s": float(p.max_trip_s)})
+        del t_now
     starts = np.concatenate(([0], np.flatnonzero(reason > 0)))
     start_reasons = [_SPLIT_REASONS[int(reason[s])] if s > 0 else "start" for s in starts]
     return idx, starts, start_reasons
@@ -129,6 +136,27 @@ def _split_long_stops(t_kept, v_kept, idx, reason, p: CleanParams, signals: Stop
     free = reason[la] == 0
     reason[la[free]] = np.where(long_[split][free], 4, 5)
     return (_nonzero(sel) if idx is None else idx[sel]), reason[sel]
+
+
+def _split_long_trips(t_kept: np.ndarray, reason: np.ndarray, max_trip_s: float) -> np.ndarray:
+    """Split each trip (rows from one ``reason > 0`` to the next) that lasts longer than
+    ``max_trip_s`` into pieces of at most that long: a piece starts at the first row
+    ``max_trip_s`` or more after the piece before it started (``"max_duration"``, in
+    ``reason``, in place). One pass over the rows: within a trip the pieces are whole
+    multiples of ``max_trip_s`` from its start, so a piece can be a little shorter when
+    the rows do not fall on its boundary. Returns the rows where a piece starts."""
+    k = t_kept.size
+    if k < 2 or t_kept[-1] - t_kept[0] <= max_trip_s:
+        return np.zeros(0, dtype=np.int64)
+    starts = np.concatenate(([0], np.flatnonzero(reason[1:] > 0) + 1))
+    lengths = np.diff(np.append(starts, k))
+    t0 = np.repeat(t_kept[starts], lengths)  # each row's trip start [s]
+    piece = np.floor((t_kept - t0) / max_trip_s).astype(np.int64)
+    del t0
+    new = np.flatnonzero(np.diff(piece) > 0) + 1  # rows where a trip's piece changes
+    new = new[reason[new] == 0]
+    reason[new] = _SPLIT_REASONS.index("max_duration")
+    return new
 
 
 def _charging_runs(t_kept, first, last, p: CleanParams, signals: StopSignals, notes: list | None) -> np.ndarray:

@@ -15,6 +15,7 @@ from cevm.ingest.textfile import (
     sniff_bom,
     utf16_hint,
 )
+from cevm.text import shorten
 
 #: Bytes read from the start of a file to detect its profile.
 _HEAD_BYTES = 65536
@@ -88,7 +89,8 @@ def _detect_in_head(path: Path, head: bytes, profiles: dict[str, Profile]) -> Pr
         if set(prof.required_columns) <= set(hdr.names):
             matches.append(prof)
     if not matches:
-        shown = ", ".join(seen_header[:12]) + (", ..." if len(seen_header) > 12 else "")
+        shown = ", ".join(shorten(n, 40) for n in seen_header[:12])  # a name may be a 1 MiB line
+        shown = shorten(shown + (", ..." if len(seen_header) > 12 else ""))
         listing = "; ".join(f"{p.name} (needs {', '.join(p.required_columns)})" for p in profiles.values())
         raise InputError(path, f"no logger profile matches the header [{shown}]; profiles: {listing}. "
                                "Add a profile (see configs/loggers) or force one.")
