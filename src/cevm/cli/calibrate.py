@@ -335,14 +335,12 @@ def result_json(result: CalibrationResult, vehicle_id: str, notes: tuple[str, ..
     candidates (with ``selection``), per-trip rows (each trip twice: its in-sample
     prediction, held_out false, and its cross-validated one, held_out true, each with
     its interval at the result's level: predicted_low, predicted_high, inside)."""
-    from scipy.special import ndtri
-
     from cevm.core.calibration import display_value
+    from cevm.core.distribution import interval
     from cevm.io.calibrated import calibration_table, fitted_keys
 
     unit = "kWh" if result.unit == "J" else "l"
     pt = result.vehicle.powertrain
-    z = float(ndtri(0.5 + 0.5 * result.interval))
 
     def stats(s):
         return None if s is None else {"n": s.n, "mean_pct": _f(s.mean_pct), "std_pct": _f(s.std_pct),
@@ -351,8 +349,8 @@ def result_json(result: CalibrationResult, vehicle_id: str, notes: tuple[str, ..
     trips = []
     for r in result.rows:
         for held_out, pred, err, low, high in (
-                (False, r.predicted_in_sample, r.error_pct_in_sample, r.predicted_in_sample - z * r.sd_in_sample,
-                 r.predicted_in_sample + z * r.sd_in_sample),
+                (False, r.predicted_in_sample, r.error_pct_in_sample,
+                 *(float(x) for x in interval(r.predicted_in_sample, r.sd_in_sample, result.interval))),
                 (True, r.predicted_cv, r.error_pct_cv, r.predicted_low, r.predicted_high)):
             lo, hi = _f(display_value(result, low)), _f(display_value(result, high))
             meas = display_value(result, r.measured)

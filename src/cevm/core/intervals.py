@@ -7,10 +7,12 @@ The probability of keeping the reserve: the energy the vehicle may draw before i
 state of charge reaches the reserve is B = (SoC_start - reserve) x battery; the energy it
 needs to its lowest state of charge along the source is E_min (the whole source's when
 that is its end, less when it regains charge after it: a descent), and
-P(reserve kept) = P(E_min <= B), E_min taken as Gaussian with the source's relative
-uncertainty (sd_min = sd x E_min / E: the uncertainty of a part of the source in
-proportion to its energy). Where the row runs empty on the way, E_min is the whole
-source's energy. An ICE completes its source within its tank with P(fuel <= tank_l).
+P(reserve kept) = P(E_min <= B), E_min with the source's relative uncertainty (sd_min =
+sd x E_min / E: the uncertainty of a part of the source in proportion to its energy) and
+the distribution of every interval (:mod:`cevm.core.distribution`), so that a row whose
+high end keeps the reserve has p_reserve_ok at least the interval's upper level. Where
+the row runs empty on the way, E_min is the whole source's energy. An ICE completes its
+source within its tank with P(fuel <= tank_l).
 """
 
 from __future__ import annotations
@@ -19,8 +21,8 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
-from scipy.special import ndtr
 
+from cevm.core import distribution
 from cevm.core.predictive import Features, predictive
 from cevm.core.vehicle import EXTRAPOLATION_AXES, extrapolation_mask, extrapolation_text
 
@@ -47,16 +49,11 @@ class RowRanges:
 
     def bounds(self, level: float) -> tuple[np.ndarray, np.ndarray]:
         """The central interval at ``level`` of every row."""
-        from scipy.special import ndtri
-
-        z = float(ndtri(0.5 + 0.5 * level))
-        return self.mean - z * self.sd, self.mean + z * self.sd
+        return distribution.interval(self.mean, self.sd, level)
 
     def prob_at_most(self, budget: np.ndarray) -> np.ndarray:
         """P(consumption <= budget) per row (the budget in the rows' unit)."""
-        with np.errstate(divide="ignore", invalid="ignore"):
-            z = (budget - self.mean) / self.sd
-        return np.where(self.sd > 0, ndtr(z), np.where(budget >= self.mean, 1.0, 0.0))
+        return distribution.prob_at_most(self.mean, self.sd, budget)
 
 
 def block_ranges(block: SweepBlock) -> RowRanges:
@@ -97,8 +94,7 @@ def p_reserve_ok(block: SweepBlock, ranges: RowRanges, soc_start_pct: float, res
         rel = np.where(np.abs(e) > 0, ranges.sd / np.abs(e), 0.0)
         sd_min = rel * np.abs(e_min)
         budget = (soc_start_pct - reserve_pct) / 100.0 * battery
-        z = (budget - e_min) / sd_min
-    p = np.where(sd_min > 0, ndtr(z), np.where(budget >= e_min, 1.0, 0.0))
+    p = distribution.prob_at_most(e_min, sd_min, budget)
     return np.where(pset.is_ev, p, np.nan)
 
 
