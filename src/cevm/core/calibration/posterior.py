@@ -670,8 +670,9 @@ def heldout_scatter(model: TermModel, ho: HeldOut, centre: ScatterPrior | None, 
     M = ratio * np.maximum(ho.mean[ok], 0.0) ** 2
     T = ratio
     h = np.ones(idx.size)
-    x0 = np.array([math.log(start.aux), math.log(start.share), math.log(max(start.trip, 1e-300))])
     trip_centre = centre.trip if centre is not None and centre.trip > 0 else None
+    t0 = start.trip if start.trip > 0 else trip_centre or 0.01 * float(np.median(np.abs(d.y[idx])))
+    x0 = np.array([math.log(start.aux), math.log(start.share), math.log(max(t0, 1e-300))])
 
     def obj(v: np.ndarray) -> tuple[float, np.ndarray]:
         v = np.clip(v, x0 - 25.0, x0 + 25.0)
@@ -735,14 +736,13 @@ def day_correlation(model: TermModel, names: Sequence[str], idx: np.ndarray, pri
 
 def initial_noise(model: TermModel, idx: np.ndarray, scatter_prior: ScatterPrior | None, standstill: bool) -> Noise:
     """A starting point of the scatter: the class's typical values, else 5 % of the
-    median consumption rate, 5 %, and 1 % of the median trip's consumption."""
+    median consumption rate and 5 %; no part that does not grow with a trip (the
+    in-sample fit does not estimate it: held at the class's value, it would weigh the
+    trips of a vehicle whose trips are small against it less than their priors;
+    :func:`heldout_scatter` fits it)."""
     d = model.data
     rate = float(np.median(d.y[idx] / d.duration[idx])) if len(idx) else 1.0
     aux = scatter_prior.aux if scatter_prior is not None else 0.05 * rate
     share = scatter_prior.share if scatter_prior is not None else 0.05
-    if scatter_prior is not None and scatter_prior.trip > 0:
-        trip = scatter_prior.trip
-    else:
-        trip = 0.01 * float(np.median(d.y[idx])) if len(idx) else 0.0
-    return Noise(aux=max(aux, 1e-9), share=max(share, 1e-6), rho=0.0, trip=max(trip, 1e-12),
+    return Noise(aux=max(aux, 1e-9), share=max(share, 1e-6), rho=0.0,
                  standstill=(max(aux, 1e-9) if standstill else None))
