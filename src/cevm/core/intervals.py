@@ -71,14 +71,33 @@ def block_ranges(block: SweepBlock) -> RowRanges:
     for v in np.unique(pset.vehicle_index):
         rows = np.flatnonzero(pset.vehicle_index == v)
         veh = pset.vehicles[int(v)]
-        f = Features.of(vec, veh, pset.mass_kg[rows], block.ambient_c[rows])
         braking = pset.braking[int(v)] or None
-        p = predictive(veh, f, ice_braking=braking)
+        if src.leg_vectors is not None:  # a route taken leg by leg: the sum of its legs' distributions
+            p = _route_total(veh, src, pset.mass_kg[rows], block.ambient_c[rows], block.ambient_from[rows] == 0,
+                             braking)
+        else:
+            f = Features.of(vec, veh, pset.mass_kg[rows], block.ambient_c[rows])
+            p = predictive(veh, f, ice_braking=braking)
         sd[rows] = np.broadcast_to(p.sd, (rows.size,))
         code[rows] = INTERVAL_SOURCES.index(p.source)
         mask[rows] = extrapolation_mask(veh.calibration, mass_kg=pset.mass_kg[rows], ambient_c=block.ambient_c[rows],
                                         mean_speed_mps=speed, idle_share=idle)
     return RowRanges(mean, sd, code, mask)
+
+
+def _route_total(veh, src, mass_kg: np.ndarray, ambient_c: np.ndarray, given: np.ndarray, braking: str | None):
+    """The predictive distribution of each row's route as the sum of its legs
+    (:func:`cevm.core.predictive.total`), each leg at its own temperature (a row whose
+    temperature was ``given``, the run's --ambient-c, at that one) and the row's mass."""
+    from cevm.core.predictive import total
+
+    legs = src.leg_vectors
+    own = np.asarray(src.leg_ambient_c, dtype=np.float64)
+    parts = [Features.of(vec, veh, mass_kg, np.where(given, ambient_c, own[i])) for i, vec in enumerate(legs)]
+    names = ("positive_j", "negative_j", "duration_s", "idle_s", "traction_s", "kinetic_j", "ambient_c")
+    f = Features(*(np.concatenate([np.broadcast_to(getattr(p, k), (mass_kg.size,)) for p in parts]) for k in names))
+    groups = np.tile(np.arange(mass_kg.size), len(legs))
+    return total(veh, f, groups, ice_braking=braking)
 
 
 def p_reserve_ok(block: SweepBlock, ranges: RowRanges, soc_start_pct: float, reserve_pct: float) -> np.ndarray:
