@@ -46,7 +46,8 @@ def test_a_cold_trip_without_heating_keys_takes_the_class_heating_and_its_spread
     ambient = -5.0
     p = predictive(v, Features.of(_vector(), v, ambient_c=ambient))
     # by hand: the wheel's work at constant speed (rolling + drag, every step driving)
-    wheel = MASS * 9.81 * CR * V * T_S + 0.5 * 1.225 * CDA * V ** 3 * T_S
+    rolling, drag = MASS * 9.81 * CR * V * T_S, 0.5 * 1.225 * CDA * V ** 3 * T_S
+    wheel = rolling + drag
     aux_w, aux_sd = (1e3 * x for x in _mid_sd(car["aux_power_kw"]))
     heat_w, heat_sd = (1e3 * x for x in _mid_sd(car["aux_heating_kw_per_k"]))
     _, cool_sd = _mid_sd(car["aux_cooling_kw_per_k"])
@@ -57,7 +58,9 @@ def test_a_cold_trip_without_heating_keys_takes_the_class_heating_and_its_spread
     coef_sd = (1 / eta_lo - 1 / eta_hi) / (2 * Z95)  # of 1 / eta, whose gradient is the wheel's work
     var = ((wheel * coef_sd) ** 2 + (aux_sd * T_S) ** 2 + (heat_sd * kelvin * T_S) ** 2
            + (1e3 * car["scatter_aux_kw"] * T_S) ** 2 + (car["scatter_share"] * mean) ** 2
-           + (3.6e6 * car["scatter_trip_kwh"]) ** 2)  # A/C: none at -5 degC, whatever its spread
+           + (3.6e6 * car["scatter_trip_kwh"]) ** 2  # A/C: none at -5 degC, whatever its spread
+           # the stated CdA and Cr, uncertain by their class's factors: drag and rolling move with them
+           + (drag / ETA * _mid_sd(car["cda_m2_factor"])[1]) ** 2 + (rolling / ETA * _mid_sd(car["cr_factor"])[1]) ** 2)
     assert cool_sd > 0
     assert float(p.sd) == pytest.approx(math.sqrt(var), rel=1e-9)
     assert p.source == "prior"

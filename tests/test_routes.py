@@ -274,8 +274,7 @@ def test_a_route_of_legs_at_different_temperatures_is_the_sum_of_its_legs(tmp_pa
     from cevm.core.intervals import block_ranges
 
     f = [Features.of(v, ev, ambient_c=t) for v, t in zip(legs, temps, strict=True)]
-    names = ("positive_j", "negative_j", "duration_s", "idle_s", "traction_s", "kinetic_j", "ambient_c")
-    day = total(ev, Features(*(np.concatenate([np.atleast_1d(getattr(x, k)) for x in f]) for k in names)))
+    day = total(ev, Features.concat(f))
     assert float(block_ranges(block).sd[0]) == pytest.approx(float(day.sd[0]), rel=1e-9)
     assert float(day.mean[0]) == pytest.approx(want_e, rel=1e-8)
     assert float(predictive(ev, f[0]).mean) > 0

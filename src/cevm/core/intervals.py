@@ -93,9 +93,8 @@ def _route_total(veh, src, mass_kg: np.ndarray, ambient_c: np.ndarray, given: np
 
     legs = src.leg_vectors
     own = np.asarray(src.leg_ambient_c, dtype=np.float64)
-    parts = [Features.of(vec, veh, mass_kg, np.where(given, ambient_c, own[i])) for i, vec in enumerate(legs)]
-    names = ("positive_j", "negative_j", "duration_s", "idle_s", "traction_s", "kinetic_j", "ambient_c")
-    f = Features(*(np.concatenate([np.broadcast_to(getattr(p, k), (mass_kg.size,)) for p in parts]) for k in names))
+    f = Features.concat([Features.of(vec, veh, mass_kg, np.where(given, ambient_c, own[i]))
+                         for i, vec in enumerate(legs)])
     groups = np.tile(np.arange(mass_kg.size), len(legs))
     return total(veh, f, groups, ice_braking=braking)
 

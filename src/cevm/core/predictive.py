@@ -53,6 +53,9 @@ from cevm.core.model import IceBraking, braking_weight, wheel_energy_parts_j
 from cevm.core.uncertainty import Posterior, Scatter, coefficient_prior, extrapolation_variance, slope_prior_sd
 from cevm.core.vehicle import Vehicle, default_ambient_c
 
+#: The relative step of the CdA and Cr derivatives of :meth:`Features.of`.
+_H = 1e-6
+
 #: The terms a never-calibrated vehicle's prior interval spans: every vehicle's physical
 #: terms (the others only where its file sets them: they change what eta means).
 PRIOR_TERMS = {"ev": ("eta", "aux", "heat", "cool"), "ice": ("eta", "idle", "heat", "cool")}
@@ -63,7 +66,10 @@ class Features:
     """What the CE model needs of n predictions (arrays of one length, or scalars):
     ``positive_j`` P and ``negative_j`` N (<= 0) of the wheel energy [J], ``duration_s``,
     ``idle_s`` (standstill), ``traction_s`` [s], ``kinetic_j`` the positive kinetic
-    energy m k_pos [J], ``ambient_c`` [degC], ``starts`` (trip starts, 1 per trip)."""
+    energy m k_pos [J], ``ambient_c`` [degC], ``starts`` (trip starts, 1 per trip);
+    ``spec`` the derivatives of (P, N) in the vehicle's CdA and Cr, relative (d/d ln x)
+    [J]: ((dP, dN) for CdA, (dP, dN) for Cr), or None (:meth:`of` gives them to a file
+    never calibrated, whose stated CdA and Cr carry its class's spread)."""
 
     positive_j: np.ndarray
     negative_j: np.ndarray
@@ -73,6 +79,7 @@ class Features:
     kinetic_j: np.ndarray
     ambient_c: np.ndarray
     starts: np.ndarray | float = 1.0
+    spec: tuple[tuple[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]] | None = None
 
     @classmethod
     def of(cls, vector: CycleVector, vehicle: Vehicle, mass_kg: ArrayLike | None = None,
@@ -88,11 +95,44 @@ class Features:
         kin = m * vector.k_pos if math.isfinite(vector.k_pos) else np.zeros_like(m)
         trac = vector.traction_s if math.isfinite(vector.traction_s) else 0.0
         full = np.ones_like(m)
-        return cls(P, N, vector.duration_s * full, vector.idle_s * full, trac * full, kin, t, starts)
+        spec = None
+        pr = vehicle.priors
+        if vehicle.posterior is None and pr is not None and (pr.spec_sd("cda") > 0 or pr.spec_sd("cr") > 0):
+            # (P, N) are piecewise linear in CdA and Cr: a forward difference within the piece
+            # (upwards: Cr may not fall below the vector's cr0) is the derivative
+            parts = []
+            for cda, cr in ((vehicle.cda_m2 * (1 + _H), vehicle.cr), (vehicle.cda_m2, vehicle.cr * (1 + _H))):
+                P2, N2 = wheel_energy_parts_j(vector, m, cda, cr)
+                parts.append(((P2 - P) / _H, (N2 - N) / _H))
+            spec = (parts[0], parts[1])
+        return cls(P, N, vector.duration_s * full, vector.idle_s * full, trac * full, kin, t, starts, spec)
 
     @property
     def n(self) -> int:
         return int(np.broadcast(self.positive_j, self.duration_s, self.ambient_c).size)
+
+    @classmethod
+    def concat(cls, parts: Sequence[Features]) -> Features:
+        """The predictions of ``parts`` one after another (a day's legs, a route's), each
+        part's arrays broadcast to its length; the CdA and Cr derivatives where every
+        part has them."""
+        ns = [p.n for p in parts]
+
+        def cat(get) -> np.ndarray:
+            return np.concatenate([np.broadcast_to(np.asarray(get(p), dtype=np.float64), (n,))
+                                   for p, n in zip(parts, ns, strict=True)])
+
+        def col(k: str) -> np.ndarray:
+            return cat(lambda p: getattr(p, k))
+
+        spec = None
+        if parts and all(p.spec is not None for p in parts):
+            def d(i: int, j: int) -> np.ndarray:
+                return cat(lambda p: p.spec[i][j])
+
+            spec = ((d(0, 0), d(0, 1)), (d(1, 0), d(1, 1)))
+        return cls(col("positive_j"), col("negative_j"), col("duration_s"), col("idle_s"), col("traction_s"),
+                   col("kinetic_j"), col("ambient_c"), col("starts"), spec)
 
 
 @dataclass(frozen=True, eq=False)
@@ -249,6 +289,25 @@ def extrapolation_var(vehicle: Vehicle, post: Posterior, f: Features) -> np.ndar
                                   f.duration_s, f.starts)
 
 
+def spec_parts(vehicle: Vehicle, f: Features, ice_braking: str | None = None) -> list[np.ndarray]:
+    """The consumption's standard deviations [J or l] from the spread of a file's stated
+    CdA and Cr (its class's, :attr:`cevm.core.uncertainty.Priors.spec`), one array per
+    quantity, for a file never calibrated (a calibration's eta absorbs them: none then).
+    The consumption is affine in (P, N) with the other features fixed, so its derivative
+    is the mean of (dP, dN) with every other feature zero."""
+    pr = vehicle.priors
+    if f.spec is None or pr is None or vehicle.posterior is not None:
+        return []
+    zero = np.zeros_like(np.asarray(f.positive_j, dtype=np.float64))
+    out = []
+    for (dp, dn), name in zip(f.spec, ("cda", "cr"), strict=True):
+        s = pr.spec_sd(name)
+        if s > 0:
+            d = Features(dp, dn, zero, zero, zero, zero, f.ambient_c, 0.0)
+            out.append(np.asarray(mean(vehicle, d, ice_braking), dtype=np.float64) * s)
+    return out
+
+
 def sqrt_cov(cov: np.ndarray) -> np.ndarray:
     """A square root R of a covariance, R^T R = cov (eigen-decomposition: semi-definite
     covariances too)."""
@@ -290,6 +349,8 @@ def predictive(vehicle: Vehicle, f: Features, *, measurement_sd: ArrayLike | Non
     extra = extrapolation_var(vehicle, post, f)
     if extra is not None:
         var += extra
+    for part in spec_parts(vehicle, f, ice_braking):
+        var = var + part ** 2
     if measurement_sd is not None:
         var = var + np.asarray(measurement_sd, dtype=np.float64) ** 2
     var = var.reshape(mu.shape) if var.size == mu.size else var
@@ -331,4 +392,6 @@ def total(vehicle: Vehicle, f: Features, groups: ArrayLike | None = None, *,
     extra = extrapolation_var(vehicle, post, f)
     if extra is not None:
         var = var + np.bincount(codes, weights=np.sqrt(np.broadcast_to(extra, (f.n,))), minlength=k) ** 2
+    for part in spec_parts(vehicle, f, ice_braking):  # one CdA, one Cr for every leg
+        var = var + np.bincount(codes, weights=np.broadcast_to(part, (f.n,)), minlength=k) ** 2
     return Predictive(sums, np.sqrt(var), post.label, post.source)

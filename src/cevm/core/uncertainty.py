@@ -82,6 +82,17 @@ class Priors:
     terms: tuple[TermPrior, ...]
     scatter: ScatterPrior
     sources: str = ""  # where the class defaults come from (file), for messages
+    #: the 95 % range of a stated spec-sheet value as factors of it: (("cda", 0.9, 1.1),
+    #: ("cr", 0.8, 1.2)); a file never calibrated predicts with that spread of its CdA, Cr
+    spec: tuple[tuple[str, float, float], ...] = ()
+
+    def spec_sd(self, name: str) -> float:
+        """The relative standard deviation of a stated ``name`` ("cda", "cr"): a quarter
+        of its 95 % range's width in factors (0 where the class gives none)."""
+        for n, lo, hi in self.spec:
+            if n == name:
+                return (hi - lo) / (2.0 * Z95)
+        return 0.0
 
     def get(self, term: str) -> TermPrior | None:
         for t in self.terms:

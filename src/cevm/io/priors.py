@@ -107,9 +107,15 @@ def _check_plausible(powertrain: str, term: str, key: str, lo_si: float, hi_si: 
                                  f"{plo * f:g} to {phi * f:g} of {key} ({t.label})")
 
 
+#: A stated spec-sheet value's 95 % range as factors of it, by key: the file key and the
+#: name a :class:`Priors` ``spec`` entry carries.
+SPEC_KEYS = {"cda_m2_factor": "cda", "cr_factor": "cr"}
+
+
 def _table_priors(table: dict, powertrain: str, where: str, source: str | Path, default_source: str,
                   prefix: str) -> tuple[dict[str, TermPrior], dict[str, float]]:
-    """The term ranges and scatter numbers of a class or [prior] table."""
+    """The term ranges and scatter numbers of a class or [prior] table (the spec-sheet
+    factors: :func:`_spec`)."""
     keys = _file_keys(powertrain)
     sc_key, sc_f = _scatter_key(powertrain)
     tr_key, tr_f = _trip_key(powertrain)
@@ -119,7 +125,7 @@ def _table_priors(table: dict, powertrain: str, where: str, source: str | Path, 
     terms: dict[str, TermPrior] = {}
     scatter: dict[str, float] = {}
     for key, value in table.items():
-        if key in ("sources", "class_from"):
+        if key in ("sources", "class_from") or key in SPEC_KEYS:
             continue
         if key == sc_key:
             scatter["aux"] = _positive(value, f"{where}.{key}", source) / sc_f
@@ -133,7 +139,7 @@ def _table_priors(table: dict, powertrain: str, where: str, source: str | Path, 
         if key not in keys:
             other = _scatter_key("ice" if powertrain == "ev" else "ev")[0]
             hint = (f" (an {'EV' if powertrain == 'ev' else 'ICE'} vehicle's is '{sc_key}')" if key == other else "")
-            allowed = ", ".join([*keys, sc_key, "scatter_share", tr_key])
+            allowed = ", ".join([*keys, sc_key, "scatter_share", tr_key, *SPEC_KEYS])
             raise InputError(source, f"unknown key '{where}.{key}'{hint}; a prior may set {allowed}")
         term, factor = keys[key]
         lo, hi = _range(value, f"{where}.{key}", source)
@@ -142,6 +148,20 @@ def _table_priors(table: dict, powertrain: str, where: str, source: str | Path, 
         text = sources.get(key)
         terms[term] = TermPrior(term, lo_si, hi_si, f"{prefix}{text}" if text else default_source)
     return terms, scatter
+
+
+def _spec(table: dict, where: str, source: str | Path) -> dict[str, tuple[float, float]]:
+    """The spec-sheet factors of a class or [prior] table: name -> (low, high), 0 < low
+    <= 1 <= high (a range around the stated value)."""
+    out = {}
+    for key, name in SPEC_KEYS.items():
+        if key in table:
+            lo, hi = _range(table[key], f"{where}.{key}", source)
+            if not 0 < lo <= 1.0 <= hi:
+                raise InputError(source, f"key '{where}.{key}' = [{lo:g}, {hi:g}] must hold 1 (the stated value) "
+                                         "between factors > 0")
+            out[name] = (lo, hi)
+    return out
 
 
 @functools.lru_cache(maxsize=4)
@@ -166,13 +186,13 @@ def _load_classes(path_text: str) -> dict:
             sc_key = _scatter_key(pt)[0]
             out["classes"][(cls, pt)] = (terms, ScatterPrior(scatter["aux"], scatter["share"],
                                                              f"class {cls}: {sources.get(sc_key, 'class default')}",
-                                                             scatter["trip"]))
+                                                             scatter["trip"]), _spec(table, f"{cls}.{pt}", path))
     return out
 
 
 def class_defaults(path: str | Path | None = None) -> dict:
     """The parsed class defaults: {"by_mass": ..., "classes": {(class, powertrain):
-    (term -> TermPrior, ScatterPrior)}} (cached)."""
+    (term -> TermPrior, ScatterPrior, spec-sheet factors)}} (cached)."""
     return _load_classes(str(classes_path() if path is None else Path(path)))
 
 
@@ -203,8 +223,8 @@ def priors_from_mapping(data: dict, powertrain: str, mass_kg: float, source: str
         if cls not in VEHICLE_CLASSES:
             raise InputError(source, f"key 'class' must be one of {', '.join(VEHICLE_CLASSES)}; got {cls!r}")
         how = "vehicle file"
-    terms, scatter = defaults["classes"][(cls, powertrain)]
-    terms = dict(terms)
+    terms, scatter, spec = defaults["classes"][(cls, powertrain)]
+    terms, spec = dict(terms), dict(spec)
     table = data.get("prior")
     sc = scatter
     if table is not None:
@@ -218,9 +238,11 @@ def priors_from_mapping(data: dict, powertrain: str, mass_kg: float, source: str
                               "vehicle file [prior]", own_sc.get("trip", scatter.trip))
         if isinstance(table.get("class_from"), str) and data.get("class") is not None:
             how = table["class_from"]
+        spec.update(_spec(table, "prior", source))
     order = ("eta", *EXTRA_TERMS[powertrain])
     return Priors(vehicle_class=str(cls), class_from=how, terms=tuple(terms[n] for n in order if n in terms),
-                  scatter=sc, sources=str(CLASSES_FILE))
+                  scatter=sc, sources=str(CLASSES_FILE),
+                  spec=tuple((n, lo, hi) for n, (lo, hi) in sorted(spec.items())))
 
 
 def with_prior_values(vehicle, data: dict):
@@ -283,6 +305,10 @@ def prior_table(priors: Priors, powertrain: str) -> dict:
     sc_key, sc_f = _scatter_key(powertrain)
     out[sc_key] = _round(priors.scatter.aux * sc_f)
     out["scatter_share"] = _round(priors.scatter.share)
+    for key, name in SPEC_KEYS.items():
+        for n, lo, hi in priors.spec:
+            if n == name:
+                out[key] = [_round(lo), _round(hi)]
     tr_key, tr_f = _trip_key(powertrain)
     out[tr_key] = _round(priors.scatter.trip * tr_f)
     sources[sc_key] = priors.scatter.source

@@ -66,8 +66,7 @@ def _leg_features(sc: Scenario, d: int, v: FleetVehicle, legs: Sequence[tuple[in
     for ri, j, m in legs:
         vec = sc.routes[ri].legs[j].vector
         parts.append(Features.of(vec, v.vehicle, [m], None if t is None else [t]))
-    names = ("positive_j", "negative_j", "duration_s", "idle_s", "traction_s", "kinetic_j", "ambient_c")
-    return Features(*(np.concatenate([np.atleast_1d(getattr(f, k)) for f in parts]) for k in names))
+    return Features.concat(parts)
 
 
 def p_complete(sc: Scenario, d: int, evaluation: Evaluation) -> dict[str, float | None]:
