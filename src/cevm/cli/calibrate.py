@@ -214,8 +214,9 @@ def _print_calibration(r: dict, is_ev: bool) -> None:
         _say(f"prior kept: {labels.get(k, k)}: {why.removeprefix('kept its prior: ')}")
     sc = r["scatter"]
     if sc:
-        _say(f"scatter of a trip around the model: {sc['aux_text']} x its duration and {100 * sc['share']:.1f} % "
-                   f"of its energy (from the held-out trips); within a day, correlation {sc['day_correlation_note']}")
+        _say(f"scatter of a trip around the model: {sc['aux_text']} x its duration, {100 * sc['share']:.1f} % "
+             f"of its energy and {sc['trip_text']} a trip (from the held-out trips); within a day, correlation "
+             f"{sc['day_correlation_note']}")
     if cov.get("by_level"):
         _say("held-out coverage at other levels: " + ", ".join(
             f"{100 * float(lv):g} %: {100 * sh:.0f} %" for lv, sh in cov["by_level"].items() if float(lv) != iv))
@@ -325,7 +326,9 @@ def _scatter(result: CalibrationResult) -> dict | None:
         return None
     ev = result.vehicle.is_ev
     aux_text = f"{sc.aux / 1e3:.2f} kW" if ev else f"{sc.aux * 3600:.2f} l/h"
+    trip_text = f"{sc.trip / 3.6e6:.2f} kWh" if ev else f"{sc.trip:.2f} l"
     return {"aux": sc.aux, "aux_unit": "W" if ev else "l/s", "aux_text": aux_text, "share": sc.share,
+            "trip": sc.trip, "trip_unit": "J" if ev else "l", "trip_text": trip_text,
             "day_correlation": sc.day_corr, "day_correlation_note": sc.day_corr_note, "standstill": sc.standstill,
             "meter_share": None if result.posterior is None else result.posterior.meter_share}
 
