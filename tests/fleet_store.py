@@ -85,9 +85,13 @@ def make_store(path: Path, logs_dir: Path) -> dict:
     return out
 
 
-# A diesel truck as the trips were measured: the plain CE model (no idle or other terms).
+# A diesel truck as the trips were measured: the plain CE model (no idle or other terms:
+# stated as zeros, since a term a file leaves out takes its class's prior).
 HGV_FILE = """name = "Test HGV"
 powertrain = "ice"
+idle_fuel_lph = 0.0
+heating_fuel_lph_per_k = 0.0
+cooling_fuel_lph_per_k = 0.0
 kerb_mass_kg = 18000.0
 max_gross_kg = 44000.0
 cda_m2 = 6.62

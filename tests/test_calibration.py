@@ -181,13 +181,14 @@ def test_quantised_counter_weighs_less_and_coarse_trips_are_excluded(pool):
     assert all("relative uncertainty" in r.excluded[k] and "> 10.0 %" in r.excluded[k] for k in coarse)
     rows = {row.trip_id: row for row in r.rows}
     assert sum(row.weight for row in r.rows) == pytest.approx(1.0)
-    # each trip weighs 1 / (its measurement's variance + the fitted scatter's there)
+    # each trip weighs 1 / (its measurement's variance + the fitted scatter's there,
+    # with its part that does not grow with a trip: Scatter.trip)
     sc = r.scatter
     dur = {t.trip_id: t.vector.duration_s for t in trips}
 
     def variance(row):
         return (row.rel_uncertainty * row.measured) ** 2 + (sc.aux * dur[row.trip_id]) ** 2 + (
-            sc.share * row.predicted_in_sample) ** 2
+            sc.share * row.predicted_in_sample) ** 2 + sc.trip ** 2
 
     flow = [row for row in r.rows if row.trip_id not in counter]
     for k in set(counter) - coarse:

@@ -288,9 +288,10 @@ def test_fleet_plan_warns_outside_what_a_calibration_saw(root, tmp_path):
 
 
 def test_a_temperature_the_model_cannot_use_is_said(root, tmp_path):
-    # electric-bus.toml has no heating, A/C or warm-up term: a winter question would get
-    # the same number as a summer one; a bus with a heating term takes it without a word
-    bus, cyc = str(root / "configs/vehicles/electric-bus.toml"), str(root / "configs/cycles/urban-bus.csv")
+    # electric-bus-paper.toml states no heating, A/C or warm-up (zeros: the paper's model;
+    # a file that leaves them out takes its class's prior instead): a winter question would
+    # get the same number as a summer one; a bus with a heating term takes it without a word
+    bus, cyc = str(root / "configs/vehicles/electric-bus-paper.toml"), str(root / "configs/cycles/urban-bus.csv")
     heated = tmp_path / "heated.toml"
     heated.write_text('name = "heated bus"\npowertrain = "ev"\nkerb_mass_kg = 9000\npayload_kg = 1000\n'
                       'cda_m2 = 4.0\ncr = 0.007\neta = 0.8\nbattery_kwh = 300\naux_power_kw = 3\n'
@@ -299,7 +300,8 @@ def test_a_temperature_the_model_cannot_use_is_said(root, tmp_path):
         res = runner.invoke(app, [*cmd, "-v", bus, "-v", str(heated), "-c", cyc, "--ambient-c", "-10"])
         assert res.exit_code == 0, res.output
         said = [x for x in res.stderr.splitlines() if "changes nothing" in x]
-        assert len(said) == 1 and said[0].startswith("cevm: warning: electric-bus: ") and "--ambient-c -10" in said[0]
+        assert len(said) == 1 and said[0].startswith("cevm: warning: electric-bus-paper: ")
+        assert "--ambient-c -10" in said[0]
         res = runner.invoke(app, [*cmd, "-v", bus, "-c", cyc])
         assert "changes nothing" not in res.stderr  # nothing asked, nothing to say
     res = runner.invoke(app, ["fleet", "plan", str(root / "configs/fleet/paper-case-study.toml"), "--ambient-c", "30"])

@@ -217,12 +217,16 @@ def test_a_days_total_has_the_variance_of_a_sum_of_correlated_trips(vectors):
 
 
 def test_p_within_budget_is_the_frequency_in_simulation(vectors):
-    """prob_at_most(budget) against the share of simulated trips within it."""
+    """prob_at_most(budget) against the share of simulated trips within it: trips drawn
+    from the log-normal of the prediction's mean and sd (a consumption is never
+    negative; cevm.core.distribution), its parameters from the moments by hand."""
     v = dataclasses.replace(BUS, aux_power_w=3000.0, priors=PRIORS)
     p = predictive(v, Features.of(vectors[2], v))
     rng = np.random.default_rng(7)
     mean, sd = float(p.mean), float(p.sd)
-    draws = mean + sd * rng.standard_normal(100000)
+    sigma2 = np.log(1.0 + (sd / mean) ** 2)
+    draws = rng.lognormal(np.log(mean) - sigma2 / 2, np.sqrt(sigma2), 100000)
+    assert draws.mean() == pytest.approx(mean, rel=0.01) and draws.std() == pytest.approx(sd, rel=0.03)
     for budget in (mean - sd, mean + 0.3 * sd, mean + 2 * sd):
         assert float(p.prob_at_most(budget)) == pytest.approx(float(np.mean(draws <= budget)), abs=0.005)
     assert p.source == "prior"

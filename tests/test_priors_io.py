@@ -28,7 +28,7 @@ def test_every_class_has_every_terms_range_with_a_source_and_inside_physics():
     d = class_defaults()
     for cls in VEHICLE_CLASSES:
         for pt in ("ev", "ice"):
-            terms, scatter = d["classes"][(cls, pt)]
+            terms, scatter, _spec = d["classes"][(cls, pt)]  # and the spec-sheet factors
             assert "eta" in terms and scatter.aux > 0 and 0 < scatter.share < 0.5
             for p in terms.values():
                 assert p.low <= p.high and p.source

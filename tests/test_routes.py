@@ -191,11 +191,22 @@ def test_cli_route_errors(store, cycles, root):
         assert res.exit_code == 2 and msg in res.output, (args, res.output)
 
 
+def _store_trips(st, tmp_path, seeds, temps, step_s: float) -> None:
+    """One stored trip of EB-01 per seed, ``step_s`` apart, each at its temperature."""
+    import dataclasses
+
+    for i, seed in enumerate(seeds):
+        src = str(tmp_path / f"log{i}.csv")
+        trip = dataclasses.replace(make_trip("EB-01", seed, 1_557_820_800 + step_s * i, src), ambient_temp_c=temps[i])
+        vec = drive_cycle_vector(trip.time_s, trip.speed_mps, trip.elevation_m)
+        st.replace_file_trips(src, [trip], [vec.to_bytes()], sha256=trip.source_sha256, size_bytes=1,
+                              mtime_s=0.0, profile="test")
+
+
 def test_a_route_of_trips_is_predicted_at_its_legs_mean_temperature(tmp_path, cycles):
     """A route's ambient temperature is the duration-weighted mean of its trip legs' logged
     temperatures (computed here by hand); a route with a cycle leg, or with a trip that
     logged none, has none (the prediction then says it used the vehicle's reference)."""
-    import dataclasses
     from contextlib import ExitStack
 
     from cevm.store.sources import load_sources
@@ -203,13 +214,7 @@ def test_a_route_of_trips_is_predicted_at_its_legs_mean_temperature(tmp_path, cy
     path = tmp_path / "s.sqlite"
     temps = {0: -4.0, 1: 12.0, 2: None}
     with TripStore.open(path) as st:
-        for i, seed in enumerate((11, 12, 13)):
-            src = str(tmp_path / f"log{i}.csv")
-            trip = dataclasses.replace(make_trip("EB-01", seed, 1_557_820_800 + 86400 * i, src),
-                                       ambient_temp_c=temps[i])
-            vec = drive_cycle_vector(trip.time_s, trip.speed_mps, trip.elevation_m)
-            st.replace_file_trips(src, [trip], [vec.to_bytes()], sha256=trip.source_sha256, size_bytes=1,
-                                  mtime_s=0.0, profile="test")
+        _store_trips(st, tmp_path, (11, 12, 13), temps, 86400)
         rows = st.list_trips().sort_values("start_utc_s")
         ids = list(rows.trip_id)
         durations = list(rows.duration_s)
@@ -223,3 +228,53 @@ def test_a_route_of_trips_is_predicted_at_its_legs_mean_temperature(tmp_path, cy
     assert durations[0] != durations[1]  # so that the weighting is tested, not a plain mean
     assert got["with-cycle"] is None
     assert got["one-unlogged"] is None
+
+
+def test_a_route_of_legs_at_different_temperatures_is_the_sum_of_its_legs(tmp_path):
+    """A day stored as a route: each leg heated or cooled at its own logged temperature and
+    warmed up at its own start, so the route's energy (fuel) and its distribution are the
+    sums of its legs predicted one by one (an EV with heating, A/C and warm-up terms on
+    both sides of the balance temperatures; a diesel with heating and cold-start fuel); the
+    legs' mean temperature alone would heat the cold leg too little."""
+    from contextlib import ExitStack
+
+    from cevm.core.predictive import Features, predictive, total
+    from cevm.core.sweep import PredictionSet, sweep
+    from cevm.core.vehicle import predict
+    from cevm.io.vehicles import vehicle_from_mapping
+    from cevm.store.sources import load_sources
+
+    path = tmp_path / "s.sqlite"
+    temps = [-8.0, 14.0, 31.0]
+    with TripStore.open(path) as st:
+        _store_trips(st, tmp_path, (21, 22, 23), temps, 3600)
+        ids = list(st.list_trips().sort_values("start_utc_s").trip_id)
+        add_route(st, "day", [TripLeg(t) for t in ids])
+        vectors = st.load_cycle_vectors(trip_ids=ids)
+    common = {"class": "bus", "mass_kg": 12000.0, "cda_m2": 4.0, "cr": 0.007, "eta": 0.8}
+    ev = vehicle_from_mapping({**common, "name": "ev", "powertrain": "ev", "battery_kwh": 300.0,
+                               "aux_power_kw": 3.0, "aux_heating_kw_per_k": 0.5, "aux_cooling_kw_per_k": 0.4,
+                               "warmup_kwh_per_k": 0.1})
+    ice = vehicle_from_mapping({**common, "name": "ice", "powertrain": "ice", "eta": 0.35, "fuel_lhv_mj_per_l": 35.8,
+                                "idle_fuel_lph": 2.0, "heating_fuel_lph_per_k": 0.05,
+                                "cooling_fuel_lph_per_k": 0.1, "warmup_fuel_l_per_k": 0.02})
+    with ExitStack() as stack:
+        (route,) = load_sources(stack, path, [], [], [], ["day"], 0.0)
+        blocks = list(sweep([route], PredictionSet.build([ev, ice]), ranges=True))
+    (block,) = blocks
+    legs = [vectors[t] for t in ids]
+    want_e = sum(float(predict(v, ev, ambient_c=t).energy_j) for v, t in zip(legs, temps, strict=True))
+    want_f = sum(float(predict(v, ice, ambient_c=t).fuel_l) for v, t in zip(legs, temps, strict=True))
+    # (to rounding: the route's CE vector sums its legs' steps in another order)
+    assert float(block.energy_j[0]) == pytest.approx(want_e, rel=1e-8)
+    assert float(block.fuel_l[1]) == pytest.approx(want_f, rel=1e-8)
+    mean_t = predict(route.vector, ev, ambient_c=route.ambient_c).energy_j
+    assert abs(float(mean_t) - want_e) > 1e-3 * want_e  # the mean temperature alone would differ
+    # the interval: the legs' sum as one day (cevm.core.predictive.total)
+    from cevm.core.intervals import block_ranges
+
+    f = [Features.of(v, ev, ambient_c=t) for v, t in zip(legs, temps, strict=True)]
+    day = total(ev, Features.concat(f))
+    assert float(block_ranges(block).sd[0]) == pytest.approx(float(day.sd[0]), rel=1e-9)
+    assert float(day.mean[0]) == pytest.approx(want_e, rel=1e-8)
+    assert float(predictive(ev, f[0]).mean) > 0

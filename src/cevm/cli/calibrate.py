@@ -213,8 +213,9 @@ def _print_calibration(r: dict, is_ev: bool) -> None:
         _say(f"prior kept: {labels.get(k, k)}: {why.removeprefix('kept its prior: ')}")
     sc = r["scatter"]
     if sc:
-        _say(f"scatter of a trip around the model: {sc['aux_text']} x its duration and {100 * sc['share']:.1f} % "
-                   f"of its energy (from the held-out trips); within a day, correlation {sc['day_correlation_note']}")
+        _say(f"scatter of a trip around the model: {sc['aux_text']} x its duration, {100 * sc['share']:.1f} % "
+             f"of its energy and {sc['trip_text']} a trip (from the held-out trips); within a day, correlation "
+             f"{sc['day_correlation_note']}")
     if cov.get("by_level"):
         _say("held-out coverage at other levels: " + ", ".join(
             f"{100 * float(lv):g} %: {100 * sh:.0f} %" for lv, sh in cov["by_level"].items() if float(lv) != iv))
@@ -324,7 +325,9 @@ def _scatter(result: CalibrationResult) -> dict | None:
         return None
     ev = result.vehicle.is_ev
     aux_text = f"{sc.aux / 1e3:.2f} kW" if ev else f"{sc.aux * 3600:.2f} l/h"
+    trip_text = f"{sc.trip / 3.6e6:.2f} kWh" if ev else f"{sc.trip:.2f} l"
     return {"aux": sc.aux, "aux_unit": "W" if ev else "l/s", "aux_text": aux_text, "share": sc.share,
+            "trip": sc.trip, "trip_unit": "J" if ev else "l", "trip_text": trip_text,
             "day_correlation": sc.day_corr, "day_correlation_note": sc.day_corr_note, "standstill": sc.standstill,
             "meter_share": None if result.posterior is None else result.posterior.meter_share}
 
@@ -334,14 +337,12 @@ def result_json(result: CalibrationResult, vehicle_id: str, notes: tuple[str, ..
     candidates (with ``selection``), per-trip rows (each trip twice: its in-sample
     prediction, held_out false, and its cross-validated one, held_out true, each with
     its interval at the result's level: predicted_low, predicted_high, inside)."""
-    from scipy.special import ndtri
-
     from cevm.core.calibration import display_value
+    from cevm.core.distribution import interval
     from cevm.io.calibrated import calibration_table, fitted_keys
 
     unit = "kWh" if result.unit == "J" else "l"
     pt = result.vehicle.powertrain
-    z = float(ndtri(0.5 + 0.5 * result.interval))
 
     def stats(s):
         return None if s is None else {"n": s.n, "mean_pct": _f(s.mean_pct), "std_pct": _f(s.std_pct),
@@ -350,8 +351,8 @@ def result_json(result: CalibrationResult, vehicle_id: str, notes: tuple[str, ..
     trips = []
     for r in result.rows:
         for held_out, pred, err, low, high in (
-                (False, r.predicted_in_sample, r.error_pct_in_sample, r.predicted_in_sample - z * r.sd_in_sample,
-                 r.predicted_in_sample + z * r.sd_in_sample),
+                (False, r.predicted_in_sample, r.error_pct_in_sample,
+                 *(float(x) for x in interval(r.predicted_in_sample, r.sd_in_sample, result.interval))),
                 (True, r.predicted_cv, r.error_pct_cv, r.predicted_low, r.predicted_high)):
             lo, hi = _f(display_value(result, low)), _f(display_value(result, high))
             meas = display_value(result, r.measured)

@@ -472,3 +472,15 @@ def apply_manifest(st, path: Path, manifest, *, dry_run: bool = False) -> tuple[
                          f"{match.n_problems} rows not applied (columns: {cols}; mass in {manifest.mass_unit}, "
                          f"decimal mark {manifest.decimal!r})"), err=True)
     return len(match.masses), match.n_problems
+
+
+def say_prior_values(vehicles) -> None:
+    """A note on stderr per vehicle that took terms from its class's priors, or whose class
+    was inferred from its mass (:func:`cevm.io.priors.prior_values_note`): every number
+    says what it assumed."""
+    from cevm.io.priors import prior_values_note
+
+    for v in vehicles:
+        note = prior_values_note(v)
+        if note:
+            typer.echo(printable(f"cevm: note: {note}"), err=True)

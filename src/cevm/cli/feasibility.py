@@ -39,6 +39,7 @@ from cevm.cli.common import (
     load_sources,
     note_flat_cycles,
     open_out,
+    say_prior_values,
     start_soc,
     warn,
     warn_ambient_unused,
@@ -159,6 +160,7 @@ def feasibility_cmd(
     except CevmError as exc:
         raise fail(exc) from None
     _warn_outside_calibration(vehicles, seen)
+    say_prior_values(vehicles)
     if mass_kg is None and payload_kg is None:  # stored trips at their own masses
         from cevm.store.sources import foreign_mass_warnings
 

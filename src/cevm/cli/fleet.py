@@ -200,6 +200,8 @@ def _warn(report: dict) -> None:
     others were, 2 when none was)."""
     for w in report["warnings"]:
         typer.echo(f"cevm: warning: {w}", err=True)
+    for note in dict.fromkeys(v["prior_note"] for v in report["vehicles"] if v.get("prior_note")):
+        typer.echo(printable(f"cevm: note: {note}"), err=True)
     temps = [t for t in report["ambient_c"].values() if t is not None]
     if temps:  # asked by --ambient-c or the scenario's days
         asked = "the days' ambient temperatures" if len(set(temps)) > 1 else f"an ambient of {temps[0]:g} degC"

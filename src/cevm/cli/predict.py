@@ -56,6 +56,7 @@ from cevm.cli.common import (
     load_sources,
     note_flat_cycles,
     open_out,
+    say_prior_values,
     start_soc,
     warn_ambient_unused,
     warn_damaged,
@@ -460,6 +461,7 @@ def predict_cmd(
         raise fail(exc) from None
     for line in assumed.lines():
         typer.echo(line, err=True)
+    say_prior_values(vehicles)
     if ambient_c is not None:
         warn_ambient_unused([(v.label, uses_temperature(v)) for v in vehicles], f"--ambient-c {ambient_c:g}")
     for line in _mass_lines(sources, used):

@@ -89,6 +89,17 @@ class RangeOptions:
         self.reserve_pct = reserve_pct
 
 
+#: What the column from_prior says (:func:`from_prior_text`).
+FROM_PRIOR_MEANING = ("the terms the vehicle file leaves out, taken at the middle of their class prior's range (their "
+                      "spread in the interval): of aux (auxiliary power), heat, cool (EV), idle, heat, cool (ICE), "
+                      "joined by +; none where the file states them all")
+
+
+def from_prior_text(vehicle: Any) -> str:
+    """"none", or the terms a vehicle took from its priors (``vehicle.from_prior``), joined by "+"."""
+    return "+".join(vehicle.from_prior) if vehicle.from_prior else "none"
+
+
 class BlockRows:
     """What a predict column reads: one block of rows (:class:`~cevm.core.sweep.SweepBlock`)
     and where its masses come from (``mass_source``), with helpers that give arrays of
@@ -288,6 +299,8 @@ PREDICT = ColumnSpec((
     Column("interval_from", "what the interval comes from: posterior (the vehicle's calibration), prior (its "
            "class's ranges: a file never calibrated) or none (a vehicle without priors)", kind="text",
            value=lambda r: (r.ranges.source, list(INTERVAL_SOURCES))),
+    Column("from_prior", FROM_PRIOR_MEANING, kind="text",
+           value=lambda r: (r.pset.vehicle_index, [from_prior_text(v) for v in r.pset.vehicles])),
     Column("extrapolation", "none, or which of temperature, mass, speed (mean), duty (share of time standing) lie "
            "outside what the vehicle's calibration saw (never calibrated: none)", kind="text",
            value=lambda r: (r.ranges.extrapolation, list(EXTRAPOLATION_TEXTS))),
@@ -452,12 +465,12 @@ class VehicleRow:
 
     def bound(self, high: bool) -> float | None:
         """The interval's end at ``level`` of the energy [J] (EV) or fuel [l] (ICE)."""
-        from scipy.special import ndtri
+        from cevm.core.distribution import interval
 
         if self.res.sd is None:
             return None
         mean = self.res.energy_j[self.i] if self.vehicle.is_ev else self.res.fuel_l[self.i]
-        x = float(mean + (1 if high else -1) * float(ndtri(0.5 + 0.5 * self.level)) * self.res.sd[self.i])
+        x = float(interval(mean, self.res.sd[self.i], self.level)[int(high)])
         return None if x != x else x
 
     def soc_at(self, energy_j: float | None) -> float | None:
@@ -558,6 +571,7 @@ FEASIBILITY = ColumnSpec((
     Column("fuel_l_high", "the interval's high end of the fuel [l]", ICE, value=lambda r: r.bound(True)),
     Column("interval_from", "what the interval comes from: posterior, prior (a file never calibrated) or none",
            kind="text", value=lambda r: r.res.interval_from[r.i] if r.res.interval_from else "none"),
+    Column("from_prior", FROM_PRIOR_MEANING, kind="text", value=lambda r: from_prior_text(r.vehicle)),
     Column("extrapolation", "none, or which of temperature, mass, speed, duty lie outside what the vehicle's "
            "calibration saw", kind="text", value=lambda r: r.extrapolation()),
     Column("over_power", "the source asks more wheel power than max_power_kw at the evaluated mass (over any 5 s; "

@@ -42,6 +42,7 @@ from cevm.cli.common import (
     check_workers,
     fail,
     open_out,
+    say_prior_values,
     warn,
     warn_damaged,
 )
@@ -593,6 +594,7 @@ def _say(o: SimpleNamespace, sm: dict, settings: ReplaySettings, run: Run, vehic
             write_lines([f"cevm replay: {line}"], sys.stdout)
     for note in run.notes:
         typer.echo(f"cevm: note: {note}", err=True)
+    say_prior_values([vehicle])
     if settings.within_trips and vehicle.is_ev:
         typer.echo(f"cevm: note: the lowest level inside the trips: stored profiles read for {run.read} of "
                    f"{run.trips} trips (those that could hold a duty's lowest point or decide it; --within-trips "

@@ -129,6 +129,7 @@ def vehicle_show(
     from (its calibration's posterior, or its class's priors)."""
     from cevm.core.predictive import posterior_of
     from cevm.io import load_vehicle, read_toml
+    from cevm.io.priors import prior_values_note
 
     try:
         data = read_toml(file, "vehicle file")
@@ -145,7 +146,8 @@ def vehicle_show(
     post = posterior_of(vehicle)
     uncertainty = {"interval_from": "none" if post is None else post.label,
                    "source": "no priors: no interval" if post is None else post.source,
-                   "priors": None if vehicle.priors is None else vehicle.priors.describe()}
+                   "priors": None if vehicle.priors is None else vehicle.priors.describe(),
+                   "from_prior": list(vehicle.from_prior), "prior_note": prior_values_note(vehicle)}
     report: dict[str, Any] = {
         "file": str(file), "id": vehicle.id, "name": vehicle.name, "powertrain": vehicle.powertrain,
         "parameters": params, "consumption": figures, "reference": references, "terms": terms,
@@ -160,6 +162,8 @@ def vehicle_show(
     typer.echo(printable(f"{vehicle.id}: {vehicle.name} ({vehicle.powertrain}), {file}"))
     typer.echo(printable(f"intervals from: {uncertainty['interval_from']} ({uncertainty['source']})"
                          + (f"; priors of {uncertainty['priors']}" if uncertainty["priors"] else "")))
+    if uncertainty["prior_note"]:
+        typer.echo(printable(f"from its priors: {uncertainty['prior_note']}"))
     write_rows(params, OutputFormat.table, title="parameters", columns=["parameter", "value", "basis"],
                headers={"basis": "source"})
     unit = "energy_kwh_per_km" if vehicle.is_ev else "fuel_l_per_100km"

@@ -21,10 +21,12 @@ keeps the reserve (EV) or fits the tank (ICE) and respects ``max_gross_kg``.
 At a confidence c (:func:`feasibility`'s ``confidence``), "keeps the reserve" means that
 it does so with probability at least c under the vehicle's predictive distribution
 (:mod:`cevm.core.predictive`: its calibration's posterior, or its class's priors): the
-load (the peak energy drawn, or the fuel) plus z_c of its standard deviations must fit
-the budget, z_c = Phi^-1(c), the peak's standard deviation taken as the source total's
-relative one. That load is convex in the mass too where z_c >= 0 (a norm of terms affine
-in the mass, added to a convex one), so the search stands; c = 0.5 is the point estimate.
+load's (the peak energy drawn, or the fuel) c-quantile must fit the budget, in the
+distribution of every interval (:mod:`cevm.core.distribution`: log-normal of the load's
+mean and standard deviation, the peak's taken as the source total's relative one), so
+that the verdict and predict's p_reserve_ok agree. The quantile grows with the load's
+mean and standard deviation, both increasing in the mass where the load is (for c >=
+0.5): the search stands; c = 0.5 is the point estimate (the mean, as predict's).
 """
 
 from __future__ import annotations
@@ -34,9 +36,8 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.special import ndtr, ndtri
 
-from cevm.core import limits, physical_inputs
+from cevm.core import distribution, limits, physical_inputs
 from cevm.core.predictive import Features, predictive
 from cevm.core.sweep import (
     AMBIENT_ORIGINS,
@@ -135,10 +136,11 @@ class _LoadFunction:
     the reserve, or the tank)."""
 
     def __init__(self, source: Source, vehicles: Sequence[Vehicle], base_kg: np.ndarray, soc_start_pct: float,
-                 reserve_pct: float, ice_braking: str | None, ambient_c: float | None = None, z: float = 0.0):
+                 reserve_pct: float, ice_braking: str | None, ambient_c: float | None = None,
+                 confidence: float | None = None):
         self.source = source
         self.vehicles = tuple(vehicles)
-        self.z = z
+        self.confidence = confidence
         self.pset = PredictionSet.build(vehicles, ice_braking=ice_braking, ambient_c=ambient_c)  # one row per vehicle
         check_cr(source, self.pset)
         self.base_kg = base_kg
@@ -146,16 +148,16 @@ class _LoadFunction:
         self.budget = np.where(ps.is_ev, (soc_start_pct - reserve_pct) / 100.0 * ps.battery_j, ps.tank_l)
 
     def __call__(self, vi: np.ndarray, payload_kg: np.ndarray) -> np.ndarray:
-        """The load at the confidence: the peak energy or fuel plus z of its standard
-        deviations (module notes)."""
+        """The load at the confidence: the peak energy's or fuel's quantile at it
+        (:mod:`cevm.core.distribution`; the mean without a confidence)."""
         load, total, terms = self.evaluate(vi, payload_kg)
-        if self.z == 0.0:
+        if self.confidence is None:
             return load
         sd = self.sd(vi, self.base_kg[vi] + payload_kg, terms)
         ev = self.pset.is_ev[vi]
         with np.errstate(invalid="ignore", divide="ignore"):
             rel = np.where(ev, sd / np.abs(total), 0.0)
-        return load + self.z * np.where(ev, rel * np.abs(load), sd)
+        return distribution.quantile(load, np.where(ev, rel * np.abs(load), sd), self.confidence)
 
     def sd(self, vi: np.ndarray, mass_kg: np.ndarray, terms: RowTerms) -> np.ndarray:
         """The standard deviation of the source's total energy [J] or fuel [l] of (vehicle
@@ -290,8 +292,8 @@ def feasibility(
         mass = np.array([v.mass_kg for v in vehicles], dtype=np.float64)
     if not (isinstance(confidence, (int, float)) and 0.5 <= confidence < 1.0):
         raise CevmError(f"the confidence must be at least 0.5 and below 1, got {confidence!r}")
-    z = float(ndtri(confidence))
-    f = _LoadFunction(source, vehicles, base, soc_start_pct, reserve_pct, ice_braking, ambient_c, z=z)
+    f = _LoadFunction(source, vehicles, base, soc_start_pct, reserve_pct, ice_braking, ambient_c,
+                      confidence=None if confidence == 0.5 else confidence)  # 0.5: the mean, as predict
     ps = f.pset
     vi = np.arange(nv)
     at, total, terms = f.evaluate(vi, mass - base)
@@ -299,8 +301,7 @@ def feasibility(
     with np.errstate(invalid="ignore", divide="ignore"):
         rel = np.where(ps.is_ev, sd_at / np.abs(total), 0.0)
         sd_load = np.where(ps.is_ev, rel * np.abs(at), sd_at)
-        zl = (f.budget - at) / sd_load
-    p_ok = np.where(sd_load > 0, ndtr(zl), np.where(at <= f.budget, 1.0, 0.0))
+    p_ok = distribution.prob_at_most(at, sd_load, f.budget)
     p_ok = np.where(ps.is_ev | np.isfinite(ps.tank_l), p_ok, np.nan)
     max_gross = np.array([np.inf if v.max_gross_kg is None else v.max_gross_kg for v in vehicles])
     over = mass > max_gross
@@ -316,7 +317,7 @@ def feasibility(
     fuel[~ev] = at[~ev]
     with np.errstate(invalid="ignore"):
         tank_margin = ps.tank_l - fuel
-        ok_load = (np.where(ev, soc_min >= reserve_pct, tank_margin >= 0) if z == 0.0
+        ok_load = (np.where(ev, soc_min >= reserve_pct, tank_margin >= 0) if confidence == 0.5
                    else p_ok >= confidence)
     known = ev | np.isfinite(ps.tank_l)
 

@@ -7,10 +7,12 @@ The probability of keeping the reserve: the energy the vehicle may draw before i
 state of charge reaches the reserve is B = (SoC_start - reserve) x battery; the energy it
 needs to its lowest state of charge along the source is E_min (the whole source's when
 that is its end, less when it regains charge after it: a descent), and
-P(reserve kept) = P(E_min <= B), E_min taken as Gaussian with the source's relative
-uncertainty (sd_min = sd x E_min / E: the uncertainty of a part of the source in
-proportion to its energy). Where the row runs empty on the way, E_min is the whole
-source's energy. An ICE completes its source within its tank with P(fuel <= tank_l).
+P(reserve kept) = P(E_min <= B), E_min with the source's relative uncertainty (sd_min =
+sd x E_min / E: the uncertainty of a part of the source in proportion to its energy) and
+the distribution of every interval (:mod:`cevm.core.distribution`), so that a row whose
+high end keeps the reserve has p_reserve_ok at least the interval's upper level. Where
+the row runs empty on the way, E_min is the whole source's energy. An ICE completes its
+source within its tank with P(fuel <= tank_l).
 """
 
 from __future__ import annotations
@@ -19,8 +21,8 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
-from scipy.special import ndtr
 
+from cevm.core import distribution
 from cevm.core.predictive import Features, predictive
 from cevm.core.vehicle import EXTRAPOLATION_AXES, extrapolation_mask, extrapolation_text
 
@@ -47,16 +49,11 @@ class RowRanges:
 
     def bounds(self, level: float) -> tuple[np.ndarray, np.ndarray]:
         """The central interval at ``level`` of every row."""
-        from scipy.special import ndtri
-
-        z = float(ndtri(0.5 + 0.5 * level))
-        return self.mean - z * self.sd, self.mean + z * self.sd
+        return distribution.interval(self.mean, self.sd, level)
 
     def prob_at_most(self, budget: np.ndarray) -> np.ndarray:
         """P(consumption <= budget) per row (the budget in the rows' unit)."""
-        with np.errstate(divide="ignore", invalid="ignore"):
-            z = (budget - self.mean) / self.sd
-        return np.where(self.sd > 0, ndtr(z), np.where(budget >= self.mean, 1.0, 0.0))
+        return distribution.prob_at_most(self.mean, self.sd, budget)
 
 
 def block_ranges(block: SweepBlock) -> RowRanges:
@@ -74,14 +71,32 @@ def block_ranges(block: SweepBlock) -> RowRanges:
     for v in np.unique(pset.vehicle_index):
         rows = np.flatnonzero(pset.vehicle_index == v)
         veh = pset.vehicles[int(v)]
-        f = Features.of(vec, veh, pset.mass_kg[rows], block.ambient_c[rows])
         braking = pset.braking[int(v)] or None
-        p = predictive(veh, f, ice_braking=braking)
+        if src.leg_vectors is not None:  # a route taken leg by leg: the sum of its legs' distributions
+            p = _route_total(veh, src, pset.mass_kg[rows], block.ambient_c[rows], block.ambient_from[rows] == 0,
+                             braking)
+        else:
+            f = Features.of(vec, veh, pset.mass_kg[rows], block.ambient_c[rows])
+            p = predictive(veh, f, ice_braking=braking)
         sd[rows] = np.broadcast_to(p.sd, (rows.size,))
         code[rows] = INTERVAL_SOURCES.index(p.source)
         mask[rows] = extrapolation_mask(veh.calibration, mass_kg=pset.mass_kg[rows], ambient_c=block.ambient_c[rows],
                                         mean_speed_mps=speed, idle_share=idle)
     return RowRanges(mean, sd, code, mask)
+
+
+def _route_total(veh, src, mass_kg: np.ndarray, ambient_c: np.ndarray, given: np.ndarray, braking: str | None):
+    """The predictive distribution of each row's route as the sum of its legs
+    (:func:`cevm.core.predictive.total`), each leg at its own temperature (a row whose
+    temperature was ``given``, the run's --ambient-c, at that one) and the row's mass."""
+    from cevm.core.predictive import total
+
+    legs = src.leg_vectors
+    own = np.asarray(src.leg_ambient_c, dtype=np.float64)
+    f = Features.concat([Features.of(vec, veh, mass_kg, np.where(given, ambient_c, own[i]))
+                         for i, vec in enumerate(legs)])
+    groups = np.tile(np.arange(mass_kg.size), len(legs))
+    return total(veh, f, groups, ice_braking=braking)
 
 
 def p_reserve_ok(block: SweepBlock, ranges: RowRanges, soc_start_pct: float, reserve_pct: float) -> np.ndarray:
@@ -97,8 +112,7 @@ def p_reserve_ok(block: SweepBlock, ranges: RowRanges, soc_start_pct: float, res
         rel = np.where(np.abs(e) > 0, ranges.sd / np.abs(e), 0.0)
         sd_min = rel * np.abs(e_min)
         budget = (soc_start_pct - reserve_pct) / 100.0 * battery
-        z = (budget - e_min) / sd_min
-    p = np.where(sd_min > 0, ndtr(z), np.where(budget >= e_min, 1.0, 0.0))
+    p = distribution.prob_at_most(e_min, sd_min, budget)
     return np.where(pset.is_ev, p, np.nan)
 
 

@@ -8,14 +8,18 @@ time [s], the positive kinetic energy m k_pos [J], the ambient temperature [degC
 trip starts. The mean is :func:`cevm.core.vehicle.predict`'s, to the last bit; the
 variance, for a prediction of the true consumption [J^2 or l^2]::
 
-    Var = g Sigma g^T  +  (s_aux D)^2 + (s_share mu)^2  +  (meter mu)^2   [+ sigma_meas^2]
+    Var = g Sigma g^T  +  (s_aux D)^2 + (s_share mu)^2 + s_trip^2  +  (meter mu)^2
+          + extrapolation   [+ sigma_meas^2]
 
 g the gradient of the mean in the coefficients, Sigma their covariance
-(:class:`cevm.core.uncertainty.Posterior`), s_aux and s_share the trips' scatter, meter
-the calibration meter's systematic share (every prediction shares it), and sigma_meas a
-measurement's own uncertainty when the prediction is compared with one. Predictive
-distributions are Gaussian: :meth:`Predictive.quantile`, :meth:`Predictive.interval`,
-:meth:`Predictive.prob_at_most`.
+(:class:`cevm.core.uncertainty.Posterior`), s_aux, s_share and s_trip the trips' scatter
+(:class:`cevm.core.uncertainty.Scatter`), meter the calibration meter's systematic share
+(every prediction shares it), the extrapolation what a prediction colder or warmer than
+the calibration's trips gains (:func:`extrapolation_var`), and sigma_meas a
+measurement's own uncertainty when the prediction is compared with one. The
+distribution of that mean and variance is :mod:`cevm.core.distribution`'s (log-normal
+where the mean is positive: never below zero): :meth:`Predictive.quantile`,
+:meth:`Predictive.interval`, :meth:`Predictive.prob_at_most`.
 
 A vehicle file never calibrated predicts with its priors (:func:`posterior_of`): its
 coefficients at the file's values, their uncertainty the vehicle class's prior ranges,
@@ -37,18 +41,20 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import cast
 
 import numpy as np
 from numpy.typing import ArrayLike
-from scipy.special import ndtr, ndtri
 
-from cevm.core import energy
+from cevm.core import distribution, energy
 from cevm.core.cycle import CycleVector
 from cevm.core.model import IceBraking, braking_weight, wheel_energy_parts_j
 from cevm.core.uncertainty import Posterior, Scatter, coefficient_prior, extrapolation_variance, slope_prior_sd
 from cevm.core.vehicle import Vehicle, default_ambient_c
+
+#: The relative step of the CdA and Cr derivatives of :meth:`Features.of`.
+_H = 1e-6
 
 #: The terms a never-calibrated vehicle's prior interval spans: every vehicle's physical
 #: terms (the others only where its file sets them: they change what eta means).
@@ -60,7 +66,10 @@ class Features:
     """What the CE model needs of n predictions (arrays of one length, or scalars):
     ``positive_j`` P and ``negative_j`` N (<= 0) of the wheel energy [J], ``duration_s``,
     ``idle_s`` (standstill), ``traction_s`` [s], ``kinetic_j`` the positive kinetic
-    energy m k_pos [J], ``ambient_c`` [degC], ``starts`` (trip starts, 1 per trip)."""
+    energy m k_pos [J], ``ambient_c`` [degC], ``starts`` (trip starts, 1 per trip);
+    ``spec`` the derivatives of (P, N) in the vehicle's CdA and Cr, relative (d/d ln x)
+    [J]: ((dP, dN) for CdA, (dP, dN) for Cr), or None (:meth:`of` gives them to a file
+    never calibrated, whose stated CdA and Cr carry its class's spread)."""
 
     positive_j: np.ndarray
     negative_j: np.ndarray
@@ -70,6 +79,7 @@ class Features:
     kinetic_j: np.ndarray
     ambient_c: np.ndarray
     starts: np.ndarray | float = 1.0
+    spec: tuple[tuple[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]] | None = None
 
     @classmethod
     def of(cls, vector: CycleVector, vehicle: Vehicle, mass_kg: ArrayLike | None = None,
@@ -85,16 +95,49 @@ class Features:
         kin = m * vector.k_pos if math.isfinite(vector.k_pos) else np.zeros_like(m)
         trac = vector.traction_s if math.isfinite(vector.traction_s) else 0.0
         full = np.ones_like(m)
-        return cls(P, N, vector.duration_s * full, vector.idle_s * full, trac * full, kin, t, starts)
+        spec = None
+        pr = vehicle.priors
+        if vehicle.posterior is None and pr is not None and (pr.spec_sd("cda") > 0 or pr.spec_sd("cr") > 0):
+            # (P, N) are piecewise linear in CdA and Cr: a forward difference within the piece
+            # (upwards: Cr may not fall below the vector's cr0) is the derivative
+            parts = []
+            for cda, cr in ((vehicle.cda_m2 * (1 + _H), vehicle.cr), (vehicle.cda_m2, vehicle.cr * (1 + _H))):
+                P2, N2 = wheel_energy_parts_j(vector, m, cda, cr)
+                parts.append(((P2 - P) / _H, (N2 - N) / _H))
+            spec = (parts[0], parts[1])
+        return cls(P, N, vector.duration_s * full, vector.idle_s * full, trac * full, kin, t, starts, spec)
 
     @property
     def n(self) -> int:
         return int(np.broadcast(self.positive_j, self.duration_s, self.ambient_c).size)
 
+    @classmethod
+    def concat(cls, parts: Sequence[Features]) -> Features:
+        """The predictions of ``parts`` one after another (a day's legs, a route's), each
+        part's arrays broadcast to its length; the CdA and Cr derivatives where every
+        part has them."""
+        ns = [p.n for p in parts]
+
+        def cat(get) -> np.ndarray:
+            return np.concatenate([np.broadcast_to(np.asarray(get(p), dtype=np.float64), (n,))
+                                   for p, n in zip(parts, ns, strict=True)])
+
+        def col(k: str) -> np.ndarray:
+            return cat(lambda p: getattr(p, k))
+
+        spec = None
+        if parts and all(p.spec is not None for p in parts):
+            def d(i: int, j: int) -> np.ndarray:
+                return cat(lambda p: p.spec[i][j])
+
+            spec = ((d(0, 0), d(0, 1)), (d(1, 0), d(1, 1)))
+        return cls(col("positive_j"), col("negative_j"), col("duration_s"), col("idle_s"), col("traction_s"),
+                   col("kinetic_j"), col("ambient_c"), col("starts"), spec)
+
 
 @dataclass(frozen=True, eq=False)
 class Predictive:
-    """Gaussian predictive distributions: ``mean`` and ``sd`` [J (EV) or l (ICE)] per
+    """Predictive distributions (:mod:`cevm.core.distribution`): ``mean`` and ``sd`` [J (EV) or l (ICE)] per
     prediction, ``source`` "posterior" (a calibration's) or "prior" (the class's: a file
     never calibrated) or "none" (a vehicle without priors: no interval), and ``note``
     the sentence behind it."""
@@ -106,20 +149,15 @@ class Predictive:
 
     def quantile(self, q: ArrayLike) -> np.ndarray:
         """The q-quantile(s), q in (0, 1)."""
-        return np.asarray(self.mean + self.sd * ndtri(np.asarray(q, dtype=np.float64)))
+        return distribution.quantile(self.mean, self.sd, q)
 
     def interval(self, level: float = 0.9) -> tuple[np.ndarray, np.ndarray]:
         """The central interval holding the consumption with probability ``level``."""
-        z = float(ndtri(0.5 + 0.5 * level))
-        return self.mean - z * self.sd, self.mean + z * self.sd
+        return distribution.interval(self.mean, self.sd, level)
 
     def prob_at_most(self, budget: ArrayLike) -> np.ndarray:
         """P(consumption <= budget), budget in the unit of ``mean`` (broadcast)."""
-        b = np.asarray(budget, dtype=np.float64)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            z = (b - self.mean) / self.sd
-        z = np.where(self.sd > 0, z, np.where(b >= self.mean, np.inf, -np.inf))
-        return np.asarray(ndtr(z))
+        return distribution.prob_at_most(self.mean, self.sd, budget)
 
 
 def _prior_posterior(vehicle: Vehicle) -> Posterior | None:
@@ -143,7 +181,7 @@ def _prior_posterior(vehicle: Vehicle) -> Posterior | None:
     cp = coefficient_prior(pt, terms, pr, vehicle.eta)
     sd = np.where(np.isfinite(cp.sd), cp.sd, 0.0)
     scatter = Scatter(pr.scatter.aux, pr.scatter.share, 1.0,
-                      "assumed 1 (fully correlated within a day): never calibrated")
+                      "assumed 1 (fully correlated within a day): never calibrated", trip=pr.scatter.trip)
     return Posterior(terms=tuple(terms), cov=np.diag(sd * sd), scatter=scatter,
                      source=f"prior only: class defaults ({pr.vehicle_class}, {pr.class_from})", n_trips=0,
                      priors=pr)
@@ -151,8 +189,24 @@ def _prior_posterior(vehicle: Vehicle) -> Posterior | None:
 
 def posterior_of(vehicle: Vehicle) -> Posterior | None:
     """The vehicle's posterior (a calibrated file's), else its prior (module notes),
-    else None (a vehicle built without priors: no interval)."""
-    return vehicle.posterior if vehicle.posterior is not None else _prior_posterior(vehicle)
+    else None (a vehicle built without priors: no interval). A calibrated file that
+    leaves out a term every vehicle has (``vehicle.from_prior``, e.g. written by a
+    calibration forced to eta alone) has that term at its prior's centre: its prior
+    spread joins the posterior's, independent of the fitted terms."""
+    post = vehicle.posterior
+    if post is None:
+        return _prior_posterior(vehicle)
+    pr = vehicle.priors
+    extra = [t for t in vehicle.from_prior if t not in post.terms and pr is not None and pr.get(t) is not None]
+    if not extra:
+        return post
+    cp = coefficient_prior(vehicle.powertrain, extra, pr, vehicle.eta)
+    sd = np.where(np.isfinite(cp.sd), cp.sd, 0.0)
+    k = len(post.terms)
+    cov = np.zeros((k + len(extra), k + len(extra)))
+    cov[:k, :k] = post.cov
+    cov[k:, k:] = np.diag(sd * sd)
+    return replace(post, terms=(*post.terms, *extra), cov=cov)
 
 
 def mean(vehicle: Vehicle, f: Features, ice_braking: str | None = None) -> np.ndarray:
@@ -221,7 +275,7 @@ def gradient_rows(vehicle: Vehicle, f: Features, terms: Sequence[str], ice_braki
     return out
 
 
-def _extrapolation(vehicle: Vehicle, post: Posterior, f: Features) -> np.ndarray | None:
+def extrapolation_var(vehicle: Vehicle, post: Posterior, f: Features) -> np.ndarray | None:
     """What a prediction gains beyond the temperatures the calibration saw
     (:func:`cevm.core.uncertainty.extrapolation_variance`); nothing for a file never
     calibrated (its prior is all it knows anyway): None."""
@@ -233,6 +287,25 @@ def _extrapolation(vehicle: Vehicle, post: Posterior, f: Features) -> np.ndarray
         return None
     return extrapolation_variance(sd, d.ambient_c, vehicle.heating_below_c, vehicle.cooling_above_c, f.ambient_c,
                                   f.duration_s, f.starts)
+
+
+def spec_parts(vehicle: Vehicle, f: Features, ice_braking: str | None = None) -> list[np.ndarray]:
+    """The consumption's standard deviations [J or l] from the spread of a file's stated
+    CdA and Cr (its class's, :attr:`cevm.core.uncertainty.Priors.spec`), one array per
+    quantity, for a file never calibrated (a calibration's eta absorbs them: none then).
+    The consumption is affine in (P, N) with the other features fixed, so its derivative
+    is the mean of (dP, dN) with every other feature zero."""
+    pr = vehicle.priors
+    if f.spec is None or pr is None or vehicle.posterior is not None:
+        return []
+    zero = np.zeros_like(np.asarray(f.positive_j, dtype=np.float64))
+    out = []
+    for (dp, dn), name in zip(f.spec, ("cda", "cr"), strict=True):
+        s = pr.spec_sd(name)
+        if s > 0:
+            d = Features(dp, dn, zero, zero, zero, zero, f.ambient_c, 0.0)
+            out.append(np.asarray(mean(vehicle, d, ice_braking), dtype=np.float64) * s)
+    return out
 
 
 def sqrt_cov(cov: np.ndarray) -> np.ndarray:
@@ -265,16 +338,19 @@ def predictive(vehicle: Vehicle, f: Features, *, measurement_sd: ArrayLike | Non
     if post is None:
         return Predictive(mu, np.zeros_like(mu), "none", "no priors: the vehicle was built without a class")
     k = len(post.terms)
-    rows = gradient_rows(vehicle, f, post.terms, ice_braking, extra=2)
+    rows = gradient_rows(vehicle, f, post.terms, ice_braking, extra=3)
     sc = post.scatter
     np.multiply(f.duration_s, sc.aux, out=rows[k])
     # the energy-proportional scatter and the meter's share, at the prediction
     np.maximum(np.broadcast_to(mu, (f.n,)), 0.0, out=rows[k + 1])
     rows[k + 1] *= math.hypot(sc.share, post.meter_share)
+    rows[k + 2] = sc.trip  # the part that does not grow with the trip
     var = _variance(post, rows, k)
-    extra = _extrapolation(vehicle, post, f)
+    extra = extrapolation_var(vehicle, post, f)
     if extra is not None:
         var += extra
+    for part in spec_parts(vehicle, f, ice_braking):
+        var = var + part ** 2
     if measurement_sd is not None:
         var = var + np.asarray(measurement_sd, dtype=np.float64) ** 2
     var = var.reshape(mu.shape) if var.size == mu.size else var
@@ -288,7 +364,10 @@ def total(vehicle: Vehicle, f: Features, groups: ArrayLike | None = None, *,
     element), or of each group's sum (``groups``: a label per prediction, e.g. its
     day; the result in the order of ``np.unique(groups)``). Within a group the scatter
     is shared at the posterior's day correlation rho; across groups it is independent;
-    the parameters' and the meter's parts are common to all."""
+    the parameters' and the meter's parts are common to all, and so is what a colder
+    (warmer) day than the calibration's gains (one unknown slope for every leg: the
+    legs' standard deviations add), so that a day's probability widens beyond the
+    calibration's temperatures as each leg's interval does."""
     mu = np.asarray(mean(vehicle, f, ice_braking), dtype=np.float64)
     mu = np.broadcast_to(mu, (f.n,))
     if groups is None:
@@ -307,9 +386,12 @@ def total(vehicle: Vehicle, f: Features, groups: ArrayLike | None = None, *,
     sc = post.scatter
     d = np.broadcast_to(np.asarray(f.duration_s, dtype=np.float64), (f.n,))
     m = np.maximum(mu, 0.0)
-    own = np.bincount(codes, weights=(sc.aux * d) ** 2 + (sc.share * m) ** 2, minlength=k)
-    sd_sum = np.bincount(codes, weights=d, minlength=k)
-    m_sum = np.bincount(codes, weights=m, minlength=k)
-    shared = (sc.aux * sd_sum) ** 2 + (sc.share * m_sum) ** 2
-    var = var + sc.day_corr * shared + (1.0 - sc.day_corr) * own
+    own = np.bincount(codes, weights=sc.trip_variance(d, m), minlength=k)
+    var = var + sc.sum_variance(np.bincount(codes, weights=d, minlength=k),
+                                np.bincount(codes, weights=m, minlength=k), np.bincount(codes, minlength=k), own)
+    extra = extrapolation_var(vehicle, post, f)
+    if extra is not None:
+        var = var + np.bincount(codes, weights=np.sqrt(np.broadcast_to(extra, (f.n,))), minlength=k) ** 2
+    for part in spec_parts(vehicle, f, ice_braking):  # one CdA, one Cr for every leg
+        var = var + np.bincount(codes, weights=np.broadcast_to(part, (f.n,)), minlength=k) ** 2
     return Predictive(sums, np.sqrt(var), post.label, post.source)

@@ -110,6 +110,14 @@ EXTRA_TERMS = {"ev": ("regen", "aux", "heat", "cool", "warm"), "ice": ("idle", "
 #: idle, heating and cooling fuel) every vehicle has: with a prior, they are always in its
 #: model.
 STRUCTURAL = {"ev": ("regen", "warm"), "ice": ("run", "kin", "warm")}
+#: The terms every vehicle has (:data:`EXTRA_TERMS` less :data:`STRUCTURAL`): an EV's
+#: auxiliary power, heating and A/C; an ICE's idle fuel, heating and cooling fuel. A vehicle
+#: file that leaves one of them out has it at its class prior's central value, not at zero
+#: (:func:`cevm.io.priors.with_prior_values`): a car with no heating key still heats in the
+#: cold. The structural terms stay out where a file leaves them out: they change what eta
+#: means (a running-fuel offset, a kinetic efficiency apart from eta, a regeneration apart
+#: from it) or describe an effect a vehicle may lack (a warm-up per start).
+PHYSICAL = {pt: tuple(n for n in names if n not in STRUCTURAL[pt]) for pt, names in EXTRA_TERMS.items()}
 
 # Plausible rates: a heavy truck's diesel idles at 1.5-4 l/h (up to about 6 with the cab
 # heated or cooled at idle), so 8 l/h is several times any idle; its engine friction and

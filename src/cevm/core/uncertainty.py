@@ -61,13 +61,15 @@ class TermPrior:
 
 @dataclass(frozen=True)
 class ScatterPrior:
-    """Typical trip-to-trip scatter of a vehicle class (:class:`Scatter`'s ``aux`` and
-    ``share``), for predictions before any calibration and as the weak centre of the
-    scatter a calibration fits; ``aux`` in W (EV) or l/s (ICE)."""
+    """Typical trip-to-trip scatter of a vehicle class (:class:`Scatter`'s ``aux``,
+    ``share`` and ``trip``), for predictions before any calibration and as the weak
+    centre of the scatter a calibration fits; ``aux`` in W (EV) or l/s (ICE), ``trip`` in
+    J (EV) or l (ICE)."""
 
     aux: float
     share: float
     source: str = ""
+    trip: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -80,6 +82,17 @@ class Priors:
     terms: tuple[TermPrior, ...]
     scatter: ScatterPrior
     sources: str = ""  # where the class defaults come from (file), for messages
+    #: the 95 % range of a stated spec-sheet value as factors of it: (("cda", 0.9, 1.1),
+    #: ("cr", 0.8, 1.2)); a file never calibrated predicts with that spread of its CdA, Cr
+    spec: tuple[tuple[str, float, float], ...] = ()
+
+    def spec_sd(self, name: str) -> float:
+        """The relative standard deviation of a stated ``name`` ("cda", "cr"): a quarter
+        of its 95 % range's width in factors (0 where the class gives none)."""
+        for n, lo, hi in self.spec:
+            if n == name:
+                return (hi - lo) / (2.0 * Z95)
+        return 0.0
 
     def get(self, term: str) -> TermPrior | None:
         for t in self.terms:
@@ -95,13 +108,17 @@ class Priors:
 class Scatter:
     """The scatter of a trip's consumption around the model [J or l]:
 
-        Var(y_i) = (aux D_i)^2 + (share mu_i)^2 + sigma_meas,i^2
+        Var(y_i) = (aux D_i)^2 + (share mu_i)^2 + trip^2 + sigma_meas,i^2
 
     ``aux`` the trip-to-trip scatter of the auxiliary power [W] (EV) or of the fuel rate
     [l/s] (ICE) beyond what the model's terms explain (A/C on or off, the set-point, a
     cabin warm after a short park), times the trip's duration D_i [s]; ``share`` the part
     that scales with the energy mu_i (driving style, traffic, wind, tyres) [-];
-    sigma_meas the measurement's own uncertainty (for a comparison with a measurement).
+    ``trip`` the part that does not grow with the trip [J or l]: how warm the engine,
+    cabin or battery was at the start, the first and last minutes of a trip, a detour
+    (without it a short trip's interval shrinks with its duration and energy while the
+    model misses short trips most); sigma_meas the measurement's own uncertainty (for a
+    comparison with a measurement).
 
     ``day_corr`` rho in [0, 1]: the share of both parts common to the trips of one day
     (one weather, one driver): over a day's trips the sum's variance is
@@ -115,12 +132,24 @@ class Scatter:
     day_corr: float = 1.0
     day_corr_note: str = "assumed 1 (fully correlated within a day): no estimate"
     standstill: float | None = None
+    trip: float = 0.0
 
     def trip_variance(self, duration_s: ArrayLike, mean: ArrayLike) -> np.ndarray:
-        """(aux D)^2 + (share mu)^2 per trip."""
+        """(aux D)^2 + (share max(mu, 0))^2 + trip^2 per trip (an energy given back on a
+        descent has no share scatter of its own)."""
         d = np.asarray(duration_s, dtype=np.float64)
-        m = np.asarray(mean, dtype=np.float64)
-        return (self.aux * d) ** 2 + (self.share * m) ** 2
+        m = np.maximum(np.asarray(mean, dtype=np.float64), 0.0)
+        return (self.aux * d) ** 2 + (self.share * m) ** 2 + self.trip ** 2
+
+    def sum_variance(self, duration_s: ArrayLike, drawn: ArrayLike, trips: ArrayLike, own: ArrayLike) -> np.ndarray:
+        """The scatter's variance of a sum of trips (a day, a duty): ``duration_s`` their
+        summed durations, ``drawn`` their summed max(mu, 0), ``trips`` how many, ``own``
+        the sum of their :meth:`trip_variance`; the share ``day_corr`` of every part is
+        common to the trips, the rest their own."""
+        shared = ((self.aux * np.asarray(duration_s, dtype=np.float64)) ** 2
+                  + (self.share * np.asarray(drawn, dtype=np.float64)) ** 2
+                  + (self.trip * np.asarray(trips, dtype=np.float64)) ** 2)
+        return np.asarray(self.day_corr * shared + (1.0 - self.day_corr) * np.asarray(own, dtype=np.float64))
 
 
 @dataclass(frozen=True, eq=False)

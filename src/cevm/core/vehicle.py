@@ -207,6 +207,8 @@ class Vehicle:
     vehicle_class: str | None = None  # "bus", "truck", "van", "car", "quadricycle" (priors)
     priors: Priors | None = field(default=None, compare=False)  # the class defaults and the file's [prior]
     posterior: Posterior | None = field(default=None, compare=False)  # what a calibration learnt
+    # the terms (cevm.core.terms names) its file leaves out, at their class prior's central value
+    from_prior: tuple[str, ...] = ()
     sources: dict = field(default_factory=dict, compare=False)
     extra: dict = field(default_factory=dict, compare=False)  # tables for other models
 

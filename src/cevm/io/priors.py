@@ -39,7 +39,7 @@ from typing import Any
 import numpy as np
 
 from cevm.configs_dir import shipped_configs_dir
-from cevm.core.terms import EXTRA_TERMS, TERMS_BY_POWERTRAIN
+from cevm.core.terms import EXTRA_TERMS, PHYSICAL, TERMS_BY_POWERTRAIN
 from cevm.core.uncertainty import (
     VEHICLE_CLASSES,
     Posterior,
@@ -52,6 +52,7 @@ from cevm.core.uncertainty import (
 )
 from cevm.errors import InputError
 from cevm.io.toml import read_toml
+from cevm.units import J_PER_KWH
 
 #: The shipped class defaults, relative to the configs directory.
 CLASSES_FILE = Path("priors") / "classes.toml"
@@ -73,6 +74,12 @@ def _file_keys(powertrain: str) -> dict[str, tuple[str, float]]:
 def _scatter_key(powertrain: str) -> tuple[str, float]:
     """The file key and SI factor of the class scatter's auxiliary part."""
     return ("scatter_aux_kw", 1e-3) if powertrain == "ev" else ("scatter_aux_lph", 3600.0)
+
+
+def _trip_key(powertrain: str) -> tuple[str, float]:
+    """The file key and SI factor of the class scatter's part that does not grow with a
+    trip (:class:`cevm.core.uncertainty.Scatter` ``trip``)."""
+    return ("scatter_trip_kwh", 1.0 / J_PER_KWH) if powertrain == "ev" else ("scatter_trip_l", 1.0)
 
 
 def _range(value: Any, where: str, source: str | Path) -> tuple[float, float]:
@@ -100,18 +107,25 @@ def _check_plausible(powertrain: str, term: str, key: str, lo_si: float, hi_si: 
                                  f"{plo * f:g} to {phi * f:g} of {key} ({t.label})")
 
 
+#: A stated spec-sheet value's 95 % range as factors of it, by key: the file key and the
+#: name a :class:`Priors` ``spec`` entry carries.
+SPEC_KEYS = {"cda_m2_factor": "cda", "cr_factor": "cr"}
+
+
 def _table_priors(table: dict, powertrain: str, where: str, source: str | Path, default_source: str,
                   prefix: str) -> tuple[dict[str, TermPrior], dict[str, float]]:
-    """The term ranges and scatter numbers of a class or [prior] table."""
+    """The term ranges and scatter numbers of a class or [prior] table (the spec-sheet
+    factors: :func:`_spec`)."""
     keys = _file_keys(powertrain)
     sc_key, sc_f = _scatter_key(powertrain)
+    tr_key, tr_f = _trip_key(powertrain)
     sources = table.get("sources", {})
     if not isinstance(sources, dict):
         raise InputError(source, f"key '{where}.sources' must be a table of texts")
     terms: dict[str, TermPrior] = {}
     scatter: dict[str, float] = {}
     for key, value in table.items():
-        if key in ("sources", "class_from"):
+        if key in ("sources", "class_from") or key in SPEC_KEYS:
             continue
         if key == sc_key:
             scatter["aux"] = _positive(value, f"{where}.{key}", source) / sc_f
@@ -119,10 +133,13 @@ def _table_priors(table: dict, powertrain: str, where: str, source: str | Path, 
         if key == "scatter_share":
             scatter["share"] = _positive(value, f"{where}.{key}", source)
             continue
+        if key == tr_key:
+            scatter["trip"] = _positive(value, f"{where}.{key}", source) / tr_f
+            continue
         if key not in keys:
             other = _scatter_key("ice" if powertrain == "ev" else "ev")[0]
             hint = (f" (an {'EV' if powertrain == 'ev' else 'ICE'} vehicle's is '{sc_key}')" if key == other else "")
-            allowed = ", ".join([*keys, sc_key, "scatter_share"])
+            allowed = ", ".join([*keys, sc_key, "scatter_share", tr_key, *SPEC_KEYS])
             raise InputError(source, f"unknown key '{where}.{key}'{hint}; a prior may set {allowed}")
         term, factor = keys[key]
         lo, hi = _range(value, f"{where}.{key}", source)
@@ -131,6 +148,20 @@ def _table_priors(table: dict, powertrain: str, where: str, source: str | Path, 
         text = sources.get(key)
         terms[term] = TermPrior(term, lo_si, hi_si, f"{prefix}{text}" if text else default_source)
     return terms, scatter
+
+
+def _spec(table: dict, where: str, source: str | Path) -> dict[str, tuple[float, float]]:
+    """The spec-sheet factors of a class or [prior] table: name -> (low, high), 0 < low
+    <= 1 <= high (a range around the stated value)."""
+    out = {}
+    for key, name in SPEC_KEYS.items():
+        if key in table:
+            lo, hi = _range(table[key], f"{where}.{key}", source)
+            if not 0 < lo <= 1.0 <= hi:
+                raise InputError(source, f"key '{where}.{key}' = [{lo:g}, {hi:g}] must hold 1 (the stated value) "
+                                         "between factors > 0")
+            out[name] = (lo, hi)
+    return out
 
 
 @functools.lru_cache(maxsize=4)
@@ -149,18 +180,19 @@ def _load_classes(path_text: str) -> dict:
             terms, scatter = _table_priors(table, pt, f"{cls}.{pt}", path, f"class default ({cls})",
                                            f"class {cls}: ")
             missing = [k for k in _file_keys(pt) if _file_keys(pt)[k][0] not in terms]
-            if missing or set(scatter) != {"aux", "share"}:
+            if missing or set(scatter) != {"aux", "share", "trip"}:
                 raise InputError(path, f"table [{cls}.{pt}] lacks {', '.join(missing) or 'its scatter'}")
             sources = table.get("sources", {})
             sc_key = _scatter_key(pt)[0]
             out["classes"][(cls, pt)] = (terms, ScatterPrior(scatter["aux"], scatter["share"],
-                                                             f"class {cls}: {sources.get(sc_key, 'class default')}"))
+                                                             f"class {cls}: {sources.get(sc_key, 'class default')}",
+                                                             scatter["trip"]), _spec(table, f"{cls}.{pt}", path))
     return out
 
 
 def class_defaults(path: str | Path | None = None) -> dict:
     """The parsed class defaults: {"by_mass": ..., "classes": {(class, powertrain):
-    (term -> TermPrior, ScatterPrior)}} (cached)."""
+    (term -> TermPrior, ScatterPrior, spec-sheet factors)}} (cached)."""
     return _load_classes(str(classes_path() if path is None else Path(path)))
 
 
@@ -191,8 +223,8 @@ def priors_from_mapping(data: dict, powertrain: str, mass_kg: float, source: str
         if cls not in VEHICLE_CLASSES:
             raise InputError(source, f"key 'class' must be one of {', '.join(VEHICLE_CLASSES)}; got {cls!r}")
         how = "vehicle file"
-    terms, scatter = defaults["classes"][(cls, powertrain)]
-    terms = dict(terms)
+    terms, scatter, spec = defaults["classes"][(cls, powertrain)]
+    terms, spec = dict(terms), dict(spec)
     table = data.get("prior")
     sc = scatter
     if table is not None:
@@ -203,12 +235,61 @@ def priors_from_mapping(data: dict, powertrain: str, mass_kg: float, source: str
         terms.update(own)
         if own_sc:
             sc = ScatterPrior(own_sc.get("aux", scatter.aux), own_sc.get("share", scatter.share),
-                              "vehicle file [prior]")
+                              "vehicle file [prior]", own_sc.get("trip", scatter.trip))
         if isinstance(table.get("class_from"), str) and data.get("class") is not None:
             how = table["class_from"]
+        spec.update(_spec(table, "prior", source))
     order = ("eta", *EXTRA_TERMS[powertrain])
     return Priors(vehicle_class=str(cls), class_from=how, terms=tuple(terms[n] for n in order if n in terms),
-                  scatter=sc, sources=str(CLASSES_FILE))
+                  scatter=sc, sources=str(CLASSES_FILE),
+                  spec=tuple((n, lo, hi) for n, (lo, hi) in sorted(spec.items())))
+
+
+def with_prior_values(vehicle, data: dict):
+    """``vehicle`` with each term every vehicle has (:data:`cevm.core.terms.PHYSICAL`)
+    that the parsed file ``data`` leaves out at its prior's central value (the middle of
+    its range, :attr:`TermPrior.mean`) and listed in ``from_prior``. What a file does not
+    state is unknown, not zero: a car without a heating key still heats in the cold,
+    within its class's range (the predictive distribution spans that range,
+    :mod:`cevm.core.predictive`). A stated value is kept, zero too (a quadricycle without
+    a heater). Without priors (none apply) the vehicle is returned as it is."""
+    from dataclasses import replace
+
+    pr = vehicle.priors
+    if pr is None:
+        return vehicle
+    pt = vehicle.powertrain
+    values: dict = {}
+    names: list[str] = []
+    for name in PHYSICAL[pt]:
+        t = TERMS_BY_POWERTRAIN[(pt, name)]
+        p = pr.get(name)
+        if t.file[0] in data or p is None:
+            continue
+        values[t.field] = p.mean
+        names.append(name)
+    return replace(vehicle, **values, from_prior=tuple(names)) if names else vehicle
+
+
+def prior_values_note(vehicle) -> str | None:
+    """What a vehicle took from its priors, for a note beside its rows: the terms its
+    file leaves out at their central values in file units, with its class and how the
+    class was decided; for a file that states every term but no ``class``, the class
+    inferred from its mass whose priors its intervals use; None otherwise."""
+    pr = vehicle.priors
+    if pr is None:
+        return None
+    parts = []
+    for name in vehicle.from_prior:
+        t = TERMS_BY_POWERTRAIN[(vehicle.powertrain, name)]
+        key, f = t.file
+        parts.append(f"{key} {getattr(vehicle, t.field) * f:.3g}")
+    if parts:
+        return (f"{vehicle.label}: {', '.join(parts)} (not in its file) at the middle of the priors of "
+                f"{pr.describe()}; their spread is in the intervals (column from_prior)")
+    if pr.class_from.startswith("inferred"):
+        return f"{vehicle.label}: its intervals use the priors of {pr.describe()}"
+    return None
 
 
 def prior_table(priors: Priors, powertrain: str) -> dict:
@@ -224,6 +305,12 @@ def prior_table(priors: Priors, powertrain: str) -> dict:
     sc_key, sc_f = _scatter_key(powertrain)
     out[sc_key] = _round(priors.scatter.aux * sc_f)
     out["scatter_share"] = _round(priors.scatter.share)
+    for key, name in SPEC_KEYS.items():
+        for n, lo, hi in priors.spec:
+            if n == name:
+                out[key] = [_round(lo), _round(hi)]
+    tr_key, tr_f = _trip_key(powertrain)
+    out[tr_key] = _round(priors.scatter.trip * tr_f)
     sources[sc_key] = priors.scatter.source
     out["sources"] = sources
     return out
@@ -257,6 +344,8 @@ def posterior_table(posterior: Posterior, vehicle) -> dict:
                "day_correlation_note": sc.day_corr_note}
     if sc.standstill is not None:
         scatter["standstill_" + sc_key] = _round(sc.standstill * sc_f)
+    tr_key, tr_f = ("trip_kwh", 1.0 / J_PER_KWH) if pt == "ev" else ("trip_l", 1.0)
+    scatter[tr_key] = _round(sc.trip * tr_f)
     return {
         "source": posterior.source, "n_trips": int(posterior.n_trips), "terms": list(terms),
         "std": [_round(s * f) for s, f in zip(sd, factors, strict=True)],
@@ -316,7 +405,12 @@ def posterior_from_mapping(table: Any, vehicle, priors: Priors | None, source: s
     if rho > 1:
         raise InputError(source, f"key 'posterior.scatter.day_correlation' = {rho:g} must be <= 1")
     ss = sc_t.get("standstill_" + sc_key)
-    scatter = Scatter(aux=aux, share=share, day_corr=rho,
+    # the part that does not grow with a trip: a file calibrated before cevm fitted it
+    # has the class's typical value (its intervals were too narrow on short trips)
+    tr_key, tr_f = ("trip_kwh", 1.0 / J_PER_KWH) if pt == "ev" else ("trip_l", 1.0)
+    trip = (_nonneg(sc_t[tr_key], f"posterior.scatter.{tr_key}", source) / tr_f if tr_key in sc_t
+            else priors.scatter.trip if priors is not None else 0.0)
+    scatter = Scatter(aux=aux, share=share, day_corr=rho, trip=trip,
                       day_corr_note=str(sc_t.get("day_correlation_note", "as the vehicle file states")),
                       standstill=None if ss is None else _nonneg(ss, f"posterior.scatter.standstill_{sc_key}",
                                                                   source) / sc_f)

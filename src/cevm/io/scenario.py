@@ -53,6 +53,7 @@ from cevm.core.vehicle import Vehicle
 from cevm.errors import FileAccessError, InputError
 from cevm.io.cycles import CycleFormat, read_cycle_csv
 from cevm.io.inputs import open_regular
+from cevm.io.priors import prior_values_note
 from cevm.io.toml import read_toml
 from cevm.io.vehicles import load_vehicle
 
@@ -582,7 +583,9 @@ def fleet_report(path: str | Path, days: Sequence[str | int] | None = None, *, m
                       "ice_braking": None if fv.vehicle.is_ev else fv.vehicle.ice_braking,
                       "calibrated": fv.vehicle.calibration is not None,
                       "interval_from": _interval_from(fv.vehicle),
-                      "uses_temperature": energy.uses_temperature(fv.vehicle)} for fv in sc.vehicles],
+                      "uses_temperature": energy.uses_temperature(fv.vehicle),
+                      "from_prior": list(fv.vehicle.from_prior),
+                      "prior_note": prior_values_note(fv.vehicle)} for fv in sc.vehicles],
         "warnings": calibration_warnings(sc, plans) + [w for p, vd in zip(plans, verdicts, strict=True)
                                                          for w in verdict_warnings(p.day, vd, fleet)],
         "infeasible_days": infeasible,

@@ -19,7 +19,8 @@ Vehicle files (TOML), units in the key names::
     cr = 0.0066                               # required: rolling-resistance coefficient
     eta = 0.78                                # required: average efficiency, (0, 1]
     battery_kwh = 124                         # EV, required: usable battery capacity
-    aux_power_kw = 0.0                        # EV, optional: auxiliary load [kW]
+    aux_power_kw = 0.0                        # EV, optional: auxiliary load [kW]; left out:
+                                              #   its class prior's central value (below)
     regen_eta = 0.7                           # EV, optional: battery share of negative wheel
                                               #   energy (default: eta, the paper's eq. 29-31)
     aux_heating_kw_per_k = 0.2                # EV, optional: heating per K below heating_below_c
@@ -52,6 +53,13 @@ Vehicle files (TOML), units in the key names::
                                                #   inferred from the mass, and said so)
     [prior]                                    # optional: ranges [low, high] that override
     eta = [0.75, 0.85]                         #   the class's (:mod:`cevm.io.priors`)
+
+    A term every vehicle has (:data:`cevm.core.terms.PHYSICAL`: an EV's aux_power_kw,
+    aux_heating_kw_per_k, aux_cooling_kw_per_k; an ICE's idle_fuel_lph,
+    heating_fuel_lph_per_k, cooling_fuel_lph_per_k) that the file leaves out is not zero:
+    it takes the middle of its class's prior range (or of the file's [prior] range), and
+    its spread widens the intervals; rows list such terms (column from_prior). A stated
+    value, zero included, is the file's. The other optional terms are off where left out.
 
     [calibration]                              # written by cevm calibrate: what the fit saw
     terms = ["eta", "aux", "heat"]             #   (see :class:`FitDomain`)
@@ -160,7 +168,9 @@ def _number(data: dict, key: str, source: str, *, required: bool, lo: float | No
 def vehicle_from_mapping(data: dict[str, Any], source: str = "<vehicle>", *,
                          default_id: str | None = None) -> Vehicle:
     """Validate a parsed vehicle file and build a :class:`Vehicle`, with its priors (its
-    class's defaults and its ``[prior]`` table) and, for a calibrated file, its
+    class's defaults and its ``[prior]`` table), the terms every vehicle has that the
+    file leaves out at their prior's central value (:func:`cevm.io.priors.
+    with_prior_values`; a stated value, zero too, is kept) and, for a calibrated file, its
     posterior (:mod:`cevm.io.priors`).
 
     The vehicle's ``id`` is the file's ``id`` key, else ``default_id`` (the file's stem,
@@ -170,7 +180,7 @@ def vehicle_from_mapping(data: dict[str, Any], source: str = "<vehicle>", *,
     """
     from dataclasses import replace
 
-    from cevm.io.priors import posterior_from_mapping, priors_from_mapping
+    from cevm.io.priors import posterior_from_mapping, priors_from_mapping, with_prior_values
 
     v = _vehicle_values(data, source, default_id=default_id)
     if "detailed" in data:  # one rule in every command: what simulate refuses, predict does not take
@@ -178,7 +188,7 @@ def vehicle_from_mapping(data: dict[str, Any], source: str = "<vehicle>", *,
 
         detailed_params(v, source)
     priors = priors_from_mapping(data, v.powertrain, v.mass_kg, source)
-    v = replace(v, vehicle_class=priors.vehicle_class, priors=priors)
+    v = with_prior_values(replace(v, vehicle_class=priors.vehicle_class, priors=priors), data)
     return replace(v, posterior=posterior_from_mapping(data.get("posterior"), v, priors, source))
 
 

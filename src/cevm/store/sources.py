@@ -217,9 +217,12 @@ def load_sources(stack: ExitStack, store: Path | None, cycles: Sequence[Path], t
         for leg in legs[1:]:
             vec = vec + leg.vector
         logged = all(leg.info.kind == "trip" for leg in legs)  # else: a cycle leg, a target held exactly
+        temps = leg_ambient_c(st, legs)
         sources.append(Source(name=name, kind="route", vector=vec, legs=route_legs(name),
                               ambient_c=route_ambient_c(st, legs), logged=logged,
-                              elevation_sd_m=elevation_sd_m(None) if logged else 0.0))
+                              elevation_sd_m=elevation_sd_m(None) if logged else 0.0,
+                              leg_vectors=None if temps is None else tuple(leg.vector for leg in legs),
+                              leg_ambient_c=temps))
     return sources
 
 
@@ -247,18 +250,27 @@ def _finite(x: float) -> float | None:
     return float(x) if math.isfinite(x) else None
 
 
-def route_ambient_c(st: TripStore, legs: Sequence) -> float | None:
-    """A route's ambient temperature [degC]: the duration-weighted mean of its legs'
-    logged temperatures when every leg is a stored trip that logged one; None otherwise
-    (a cycle leg has no temperature, and a mean over some legs only would pass for the
-    whole route's), so that the prediction falls back to the vehicle's reference and says
-    so."""
+def leg_ambient_c(st: TripStore, legs: Sequence) -> tuple[float, ...] | None:
+    """Each leg's logged ambient temperature [degC] when every leg is a stored trip that
+    logged one; None otherwise (a cycle leg has no temperature)."""
     if not legs or any(leg.info.kind != "trip" for leg in legs):
         return None
     rows = st.list_trips(trip_ids=[leg.info.ref for leg in legs]).set_index("trip_id")
     temps = [rows.at[leg.info.ref, "ambient_temp_c"] if leg.info.ref in rows.index else math.nan for leg in legs]
+    if not all(math.isfinite(t) for t in temps):
+        return None
+    return tuple(float(t) for t in temps)
+
+
+def route_ambient_c(st: TripStore, legs: Sequence) -> float | None:
+    """A route's ambient temperature [degC] for its rows: the duration-weighted mean of
+    its legs' logged temperatures (:func:`leg_ambient_c`; the terms that depend on it are
+    taken leg by leg, :class:`cevm.core.sweep.Source`); None where a leg has none (a
+    mean over some legs only would pass for the whole route's), so that the prediction
+    falls back to the vehicle's reference and says so."""
+    temps = leg_ambient_c(st, legs)
     weights = [leg.vector.duration_s for leg in legs]
-    if not all(math.isfinite(t) for t in temps) or sum(weights) <= 0:
+    if temps is None or sum(weights) <= 0:
         return None
     return float(sum(t * w for t, w in zip(temps, weights, strict=True)) / sum(weights))
 

@@ -9,13 +9,18 @@ correlation) gives P(day <= budget), the budget an EV's usable battery above its
 gives one).
 
 Requiring P >= p (``min_p_complete``) for every vehicle with a budget is the constraint
-mean + z_p sd <= budget, z_p = Phi^-1(p). Its sd depends on the assignment (the masses
+that the day's p-quantile fits the budget, in the distribution of every interval
+(:mod:`cevm.core.distribution`: log-normal of the day's mean and standard deviation, as
+each leg's interval in predict; the legs' extrapolation beyond the calibration's
+temperatures widens it as it widens theirs). Its sd depends on the assignment (the masses
 move the legs' energies and their gradients), so it is not a linear row of the MILP; it
 is handled exactly:
 
 - enumeration evaluates it for every combination, vectorised (:func:`day_moments`);
 - the MILP keeps its deterministic rows (mean <= budget, implied by the chance
-  constraint for p >= 0.5, so no assignment that satisfies it is lost) and, each time
+  constraint for p >= Phi(sigma / 2), the probability of staying below the mean, which
+  is below 0.6 unless the day's standard deviation is more than half its mean: no
+  assignment that satisfies it is lost) and, each time
   HiGHS returns an assignment that breaks the chance constraint (checked exactly with the
   CE model), adds the no-good cut that removes that one assignment (sum of its binaries
   <= their number - 1) and solves again. Each cut removes only an assignment proven
@@ -31,11 +36,10 @@ from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
 import numpy as np
-from scipy.special import ndtr
 
 from cevm.core.assignment.scenario import FleetVehicle, Scenario
 from cevm.core.cycle import CycleVector
-from cevm.core.predictive import Features, gradient_rows, posterior_of, sqrt_cov, total
+from cevm.core.predictive import Features, extrapolation_var, gradient_rows, posterior_of, sqrt_cov, total
 
 if TYPE_CHECKING:
     from cevm.core.assignment.evaluation import Evaluation
@@ -62,8 +66,7 @@ def _leg_features(sc: Scenario, d: int, v: FleetVehicle, legs: Sequence[tuple[in
     for ri, j, m in legs:
         vec = sc.routes[ri].legs[j].vector
         parts.append(Features.of(vec, v.vehicle, [m], None if t is None else [t]))
-    names = ("positive_j", "negative_j", "duration_s", "idle_s", "traction_s", "kinetic_j", "ambient_c")
-    return Features(*(np.concatenate([np.atleast_1d(getattr(f, k)) for f in parts]) for k in names))
+    return Features.concat(parts)
 
 
 def p_complete(sc: Scenario, d: int, evaluation: Evaluation) -> dict[str, float | None]:
@@ -99,6 +102,8 @@ class DayMoments:
         self.dur = np.zeros(n_comb)
         self.own = np.zeros(n_comb)
         self.drawn = np.zeros(n_comb)  # the sum of the legs' max(mean, 0): the scatter's share part
+        self.trips = np.zeros(n_comb)  # how many legs: the scatter's part that does not grow with a leg
+        self.extra = np.zeros(n_comb)  # the sum of the legs' extrapolation standard deviations
 
     def add(self, vec: CycleVector, masses: np.ndarray, driven: np.ndarray, t_day: float | None) -> None:
         """Legs of one vector at ``masses`` (n_comb x legs), counted where ``driven``."""
@@ -116,9 +121,12 @@ class DayMoments:
         mu = mu_u[inv]
         self.mu += np.sum(mu * driven, axis=1)
         self.dur += vec.duration_s * np.sum(driven, axis=1)
-        self.own += np.sum(driven * ((sc_.aux * vec.duration_s) ** 2 + (sc_.share * np.maximum(mu, 0.0)) ** 2),
-                           axis=1)
+        self.own += np.sum(driven * sc_.trip_variance(vec.duration_s, mu), axis=1)
         self.drawn += np.sum(driven * np.maximum(mu, 0.0), axis=1)
+        self.trips += np.sum(driven, axis=1)
+        x = extrapolation_var(self.v.vehicle, self.post, f)
+        if x is not None:  # one unknown slope for every leg: their standard deviations add
+            self.extra += np.sum(driven * np.sqrt(np.broadcast_to(x, uniq.shape))[inv], axis=1)
 
     def sd(self) -> np.ndarray:
         if self.post is None:
@@ -129,8 +137,7 @@ class DayMoments:
         # the shared scatter's share part is of each leg's energy drawn (max(mean, 0) per leg, as
         # cevm.core.predictive.total has it), not of the day's net: a leg that gives energy back
         # does not cancel another's scatter
-        var += (sc_.day_corr * ((sc_.aux * self.dur) ** 2 + (sc_.share * self.drawn) ** 2)
-                + (1.0 - sc_.day_corr) * self.own)
+        var += sc_.sum_variance(self.dur, self.drawn, self.trips, self.own) + self.extra ** 2
         return np.asarray(np.sqrt(var))
 
 
@@ -146,6 +153,8 @@ def check_level(p: float | None) -> None:
 
 
 def prob(mean: np.ndarray, sd: np.ndarray, budget: float) -> np.ndarray:
-    with np.errstate(divide="ignore", invalid="ignore"):
-        z = (budget - mean) / sd
-    return np.where(sd > 0, ndtr(z), np.where(mean <= budget, 1.0, 0.0))
+    """P(the day's total <= budget): the distribution of every interval
+    (:mod:`cevm.core.distribution`)."""
+    from cevm.core import distribution
+
+    return distribution.prob_at_most(mean, sd, budget)

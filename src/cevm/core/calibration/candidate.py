@@ -154,15 +154,17 @@ def _flat(prior: CoefficientPrior, name: str) -> bool:
 
 def fit_candidate(model: TermModel, names: Sequence[str], idx: np.ndarray, priors: Priors | None,
                   settings: Settings, *, standstill: bool = False, heldout: bool = True,
-                  balance: bool = True, scatter: tuple[float, float] | None = None) -> CandidateFit:
+                  balance: bool = True, scatter: tuple[float, ...] | None = None) -> CandidateFit:
     """Fit the candidate ``names`` on the trips ``idx`` (module notes); ``scatter``
-    (s_aux, s_share) fixes the scatter instead of fitting it. Raises
+    (s_aux, s_share[, s_trip]) fixes the scatter instead of fitting it (s_trip 0 where
+    not given). Raises
     :class:`CalibrationError` when eta itself cannot be fitted."""
     idx = np.asarray(idx, dtype=np.intp)
     centre = None if priors is None else priors.scatter
     noise0 = post.initial_noise(model, idx, centre, standstill)
     if scatter is not None:
-        noise0 = post.Noise(float(scatter[0]), float(scatter[1]), 0.0, noise0.standstill)
+        noise0 = post.Noise(float(scatter[0]), float(scatter[1]), 0.0, noise0.standstill,
+                            float(scatter[2]) if len(scatter) > 2 else 0.0)
     active = list(names)
     refused: dict = {}
     while True:

@@ -8,8 +8,8 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
-from scipy.stats import norm
 
+from cevm.core import distribution
 from cevm.core.calibration import plausibility
 from cevm.core.calibration import posterior as post
 from cevm.core.calibration.candidate import CandidateFit, Settings, fit_candidate
@@ -150,7 +150,7 @@ def fit(
     interval: float = 0.9,
     standstill: bool = False,
     fit_balance: bool = False,
-    scatter: tuple[float, float] | None = None,
+    scatter: tuple[float, ...] | None = None,
     plausible: Mapping[str, tuple[float, float]] | None = None,
 ) -> CalibrationResult:
     """Fit a vehicle's terms to measured trip consumption and validate the fit.
@@ -195,9 +195,9 @@ def fit(
     standstill : use the logs' standstill rates as observations (:mod:`.posterior`)
     fit_balance : search the balance temperatures of temperature terms on a grid
         (:mod:`.candidate`); default False: the vehicle's
-    scatter : (s_aux [W or l/s], s_share [-]) to hold the trips' scatter at instead of
-        fitting it (:class:`cevm.core.uncertainty.Scatter`); (0, 0): the measurement
-        uncertainties alone weigh the trips
+    scatter : (s_aux [W or l/s], s_share [-][, s_trip [J or l]]) to hold the trips'
+        scatter at instead of fitting it (:class:`cevm.core.uncertainty.Scatter`; s_trip
+        0 where not given); (0, 0): the measurement uncertainties alone weigh the trips
     plausible : physical ranges {term: (low, high)} of the values (SI, vehicle-field
         meaning: eta as an efficiency) that replace the terms' own, for research fits on
         models that are no real vehicle (benchmarks/bench_tables.py fits the detailed
@@ -291,8 +291,12 @@ def cross_validated(cf: CandidateFit, settings: Settings, fold_of: np.ndarray) -
         assert extra is not None  # set by HeldOut.__post_init__
         var[te_pos] = (cf.heldout.param_var[te_pos] + extra[te_pos]
                        + (post._u_random(d)[te] * d.y[te]) ** 2
-                       + ratio * ((sc.aux * d.duration[te]) ** 2 + (sc.share * np.maximum(mu, 0.0)) ** 2))
+                       + ratio * sc.variance(d.duration[te], mu))
     return mean, var
+
+
+def _inside(y: np.ndarray, low: np.ndarray, high: np.ndarray) -> np.ndarray:
+    return (y >= low) & (y <= high)
 
 
 def _fitted_values(cf: CandidateFit, settings: Settings, idx_all: np.ndarray
@@ -342,18 +346,18 @@ def fit_model(cf: CandidateFit, excluded: dict, settings: Settings, *, priors: P
     rho, rho_note, _ = post.day_correlation(model, active, idx_all, cf.prior, result.noise,
                                             huber_c=settings.huber_c, theta0=result.theta)
     scatter = Scatter(aux=result.noise.aux, share=result.noise.share, day_corr=rho, day_corr_note=rho_note,
-                      standstill=result.noise.standstill)
+                      standstill=result.noise.standstill, trip=result.noise.trip)
     domain = fit_domain(data, active, vehicle_id)
     calibrated = with_values(vehicle, model.fields_of(active, result.theta))
     pred_in = predict_set(calibrated, data)
     _, var_in = result.predictive_var(model, idx_all)
     mean_cv, var_cv = cross_validated(cf, settings, fold_of)
-    z = norm.ppf(0.5 + 0.5 * interval)
     sd_cv = np.sqrt(var_cv)
-    low, high = mean_cv - z * sd_cv, mean_cv + z * sd_cv
-    zs = (data.y - mean_cv) / sd_cv
-    coverage = {lvl: float(np.mean(np.abs(zs[np.isfinite(zs)]) <= norm.ppf(0.5 + 0.5 * lvl)))
-                for lvl in COVERAGE_LEVELS} if np.any(np.isfinite(zs)) else {}
+    # the held-out intervals in the distribution of every prediction's (cevm.core.distribution)
+    low, high = distribution.interval(mean_cv, sd_cv, interval)
+    seen = np.isfinite(mean_cv) & np.isfinite(sd_cv)
+    coverage = {lvl: float(np.mean(_inside(data.y[seen], *distribution.interval(mean_cv[seen], sd_cv[seen], lvl))))
+                for lvl in COVERAGE_LEVELS} if np.any(seen) else {}
     ok = np.isfinite(sd_cv)
     width = float(np.mean((high - low)[ok] / data.y[ok]) * 100.0) if np.any(ok) else math.nan
     warnings += [f"fold {f}: its training trips could not be fitted" for f in np.unique(fold_of[fold_of >= 0])

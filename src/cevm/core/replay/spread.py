@@ -31,8 +31,8 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike
-from scipy.special import ndtri
 
+from cevm.core import distribution
 from cevm.core import predictive as pr
 from cevm.core.replay.trips import TripEnergies
 from cevm.core.vehicle import Vehicle
@@ -106,8 +106,8 @@ class TripSpread:
 
 def energy_at_confidence(mean: ArrayLike, duty_sd: ArrayLike, bounds: np.ndarray, confidence: float) -> np.ndarray:
     """Each trip's energy [J or l] with its duty's total at the duty's one-sided
-    ``confidence`` quantile (Gaussian: the total's mean plus z_c times ``duty_sd``), the
-    z_c x sd added shared over the duty's trips in proportion to the energy each draws
+    ``confidence`` quantile (:mod:`cevm.core.distribution`, of the total's mean and
+    ``duty_sd``), what that adds to the mean shared over the duty's trips in proportion to the energy each draws
     (``max(mean, 0)``; equally where none draws). Sizing a battery on these energies gives
     the one that runs the duty, with its reserve kept, when the duty takes that much: with
     a probability of at least ``confidence`` (the spread's placement within the duty aside).
@@ -124,14 +124,15 @@ def energy_at_confidence(mean: ArrayLike, duty_sd: ArrayLike, bounds: np.ndarray
     total = np.bincount(duty_of, weights=draws, minlength=counts.size)
     share = np.where(total[duty_of] > 0.0, draws / np.where(total > 0.0, total, 1.0)[duty_of],
                      1.0 / np.maximum(counts, 1)[duty_of])
-    return np.asarray(mu + float(ndtri(confidence)) * sd[duty_of] * share, dtype=np.float64)
+    duty_mean = np.bincount(duty_of, weights=mu, minlength=counts.size)
+    add = distribution.quantile(duty_mean, sd, confidence) - duty_mean
+    return np.asarray(mu + add[duty_of] * share, dtype=np.float64)
 
 
 def central_interval(mean: ArrayLike, sd: ArrayLike, level: float) -> tuple[np.ndarray, np.ndarray]:
-    """The central interval holding a Gaussian with probability ``level``."""
-    z = float(ndtri(0.5 + 0.5 * level))
-    m, s = np.asarray(mean, dtype=np.float64), np.asarray(sd, dtype=np.float64)
-    return m - z * s, m + z * s
+    """The central interval holding the consumption with probability ``level``
+    (:mod:`cevm.core.distribution`)."""
+    return distribution.interval(mean, sd, level)
 
 
 def trip_spread(vehicle: Vehicle, trips: TripEnergies, *, ice_braking: str | None = None) -> TripSpread:
@@ -152,7 +153,9 @@ def trip_spread(vehicle: Vehicle, trips: TripEnergies, *, ice_braking: str | Non
     w, V = np.linalg.eigh(post.cov) if post.terms else (np.zeros(0), np.zeros((0, 0)))
     chol = V * np.sqrt(np.maximum(w, 0.0))
     sc = post.scatter
-    aux, share = sc.aux * trips.duration_s, sc.share * mu
+    # the scatter's part that does not grow with a trip joins its auxiliary part: exact
+    # for a trip, a little wide for a duty's sum (a sum of square roots)
+    aux, share = np.hypot(sc.aux * trips.duration_s, sc.trip), sc.share * mu
     base = TripSpread(G, chol, float(post.meter_share), aux, share, np.zeros(n), float(sc.day_corr), p.source,
                       p.note or post.source)
     rest = np.asarray(p.sd, dtype=np.float64) ** 2 - base.trip_sd(np.asarray(p.mean)) ** 2

@@ -22,7 +22,7 @@ def _portable(source: Source, lowest_soc: bool) -> Source:
     state of charge is asked for (the legs' profiles, and any store access behind them,
     stay here)."""
     out = Source(source.name, source.kind, source.vector, legs=(), block_elements=source.block_elements,
-                 ambient_c=source.ambient_c)
+                 ambient_c=source.ambient_c, leg_vectors=source.leg_vectors, leg_ambient_c=source.leg_ambient_c)
     if lowest_soc:
         out.__dict__["steps"] = source.steps  # the cached_property's slot: set, not recomputed
     return out

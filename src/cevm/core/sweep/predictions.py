@@ -209,5 +209,30 @@ def row_terms(pset: PredictionSet, sources: Sequence[Source], rows: np.ndarray |
                                                duration_s=dur, idle_s=idle, ambient_c=t)
             except ValueError as exc:
                 raise CevmError(f"vehicle {veh.name!r}: {exc}") from None
+        for j, src in enumerate(sources):
+            if src.leg_vectors is not None:
+                temps = (np.full(len(src.leg_vectors), pset.ambient_c) if pset.ambient_c is not None
+                         else np.asarray(src.leg_ambient_c, dtype=np.float64))
+                a, s, x = _leg_terms(veh, src.leg_vectors, temps, mass[sel])
+                aux[sel, j], start[sel, j], extra[sel, j] = a, s, x
     return RowTerms(t_all, origin, aux, start, extra)
+
+
+def _leg_terms(veh, vectors, temps: np.ndarray, mass: np.ndarray) -> tuple[float, float, np.ndarray]:
+    """A route's temperature terms leg by leg (:class:`Source` ``leg_vectors``): an EV's
+    auxiliary power as the route's duration-weighted mean of each leg's at its own
+    temperature and the sum of its legs' starts; an ICE's extra fuel summed over its legs
+    (at the rows' masses ``mass``). The sum of the legs' own predictions, exactly."""
+    dur = np.array([v.duration_s for v in vectors])
+    if veh.is_ev:
+        p = np.asarray(energy.ev_aux_power_w(veh, temps), dtype=np.float64)
+        mean_w = float(np.sum(p * dur) / np.sum(dur)) if np.sum(dur) > 0 else float(p[0])
+        return mean_w, float(np.sum(energy.ev_start_energy_j(veh, temps))), np.zeros(mass.size)
+    try:
+        fuel = energy.ice_fuel_l(veh, 0.0, mass_kg=mass[:, None], k_pos=np.array([v.k_pos for v in vectors]),
+                                 traction_s=np.array([v.traction_s for v in vectors]), duration_s=dur,
+                                 idle_s=np.array([v.idle_s for v in vectors]), ambient_c=temps)
+    except ValueError as exc:
+        raise CevmError(f"vehicle {veh.name!r}: {exc}") from None
+    return 0.0, 0.0, np.asarray(fuel, dtype=np.float64).reshape(mass.size, -1).sum(axis=1)
 

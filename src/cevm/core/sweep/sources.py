@@ -28,7 +28,12 @@ class Source:
     mean), or None (see :data:`AMBIENT_ORIGINS` for what a prediction uses then).
     ``logged``: a measured trace (a stored trip, a route of them), held to a vehicle's
     limits with its measurement's tolerance, and ``elevation_sd_m`` its elevation's
-    uncertainty [m] (:mod:`cevm.core.limits`); a cycle file is a target, held exactly."""
+    uncertainty [m] (:mod:`cevm.core.limits`); a cycle file is a target, held exactly.
+    ``leg_vectors`` and ``leg_ambient_c``: a route's legs, each with its own logged
+    temperature, so that the terms that depend on the temperature are taken leg by leg
+    (:func:`cevm.core.sweep.predictions.row_terms`): a day stored as a route is then the
+    sum of its trips, each heated at its own temperature and warmed up at its own start
+    (``ambient_c`` stays the duration-weighted mean, for the rows)."""
 
     name: str
     kind: str
@@ -38,6 +43,8 @@ class Source:
     ambient_c: float | None = None
     logged: bool = False
     elevation_sd_m: float = 0.0
+    leg_vectors: tuple[CycleVector, ...] | None = None
+    leg_ambient_c: tuple[float, ...] | None = None
 
     @classmethod
     def from_cycle(cls, cycle: DriveCycle, name: str | None = None, *, cr0: float = CR0_DEFAULT,

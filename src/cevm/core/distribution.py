@@ -1,0 +1,74 @@
+"""The shape of every predictive distribution of a consumption (pure): its quantiles,
+central intervals and the probability of staying within a budget, from its mean and
+standard deviation. Every command's intervals and probabilities (predict's
+``*_low``/``*_high`` and ``p_reserve_ok``/``p_tank_ok``, feasibility's verdict, replay's
+intervals and battery sizes, fleet plan's ``p_complete``, calibrate's held-out intervals)
+come from here, so that an interval and a probability made of the same mean and
+standard deviation say the same thing.
+
+Fuel burnt, and the energy a vehicle draws over a trip that is not a net descent, cannot
+be negative, and its errors are multiplicative (an efficiency, a share of the energy): a
+Gaussian's lower end goes below zero where the standard deviation is large against the
+mean (a short truck trip, a file never calibrated). So where the mean is positive the
+distribution is the **log-normal** with that mean m and standard deviation s::
+
+    sigma^2 = ln(1 + (s / m)^2),   mu = ln m - sigma^2 / 2,   X = exp(mu + sigma Z)
+
+(the same mean and variance as before: only the shape changes, and it never crosses
+zero). Where the mean is zero or negative (an electric vehicle on a long descent regains
+charge: its energy takes either sign) it is the Gaussian N(m, s^2); a standard deviation
+of zero is the mean itself. For s << m the two agree (the held-out log-likelihoods and
+coverages of the sample logs' calibrations: docs/benchmarks.md).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import ArrayLike
+from scipy.special import ndtr, ndtri
+
+
+def _params(mean: ArrayLike, sd: ArrayLike) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(m, s, log-normal's mu, its sigma) broadcast; mu and sigma are NaN where the
+    Gaussian applies (m <= 0, or s = 0)."""
+    m, s = np.broadcast_arrays(np.asarray(mean, dtype=np.float64), np.asarray(sd, dtype=np.float64))
+    ln = (m > 0) & (s > 0)
+    with np.errstate(divide="ignore", invalid="ignore", under="ignore"):
+        s2 = np.where(ln, np.log1p((s / np.where(ln, m, 1.0)) ** 2), np.nan)
+        ln &= s2 > 0  # an sd below the mean's last digit: the Gaussian (as good as the mean)
+        mu = np.where(ln, np.log(np.where(ln, m, 1.0)) - 0.5 * s2, np.nan)
+    return m, s, mu, np.sqrt(np.where(ln, s2, np.nan))
+
+
+def lognormal(mean: ArrayLike, sd: ArrayLike) -> np.ndarray:
+    """Where the log-normal applies (mean > 0 and sd > 0)."""
+    m, s = np.broadcast_arrays(np.asarray(mean, dtype=np.float64), np.asarray(sd, dtype=np.float64))
+    return np.asarray((m > 0) & (s > 0))
+
+
+def quantile(mean: ArrayLike, sd: ArrayLike, q: ArrayLike) -> np.ndarray:
+    """The q-quantile(s), q in (0, 1) (broadcast)."""
+    z = ndtri(np.asarray(q, dtype=np.float64))
+    m, s, mu, sig = _params(mean, sd)
+    with np.errstate(invalid="ignore", over="ignore"):
+        out = np.where(np.isfinite(mu), np.exp(mu + sig * z), m + s * z)
+    return np.asarray(out, dtype=np.float64)
+
+
+def interval(mean: ArrayLike, sd: ArrayLike, level: float) -> tuple[np.ndarray, np.ndarray]:
+    """The central interval that holds the consumption with probability ``level``."""
+    return quantile(mean, sd, 0.5 - 0.5 * level), quantile(mean, sd, 0.5 + 0.5 * level)
+
+
+def prob_at_most(mean: ArrayLike, sd: ArrayLike, budget: ArrayLike) -> np.ndarray:
+    """P(consumption <= budget) (broadcast); a budget of NaN gives NaN."""
+    b = np.asarray(budget, dtype=np.float64)
+    m, s, mu, sig = _params(mean, sd)
+    m, s, mu, sig, b = np.broadcast_arrays(m, s, mu, sig, b)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        z_ln = (np.log(np.where(b > 0, b, 1.0)) - mu) / sig
+        z_ln = np.where(b > 0, z_ln, -np.inf)
+        z_n = (b - m) / s
+    p = np.where(np.isfinite(mu), ndtr(z_ln),
+                 np.where(s > 0, ndtr(z_n), np.where(b >= m, 1.0, 0.0)))
+    return np.asarray(np.where(np.isnan(b) | np.isnan(m), np.nan, p), dtype=np.float64)
