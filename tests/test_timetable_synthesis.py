@@ -21,7 +21,7 @@ def steady(a: float = 1.0, b: float = 0.5, top: float = 20.0, **kw):
     """A driving without spread, unscheduled stops or slowdowns."""
     return replace(driving_prior("bus"), accel_mps2=a, accel_sd=0.0, accel_trip_sd=0.0, decel_mps2=b, decel_sd=0.0,
                    decel_trip_sd=0.0, stops_per_km=0.0, slowdowns_per_km=0.0, top_speed_mps=top, stop_sd=0.0,
-                   stop_trip_sd=0.0, cruise_tilt=0.0, cruise_tilt_sd=0.0, **kw)
+                   stop_trip_sd=0.0, cruise_tilt=0.0, cruise_tilt_sd=0.0, wobble=0.0, **kw)
 
 
 def test_a_single_run_is_the_closed_form_trapezoid():

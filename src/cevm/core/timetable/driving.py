@@ -83,11 +83,10 @@ DIP_MIN_MPS = 0.5
 TILT_MIN_SAMPLES = 5
 #: The levels of the quantiles a slowdown's share is kept at (drawn by interpolating them).
 SHARE_LEVELS = tuple(round(0.05 + 0.1 * i, 2) for i in range(10))
-#: The slowdowns' rate matched to the logs' kinetic energy (:func:`match_kinetic`): on
-#: at most this many trips, and at most 4 times the rate seen or 3 per km more (module notes).
+#: The cruise's wobble matched to the logs' kinetic energy (:func:`match_kinetic`): on at
+#: most this many trips, and at most this amplitude (a share of the cruise speed).
 KINETIC_MATCH_TRIPS = 60
-RATE_BOUND_FACTOR = 4.0
-RATE_BOUND_ADD_PER_KM = 3.0
+WOBBLE_MAX = 0.4
 #: Shrinkage towards the prior (module notes): the prior's weight in observations.
 SHRINK_N0 = {"launch": 20.0, "stop": 20.0, "dip": 20.0, "km": 10.0, "trips": 5.0}
 
@@ -113,17 +112,19 @@ class DrivingParams:
     stop_s: float  # a stop's duration (and a dwell the timetable does not give), median [s]
     stop_sd: float
     stop_trip_sd: float
-    slowdowns_per_km: float  # the synthesis' rate (matched to the logs' kinetic energy: match_kinetic)
+    slowdowns_per_km: float
     slowdowns_trip_cv: float
-    slowdowns_seen_per_km: float  # the rate measured in the logs (reported)
     # a slowdown's lowest speed over the lower of the highest either side: quantiles at SHARE_LEVELS
     slowdown_quantiles: tuple[float, ...]
     cruise_tilt: float  # the cruise's fall in speed over a run, as a share of the peak (median)
     cruise_tilt_sd: float
     cruise_ratio: float  # a moving part's peak over its mean speed (median; reported)
     top_speed_mps: float  # the default speed cap: 99th percentile of moving speed
+    # the cruise's wobble: a sine's amplitude as a share of the cruise speed, matched to the
+    # logs' kinetic energy (match_kinetic)
+    wobble: float = 0.0
     # the positive kinetic energy per km of the logs' own timetables synthesised, over the
-    # logs' (1: matched; below: the slowdowns' bound held it back; NaN: not matched)
+    # logs' (1: matched; below: the wobble's bound held it back; NaN: not matched)
     kinetic_ratio: float = math.nan
     km: float = 0.0  # km of logs (0 for a prior: see source)
     n_launches: int = 0
@@ -347,8 +348,8 @@ def fit_driving(series: Sequence[tuple[np.ndarray, np.ndarray]], source: str) ->
 
 
 def params_from_measures(m: DrivingMeasures, source: str) -> DrivingParams:
-    """The parameters of measures ``m`` alone (no prior): NaN where nothing was seen; the
-    slowdowns' rate as seen (:func:`match_kinetic` gives the synthesis' own)."""
+    """The parameters of measures ``m`` alone (no prior): NaN where nothing was seen, no
+    wobble (:func:`match_kinetic` gives it)."""
     a = _log_stats(m.accel, m.accel_trip)
     b = _log_stats(m.decel, m.decel_trip)
     s = _log_stats(m.stop_s, m.stop_trip)
@@ -361,7 +362,7 @@ def params_from_measures(m: DrivingMeasures, source: str) -> DrivingParams:
         decel_mps2=b[0], decel_sd=b[1], decel_trip_sd=b[2],
         stops_per_km=stops, stops_trip_cv=stops_cv,
         stop_s=s[0], stop_sd=s[1], stop_trip_sd=s[2],
-        slowdowns_per_km=dips, slowdowns_trip_cv=dips_cv, slowdowns_seen_per_km=dips,
+        slowdowns_per_km=dips, slowdowns_trip_cv=dips_cv,
         slowdown_quantiles=tuple(float(q) for q in np.quantile(share, SHARE_LEVELS)) if share.size
         else (math.nan,) * len(SHARE_LEVELS),
         cruise_tilt=float(np.median(m.tilt)) if m.tilt.size else math.nan,
@@ -379,29 +380,28 @@ PRIORS: dict[str, DrivingParams] = {
                "Nuremberg 36 cycles)", n_trips=0,
         accel_mps2=0.764, accel_sd=0.298, accel_trip_sd=0.389, decel_mps2=0.939, decel_sd=0.483,
         decel_trip_sd=0.348, stops_per_km=3.59, stops_trip_cv=0.178, stop_s=12.0, stop_sd=0.274,
-        stop_trip_sd=0.663, slowdowns_per_km=10.2, slowdowns_trip_cv=0.748, slowdowns_seen_per_km=2.55,
-        slowdown_quantiles=(0.0, 0.0, 0.00718, 0.0105, 0.0184, 0.11, 0.225, 0.452, 0.64, 0.818),
-        cruise_tilt=-0.115, cruise_tilt_sd=0.279, cruise_ratio=1.6, top_speed_mps=14.2, kinetic_ratio=0.725,
-        km=34.5, n_launches=148, n_stops=124, n_slowdowns=88),
+        stop_trip_sd=0.663, slowdowns_per_km=2.55, slowdowns_trip_cv=0.748, slowdown_quantiles=(0.0, 0.0,
+        0.00718, 0.0105, 0.0184, 0.11, 0.225, 0.452, 0.64, 0.818), cruise_tilt=-0.115, cruise_tilt_sd=0.279,
+        cruise_ratio=1.6, top_speed_mps=14.2, wobble=0.194, kinetic_ratio=1.0, km=34.5, n_launches=148,
+        n_stops=124, n_slowdowns=88),
     "truck": DrivingParams(
         source="class prior (truck: ADVISOR's NYC truck, CBD truck, UDDS HDV, WVU city and suburban and "
                "CSHVR cycles)", n_trips=0,
         accel_mps2=0.32, accel_sd=0.455, accel_trip_sd=0.378, decel_mps2=0.585, decel_sd=0.646,
         decel_trip_sd=0.318, stops_per_km=1.48, stops_trip_cv=0.55, stop_s=20.0, stop_sd=0.744,
-        stop_trip_sd=0.354, slowdowns_per_km=7.09, slowdowns_trip_cv=0.375, slowdowns_seen_per_km=1.77,
-        slowdown_quantiles=(0.0, 0.0864, 0.156, 0.332, 0.457, 0.727, 0.788, 0.807, 0.924, 0.944),
-        cruise_tilt=-0.28, cruise_tilt_sd=0.218, cruise_ratio=1.75, top_speed_mps=24.6, kinetic_ratio=0.559,
-        km=44.0, n_launches=53, n_stops=65, n_slowdowns=78),
+        stop_trip_sd=0.354, slowdowns_per_km=1.77, slowdowns_trip_cv=0.375, slowdown_quantiles=(0.0, 0.0864,
+        0.156, 0.332, 0.457, 0.727, 0.788, 0.807, 0.924, 0.944), cruise_tilt=-0.28, cruise_tilt_sd=0.218,
+        cruise_ratio=1.75, top_speed_mps=24.6, wobble=0.0869, kinetic_ratio=0.999, km=44.0, n_launches=53,
+        n_stops=65, n_slowdowns=78),
     # no slowdown in these two cycles: its shares 0 (never drawn: the rate is 0), its spreads
     # 0 where a cycle pair cannot give one
     "car": DrivingParams(
         source="class prior (car: ADVISOR's SAE J1376 arterial and commuter cycles)", n_trips=0,
         accel_mps2=0.752, accel_sd=0.0108, accel_trip_sd=0.165, decel_mps2=1.86, decel_sd=0.0337,
         decel_trip_sd=0.0416, stops_per_km=0.31, stops_trip_cv=1.0, stop_s=6.0, stop_sd=2.72e-16,
-        stop_trip_sd=0.0, slowdowns_per_km=0.0, slowdowns_trip_cv=0.0, slowdowns_seen_per_km=0.0,
-        slowdown_quantiles=(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0), cruise_tilt=-0.232,
-        cruise_tilt_sd=0.058, cruise_ratio=1.35, top_speed_mps=24.6, kinetic_ratio=1.05, km=9.66,
-        n_launches=5, n_stops=3, n_slowdowns=0),
+        stop_trip_sd=0.0, slowdowns_per_km=0.0, slowdowns_trip_cv=0.0, slowdown_quantiles=(0.0, 0.0, 0.0, 0.0,
+        0.0, 0.0, 0.0, 0.0, 0.0, 0.0), cruise_tilt=-0.232, cruise_tilt_sd=0.058, cruise_ratio=1.35,
+        top_speed_mps=24.6, wobble=0.0, kinetic_ratio=1.05, km=9.66, n_launches=5, n_stops=3, n_slowdowns=0),
 }
 
 
@@ -460,7 +460,7 @@ def learn_driving(series: Sequence[tuple[np.ndarray, np.ndarray]], *, prior: Dri
         stop_trip_sd=_shrink(x.stop_trip_sd, nt, prior.stop_trip_sd, n0["trips"]),
         slowdowns_per_km=_shrink(x.slowdowns_per_km, km, prior.slowdowns_per_km, n0["km"]),
         slowdowns_trip_cv=_shrink(x.slowdowns_trip_cv, nt, prior.slowdowns_trip_cv, n0["trips"]),
-        slowdowns_seen_per_km=x.slowdowns_seen_per_km,
+        wobble=prior.wobble,
         slowdown_quantiles=tuple(_shrink(q, nd, q0, n0["dip"]) for q, q0 in
                                  zip(x.slowdown_quantiles, prior.slowdown_quantiles, strict=True)),
         cruise_tilt=_shrink(x.cruise_tilt, nn, prior.cruise_tilt, n0["launch"]),
@@ -469,8 +469,7 @@ def learn_driving(series: Sequence[tuple[np.ndarray, np.ndarray]], *, prior: Dri
         top_speed_mps=_shrink(x.top_speed_mps, km, prior.top_speed_mps, n0["km"]),
         km=km, n_launches=int(na), n_stops=int(ns), n_slowdowns=int(nd))
     matched = match_kinetic(series, shrunk)
-    return replace(matched, slowdowns_per_km=_shrink(matched.slowdowns_per_km, km, prior.slowdowns_per_km,
-                                                     n0["km"]))
+    return replace(matched, wobble=_shrink(matched.wobble, km, prior.wobble, n0["km"]))
 
 
 def _kinetic(t: np.ndarray, v: np.ndarray) -> tuple[float, float]:
@@ -481,11 +480,12 @@ def _kinetic(t: np.ndarray, v: np.ndarray) -> tuple[float, float]:
 
 def match_kinetic(series: Sequence[tuple[np.ndarray, np.ndarray]], params: DrivingParams, *,
                   trips: int = KINETIC_MATCH_TRIPS) -> DrivingParams:
-    """``params`` with the slowdowns' rate per km that makes the series' own timetables
+    """``params`` with the cruise's wobble that makes the series' own timetables
     (:func:`~cevm.core.timetable.synthesis.timetable_from_log`, up to ``trips`` of them
     spread over the series), synthesised, gain the positive kinetic energy per km the
-    series gained (module notes): secant steps on the rate, with the same random draws
-    at each step; unchanged where no series moves or the rate does not move it."""
+    series gained (module notes): secant steps on the amplitude in [0,
+    :data:`WOBBLE_MAX`], with the same random draws at each step; ``kinetic_ratio`` says
+    how close it came (unchanged params where no series moves)."""
     from cevm.core.timetable.synthesis import synthesise_trip, timetable_from_log  # (it imports this module)
 
     usable = [(np.asarray(t, dtype=np.float64), np.asarray(v, dtype=np.float64)) for t, v in series
@@ -497,8 +497,8 @@ def match_kinetic(series: Sequence[tuple[np.ndarray, np.ndarray]], params: Drivi
     k_log = sum(_kinetic(t, v)[0] for t, v in chosen) / max(sum(_kinetic(t, v)[1] for t, v in chosen), 1.0)
     tables = [timetable_from_log(t, v) for t, v in chosen]
 
-    def k_syn(rate: float) -> float:
-        p = replace(params, slowdowns_per_km=rate)
+    def k_syn(amp: float) -> float:
+        p = replace(params, wobble=amp)
         rng = np.random.default_rng(0)
         k = m = 0.0
         for d, arr, dep in tables:
@@ -507,19 +507,17 @@ def match_kinetic(series: Sequence[tuple[np.ndarray, np.ndarray]], params: Drivi
             k, m = k + kk, m + mm
         return k / max(m, 1.0)
 
-    seen = _finite(params.slowdowns_seen_per_km)
-    top = max(RATE_BOUND_FACTOR * seen, seen + RATE_BOUND_ADD_PER_KM)
-    r0, r1 = 0.0, min(max(seen, 1.0), top)
+    r0, r1 = 0.0, 0.1
     k0, k1 = k_syn(r0), k_syn(r1)
-    for _ in range(2):
+    for _ in range(3):
         if not k1 > k0:
             break
-        r2 = float(np.clip(r0 + (k_log - k0) * (r1 - r0) / (k1 - k0), 0.0, top))
+        r2 = float(np.clip(r1 + (k_log - k1) * (r1 - r0) / (k1 - k0), 0.0, WOBBLE_MAX))
         if r2 == r1:
             break
         r0, k0, r1, k1 = r1, k1, r2, k_syn(r2)
     best = (r1, k1) if abs(k1 - k_log) <= abs(k0 - k_log) else (r0, k0)
-    return replace(params, slowdowns_per_km=best[0], kinetic_ratio=best[1] / k_log if k_log > 0 else math.nan)
+    return replace(params, wobble=best[0], kinetic_ratio=best[1] / k_log if k_log > 0 else math.nan)
 
 
 def _finite(x: float) -> float:

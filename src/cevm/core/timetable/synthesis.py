@@ -60,6 +60,9 @@ DECEL_BOUNDS = (0.15, 3.5)
 #: Bound on a run's drawn cruise tilt (its speed at the end at least half, at most 1.5
 #: times, that at its start).
 TILT_BOUND = 0.5
+#: The cruise wobble's period [s], drawn per run (its amplitude is the driving's
+#: ``wobble``, matched to the logs' kinetic energy): the slowdowns' window either side.
+WOBBLE_PERIOD_S = (10.0, 30.0)
 #: Longest drawn dwell or unscheduled stop [s].
 STOP_MAX_S = 600.0
 
@@ -335,6 +338,8 @@ class _Events:
     st_dur: np.ndarray
     st_pos: np.ndarray
     dip_gamma: np.ndarray  # per draw: the factor of its slowdowns' rate
+    wob_period: np.ndarray  # per run: the wobble's period [s] and phase
+    wob_phase: np.ndarray
 
 
 def _draw_events(rng: np.random.Generator, params: DrivingParams, d: np.ndarray, n: int, k: int) -> _Events:
@@ -354,7 +359,8 @@ def _draw_events(rng: np.random.Generator, params: DrivingParams, d: np.ndarray,
         st_dur=np.round(_lognormal(rng, params.stop_s, params.stop_trip_sd, params.stop_sd, (1, ns),
                                    (STOP_MIN_S, STOP_MAX_S))[0]),
         st_pos=rng.random(ns),
-        dip_gamma=_gamma_factor(rng, params.slowdowns_trip_cv, n))
+        dip_gamma=_gamma_factor(rng, params.slowdowns_trip_cv, n),
+        wob_period=rng.uniform(*WOBBLE_PERIOD_S, n * R), wob_phase=rng.uniform(0.0, 2.0 * np.pi, n * R))
 
 
 def _retime(w0: np.ndarray, w1: np.ndarray, least: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -446,8 +452,11 @@ def _drive(d: np.ndarray, w0: np.ndarray, w1: np.ndarray, a: np.ndarray, b: np.n
     r, dp_t, dp_u = r[keep], dp_t[keep], dp_u[keep]
     g = _grid(w0, w1, with_terminals)
     t, run, bounds, wgt = g.t, g.run, g.bounds, g.wgt
-    # the cruise's tilt: v = min(c phi, h) = phi min(c, h / phi), phi > 0
-    phi = 1.0 - ev.tilt[run] * np.clip((t - dep_r[run]) / np.maximum(T[run], 1e-9), 0.0, 1.0)
+    # the cruise's shape: its tilt, and its wobble (a sine of the driving's amplitude, the
+    # run's period and phase); v = min(c phi, h) = phi min(c, h / phi), phi > 0
+    tau = t - dep_r[run]
+    phi = (1.0 - ev.tilt[run] * np.clip(tau / np.maximum(T[run], 1e-9), 0.0, 1.0)) \
+        * (1.0 + _finite(params.wobble) * np.sin(2.0 * np.pi * tau / ev.wob_period[run] + ev.wob_phase[run]))
 
     def build(stops_on: np.ndarray, dips_on: np.ndarray, dp_u: np.ndarray) -> tuple[np.ndarray, np.ndarray,
                                                                                  np.ndarray]:
