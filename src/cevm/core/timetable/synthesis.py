@@ -7,22 +7,27 @@ The speed of a run between two timed stops
 Each run (departure at stop j to arrival at stop j+1, ``d`` metres in ``T`` seconds) is
 drawn with a launch acceleration ``a`` and a braking deceleration ``b`` (log-normal: a
 factor per drawn cycle, the trip's, and one per run), and within it unscheduled stops
-and slowdowns (Poisson per km, with a gamma factor per drawn cycle; their times uniform
-in the run). Every event k (the stops at each end, an unscheduled stop standing from
-``s_k`` to ``e_k``, a slowdown at ``s_k = e_k`` to speed ``u_k``) bounds the speed by a
-V: ``u_k + max(a (t - e_k), b (s_k - t))``, and so does the cap; the speed at each sample
-of the 1 s grid is::
+(the logs' stops per km beyond the timetable's, spread by distance) and slowdowns (per
+km), Poisson with a gamma factor per drawn cycle. Every event k (the stops at each end,
+an unscheduled stop standing from ``s_k`` to ``e_k``, a slowdown at ``s_k = e_k`` to
+speed ``u_k``) bounds the speed by a V: ``u_k + max(a (t - e_k), b (s_k - t))``, and so
+does the cap; the speed at each sample of the 1 s grid is::
 
-    v_i = min(c, h_i),   h_i = min(cap, max(0, min_k V_k(t_i)))
+    v_i = min(c phi_i, h_i),   h_i = min(cap, max(0, min_k V_k(t_i)))
 
-with one cruise speed ``c`` per run. The run's distance by the trapezoid rule (the CE
-model's, :func:`cevm.core.cycle.trapezoid_distance_m`) is ``sum_i w_i min(c, h_i)``
+with one cruise speed ``c`` per run and the cruise's shape ``phi_i > 0``: its tilt (a
+straight line over the run) times its wobble (``1 + A sin(2 pi t / P + theta)``, the
+driving's amplitude A, period P and phase theta drawn per run). As ``min(c phi, h) = phi min(c, h /
+phi)``, the run's distance by the trapezoid rule (the CE model's,
+:func:`cevm.core.cycle.trapezoid_distance_m`) is ``sum_i w_i phi_i min(c, h_i / phi_i)``
 (``w_i`` half the steps either side of sample i): continuous, piecewise linear and
-increasing in ``c``, so ``c`` is solved exactly by sorting the h_i of the run (the closed
-form of a trapezoid, on the grid: with no event ``h_i = min(a t_i, b (T - t_i))`` and
-``c`` solves ``sum_i w_i min(c, h_i) = d``). The run then covers exactly ``d`` in exactly
-``T``, starts and ends at rest, never exceeds its cap, and changes speed by at most ``a``
-(``b``) per second.
+increasing in ``c``, so ``c`` is solved exactly by sorting the run's ``h_i / phi_i``
+(the closed form of a trapezoid, on the grid: with no event and phi = 1, ``h_i = min(a
+t_i, b (T - t_i))`` and ``c`` solves ``sum_i w_i min(c, h_i) = d``). The run then covers
+exactly ``d`` in exactly ``T``, starts and ends at rest, and never exceeds its cap.
+Slowdowns are placed where the run cruises (after a launch to about ``cruise_ratio``
+times its mean speed, as long before its braking) and go to their drawn share of the
+cruise there. All draws of a trip are built in one pass (:func:`synthesise_trips`).
 
 Dwell: a stop whose arrival and departure differ keeps that dwell; one whose times are
 equal (most GTFS feeds) stands for a drawn dwell (``params.stop_s``) centred on its time.
@@ -31,14 +36,19 @@ adds the standing before the first departure and after the last arrival).
 
 A schedule the driving cannot keep
 ----------------------------------
-A run shorter than the least time a trapezoid with its ``a``, ``b`` and cap needs (plus
-:data:`GRID_MARGIN_S` for the 1 s grid) is not squeezed: the bus leaves on time and
+A run shorter than the least time a trapezoid with its drawn ``a``, ``b`` and cap needs
+(plus :data:`GRID_MARGIN_S` for the 1 s grid) is first driven harder: both scaled by the
+least factor that fits, up to the 99th percentile of the driving's distributions (a
+driver late on a tight run launches and brakes harder). Beyond that it is not squeezed:
+the bus leaves on time and
 arrives late, and the lateness carries over to the next stops, shortened by their slack
 (``x_i = max(s_i, x_{i-1} + m_i)`` over the schedule's times ``s_i`` and least gaps
 ``m_i``). :class:`SynthCycle` says how late (``late_s`` at the last stop, ``late_max_s``
 at the worst); a schedule kept has both 0. Minute-rounded feeds with two stops at the
 same minute are the common case. Unscheduled events are drawn only within a run's slack
-(their standing within half of it) and dropped from a run they would make impossible.
+(the unscheduled stops' standing within half of it, then the time the slowdowns lose,
+``(1/a + 1/b) (c - u)^2 / (2 c)`` each, within half of what is left) and dropped from a
+run they would still make impossible.
 """
 
 from __future__ import annotations
