@@ -58,7 +58,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from cevm.core.timetable.driving import SHARE_LEVELS, STAND_MPS, STOP_MIN_S, DrivingParams
+from cevm.core.timetable.driving import SHARE_LEVELS, STAND_MPS, STOP_MIN_S, SWAY_MIN_RUN_S, DrivingParams
 from cevm.errors import CevmError
 
 #: Extra seconds a run needs beyond the continuous least time, for the 1 s grid.
@@ -73,6 +73,9 @@ TILT_BOUND = 0.5
 #: The cruise wobble's period [s], drawn per run (its amplitude is the driving's
 #: ``wobble``, matched to the logs' kinetic energy): the slowdowns' window either side.
 WOBBLE_PERIOD_S = (10.0, 30.0)
+#: The knots of a long run's sway (its slow changes: traffic, roads) every so many
+#: seconds [s] (its sd is the driving's ``sway``, matched to the logs' long runs).
+SWAY_KNOT_S = 60.0
 #: Longest drawn dwell or unscheduled stop [s].
 STOP_MAX_S = 600.0
 
@@ -415,6 +418,23 @@ def _grid(w0: np.ndarray, w1: np.ndarray, with_terminals: bool) -> _Grid:
                  lo=np.searchsorted(run, every, side="left"), hi=np.searchsorted(run, every, side="right"))
 
 
+def _sway(rng: np.random.Generator, tau: np.ndarray, run: np.ndarray, T: np.ndarray, sd: float) -> np.ndarray:
+    """The cruise's slow changes on the runs of :data:`SWAY_MIN_RUN_S` or more: exp(sd z -
+    sd^2 / 2), z standard normal at knots every :data:`SWAY_KNOT_S` from the run's
+    departure, linear between them; 1 on shorter runs and where sd is 0."""
+    if sd <= 0 or not np.any(T >= SWAY_MIN_RUN_S):
+        return np.ones(tau.size)
+    knots = np.floor(np.maximum(T, 0.0) / SWAY_KNOT_S).astype(np.int64) + 2
+    first = np.cumsum(knots) - knots
+    z = rng.standard_normal(int(knots.sum()))
+    z[np.repeat(T < SWAY_MIN_RUN_S, knots)] = 0.5 * sd  # exp(0) on the short runs
+    x = np.maximum(tau, 0.0) / SWAY_KNOT_S
+    j = np.minimum(np.floor(x).astype(np.int64), knots[run] - 2)
+    f = x - j
+    zi = z[first[run] + j] * (1.0 - f) + z[first[run] + j + 1] * f
+    return np.exp(sd * zi - 0.5 * sd * sd)
+
+
 def _running_sum(run: np.ndarray, x: np.ndarray, n_runs: int) -> np.ndarray:
     """Each event's ``x`` summed with those before it in its run (events in run order)."""
     by_run = np.bincount(run, weights=x, minlength=n_runs)
@@ -466,7 +486,8 @@ def _drive(d: np.ndarray, w0: np.ndarray, w1: np.ndarray, a: np.ndarray, b: np.n
     # run's period and phase); v = min(c phi, h) = phi min(c, h / phi), phi > 0
     tau = t - dep_r[run]
     phi = (1.0 - ev.tilt[run] * np.clip(tau / np.maximum(T[run], 1e-9), 0.0, 1.0)) \
-        * (1.0 + _finite(params.wobble) * np.sin(2.0 * np.pi * tau / ev.wob_period[run] + ev.wob_phase[run]))
+        * (1.0 + _finite(params.wobble) * np.sin(2.0 * np.pi * tau / ev.wob_period[run] + ev.wob_phase[run])) \
+        * _sway(rng, tau, run, T, _finite(params.sway))
 
     def build(stops_on: np.ndarray, dips_on: np.ndarray, dp_u: np.ndarray) -> tuple[np.ndarray, np.ndarray,
                                                                                  np.ndarray]:
