@@ -161,7 +161,6 @@ def _caps(speed_cap_mps, runs: int, params: DrivingParams) -> np.ndarray:
     return cap
 
 
-_H_SPAN = 64.0
 
 
 def _solve_cruise(h: np.ndarray, w: np.ndarray, run: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -169,8 +168,9 @@ def _solve_cruise(h: np.ndarray, w: np.ndarray, run: np.ndarray, d: np.ndarray) 
     and whether each run is feasible (sum w_i h_i >= d_r). Infeasible runs get their
     largest h."""
     R = d.size
-    # (run, h) order: h < its bound below 2^6 m/s (no cap reaches 230 km/h) keeps the key exact enough
-    order = np.argsort(run * _H_SPAN + np.minimum(h, _H_SPAN * 0.999), kind="stable")
+    # (run, h) order in one key: run * span + h, span a power of 2 above every h
+    span = 2.0 ** math.ceil(math.log2(float(h.max(initial=0.0)) + 2.0))
+    order = np.argsort(run * span + h, kind="stable")
     hs, ws, rs = h[order], w[order], run[order]
     cw = np.cumsum(ws)
     cwh = np.cumsum(ws * hs)
