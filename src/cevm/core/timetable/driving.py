@@ -171,10 +171,11 @@ class DrivingParams:
         return float(np.interp(0.5, SHARE_LEVELS, self.slowdown_quantiles))
 
     def describe(self) -> str:
-        """One line for people: the medians and rates."""
+        """One line for people: the medians and rates, the shape's amplitudes."""
         return (f"launch {self.accel_mps2:.2f} m/s2, braking {self.decel_mps2:.2f} m/s2, "
                 f"{self.stops_per_km:.2f} stops/km of {self.stop_s:.0f} s, "
                 f"{self.slowdowns_per_km:.2f} slowdowns/km to {100 * self.slowdown_share:.0f} % of the speed, "
+                f"wobble {100 * self.wobble:.0f} %, sway {100 * self.sway:.0f} %, "
                 f"top {3.6 * self.top_speed_mps:.0f} km/h ({self.source})")
 
 
