@@ -93,3 +93,29 @@ def test_a_logged_trip_turned_into_a_timetable_is_predicted_within_its_interval(
             # and after it last stops (timetable_from_log's terminals: centimetres)
             assert e.distance_m == pytest.approx(t.vector.distance_m, abs=1.0)
             assert e.duration_s == pytest.approx(t.vector.duration_s)
+
+
+def test_a_damaged_profile_is_named_or_left_out(buses, tmp_path):
+    """A trip whose stored profile fails its checksum: DamagedTripError naming it, or,
+    with on_damaged, passed there and left out of the series."""
+    import shutil
+    import sqlite3
+
+    from cevm.store.failures import DamagedTripError
+
+    store, _ = buses
+    db = tmp_path / "damaged.sqlite"
+    shutil.copy(store, db)
+    con = sqlite3.connect(db)
+    with con:
+        tid = con.execute("SELECT trip_id FROM trips WHERE vehicle_id = 'EB-02' ORDER BY start_utc_s LIMIT 1 OFFSET 2"
+                          ).fetchone()[0]
+        con.execute("UPDATE trip_blobs SET profile = randomblob(900) WHERE trip_id = ?", (tid,))
+    con.close()
+    with TripStore.open(db, readonly=True) as st:
+        with pytest.raises(DamagedTripError, match=tid):
+            load_driving_series(st, ["EB-02"])
+        seen: list[DamagedTripError] = []
+        series = load_driving_series(st, ["EB-02"], on_damaged=seen.append)
+        assert [e.trip_id for e in seen] == [tid]
+        assert len(series) == st.count_trips("EB-02") - 1

@@ -390,22 +390,29 @@ def _retime(w0: np.ndarray, w1: np.ndarray, least: np.ndarray) -> tuple[np.ndarr
 
 def _grid(w0: np.ndarray, w1: np.ndarray, with_terminals: bool) -> _Grid:
     """Per draw the grid: whole seconds from its start, and every dwell window's ends (all
-    draws in one sort, on their keys)."""
+    draws in one sort, on their keys; no sort when they all fall on whole seconds, as a
+    feed's times and the drawn dwells do)."""
     n, k = w0.shape
     R = k - 1
     t_end = w1[:, -1] if with_terminals else w0[:, -1]
-    whole = np.ceil(t_end).astype(np.int64)  # whole seconds below each end
-    draw_of = np.repeat(np.arange(n), whole)
-    sec = np.arange(int(whole.sum())) - np.repeat(np.cumsum(whole) - whole, whole)
     shift = np.arange(n)[:, None] * _DRAW_SHIFT_S
     ends = np.concatenate((w0, w1), axis=1)
-    ends = np.where(ends <= t_end[:, None], ends, t_end[:, None]) + shift
-    key = np.concatenate((sec[sec < t_end[draw_of]] + draw_of[sec < t_end[draw_of]] * _DRAW_SHIFT_S,
-                          ends.ravel()))
-    key.sort()
-    key = key[np.concatenate(([True], np.diff(key) > 1e-6))]
-    draw = (key // _DRAW_SHIFT_S).astype(np.int64)
-    t = key - draw * _DRAW_SHIFT_S
+    if np.all(ends == np.round(ends)):
+        count = t_end.astype(np.int64) + 1  # 0, 1, ..., t_end
+        draw = np.repeat(np.arange(n), count)
+        t = (np.arange(int(count.sum())) - np.repeat(np.cumsum(count) - count, count)).astype(np.float64)
+        key = t + draw * _DRAW_SHIFT_S
+    else:
+        whole = np.ceil(t_end).astype(np.int64)  # whole seconds below each end
+        draw_of = np.repeat(np.arange(n), whole)
+        sec = np.arange(int(whole.sum())) - np.repeat(np.cumsum(whole) - whole, whole)
+        ends = np.where(ends <= t_end[:, None], ends, t_end[:, None]) + shift
+        below = sec < t_end[draw_of]
+        key = np.concatenate((sec[below] + draw_of[below] * _DRAW_SHIFT_S, ends.ravel()))
+        key.sort()
+        key = key[np.concatenate(([True], np.diff(key) > 1e-6))]
+        draw = (key // _DRAW_SHIFT_S).astype(np.int64)
+        t = key - draw * _DRAW_SHIFT_S
     dep_keys = (w1[:, :-1] + shift).ravel()
     run = np.searchsorted(dep_keys, key, side="right") - 1
     run = np.clip(run, draw * R, draw * R + R - 1)
