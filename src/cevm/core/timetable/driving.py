@@ -417,7 +417,7 @@ PRIORS: dict[str, DrivingParams] = {
         decel_trip_sd=0.348, stops_per_km=3.59, stops_trip_cv=0.178, stop_s=12.0, stop_sd=0.274,
         stop_trip_sd=0.663, slowdowns_per_km=2.55, slowdowns_trip_cv=0.748, slowdown_quantiles=(0.0, 0.0,
         0.00718, 0.0105, 0.0184, 0.11, 0.225, 0.452, 0.64, 0.818), cruise_tilt=-0.115, cruise_tilt_sd=0.279,
-        cruise_ratio=1.6, top_speed_mps=14.2, wobble=0.199, sway=0.4, kinetic_ratio=1.0, aero_ratio=0.867,
+        cruise_ratio=1.6, top_speed_mps=14.2, wobble=0.21, sway=0.4, kinetic_ratio=1.0, aero_ratio=0.84,
         km=34.5, n_launches=148, n_stops=124, n_slowdowns=88),
     "truck": DrivingParams(
         source="class prior (truck: ADVISOR's NYC truck, CBD truck, UDDS HDV, WVU city and suburban and "
@@ -426,7 +426,7 @@ PRIORS: dict[str, DrivingParams] = {
         decel_trip_sd=0.318, stops_per_km=1.48, stops_trip_cv=0.55, stop_s=20.0, stop_sd=0.744,
         stop_trip_sd=0.354, slowdowns_per_km=1.77, slowdowns_trip_cv=0.375, slowdown_quantiles=(0.0, 0.0864,
         0.156, 0.332, 0.457, 0.727, 0.788, 0.807, 0.924, 0.944), cruise_tilt=-0.28, cruise_tilt_sd=0.218,
-        cruise_ratio=1.75, top_speed_mps=24.6, wobble=0.0792, sway=0.4, kinetic_ratio=0.989, aero_ratio=0.914,
+        cruise_ratio=1.75, top_speed_mps=24.6, wobble=0.0893, sway=0.0, kinetic_ratio=0.999, aero_ratio=0.85,
         km=44.0, n_launches=53, n_stops=65, n_slowdowns=78),
     # no slowdown in these two cycles: its shares 0 (never drawn: the rate is 0), its spreads
     # 0 where a cycle pair cannot give one

@@ -46,9 +46,10 @@ arrives late, and the lateness carries over to the next stops, shortened by thei
 ``m_i``). :class:`SynthCycle` says how late (``late_s`` at the last stop, ``late_max_s``
 at the worst); a schedule kept has both 0. Minute-rounded feeds with two stops at the
 same minute are the common case. Unscheduled events are drawn only within a run's slack
-(the unscheduled stops' standing within half of it, then the time the slowdowns lose,
-``(1/a + 1/b) (c - u)^2 / (2 c)`` each, within half of what is left) and dropped from a
-run they would still make impossible.
+(the time the unscheduled stops lose, their standing and ``c (1/a + 1/b) / 2`` each,
+within half of it, then the time the slowdowns lose, ``(1/a + 1/b) (c - u)^2 / (2 c)``
+each, within half of what is left) and dropped from a run they would still make
+impossible.
 """
 
 from __future__ import annotations
@@ -453,18 +454,23 @@ def _drive(d: np.ndarray, w0: np.ndarray, w1: np.ndarray, a: np.ndarray, b: np.n
            ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The draws' grids end to end, the speeds on them, their bounds, which runs are
     feasible (draws x runs), and per draw the unscheduled stops and slowdowns kept
-    (module notes): a run's stops while their standing fits in half its slack, then its
-    slowdowns while the time they lose fits in half what is left, all its events dropped
-    if they still make it impossible."""
+    (module notes): a run's stops while the time they lose fits in half its slack, then
+    its slowdowns while theirs fits in half what is left, all its events dropped if they
+    still make it impossible."""
     n, k = w0.shape
     NR = n * (k - 1)
     dd, cc = np.tile(d, n), np.tile(cap, n)
     dep_r, arr_r = w1[:, :-1].ravel(), w0[:, 1:].ravel()
     T = arr_r - dep_r
     slack = np.maximum(T - np.where(dd > 0, least_run_time_s(dd, a, b, cc), 0.0), 0.0)
-    fits = _running_sum(ev.st_run, ev.st_dur, NR) <= 0.5 * slack[ev.st_run]
+    # an unscheduled stop loses its standing and the time of braking to it from about the
+    # cruise speed and launching again, c (1/a + 1/b) / 2
+    c0 = np.minimum((_finite(params.cruise_ratio) or 1.3) * dd / np.maximum(T, 1.0), cc)
+    s_lost = ev.st_dur + 0.5 * c0[ev.st_run] * (1.0 / a[ev.st_run] + 1.0 / b[ev.st_run])
+    fits = _running_sum(ev.st_run, s_lost, NR) <= 0.5 * slack[ev.st_run]
     st_run, st_dur = ev.st_run[fits], ev.st_dur[fits]
     standing = np.bincount(st_run, weights=st_dur, minlength=NR)
+    lost_stops = np.bincount(st_run, weights=s_lost[fits], minlength=NR)
     st_start = dep_r[st_run] + ev.st_pos[fits] * np.maximum(T[st_run] - st_dur, 0.0)
     # slowdowns where the run cruises: after its launch to about its cruise speed (the
     # driving's peak-to-mean ratio times the mean) and a slowdown's window, and as long
@@ -475,7 +481,7 @@ def _drive(d: np.ndarray, w0: np.ndarray, w1: np.ndarray, a: np.ndarray, b: np.n
     # slowdowns at their rate per km, each to its share of the run's cruise speed there;
     # kept while the time they lose, (1/a + 1/b) (c - u)^2 / (2 c) each, fits in half the
     # slack the stops left
-    left = np.maximum(slack - standing, 0.0)
+    left = np.maximum(slack - lost_stops, 0.0)
     n_dip = rng.poisson(_finite(params.slowdowns_per_km) * dd / 1000.0 * np.repeat(ev.dip_gamma, k - 1))
     r = np.repeat(np.arange(NR), n_dip)
     lead = np.where(room > 0, lead, 0.5 * T)
