@@ -45,10 +45,11 @@ synthesised, drive as the logs did where the energy sees it:
   real Twizy logs', whose commutes stop every few km.
 
 ``kinetic_ratio`` and ``aero_ratio`` (the whole trips' cubed speed) say how close they
-came: on the sample buses 0.99 and 0.96, on the public bus cycles 1.00 and 0.87 (their
-short runs reach higher peaks than one cruise per run does; the sway reaches its bound,
-:data:`WOBBLE_MAX`, on the bus and truck cycles; on the car's two cycles the kinetic
-energy is 1.2 times theirs with no wobble at all).
+came: on the sample buses 0.99 and 0.96, on the public bus cycles 1.00 and 0.84, on the
+truck cycles 1.00 and 0.85 (their short runs reach higher peaks than one cruise per run
+does; the bus cycles' sway reaches its bound, :data:`WOBBLE_MAX`, the trucks' stays 0: it
+does not move their cubed speed); on the car's two cycles the kinetic energy is 1.2 times
+theirs with no wobble at all.
 
 Spreads: accelerations, decelerations and stop durations are log-normal (median, and the
 sd of their logarithm, split into a between-trip part, the sd of the trips' mean
