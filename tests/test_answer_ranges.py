@@ -263,7 +263,8 @@ def test_the_enumerations_day_spread_is_the_exact_one_with_a_leg_that_gives_ener
     cevm.core.predictive.total on the same legs, also when a leg's mean is negative (a
     long descent regenerates more than it draws): the shared scatter's share part is of
     each leg's energy drawn, not of the day's net (it was, so the enumeration found a day
-    surer than it is: 0.854 against 0.849, and planned it at min_p_complete 0.85)."""
+    surer than it is: 0.854 against 0.849, and planned it at min_p_complete 0.85). With a
+    spec sheet's CdA and Cr spread (one CdA for every leg) in both."""
     from cevm.core.assignment.chance import DayMoments
     from cevm.core.assignment.scenario import FleetVehicle
     from cevm.core.cycle import drive_cycle_vector
@@ -272,7 +273,7 @@ def test_the_enumerations_day_spread_is_the_exact_one_with_a_leg_that_gives_ener
     from test_fleet import ebus
 
     priors = Priors("bus", "test", (TermPrior("eta", 0.72, 0.86), TermPrior("aux", 0.0, 3000.0)),
-                    ScatterPrior(800.0, 0.04))
+                    ScatterPrior(800.0, 0.04), spec=(("cda", 0.85, 1.15), ("cr", 0.8, 1.2)))
     veh = dataclasses.replace(ebus(regen_eta=0.7), priors=priors)
     fv = FleetVehicle("V0", veh, veh.kerb_mass_kg + 3000.0)
     t = np.arange(0.0, 601.0)
@@ -284,9 +285,8 @@ def test_the_enumerations_day_spread_is_the_exact_one_with_a_leg_that_gives_ener
     for vec, m in legs:
         day.add(vec, np.array([[m]]), np.ones((1, 1)), None)
     parts = [Features.of(vec, veh, [m], None) for vec, m in legs]
-    names = ("positive_j", "negative_j", "duration_s", "idle_s", "traction_s", "kinetic_j", "ambient_c")
-    f = Features(*(np.concatenate([np.atleast_1d(getattr(p, k)) for p in parts]) for k in names))
-    exact = total(veh, f)
+    assert all(p.spec is not None for p in parts)
+    exact = total(veh, Features.concat(parts))
     from cevm.core.predictive import mean
     assert (np.asarray(mean(veh, parts[0])) < 0).all()  # the descent gives energy back
     np.testing.assert_allclose(day.mu, exact.mean, rtol=1e-12)

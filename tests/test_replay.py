@@ -454,12 +454,13 @@ def test_the_spread_taken_apart_gives_the_predictive_distributions_back(tmp_path
     if sp.source == "none":
         pytest.skip("the test vehicle has no priors")
     f = pr.Features(te.positive_j, te.negative_j, te.duration_s, te.idle_s, te.traction_s, te.kinetic_j,
-                    te.ambient_c, np.ones(te.n))
+                    te.ambient_c, np.ones(te.n), spec=te.spec)  # with the spec sheet's CdA and Cr derivatives
     np.testing.assert_allclose(sp.trip_sd(te.energy), pr.predictive(veh, f).sd, rtol=1e-9)
     bounds = np.array([0, 3, 5])
     # the scatter's part that does not grow with a trip is folded into each trip's
-    # auxiliary part (exact per trip, above); a duty's sum of those square roots is a
-    # little wider than the exact (sum of the two parts apart): within 1e-4 here
+    # auxiliary part, and the spec sheet's CdA and Cr into the common part with the
+    # extrapolation (exact per trip, above); a duty's sum of those square roots is a
+    # little wider than the exact (the parts summed apart): within 1e-4 here
     np.testing.assert_allclose(sp.duty_sd(te.energy, bounds), pr.total(veh, f, groups=[0, 0, 0, 1, 1]).sd, rtol=1e-4)
     assert (sp.duty_sd(te.energy, bounds) >= pr.total(veh, f, groups=[0, 0, 0, 1, 1]).sd * (1 - 1e-12)).all()
 

@@ -53,8 +53,17 @@ from cevm.core.model import IceBraking, braking_weight, wheel_energy_parts_j
 from cevm.core.uncertainty import Posterior, Scatter, coefficient_prior, extrapolation_variance, slope_prior_sd
 from cevm.core.vehicle import Vehicle, default_ambient_c
 
-#: The relative step of the CdA and Cr derivatives of :meth:`Features.of`.
-_H = 1e-6
+#: The relative step of the CdA and Cr derivatives of :meth:`Features.of` (and of
+#: :func:`cevm.core.replay.trips.trip_energies`).
+SPEC_STEP = 1e-6
+
+
+def spec_spread(vehicle: Vehicle) -> bool:
+    """Whether ``vehicle``'s stated CdA and Cr carry a spread in its predictions: a file
+    never calibrated whose class (or [prior]) gives them one (a calibration's eta absorbs
+    them)."""
+    pr = vehicle.priors
+    return vehicle.posterior is None and pr is not None and (pr.spec_sd("cda") > 0 or pr.spec_sd("cr") > 0)
 
 #: The terms a never-calibrated vehicle's prior interval spans: every vehicle's physical
 #: terms (the others only where its file sets them: they change what eta means).
@@ -96,14 +105,14 @@ class Features:
         trac = vector.traction_s if math.isfinite(vector.traction_s) else 0.0
         full = np.ones_like(m)
         spec = None
-        pr = vehicle.priors
-        if vehicle.posterior is None and pr is not None and (pr.spec_sd("cda") > 0 or pr.spec_sd("cr") > 0):
+        if spec_spread(vehicle):
             # (P, N) are piecewise linear in CdA and Cr: a forward difference within the piece
             # (upwards: Cr may not fall below the vector's cr0) is the derivative
             parts = []
-            for cda, cr in ((vehicle.cda_m2 * (1 + _H), vehicle.cr), (vehicle.cda_m2, vehicle.cr * (1 + _H))):
+            up = 1.0 + SPEC_STEP
+            for cda, cr in ((vehicle.cda_m2 * up, vehicle.cr), (vehicle.cda_m2, vehicle.cr * up)):
                 P2, N2 = wheel_energy_parts_j(vector, m, cda, cr)
-                parts.append(((P2 - P) / _H, (N2 - N) / _H))
+                parts.append(((P2 - P) / SPEC_STEP, (N2 - N) / SPEC_STEP))
             spec = (parts[0], parts[1])
         return cls(P, N, vector.duration_s * full, vector.idle_s * full, trac * full, kin, t, starts, spec)
 

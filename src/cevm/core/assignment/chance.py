@@ -39,7 +39,15 @@ import numpy as np
 
 from cevm.core.assignment.scenario import FleetVehicle, Scenario
 from cevm.core.cycle import CycleVector
-from cevm.core.predictive import Features, extrapolation_var, gradient_rows, posterior_of, sqrt_cov, total
+from cevm.core.predictive import (
+    Features,
+    extrapolation_var,
+    gradient_rows,
+    posterior_of,
+    spec_parts,
+    sqrt_cov,
+    total,
+)
 
 if TYPE_CHECKING:
     from cevm.core.assignment.evaluation import Evaluation
@@ -104,6 +112,7 @@ class DayMoments:
         self.drawn = np.zeros(n_comb)  # the sum of the legs' max(mean, 0): the scatter's share part
         self.trips = np.zeros(n_comb)  # how many legs: the scatter's part that does not grow with a leg
         self.extra = np.zeros(n_comb)  # the sum of the legs' extrapolation standard deviations
+        self.spec = np.zeros((2, n_comb))  # the sums of the legs' parts from a spec sheet's CdA and Cr
 
     def add(self, vec: CycleVector, masses: np.ndarray, driven: np.ndarray, t_day: float | None) -> None:
         """Legs of one vector at ``masses`` (n_comb x legs), counted where ``driven``."""
@@ -127,6 +136,8 @@ class DayMoments:
         x = extrapolation_var(self.v.vehicle, self.post, f)
         if x is not None:  # one unknown slope for every leg: their standard deviations add
             self.extra += np.sum(driven * np.sqrt(np.broadcast_to(x, uniq.shape))[inv], axis=1)
+        for j, part in enumerate(spec_parts(self.v.vehicle, f)):  # one CdA, one Cr for every leg
+            self.spec[j] += np.sum(driven * np.broadcast_to(part, uniq.shape)[inv], axis=1)
 
     def sd(self) -> np.ndarray:
         if self.post is None:
@@ -138,6 +149,7 @@ class DayMoments:
         # cevm.core.predictive.total has it), not of the day's net: a leg that gives energy back
         # does not cancel another's scatter
         var += sc_.sum_variance(self.dur, self.drawn, self.trips, self.own) + self.extra ** 2
+        var += np.sum(self.spec ** 2, axis=0)
         return np.asarray(np.sqrt(var))
 
 

@@ -146,7 +146,7 @@ def trip_spread(vehicle: Vehicle, trips: TripEnergies, *, ice_braking: str | Non
         return TripSpread.none(n, "no priors: the vehicle was built without a class")
     f = pr.Features(positive_j=trips.positive_j, negative_j=trips.negative_j, duration_s=trips.duration_s,
                     idle_s=trips.idle_s, traction_s=trips.traction_s, kinetic_j=trips.kinetic_j,
-                    ambient_c=trips.ambient_c, starts=np.ones(n))
+                    ambient_c=trips.ambient_c, starts=np.ones(n), spec=trips.spec)
     p = pr.predictive(vehicle, f, ice_braking=ice_braking)
     mu = np.maximum(np.asarray(p.mean, dtype=np.float64), 0.0)
     G = pr.gradient(vehicle, f, post.terms, ice_braking) if post.terms else np.zeros((n, 0))
@@ -159,5 +159,7 @@ def trip_spread(vehicle: Vehicle, trips: TripEnergies, *, ice_braking: str | Non
     base = TripSpread(G, chol, float(post.meter_share), aux, share, np.zeros(n), float(sc.day_corr), p.source,
                       p.note or post.source)
     rest = np.asarray(p.sd, dtype=np.float64) ** 2 - base.trip_sd(np.asarray(p.mean)) ** 2
-    extra = np.sqrt(np.maximum(rest, 0.0))  # the extrapolation's part: what predictive adds beyond the others
+    # what predictive adds beyond the others: the extrapolation's part and a spec sheet's CdA
+    # and Cr, each common to every trip (one slope, one CdA): drawn together
+    extra = np.sqrt(np.maximum(rest, 0.0))
     return TripSpread(G, chol, base.meter_share, aux, share, extra, base.day_corr, base.source, base.note)

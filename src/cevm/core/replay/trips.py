@@ -32,6 +32,7 @@ from numpy.typing import ArrayLike
 from cevm.core import energy
 from cevm.core.cycle import CycleVector
 from cevm.core.model import IceBraking, braking_weight
+from cevm.core.predictive import SPEC_STEP, spec_spread
 from cevm.core.sweep import AMBIENT_ORIGINS, PredictionSet, StepTable, crossings, step_coefficients
 from cevm.core.sweep.stepenergy import StepCoefficients
 from cevm.core.vehicle import Vehicle
@@ -50,7 +51,9 @@ class TripEnergies:
     [J] (W = P + w N); ``regen_bound`` the most a trip can give back after its peak [J or
     l]; ``mass_kg``; ``ambient_c`` [degC] and ``ambient_from`` (codes into
     :data:`cevm.core.sweep.AMBIENT_ORIGINS`); and what the uncertainty model needs of each
-    trip: ``duration_s``, ``idle_s``, ``traction_s``, ``kinetic_j`` (m k_pos [J])."""
+    trip: ``duration_s``, ``idle_s``, ``traction_s``, ``kinetic_j`` (m k_pos [J]), and
+    ``spec`` the derivatives of (P, N) in ln CdA and ln Cr for a candidate never calibrated
+    (:class:`cevm.core.predictive.Features` ``spec``), else None."""
 
     energy: np.ndarray
     positive_j: np.ndarray
@@ -63,6 +66,7 @@ class TripEnergies:
     idle_s: np.ndarray
     traction_s: np.ndarray
     kinetic_j: np.ndarray
+    spec: tuple | None = None
 
     @property
     def n(self) -> int:
@@ -127,31 +131,41 @@ def trip_energies(vectors: Sequence[CycleVector], vehicle: Vehicle, mass_kg: Arr
     def field(name: str) -> np.ndarray:
         return np.array([getattr(v, name) for v in vectors], dtype=np.float64)
 
-    cda, cr = vehicle.cda_m2, vehicle.cr
-    e1 = m * field("s_me") + cda * field("s_a") + cr * m * field("s_r")
     sums = np.array([v.ns_sums for v in vectors], dtype=np.float64).reshape(n, 3)
-    net = m * (sums[:, 0] + cr * sums[:, 2]) + cda * sums[:, 1]
-    pos = _positive_parts(vectors, m, cda, cr)
-    neg = net - pos  # <= 0: the negative non-simplified steps, standstill included
+
+    def parts(cda: float, cr: float) -> tuple[np.ndarray, np.ndarray]:
+        """(P, N): E_DC1 plus the positive non-simplified steps, and the negative ones
+        (<= 0, standstill included)."""
+        e1 = m * field("s_me") + cda * field("s_a") + cr * m * field("s_r")
+        net = m * (sums[:, 0] + cr * sums[:, 2]) + cda * sums[:, 1]
+        pos = _positive_parts(vectors, m, cda, cr)
+        return e1 + pos, net - pos
+
+    cda, cr = vehicle.cda_m2, vehicle.cr
+    p_all, neg = parts(cda, cr)
+    spec = None
+    if spec_spread(vehicle):  # as Features.of: forward differences within the linear piece
+        d = [parts(cda * (1 + SPEC_STEP), cr), parts(cda, cr * (1 + SPEC_STEP))]
+        spec = tuple(((a - p_all) / SPEC_STEP, (b - neg) / SPEC_STEP) for a, b in d)
     duration, idle = field("duration_s"), field("idle_s")
     k_pos, traction = field("k_pos"), field("traction_s")
     if vehicle.is_ev:
         w = energy.ev_negative_weight(vehicle)
-        e = energy.ev_battery_energy_j(vehicle, e1 + pos + w * neg, duration_s=duration, ambient_c=t)
+        e = energy.ev_battery_energy_j(vehicle, p_all + w * neg, duration_s=duration, ambient_c=t)
         bound = -w * neg / vehicle.eta
     else:
         w = braking_weight(cast(IceBraking, ice_braking or vehicle.ice_braking))
         try:
-            e = energy.ice_fuel_l(vehicle, e1 + pos + w * neg, mass_kg=m, k_pos=k_pos, traction_s=traction,
+            e = energy.ice_fuel_l(vehicle, p_all + w * neg, mass_kg=m, k_pos=k_pos, traction_s=traction,
                                   duration_s=duration, idle_s=idle, ambient_c=t)
         except ValueError as exc:
             raise CevmError(f"vehicle {vehicle.name!r}: {exc}") from None
         bound = np.zeros(n)
     kin = np.where(np.isfinite(k_pos), m * k_pos, 0.0)
-    return TripEnergies(energy=np.asarray(e, dtype=np.float64), positive_j=e1 + pos, negative_j=neg,
+    return TripEnergies(energy=np.asarray(e, dtype=np.float64), positive_j=p_all, negative_j=neg,
                         regen_bound=np.maximum(bound, 0.0), mass_kg=m, ambient_c=np.asarray(t, dtype=np.float64),
                         ambient_from=origin, duration_s=duration, idle_s=idle,
-                        traction_s=np.where(np.isfinite(traction), traction, 0.0), kinetic_j=kin)
+                        traction_s=np.where(np.isfinite(traction), traction, 0.0), kinetic_j=kin, spec=spec)
 
 
 # ------------------------------------------------------------------ inside one trip

@@ -217,6 +217,12 @@ def source_ranges(block: SweepBlock, *, soc_start_pct: float = DEFAULT_SOC_START
     out: dict[str, Any] = {f: np.full(n, np.nan) for f in RANGE_FIELDS}  # SweepBlock fields (None: not asked)
     if rows.size:
         coef = step_coefficients(ps, block.ambient_c)
+        if block.source.leg_vectors is not None:  # a route leg by leg: an EV's auxiliary power, starts as its total
+            from cevm.core.sweep.predictions import row_terms
+
+            terms = row_terms(ps, [block.source])
+            coef = replace(coef, aux=np.where(ps.is_ev, terms.aux_w[:, 0], coef.aux),
+                           lump=np.where(ps.is_ev, terms.start_j[:, 0], coef.lump))
         levels = np.stack([l_res[rows], l_empty[rows]], axis=1)
         t, d, inside = crossings(block.source.step_table, coef.take(rows), levels, repeat=repeat)
         res = ev[rows]
