@@ -160,9 +160,11 @@ def test_what_is_synthesised_is_learnt_back():
 
 
 def test_kinetic_matching_reaches_the_logs_kinetic_energy():
-    """The cruise's wobble is matched so that the logs' own timetables, synthesised, gain
-    the logs' positive kinetic energy per km: measured here on a fresh synthesis of
-    those timetables (other random draws) against the logs, within 5 %."""
+    """The cruise's wobbles are matched so that the logs' own timetables, synthesised,
+    gain the logs' positive kinetic energy per km (fit_driving: the logs alone, no prior
+    to shrink towards): measured here on a fresh synthesis of those timetables (other
+    random draws) against the logs, within 6 % (the matching fits one set of draws of 36
+    runs: its own draws' noise is a few per cent)."""
     rng = np.random.default_rng(2)
     series = []
     for _ in range(6):  # runs with a wobbly cruise: 8 +- 1.5 m/s every 12 s
@@ -173,14 +175,16 @@ def test_kinetic_matching_reaches_the_logs_kinetic_energy():
                                          np.linspace(7.0, 0.0, 8))))
         v = np.concatenate(parts + [np.zeros(5)])
         series.append((np.arange(v.size, dtype=np.float64), v))
-    p = learn_driving(series, prior=driving_prior("bus"))
-    assert p.wobble > 0.05 and p.kinetic_ratio == pytest.approx(1.0, abs=0.05)
+    p = fit_driving(series, "wobbly")
+    assert max(p.wobble, p.wobble_slow) > 0.05 and p.kinetic_ratio == pytest.approx(1.0, abs=0.05)
     k_log = sum(float(np.maximum(0.5 * np.diff(v * v), 0).sum()) for _, v in series)
     d_log = sum(float(np.sum((v[:-1] + v[1:]) * 0.5)) for _, v in series)
     k_syn = d_syn = 0.0
-    for t, v in series:
-        c = synthesise_trip(*timetable_from_log(t, v), p, np.random.default_rng(9), with_terminals=True)
-        k_syn += float(np.maximum(0.5 * np.diff(c.speed_mps ** 2), 0).sum())
-        d_syn += float(c.distance_m[-1])
-    assert d_syn == pytest.approx(d_log, rel=1e-9)
-    assert k_syn / d_syn == pytest.approx(k_log / d_log, rel=0.05)
+    for seed in range(5):  # five fresh sets of draws (the matching used one)
+        rng = np.random.default_rng(100 + seed)
+        for t, v in series:
+            c = synthesise_trip(*timetable_from_log(t, v), p, rng, with_terminals=True)
+            k_syn += float(np.maximum(0.5 * np.diff(c.speed_mps ** 2), 0).sum())
+            d_syn += float(c.distance_m[-1])
+    assert d_syn == pytest.approx(5 * d_log, rel=1e-9)
+    assert k_syn / d_syn == pytest.approx(k_log / d_log, rel=0.06)

@@ -28,12 +28,14 @@ What is measured (:func:`measure_driving`, on each series' own samples; a sample
   solves the cruise speed from the schedule instead).
 - **top speed**: the 99th percentile of moving speed, the default speed cap.
 
-Two parameters are not read off the logs but matched (:func:`match_kinetic`), so that the
+Three parameters are not read off the logs but matched (:func:`match_kinetic`), so that the
 logs' own timetables (:func:`~cevm.core.timetable.synthesis.timetable_from_log`),
 synthesised, drive as the logs did where the energy sees it:
 
-- the cruise's *wobble*, a sine's amplitude as a share of the cruise speed (periods of
-  10-30 s), to the positive kinetic energy per km the logs gained (the CE vector's k_pos,
+- the cruise's *wobbles*, a sine's amplitude as a share of the cruise speed (periods of
+  10-30 s), one for the runs slower than the median run (mean speed, distance over
+  scheduled time: congestion) and one for the others, each to the positive kinetic
+  energy per km those runs of the logs gained (the CE vector's k_pos,
   behind the kinetic part of the energy: a speed trace's small changes, ignored by the
   measures above, add up to much of it; a flat cruise between trapezoids gained 26 % less
   than the sample buses' logs, 28 % less than the public bus cycles). A wobble costs no
@@ -47,9 +49,10 @@ synthesised, drive as the logs did where the energy sees it:
 ``kinetic_ratio`` and ``aero_ratio`` (the whole trips' cubed speed) say how close they
 came: on the sample buses 0.99 and 0.96, on the public bus cycles 1.00 and 0.84, on the
 truck cycles 1.00 and 0.85 (their short runs reach higher peaks than one cruise per run
-does; the bus cycles' sway reaches its bound, :data:`WOBBLE_MAX`, the trucks' stays 0: it
-does not move their cubed speed); on the car's two cycles the kinetic energy is 1.2 times
-theirs with no wobble at all.
+does; the bus cycles' sway and slow wobble reach their bound, :data:`WOBBLE_MAX`, the
+trucks' sway stays 0: it does not move their cubed speed); on the car's two cycles the
+kinetic energy is 1.2 times theirs with no wobble at all. One wobble for all runs gave
+the Twizy's congested city trips 0.7x their logs' kinetic energy and its commutes 2x.
 
 Spreads: accelerations, decelerations and stop durations are log-normal (median, and the
 sd of their logarithm, split into a between-trip part, the sd of the trips' mean
@@ -156,6 +159,10 @@ class DrivingParams:
     # their long runs' cubed speed per km (match_kinetic)
     wobble: float = 0.0
     sway: float = 0.0
+    # ... the wobble of the runs whose mean speed (distance over scheduled time) is below
+    # wobble_split_mps (the median of the logs' runs'; NaN: every run wobbles by ``wobble``)
+    wobble_slow: float = 0.0
+    wobble_split_mps: float = math.nan
     # the positive kinetic energy (kinetic_ratio) and the cubed speed (aero_ratio: the
     # aerodynamic term's) per km of the logs' own timetables synthesised, over the logs'
     # (NaN: not measured)
@@ -176,7 +183,8 @@ class DrivingParams:
         return (f"launch {self.accel_mps2:.2f} m/s2, braking {self.decel_mps2:.2f} m/s2, "
                 f"{self.stops_per_km:.2f} stops/km of {self.stop_s:.0f} s, "
                 f"{self.slowdowns_per_km:.2f} slowdowns/km to {100 * self.slowdown_share:.0f} % of the speed, "
-                f"wobble {100 * self.wobble:.0f} %, sway {100 * self.sway:.0f} %, "
+                f"wobble {100 * self.wobble_slow:.0f} % below {3.6 * self.wobble_split_mps:.0f} km/h and "
+                f"{100 * self.wobble:.0f} % above, sway {100 * self.sway:.0f} %, "
                 f"top {3.6 * self.top_speed_mps:.0f} km/h ({self.source})")
 
 
@@ -418,8 +426,8 @@ PRIORS: dict[str, DrivingParams] = {
         decel_trip_sd=0.348, stops_per_km=3.59, stops_trip_cv=0.178, stop_s=12.0, stop_sd=0.274,
         stop_trip_sd=0.663, slowdowns_per_km=2.55, slowdowns_trip_cv=0.748, slowdown_quantiles=(0.0, 0.0,
         0.00718, 0.0105, 0.0184, 0.11, 0.225, 0.452, 0.64, 0.818), cruise_tilt=-0.115, cruise_tilt_sd=0.279,
-        cruise_ratio=1.6, top_speed_mps=14.2, wobble=0.21, sway=0.4, kinetic_ratio=1.0, aero_ratio=0.84,
-        km=34.5, n_launches=148, n_stops=124, n_slowdowns=88),
+        cruise_ratio=1.6, top_speed_mps=14.2, wobble=0.137, sway=0.4, wobble_slow=0.4, wobble_split_mps=4.92,
+        kinetic_ratio=0.999, aero_ratio=0.842, km=34.5, n_launches=148, n_stops=124, n_slowdowns=88),
     "truck": DrivingParams(
         source="class prior (truck: ADVISOR's NYC truck, CBD truck, UDDS HDV, WVU city and suburban and "
                "CSHVR cycles)", n_trips=0,
@@ -427,8 +435,9 @@ PRIORS: dict[str, DrivingParams] = {
         decel_trip_sd=0.318, stops_per_km=1.48, stops_trip_cv=0.55, stop_s=20.0, stop_sd=0.744,
         stop_trip_sd=0.354, slowdowns_per_km=1.77, slowdowns_trip_cv=0.375, slowdown_quantiles=(0.0, 0.0864,
         0.156, 0.332, 0.457, 0.727, 0.788, 0.807, 0.924, 0.944), cruise_tilt=-0.28, cruise_tilt_sd=0.218,
-        cruise_ratio=1.75, top_speed_mps=24.6, wobble=0.0893, sway=0.0, kinetic_ratio=0.999, aero_ratio=0.85,
-        km=44.0, n_launches=53, n_stops=65, n_slowdowns=78),
+        cruise_ratio=1.75, top_speed_mps=24.6, wobble=0.083, sway=0.0, wobble_slow=0.248,
+        wobble_split_mps=5.02, kinetic_ratio=0.998, aero_ratio=0.85, km=44.0, n_launches=53, n_stops=65,
+        n_slowdowns=78),
     # no slowdown in these two cycles: its shares 0 (never drawn: the rate is 0), its spreads
     # 0 where a cycle pair cannot give one
     "car": DrivingParams(
@@ -437,8 +446,8 @@ PRIORS: dict[str, DrivingParams] = {
         decel_trip_sd=0.0416, stops_per_km=0.31, stops_trip_cv=1.0, stop_s=6.0, stop_sd=2.72e-16,
         stop_trip_sd=0.0, slowdowns_per_km=0.0, slowdowns_trip_cv=0.0, slowdown_quantiles=(0.0, 0.0, 0.0, 0.0,
         0.0, 0.0, 0.0, 0.0, 0.0, 0.0), cruise_tilt=-0.232, cruise_tilt_sd=0.058, cruise_ratio=1.35,
-        top_speed_mps=24.6, wobble=0.0, sway=0.338, kinetic_ratio=1.2, aero_ratio=1.0, km=9.66, n_launches=5,
-        n_stops=3, n_slowdowns=0),
+        top_speed_mps=24.6, wobble=0.0, sway=0.338, wobble_slow=0.0, wobble_split_mps=13.0, kinetic_ratio=1.2,
+        aero_ratio=1.0, km=9.66, n_launches=5, n_stops=3, n_slowdowns=0),
 }
 
 
@@ -469,8 +478,10 @@ def _shrink(x: float, n: float, prior: float, n0: float, *, log: bool = False) -
 def learn_driving(series: Sequence[tuple[np.ndarray, np.ndarray]], *, prior: DrivingParams,
                   label: str = "") -> DrivingParams:
     """The driving of ``series`` (per stored trip (time_s, speed_mps) on its 1 s grid),
-    each parameter shrunk towards ``prior`` by how much the logs saw (module notes).
-    ``label`` names the trips' vehicles in ``source`` (e.g. "EB-01, EB-02")."""
+    each parameter shrunk towards ``prior`` by how much the logs saw (module notes); the
+    cruise's wobbles and sway matched (:func:`match_kinetic`) with the others shrunk, then
+    shrunk by the km the logs drove (``kinetic_ratio`` and ``aero_ratio`` are the match's,
+    before that). ``label`` names the trips' vehicles in ``source`` (e.g. "EB-01, EB-02")."""
     m = measure_driving(series)
     if m.n_trips == 0 or float(m.km.sum()) <= 0:
         return prior
@@ -497,7 +508,8 @@ def learn_driving(series: Sequence[tuple[np.ndarray, np.ndarray]], *, prior: Dri
         stop_trip_sd=_shrink(x.stop_trip_sd, nt, prior.stop_trip_sd, n0["trips"]),
         slowdowns_per_km=_shrink(x.slowdowns_per_km, km, prior.slowdowns_per_km, n0["km"]),
         slowdowns_trip_cv=_shrink(x.slowdowns_trip_cv, nt, prior.slowdowns_trip_cv, n0["trips"]),
-        wobble=prior.wobble, sway=prior.sway,
+        wobble=prior.wobble, sway=prior.sway, wobble_slow=prior.wobble_slow,
+        wobble_split_mps=prior.wobble_split_mps,
         slowdown_quantiles=tuple(_shrink(q, nd, q0, n0["dip"]) for q, q0 in
                                  zip(x.slowdown_quantiles, prior.slowdown_quantiles, strict=True)),
         cruise_tilt=_shrink(x.cruise_tilt, nn, prior.cruise_tilt, n0["launch"]),
@@ -507,39 +519,54 @@ def learn_driving(series: Sequence[tuple[np.ndarray, np.ndarray]], *, prior: Dri
         km=km, n_launches=int(na), n_stops=int(ns), n_slowdowns=int(nd))
     matched = match_kinetic(series, shrunk)
     return replace(matched, wobble=_shrink(matched.wobble, km, prior.wobble, n0["km"]),
-                   sway=_shrink(matched.sway, km, prior.sway, n0["km"]))
+                   sway=_shrink(matched.sway, km, prior.sway, n0["km"]),
+                   wobble_slow=_shrink(matched.wobble_slow, km, prior.wobble_slow, n0["km"]),
+                   wobble_split_mps=_shrink(matched.wobble_split_mps, km, prior.wobble_split_mps, n0["km"]))
 
 
-def _moments(t: np.ndarray, v: np.ndarray, arr: np.ndarray, dep: np.ndarray) -> np.ndarray:
-    """A speed trace's positive kinetic energy per kg [J/kg] (the CE vector's k_pos), its
-    sum of cubed speeds over the steps [m^3/s^2] (the aerodynamic term's, per unit of
-    0.5 rho) and its distance [m] (trapezoids); then the cubed speeds and the distance of
-    its long runs alone (departure to arrival over :data:`SWAY_MIN_RUN_S`, by the
-    timetable ``arr``, ``dep``)."""
+def _run_class(d: np.ndarray, arr: np.ndarray, dep: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each run's mean speed [m/s] (distance over departure-to-arrival time) and time [s]."""
+    T = arr[1:] - dep[:-1]
+    return np.diff(d) / np.maximum(T, 1.0), T
+
+
+def _moments(t: np.ndarray, v: np.ndarray, d: np.ndarray, arr: np.ndarray, dep: np.ndarray,
+             split: float) -> np.ndarray:
+    """Sums over a speed trace's steps, by the runs of its timetable (``d``, ``arr``,
+    ``dep``): the positive kinetic energy per kg [J/kg] (the CE vector's k_pos), the cubed
+    speeds [m^3/s^2] (the aerodynamic term's, per unit of 0.5 rho) and the distance [m]
+    (trapezoids) of the whole trace; the kinetic energy and distance of its slow runs (mean
+    speed below ``split``) and of the others; the cubed speeds and distance of its long
+    runs (:data:`SWAY_MIN_RUN_S` or more)."""
     dt = np.diff(t)
     v0, v1 = v[:-1], v[1:]
+    kin = np.maximum(0.5 * (v1 * v1 - v0 * v0), 0.0)
     cube = 0.5 * (v0 ** 3 + v1 ** 3) * dt
     dist = 0.5 * (v0 + v1) * dt
-    long = np.flatnonzero(arr[1:] - dep[:-1] >= SWAY_MIN_RUN_S)
-    inside = np.zeros(t.size - 1, dtype=bool)
-    if long.size:
-        j = np.searchsorted(dep[:-1], t[:-1], side="right") - 1
-        ok = j >= 0
-        inside[ok] = np.isin(j[ok], long) & (t[:-1][ok] < arr[1:][j[ok]])
-    return np.array([float(np.maximum(0.5 * (v1 * v1 - v0 * v0), 0.0).sum()), float(cube.sum()),
-                     float(dist.sum()), float(cube[inside].sum()), float(dist[inside].sum())])
+    mean, T = _run_class(d, arr, dep)
+    j = np.searchsorted(dep[:-1], t[:-1], side="right") - 1
+    inrun = j >= 0
+    inrun[inrun] = t[:-1][inrun] < arr[1:][j[inrun]]
+    jj = np.where(inrun, j, 0)
+    slow = inrun & (mean[jj] < split)
+    fast = inrun & ~(mean[jj] < split)
+    long = inrun & (T[jj] >= SWAY_MIN_RUN_S)
+    return np.array([kin.sum(), cube.sum(), dist.sum(), kin[slow].sum(), dist[slow].sum(), kin[fast].sum(),
+                     dist[fast].sum(), cube[long].sum(), dist[long].sum()], dtype=np.float64)
 
 
 def match_kinetic(series: Sequence[tuple[np.ndarray, np.ndarray]], params: DrivingParams, *,
                   trips: int = KINETIC_MATCH_TRIPS) -> DrivingParams:
-    """``params`` with the cruise's wobble and sway that make the series' own timetables
+    """``params`` with the cruise's wobbles and sway that make the series' own timetables
     (:func:`~cevm.core.timetable.synthesis.timetable_from_log`, up to ``trips`` of them
     spread over the series), synthesised, gain the series' positive kinetic energy per km
-    (the wobble's) and have their long runs' cubed speed per km (the sway's): secant steps
-    on one amplitude at a time (wobble, sway, wobble again), each in [0,
-    :data:`WOBBLE_MAX`], with the same random draws at each step; ``kinetic_ratio`` and
-    ``aero_ratio`` (the whole trips' cubed speed) say how close they came. Without long
-    runs the sway stays the one given (params unchanged where no series moves)."""
+    on their slow runs (``wobble_slow``: mean speed below ``wobble_split_mps``, the median
+    of the runs') and on the others (``wobble``), and have their long runs' cubed speed per
+    km (``sway``): secant steps on one amplitude at a time (the wobbles, the sway, the
+    wobbles again), each in [0, :data:`WOBBLE_MAX`], with the same random draws at each
+    step; ``kinetic_ratio`` and ``aero_ratio`` (the whole trips') say how close they came.
+    An amplitude without runs of its kind stays the one given (params unchanged where no
+    series moves)."""
     from cevm.core.timetable.synthesis import synthesise_trip, timetable_from_log  # (it imports this module)
 
     usable = [(np.asarray(t, dtype=np.float64), np.asarray(v, dtype=np.float64)) for t, v in series
@@ -549,27 +576,32 @@ def match_kinetic(series: Sequence[tuple[np.ndarray, np.ndarray]], params: Drivi
     pick = np.unique(np.linspace(0, len(usable) - 1, min(trips, len(usable))).round().astype(np.int64))
     chosen = [usable[i] for i in pick.tolist()]
     tables = [timetable_from_log(t, v) for t, v in chosen]
+    means = np.concatenate([_run_class(d, arr, dep)[0] for d, arr, dep in tables])
+    split = float(np.median(means[means > 0])) if np.any(means > 0) else math.nan
+    params = replace(params, wobble_split_mps=split)
 
-    def per_m(m: np.ndarray) -> np.ndarray:  # kinetic, cubed speed, long runs' cubed speed per m
-        return np.array([m[0] / max(m[2], 1.0), m[1] / max(m[2], 1.0), m[3] / m[4] if m[4] > 0 else math.nan])
+    def per_m(m: np.ndarray) -> np.ndarray:  # all: kinetic, cubed speed; slow, fast: kinetic; long: cubed
+        def ratio(x: float, y: float) -> float:
+            return x / y if y > 0 else math.nan
+        return np.array([ratio(m[0], m[2]), ratio(m[1], m[2]), ratio(m[3], m[4]), ratio(m[5], m[6]),
+                         ratio(m[7], m[8])])
 
-    target = per_m(np.sum([_moments(t, v, arr, dep) for (t, v), (_, arr, dep) in zip(chosen, tables, strict=True)],
-                          axis=0))
+    target = per_m(np.sum([_moments(t, v, d, arr, dep, split)
+                           for (t, v), (d, arr, dep) in zip(chosen, tables, strict=True)], axis=0))
 
     def synth(p: DrivingParams) -> np.ndarray:
         rng = np.random.default_rng(0)
-        m = np.zeros(5)
+        m = np.zeros(9)
         for d, arr, dep in tables:
             c = synthesise_trip(d, arr, dep, p, rng, with_terminals=True)
-            m += _moments(c.time_s, c.speed_mps, arr, dep)
+            m += _moments(c.time_s, c.speed_mps, d, arr, dep, split)
         return per_m(m)
 
-    def secant(p: DrivingParams, field: str, which: int) -> tuple[DrivingParams, np.ndarray]:
-        def at(x: float) -> DrivingParams:
-            return replace(p, wobble=x) if field == "wobble" else replace(p, sway=x)
-
+    def secant(p: DrivingParams, field: str, which: int) -> tuple[DrivingParams, np.ndarray | None]:
+        if not math.isfinite(target[which]):
+            return p, None
         x0, x1 = 0.0, 0.1
-        y0, y1 = synth(at(x0)), synth(at(x1))
+        y0, y1 = synth(replace(p, **{field: x0})), synth(replace(p, **{field: x1}))  # type: ignore[arg-type]
         for _ in range(3):
             if not y1[which] > y0[which]:
                 break
@@ -577,13 +609,17 @@ def match_kinetic(series: Sequence[tuple[np.ndarray, np.ndarray]], params: Drivi
                                WOBBLE_MAX))
             if x2 == x1:
                 break
-            x0, y0, x1, y1 = x1, y1, x2, synth(at(x2))
-        return (at(x1), y1) if abs(y1[which] - target[which]) <= abs(y0[which] - target[which]) else (at(x0), y0)
+            x0, y0, x1, y1 = x1, y1, x2, synth(replace(p, **{field: x2}))  # type: ignore[arg-type]
+        x, y = (x1, y1) if abs(y1[which] - target[which]) <= abs(y0[which] - target[which]) else (x0, y0)
+        return replace(p, **{field: x}), y  # type: ignore[arg-type]
 
-    p, got = secant(replace(params, wobble=0.0), "wobble", 0)
-    if math.isfinite(target[2]):
-        p, _ = secant(p, "sway", 2)
-        p, got = secant(p, "wobble", 0)
+    p = replace(params, wobble=0.0, wobble_slow=0.0)
+    p, _ = secant(p, "wobble_slow", 2)
+    p, _ = secant(p, "wobble", 3)
+    p, _ = secant(p, "sway", 4)
+    p, _ = secant(p, "wobble_slow", 2)
+    p, got = secant(p, "wobble", 3)
+    got = synth(p) if got is None else got
     return replace(p, kinetic_ratio=float(got[0] / target[0]) if target[0] > 0 else math.nan,
                    aero_ratio=float(got[1] / target[1]) if target[1] > 0 else math.nan)
 

@@ -17,8 +17,10 @@ does the cap; the speed at each sample of the 1 s grid is::
 
 with one cruise speed ``c`` per run and the cruise's shape ``phi_i > 0``: its tilt (a
 straight line over the run) times its wobble (``1 + A sin(2 pi t / P + theta)``, the
-driving's amplitude A, period P and phase theta drawn per run). As ``min(c phi, h) = phi min(c, h /
-phi)``, the run's distance by the trapezoid rule (the CE model's,
+driving's amplitude A for the run's kind, slow or not, period P and phase theta drawn
+per run) times, on runs of 3 minutes or more, its sway (``exp(s z - s^2 / 2)``, z
+standard normal at knots a minute apart, linear between). As ``min(c phi, h) = phi
+min(c, h / phi)``, the run's distance by the trapezoid rule (the CE model's,
 :func:`cevm.core.cycle.trapezoid_distance_m`) is ``sum_i w_i phi_i min(c, h_i / phi_i)``
 (``w_i`` half the steps either side of sample i): continuous, piecewise linear and
 increasing in ``c``, so ``c`` is solved exactly by sorting the run's ``h_i / phi_i``
@@ -162,8 +164,6 @@ def _caps(speed_cap_mps, runs: int, params: DrivingParams) -> np.ndarray:
     return cap
 
 
-
-
 def _solve_cruise(h: np.ndarray, w: np.ndarray, run: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Per run r the cruise c_r with sum_{i in r} w_i min(c_r, h_i) = d_r (module notes),
     and whether each run is feasible (sum w_i h_i >= d_r). Infeasible runs get their
@@ -232,7 +232,8 @@ def _envelope(g: _Grid, dep: np.ndarray, arr: np.ndarray, a: np.ndarray, b: np.n
     np.clip(h, 0.0, cap[run], out=h)
     if ev_run.size:
         ar, br, cr = a[ev_run], b[ev_run], cap[ev_run]
-        off = (ev_run // (dep.size // max(g.bounds.size - 1, 1))) * _DRAW_SHIFT_S
+        runs_per_draw = dep.size // max(g.bounds.size - 1, 1)
+        off = (ev_run // runs_per_draw) * _DRAW_SHIFT_S  # the event's draw's clock in the key
         i0 = np.maximum(np.searchsorted(g.key, off + ev_s - (cr - ev_u) / br, side="left"), g.lo[ev_run])
         i1 = np.minimum(np.searchsorted(g.key, off + ev_e + (cr - ev_u) / ar, side="right"), g.hi[ev_run])
         cnt = np.maximum(i1 - i0, 0)
@@ -495,11 +496,13 @@ def _drive(d: np.ndarray, w0: np.ndarray, w1: np.ndarray, a: np.ndarray, b: np.n
     r, dp_t, dp_u = r[keep], dp_t[keep], dp_u[keep]
     g = _grid(w0, w1, with_terminals)
     t, run, bounds, wgt = g.t, g.run, g.bounds, g.wgt
+    slow = dd / np.maximum(T, 1.0) < params.wobble_split_mps  # False where the split is NaN
+    amp = np.where(slow, _finite(params.wobble_slow), _finite(params.wobble))
     # the cruise's shape: its tilt, and its wobble (a sine of the driving's amplitude, the
     # run's period and phase); v = min(c phi, h) = phi min(c, h / phi), phi > 0
     tau = t - dep_r[run]
     phi = (1.0 - ev.tilt[run] * np.clip(tau / np.maximum(T[run], 1e-9), 0.0, 1.0)) \
-        * (1.0 + _finite(params.wobble) * np.sin(2.0 * np.pi * tau / ev.wob_period[run] + ev.wob_phase[run])) \
+        * (1.0 + amp[run] * np.sin(2.0 * np.pi * tau / ev.wob_period[run] + ev.wob_phase[run])) \
         * _sway(rng, tau, run, T, _finite(params.sway))
 
     def build(stops_on: np.ndarray, dips_on: np.ndarray, dp_u: np.ndarray) -> tuple[np.ndarray, np.ndarray,
