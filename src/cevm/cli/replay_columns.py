@@ -72,16 +72,19 @@ class DutyRows:
     @cached_property
     def verdict(self) -> dict[str, np.ndarray]:
         """Each duty's flags by the one verdict of :func:`cevm.core.limits.verdict`: the
-        reserve (column completes), the gross mass; power and speed not checked (NaN)."""
+        reserve kept at the mean energies, and the candidate's gross mass, power and speed
+        limits on each of its trips (:mod:`cevm.core.replay.follow`: a flag is 1 if any
+        trip fails it; NaN where not checked)."""
         from cevm.core import limits
 
-        limit = self.plan.vehicle.max_gross_kg
-        heaviest = self.per_duty(self.plan.energies.mass_kg, np.maximum)
-        over = np.full(self.n, np.nan) if limit is None else (heaviest > limit).astype(np.float64)
-        completes = (self.plan.levels.low >= self.plan.reserve).astype(np.float64)
-        nan = np.full(self.n, np.nan)
+        follow, first = self.plan.follow, self.d.first
+        over = follow.duty_flag("over_max_gross", first)
+        if self.plan.vehicle.max_gross_kg is None:
+            over = np.full(self.n, np.nan)
+        kept = (self.plan.levels.low >= self.plan.reserve).astype(np.float64)
+        flags = {k: follow.duty_flag(k, first) for k in ("over_power", "over_speed")}
         return limits.verdict(is_ev=np.full(self.n, self.ev), over_max_gross=np.nan_to_num(over, nan=0.0),
-                              over_power=nan, over_speed=nan, energy_ok=completes) | {"over_max_gross": over}
+                              energy_ok=kept, **flags) | {"over_max_gross": over}
 
     @cached_property
     def energy(self) -> np.ndarray:
@@ -196,16 +199,26 @@ REPLAY = ColumnSpec((
            value=lambda r: r.out(r.plan.levels.gained)),
     Column("charges", "stops of the duty that charged (EV) or refuelled (ICE)", decimals=0, digits=0,
            value=lambda r: r.plan.levels.charges.astype(np.float64)),
-    Column("completes", "the duty keeps the reserve all along, at the mean energies", kind="bool", header="completes",
-           value=lambda r: (r.plan.levels.low >= r.plan.reserve).astype(np.float64)),
+    Column("completes", "the duty keeps the reserve all along, at the mean energies, and the candidate can follow "
+           "every trip of it (column cannot_follow)", kind="bool", header="completes",
+           value=lambda r: r.plan.completes.astype(np.float64)),
+    Column("cannot_follow", "the duty's first trip the candidate cannot follow and the limit, with the figures (e.g. "
+           "'speed on trip T (124 km/h > 80)'; empty where it follows them all): its max_power_kw, max_speed_kmh "
+           "and max_gross_kg judged on each trip's stored samples as cevm predict judges them", kind="text",
+           value=lambda r: r.texts(list(r.plan.cannot_follow))),
     Column("over_max_gross", "a trip of the duty is heavier than the candidate's max_gross_kg (empty without it)",
            kind="bool", value=lambda r: r.verdict["over_max_gross"]),
+    Column("over_power", "a trip of the duty asks more wheel power than the candidate's max_power_kw (over any 5 s, "
+           "at the trip's mass, with the logged trace's tolerance, as cevm predict; empty without it)", kind="bool",
+           value=lambda r: r.verdict["over_power"]),
+    Column("over_speed", "a trip of the duty holds a speed above the candidate's max_speed_kmh (as cevm predict; "
+           "empty without it)", kind="bool", value=lambda r: r.verdict["over_speed"]),
     Column("feasible", "the verdict every command gives (cevm.core.limits): the duty completes (the reserve kept at "
-           "the mean energies) within max_gross_kg; max_power_kw and max_speed_kmh are not checked here (replay reads "
-           "the trips' vectors, not their samples: cevm predict -v CANDIDATE --vehicle-id ID checks them per trip)",
+           "the mean energies) and the candidate can follow every trip (max_power_kw, max_speed_kmh, max_gross_kg)",
            kind="bool", value=lambda r: r.verdict["feasible"]),
     Column("p_complete", "probability that the duty keeps the reserve all along (Monte Carlo over the candidate's "
-           "predictive distribution; 0 or 1 without one)", header="p", digits=3, value=lambda r: r.p),
+           "predictive distribution; 0 or 1 without one), 0 where the candidate cannot follow a trip of it",
+           header="p", digits=3, value=lambda r: r.p),
     Column("p_complete_se", "Monte Carlo standard error of p_complete", decimals=6, value=lambda r: r.se()),
     Column("reserve_trip", "the trip in which the level first falls below the reserve (empty if kept)", kind="text",
            value=lambda r: r.trip_id(r.plan.reserve_trip)),
@@ -292,6 +305,13 @@ def replay_values(ctx: DutyRows) -> dict:
 #: people only.
 STATUS = Column("status", "reserve kept, and where not, where it is crossed", kind="text", header="completes",
                 layout="wrap")
+
+#: What the table never leaves out on a narrow terminal (its verdict, "status", above
+#: all: the other columns are folded or left out first, :func:`cevm.cli.output.fit_columns`),
+#: and what it leaves out first.
+REPLAY_TABLE_KEEP = ("vehicle_id", "day", "status")
+REPLAY_TABLE_DROP = ("charged_kwh", "refuelled_l", "tank_needed_l", "battery_needed_kwh", "extra_kwh", "extra_l",
+                     "distance_km", "trips", "soc_min_pct", "tank_min_pct")
 
 #: What the table shows (those without a value in any row left out), and "status".
 REPLAY_TABLE = ("vehicle_id", "day", "trips", "distance_km", "energy_kwh", "fuel_l", "soc_min_pct", "tank_min_pct",

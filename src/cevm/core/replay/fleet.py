@@ -45,8 +45,9 @@ def duty_extrapolation(plan: VehiclePlan) -> list[str]:
 class Fleet:
     """The duties of a replay, gathered vehicle by vehicle (:meth:`add`): per duty its
     vehicle, start [s], energy and its interval [J or l], whether it completes at the
-    mean, its probability, and its battery and charger needs at the mean energies and at
-    the sizing's confidence (``battery_conf``, ``charger_conf``)."""
+    mean, whether the candidate can follow its trips (``follows``), its probability, and
+    its battery and charger needs at the mean energies and at the sizing's confidence
+    (``battery_conf``, ``charger_conf``; inf where the candidate cannot follow it)."""
 
     vehicle: list
     start_s: list
@@ -54,6 +55,7 @@ class Fleet:
     low: list
     high: list
     completes: list
+    follows: list
     p: list
     battery: list
     charger: list
@@ -62,7 +64,7 @@ class Fleet:
 
     @classmethod
     def empty(cls) -> Fleet:
-        return cls(*([] for _ in range(11)))
+        return cls(*([] for _ in range(12)))
 
     def add(self, plan: VehiclePlan, p: np.ndarray, low: np.ndarray, high: np.ndarray) -> None:
         first = plan.duties.first
@@ -71,12 +73,15 @@ class Fleet:
         self.energy.append(np.add.reduceat(plan.energies.energy, first) if first.size else np.zeros(0))
         self.low.append(low)
         self.high.append(high)
-        self.completes.append(plan.levels.low >= plan.reserve)
-        self.p.append(np.asarray(p, dtype=np.float64))
-        self.battery.append(plan.battery_needed)
-        self.charger.append(plan.charger_needed_w)
-        self.battery_conf.append(plan.battery_needed_conf)
-        self.charger_conf.append(plan.charger_needed_w_conf)
+        self.completes.append(plan.completes)
+        self.follows.append(plan.follows)
+        self.p.append(plan.judged(p))
+        # a duty the candidate cannot follow: no battery or charger completes it
+        self.battery.append(np.where(plan.follows, plan.battery_needed, np.inf))
+        self.charger.append(np.where(plan.follows | np.isnan(plan.charger_needed_w), plan.charger_needed_w, np.inf))
+        self.battery_conf.append(np.where(plan.follows, plan.battery_needed_conf, np.inf))
+        self.charger_conf.append(np.where(plan.follows | np.isnan(plan.charger_needed_w_conf),
+                                          plan.charger_needed_w_conf, np.inf))
 
     def array(self, name: str) -> np.ndarray:
         parts = getattr(self, name)
