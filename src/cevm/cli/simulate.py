@@ -146,7 +146,7 @@ def simulate(
     row.update(verdict)
     row["road"] = "flat" if h is None else (elevation or "elevation")
     if fmt == OutputFormat.table:
-        write_rows([{"quantity": k, "value": v} for k, v in row.items()], fmt, title="cevm simulate (detailed model)")
+        write_rows(table_rows(row), fmt, title="cevm simulate (detailed model)")
     else:
         write_rows([row], fmt)
     if foreign:
@@ -156,6 +156,38 @@ def simulate(
     if res.traction_deficit_j > 0.02 * max(res.wheel_energy_j, 1.0):
         typer.echo(f"cevm: warning: the vehicle could not follow the trace: {row['traction_deficit_kwh']:.2f} kWh "
                    "of wheel work beyond its powertrain's limits", err=True)
+
+
+#: Decimals of simulate's table by the end of a quantity's name (the rest: 3), as the
+#: other commands' tables show them: whole kg, s, kW of demand; one decimal of %, km/h.
+TABLE_DECIMALS = (("_kg", 0), ("_s", 0), ("_pct", 1), ("_kmh", 1), ("demand_kw", 0), ("_km", 2), ("_kwh", 2),
+                  ("_l", 2), ("_100km", 1))
+
+
+def table_rows(row: dict[str, Any]) -> list[dict[str, str]]:
+    """Simulate's row as the table's (quantity, value) pairs: numbers at the decimals of
+    :data:`TABLE_DECIMALS` with thousands separators, "-" where there is no value; the
+    verdict as predict's table says it (``yes``, or ``NO`` and why: over max gross, where
+    it runs empty, what it cannot follow), the other flags in capitals where they fail
+    (``NO`` for a check that fails, ``YES`` for a limit exceeded)."""
+    from cevm.cli.prediction_columns import verdict_text
+
+    out = []
+    for k, v in row.items():
+        if v is None or (isinstance(v, float) and v != v):
+            text = "-"
+        elif k == "feasible":
+            ev = "energy_kwh" in row
+            text = verdict_text({**row, "powertrain": "ev" if ev else "ice", "tank_ok": row.get("tank_ok", True)})
+        elif isinstance(v, (bool, np.bool_)):
+            text = ("YES" if v else "no") if k.startswith("over_") else ("yes" if v else "NO")
+        elif isinstance(v, (int, float, np.integer, np.floating)):
+            d = next((n for end, n in TABLE_DECIMALS if k.endswith(end)), 3)
+            text = f"{float(v):,.{d}f}"
+        else:
+            text = str(v)
+        out.append({"quantity": k, "value": text})
+    return out
 
 
 def _stored_trip(store: Path | None, trip: str, veh, mass_kg: float | None, mass_source: str,
