@@ -103,8 +103,9 @@ class DutyRows:
     def times(self, which: str) -> tuple[np.ndarray, list[str]]:
         t = self.plan.trips
         s = t.start_s[self.d.first] if which == "start" else t.end_s[self.d.last]
-        return self.texts([datetime.fromtimestamp(float(x), UTC).astimezone(self.tz).isoformat(timespec="seconds")
-                           for x in s])
+        from cevm.text import iso_time
+
+        return self.texts([iso_time(x, self.tz) for x in s.tolist()])
 
     def days(self) -> tuple[np.ndarray, list[str]]:
         t = self.plan.trips
@@ -161,7 +162,8 @@ REPLAY = ColumnSpec((
     Column("day", "the date the duty starts, in --tz", kind="text", value=lambda r: r.days()),
     Column("duty", "the duty's number among the vehicle's replayed duties (1, 2, ...)", decimals=0, digits=0,
            value=lambda r: np.arange(1, r.n + 1, dtype=np.float64)),
-    Column("start_time", "when the duty's first trip starts (ISO 8601, in --tz)", kind="text",
+    Column("start_time", "when the duty's first trip starts (ISO 8601 to the second, in --tz: Z for UTC, else the "
+           "zone's offset)", kind="text",
            value=lambda r: r.times("start")),
     Column("end_time", "when the duty's last trip ends (ISO 8601, in --tz)", kind="text",
            value=lambda r: r.times("end")),
