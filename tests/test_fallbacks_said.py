@@ -72,3 +72,17 @@ def test_fleet_plan_names_the_vehicle_route_and_limit_of_an_infeasible_day(tmp_p
                      r"its battery above the reserve\)", res.stderr), res.stderr
     res = runner.invoke(app, ["fleet", "plan", str(_ev_scenario(tmp_path, max_power_kw="150.0")), "--day", "1"])
     assert "NO (cannot follow: power on route LH1 leg depot -> LH1S1/R1S2, " in " ".join(res.stdout.split())
+
+
+def test_calibrate_compares_with_the_paper_only_where_it_has_a_row(tmp_path):
+    # the paper's tables 1 and 2 are an electric bus's and a diesel HGV's: a quadricycle
+    # (or a car) has no row, and its report had the bus's beside it
+    store = tmp_path / "s.sqlite"
+    assert runner.invoke(app, ["ingest", str(ROOT / "tests/data/twizy"), "--store", str(store), "-q"]).exit_code == 0
+    res = runner.invoke(app, ["calibrate", "-v", str(ROOT / "configs/vehicles/renault-twizy.toml"), "--vehicle-id",
+                              "RSK-Twizy", "--store", str(store)])
+    assert res.exit_code == 0, res.output
+    out = " ".join(res.stdout.split())
+    assert "paper (" not in out and "table 1" in out
+    assert ("the paper has CE-model errors for an electric bus (table 1) and a diesel HGV (table 2) only: none to "
+            "compare an electric quadricycle with") in out
