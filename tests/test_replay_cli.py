@@ -308,3 +308,17 @@ def test_replay_judges_each_trip_as_predict(store, tmp_path):
         else:
             assert d["cannot_follow"] in ("", None)
     assert i == len(trips)
+
+
+def test_levels_carried_sizing_counts_no_duty_the_candidate_cannot_follow(store, tmp_path):
+    # the shipped truck cannot follow 3 of the 5 duties (a trip each over its 600 kW):
+    # with levels carried across duties no battery completes 95 % of them, and a share
+    # of 40 % is completed by the two it can follow
+    summary = tmp_path / "summary.json"
+    for share, sized in (("0.95", False), ("0.4", True)):
+        res = replay(store, "-v", TRUCK, "--overnight", "none", "--target-share", share, "--summary", str(summary),
+                     "-f", "csv")
+        assert res.exit_code == 0, res.output
+        sm = json.loads(summary.read_text())
+        assert sm["cannot_follow"] == 3
+        assert (sm["battery_for_target_kWh"] is not None) is sized, sm

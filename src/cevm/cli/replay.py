@@ -286,7 +286,7 @@ def _plans(st, vehicle, settings: ReplaySettings, ids: list[str], *, positions: 
                              "charged")
         if settings.charging.chained:
             run.chains.append(Chain(plan.energies.energy, plan.excess, _excess_reader(plan, read), plan.stops,
-                                    plan.duties.bounds))
+                                    plan.duties.bounds, plan.follows))
         task = None
         if plan.spread.source != "none":
             task = Task(f"{vid} ({plan.duties.n} duties)", (plan.draw_plan(), settings.draws, settings.seed),

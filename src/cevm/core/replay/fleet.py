@@ -98,14 +98,16 @@ class Fleet:
 @dataclass(frozen=True, eq=False)
 class Chain:
     """One vehicle's chain of duties for the fleet's sizing: its trips' energies, excess
-    (:class:`~cevm.core.replay.plan.Excess`, and ``exact`` to learn more), stops and
-    duty bounds."""
+    (:class:`~cevm.core.replay.plan.Excess`, and ``exact`` to learn more), stops, duty
+    bounds, and which duties the candidate can follow (a duty it cannot is completed by no
+    battery or charger)."""
 
     energy: np.ndarray
     excess: Excess
     exact: Callable[[np.ndarray], np.ndarray]
     stops: Stops
     bounds: np.ndarray
+    follows: np.ndarray | None = None  # per duty: the candidate can follow its trips (None: all)
 
 
 def _joined(chains: Sequence[Chain]) -> tuple[np.ndarray, Stops, np.ndarray, Lanes, np.ndarray]:
@@ -130,6 +132,8 @@ def chained_sizes(chains: Sequence[Chain], share: float, *, soc_start: float, re
         return float("nan"), float("nan")
     energy, stops, bounds, lanes, offsets = _joined(chains)
     n_duties = bounds.size - 1
+    follows = np.concatenate([np.ones(c.bounds.size - 1, dtype=bool) if c.follows is None else c.follows
+                              for c in chains])
 
     def excess(which: str) -> np.ndarray:
         return np.concatenate([getattr(c.excess, which) for c in chains])
@@ -137,7 +141,8 @@ def chained_sizes(chains: Sequence[Chain], share: float, *, soc_start: float, re
     def share_at(x: np.ndarray, cap: float, start: float, power: np.ndarray | None = None) -> float:
         run = run_chains(lanes, energy, x, stops, capacity=cap, start=start, efficiency=efficiency, power_w=power)
         low = lanes.put(run.low, energy.size)
-        return float(np.count_nonzero(np.minimum.reduceat(low, bounds[:-1]) >= reserve * cap)) / n_duties
+        kept = np.minimum.reduceat(low, bounds[:-1]) >= reserve * cap
+        return float(np.count_nonzero(kept & follows)) / n_duties
 
     def learn(trips: np.ndarray) -> None:
         owner = np.searchsorted(offsets, trips, side="right") - 1
