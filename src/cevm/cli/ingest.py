@@ -8,7 +8,8 @@ from typing import TYPE_CHECKING, Annotated
 
 import typer
 
-from cevm.cli.common import EXIT_OK, EXIT_PARTIAL, StoreOption, apply_manifest, check_workers, fail, warn
+from cevm.cli.common import EXIT_OK, EXIT_PARTIAL, StoreOption, apply_manifest, check_workers, fail
+from cevm.cli.ingest_dsm import dsm_coverage, warn_dsm_coverage
 from cevm.cli.output import OutputFormat, write_lines, write_rows
 from cevm.errors import CevmError
 from cevm.ingest.textfile import MAX_SAMPLES, ReadLimits
@@ -145,7 +146,7 @@ def ingest(
         with make_executor(workers, scheduler) as executor, TripStore.open(store_path) as st:
             st.require_intact()  # never write into a damaged database
             report = run_ingest(paths, st, options, on_file=on_file, on_start=on_start, executor=executor)
-            coverage = dsm_coverage(st, report) if dsm else None
+            coverage = dsm_coverage(st, report) if dsm else None  # cevm.cli.ingest_dsm
             if masses is not None and manifest is not None:
                 from cevm.io.manifest import open_manifest
 
@@ -187,7 +188,7 @@ def ingest(
         else:
             _print_ingest_table(report, summary, store_path)
         if coverage is not None and dsm:
-            _warn_dsm_coverage(coverage, dsm)
+            warn_dsm_coverage(coverage, dsm)
         if late:
             typer.echo(f"cevm ingest: {interrupts.signal_name(interrupts.Interrupted(late[0]))} arrived after the "
                        "run had finished: it stopped nothing, the summary above stands", err=True)
@@ -271,52 +272,6 @@ def _remove_store_files(store_path: Path) -> None:
     """Remove a store this run created and wrote no file into (and SQLite's side files)."""
     for p in (store_path, *(store_path.with_name(store_path.name + s) for s in ("-wal", "-shm", "-journal"))):
         p.unlink(missing_ok=True)
-
-
-#: Below this share of the logs' distance [%] on the DSM, ingest says so (overall, and
-#: names each file below :data:`DSM_FILE_FEW_PCT`): their road elevation comes from GPS
-#: altitude or a flat road instead, which calibration and the power checks treat
-#: differently (cevm.core.limits.ELEVATION_SD_M).
-DSM_FEW_PCT = 90.0
-DSM_FILE_FEW_PCT = 50.0
-
-
-def dsm_coverage(st, report) -> tuple[float | None, list[tuple[str, float]]]:
-    """The share [%] of the distance of the trips of the files this run ingested that
-    lies on the DSM (each trip's dsm_coverage_pct weighted by its distance; None without
-    such trips), and each file's share, in the run's order."""
-    import numpy as np
-
-    ingested = [str(Path(f.path).resolve()) for f in report.files if f.status == "ingested"]  # as stored
-    if not ingested:
-        return None, []
-    rows = st.list_trips()
-    rows = rows[rows["source_file"].map(lambda p: str(Path(p).resolve())).isin(ingested)]
-    d = rows["distance_m"].to_numpy(dtype=np.float64)
-    c = np.nan_to_num(rows["dsm_coverage_pct"].to_numpy(dtype=np.float64))
-    if not d.sum() > 0:
-        return None, []
-    per = []
-    for path in ingested:
-        sel = (rows["source_file"].map(lambda p: str(Path(p).resolve())) == path).to_numpy()
-        if d[sel].sum() > 0:
-            per.append((path, float(np.dot(c[sel], d[sel]) / d[sel].sum())))
-    return float(np.dot(c, d) / d.sum()), per
-
-
-def _warn_dsm_coverage(coverage: tuple[float | None, list[tuple[str, float]]], dsm: str) -> None:
-    """One warning when --dsm covers few of the logs ingested (module constants), with
-    the share covered overall and of each file below half."""
-    overall, per = coverage
-    few = [(p, c) for p, c in per if c < DSM_FILE_FEW_PCT]
-    if overall is None or (overall >= DSM_FEW_PCT and not few):
-        return
-    named = ", ".join(f"{printable(Path(p).name)} {c:.0f} %" for p, c in few[:5]) + (" ..." if len(few) > 5 else "")
-    what = "none" if overall == 0 else f"{overall:.0f} %"
-    warn(f"--dsm {printable(str(dsm))} covers {what} of the distance of the {len(per)} log(s) ingested"
-         + (f"; under half of {len(few)}: {named}" if few else "")
-         + ": their road elevation is from GPS altitude or a flat road (columns dsm_coverage_pct and "
-         "elevation_source of 'cevm trips'; a DSM of another area or CRS covers nothing)")
 
 
 def _file_dict(fr) -> dict:

@@ -466,8 +466,9 @@ def replay_cmd(
                                                          "candidate file's.")] = None,
     within_trips: Annotated[str, typer.Option(help="Where the lowest level is looked for: 'exact' (inside the trips "
                                                    "that could decide anything: their stored profiles read) or 'ends' "
-                                                   "(at the trips' ends only: no profile read, for a large fleet "
-                                                   "fast).")] = "exact",
+                                                   "(at the trips' ends only: no profile read for it, for a large "
+                                                   "fleet fast; a candidate's max_power_kw and max_speed_kmh are "
+                                                   "judged on every trip's profile either way).")] = "exact",
     interval: Annotated[float, typer.Option(help="Interval of the duties' energy.")] = DEFAULT_INTERVAL,
     confidence: Annotated[float, typer.Option(help="A duty counts as completed in the summary at this probability "
                                                    "(default 0.95: the high end of the 90 % "
