@@ -65,8 +65,10 @@ def test_fleet_plan_says_an_electric_fleet_in_kwh(tmp_path):
     assert "[J]" not in res.stdout and "total J" not in res.stdout
 
 
-def test_fleet_plan_names_the_vehicle_route_and_limit_of_an_infeasible_day(tmp_path):
-    res = runner.invoke(app, ["fleet", "plan", str(_ev_scenario(tmp_path, battery_kwh="60.0")), "--day", "1"])
+@pytest.mark.parametrize("method", ["enumerate", "milp"])
+def test_fleet_plan_names_the_vehicle_route_and_limit_of_an_infeasible_day(tmp_path, method):
+    res = runner.invoke(app, ["fleet", "plan", str(_ev_scenario(tmp_path, battery_kwh="60.0")), "--day", "1",
+                              "--method", method])
     # 60 kWh, 51 above the 15 % reserve: HGV1's long-haul route asks more whatever it serves
     assert re.search(r"not planned: day 'day 1': .*\(HGV1 on route 'LH1': at least [\d.]+ kWh, over the 51\.0 kWh of "
                      r"its battery above the reserve\)", res.stderr), res.stderr

@@ -6,7 +6,7 @@ import numpy as np
 
 from cevm.core.assignment.curves import quantity
 from cevm.core.assignment.evaluation import objective_weights, vector_groups
-from cevm.core.assignment.problem import DayProblem, why_infeasible
+from cevm.core.assignment.problem import DayProblem, over_budget, why_infeasible
 from cevm.core.assignment.scenario import BUDGET_RTOL, Scenario
 from cevm.core.vehicle import predict
 
@@ -78,7 +78,8 @@ def solve_enumerate(sc: Scenario, prob: DayProblem, min_p_complete: float | None
     if not feasible.any():
         info["why"] = ("no assignment satisfies the gross-weight and battery limits"
                        + (f" with every day completed with probability {min_p_complete:g}" if moments else "")
-                       + (why_infeasible(sc, prob) or _over_budget(sc, vehicle_q)))
+                       + (why_infeasible(sc, prob)
+                          or over_budget(sc, {k: float(np.min(q)) for k, q in vehicle_q.items() if q.size})))
         info["status"] = "infeasible"
         return None, info
     k = int(np.argmin(np.where(feasible, total, np.inf)))
@@ -89,23 +90,3 @@ def solve_enumerate(sc: Scenario, prob: DayProblem, min_p_complete: float | None
     info["objective"] = float(total[k])
     return best, info
 
-
-def _over_budget(sc, vehicle_q: dict) -> str:
-    """A hint at the binding energy limit: a vehicle over its budget (an EV's battery
-    above its reserve, an ICE's tank) in every assignment, with its routes and the least
-    it would use [kWh or l]; "" when none is."""
-    from cevm.units import J_PER_KWH
-
-    for v in sc.vehicles:
-        budget = v.energy_budget_j
-        if budget is None or not vehicle_q[v.id].size:
-            continue
-        least = float(np.min(vehicle_q[v.id]))
-        if least > budget * (1 + BUDGET_RTOL):
-            routes = ", ".join(repr(r.id) for r in sc.routes if r.vehicle_id == v.id)
-            ev = v.vehicle.is_ev
-            unit, scale = ("kWh", J_PER_KWH) if ev else ("l", 1.0)
-            what = "its battery above the reserve" if ev else "its tank"
-            return (f" ({v.id} on route {routes}: at least {least / scale:,.1f} {unit}, over the {budget / scale:,.1f} "
-                    f"{unit} of {what})")
-    return ""
