@@ -48,6 +48,11 @@ class DutyRows:
         self.ev = bool(plan.vehicle.is_ev)
         self.unit = J_PER_KWH if self.ev else 1.0  # levels in J (EV) or l (ICE)
 
+    def followed(self, size: np.ndarray) -> np.ndarray:
+        """A duty's battery, tank or charger need, empty (NaN) where the candidate cannot
+        follow a trip of it: no size completes it."""
+        return np.where(self.plan.follows, np.asarray(size, dtype=np.float64), np.nan)
+
     def same(self, value: float) -> np.ndarray:
         return np.full(self.n, value, dtype=np.float64)
 
@@ -233,22 +238,23 @@ REPLAY = ColumnSpec((
     Column("extra_l", "fuel the duty lacks to keep the reserve at its lowest point [l] (0 if kept)", ICE,
            header="lacks l", digits=1, value=_extra),
     Column("battery_needed_kwh", "smallest usable battery that runs the duty with the reserve kept, to "
-           "1 kWh [kWh] (empty: levels carried across duties)", EV, header="needs kWh", digits=0,
-           value=lambda r: r.out(r.plan.battery_needed)),
-    Column("tank_needed_l", "smallest tank that runs the duty with the reserve kept, to 1 l [l]",
-           ICE, digits=0, value=lambda r: r.plan.battery_needed),
+           "1 kWh [kWh] (empty: levels carried across duties, or a trip the candidate cannot follow)", EV,
+           header="needs kWh", digits=0, value=lambda r: r.out(r.followed(r.plan.battery_needed))),
+    Column("tank_needed_l", "smallest tank that runs the duty with the reserve kept, to 1 l [l] (empty: a trip the "
+           "candidate cannot follow)", ICE, digits=0, value=lambda r: r.followed(r.plan.battery_needed)),
     Column("battery_needed_kwh_conf", "as battery_needed_kwh with the duty's energy at its --confidence quantile "
            "(its mean plus z times its standard deviation, shared over its trips as they draw) [kWh]", EV,
-           digits=0, value=lambda r: r.out(r.plan.battery_needed_conf)),
+           digits=0, value=lambda r: r.out(r.followed(r.plan.battery_needed_conf))),
     Column("tank_needed_l_conf", "as tank_needed_l with the duty's fuel at its --confidence quantile [l]", ICE,
-           digits=0, value=lambda r: r.plan.battery_needed_conf),
+           digits=0, value=lambda r: r.followed(r.plan.battery_needed_conf)),
     Column("charger_needed_kw", "smallest charger at the duty's charging stops that completes it at the candidate's "
-           "battery, to 1 kW [kW] (empty: no stop may charge; inf is written empty: no charger suffices)", EV,
-           digits=0, value=lambda r: np.where(np.isfinite(r.plan.charger_needed_w), r.plan.charger_needed_w / 1e3,
-                                              np.nan)),
+           "battery, to 1 kW [kW] (empty: no stop may charge; inf is written empty: no charger suffices, as for a "
+           "trip the candidate cannot follow)", EV,
+           digits=0, value=lambda r: r.followed(np.where(np.isfinite(r.plan.charger_needed_w),
+                                                         r.plan.charger_needed_w / 1e3, np.nan))),
     Column("charger_needed_kw_conf", "as charger_needed_kw with the duty's energy at its --confidence quantile [kW]",
-           EV, digits=0, value=lambda r: np.where(np.isfinite(r.plan.charger_needed_w_conf),
-                                                  r.plan.charger_needed_w_conf / 1e3, np.nan)),
+           EV, digits=0, value=lambda r: r.followed(np.where(np.isfinite(r.plan.charger_needed_w_conf),
+                                                             r.plan.charger_needed_w_conf / 1e3, np.nan))),
     Column("vehicle_key", "the candidate vehicle: its file's id key, else its stem", kind="text", header="candidate",
            value=lambda r: r.text(r.plan.vehicle.label)),
     Column("powertrain", "the candidate's powertrain: ev or ice", kind="text",
