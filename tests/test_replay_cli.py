@@ -93,12 +93,18 @@ def test_charging_at_the_depot_only(store):
 
 def test_summary_plot_and_a_diesel_candidate(store, tmp_path):
     png, summary = tmp_path / "days.png", tmp_path / "summary.json"
+    # the truck cannot follow 3 of the 5 duties (a trip each over its 600 kW: test_replay_judges_
+    # as_predict): no battery completes 95 % of them; the largest need of the
+    # two it can follow, 41 kWh, more than its 30) completes 40 %
     res = replay(store, "-v", TRUCK, "--battery-kwh", "30", "--plot", str(png), "--summary", str(summary), "-f", "csv",
-                 "-o", str(tmp_path / "rows.csv"))
+                 "-o", str(tmp_path / "rows.csv"), "--target-share", "0.4")
     assert res.exit_code == 0, res.output
     sm = json.loads(summary.read_text())
-    assert sm["duties"] == 5 and sm["battery_step_kWh"] == 1.0 and sm["completes"] < 5
+    assert sm["duties"] == 5 and sm["battery_step_kWh"] == 1.0 and sm["completes"] < 5 and sm["cannot_follow"] == 3
     assert sm["battery_for_target_kWh"] > 30 and png.stat().st_size > 10_000
+    res = replay(store, "-v", TRUCK, "--battery-kwh", "30", "--summary", str(summary), "-f", "csv",
+                 "-o", str(tmp_path / "rows.csv"))
+    assert json.loads(summary.read_text())["battery_for_target_kWh"] is None  # inf: none completes 95 %
     res = replay(store, "-v", DIESEL, "-f", "json")
     assert res.exit_code == 0, res.output
     rows = json.loads(res.stdout)
@@ -189,7 +195,9 @@ def test_sizes_at_the_confidence_are_the_quantile_of_the_duties_needs_at_it(stor
     battery_needed_kwh_conf (the smallest on the 1 kWh grid that completes the share), as
     the mean's is of battery_needed_kwh; never below it; the lines say both."""
     summary = tmp_path / "summary.json"
-    res = replay(store, "-v", TRUCK, "--battery-kwh", "30", "--target-share", "0.6", "--summary", str(summary),
+    strong = tmp_path / "strong.toml"  # a truck that can follow every trip of the store (they ask up to 935 kW)
+    strong.write_text(Path(TRUCK).read_text().replace("max_power_kw = 600.0", "max_power_kw = 1000.0"))
+    res = replay(store, "-v", str(strong), "--battery-kwh", "30", "--target-share", "0.6", "--summary", str(summary),
                  "-f", "csv")
     assert res.exit_code == 0, res.output
     rows = list(csv.DictReader(io.StringIO(res.stdout)))
@@ -200,7 +208,7 @@ def test_sizes_at_the_confidence_are_the_quantile_of_the_duties_needs_at_it(stor
     assert sm["battery_for_target_kWh"] == mean_need[k]
     assert sm["battery_for_target_kWh_at_confidence"] == conf_need[k]
     assert all(c >= m for c, m in zip(conf_need, mean_need, strict=True)) and conf_need[k] > mean_need[k]
-    table = replay(store, "-v", TRUCK, "--battery-kwh", "30", "--target-share", "0.6")
+    table = replay(store, "-v", str(strong), "--battery-kwh", "30", "--target-share", "0.6")
     assert f"{conf_need[k]:,.0f} kWh with each duty's energy at its 0.95 quantile" in " ".join(table.output.split())
 
 
@@ -255,3 +263,62 @@ def test_calibrate_fits_a_trip_logged_twice_once(store, tmp_path):
         sel = trips_for_calibration(st, "TRK-1", load_vehicle(DIESEL))
     assert sorted(t.trip_id for t in sel.trips) == sorted(ids)  # 9 trips, not 12
     assert any(n.startswith("3 trip(s) lie mostly inside an earlier trip") for n in sel.notes)
+
+
+def test_replay_judges_each_trip_as_predict(store, tmp_path):
+    """A hand-made candidate that cannot follow some of the logged trips (its max speed,
+    max power and max gross mass set between the trips' figures): replay's verdict on
+    each duty is predict's on its trips (any trip failing fails the duty), the duty does
+    not complete (p 0), and it names its first failing trip and the limit."""
+    text = Path(TRUCK).read_text()
+    for old, new in (("max_speed_kmh = 90.0", "max_speed_kmh = 62.0"),
+                     ("max_power_kw = 600.0", "max_power_kw = 700.0"),
+                     ("max_gross_kg = 44000.0", "max_gross_kg = 36000.0"),
+                     ("payload_kg = 22000.0", "payload_kg = 18000.0")):
+        text = text.replace(old, new)
+    cand = tmp_path / "slow-truck.toml"
+    cand.write_text(text)
+    res = runner.invoke(app, ["predict", "--store", str(store), "-v", str(cand), "--vehicle-id", "TRK-1",
+                              "--vehicle-id", "TRK-2", "-f", "json"])
+    assert res.exit_code == 0, res.output
+    trips = json.loads(res.stdout)
+    res = replay(store, "-v", str(cand), "-f", "json")
+    assert res.exit_code == 0, res.output
+    duties = json.loads(res.stdout)
+    flags = ("over_power", "over_speed", "over_max_gross")
+    # each flag fails on some trips and passes on others: the candidate is between them
+    assert all(0 < sum(t[f] for t in trips) < len(trips) for f in flags)
+    i = 0
+    for d in duties:
+        mine = trips[i:i + d["trips"]]
+        i += d["trips"]
+        for f in flags:
+            assert d[f] == any(t[f] for t in mine), (d["vehicle_id"], d["day"], f)
+        bad = [t for t in mine if any(t[f] for f in flags)]
+        assert d["feasible"] == (not bad and d["completes"])
+        if bad:
+            assert not d["completes"] and d["p_complete"] == 0.0
+            first = bad[0]
+            said = d["cannot_follow"]
+            assert said.split(" on trip ")[1].split(" ")[0] == first["cycle"]
+            if first["over_speed"]:
+                assert said.startswith("speed on trip") and "> 62)" in said
+            if first["over_max_gross"]:
+                assert f"gross mass on trip {first['cycle']} ({first['mass_kg']:,.0f} kg > 36,000)" in said
+        else:
+            assert d["cannot_follow"] in ("", None)
+    assert i == len(trips)
+
+
+def test_levels_carried_sizing_counts_no_duty_the_candidate_cannot_follow(store, tmp_path):
+    # the shipped truck cannot follow 3 of the 5 duties (a trip each over its 600 kW):
+    # with levels carried across duties no battery completes 95 % of them, and a share
+    # of 40 % is completed by the two it can follow
+    summary = tmp_path / "summary.json"
+    for share, sized in (("0.95", False), ("0.4", True)):
+        res = replay(store, "-v", TRUCK, "--overnight", "none", "--target-share", share, "--summary", str(summary),
+                     "-f", "csv")
+        assert res.exit_code == 0, res.output
+        sm = json.loads(summary.read_text())
+        assert sm["cannot_follow"] == 3
+        assert (sm["battery_for_target_kWh"] is not None) is sized, sm

@@ -213,3 +213,27 @@ def test_a_redirected_table_is_whole(tmp_path):
     assert res.returncode == 0, res.stderr
     out = path.read_text()
     assert "\u2026" not in out and "not shown" not in out and "every row" not in out
+
+
+@pytest.fixture(scope="module")
+def replay_store(tmp_path_factory):
+    from replay_cases import make_replay_store
+
+    d = tmp_path_factory.mktemp("replay")
+    make_replay_store(d / "s.sqlite", d / "logs")
+    return d / "s.sqlite"
+
+
+@pytest.mark.parametrize("cols", [80, 120, None], ids=["80", "120", "piped"])
+def test_replay_keeps_its_verdict_at_every_width(cols, replay_store):
+    # the verdict was the first column left out at 80 ("not shown: status"); the shipped
+    # truck cannot follow 3 of the store's 5 duties (a trip each over its 600 kW)
+    args = ["replay", "-v", str(ROOT / "configs/vehicles/electric-truck.toml"), "--vehicle-id", "TRK-1",
+            "--vehicle-id", "TRK-2", "--store", str(replay_store)]
+    out, err, code = run(args, cols)
+    assert code == 0, err
+    check_fits(out, cols)
+    assert "status" not in dropped(out)
+    cells = table_cells(out)
+    assert "completes" in cells and sum(c.startswith("NO: cannot follow: power") for c in cells) == 3
+    assert sum("(853 kW > 600)" in c for c in cells) == 1

@@ -146,7 +146,7 @@ def test_simulate_and_feasibility_use_the_trips_own_mass(fleet):
     assert (row["mass_kg"], row["mass_source"]) == (ids["hgv_mass_kg"][t], "logged")
     assert row["measured_fuel_l"] > 0 and row["error_pct"] is not None  # the detailed model beside the truth
     res = cevm("feasibility", "-v", hgv, "--vehicle-id", "HGV-77", "--store", db, "-f", "json")
-    got = {r["source"]: (r["mass_kg"], r["mass_source"]) for r in json.loads(res.stdout)}
+    got = {r["cycle"]: (r["mass_kg"], r["mass_source"]) for r in json.loads(res.stdout)}
     assert got[t] == (ids["hgv_mass_kg"][t], "logged") and got[ids["HGV-77"][0]] == (18000.0, "vehicle file")
     assert "mass from: logged (4 sources), vehicle file (4 sources)" in cevm(
         "feasibility", "-v", hgv, "--vehicle-id", "HGV-77", "--store", db).stdout

@@ -88,3 +88,16 @@ def one_line(text: str, limit: int = LINE_CHARS) -> str:
         return text
     head, tail = limit * 2 // 3, limit // 3
     return f"{text[:head]} ... ({len(text) - head - tail:,} characters left out) ... {text[-tail:]}"
+
+
+def iso_time(t_s: float, tz=None) -> str:
+    """A time [s since the Unix epoch] in the one ISO 8601 form every cevm output writes:
+    to the second, ``2019-01-31T07:00:00Z`` in UTC (``tz`` None or UTC), with its offset
+    in another zone ``tz`` (a :class:`datetime.tzinfo`: ``2019-01-31T16:00:00+09:00``), as
+    the trips list, the store and a calibrated file write them."""
+    import datetime as dt
+
+    when = dt.datetime.fromtimestamp(round(float(t_s)), dt.UTC)
+    if tz is None or tz is dt.UTC:
+        return when.strftime("%Y-%m-%dT%H:%M:%SZ")
+    return when.astimezone(tz).isoformat(timespec="seconds")

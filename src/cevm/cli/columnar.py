@@ -9,7 +9,8 @@ point) dropped, booleans ``true``/``false``, empty cells where a row has no valu
 quoted as :func:`cevm.cli.output.csv_writer` quotes, control characters escaped, formula
 prefixes neutralised (:func:`cevm.text.csv_safe`). JSON:
 one object per row with the keys of its powertrain (:meth:`ColumnSpec.json_keys`),
-numbers in full precision (``repr``), ``null`` where a row has no value.
+numbers in full precision (``repr``; a column of no decimals, a count, as an integer),
+``null`` where a row has no value.
 """
 
 from __future__ import annotations
@@ -142,7 +143,9 @@ def csv_text(cols: dict[str, ColumnValues], spec: ColumnSpec) -> str:
 # ---------------------------------------------------------------------- JSON, streamed
 
 
-def _json_values(col: object, kind: str) -> list[str]:
+def _json_values(col: object, kind: str, decimals: int = 6) -> list[str]:
+    """A column's JSON values: text quoted, booleans, numbers in full precision; a
+    column of no decimals (a count, a number: duties, trips, draws) as integers."""
     if isinstance(col, tuple):
         codes, cats = col
         enc = [json.dumps(c) for c in cats]
@@ -150,13 +153,15 @@ def _json_values(col: object, kind: str) -> list[str]:
     v = np.asarray(col, dtype=np.float64)
     if kind == "bool":
         return [("null" if x != x else ("true" if x > 0.5 else "false")) for x in v.tolist()]
+    if decimals == 0:
+        return [(str(int(round(x))) if math.isfinite(x) else "null") for x in v.tolist()]
     return [(repr(x) if math.isfinite(x) else "null") for x in v.tolist()]
 
 
 def json_objects(cols: dict[str, ColumnValues], spec: ColumnSpec, is_ev: np.ndarray) -> list[str]:
     """One JSON object (text) per row of ``cols``: an EV row (``is_ev``) with the keys
     ``spec`` gives EV rows, the others with an ICE row's."""
-    vals = {c.name: _json_values(cols[c.name], c.kind) for c in spec.columns}
+    vals = {c.name: _json_values(cols[c.name], c.kind, c.decimals) for c in spec.columns}
     ev_keys, ice_keys = spec.json_keys("ev"), spec.json_keys("ice")
     ev_fmt = "{" + ", ".join(f'"{k}": %s' for k in ev_keys) + "}"
     ice_fmt = "{" + ", ".join(f'"{k}": %s' for k in ice_keys) + "}"

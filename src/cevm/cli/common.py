@@ -360,6 +360,17 @@ def check_soc(soc_start: float | None, reserve_pct: float | None = None) -> None
             physical_inputs.soc_pct(100.0, reserve_pct)
         except CevmError as exc:
             raise fail(f"--reserve-pct: {exc}") from None
+    warn_fraction_pct(("--soc-start", soc_start), ("--reserve-pct", reserve_pct))
+
+
+def warn_fraction_pct(*options: tuple[str, float | None]) -> None:
+    """One warning line per percent option given a value in (0, 1), as a fraction is
+    written (0.8 for 80 %): it is read as given, in percent, which is rarely what was
+    meant (a reserve of 0.15 % is legal, and silently not 15 %)."""
+    for name, value in options:
+        if value is not None and 0.0 < value < 1.0:
+            warn(f"{name} {value:g} reads as {value:g} % (a percentage, not a fraction); for {100 * value:g} % "
+                 f"give {name} {100 * value:g}")
 
 
 def os_error_exit(exc: OSError, what: str | None = None) -> int:

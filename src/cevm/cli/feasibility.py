@@ -47,7 +47,7 @@ from cevm.cli.common import (
     with_cycle_options,
 )
 from cevm.cli.output import OutputFormat, vehicle_legend, write_lines, write_rows
-from cevm.cli.prediction_columns import assumptions_line, feasibility_row, verdict_text
+from cevm.cli.prediction_columns import FEASIBILITY, assumptions_line, feasibility_row, verdict_text
 from cevm.core.cycle import CR0_DEFAULT
 from cevm.core.feasibility import feasibility
 from cevm.core.sweep import DEFAULT_RESERVE_PCT
@@ -156,7 +156,8 @@ def feasibility_cmd(
             if fmt == OutputFormat.table:
                 _print_feasibility(rows, stream)
             else:
-                write_rows(rows, fmt, stream=stream)
+                # every column in the spec's order, CSV numbers at its decimals (as predict's)
+                write_rows(rows, fmt, stream=stream, columns=FEASIBILITY.columns)
     except CevmError as exc:
         raise fail(exc) from None
     _warn_outside_calibration(vehicles, seen)
@@ -196,7 +197,7 @@ def _warn_outside_calibration(vehicles, seen: list[tuple]) -> None:
 
 #: The columns of feasibility's table, composed from its rows by :func:`_print_feasibility`.
 FEASIBILITY_TABLE = (
-    Column("route", "the source", kind="text", layout="id"),
+    Column("cycle", "the source: a cycle, stored trip or route (column cycle)", kind="text", layout="id"),
     Column("vehicle", "the vehicle's key", kind="text", layout="id"),
     Column("payload kg", "the payload evaluated [kg]", digits=0),
     Column("feasible", "the verdict: yes, NO, or ? (ICE without tank_l), the reserve or tank at --confidence, and why "
@@ -233,7 +234,7 @@ def _print_feasibility(rows: list[dict], stream: IO[str]) -> None:
         payload = "none" if mp is None else f"{mp:,.0f}"
         if r["min_payload_kg"]:
             payload = f"{r['min_payload_kg']:,.0f} to {payload}"
-        table.append({"route": r["source"], "vehicle": r["vehicle_key"], "payload kg": r["payload_kg"],
+        table.append({"cycle": r["cycle"], "vehicle": r["vehicle_key"], "payload kg": r["payload_kg"],
                       "feasible": verdict_text(r, energy=False), "state": state, "margin": margin,
                       "range km": r["range_km"], "max payload kg": payload, "limited by": r["limited_by"]})
         names[r["vehicle_key"]] = (r["vehicle"], r.get("ice_braking"))
@@ -241,9 +242,9 @@ def _print_feasibility(rows: list[dict], stream: IO[str]) -> None:
     title = "cevm feasibility" + (f" (first {len(table)} of {len(rows)})" if len(rows) > len(table) else "") + (
         f": verdicts and payloads at confidence {conf:g}" if conf is not None else "")
     write_rows(table, OutputFormat.table, title=title, columns=FEASIBILITY_TABLE, stream=stream,
-               keep=("route", "feasible"), drop_order=("range km", "state", "limited by", "payload kg", "vehicle"))
-    origins = Counter({r["source"]: r["mass_source"] for r in rows}.values())
+               keep=("cycle", "feasible"), drop_order=("range km", "state", "limited by", "payload kg", "vehicle"))
+    origins = Counter({r["cycle"]: r["mass_source"] for r in rows}.values())
     mass_line = ("mass from: " + ", ".join(f"{what} ({n} source{'s' if n > 1 else ''})" for what, n in
                                            sorted(origins.items(), key=lambda kv: (-kv[1], kv[0])))
                  + " (column mass_source in --format csv or json)")
-    write_lines([vehicle_legend(names), assumptions_line(rows, "source")[0], mass_line], stream)
+    write_lines([vehicle_legend(names), assumptions_line(rows, "cycle")[0], mass_line], stream)

@@ -22,6 +22,7 @@ from cevm.cli.common import (
 from cevm.cli.output import OutputFormat, vehicle_legend, write_lines, write_rows
 from cevm.errors import CevmError
 from cevm.text import printable
+from cevm.units import J_PER_KWH
 
 app = typer.Typer(help="Fleet assignment: which vehicle serves the shared stops (the paper's section 6).",
                   no_args_is_help=True, rich_markup_mode=None)
@@ -107,10 +108,16 @@ def _write_report(report: dict, fmt: OutputFormat, stream) -> None:
         json.dump(report, stream, indent=2)
         stream.write("\n")
         return
-    unit = report["unit"]
+    unit, scale = report["unit"], 1.0
+    if unit == "J":  # an electric fleet's energy, as every other table and CSV says it (the JSON: SI and kWh)
+        unit, scale = "kWh", 1.0 / J_PER_KWH
+
+    def said(x: float | None) -> float | None:
+        return None if x is None else x * scale
+
     if fmt == OutputFormat.csv:
         rows = [{"day": p["day"], "vehicle": v["vehicle"], "stops": " ".join(v["stops"]),
-                 f"consumption_{unit}": v["value"], "p_complete": v.get("p_complete"),
+                 f"consumption_{unit}": said(v["value"]), "p_complete": v.get("p_complete"),
                  "feasible": v["verdict"]["feasible"], "why": "; ".join(_why_not(v["verdict"]))}
                 for p in report["plans"] for v in p["vehicles"]]
         rows += [{"day": d["day"], "vehicle": None, "stops": None, f"consumption_{unit}": None, "p_complete": None,
@@ -139,7 +146,7 @@ def _write_report(report: dict, fmt: OutputFormat, stream) -> None:
             vd = v["verdict"]
             mark = "?" if vd["feasible"] is None else "yes" if vd["feasible"] else "NO"
             why = _why_not(vd)
-            rows.append({"day": p["day"], "vehicle": v["vehicle"], unit: v["value"],
+            rows.append({"day": p["day"], "vehicle": v["vehicle"], unit: said(v["value"]),
                          "max gross kg": v["max_gross_used_kg"], "P complete": v.get("p_complete"),
                          "feasible": mark + (f" ({'; '.join(why)})" if why else "")})
     if not any(r["P complete"] is not None for r in rows):
@@ -150,7 +157,7 @@ def _write_report(report: dict, fmt: OutputFormat, stream) -> None:
                    + ("; P complete: the probability of completing the day within its battery reserve or tank"
                       if "P complete" in rows[0] else ""), digits={unit: 2, "max gross kg": 0, "P complete": 3},
                    keep=("day", "vehicle", unit, "feasible"), stream=stream)
-    summary = [{"day": s["day"], f"total {unit}": s["total"], f"default {unit}": s["default_total"],
+    summary = [{"day": s["day"], f"total {unit}": said(s["total"]), f"default {unit}": said(s["default_total"]),
                 "saving %": s["saving_pct"], "method": s["method"], "status": s["status"],
                 "solve ms": None if s["solve_time_s"] is None else s["solve_time_s"] * 1e3} for s in report["summary"]]
     if summary:
@@ -167,8 +174,15 @@ def _why_not(verdict: dict) -> list[str]:
         out.append("over max gross")
     if verdict["energy_ok"] is False:
         out.append("over its energy budget or tank")
-    cannot = [f"{what} on {len(verdict[key])} leg(s)"
-              for what, key in (("power", "over_power"), ("speed", "over_speed")) if verdict.get(key)]
+    cannot = []
+    for what, key in (("power", "over_power"), ("speed", "over_speed")):
+        legs = verdict.get(key)
+        if legs:  # the first leg named, with its route and what it asks
+            first = legs[0]
+            asks = (f", {first['power_demand_kw']:,.0f} kW at {first['mass_kg']:,.0f} kg"
+                    if first.get("power_demand_kw") is not None and what == "power" else "")
+            more = f" and {len(legs) - 1} more leg(s)" if len(legs) > 1 else ""
+            cannot.append(f"{what} on route {first['route']} leg {first['leg']}{asks}{more}")
     if cannot:
         out.append("cannot follow: " + ", ".join(cannot))
     return out

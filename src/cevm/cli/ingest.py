@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING, Annotated
 import typer
 
 from cevm.cli.common import EXIT_OK, EXIT_PARTIAL, StoreOption, apply_manifest, check_workers, fail
+from cevm.cli.ingest_dsm import dsm_coverage, warn_dsm_coverage
 from cevm.cli.output import OutputFormat, write_lines, write_rows
 from cevm.errors import CevmError
 from cevm.ingest.textfile import MAX_SAMPLES, ReadLimits
@@ -141,10 +142,12 @@ def ingest(
     not_applied = 0
     manifest_applied = False  # said in the line of an interrupted run: the masses wait for the next one
     new_store = not store_path.exists()
+    coverage = None
     try:
         with make_executor(workers, scheduler) as executor, TripStore.open(store_path) as st:
             st.require_intact()  # never write into a damaged database
             report = run_ingest(paths, st, options, on_file=on_file, on_start=on_start, executor=executor)
+            coverage = dsm_coverage(st, report) if dsm else None  # cevm.cli.ingest_dsm
             if masses is not None and manifest is not None:
                 from cevm.io.manifest import open_manifest
 
@@ -177,12 +180,16 @@ def ingest(
     # neither the summary nor the exit code into an interrupted run's; it is said in a line.
     with interrupts.late_signals_noted() as late:
         summary = report.summary()
+        if coverage is not None and coverage[0] is not None:
+            summary["dsm_coverage_pct"] = round(coverage[0], 1)
         if log_json:
             typer.echo(json.dumps({"event": "summary", "store": str(store_path), **summary}))
         elif quiet:
             typer.echo(_summary_line(summary, store_path))
         else:
             _print_ingest_table(report, summary, store_path)
+        if coverage is not None and dsm:
+            warn_dsm_coverage(coverage, dsm)
         if late:
             typer.echo(f"cevm ingest: {interrupts.signal_name(interrupts.Interrupted(late[0]))} arrived after the "
                        "run had finished: it stopped nothing, the summary above stands", err=True)

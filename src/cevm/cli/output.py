@@ -71,7 +71,10 @@ def _clean(value: Any) -> Any:
     return value
 
 
-def _csv_cell(value: Any) -> Any:
+def _csv_cell(value: Any, decimals: int | None = None) -> Any:
+    """A CSV cell; a number of a column with ``decimals`` written as predict's fast CSV
+    path writes it (:mod:`cevm.cli.columnar`): that many decimals, trailing zeros and a
+    bare point dropped."""
     value = _clean(value)
     if value is None:
         return ""
@@ -79,6 +82,10 @@ def _csv_cell(value: Any) -> Any:
         return "true" if value else "false"
     if isinstance(value, str):
         return csv_safe(value)  # control characters escaped, formula prefixes neutralised
+    if decimals is not None and isinstance(value, (float, int, np.floating, np.integer)):
+        text = f"{float(value):.{decimals}f}"
+        text = text.rstrip("0").rstrip(".") if "." in text else text
+        return "0" if text == "-0" else text
     return value
 
 
@@ -104,7 +111,8 @@ def write_rows(
     """Write rows (dicts) in the chosen format.
 
     JSON: a list of objects with every key of each row (non-finite floats become null).
-    CSV: a header of ``columns`` (default: the union of keys in first-seen order).
+    CSV: a header of ``columns`` (default: the union of keys in first-seen order); the
+    numbers of a column given as a :class:`~cevm.cli.columns.Column` at its decimals.
     Table: a table of ``columns`` titled by ``headers`` (default the column names),
     floats rounded to ``digits[column]`` (default 3), laid out by :func:`print_table`:
     never a cut number or identifier; on a terminal too narrow for every column, columns
@@ -127,8 +135,9 @@ def write_rows(
     elif fmt == OutputFormat.csv:
         w = csv_writer(stream)
         w.writerow([csv_safe(str(c)) for c in names])
+        places = [c.decimals if isinstance(c, Column) else None for c in columns]
         for r in rows:
-            w.writerow([_csv_cell(r.get(k)) for k in names])
+            w.writerow([_csv_cell(r.get(k), d) for k, d in zip(names, places, strict=True)])
     else:
         specs = [_as_column(c, digits or {}, headers or {}) for c in columns]
         cells = [[_fmt(r.get(c.name), c.digits) for c in specs] for r in rows]

@@ -504,7 +504,8 @@ def _feasible(r: VehicleRow) -> bool | None:
 
 
 FEASIBILITY = ColumnSpec((
-    Column("source", "the route, cycle or trip", kind="text", value=lambda r: r.source.name),
+    # named as predict's and simulate's first column (its name: a cycle file's, a stored trip's or route's)
+    Column("cycle", "the cycle, trip or route", kind="text", value=lambda r: r.source.name),
     Column("source_kind", "what the source is: cycle, trip or route", kind="text", value=lambda r: r.source.kind),
     Column("vehicle", "the vehicle's name", kind="text", value=lambda r: r.vehicle.name),
     Column("vehicle_key", "the vehicle's id: its file's id key, else its stem", kind="text",

@@ -47,7 +47,15 @@ from cevm.cli.common import (
     warn_damaged,
 )
 from cevm.cli.output import OutputFormat, write_lines, write_rows
-from cevm.cli.replay_columns import REPLAY, REPLAY_TABLE, STATUS, DutyRows, replay_values
+from cevm.cli.replay_columns import (
+    REPLAY,
+    REPLAY_TABLE,
+    REPLAY_TABLE_DROP,
+    REPLAY_TABLE_KEEP,
+    STATUS,
+    DutyRows,
+    replay_values,
+)
 from cevm.core.replay import (
     DEFAULT_CHARGE_EFFICIENCY,
     DEFAULT_CONFIDENCE,
@@ -202,7 +210,7 @@ class ReplayWriter:
             columns = [c for c in REPLAY_TABLE if c == "status" or any(r.get(c) is not None for r in rows)]
             title = "cevm replay" + (f" (first {len(rows)} of {self.rows} duties)" if self.rows > len(rows) else "")
             write_rows(rows, OutputFormat.table, columns=REPLAY.table(columns, STATUS), title=title,
-                       stream=self.stream)
+                       stream=self.stream, keep=REPLAY_TABLE_KEEP, drop_order=REPLAY_TABLE_DROP)
             if self.rows > len(rows):
                 typer.echo(f"cevm: {self.rows - len(rows)} more duties not shown; use --format csv or json "
                            "(and --out FILE)", err=True)
@@ -215,10 +223,13 @@ class ReplayWriter:
 
 
 def with_status(row: dict) -> dict:
-    """A table row with its 'status': the reserve kept, or where it is first crossed (or
-    the battery or tank runs empty) [km into the duty]."""
+    """A table row with its 'status': the reserve kept, or the trip and limit the candidate
+    cannot follow, or where the reserve is first crossed (or the battery or tank runs
+    empty) [km into the duty]."""
     if row.get("completes"):
         row["status"] = "yes"
+    elif row.get("cannot_follow"):
+        row["status"] = f"NO: cannot follow: {row['cannot_follow']}"
     elif row.get("empty_at_km") is not None:
         row["status"] = f"NO: empty at {row['empty_at_km']:,.1f} km"
     elif row.get("reserve_at_km") is not None:
@@ -244,6 +255,7 @@ class Run:
     sources: set = dataclasses.field(default_factory=set)
     extrapolating: int = 0
     read: int = 0
+    judged: int = 0
     trips: int = 0
 
 
@@ -251,7 +263,7 @@ def _plans(st, vehicle, settings: ReplaySettings, ids: list[str], *, positions: 
            ) -> Iterator[tuple]:
     """Each vehicle's plan, with the Monte Carlo task (or None where there is nothing to
     draw), in the order of ``ids``."""
-    from cevm.store.replay_trips import logged_trips, step_table_reader
+    from cevm.store.replay_trips import demand_reader, logged_trips, step_table_reader
 
     for vid in ids:
         def profile(exc) -> None:
@@ -265,16 +277,17 @@ def _plans(st, vehicle, settings: ReplaySettings, ids: list[str], *, positions: 
         trips = logged_trips(st, vid, positions=positions, day_of=day_of, on_damaged=run.skipped.append,
                              on_damaged_profile=profile, on_logged_twice=twice)
         read = step_table_reader(st, trips, profile)
-        plan = plan_vehicle(trips, vehicle, settings, read)
+        plan = plan_vehicle(trips, vehicle, settings, read, demand=demand_reader(st, trips, profile))
         plan = dataclasses.replace(plan, trips=dataclasses.replace(trips, vectors=()))  # free the vectors
         run.read += plan.excess.read
+        run.judged += plan.follow.read
         run.trips += plan.trips.n
         if plan.unplaced:
             run.notes.append(f"{vid}: {plan.unplaced} stop(s) long enough to charge have no known position: not "
                              "charged")
         if settings.charging.chained:
             run.chains.append(Chain(plan.energies.energy, plan.excess, _excess_reader(plan, read), plan.stops,
-                                    plan.duties.bounds))
+                                    plan.duties.bounds, plan.follows))
         task = None
         if plan.spread.source != "none":
             task = Task(f"{vid} ({plan.duties.n} duties)", (plan.draw_plan(), settings.draws, settings.seed),
@@ -306,7 +319,7 @@ def _replayed(executor, plans: Iterator[tuple]) -> Iterator[tuple]:
         if not res.ok:
             raise CevmError(f"the Monte Carlo of vehicle {plan.trips.vehicle_id!r} failed on a worker: {res.error}")
         p = res.value if res.attempts else (plan.levels.low >= plan.reserve).astype(np.float64)
-        yield plan, p
+        yield plan, plan.judged(p)
 
 
 def fleet_summary(run: Run, vehicle, settings: ReplaySettings, confidence: float, target: float) -> dict:
@@ -317,6 +330,7 @@ def fleet_summary(run: Run, vehicle, settings: ReplaySettings, confidence: float
     unit, scale = ("kWh", J_PER_KWH) if ev else ("l", 1.0)
     completes = f.array("completes").astype(bool)
     p = f.array("p")
+    follows = f.array("follows").astype(bool)
     cap = vehicle.battery_j if ev else vehicle.tank_l
     s, r = settings.soc_start_pct / 100.0, settings.reserve_pct / 100.0
     if settings.charging.chained:
@@ -340,6 +354,7 @@ def fleet_summary(run: Run, vehicle, settings: ReplaySettings, confidence: float
     out = {
         "candidate": vehicle.label, "powertrain": vehicle.powertrain, "vehicles": len(set(f.vehicle)), "duties": n,
         "completes": int(completes.sum()), "completes_share": completes.mean() if n else math.nan,
+        "cannot_follow": int(np.count_nonzero(~follows)),
         "confidence": confidence, "completes_at_confidence": int(np.count_nonzero(p >= confidence)),
         "share_at_confidence": float(np.count_nonzero(p >= confidence)) / n if n else math.nan,
         "mean_p_complete": float(p.mean()) if n else math.nan,
@@ -381,9 +396,14 @@ def summary_lines(sm: dict, settings: ReplaySettings) -> list[str]:
         return "-" if not math.isfinite(x) else f"{100 * x:.0f} %"
 
     lines = [f"{n} duties of {sm['vehicles']} vehicle(s) replayed with {sm['candidate']}: {sm['completes']} "
-             f"({pct(sm['completes_share'])}) keep the {settings.reserve_pct:g} % reserve at the mean energies, "
+             f"({pct(sm['completes_share'])}) keep the {settings.reserve_pct:g} % reserve at the mean energies "
+             f"on trips it can follow, "
              f"{sm['completes_at_confidence']} ({pct(sm['share_at_confidence'])}) with a probability of at least "
              f"{sm['confidence']:g}"]
+    if sm.get("cannot_follow"):
+        lines.append(f"{sm['cannot_follow']} duties have a trip the candidate cannot follow (its max_power_kw, "
+                     "max_speed_kmh or max_gross_kg, as cevm predict judges the trips): they do not complete "
+                     "(column cannot_follow)")
     b = sm[f"battery_for_target_{per}"]
     what = "battery" if unit == "kWh" else "tank"
     bc = sm[f"battery_for_target_{per}_at_confidence"]
@@ -447,8 +467,9 @@ def replay_cmd(
                                                          "candidate file's.")] = None,
     within_trips: Annotated[str, typer.Option(help="Where the lowest level is looked for: 'exact' (inside the trips "
                                                    "that could decide anything: their stored profiles read) or 'ends' "
-                                                   "(at the trips' ends only: no profile read, for a large fleet "
-                                                   "fast).")] = "exact",
+                                                   "(at the trips' ends only: no profile read for it, for a large "
+                                                   "fleet fast; a candidate's max_power_kw and max_speed_kmh are "
+                                                   "judged on every trip's profile either way).")] = "exact",
     interval: Annotated[float, typer.Option(help="Interval of the duties' energy.")] = DEFAULT_INTERVAL,
     confidence: Annotated[float, typer.Option(help="A duty counts as completed in the summary at this probability "
                                                    "(default 0.95: the high end of the 90 % "
@@ -551,8 +572,8 @@ def _replay(o: SimpleNamespace) -> Run:
         known = set(st.vehicle_ids())
         unknown = [v for v in ids if v not in known]
         if unknown:
-            raise CevmError(f"no stored trips of vehicle id(s) {', '.join(map(repr, unknown))}; 'cevm trips list' "
-                            "shows the stored vehicles")
+            raise CevmError(f"no stored trips of vehicle id(s) {', '.join(map(repr, unknown))}; 'cevm trips' lists "
+                            "the stored trips and their vehicles")
         executor = stack.enter_context(make_executor(None if o.scheduler else (o.workers or 1), o.scheduler))
         stream = open_out(stack, o.out)
         writer = ReplayWriter(o.fmt, stream)
@@ -599,6 +620,9 @@ def _say(o: SimpleNamespace, sm: dict, settings: ReplaySettings, run: Run, vehic
         typer.echo(f"cevm: note: the lowest level inside the trips: stored profiles read for {run.read} of "
                    f"{run.trips} trips (those that could hold a duty's lowest point or decide it; --within-trips "
                    "ends reads none)", err=True)
+    if run.judged:
+        typer.echo(f"cevm: note: the candidate's max_power_kw and max_speed_kmh judged on the stored profiles of "
+                   f"{run.judged} of {run.trips} trips, as cevm predict judges them", err=True)
     if run.extrapolating:
         warn(f"{run.extrapolating} duties ask what {vehicle.label}'s calibration did not see (column extrapolation)")
     if o.summary is not None:

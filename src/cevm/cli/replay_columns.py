@@ -48,6 +48,11 @@ class DutyRows:
         self.ev = bool(plan.vehicle.is_ev)
         self.unit = J_PER_KWH if self.ev else 1.0  # levels in J (EV) or l (ICE)
 
+    def followed(self, size: np.ndarray) -> np.ndarray:
+        """A duty's battery, tank or charger need, empty (NaN) where the candidate cannot
+        follow a trip of it: no size completes it."""
+        return np.where(self.plan.follows, np.asarray(size, dtype=np.float64), np.nan)
+
     def same(self, value: float) -> np.ndarray:
         return np.full(self.n, value, dtype=np.float64)
 
@@ -72,16 +77,19 @@ class DutyRows:
     @cached_property
     def verdict(self) -> dict[str, np.ndarray]:
         """Each duty's flags by the one verdict of :func:`cevm.core.limits.verdict`: the
-        reserve (column completes), the gross mass; power and speed not checked (NaN)."""
+        reserve kept at the mean energies, and the candidate's gross mass, power and speed
+        limits on each of its trips (:mod:`cevm.core.replay.follow`: a flag is 1 if any
+        trip fails it; NaN where not checked)."""
         from cevm.core import limits
 
-        limit = self.plan.vehicle.max_gross_kg
-        heaviest = self.per_duty(self.plan.energies.mass_kg, np.maximum)
-        over = np.full(self.n, np.nan) if limit is None else (heaviest > limit).astype(np.float64)
-        completes = (self.plan.levels.low >= self.plan.reserve).astype(np.float64)
-        nan = np.full(self.n, np.nan)
+        follow, first = self.plan.follow, self.d.first
+        over = follow.duty_flag("over_max_gross", first)
+        if self.plan.vehicle.max_gross_kg is None:
+            over = np.full(self.n, np.nan)
+        kept = (self.plan.levels.low >= self.plan.reserve).astype(np.float64)
+        flags = {k: follow.duty_flag(k, first) for k in ("over_power", "over_speed")}
         return limits.verdict(is_ev=np.full(self.n, self.ev), over_max_gross=np.nan_to_num(over, nan=0.0),
-                              over_power=nan, over_speed=nan, energy_ok=completes) | {"over_max_gross": over}
+                              energy_ok=kept, **flags) | {"over_max_gross": over}
 
     @cached_property
     def energy(self) -> np.ndarray:
@@ -100,8 +108,9 @@ class DutyRows:
     def times(self, which: str) -> tuple[np.ndarray, list[str]]:
         t = self.plan.trips
         s = t.start_s[self.d.first] if which == "start" else t.end_s[self.d.last]
-        return self.texts([datetime.fromtimestamp(float(x), UTC).astimezone(self.tz).isoformat(timespec="seconds")
-                           for x in s])
+        from cevm.text import iso_time
+
+        return self.texts([iso_time(x, self.tz) for x in s.tolist()])
 
     def days(self) -> tuple[np.ndarray, list[str]]:
         t = self.plan.trips
@@ -158,7 +167,8 @@ REPLAY = ColumnSpec((
     Column("day", "the date the duty starts, in --tz", kind="text", value=lambda r: r.days()),
     Column("duty", "the duty's number among the vehicle's replayed duties (1, 2, ...)", decimals=0, digits=0,
            value=lambda r: np.arange(1, r.n + 1, dtype=np.float64)),
-    Column("start_time", "when the duty's first trip starts (ISO 8601, in --tz)", kind="text",
+    Column("start_time", "when the duty's first trip starts (ISO 8601 to the second, in --tz: Z for UTC, else the "
+           "zone's offset)", kind="text",
            value=lambda r: r.times("start")),
     Column("end_time", "when the duty's last trip ends (ISO 8601, in --tz)", kind="text",
            value=lambda r: r.times("end")),
@@ -196,16 +206,26 @@ REPLAY = ColumnSpec((
            value=lambda r: r.out(r.plan.levels.gained)),
     Column("charges", "stops of the duty that charged (EV) or refuelled (ICE)", decimals=0, digits=0,
            value=lambda r: r.plan.levels.charges.astype(np.float64)),
-    Column("completes", "the duty keeps the reserve all along, at the mean energies", kind="bool", header="completes",
-           value=lambda r: (r.plan.levels.low >= r.plan.reserve).astype(np.float64)),
+    Column("completes", "the duty keeps the reserve all along, at the mean energies, and the candidate can follow "
+           "every trip of it (column cannot_follow)", kind="bool", header="completes",
+           value=lambda r: r.plan.completes.astype(np.float64)),
+    Column("cannot_follow", "the duty's first trip the candidate cannot follow and the limit, with the figures (e.g. "
+           "'speed on trip T (124 km/h > 80)'; empty where it follows them all): its max_power_kw, max_speed_kmh "
+           "and max_gross_kg judged on each trip's stored samples as cevm predict judges them", kind="text",
+           value=lambda r: r.texts(list(r.plan.cannot_follow))),
     Column("over_max_gross", "a trip of the duty is heavier than the candidate's max_gross_kg (empty without it)",
            kind="bool", value=lambda r: r.verdict["over_max_gross"]),
+    Column("over_power", "a trip of the duty asks more wheel power than the candidate's max_power_kw (over any 5 s, "
+           "at the trip's mass, with the logged trace's tolerance, as cevm predict; empty without it)", kind="bool",
+           value=lambda r: r.verdict["over_power"]),
+    Column("over_speed", "a trip of the duty holds a speed above the candidate's max_speed_kmh (as cevm predict; "
+           "empty without it)", kind="bool", value=lambda r: r.verdict["over_speed"]),
     Column("feasible", "the verdict every command gives (cevm.core.limits): the duty completes (the reserve kept at "
-           "the mean energies) within max_gross_kg; max_power_kw and max_speed_kmh are not checked here (replay reads "
-           "the trips' vectors, not their samples: cevm predict -v CANDIDATE --vehicle-id ID checks them per trip)",
+           "the mean energies) and the candidate can follow every trip (max_power_kw, max_speed_kmh, max_gross_kg)",
            kind="bool", value=lambda r: r.verdict["feasible"]),
     Column("p_complete", "probability that the duty keeps the reserve all along (Monte Carlo over the candidate's "
-           "predictive distribution; 0 or 1 without one)", header="p", digits=3, value=lambda r: r.p),
+           "predictive distribution; 0 or 1 without one), 0 where the candidate cannot follow a trip of it",
+           header="p", digits=3, value=lambda r: r.p),
     Column("p_complete_se", "Monte Carlo standard error of p_complete", decimals=6, value=lambda r: r.se()),
     Column("reserve_trip", "the trip in which the level first falls below the reserve (empty if kept)", kind="text",
            value=lambda r: r.trip_id(r.plan.reserve_trip)),
@@ -218,22 +238,23 @@ REPLAY = ColumnSpec((
     Column("extra_l", "fuel the duty lacks to keep the reserve at its lowest point [l] (0 if kept)", ICE,
            header="lacks l", digits=1, value=_extra),
     Column("battery_needed_kwh", "smallest usable battery that runs the duty with the reserve kept, to "
-           "1 kWh [kWh] (empty: levels carried across duties)", EV, header="needs kWh", digits=0,
-           value=lambda r: r.out(r.plan.battery_needed)),
-    Column("tank_needed_l", "smallest tank that runs the duty with the reserve kept, to 1 l [l]",
-           ICE, digits=0, value=lambda r: r.plan.battery_needed),
+           "1 kWh [kWh] (empty: levels carried across duties, or a trip the candidate cannot follow)", EV,
+           header="needs kWh", digits=0, value=lambda r: r.out(r.followed(r.plan.battery_needed))),
+    Column("tank_needed_l", "smallest tank that runs the duty with the reserve kept, to 1 l [l] (empty: a trip the "
+           "candidate cannot follow)", ICE, digits=0, value=lambda r: r.followed(r.plan.battery_needed)),
     Column("battery_needed_kwh_conf", "as battery_needed_kwh with the duty's energy at its --confidence quantile "
            "(its mean plus z times its standard deviation, shared over its trips as they draw) [kWh]", EV,
-           digits=0, value=lambda r: r.out(r.plan.battery_needed_conf)),
+           digits=0, value=lambda r: r.out(r.followed(r.plan.battery_needed_conf))),
     Column("tank_needed_l_conf", "as tank_needed_l with the duty's fuel at its --confidence quantile [l]", ICE,
-           digits=0, value=lambda r: r.plan.battery_needed_conf),
+           digits=0, value=lambda r: r.followed(r.plan.battery_needed_conf)),
     Column("charger_needed_kw", "smallest charger at the duty's charging stops that completes it at the candidate's "
-           "battery, to 1 kW [kW] (empty: no stop may charge; inf is written empty: no charger suffices)", EV,
-           digits=0, value=lambda r: np.where(np.isfinite(r.plan.charger_needed_w), r.plan.charger_needed_w / 1e3,
-                                              np.nan)),
+           "battery, to 1 kW [kW] (empty: no stop may charge; inf is written empty: no charger suffices, as for a "
+           "trip the candidate cannot follow)", EV,
+           digits=0, value=lambda r: r.followed(np.where(np.isfinite(r.plan.charger_needed_w),
+                                                         r.plan.charger_needed_w / 1e3, np.nan))),
     Column("charger_needed_kw_conf", "as charger_needed_kw with the duty's energy at its --confidence quantile [kW]",
-           EV, digits=0, value=lambda r: np.where(np.isfinite(r.plan.charger_needed_w_conf),
-                                                  r.plan.charger_needed_w_conf / 1e3, np.nan)),
+           EV, digits=0, value=lambda r: r.followed(np.where(np.isfinite(r.plan.charger_needed_w_conf),
+                                                             r.plan.charger_needed_w_conf / 1e3, np.nan))),
     Column("vehicle_key", "the candidate vehicle: its file's id key, else its stem", kind="text", header="candidate",
            value=lambda r: r.text(r.plan.vehicle.label)),
     Column("powertrain", "the candidate's powertrain: ev or ice", kind="text",
@@ -292,6 +313,13 @@ def replay_values(ctx: DutyRows) -> dict:
 #: people only.
 STATUS = Column("status", "reserve kept, and where not, where it is crossed", kind="text", header="completes",
                 layout="wrap")
+
+#: What the table never leaves out on a narrow terminal (its verdict, "status", above
+#: all: the other columns are folded or left out first, :func:`cevm.cli.output.fit_columns`),
+#: and what it leaves out first.
+REPLAY_TABLE_KEEP = ("vehicle_id", "day", "status")
+REPLAY_TABLE_DROP = ("charged_kwh", "refuelled_l", "tank_needed_l", "battery_needed_kwh", "extra_kwh", "extra_l",
+                     "distance_km", "trips", "soc_min_pct", "tank_min_pct")
 
 #: What the table shows (those without a value in any row left out), and "status".
 REPLAY_TABLE = ("vehicle_id", "day", "trips", "distance_km", "energy_kwh", "fuel_l", "soc_min_pct", "tank_min_pct",

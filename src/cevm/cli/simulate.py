@@ -145,17 +145,83 @@ def simulate(
         row["error_pct"] = 100.0 * (modelled - reference) / reference if own_mass and modelled is not None else None
     row.update(verdict)
     row["road"] = "flat" if h is None else (elevation or "elevation")
+    notes = _beside_ce(row, veh, res, detailed_params(veh))
     if fmt == OutputFormat.table:
-        write_rows([{"quantity": k, "value": v} for k, v in row.items()], fmt, title="cevm simulate (detailed model)")
+        write_rows(table_rows(row), fmt, title="cevm simulate (detailed model)")
     else:
         write_rows([row], fmt)
     if foreign:
         typer.echo(f"cevm: warning: {veh.label}: simulated at the own gross mass of trip {trip} ({own.describe()} "
                    f"{mass_kg:,.0f} kg), which another vehicle drove ({foreign}); give --mass-kg or --payload-kg for "
                    f"what {veh.label} would carry", err=True)
+    for note in notes:
+        typer.echo(f"cevm: note: {note}", err=True)
     if res.traction_deficit_j > 0.02 * max(res.wheel_energy_j, 1.0):
         typer.echo(f"cevm: warning: the vehicle could not follow the trace: {row['traction_deficit_kwh']:.2f} kWh "
                    "of wheel work beyond its powertrain's limits", err=True)
+
+
+def _beside_ce(row: dict[str, Any], veh, res, params) -> list[str]:
+    """The CE model's figure on the same trace in ``row`` (``ce_energy_kwh`` or
+    ``ce_fuel_l``, ``ce_vs_detailed_pct``; an EV's ``detailed_traction_efficiency``) and
+    the note that says in which terms the two models differ
+    (:mod:`cevm.core.detailed.comparison`)."""
+    from cevm.core.detailed.comparison import compare
+
+    c = compare(veh, res)
+    pct = 100.0 * c.difference
+    if not veh.is_ev:
+        row["ce_fuel_l"], row["ce_vs_detailed_pct"] = c.ce, pct
+        return [f"the CE model (cevm predict) gives {c.ce:.2f} l here ({pct:+.1f} % on the detailed model's "
+                f"{res.fuel_l:.2f} l): one efficiency eta {veh.eta:g} and the file's idle and kinetic terms, where the "
+                "detailed model has the engine's fuel map, the gearbox and its shifts, the rotating inertia"]
+    row["ce_energy_kwh"], row["ce_vs_detailed_pct"] = c.ce / J_PER_KWH, pct
+    row["detailed_traction_efficiency"] = c.detailed_efficiency
+    kwh = J_PER_KWH
+    regen = ("its regeneration limited to " f"{params.regen_max_power_w / 1e3:g} kW and faded out below "
+             f"{params.regen_fade_high_mps * 3.6:g} km/h")
+    return [f"the CE model (cevm predict) gives {c.ce / kwh:.2f} kWh here ({pct:+.1f} % on the detailed model's "
+            f"{res.energy_j / kwh:.2f} kWh), in these terms: traction {c.ce_traction_j / kwh:.2f} kWh with one "
+            f"efficiency eta {veh.eta:g} (battery to wheel) against {c.detailed_traction_j / kwh:.2f} kWh through the "
+            f"detailed drivetrain, {c.detailed_efficiency:.2f} over this trace (motor and inverter loss map, "
+            f"transmission {params.transmission_efficiency:g}); regenerated {c.ce_regen_j / kwh:.2f} kWh (eta x "
+            f"regen, no limit) against {c.detailed_regen_j / kwh:.2f} kWh ({regen}); auxiliaries "
+            f"{c.ce_aux_j / kwh:.2f} kWh (aux_power_kw at {c.ambient_c:g} degC) against {c.detailed_aux_j / kwh:.2f} "
+            "kWh ([detailed] aux_base_power_kw + hvac_power_kw); the detailed model also has the battery's internal "
+            "resistance and the rotating inertia. A calibrated eta (cevm calibrate) holds every loss the maps split "
+            "out; the [detailed] table's figures are plausible, not measured"]
+
+
+#: Decimals of simulate's table by the end of a quantity's name (the rest: 3), as the
+#: other commands' tables show them: whole kg, s, kW of demand; one decimal of %, km/h.
+TABLE_DECIMALS = (("_kg", 0), ("_s", 0), ("_pct", 1), ("_kmh", 1), ("demand_kw", 0), ("_km", 2), ("_kwh", 2),
+                  ("_l", 2), ("_100km", 1))
+
+
+def table_rows(row: dict[str, Any]) -> list[dict[str, str]]:
+    """Simulate's row as the table's (quantity, value) pairs: numbers at the decimals of
+    :data:`TABLE_DECIMALS` with thousands separators, "-" where there is no value; the
+    verdict as predict's table says it (``yes``, or ``NO`` and why: over max gross, where
+    it runs empty, what it cannot follow), the other flags in capitals where they fail
+    (``NO`` for a check that fails, ``YES`` for a limit exceeded)."""
+    from cevm.cli.prediction_columns import verdict_text
+
+    out = []
+    for k, v in row.items():
+        if v is None or (isinstance(v, float) and v != v):
+            text = "-"
+        elif k == "feasible":
+            ev = "energy_kwh" in row
+            text = verdict_text({**row, "powertrain": "ev" if ev else "ice", "tank_ok": row.get("tank_ok", True)})
+        elif isinstance(v, (bool, np.bool_)):
+            text = ("YES" if v else "no") if k.startswith("over_") else ("yes" if v else "NO")
+        elif isinstance(v, (int, float, np.integer, np.floating)):
+            d = next((n for end, n in TABLE_DECIMALS if k.endswith(end)), 3)
+            text = f"{float(v):,.{d}f}"
+        else:
+            text = str(v)
+        out.append({"quantity": k, "value": text})
+    return out
 
 
 def _stored_trip(store: Path | None, trip: str, veh, mass_kg: float | None, mass_source: str,

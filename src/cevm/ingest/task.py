@@ -166,12 +166,12 @@ def trip_warnings(trip: Trip) -> list[str]:
 def speed_jump_warning(jumps: list[dict], n: int) -> str:
     """The repair note of a trip's lasting speed jumps (its quality's ``speed_jumps``, the
     largest first; ``n`` of them in all)."""
-    import datetime as dt
+    from cevm.text import iso_time
 
     j = jumps[0]
-    when = dt.datetime.fromtimestamp(j["utc_s"], dt.UTC).strftime("%Y-%m-%d %H:%M:%S")
+    when = iso_time(j["utc_s"])
     return (f"speed: {max(n, len(jumps))} lasting speed jump(s) the cleaning could not repair, the largest "
-            f"{3.6 * (j['to_mps'] - j['from_mps']):+.0f} km/h in {j['dt_s']:g} s at {when} UTC in "
+            f"{3.6 * (j['to_mps'] - j['from_mps']):+.0f} km/h in {j['dt_s']:g} s at {when} in "
             f"{j['source']} (a spliced recording?); kept as logged, and listed in the trip's quality "
             "('speed_jumps') for calibrate to flag or down-weight the trip")
 

@@ -18,6 +18,7 @@ import numpy as np
 import pandas as pd
 
 from cevm.core.cycle import CycleVector
+from cevm.core.limits import Demand, elevation_sd_m, source_demand
 from cevm.core.replay import LoggedTrips
 from cevm.core.replay.duties import logged_twice
 from cevm.core.sweep import LegProfile, StepTable, build_step_table
@@ -116,7 +117,8 @@ def logged_trips(st: TripStore, vehicle_id: str, *, positions: bool = False,
                        vectors=tuple(vectors[t] for t in rows["trip_id"]), gross_kg=gross, payload_kg=payload,
                        mass_source=tuple(sources), ambient_c=rows["ambient_temp_c"].to_numpy(dtype=np.float64),
                        start_lat=pos[0], start_lon=pos[1], end_lat=pos[2], end_lon=pos[3],
-                       day=None if day_of is None else day_of(start), missing=len(missing))
+                       day=None if day_of is None else day_of(start), missing=len(missing),
+                       elevation_source=tuple(rows["elevation_source"]) if "elevation_source" in rows else None)
 
 
 def step_table_reader(st: TripStore, trips: LoggedTrips,
@@ -130,13 +132,42 @@ def step_table_reader(st: TripStore, trips: LoggedTrips,
 
     @lru_cache(maxsize=STEP_TABLES_KEPT)
     def read(i: int) -> StepTable | None:
-        cr0, physics = terms[i]
-        try:
-            profile = st.load_profile(trips.trip_ids[i])
-        except DamagedTripError as exc:
-            if on_damaged is not None:
-                on_damaged(exc)
-            return None
-        return build_step_table([LegProfile.from_profile(profile)], cr0=cr0, physics=physics)
+        got = _trip_table(st, trips.trip_ids[i], terms[i], on_damaged)
+        return None if got is None else got[1]
 
     return read
+
+
+def _trip_table(st: TripStore, trip_id: str, terms: tuple, on_damaged: Callable[[DamagedTripError], None] | None
+                ) -> tuple[list[LegProfile], StepTable] | None:
+    """A stored trip's leg and step table (with its vector's ``terms``: Cr0, physics),
+    None when its profile is damaged (passed to ``on_damaged``)."""
+    cr0, physics = terms
+    try:
+        profile = st.load_profile(trip_id)
+    except DamagedTripError as exc:
+        if on_damaged is not None:
+            on_damaged(exc)
+        return None
+    legs = [LegProfile.from_profile(profile)]
+    return legs, build_step_table(legs, cr0=cr0, physics=physics)
+
+
+def demand_reader(st: TripStore, trips: LoggedTrips,
+                  on_damaged: Callable[[DamagedTripError], None] | None = None) -> Callable[[int], Demand | None]:
+    """``demand(i)``: what trip i of ``trips`` asks of a vehicle's power and speed
+    (:class:`cevm.core.limits.Demand`, from its stored profile: a logged trace, held with
+    its measurement's tolerance as ``cevm predict`` holds a stored trip), None when the
+    profile is damaged (passed to ``on_damaged``). Nothing kept: each trip is judged once
+    (:mod:`cevm.core.replay.follow`)."""
+    terms = [(v.cr0, v.physics) for v in trips.vectors]
+    elevation = trips.elevation_source or (None,) * trips.n
+
+    def demand(i: int) -> Demand | None:
+        got = _trip_table(st, trips.trip_ids[i], terms[i], on_damaged)
+        if got is None:
+            return None
+        legs, table = got
+        return source_demand(table, legs, logged=True, elevation_sd=elevation_sd_m(elevation[i]))
+
+    return demand

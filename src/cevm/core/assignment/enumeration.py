@@ -6,7 +6,7 @@ import numpy as np
 
 from cevm.core.assignment.curves import quantity
 from cevm.core.assignment.evaluation import objective_weights, vector_groups
-from cevm.core.assignment.problem import DayProblem, why_infeasible
+from cevm.core.assignment.problem import DayProblem, over_budget, why_infeasible
 from cevm.core.assignment.scenario import BUDGET_RTOL, Scenario
 from cevm.core.vehicle import predict
 
@@ -78,7 +78,8 @@ def solve_enumerate(sc: Scenario, prob: DayProblem, min_p_complete: float | None
     if not feasible.any():
         info["why"] = ("no assignment satisfies the gross-weight and battery limits"
                        + (f" with every day completed with probability {min_p_complete:g}" if moments else "")
-                       + why_infeasible(sc, prob))
+                       + (why_infeasible(sc, prob)
+                          or over_budget(sc, {k: float(np.min(q)) for k, q in vehicle_q.items() if q.size})))
         info["status"] = "infeasible"
         return None, info
     k = int(np.argmin(np.where(feasible, total, np.inf)))
@@ -88,3 +89,4 @@ def solve_enumerate(sc: Scenario, prob: DayProblem, min_p_complete: float | None
     info["status"] = "optimal"
     info["objective"] = float(total[k])
     return best, info
+

@@ -18,7 +18,7 @@ import numpy as np
 
 from cevm.core.assignment.curves import LegCurve, leg_curve, quantity
 from cevm.core.assignment.evaluation import objective_weights
-from cevm.core.assignment.problem import DayProblem, why_infeasible
+from cevm.core.assignment.problem import DayProblem, over_budget, why_infeasible
 from cevm.core.assignment.scenario import BUDGET_RTOL, Route, Scenario
 from cevm.core.vehicle import predict
 from cevm.units import J_PER_KWH
@@ -241,7 +241,7 @@ def constraints(sc: Scenario, prob: DayProblem, xb: Binaries, terms: LegTerms, o
         if idx.size:
             rows.add(idx, coef, -np.inf, (budget - terms.const[v.id]) * s)
         elif terms.const[v.id] > budget:
-            raise _Infeasible(f"{v.id} needs {terms.const[v.id] / J_PER_KWH:.1f} kWh, over its budget")
+            raise _Infeasible("no assignment satisfies the battery limits" + over_budget(sc, {v.id: terms.const[v.id]}))
     return rows
 
 
@@ -261,6 +261,15 @@ def _highs(obj: Objective, rows: _Rows, terms: LegTerms, n_x: int, time_limit_s:
                 options=options)
 
 
+def _least_use(terms: LegTerms) -> dict[str, float]:
+    """A lower bound of each vehicle's use of the day: its constant legs, and each leg of
+    an epigraph at its mass without the free stops (the linear terms are >= 0)."""
+    least = dict(terms.const)
+    for vid, curve, m_wo, _, _ in terms.epi:
+        least[vid] += float(curve(m_wo))
+    return least
+
+
 def _decode(res, sc: Scenario, prob: DayProblem, xb: Binaries, terms: LegTerms, obj: Objective,
             weights: dict[str, float], info: dict[str, Any]) -> dict[str, int] | None:
     """The assignment HiGHS found (None if none), and its status, gap and objective (in
@@ -270,7 +279,8 @@ def _decode(res, sc: Scenario, prob: DayProblem, xb: Binaries, terms: LegTerms, 
     info["mip_gap"] = getattr(res, "mip_gap", None)
     if res.x is None:
         info["why"] = (
-            "no assignment satisfies the gross-weight and battery limits" + why_infeasible(sc, prob)
+            "no assignment satisfies the gross-weight and battery limits"
+            + (why_infeasible(sc, prob) or over_budget(sc, _least_use(terms)))
             if status == "infeasible"
             else f"MILP solver stopped: {res.message}"
         )

@@ -52,3 +52,22 @@ def why_infeasible(sc: Scenario, prob: DayProblem) -> str:
         if m > v.max_gross_kg:
             return f" (route {r.id!r}: {m:g} kg with its own stops alone, over {v.id}'s {v.max_gross_kg:g} kg)"
     return ""
+
+
+def over_budget(sc: Scenario, least: dict[str, float]) -> str:
+    """A hint at the binding energy limit: the first vehicle whose ``least`` use of the
+    day (per vehicle id, in its quantity: battery J; a lower bound where not exact) is
+    over its budget (an EV's battery above its reserve), with its routes and both figures
+    in kWh; "" when none is."""
+    from cevm.core.assignment.scenario import BUDGET_RTOL
+    from cevm.units import J_PER_KWH
+
+    for v in sc.vehicles:
+        budget = v.energy_budget_j
+        q = least.get(v.id)
+        if budget is None or q is None or not q > budget * (1 + BUDGET_RTOL):
+            continue
+        routes = ", ".join(repr(r.id) for r in sc.routes if r.vehicle_id == v.id)
+        return (f" ({v.id} on route {routes}: at least {q / J_PER_KWH:,.1f} kWh, over the {budget / J_PER_KWH:,.1f} "
+                "kWh of its battery above the reserve)")
+    return ""

@@ -45,8 +45,9 @@ def duty_extrapolation(plan: VehiclePlan) -> list[str]:
 class Fleet:
     """The duties of a replay, gathered vehicle by vehicle (:meth:`add`): per duty its
     vehicle, start [s], energy and its interval [J or l], whether it completes at the
-    mean, its probability, and its battery and charger needs at the mean energies and at
-    the sizing's confidence (``battery_conf``, ``charger_conf``)."""
+    mean, whether the candidate can follow its trips (``follows``), its probability, and
+    its battery and charger needs at the mean energies and at the sizing's confidence
+    (``battery_conf``, ``charger_conf``; inf where the candidate cannot follow it)."""
 
     vehicle: list
     start_s: list
@@ -54,6 +55,7 @@ class Fleet:
     low: list
     high: list
     completes: list
+    follows: list
     p: list
     battery: list
     charger: list
@@ -62,7 +64,7 @@ class Fleet:
 
     @classmethod
     def empty(cls) -> Fleet:
-        return cls(*([] for _ in range(11)))
+        return cls(*([] for _ in range(12)))
 
     def add(self, plan: VehiclePlan, p: np.ndarray, low: np.ndarray, high: np.ndarray) -> None:
         first = plan.duties.first
@@ -71,12 +73,15 @@ class Fleet:
         self.energy.append(np.add.reduceat(plan.energies.energy, first) if first.size else np.zeros(0))
         self.low.append(low)
         self.high.append(high)
-        self.completes.append(plan.levels.low >= plan.reserve)
-        self.p.append(np.asarray(p, dtype=np.float64))
-        self.battery.append(plan.battery_needed)
-        self.charger.append(plan.charger_needed_w)
-        self.battery_conf.append(plan.battery_needed_conf)
-        self.charger_conf.append(plan.charger_needed_w_conf)
+        self.completes.append(plan.completes)
+        self.follows.append(plan.follows)
+        self.p.append(plan.judged(p))
+        # a duty the candidate cannot follow: no battery or charger completes it
+        self.battery.append(np.where(plan.follows, plan.battery_needed, np.inf))
+        self.charger.append(np.where(plan.follows | np.isnan(plan.charger_needed_w), plan.charger_needed_w, np.inf))
+        self.battery_conf.append(np.where(plan.follows, plan.battery_needed_conf, np.inf))
+        self.charger_conf.append(np.where(plan.follows | np.isnan(plan.charger_needed_w_conf),
+                                          plan.charger_needed_w_conf, np.inf))
 
     def array(self, name: str) -> np.ndarray:
         parts = getattr(self, name)
@@ -93,14 +98,16 @@ class Fleet:
 @dataclass(frozen=True, eq=False)
 class Chain:
     """One vehicle's chain of duties for the fleet's sizing: its trips' energies, excess
-    (:class:`~cevm.core.replay.plan.Excess`, and ``exact`` to learn more), stops and
-    duty bounds."""
+    (:class:`~cevm.core.replay.plan.Excess`, and ``exact`` to learn more), stops, duty
+    bounds, and which duties the candidate can follow (a duty it cannot is completed by no
+    battery or charger)."""
 
     energy: np.ndarray
     excess: Excess
     exact: Callable[[np.ndarray], np.ndarray]
     stops: Stops
     bounds: np.ndarray
+    follows: np.ndarray | None = None  # per duty: the candidate can follow its trips (None: all)
 
 
 def _joined(chains: Sequence[Chain]) -> tuple[np.ndarray, Stops, np.ndarray, Lanes, np.ndarray]:
@@ -125,6 +132,8 @@ def chained_sizes(chains: Sequence[Chain], share: float, *, soc_start: float, re
         return float("nan"), float("nan")
     energy, stops, bounds, lanes, offsets = _joined(chains)
     n_duties = bounds.size - 1
+    follows = np.concatenate([np.ones(c.bounds.size - 1, dtype=bool) if c.follows is None else c.follows
+                              for c in chains])
 
     def excess(which: str) -> np.ndarray:
         return np.concatenate([getattr(c.excess, which) for c in chains])
@@ -132,7 +141,8 @@ def chained_sizes(chains: Sequence[Chain], share: float, *, soc_start: float, re
     def share_at(x: np.ndarray, cap: float, start: float, power: np.ndarray | None = None) -> float:
         run = run_chains(lanes, energy, x, stops, capacity=cap, start=start, efficiency=efficiency, power_w=power)
         low = lanes.put(run.low, energy.size)
-        return float(np.count_nonzero(np.minimum.reduceat(low, bounds[:-1]) >= reserve * cap)) / n_duties
+        kept = np.minimum.reduceat(low, bounds[:-1]) >= reserve * cap
+        return float(np.count_nonzero(kept & follows)) / n_duties
 
     def learn(trips: np.ndarray) -> None:
         owner = np.searchsorted(offsets, trips, side="right") - 1

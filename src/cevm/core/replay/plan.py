@@ -18,8 +18,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from cevm.core.cycle import CycleVector
+from cevm.core.limits import Demand
 from cevm.core.replay.chain import DutyLevels, Lanes, Stops, duty_levels, run_chains
 from cevm.core.replay.duties import Duties, group_duties
+from cevm.core.replay.follow import TripFollow, duty_reasons, trip_follow
 from cevm.core.replay.montecarlo import DrawPlan
 from cevm.core.replay.places import Depot, find_depot, rest_positions, stops_at
 from cevm.core.replay.settings import ReplaySettings
@@ -44,7 +46,9 @@ class LoggedTrips:
     ``payload_kg`` (a payload given to the trip, NaN: none), ``mass_source`` (per trip:
     :data:`cevm.store.masses.MASS_SOURCES`), ``ambient_c`` (NaN: not logged), start and
     end positions [deg] (NaN where unknown; None: not read), ``day`` (per trip, for the
-    ``day`` rule), ``missing`` (damaged trips left out)."""
+    ``day`` rule), ``missing`` (damaged trips left out), ``elevation_source`` (per trip,
+    how ingest made its road elevation: its power's tolerance, :mod:`cevm.core.limits`;
+    None: unknown)."""
 
     vehicle_id: str
     trip_ids: tuple[str, ...]
@@ -62,6 +66,7 @@ class LoggedTrips:
     end_lon: np.ndarray | None = None
     day: np.ndarray | None = None
     missing: int = 0
+    elevation_source: tuple[str | None, ...] | None = None
 
     @property
     def n(self) -> int:
@@ -127,7 +132,9 @@ class VehiclePlan:
     energy at ``settings.size_confidence`` (NaN: not sized; the mean's where the
     candidate has no predictive distribution); ``depot``
     (None: not asked or not found); ``unplaced`` stops long enough but with no known
-    position (not charged)."""
+    position (not charged); ``follow`` the candidate's limits on each trip
+    (:mod:`cevm.core.replay.follow`), ``follows`` per duty (every trip followed) and
+    ``cannot_follow`` per duty (why not, "" where it does)."""
 
     trips: LoggedTrips
     vehicle: Vehicle
@@ -154,9 +161,23 @@ class VehiclePlan:
     charger_needed_w: np.ndarray
     battery_needed_conf: np.ndarray
     charger_needed_w_conf: np.ndarray
+    follow: TripFollow
+    follows: np.ndarray
+    cannot_follow: tuple[str, ...]
     depot: Depot | None = None
     unplaced: int = 0
     notes: tuple[str, ...] = field(default=())
+
+    @property
+    def completes(self) -> np.ndarray:
+        """Per duty: it keeps the reserve all along at the mean energies and the candidate
+        can follow every trip of it (:mod:`cevm.core.replay.follow`)."""
+        return (self.levels.low >= self.reserve) & self.follows
+
+    def judged(self, p: np.ndarray) -> np.ndarray:
+        """The duties' probabilities of completing ``p`` (of the energy) with those the
+        candidate cannot follow at 0."""
+        return np.where(self.follows, np.asarray(p, dtype=np.float64), 0.0)
 
     @property
     def chained(self) -> bool:
@@ -295,10 +316,13 @@ def _sized(lanes: Lanes, energy: np.ndarray, ex: Excess, exact: Exact, need: Cal
 
 
 def plan_vehicle(trips: LoggedTrips, vehicle: Vehicle, settings: ReplaySettings,
-                 step_table: Callable[[int], StepTable | None], *, size: bool = True) -> VehiclePlan:
+                 step_table: Callable[[int], StepTable | None], *, size: bool = True,
+                 demand: Callable[[int], Demand | None] | None = None) -> VehiclePlan:
     """Run ``trips``' duties with ``vehicle`` (module notes). ``step_table(i)`` reads trip
     i's step table (None: unreadable); ``size`` (with duties that do not carry their level
-    across rests) adds each duty's battery and charger needs."""
+    across rests) adds each duty's battery and charger needs; ``demand(i)`` what trip i
+    asks of a vehicle's power and speed (:mod:`cevm.core.replay.follow`; None: only the
+    gross mass is checked)."""
     if trips.n == 0:
         raise CevmError(f"vehicle id {trips.vehicle_id!r} has no trips to replay")
     duties = group_duties(trips.start_s, trips.end_s, rule=settings.rule, gap_s=settings.gap_s, day=trips.day)
@@ -340,12 +364,15 @@ def plan_vehicle(trips: LoggedTrips, vehicle: Vehicle, settings: ReplaySettings,
             battery_c, charger_c = _duty_sizes(lanes, bounds, high, ex, exact, stops, settings, cap, vehicle)
         elif settings.size_confidence is not None:  # no spread: the mean's sizes are the confidence's
             battery_c, charger_c = battery.copy(), charger.copy()
+    follow = trip_follow(vehicle, energies.mass_kg, demand)
+    reasons = duty_reasons(follow, duties.first, duties.last, trips.trip_ids, vehicle, energies.mass_kg)
     return VehiclePlan(trips=trips, vehicle=vehicle, settings=settings, energies=energies, duties=duties, stops=stops,
                        before=before, low=low, after=after, gain=gain, levels=lv, capacity=cap, start=start,
                        reserve=reserve, excess=ex, spread=spread, energy_sd=energy_sd,
                        reserve_trip=lv.first_below, reserve_at_m=cross, empty_trip=empty_first, empty_at_m=empty,
                        battery_needed=battery, charger_needed_w=charger, battery_needed_conf=battery_c,
-                       charger_needed_w_conf=charger_c, depot=depot, unplaced=unplaced)
+                       charger_needed_w_conf=charger_c, follow=follow, follows=follow.duty_follows(duties.first),
+                       cannot_follow=tuple(reasons), depot=depot, unplaced=unplaced)
 
 
 def _duty_sizes(lanes: Lanes, bounds: np.ndarray, energy: np.ndarray, ex: Excess, exact: Exact, stops: Stops,
