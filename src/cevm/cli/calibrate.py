@@ -335,14 +335,13 @@ def result_json(result: CalibrationResult, vehicle_id: str, notes: tuple[str, ..
     candidates (with ``selection``), per-trip rows (each trip twice: its in-sample
     prediction, held_out false, and its cross-validated one, held_out true, each with
     its interval at the result's level: predicted_low, predicted_high, inside)."""
-    from scipy.special import ndtri
-
     from cevm.core.calibration import display_value
+    from cevm.core.predictive import normal_quantile
     from cevm.io.calibrated import calibration_table, fitted_keys
 
     unit = "kWh" if result.unit == "J" else "l"
     pt = result.vehicle.powertrain
-    z = float(ndtri(0.5 + 0.5 * result.interval))
+    z = normal_quantile(0.5 + 0.5 * result.interval)
 
     def stats(s):
         return None if s is None else {"n": s.n, "mean_pct": _f(s.mean_pct), "std_pct": _f(s.std_pct),

@@ -452,12 +452,12 @@ class VehicleRow:
 
     def bound(self, high: bool) -> float | None:
         """The interval's end at ``level`` of the energy [J] (EV) or fuel [l] (ICE)."""
-        from scipy.special import ndtri
+        from cevm.core.predictive import normal_quantile
 
         if self.res.sd is None:
             return None
         mean = self.res.energy_j[self.i] if self.vehicle.is_ev else self.res.fuel_l[self.i]
-        x = float(mean + (1 if high else -1) * float(ndtri(0.5 + 0.5 * self.level)) * self.res.sd[self.i])
+        x = float(mean + (1 if high else -1) * normal_quantile(0.5 + 0.5 * self.level) * self.res.sd[self.i])
         return None if x != x else x
 
     def soc_at(self, energy_j: float | None) -> float | None:

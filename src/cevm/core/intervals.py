@@ -19,9 +19,8 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
-from scipy.special import ndtr
 
-from cevm.core.predictive import Features, predictive
+from cevm.core.predictive import Features, normal_cdf, normal_quantile, predictive
 from cevm.core.vehicle import EXTRAPOLATION_AXES, extrapolation_mask, extrapolation_text
 
 if TYPE_CHECKING:
@@ -47,16 +46,14 @@ class RowRanges:
 
     def bounds(self, level: float) -> tuple[np.ndarray, np.ndarray]:
         """The central interval at ``level`` of every row."""
-        from scipy.special import ndtri
-
-        z = float(ndtri(0.5 + 0.5 * level))
+        z = normal_quantile(0.5 + 0.5 * level)
         return self.mean - z * self.sd, self.mean + z * self.sd
 
     def prob_at_most(self, budget: np.ndarray) -> np.ndarray:
         """P(consumption <= budget) per row (the budget in the rows' unit)."""
         with np.errstate(divide="ignore", invalid="ignore"):
             z = (budget - self.mean) / self.sd
-        return np.where(self.sd > 0, ndtr(z), np.where(budget >= self.mean, 1.0, 0.0))
+        return np.where(self.sd > 0, normal_cdf(z), np.where(budget >= self.mean, 1.0, 0.0))
 
 
 def block_ranges(block: SweepBlock) -> RowRanges:
@@ -98,7 +95,7 @@ def p_reserve_ok(block: SweepBlock, ranges: RowRanges, soc_start_pct: float, res
         sd_min = rel * np.abs(e_min)
         budget = (soc_start_pct - reserve_pct) / 100.0 * battery
         z = (budget - e_min) / sd_min
-    p = np.where(sd_min > 0, ndtr(z), np.where(budget >= e_min, 1.0, 0.0))
+    p = np.where(sd_min > 0, normal_cdf(z), np.where(budget >= e_min, 1.0, 0.0))
     return np.where(pset.is_ev, p, np.nan)
 
 
