@@ -256,11 +256,13 @@ def _batch_ambient(t_abs, bounds, row_t, temp, lo, hi, params: EvidenceParams, o
     cand[mb[:-1] + 1] = t1[has]
     mrows = ranges(starts, mids_n)
     mpos = ranges(mb[:-1] + 2, mids_n)
-    cand[mpos] = np.clip(0.5 * (rt[mrows + 1] + rt[mrows]), t0[has][cseg[mpos]], t1[has][cseg[mpos]])
+    mseg = cseg[mpos]  # np.clip's own steps (times are never NaN), without its cost on array bounds
+    cand[mpos] = np.minimum(np.maximum(0.5 * (rt[mrows + 1] + rt[mrows]), t0[has][mseg]), t1[has][mseg])
     k = segment_searchsorted(rt, starts, lens, cand, cseg, "left")
     ln = lens[cseg]
-    before = np.abs(cand - rt[starts[cseg] + np.clip(k - 1, 0, ln - 1)])
-    after = np.abs(rt[starts[cseg] + np.clip(k, 0, ln - 1)] - cand)
+    first = starts[cseg]
+    before = np.abs(cand - rt[first + np.minimum(np.maximum(k - 1, 0), ln - 1)])
+    after = np.abs(rt[first + np.minimum(np.maximum(k, 0), ln - 1)] - cand)
     far = np.maximum.reduceat(np.minimum(before, after), mb[:-1])
     for g, i in enumerate(has.tolist()):
         out_q[i]["ambient_temp"]["max_hold_s"] = float(far[g])
