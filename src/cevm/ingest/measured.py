@@ -147,17 +147,17 @@ def window_samples(time_s: np.ndarray, columns: Mapping[str, np.ndarray], column
         return tw[ok], v[ok], _kept_bounds(ok, wb)
     arrays = [np.asarray(columns[f])[rows].astype(np.float64, copy=False)
               for f in product_factors(column)]  # KeyError if absent
-    any_ok = np.zeros(tw.shape, dtype=bool)
-    for a in arrays:
-        any_ok |= np.isfinite(a)
+    oks = [np.isfinite(a) for a in arrays]
+    any_ok = np.logical_or.reduce(oks)
     q, qb = tw[any_ok], _kept_bounds(any_ok, wb)
-    qseg = segment_ids(qb)
+    own = [np.array_equal(ok, any_ok) for ok in oks]  # sampled at every q: its own values
+    qseg = segment_ids(qb) if not all(own) else np.zeros(0, dtype=np.int64)
     prod = np.ones(q.shape)
-    for a in arrays:
-        ok = np.isfinite(a)
-        fb = _kept_bounds(ok, wb)
-        # a factor sampled at a time of q gives its own value there (exact interpolation)
-        prod *= interp_limited_segments(q, qseg, tw[ok], fb, a[ok], max_gap_s=max_gap_s)[0]
+    for a, ok, at_q in zip(arrays, oks, own, strict=True):
+        if at_q:  # what interpolating at its own sample times gives, without the search
+            prod *= a[ok]
+        else:  # a factor sampled at a time of q gives its own value there (exact interpolation)
+            prod *= interp_limited_segments(q, qseg, tw[ok], _kept_bounds(ok, wb), a[ok], max_gap_s=max_gap_s)[0]
     ok = np.isfinite(prod)
     return q[ok], prod[ok], _kept_bounds(ok, qb)
 
