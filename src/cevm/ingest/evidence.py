@@ -223,17 +223,22 @@ def _batch_ambient(t_abs, bounds, row_t, temp, lo, hi, params: EvidenceParams, o
             out_f[i].update(none)
         return
     t0, t1 = t_abs[bounds[:-1]], t_abs[bounds[1:] - 1]
-    rr = ranges(lo, hi - lo)
-    wb = np.concatenate(([0], np.cumsum(hi - lo)))
-    a = np.asarray(temp)[rr].astype(np.float64, copy=False)
+    # each trip's window of the rows that carry a reading (a temperature is logged far
+    # less often than the rows: the windows' other rows are never gathered)
+    temp = np.asarray(temp)
+    r0, r1 = int(lo.min()), int(hi.max())  # the batch's rows (``row_t`` is the whole log's)
+    fin_rows = np.flatnonzero(np.isfinite(temp[r0:r1])) + r0
+    flo, fhi = np.searchsorted(fin_rows, lo), np.searchsorted(fin_rows, hi)
+    rr = fin_rows[ranges(flo, fhi - flo)]
+    wb = bounds_of(fhi - flo)
+    a = temp[rr].astype(np.float64, copy=False)
     rt_all = row_t[rr]
-    seg = np.repeat(np.arange(n), hi - lo)
-    fin = np.isfinite(a)
+    seg = np.repeat(np.arange(n), fhi - flo)
     lo_c, hi_c = params.ambient_range_c
-    ok = fin & (a >= lo_c) & (a <= hi_c)
+    ok = (a >= lo_c) & (a <= hi_c)
     hold = params.ambient_max_hold_s
     sel = ok & (rt_all >= t0[seg] - hold) & (rt_all <= t1[seg] + hold)
-    rejected = np.bincount(seg[fin & ~ok], minlength=n)
+    rejected = np.bincount(seg[~ok], minlength=n)
     rt, rv, rs = rt_all[sel], a[sel], seg[sel]
     rb = _kept(sel, wb)
     readings = np.bincount(rs[(rt >= t0[rs]) & (rt <= t1[rs])], minlength=n)

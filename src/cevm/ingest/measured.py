@@ -235,9 +235,15 @@ def integrate_rates(ts: np.ndarray, rate: np.ndarray, sb: np.ndarray, t0: np.nda
     pts = np.empty(int(pb[-1]))
     pts[pb[:-1]] = a
     pts[pb[1:] - 1] = b
-    pts[ranges(pb[:-1] + 1, n_in)] = ts[inside]
-    pseg = segment_ids(pb)
-    vals = segment_interp(pts, pseg, ts, sb[:-1], np.diff(sb), rate)
+    at_samples = ranges(pb[:-1] + 1, n_in)
+    pts[at_samples] = ts[inside]
+    # the interpolant's values: a sample's own value at its time (np.interp's exact
+    # match), so only t0 and t1 of each trip are interpolated
+    vals = np.empty(pts.size)
+    vals[at_samples] = rate[inside]
+    ends = np.concatenate((pb[:-1], pb[1:] - 1))
+    trip = np.arange(tk.size)
+    vals[ends] = segment_interp(pts[ends], np.concatenate((trip, trip)), ts, sb[:-1], np.diff(sb), rate)
     dts, db = segment_diffs(pts, pb)
     inner = _inner_steps(pb)
     value = segment_sums((0.5 * (vals[1:] + vals[:-1]) * np.diff(pts))[inner], db)
