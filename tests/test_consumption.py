@@ -261,6 +261,21 @@ def test_soc_without_capacity_is_invalid():
     assert not est.valid and "capacity" in est.reason
 
 
+def test_every_trip_of_many_says_its_soc_wants_a_capacity():
+    # eight short trips at once (the batch of short trips once took another code path,
+    # which gave the generic reason): each says what its readings lack; one without
+    # readings (trip 7, past the log's end) does not
+    from cevm.ingest.measured import measure_trips
+
+    t = np.arange(0.0, 81.0)
+    t0 = np.array([0.0, 10, 20, 30, 40, 50, 60, 200])
+    got = measure_trips(t, {"soc_pct": 90 - 0.1 * t}, [Src("soc_pct", "soc", "energy_j", 0.01, 1)], t0, t0 + 9.0)
+    for m, q in got[:7]:
+        assert m is None and len(q["warnings"]) == 1 and "capacity" in q["warnings"][0]
+        assert q["sources"][0]["reason"] == "state of charge logged, but no capacity_j to turn it into energy"
+    assert got[7][0] is None and got[7][1]["warnings"] == []
+
+
 def test_a_logged_soc_that_cannot_measure_for_want_of_a_capacity_is_said():
     # acceptance: an e-bus logging only its state of charge, under a profile whose soc
     # entry has no capacity (the shipped srf's), got no measured energy without a word
