@@ -308,7 +308,6 @@ def child(argv: list[str], stages: bool) -> None:
         wrap(task, "read_log", "read")
         wrap(DsmSampler, "sample", "dsm")
         wrap(task, "trip_elevation", "elevation")
-        wrap(task, "trip_evidence", "evidence")
         wrap(task, "batch_evidence", "evidence")
         wrap(task, "drive_cycle_vector", "vector")
         wrap(task, "encode_profiles", "profile")

@@ -7,24 +7,27 @@ most a cycle file may hold: ``cevm.io.cycles.MAX_CYCLE_SAMPLES``;
 ``time_s,speed_kmh,elevation_m`` with 1, 2 and 2 decimals, about 21 MB) to a temporary
 directory, then times, alternately and ``--repeat`` times each, two fresh processes:
 
-1. the floor: one Python process that reads the same file with ``pandas.read_csv`` and
-   computes the CE per-step sums with numpy (k, a, r, e, the simplified split and its
-   three sums; what any program reading this file and reducing it must do), importing
-   nothing of cevm;
+1. the floor: one Python process that reads the same file with pyarrow's typed CSV
+   reader (one thread, as cevm's reader) and takes the columns as numpy arrays with
+   ``np.frombuffer`` (no pandas: cevm's reader never imports it, and importing pandas
+   alone costs about 0.3 s, which made an earlier pandas floor flatter the command),
+   then computes the CE per-step sums with numpy (k, a, r, e, the simplified split and
+   its three sums; what any program reading this file and reducing it must do),
+   importing nothing of cevm;
 2. the command ``cevm predict -v configs/vehicles/diesel-hgv.toml --cycle BIG.csv
    --mass-kg 20000`` (interpreter start, imports, the reader with its checks, the CE
    vector, the sweep, the table).
 
 Prints each run, the best and the median of each, and the ratio command / floor (the
 goal of issues 18 and 25: 1.5x or less). Also, in-process: the cycle reader alone
-(``cevm.io.read_cycle_csv``) against a bare ``pandas.read_csv`` of the file, to show the
+(``cevm.io.read_cycle_csv``) against a bare typed pyarrow read of the file, to show the
 reader's own share. Wall-clock times on a shared 2-core machine: compare within a run.
 
 Both processes run with Python's bytecode cache on, in a directory of the run
 (``PYTHONPYCACHEPREFIX``), whatever ``PYTHONDONTWRITEBYTECODE`` says: cevm is run from
 its source tree, and without the cache every run would compile cevm's modules again
 (about 0.17 s), which an installed cevm (whose modules pip compiles at install) never
-does; the floor's pandas and numpy come with their bytecode. The warm-up runs write it.
+does; the floor's pyarrow and numpy come with their bytecode. The warm-up runs write it.
 """
 
 from __future__ import annotations
@@ -47,12 +50,18 @@ VEHICLE = ROOT / "configs" / "vehicles" / "diesel-hgv.toml"
 FLOOR = r"""
 import sys
 import numpy as np
-import pandas as pd
+import pyarrow as pa
+import pyarrow.csv as pacsv
 
-df = pd.read_csv(sys.argv[1])
-t = df["time_s"].to_numpy(dtype=np.float64)
-v = df["speed_kmh"].to_numpy(dtype=np.float64) / 3.6
-h = df["elevation_m"].to_numpy(dtype=np.float64)
+names = ("time_s", "speed_kmh", "elevation_m")
+table = pacsv.read_csv(sys.argv[1], read_options=pacsv.ReadOptions(use_threads=False),
+                       convert_options=pacsv.ConvertOptions(column_types=dict.fromkeys(names, pa.float64())))
+
+def column(name):
+    a = table.column(name).combine_chunks()
+    return np.frombuffer(a.buffers()[1], np.float64, len(a), a.offset * 8)
+
+t, v, h = column("time_s"), column("speed_kmh") / 3.6, column("elevation_m")
 dt = np.diff(t)
 v0, v1 = v[:-1], v[1:]
 k = 0.5 * (v1 * v1 - v0 * v0)
@@ -138,26 +147,28 @@ def main() -> None:
         for k, label in ((0, "wall clock"), (1, "CPU time")):
             f = [x[k] for x in floor]
             c = [x[k] for x in cli]
-            print(f"{label}: floor (python + pandas.read_csv + numpy sums) best {min(f):.3f} s, median "
+            print(f"{label}: floor (python + pyarrow typed read + numpy sums) best {min(f):.3f} s, median "
                   f"{statistics.median(f):.3f} s; cevm predict best {min(c):.3f} s, median {statistics.median(c):.3f} "
                   f"s;"
                   f" ratio best {min(c) / min(f):.2f}x, median {statistics.median(c) / statistics.median(f):.2f}x "
                   "(goal: 1.5x or less)")
 
         sys.path.insert(0, str(ROOT / "src"))
-        import pandas as pd
+        import pyarrow as pa
+        import pyarrow.csv as pacsv
 
         from cevm.io import read_cycle_csv
 
+        types = pacsv.ConvertOptions(column_types=dict.fromkeys(("time_s", "speed_kmh", "elevation_m"), pa.float64()))
         bare, reader = [], []
         for _ in range(args.repeat):
             t0 = time.perf_counter()
-            pd.read_csv(big)
+            pacsv.read_csv(big, read_options=pacsv.ReadOptions(use_threads=False), convert_options=types)
             bare.append(time.perf_counter() - t0)
             t0 = time.perf_counter()
             read_cycle_csv(big)
             reader.append(time.perf_counter() - t0)
-        print(f"in process: pandas.read_csv {min(bare):.3f} s, cevm.io.read_cycle_csv {min(reader):.3f} s "
+        print(f"in process: pyarrow typed read_csv {min(bare):.3f} s, cevm.io.read_cycle_csv {min(reader):.3f} s "
               f"({min(reader) / min(bare):.2f}x, best of {args.repeat})")
 
 

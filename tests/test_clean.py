@@ -627,14 +627,14 @@ def test_tick_merging_matches_a_pandas_statement_of_the_rules(n, n_cols, seed):
 @given(n=st.integers(1, 60), seed=st.integers(0, 2**32 - 1), share=st.floats(0.0, 1.0))
 def test_row_interpolation_shortcut_equals_general_interpolation(n, seed, share):
     from cevm.ingest.cleaning.speed import _interp_rows
-    from cevm.ingest.consumption import _interp_limited
+    from cevm.ingest.consumption import interp_limited
 
     rng = np.random.default_rng(seed)
     t = np.cumsum(rng.choice([0.5, 1.0, 3.0, 20.0], n))  # strictly increasing, some gaps
     v = rng.normal(size=n)
     ok = rng.random(n) < share
     got = _interp_rows(t, ok, v, 15.0)
-    want = _interp_limited(t, t[ok], v[ok], 15.0)  # the general path: binary search
+    want = interp_limited(t, t[ok], v[ok], 15.0)  # the general path: binary search
     np.testing.assert_array_equal(got, want)
     assert np.isnan(_interp_rows(t, None, None, 15.0)).all()
 

@@ -13,14 +13,31 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from cevm.ingest.consumption import (
-    ConsumptionParams,
-    counter_increase,
-    estimate_source,
-    integrate_rate,
+from cevm.ingest.consumption import ConsumptionParams
+from cevm.ingest.measured import (
+    counter_increases,
+    estimate_sources,
+    integrate_rates,
     measure_trip,
-    soc_energy,
+    soc_energies,
 )
+
+
+# one trip's call of each estimator (they run over many trips at once)
+def integrate_rate(ts, rate, t0, t1, **kw):
+    return integrate_rates(ts, rate, np.array([0, ts.size]), np.array([t0]), np.array([t1]), **kw)[0]
+
+
+def counter_increase(ts, counter, t0, t1, **kw):
+    return counter_increases(ts, counter, np.array([0, ts.size]), np.array([t0]), np.array([t1]), **kw)[0]
+
+
+def soc_energy(ts, soc_pct, t0, t1, **kw):
+    return soc_energies(ts, soc_pct, np.array([0, ts.size]), np.array([t0]), np.array([t1]), **kw)[0]
+
+
+def estimate_source(time_s, columns, source, t0, t1, params=ConsumptionParams()):
+    return estimate_sources(time_s, columns, source, np.array([t0]), np.array([t1]), params)[0]
 
 
 @dataclass(frozen=True)
@@ -244,6 +261,21 @@ def test_soc_without_capacity_is_invalid():
     assert not est.valid and "capacity" in est.reason
 
 
+def test_every_trip_of_many_says_its_soc_wants_a_capacity():
+    # eight short trips at once (the batch of short trips once took another code path,
+    # which gave the generic reason): each says what its readings lack; one without
+    # readings (trip 7, past the log's end) does not
+    from cevm.ingest.measured import measure_trips
+
+    t = np.arange(0.0, 81.0)
+    t0 = np.array([0.0, 10, 20, 30, 40, 50, 60, 200])
+    got = measure_trips(t, {"soc_pct": 90 - 0.1 * t}, [Src("soc_pct", "soc", "energy_j", 0.01, 1)], t0, t0 + 9.0)
+    for m, q in got[:7]:
+        assert m is None and len(q["warnings"]) == 1 and "capacity" in q["warnings"][0]
+        assert q["sources"][0]["reason"] == "state of charge logged, but no capacity_j to turn it into energy"
+    assert got[7][0] is None and got[7][1]["warnings"] == []
+
+
 def test_a_logged_soc_that_cannot_measure_for_want_of_a_capacity_is_said():
     # acceptance: an e-bus logging only its state of charge, under a profile whose soc
     # entry has no capacity (the shipped srf's), got no measured energy without a word
@@ -409,13 +441,14 @@ def test_params_are_used():
 def test_battery_power_samples_equal_a_plain_loop(n, seed, share_v, share_i):
     """Power = V * I at every time where either is logged, each factor interpolated
     over at most max_gap_s between its own samples (plain-loop reference)."""
-    from cevm.ingest.consumption import source_samples
+    from cevm.ingest.measured import window_samples
 
     rng = np.random.default_rng(seed)
     t = np.cumsum(rng.choice([1.0, 2.0, 30.0], n))
     volt = np.where(rng.random(n) < share_v, rng.uniform(300, 400, n), np.nan)
     amp = np.where(rng.random(n) < share_i, rng.uniform(-50, 200, n), np.nan)
-    ts, p = source_samples(t, {"battery_voltage_v": volt, "battery_current_a": amp}, "battery_power_w", 15.0)
+    ts, p, _ = window_samples(t, {"battery_voltage_v": volt, "battery_current_a": amp}, "battery_power_w",
+                              np.array([0]), np.array([n]), 15.0)
 
     def at(tq, x):
         ti, xi = t[np.isfinite(x)], x[np.isfinite(x)]

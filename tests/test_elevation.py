@@ -700,7 +700,8 @@ def test_tiles_of_mixed_shapes_and_dtypes_equal_the_mosaic(tmp_path):
 def test_lowpass_equals_the_direct_gaussian_filter(sigma, n):
     from scipy import ndimage
 
-    from cevm.ingest.elevation import _gaussian_valid, _odd_pad
+    from cevm.ingest.road_filters import gaussian_valid as _gaussian_valid
+    from cevm.ingest.road_filters import odd_pad as _odd_pad
 
     x = np.cumsum(np.random.default_rng(n).normal(0, 1, n))
     r = int(4.0 * sigma + 0.5)
@@ -712,7 +713,7 @@ def test_lowpass_equals_the_direct_gaussian_filter(sigma, n):
 @settings(max_examples=80, deadline=None)
 @given(n=st.integers(1, 30), r=st.integers(0, 40), seed=st.integers(0, 2**32 - 1))
 def test_odd_pad_is_point_reflection(n, r, seed):
-    from cevm.ingest.elevation import _odd_pad
+    from cevm.ingest.road_filters import odd_pad as _odd_pad
 
     x = np.random.default_rng(seed).normal(size=n)
     got = _odd_pad(x, r)

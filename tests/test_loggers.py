@@ -804,7 +804,7 @@ def test_line_stats_match_plain_python(text, chunk):
 def test_ascii_heads_skip_re_encoding_only_for_ascii_compatible_codecs(tmp_path, profiles):
     import pandas as pd
 
-    from cevm.ingest.textfile import _ascii_transparent
+    from cevm.sniff import ascii_transparent as _ascii_transparent
 
     assert all(_ascii_transparent(e) for e in ("utf-8", "utf-8-sig", "cp1252", "latin-1", "ascii"))
     assert not any(_ascii_transparent(e) for e in ("utf-16", "utf-32", "utf-7", "cp500", "no-such-codec"))

@@ -1,5 +1,7 @@
-"""cevm.ingest.measured: the measured consumption of many trips at once equals
-cevm.ingest.consumption.measure_trip of each trip alone (the reference), bit for bit."""
+"""cevm.ingest.measured and cevm.ingest.evidence run over many trips at once: a trip
+measured among many (overlapping windows, trips of no duration, empty windows) is
+measured bit for bit as when it is alone. The estimators' values themselves are checked
+against hand computations in tests/test_consumption.py and tests/test_evidence.py."""
 
 from __future__ import annotations
 
@@ -10,8 +12,8 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from cevm.ingest.consumption import ConsumptionParams, measure_trip
-from cevm.ingest.measured import measure_trips
+from cevm.ingest.consumption import ConsumptionParams
+from cevm.ingest.measured import measure_trip, measure_trips
 
 
 @dataclass(frozen=True)
@@ -72,7 +74,7 @@ def _log(seed: int, n: int):
 
 @settings(max_examples=60, deadline=None)
 @given(st.integers(0, 2**32 - 1), st.integers(2, 400), st.integers(1, 6))
-def test_measure_trips_equal_measure_trip_of_each(seed, n, n_trips):
+def test_a_trip_among_many_is_measured_as_alone(seed, n, n_trips):
     t, cols = _log(seed, n)
     rng = np.random.default_rng(seed + 1)
     edges = np.sort(rng.uniform(t[0] - 30, t[-1] + 30, 2 * n_trips)).reshape(-1, 2)  # overlapping windows too
@@ -88,10 +90,11 @@ def test_measure_trips_equal_measure_trip_of_each(seed, n, n_trips):
 
 @settings(max_examples=60, deadline=None)
 @given(st.integers(0, 2**32 - 1), st.integers(3, 300), st.integers(1, 5), st.booleans())
-def test_batch_evidence_equals_trip_evidence_of_each(seed, n, n_trips, with_ignition):
-    """cevm.ingest.evidence.batch_evidence against trip_evidence (the reference) of each
-    trip: ambient temperature with junk and far readings, standstill with and without
-    ignition readings, battery power and fuel rates at standstill."""
+def test_a_trips_evidence_among_many_is_as_alone(seed, n, n_trips, with_ignition):
+    """cevm.ingest.evidence.batch_evidence of many trips against that of each trip alone
+    (trip_evidence, with only its window of rows): ambient temperature with junk and far
+    readings, standstill with and without ignition readings, battery power and fuel rates
+    at standstill."""
     from cevm.ingest.evidence import EvidenceParams, batch_evidence, trip_evidence
     from cevm.ingest.segments import bounds_of
 

@@ -23,9 +23,53 @@ coverages of the sample logs' calibrations: docs/benchmarks.md).
 
 from __future__ import annotations
 
+import math
+import statistics
+
 import numpy as np
 from numpy.typing import ArrayLike
-from scipy.special import ndtr, ndtri
+
+
+def normal_quantile(p: float) -> float:
+    """The standard normal quantile of ``p`` in (0, 1) (an interval's z): Python's
+    :class:`statistics.NormalDist` (Wichura's AS241, within 1e-15 of
+    ``scipy.special.ndtri``), so that a command printing intervals need not import
+    ``scipy.special`` (about 0.1-0.3 s of a short command: its array-API layer imports
+    numpy.testing and numpy.f2py)."""
+    return _STANDARD_NORMAL.inv_cdf(float(p))
+
+
+_STANDARD_NORMAL = statistics.NormalDist()
+
+
+def _quantile_or_edge(p: float) -> float:
+    if 0.0 < p < 1.0:
+        return _STANDARD_NORMAL.inv_cdf(p)
+    return -math.inf if p == 0.0 else math.inf if p == 1.0 else math.nan
+
+
+_QUANTILES = np.frompyfunc(_quantile_or_edge, 1, 1)
+
+
+def normal_quantiles(p: ArrayLike) -> np.ndarray:
+    """:func:`normal_quantile` of each ``p`` (float64, broadcast; 0 and 1 give -inf
+    and +inf, anything outside [0, 1] or NaN gives NaN, as ``scipy.special.ndtri``)."""
+    return np.asarray(_QUANTILES(np.asarray(p, dtype=np.float64)), dtype=np.float64)
+
+
+def normal_cdf(z: ArrayLike) -> np.ndarray:
+    """The standard normal distribution function of each ``z`` (float64; NaN stays
+    NaN): erfc(-z / sqrt 2) / 2, the formula of ``scipy.special.ndtr``, with C's
+    ``erfc`` (:func:`math.erfc`) per element (within 2.3e-16 of ``ndtr``, 1e-13 of it
+    relative in the far tail below 1e-300): about 60 ns an element, where importing
+    ``scipy.special`` costs a command about 0.16 s of CPU (2.5 M elements' worth)
+    before its first row."""
+    x = np.asarray(z, dtype=np.float64) * -_SQRT_HALF
+    return np.asarray(_ERFC(x), dtype=np.float64) * 0.5
+
+
+_SQRT_HALF = math.sqrt(0.5)
+_ERFC = np.frompyfunc(math.erfc, 1, 1)
 
 
 def _params(mean: ArrayLike, sd: ArrayLike) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -48,7 +92,7 @@ def lognormal(mean: ArrayLike, sd: ArrayLike) -> np.ndarray:
 
 def quantile(mean: ArrayLike, sd: ArrayLike, q: ArrayLike) -> np.ndarray:
     """The q-quantile(s), q in (0, 1) (broadcast)."""
-    z = ndtri(np.asarray(q, dtype=np.float64))
+    z = normal_quantiles(q)
     m, s, mu, sig = _params(mean, sd)
     with np.errstate(invalid="ignore", over="ignore"):
         out = np.where(np.isfinite(mu), np.exp(mu + sig * z), m + s * z)
@@ -69,6 +113,6 @@ def prob_at_most(mean: ArrayLike, sd: ArrayLike, budget: ArrayLike) -> np.ndarra
         z_ln = (np.log(np.where(b > 0, b, 1.0)) - mu) / sig
         z_ln = np.where(b > 0, z_ln, -np.inf)
         z_n = (b - m) / s
-    p = np.where(np.isfinite(mu), ndtr(z_ln),
-                 np.where(s > 0, ndtr(z_n), np.where(b >= m, 1.0, 0.0)))
+    p = np.where(np.isfinite(mu), normal_cdf(z_ln),
+                 np.where(s > 0, normal_cdf(z_n), np.where(b >= m, 1.0, 0.0)))
     return np.asarray(np.where(np.isnan(b) | np.isnan(m), np.nan, p), dtype=np.float64)

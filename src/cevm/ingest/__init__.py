@@ -9,11 +9,14 @@ Its modules, in the order the data flows through them:
   -> canonical log frames in SI units;
 - :mod:`~cevm.ingest.cleaning`: sorting, repairs, trip splitting, speed and distance;
 - :mod:`~cevm.ingest.dsm` (with :mod:`~cevm.ingest.dsm_sources`: which rasters may be
-  opened, remote ones only when asked for) and :mod:`~cevm.ingest.elevation`: DSM
-  samples -> a road profile;
-- :mod:`~cevm.ingest.consumption`: measured energy or fuel of each trip;
+  opened, remote ones only when asked for) and :mod:`~cevm.ingest.elevation` (its
+  filters in :mod:`~cevm.ingest.road_filters`): DSM samples -> a road profile;
+- :mod:`~cevm.ingest.consumption` (what is measured, and the choice among sources) and
+  :mod:`~cevm.ingest.measured` (the estimators, over all of a batch's trips at once):
+  measured energy or fuel of each trip;
 - :mod:`~cevm.ingest.evidence`: ambient temperature and standstill measurements of each
-  trip (evidence for a calibration, never a model input);
+  trip, over all of a batch's trips at once (evidence for a calibration, never a model
+  input);
 - :mod:`~cevm.ingest.task`: all of the above for one file (:func:`process_file`, the
   task that executors run);
 - :mod:`~cevm.ingest.pipeline`: :func:`ingest`, discovery, dispatch, and the writes to

@@ -1,6 +1,9 @@
-"""Measured consumption of a trip from a log's energy sources (rates, counters, SoC).
+"""Measured consumption of a trip from a log's energy sources (rates, counters, SoC):
+the parameters, each source's estimate, and the choice among a trip's sources.
 
-Pure functions over sorted sample arrays: no I/O, no per-sample Python loops.
+The estimators themselves run over many trips at once, for one trip as for a thousand
+(:mod:`cevm.ingest.measured`: :func:`~cevm.ingest.measured.measure_trips`); pure
+functions over sorted sample arrays: no I/O, no per-sample Python loops.
 
 Three kinds of source (attribute ``kind`` of an energy source, see
 :class:`EnergySourceLike`):
@@ -58,7 +61,7 @@ Uncertainty (1 sigma, in the measurement's unit), terms added in quadrature:
   kind. Every estimate keeps both parts (``random_uncertainty``,
   ``systematic_uncertainty``); ``uncertainty`` is their quadrature sum.
 
-When several sources are given, :func:`measure_trip` chooses among those *valid* for the
+When several sources are given, :func:`choose_measurement` chooses among those *valid* for the
 trip (coverage of the trip duration >= ``min_coverage`` and, for rates, gap share <=
 ``max_gap_share``): the quantity of the most trusted valid source (lowest ``priority``:
 fuel or electric energy), and of that quantity the source with the **least
@@ -79,7 +82,7 @@ from __future__ import annotations
 
 import math
 import statistics
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Protocol
 
@@ -244,7 +247,7 @@ def chunks(n: int, size: int | None = None):
     return ((a, min(a + size, n)) for a in range(0, n, size))
 
 
-def _interp_limited(
+def interp_limited(
     q: np.ndarray, ts: np.ndarray, vs: np.ndarray, max_gap_s: float, *more: np.ndarray,
     right: np.ndarray | None = None,
 ):
@@ -263,7 +266,7 @@ def _interp_limited(
     if q.ndim == 1 and q.size > CHUNK_ROWS:
         outs = [np.empty(q.shape) for _ in arrays]
         for a, b in chunks(q.size):
-            part = _interp_limited(q[a:b], ts, vs, max_gap_s, *more, right=None if right is None else right[a:b])
+            part = interp_limited(q[a:b], ts, vs, max_gap_s, *more, right=None if right is None else right[a:b])
             for o, x in zip(outs, part if more else [part], strict=True):
                 o[a:b] = x
         return outs if more else outs[0]
@@ -287,7 +290,8 @@ def _interp_limited(
 
 def columns_read(column: str) -> set[str]:
     """The canonical columns that the estimate of a source column may read
-    (:func:`source_samples`): the column itself, or a product's factors."""
+    (:func:`cevm.ingest.measured.window_samples`): the column itself, or a product's
+    factors."""
     return {column, *_BATTERY_POWER_FACTORS, *(part.strip() for part in column.split("*"))}
 
 
@@ -302,43 +306,14 @@ def product_factors(column: str) -> tuple[str, ...]:
     raise KeyError(column)
 
 
-def source_samples(
-    time_s: np.ndarray, columns: Mapping[str, np.ndarray], column: str, max_gap_s: float
-) -> tuple[np.ndarray, np.ndarray]:
-    """Valid samples (times [s], values) of a source column.
-
-    ``time_s`` is sorted and strictly increasing, ``columns`` maps canonical names to
-    arrays aligned with it (NaN = no value). A product column ``"a*b"`` or
-    ``"battery_power_w"`` is evaluated at the times where either factor has a value,
-    each factor interpolated linearly over at most ``max_gap_s`` [s]. Raises KeyError
-    when a needed column is missing.
-    """
-    if column in columns:
-        v = np.asarray(columns[column], dtype=float)
-        ok = np.isfinite(v)
-        return time_s[ok], v[ok]
-    arrays = [np.asarray(columns[f], dtype=float) for f in product_factors(column)]  # KeyError if absent
-    any_ok = np.zeros(time_s.shape, dtype=bool)
-    for a in arrays:
-        any_ok |= np.isfinite(a)
-    q = time_s[any_ok]
-    prod = np.ones(q.shape)
-    for a in arrays:
-        ok = np.isfinite(a)
-        if np.array_equal(ok, any_ok):  # sampled at every q: its own values (exact times)
-            prod *= a[ok]
-        else:  # samples at q[mask] of the strictly increasing q
-            mask = ok[any_ok]
-            prod *= _interp_limited(q, time_s[ok], a[ok], max_gap_s, right=np.cumsum(mask) - mask)
-    ok = np.isfinite(prod)
-    return q[ok], prod[ok]
-
-
 # ------------------------------------------------------------------------ estimators
 
 
 @dataclass(frozen=True)
-class _Raw:
+class RawEstimate:
+    """An estimator's figures for one trip, before the choice of a valid source: its
+    value, random uncertainty, coverage, gap share, repair counts, and why it has none."""
+
     value: float
     uncertainty: float
     coverage: float
@@ -347,193 +322,11 @@ class _Raw:
     reason: str = ""
 
 
-def integrate_rate(
-    ts: np.ndarray,
-    rate: np.ndarray,
-    t0: float,
-    t1: float,
-    *,
-    max_gap_s: float = 15.0,
-    resolution: float = 0.0,
-) -> _Raw:
-    """Integral of a sampled rate [unit/s] over ``[t0, t1]`` [s] -> [unit].
-
-    Trapezoid rule on the piecewise-linear interpolant through the samples (``ts``
-    sorted, strictly increasing; values outside the samples held at the edge value),
-    evaluated at ``t0``, every sample strictly inside, and ``t1``. Steps longer than
-    ``max_gap_s`` count as gaps. Uncertainty: see the module docstring.
-    """
-    duration = t1 - t0
-    ok = np.isfinite(ts) & np.isfinite(rate)
-    ts, rate = ts[ok], rate[ok]
-    if ts.size == 0 or duration < 0:
-        return _Raw(math.nan, math.nan, 0.0, 1.0, {}, "no samples")
-    if duration == 0:
-        return _Raw(0.0, 0.0, 1.0, 0.0, {"rate_gaps": 0})
-    inside = (ts > t0) & (ts < t1)
-    pts = np.concatenate(([t0], ts[inside], [t1]))
-    vals = np.interp(pts, ts, rate)
-    dts = np.diff(pts)
-    value = float(np.sum(0.5 * (vals[1:] + vals[:-1]) * dts))
-    gap = dts > max_gap_s
-    gap_s = float(np.sum(dts[gap]))
-    gap_share = gap_s / duration
-    # trapezoid weight of each point
-    w = np.zeros(pts.size)
-    w[:-1] += 0.5 * dts
-    w[1:] += 0.5 * dts
-    var = (resolution**2 / 12.0) * float(np.sum(w * w))
-    if gap.any():
-        s_r = float(np.std(vals))
-        var += s_r**2 * float(np.sum(dts[gap] ** 2))
-    return _Raw(value, math.sqrt(var), 1.0 - gap_share, gap_share, {"rate_gaps": int(gap.sum())})
-
-
-def counter_increase(
-    ts: np.ndarray,
-    counter: np.ndarray,
-    t0: float,
-    t1: float,
-    *,
-    resolution: float,
-    max_rate: float,
-    max_rate_neg: float = 0.0,
-    modulus: float | None = None,
-    reset_fraction: float = 0.01,
-) -> _Raw:
-    """Increase of a cumulative counter [unit] between its first and last reading in
-    ``[t0, t1]`` [s], with wraps, resets and jumps handled as in the module docstring.
-
-    ``max_rate`` / ``max_rate_neg`` [unit/s] bound plausible forward / backward steps.
-    """
-    duration = t1 - t0
-    sel = (ts >= t0) & (ts <= t1) & np.isfinite(counter)
-    t = ts[sel]
-    c = counter[sel]
-    if t.size < 2 or duration <= 0:
-        return _Raw(math.nan, math.nan, 0.0, 1.0, {}, "fewer than 2 readings")
-    d = np.diff(c)
-    dt = np.diff(t)
-    q = abs(resolution)
-    wraps = np.zeros(d.shape, dtype=bool)
-    if modulus is not None and modulus > 0:
-        wraps = d < -0.5 * modulus
-        d = np.where(wraps, d + modulus, d)
-    plausible = (d >= -max_rate_neg * dt - 2 * q) & (d <= max_rate * dt + 2 * q)
-    # "near zero" relative to the counter's level: the previous reading, or the
-    # median reading if smaller (so that coming down from a glitch is not a reset)
-    level = np.minimum(np.abs(c[:-1]), abs(float(np.median(c))))
-    resets = ~plausible & (d < 0) & (c[1:] <= reset_fraction * level + 2 * q)
-    jumps = ~plausible & ~resets
-    lost = resets | jumps
-    d = np.where(lost, 0.0, d)
-    value = float(np.sum(d))
-    covered = float(t[-1] - t[0])
-    coverage = covered / duration
-    mean_rate = value / covered if covered > 0 else 0.0
-    var = q * q / 6.0
-    var += float(np.sum((mean_rate * dt[lost]) ** 2))
-    var += (mean_rate * (duration - covered)) ** 2
-    counts = {
-        "counter_wraps": int(wraps.sum()),
-        "counter_resets": int(resets.sum()),
-        "counter_jumps": int(jumps.sum()),
-    }
-    return _Raw(value, math.sqrt(var), coverage, 1.0 - coverage, counts)
-
-
-def soc_energy(
-    ts: np.ndarray,
-    soc_pct: np.ndarray,
-    t0: float,
-    t1: float,
-    *,
-    resolution_pct: float,
-    capacity_j: float,
-) -> _Raw:
-    """Battery energy [J] used over ``[t0, t1]`` [s] from the first and last SoC
-    readings [%] in the span: (soc_first - soc_last) / 100 * capacity_j."""
-    duration = t1 - t0
-    sel = (ts >= t0) & (ts <= t1) & np.isfinite(soc_pct)
-    t = ts[sel]
-    s = soc_pct[sel]
-    if t.size < 2 or duration <= 0:
-        return _Raw(math.nan, math.nan, 0.0, 1.0, {}, "fewer than 2 readings")
-    value = float((s[0] - s[-1]) / 100.0 * capacity_j)
-    covered = float(t[-1] - t[0])
-    coverage = covered / duration
-    q_j = abs(resolution_pct) / 100.0 * capacity_j
-    mean_rate = value / covered if covered > 0 else 0.0
-    var = q_j * q_j / 6.0 + (mean_rate * (duration - covered)) ** 2
-    return _Raw(value, math.sqrt(var), coverage, 1.0 - coverage, {})
-
-
-def estimate_source(
-    time_s: np.ndarray,
-    columns: Mapping[str, np.ndarray],
-    source: EnergySourceLike,
-    t0: float,
-    t1: float,
-    params: ConsumptionParams = ConsumptionParams(),
-) -> SourceEstimate:
-    """Estimate a trip's consumption over ``[t0, t1]`` [s] from one source.
-
-    ``time_s`` sorted, strictly increasing [s]; ``columns`` arrays aligned with it.
-    The result says whether the source is valid for the trip, and why not.
-    """
-    kind, quantity = str(source.kind), str(source.quantity)
-    res = float(source.resolution)
-    name = str(source.column)
-
-    def invalid(reason: str, raw: _Raw | None = None) -> SourceEstimate:
-        return invalid_estimate(source, reason, raw)
-
-    if quantity not in ("fuel_l", "energy_j"):
-        return invalid(f"unknown quantity {quantity!r}")
-    max_rate = params.max_fuel_lps if quantity == "fuel_l" else params.max_power_w
-    # a window slightly wider than the trip, so rates can be interpolated at its ends
-    lo = np.searchsorted(time_s, t0 - params.max_gap_s, side="left")
-    hi = np.searchsorted(time_s, t1 + params.max_gap_s, side="right")
-    window_t = time_s[lo:hi]
-    window = {k: np.asarray(columns[k])[lo:hi] for k in columns_read(name) if k in columns}
-    try:
-        ts, vs = source_samples(window_t, window, name, params.max_gap_s)
-    except KeyError:
-        return invalid("column not in the log")
-    if kind == "rate":
-        # negative fuel flow is impossible; power may be negative (regeneration)
-        lim_lo = 0.0 if quantity == "fuel_l" else -max_rate
-        ok = (vs >= lim_lo - 2 * abs(res)) & (vs <= max_rate)
-        raw = integrate_rate(ts[ok], vs[ok], t0, t1, max_gap_s=params.max_gap_s, resolution=res)
-        raw.counts["rate_values_rejected"] = int((~ok).sum())
-        resolution = 0.0
-    elif kind == "counter":
-        modulus = getattr(source, "modulus", None)
-        raw = counter_increase(
-            ts, vs, t0, t1, resolution=res, max_rate=max_rate,
-            max_rate_neg=0.0 if quantity == "fuel_l" else max_rate,
-            modulus=modulus, reset_fraction=params.reset_fraction,
-        )
-        resolution = abs(res)
-    elif kind == "soc":
-        cap = getattr(source, "capacity_j", None)
-        if quantity != "energy_j" or cap is None or not cap > 0:
-            if np.count_nonzero((vs >= 0) & (vs <= 100)) >= 2:
-                return invalid(NO_CAPACITY)
-            return invalid("SoC source needs quantity 'energy_j' and a capacity_j > 0")
-        ok = (vs >= 0) & (vs <= 100)
-        raw = soc_energy(ts[ok], vs[ok], t0, t1, resolution_pct=res, capacity_j=float(cap))
-        resolution = abs(res) / 100.0 * float(cap)
-    else:
-        return invalid(f"unknown kind {kind!r}")
-    return finish_estimate(source, raw, resolution, params)
-
-
 #: why a logged state of charge measured nothing: the profile gives no capacity
 NO_CAPACITY = "state of charge logged, but no capacity_j to turn it into energy"
 
 
-def invalid_estimate(source: EnergySourceLike, reason: str, raw: _Raw | None = None) -> SourceEstimate:
+def invalid_estimate(source: EnergySourceLike, reason: str, raw: RawEstimate | None = None) -> SourceEstimate:
     """The estimate of a source not valid for a trip, and why (with what was measured)."""
     return SourceEstimate(
         str(source.column), str(source.kind), str(source.quantity), int(source.priority),
@@ -544,7 +337,7 @@ def invalid_estimate(source: EnergySourceLike, reason: str, raw: _Raw | None = N
     )
 
 
-def finish_estimate(source: EnergySourceLike, raw: _Raw, resolution: float,
+def finish_estimate(source: EnergySourceLike, raw: RawEstimate, resolution: float,
                     params: ConsumptionParams) -> SourceEstimate:
     """A source's estimate for a trip from its raw figures: invalid (with the reason)
     where it has none, no finite value, too many gaps or too little coverage; else its
@@ -566,32 +359,17 @@ def finish_estimate(source: EnergySourceLike, raw: _Raw, resolution: float,
     )
 
 
-def measure_trip(
-    time_s: np.ndarray,
-    columns: Mapping[str, np.ndarray],
-    sources: Sequence[EnergySourceLike],
-    t0: float,
-    t1: float,
-    params: ConsumptionParams = ConsumptionParams(),
-) -> tuple[Measurement | None, dict]:
-    """A trip's measured consumption over ``[t0, t1]`` [s] from the best valid source.
-
-    Returns the :class:`~cevm.core.trip.Measurement` of the chosen source (see the module
-    docstring: the least uncertain valid source of the most trusted valid source's
-    quantity) or None, and a JSON-serialisable quality dict: ``sources`` (every
-    source's estimate, both parts of its uncertainty, and its validity),
-    ``cross_checks`` (other valid sources of the chosen quantity against the chosen
-    one, in percent and in combined standard uncertainties), ``warnings`` (those beyond
-    ``disagreement_sigma``), ``chosen_by`` and, for the chosen source, ``source``,
-    ``coverage``, ``gap_share`` and its repair counts.
-    """
-    return choose_measurement([estimate_source(time_s, columns, s, t0, t1, params) for s in sources], params)
-
-
 def choose_measurement(estimates: Sequence[SourceEstimate],
                        params: ConsumptionParams = ConsumptionParams()) -> tuple[Measurement | None, dict]:
-    """A trip's measured consumption from its sources' estimates (:func:`measure_trip`):
-    the chosen measurement or None, and the quality dict."""
+    """A trip's measured consumption from its sources' estimates: the
+    :class:`~cevm.core.trip.Measurement` of the chosen source (see the module docstring:
+    the least uncertain valid source of the most trusted valid source's quantity) or
+    None, and a JSON-serialisable quality dict: ``sources`` (every source's estimate,
+    both parts of its uncertainty, and its validity), ``cross_checks`` (other valid
+    sources of the chosen quantity against the chosen one, in percent and in combined
+    standard uncertainties), ``warnings`` (those beyond ``disagreement_sigma``),
+    ``chosen_by`` and, for the chosen source, ``source``, ``coverage``, ``gap_share``
+    and its repair counts."""
     quality: dict = {"sources": [e.as_dict() for e in estimates], "cross_checks": [], "warnings": []}
     valid = [e for e in estimates if e.valid]
     if not valid:

@@ -1,5 +1,6 @@
-"""Road elevation for a trip: road-profile smoothing of DSM samples (pure), with GPS
-altitude or a flat road where the DSM has long gaps.
+"""Road elevation for a trip: road-profile smoothing of DSM samples (pure; the filters
+in :mod:`cevm.ingest.road_filters`), with GPS altitude or a flat road where the DSM has
+long gaps.
 
 :func:`road_profile_m`, :func:`combine_elevation` turn raw, spiky DSM samples (roofs,
 trees, bridges, vehicles) into a plausible road profile along distance, with a fallback
@@ -18,10 +19,9 @@ from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
-from scipy import ndimage
-from scipy.fft import next_fast_len
 
 from cevm.ingest.dsm import DsmSampler
+from cevm.ingest.road_filters import bound_grade, bound_grade_or_same, runs, smooth_profile
 
 __all__ = [
     "ElevationParams",
@@ -290,119 +290,6 @@ def _resample(d: np.ndarray, z: np.ndarray, valid: np.ndarray, grid: np.ndarray)
     return out
 
 
-def _odd_pad(x: np.ndarray, r: int) -> np.ndarray:
-    """Pad by point reflection about each end value (x[0] - (x[k] - x[0])), which
-    continues a straight line: symmetric filters then keep ramps up to the ends."""
-    if r <= 0:
-        return x
-    if x.size == 1:
-        return np.full(2 * r + 1, x[0])
-    if r >= x.size:  # reflected more than once
-        return np.pad(x, r, mode="reflect", reflect_type="odd")
-    out = np.empty(x.size + 2 * r)
-    out[r : r + x.size] = x
-    out[:r] = 2 * x[0] - x[r:0:-1]  # as np.pad(x, r, mode="reflect", reflect_type="odd")
-    out[r + x.size :] = 2 * x[-1] - x[-2 : -r - 2 : -1]
-    return out
-
-
-def _smooth(h: np.ndarray, step: float, params: ElevationParams) -> np.ndarray:
-    """Robust smoothing of a gap-free uniform profile with spacing ``step`` [m].
-
-    A running median of ``median_window_m`` is the reference ground; cells further than
-    ``spike_threshold_m`` from it are surface objects: they are dropped and bridged by
-    straight lines between the remaining cells (a Hampel filter). Then a Gaussian
-    low-pass of ``lowpass_sigma_m``. Ends are padded by odd reflection, so a straight
-    ramp comes out unchanged, ends included. (Taking the median itself as the profile
-    would shift a ramp near an object by half the object's length times the grade.)
-    """
-    k = 2 * int(params.median_window_m / (2 * step)) + 1
-    if k > 1 and h.size > 2:
-        r = k // 2
-        ground = ndimage.median_filter(_odd_pad(h, r), size=k, mode="nearest")[r:-r]
-        spike = np.abs(h - ground) > params.spike_threshold_m
-        if spike.all():
-            h = ground
-        elif spike.any():
-            idx = np.arange(h.size, dtype=np.float64)
-            h = h.copy()
-            h[spike] = np.interp(idx[spike], idx[~spike], h[~spike])
-    sigma = params.lowpass_sigma_m / step
-    if sigma > 0 and h.size > 1:
-        r = int(4.0 * sigma + 0.5)
-        h = _gaussian_valid(_odd_pad(h, r), sigma, r)
-    return h
-
-
-#: Kernels longer than this [taps] are applied by FFT (same result within rounding).
-_FFT_MIN_TAPS = 96
-
-
-def _gaussian_valid(x: np.ndarray, sigma: float, r: int) -> np.ndarray:
-    """Gaussian low-pass (standard deviation ``sigma`` cells, radius ``r`` cells) of
-    ``x`` at the cells ``r .. len(x) - r - 1``, whose windows lie inside ``x``: what
-    ``ndimage.gaussian_filter1d(x, sigma, truncate=4.0)[r:-r]`` gives for
-    ``r = int(4 * sigma + 0.5)``, whatever its boundary mode. Long kernels (the GPS
-    profile's, 481 taps) go through an FFT of a length :func:`scipy.fft.next_fast_len`
-    chooses, O(n log n) instead of O(n r); the result differs only by floating-point
-    rounding (about 1e-12 m). (``scipy.signal.fftconvolve`` gives the same bits, but
-    importing ``scipy.signal`` costs each process 47 MB; ``oaconvolve`` differs by up to
-    3e-13 m and was 2x slower on trips under 5,000 cells.)"""
-    k = _gaussian_weights(float(sigma), int(r))
-    if 2 * r + 1 < _FFT_MIN_TAPS:  # gaussian_filter1d's own steps, with the weights made once
-        return ndimage.correlate1d(x, k, mode="nearest")[r:-r]
-    nfft = next_fast_len(x.size + k.size - 1, real=True)
-    y = np.fft.irfft(np.fft.rfft(x, nfft) * np.fft.rfft(k, nfft), nfft)
-    return y[2 * r : x.size]
-
-
-@lru_cache(maxsize=32)
-def _gaussian_weights(sigma: float, r: int) -> np.ndarray:
-    """The normalised Gaussian kernel of ``2 r + 1`` taps (symmetric), as scipy's
-    ``gaussian_filter1d`` makes it; made once per (sigma, r), read-only."""
-    k = np.exp(-0.5 / (sigma * sigma) * np.arange(-r, r + 1, dtype=np.float64) ** 2)
-    k /= k.sum()
-    k.setflags(write=False)
-    return k
-
-
-def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
-    """[start, stop) index ranges of True runs."""
-    m = np.concatenate(([False], mask, [False]))
-    edges = np.flatnonzero(m[1:] != m[:-1])
-    return list(zip(edges[::2].tolist(), edges[1::2].tolist(), strict=True))
-
-
-def bound_grade(h: np.ndarray, step: float, max_grade: float) -> np.ndarray:
-    """Bound the grade of a uniform profile (spacing ``step`` [m]) to ``max_grade``.
-
-    Returns the mean of the two Lipschitz envelopes of ``h``: the largest profile below
-    ``h`` and the smallest profile above ``h`` whose grade never exceeds ``max_grade``
-    (``min_j h_j + G |i - j| step`` and ``max_j h_j - G |i - j| step``, computed with
-    running minima/maxima, O(n)). Both envelopes obey the bound, so their mean does.
-    Where ``h`` already obeys it both equal ``h``: the profile changes only around a
-    violation, which becomes a ramp centred on it, and total rise and fall far from it
-    are kept. So there is no drift, unlike clipping the grade and integrating.
-    """
-    if h.size < 2 or np.all(np.abs(np.diff(h)) <= max_grade * step):
-        return h.copy()
-    s = max_grade * step * np.arange(h.size)
-    up_fwd = s + np.minimum.accumulate(h - s)  # min over j <= i of h_j + G (i - j) step
-    up_bwd = (np.minimum.accumulate((h + s)[::-1]))[::-1] - s  # j >= i
-    lo_fwd = np.maximum.accumulate(h + s) - s
-    lo_bwd = (np.maximum.accumulate((h - s)[::-1]))[::-1] + s
-    lower_env = np.minimum(up_fwd, up_bwd)
-    upper_env = np.maximum(lo_fwd, lo_bwd)
-    return 0.5 * (lower_env + upper_env)
-
-
-def _bound_grade_or_same(h: np.ndarray, step: float, max_grade: float) -> np.ndarray:
-    """:func:`bound_grade`, returning ``h`` itself (not a copy) where it obeys the bound."""
-    if h.size < 2 or np.all(np.abs(np.diff(h)) <= max_grade * step):
-        return h
-    return bound_grade(h, step, max_grade)
-
-
 def _profile_grid(d: np.ndarray, z: np.ndarray, params: ElevationParams, grid: np.ndarray,
                   max_gap_m: float) -> tuple[np.ndarray, _Gaps]:
     """Smoothed (not yet grade-bounded) profile on ``grid``, NaN inside long gaps."""
@@ -419,8 +306,8 @@ def _profile_grid(d: np.ndarray, z: np.ndarray, params: ElevationParams, grid: n
         if hi > lo:
             h[lo:hi] = np.nan
     step = grid[1] - grid[0] if grid.size > 1 else params.grid_step_m
-    for lo, hi in _runs(np.isfinite(h)):
-        h[lo:hi] = _smooth(h[lo:hi], step, params)
+    for lo, hi in runs(np.isfinite(h)):
+        h[lo:hi] = smooth_profile(h[lo:hi], step, params)
     return h, gaps
 
 
@@ -461,7 +348,7 @@ def road_profile_m(distance_m, raw_elevation_m, params: ElevationParams = Elevat
     grid = _grid(d[0], d[-1], params.grid_step_m)
     h, _ = _profile_grid(d, z, params, grid, params.max_gap_m)
     step = grid[1] - grid[0] if grid.size > 1 else params.grid_step_m
-    for lo, hi in _runs(np.isfinite(h)):
+    for lo, hi in runs(np.isfinite(h)):
         h[lo:hi] = bound_grade(h[lo:hi], step, params.max_grade)
     return _to_samples(d, grid, h)
 
@@ -660,7 +547,7 @@ def _fill_long_gaps(h: np.ndarray, d: np.ndarray, grid: np.ndarray, step: float,
     by_gps = np.zeros(gap_m.size, dtype=bool)
     if gps is not None:
         span = max(1, int(round(params.median_window_m / step)))
-        for lo, hi in _runs(holes):
+        for lo, hi in runs(holes):
             if _gps_fill(h, d, gps, grid, lo, hi, span, params):
                 by_gps[max(0, np.searchsorted(gap_a, grid[lo], side="right") - 1)] = True
     filled_gps = float(gap_m[by_gps].sum())
@@ -711,7 +598,7 @@ def _bound_profile_grade(h: np.ndarray, d: np.ndarray, step: float, params: Elev
     """The profile with its grade bounded to ``max_grade``, and the road [m] on which
     that moved it by over 1 m (a note; a warning when that is over
     ``steep_warn_share`` of the trip: an implausibly steep profile)."""
-    bounded = _bound_grade_or_same(h, step, params.max_grade)
+    bounded = bound_grade_or_same(h, step, params.max_grade)
     moved_m = 0.0 if bounded is h else float(np.count_nonzero(np.abs(bounded - h) > 1.0) * step)
     if moved_m > 0:
         notes.append(f"grade bounded to {100 * params.max_grade:g} %: profile moved by over 1 m on {moved_m:.0f} m")

@@ -16,7 +16,7 @@ Pure functions over a :class:`cevm.ingest.cleaning.CleanTrip`'s arrays; no I/O.
   still (speed <= the cleaning's ``standstill_mps``) with the ignition on (the last
   ignition reading at or before each sample; unknown = on, as the trip split assumes).
 - **Battery power at standstill** (``standstill_power_w``, EV): battery_voltage_v x
-  battery_current_a (:func:`cevm.ingest.consumption.source_samples`; readings beyond
+  battery_current_a (:func:`cevm.ingest.measured.window_samples`; readings beyond
   ``max_power_w`` rejected) interpolated onto the trip's samples over at most
   ``max_gap_s``, the trapezoid mean over the standstill steps where it is known. None
   without both columns, without standstill, or when it is known on less than
@@ -35,9 +35,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from cevm.ingest.consumption import ConsumptionParams, _interp_limited, source_samples
+from cevm.ingest.consumption import ConsumptionParams
+from cevm.ingest.measured import interp_limited_segments, window_samples
+from cevm.ingest.segments import bounds_of, ranges, segment_ids, segment_interp, segment_searchsorted, segment_sums
 
-__all__ = ["EVIDENCE_COLUMNS", "EvidenceParams", "trip_evidence"]
+__all__ = ["EVIDENCE_COLUMNS", "EvidenceParams", "batch_evidence", "trip_evidence"]
 
 #: Canonical columns whose readings a clean trip keeps for its evidence.
 EVIDENCE_COLUMNS: tuple[str, ...] = (
@@ -69,145 +71,6 @@ class EvidenceParams:
     consumption: ConsumptionParams = field(default_factory=ConsumptionParams)
 
 
-def trip_evidence(
-    t_abs_s: np.ndarray,
-    speed_mps: np.ndarray,
-    row_t_s: np.ndarray,
-    rows: Mapping[str, np.ndarray],
-    standstill_mps: float,
-    params: EvidenceParams = EvidenceParams(),
-) -> tuple[dict[str, float | None], dict]:
-    """The evidence fields of one trip and a JSON-serialisable quality dict.
-
-    Parameters
-    ----------
-    t_abs_s : the trip's sample times [s, UTC epoch], strictly increasing.
-    speed_mps : speed at those samples [m/s].
-    row_t_s : the times of the log's cleaned rows around the trip [s, UTC epoch],
-        strictly increasing.
-    rows : canonical columns (any of :data:`EVIDENCE_COLUMNS`) aligned with ``row_t_s``,
-        NaN where a row carries no value.
-    standstill_mps : the speed at or below which the vehicle stands still [m/s].
-    params : :class:`EvidenceParams`.
-
-    Returns
-    -------
-    (fields, quality): ``fields`` maps every name of
-    :data:`cevm.core.trip.TRIP_EVIDENCE_FIELDS` to a float or None; ``quality`` says
-    where each came from and why a missing one is missing.
-    """
-    t = np.asarray(t_abs_s, dtype=np.float64)
-    v = np.asarray(speed_mps, dtype=np.float64)
-    row_t = np.asarray(row_t_s, dtype=np.float64)
-    fields: dict[str, float | None] = {}
-    quality: dict = {}
-    fields.update(_ambient(t, row_t, rows.get("ambient_temp_c"), params, quality))
-    still, ign_note = _standstill_steps(t, v, row_t, rows.get("ignition"), standstill_mps)
-    dt = np.diff(t)
-    standstill_s = float(dt[still].sum()) if t.size > 1 else 0.0
-    fields["standstill_s"] = standstill_s
-    quality["standstill"] = {"s": standstill_s, "ignition": ign_note}
-    cp = params.consumption
-    power = None
-    if "battery_voltage_v" in rows and "battery_current_a" in rows:
-        ts, p = source_samples(row_t, rows, "battery_power_w", cp.max_gap_s)
-        ok = np.abs(p) <= cp.max_power_w
-        power = _standstill_mean(t, still, ts[ok], p[ok], cp.max_gap_s)
-        quality["standstill_power"] = _mean_quality(power, standstill_s, int((~ok).sum()), params)
-    else:
-        quality["standstill_power"] = {"why_none": "no battery_voltage_v and battery_current_a"}
-    fields["standstill_power_w"] = _accepted(power, standstill_s, params)
-    fuel = None
-    fuel_q: dict = {"why_none": "no fuel rate column"}
-    candidates = []
-    for col in STANDSTILL_FUEL_COLUMNS:
-        if col in rows:
-            a = np.asarray(rows[col], dtype=np.float64)
-            fin = np.isfinite(a)
-            ok = fin & (a >= 0.0) & (a <= cp.max_fuel_lps)
-            m = _standstill_mean(t, still, row_t[ok], a[ok], cp.max_gap_s)
-            candidates.append((m, {"source": col, **_mean_quality(m, standstill_s, int((fin & ~ok).sum()), params)}))
-    usable = [c for c in candidates if _accepted(c[0], standstill_s, params) is not None]
-    if usable or candidates:
-        fuel, fuel_q = (usable or candidates)[0]  # the first usable in order of preference
-    fields["standstill_fuel_lps"] = _accepted(fuel, standstill_s, params)
-    quality["standstill_fuel"] = fuel_q
-    return fields, quality
-
-
-def _ambient(t: np.ndarray, row_t: np.ndarray, temp, params: EvidenceParams, quality: dict) -> dict:
-    none = {"ambient_temp_c": None, "ambient_temp_min_c": None, "ambient_temp_max_c": None}
-    if temp is None:
-        quality["ambient_temp"] = {"why_none": "no ambient_temp_c column"}
-        return none
-    a = np.asarray(temp, dtype=np.float64)
-    fin = np.isfinite(a)
-    lo, hi = params.ambient_range_c
-    ok = fin & (a >= lo) & (a <= hi)
-    t0, t1 = float(t[0]), float(t[-1])
-    hold = params.ambient_max_hold_s
-    sel = ok & (row_t >= t0 - hold) & (row_t <= t1 + hold)
-    rt, rv = row_t[sel], a[sel]
-    q: dict = {"readings": int(((rt >= t0) & (rt <= t1)).sum()), "rejected": int((fin & ~ok).sum())}
-    quality["ambient_temp"] = q
-    if rt.size == 0:
-        q["why_none"] = "no plausible reading within the trip"
-        return none
-    far = _farthest_from_readings(t0, t1, rt)
-    q["max_hold_s"] = far
-    if far > hold:
-        q["why_none"] = f"some instant of the trip is {far:.0f} s from a reading (over {hold:g} s)"
-        return none
-    inside = rt[(rt > t0) & (rt < t1)]
-    pts = np.concatenate(([t0], inside, [t1]))
-    vals = np.interp(pts, rt, rv)
-    duration = t1 - t0
-    mean = float(np.sum(0.5 * (vals[1:] + vals[:-1]) * np.diff(pts)) / duration) if duration > 0 else float(vals[0])
-    return {"ambient_temp_c": mean, "ambient_temp_min_c": float(vals.min()), "ambient_temp_max_c": float(vals.max())}
-
-
-def _farthest_from_readings(t0: float, t1: float, rt: np.ndarray) -> float:
-    """max over t in [t0, t1] of the time to the nearest reading (``rt`` sorted)."""
-    mid = np.clip(0.5 * (rt[1:] + rt[:-1]), t0, t1)
-    cand = np.concatenate(([t0, t1], mid))
-    k = np.searchsorted(rt, cand)
-    before = np.abs(cand - rt[np.clip(k - 1, 0, rt.size - 1)])
-    after = np.abs(rt[np.clip(k, 0, rt.size - 1)] - cand)
-    return float(np.minimum(before, after).max())
-
-
-def _standstill_steps(t, v, row_t, ignition, standstill_mps: float) -> tuple[np.ndarray, str]:
-    """Steps (i to i+1) standing still with the ignition on at both ends."""
-    still = (v[1:] <= standstill_mps) & (v[:-1] <= standstill_mps)
-    if ignition is None:
-        return still, "no ignition column: on (the trip)"
-    ign = np.asarray(ignition, dtype=np.float64)
-    ok = np.isfinite(ign)
-    if not ok.any():
-        return still, "no ignition reading: on (the trip)"
-    it, iv = row_t[ok], ign[ok]
-    j = np.searchsorted(it, t, side="right") - 1  # last reading at or before each sample
-    on = ~((j >= 0) & (iv[np.maximum(j, 0)] < 0.5))
-    return still & on[1:] & on[:-1], "from the ignition column"
-
-
-def _standstill_mean(t, still, ts, vs, max_gap_s: float) -> tuple[float, float] | None:
-    """(mean, covered time [s]) of a sampled rate over the standstill steps where it is
-    known (trapezoid on the trip's samples), None if it is known on none."""
-    if ts.size == 0 or not still.any():
-        return None
-    i = np.flatnonzero(still)  # the rate only at both ends of the standstill steps
-    r0 = _interp_limited(t[i], ts, vs, max_gap_s)
-    r1 = _interp_limited(t[i + 1], ts, vs, max_gap_s)
-    known = np.isfinite(r0) & np.isfinite(r1)
-    dt = t[i + 1][known] - t[i][known]
-    covered = float(dt.sum())
-    if covered <= 0:
-        return None
-    total = float(np.sum(0.5 * (r0[known] + r1[known]) * dt))
-    return total / covered, covered
-
-
 def _accepted(m, standstill_s: float, params: EvidenceParams) -> float | None:
     if m is None or standstill_s <= 0:
         return None
@@ -233,12 +96,27 @@ def _mean_quality(m, standstill_s: float, rejected: int, params: EvidenceParams)
 def batch_evidence(t_abs: np.ndarray, speed_mps: np.ndarray, bounds: np.ndarray, row_t: np.ndarray,
                    rows: Mapping[str, np.ndarray], row_window: np.ndarray, standstill_mps: float,
                    params: EvidenceParams = EvidenceParams()) -> list[tuple[dict[str, float | None], dict]]:
-    """:func:`trip_evidence` of every trip of a batch at once, bit for bit: the trips'
-    sample times [s, UTC epoch] and speeds end to end (``bounds``: each trip's), the
-    log's row times ``row_t`` and evidence columns ``rows`` (whole), and each trip's
-    rows ``row_window[i] = (a, b)``."""
-    from cevm.ingest.measured import interp_limited_segments, window_samples
-    from cevm.ingest.segments import bounds_of, segment_ids, segment_sums
+    """The evidence fields and quality of every trip of a batch at once (the one
+    implementation, for one trip as for a thousand; :func:`trip_evidence` is one trip's
+    call of it).
+
+    Parameters
+    ----------
+    t_abs : the trips' sample times [s, UTC epoch], end to end, strictly increasing
+        within each trip; ``bounds``: each trip's (``n + 1`` offsets).
+    speed_mps : speed at those samples [m/s].
+    row_t : the times of the log's cleaned rows [s, UTC epoch], strictly increasing.
+    rows : canonical columns (any of :data:`EVIDENCE_COLUMNS`) aligned with ``row_t``,
+        NaN where a row carries no value.
+    row_window : each trip's rows ``row_window[i] = (a, b)`` of ``row_t``.
+    standstill_mps : the speed at or below which the vehicle stands still [m/s].
+
+    Returns
+    -------
+    for each trip (fields, quality): ``fields`` maps every name of
+    :data:`cevm.core.trip.TRIP_EVIDENCE_FIELDS` to a float or None; ``quality`` says
+    where each came from and why a missing one is missing.
+    """
 
     n = bounds.size - 1
     lo, hi = row_window[:, 0], row_window[:, 1]
@@ -263,7 +141,9 @@ def batch_evidence(t_abs: np.ndarray, speed_mps: np.ndarray, bounds: np.ndarray,
     t_after = t_abs[1:][inner]
 
     def means(ts, vs, tb) -> list:
-        """_standstill_mean of each trip's samples (``tb``: their bounds)."""
+        """(mean, covered time [s]) of a sampled rate (``tb``: each trip's samples) over
+        each trip's standstill steps where it is known (trapezoid on the trip's
+        samples), None for a trip where it is known on none."""
         si = np.flatnonzero(still)
         seg = step_seg[si]
         r0, r1 = interp_limited_segments(np.concatenate((t_before[si], t_after[si])), np.concatenate((seg, seg)),
@@ -311,6 +191,18 @@ def batch_evidence(t_abs: np.ndarray, speed_mps: np.ndarray, bounds: np.ndarray,
     return [({k: f[k] for k in order}, q) for f, q in zip(out_f, out_q, strict=True)]
 
 
+def trip_evidence(t_abs_s: np.ndarray, speed_mps: np.ndarray, row_t_s: np.ndarray, rows: Mapping[str, np.ndarray],
+                  standstill_mps: float, params: EvidenceParams = EvidenceParams()
+                  ) -> tuple[dict[str, float | None], dict]:
+    """:func:`batch_evidence` of one trip (its samples ``t_abs_s``, ``speed_mps``) with
+    the log's rows ``row_t_s``, ``rows`` around it."""
+    t = np.asarray(t_abs_s, dtype=np.float64)
+    row_t = np.asarray(row_t_s, dtype=np.float64)
+    return batch_evidence(t, np.asarray(speed_mps, dtype=np.float64), np.array([0, t.size]), row_t,
+                          {c: np.asarray(x, dtype=np.float64) for c, x in rows.items()},
+                          np.array([[0, row_t.size]]), standstill_mps, params)[0]
+
+
 def _kept(mask: np.ndarray, bounds: np.ndarray) -> np.ndarray:
     cs = np.zeros(mask.size + 1, dtype=np.int64)
     np.cumsum(mask, out=cs[1:])
@@ -318,8 +210,10 @@ def _kept(mask: np.ndarray, bounds: np.ndarray) -> np.ndarray:
 
 
 def _batch_ambient(t_abs, bounds, row_t, temp, lo, hi, params: EvidenceParams, out_f, out_q) -> None:
-    """:func:`_ambient` of every trip (into ``out_f`` and ``out_q``)."""
-    from cevm.ingest.segments import ranges, segment_interp, segment_searchsorted, segment_sums
+    """The ambient temperature of every trip (into ``out_f`` and ``out_q``): readings
+    within ``ambient_range_c`` and ``ambient_max_hold_s`` of the trip, the trapezoid
+    mean of their interpolant over the trip, its minimum and maximum; none when some
+    instant of the trip is farther than ``ambient_max_hold_s`` from a reading."""
 
     n = bounds.size - 1
     none = {"ambient_temp_c": None, "ambient_temp_min_c": None, "ambient_temp_max_c": None}
@@ -329,17 +223,22 @@ def _batch_ambient(t_abs, bounds, row_t, temp, lo, hi, params: EvidenceParams, o
             out_f[i].update(none)
         return
     t0, t1 = t_abs[bounds[:-1]], t_abs[bounds[1:] - 1]
-    rr = ranges(lo, hi - lo)
-    wb = np.concatenate(([0], np.cumsum(hi - lo)))
-    a = np.asarray(temp)[rr].astype(np.float64, copy=False)
+    # each trip's window of the rows that carry a reading (a temperature is logged far
+    # less often than the rows: the windows' other rows are never gathered)
+    temp = np.asarray(temp)
+    r0, r1 = int(lo.min()), int(hi.max())  # the batch's rows (``row_t`` is the whole log's)
+    fin_rows = np.flatnonzero(np.isfinite(temp[r0:r1])) + r0
+    flo, fhi = np.searchsorted(fin_rows, lo), np.searchsorted(fin_rows, hi)
+    rr = fin_rows[ranges(flo, fhi - flo)]
+    wb = bounds_of(fhi - flo)
+    a = temp[rr].astype(np.float64, copy=False)
     rt_all = row_t[rr]
-    seg = np.repeat(np.arange(n), hi - lo)
-    fin = np.isfinite(a)
+    seg = np.repeat(np.arange(n), fhi - flo)
     lo_c, hi_c = params.ambient_range_c
-    ok = fin & (a >= lo_c) & (a <= hi_c)
+    ok = (a >= lo_c) & (a <= hi_c)
     hold = params.ambient_max_hold_s
     sel = ok & (rt_all >= t0[seg] - hold) & (rt_all <= t1[seg] + hold)
-    rejected = np.bincount(seg[fin & ~ok], minlength=n)
+    rejected = np.bincount(seg[~ok], minlength=n)
     rt, rv, rs = rt_all[sel], a[sel], seg[sel]
     rb = _kept(sel, wb)
     readings = np.bincount(rs[(rt >= t0[rs]) & (rt <= t1[rs])], minlength=n)
@@ -362,11 +261,13 @@ def _batch_ambient(t_abs, bounds, row_t, temp, lo, hi, params: EvidenceParams, o
     cand[mb[:-1] + 1] = t1[has]
     mrows = ranges(starts, mids_n)
     mpos = ranges(mb[:-1] + 2, mids_n)
-    cand[mpos] = np.clip(0.5 * (rt[mrows + 1] + rt[mrows]), t0[has][cseg[mpos]], t1[has][cseg[mpos]])
+    mseg = cseg[mpos]  # np.clip's own steps (times are never NaN), without its cost on array bounds
+    cand[mpos] = np.minimum(np.maximum(0.5 * (rt[mrows + 1] + rt[mrows]), t0[has][mseg]), t1[has][mseg])
     k = segment_searchsorted(rt, starts, lens, cand, cseg, "left")
     ln = lens[cseg]
-    before = np.abs(cand - rt[starts[cseg] + np.clip(k - 1, 0, ln - 1)])
-    after = np.abs(rt[starts[cseg] + np.clip(k, 0, ln - 1)] - cand)
+    first = starts[cseg]
+    before = np.abs(cand - rt[first + np.minimum(np.maximum(k - 1, 0), ln - 1)])
+    after = np.abs(rt[first + np.minimum(np.maximum(k, 0), ln - 1)] - cand)
     far = np.maximum.reduceat(np.minimum(before, after), mb[:-1])
     for g, i in enumerate(has.tolist()):
         out_q[i]["ambient_temp"]["max_hold_s"] = float(far[g])
@@ -407,9 +308,9 @@ def _batch_ambient(t_abs, bounds, row_t, temp, lo, hi, params: EvidenceParams, o
 
 def _batch_standstill_steps(t_abs, v, bounds, row_t, ignition, lo, hi, standstill_mps: float
                             ) -> tuple[np.ndarray, list[str]]:
-    """:func:`_standstill_steps` of every trip: its steps (within trips, end to end)
-    standing still with the ignition on at both ends, and each trip's ignition note."""
-    from cevm.ingest.segments import ranges, segment_searchsorted
+    """The steps of every trip (within trips, end to end) standing still with the
+    ignition on at both ends (the last ignition reading at or before each sample;
+    unknown = on), and each trip's ignition note."""
 
     n = bounds.size - 1
     inner = np.ones(max(v.size - 1, 0), dtype=bool)

@@ -1,5 +1,7 @@
-"""The measured consumption of many trips of one log at once: :func:`measure_trips`, the
-values of :func:`cevm.ingest.consumption.measure_trip` for each trip, bit for bit.
+"""The measured consumption of the trips of one log, all at once: :func:`measure_trips`
+(the one implementation, for one trip as for a thousand; :func:`measure_trip` is one
+trip's call of it). What is measured, and how a source is chosen, is in
+:mod:`cevm.ingest.consumption`.
 
 Each source's samples are taken from every trip's window of the log (``max_gap_s``
 either side of it: overlapping windows of consecutive trips give each trip its own
@@ -8,7 +10,8 @@ charge) run over all the trips' samples at once (:mod:`cevm.ingest.segments`: su
 numpy's pairwise order, medians, interpolation within each trip); the choice among a
 trip's sources and the quality it reports are those of
 :func:`~cevm.ingest.consumption.choose_measurement`. ``tests/test_measured.py`` checks
-both against each other on random logs.
+on random logs that a trip measured among many is measured as when it is alone, and
+``tests/test_consumption.py`` each estimator against hand computations.
 """
 
 from __future__ import annotations
@@ -20,10 +23,11 @@ import numpy as np
 
 from cevm.core.trip import Measurement
 from cevm.ingest.consumption import (
+    NO_CAPACITY,
     ConsumptionParams,
     EnergySourceLike,
+    RawEstimate,
     SourceEstimate,
-    _Raw,
     choose_measurement,
     finish_estimate,
     invalid_estimate,
@@ -40,23 +44,43 @@ from cevm.ingest.segments import (
     segment_sums,
 )
 
-__all__ = ["interp_limited_segments", "measure_trips", "window_samples"]
+__all__ = ["counter_increases", "integrate_rates", "interp_limited_segments", "measure_trip", "measure_trips",
+           "soc_energies", "window_samples"]
 
 
 def measure_trips(time_s: np.ndarray, columns: Mapping[str, np.ndarray], sources: Sequence[EnergySourceLike],
                   t0: np.ndarray, t1: np.ndarray, params: ConsumptionParams = ConsumptionParams()
                   ) -> list[tuple[Measurement | None, dict]]:
-    """:func:`~cevm.ingest.consumption.measure_trip` of each trip ``[t0[i], t1[i]]`` [s]
-    of one log (``time_s`` strictly increasing, ``columns`` aligned with it)."""
+    """The measured consumption of each trip ``[t0[i], t1[i]]`` [s] of one log
+    (``time_s`` strictly increasing, ``columns`` aligned with it): for each, the
+    chosen measurement or None and its quality
+    (:func:`~cevm.ingest.consumption.choose_measurement`)."""
     t0 = np.asarray(t0, dtype=np.float64)
     t1 = np.asarray(t1, dtype=np.float64)
     per_source = [_estimates(time_s, columns, s, t0, t1, params) for s in sources]
     return [choose_measurement([est[i] for est in per_source], params) for i in range(t0.size)]
 
 
+def measure_trip(time_s: np.ndarray, columns: Mapping[str, np.ndarray], sources: Sequence[EnergySourceLike],
+                 t0: float, t1: float, params: ConsumptionParams = ConsumptionParams()
+                 ) -> tuple[Measurement | None, dict]:
+    """:func:`measure_trips` of the one trip ``[t0, t1]`` [s]."""
+    return measure_trips(time_s, columns, sources, np.array([t0], dtype=np.float64),
+                         np.array([t1], dtype=np.float64), params)[0]
+
+
+def estimate_sources(time_s: np.ndarray, columns: Mapping[str, np.ndarray], source: EnergySourceLike,
+                     t0: np.ndarray, t1: np.ndarray, params: ConsumptionParams = ConsumptionParams()
+                     ) -> list[SourceEstimate]:
+    """One source's estimate for each trip ``[t0[i], t1[i]]`` [s] (valid or not, and
+    why): what :func:`measure_trips` chooses among."""
+    return _estimates(time_s, columns, source, np.asarray(t0, dtype=np.float64),
+                      np.asarray(t1, dtype=np.float64), params)
+
+
 def _estimates(time_s: np.ndarray, columns: Mapping[str, np.ndarray], source: EnergySourceLike, t0: np.ndarray,
                t1: np.ndarray, params: ConsumptionParams) -> list[SourceEstimate]:
-    """:func:`~cevm.ingest.consumption.estimate_source` of one source for each trip."""
+    """One source's estimate for each trip (:func:`estimate_sources`)."""
     n = t0.size
     kind, quantity = str(source.kind), str(source.quantity)
     res = float(source.resolution)
@@ -86,9 +110,12 @@ def _estimates(time_s: np.ndarray, columns: Mapping[str, np.ndarray], source: En
         resolution = abs(res)
     elif kind == "soc":
         cap = getattr(source, "capacity_j", None)
-        if quantity != "energy_j" or cap is None or not cap > 0:
-            return [invalid_estimate(source, "SoC source needs quantity 'energy_j' and a capacity_j > 0")] * n
         ok = (vs >= 0) & (vs <= 100)
+        if quantity != "energy_j" or cap is None or not cap > 0:
+            readings = np.diff(_kept_bounds(ok, sb))  # a trip with readings says why they measured nothing
+            return [invalid_estimate(source, NO_CAPACITY if k >= 2 else
+                                     "SoC source needs quantity 'energy_j' and a capacity_j > 0")
+                    for k in readings.tolist()]
         raws = soc_energies(ts[ok], vs[ok], _kept_bounds(ok, sb), t0, t1, resolution_pct=res, capacity_j=float(cap))
         resolution = abs(res) / 100.0 * float(cap)
     else:
@@ -105,10 +132,11 @@ def _kept_bounds(mask: np.ndarray, bounds: np.ndarray) -> np.ndarray:
 
 def window_samples(time_s: np.ndarray, columns: Mapping[str, np.ndarray], column: str, lo: np.ndarray,
                    hi: np.ndarray, max_gap_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """:func:`~cevm.ingest.consumption.source_samples` of each window ``lo[i]:hi[i]`` of
-    the log: the valid samples (times, values) of every window end to end, and their
-    bounds. A product's factors are interpolated within each window. Raises KeyError
-    when a needed column is missing."""
+    """The valid samples (times [s], values) of a source column in each window
+    ``lo[i]:hi[i]`` of the log, every window's end to end, and their bounds. A product
+    column ``"a*b"`` or ``"battery_power_w"`` is evaluated at the times where either
+    factor has a value, each factor interpolated linearly within its window over at
+    most ``max_gap_s`` [s]. Raises KeyError when a needed column is missing."""
     lens = hi - lo
     rows = ranges(lo, lens)
     wb = bounds_of(lens)
@@ -119,24 +147,24 @@ def window_samples(time_s: np.ndarray, columns: Mapping[str, np.ndarray], column
         return tw[ok], v[ok], _kept_bounds(ok, wb)
     arrays = [np.asarray(columns[f])[rows].astype(np.float64, copy=False)
               for f in product_factors(column)]  # KeyError if absent
-    any_ok = np.zeros(tw.shape, dtype=bool)
-    for a in arrays:
-        any_ok |= np.isfinite(a)
+    oks = [np.isfinite(a) for a in arrays]
+    any_ok = np.logical_or.reduce(oks)
     q, qb = tw[any_ok], _kept_bounds(any_ok, wb)
-    qseg = segment_ids(qb)
+    own = [np.array_equal(ok, any_ok) for ok in oks]  # sampled at every q: its own values
+    qseg = segment_ids(qb) if not all(own) else np.zeros(0, dtype=np.int64)
     prod = np.ones(q.shape)
-    for a in arrays:
-        ok = np.isfinite(a)
-        fb = _kept_bounds(ok, wb)
-        # a factor sampled at a time of q gives its own value there (exact interpolation)
-        prod *= interp_limited_segments(q, qseg, tw[ok], fb, a[ok], max_gap_s=max_gap_s)[0]
+    for a, ok, at_q in zip(arrays, oks, own, strict=True):
+        if at_q:  # what interpolating at its own sample times gives, without the search
+            prod *= a[ok]
+        else:  # a factor sampled at a time of q gives its own value there (exact interpolation)
+            prod *= interp_limited_segments(q, qseg, tw[ok], _kept_bounds(ok, wb), a[ok], max_gap_s=max_gap_s)[0]
     ok = np.isfinite(prod)
     return q[ok], prod[ok], _kept_bounds(ok, qb)
 
 
 def interp_limited_segments(q: np.ndarray, qseg: np.ndarray, ts: np.ndarray, sb: np.ndarray, *values: np.ndarray,
                             max_gap_s: float) -> list[np.ndarray]:
-    """:func:`~cevm.ingest.consumption._interp_limited` of the samples of each segment
+    """:func:`~cevm.ingest.consumption.interp_limited` of the samples of each segment
     (``ts`` strictly increasing within each, bounds ``sb``; ``values`` sharing them) at
     the times ``q`` of that segment (``qseg``): linear, NaN outside a segment's samples
     or between two samples more than ``max_gap_s`` apart (exact sample times always get
@@ -171,22 +199,27 @@ def interp_limited_segments(q: np.ndarray, qseg: np.ndarray, ts: np.ndarray, sb:
 
 
 def integrate_rates(ts: np.ndarray, rate: np.ndarray, sb: np.ndarray, t0: np.ndarray, t1: np.ndarray, *,
-                    max_gap_s: float = 15.0, resolution: float = 0.0) -> list[_Raw]:
-    """:func:`~cevm.ingest.consumption.integrate_rate` of each trip's rate samples
-    (``sb``: their bounds) over ``[t0[i], t1[i]]``."""
+                    max_gap_s: float = 15.0, resolution: float = 0.0) -> list[RawEstimate]:
+    """Integral of each trip's sampled rate [unit/s] (``ts`` strictly increasing within
+    each trip, ``sb``: the trips' bounds) over ``[t0[i], t1[i]]`` [s] -> [unit].
+
+    Trapezoid rule on the piecewise-linear interpolant through the samples (values
+    outside the samples held at the edge value), evaluated at ``t0``, every sample
+    strictly inside, and ``t1``. Steps longer than ``max_gap_s`` count as gaps.
+    Uncertainty: see :mod:`cevm.ingest.consumption`."""
     n = t0.size
     duration = t1 - t0
     ok = np.isfinite(ts) & np.isfinite(rate)
     if not ok.all():
         ts, rate, sb = ts[ok], rate[ok], _kept_bounds(ok, sb)
     lens = np.diff(sb)
-    out: list[_Raw | None] = [None] * n
+    out: list[RawEstimate | None] = [None] * n
     todo = []
     for i in range(n):
         if lens[i] == 0 or duration[i] < 0:
-            out[i] = _Raw(math.nan, math.nan, 0.0, 1.0, {}, "no samples")
+            out[i] = RawEstimate(math.nan, math.nan, 0.0, 1.0, {}, "no samples")
         elif duration[i] == 0:
-            out[i] = _Raw(0.0, 0.0, 1.0, 0.0, {"rate_gaps": 0})
+            out[i] = RawEstimate(0.0, 0.0, 1.0, 0.0, {"rate_gaps": 0})
         else:
             todo.append(i)
     if not todo:
@@ -202,9 +235,15 @@ def integrate_rates(ts: np.ndarray, rate: np.ndarray, sb: np.ndarray, t0: np.nda
     pts = np.empty(int(pb[-1]))
     pts[pb[:-1]] = a
     pts[pb[1:] - 1] = b
-    pts[ranges(pb[:-1] + 1, n_in)] = ts[inside]
-    pseg = segment_ids(pb)
-    vals = segment_interp(pts, pseg, ts, sb[:-1], np.diff(sb), rate)
+    at_samples = ranges(pb[:-1] + 1, n_in)
+    pts[at_samples] = ts[inside]
+    # the interpolant's values: a sample's own value at its time (np.interp's exact
+    # match), so only t0 and t1 of each trip are interpolated
+    vals = np.empty(pts.size)
+    vals[at_samples] = rate[inside]
+    ends = np.concatenate((pb[:-1], pb[1:] - 1))
+    trip = np.arange(tk.size)
+    vals[ends] = segment_interp(pts[ends], np.concatenate((trip, trip)), ts, sb[:-1], np.diff(sb), rate)
     dts, db = segment_diffs(pts, pb)
     inner = _inner_steps(pb)
     value = segment_sums((0.5 * (vals[1:] + vals[:-1]) * np.diff(pts))[inner], db)
@@ -231,7 +270,7 @@ def integrate_rates(ts: np.ndarray, rate: np.ndarray, sb: np.ndarray, t0: np.nda
             var[i] = float(var[i]) + float(sd[k]) ** 2 * float(sq[i])
     for k, i in enumerate(todo):
         gs = float(gap_share[k])
-        out[i] = _Raw(float(value[k]), math.sqrt(float(var[k])), 1.0 - gs, gs, {"rate_gaps": int(n_gaps[k])})
+        out[i] = RawEstimate(float(value[k]), math.sqrt(float(var[k])), 1.0 - gs, gs, {"rate_gaps": int(n_gaps[k])})
     return out  # type: ignore[return-value]
 
 
@@ -263,15 +302,19 @@ def _trip_readings(ts: np.ndarray, vs: np.ndarray, sb: np.ndarray, t0: np.ndarra
 
 def counter_increases(ts: np.ndarray, counter: np.ndarray, sb: np.ndarray, t0: np.ndarray, t1: np.ndarray, *,
                       resolution: float, max_rate: float, max_rate_neg: float = 0.0, modulus: float | None = None,
-                      reset_fraction: float = 0.01) -> list[_Raw]:
-    """:func:`~cevm.ingest.consumption.counter_increase` of each trip's counter samples
-    (``sb``: their bounds) over ``[t0[i], t1[i]]``."""
+                      reset_fraction: float = 0.01) -> list[RawEstimate]:
+    """Increase of each trip's cumulative counter [unit] (samples ``sb``: their bounds)
+    between its first and last reading in ``[t0[i], t1[i]]`` [s], with wraps, resets
+    and jumps handled as in :mod:`cevm.ingest.consumption`. ``max_rate`` /
+    ``max_rate_neg`` [unit/s] bound plausible forward / backward steps; a reset is a
+    drop to near zero relative to the counter's level (the previous reading, or the
+    trip's median reading if smaller, so that coming down from a glitch is not one)."""
     n = t0.size
     duration = t1 - t0
     t, c, cb = _trip_readings(ts, counter, sb, t0, t1)
     lens = np.diff(cb)
     good = (lens >= 2) & (duration > 0)
-    out: list[_Raw] = [_Raw(math.nan, math.nan, 0.0, 1.0, {}, "fewer than 2 readings")] * n
+    out: list[RawEstimate] = [RawEstimate(math.nan, math.nan, 0.0, 1.0, {}, "fewer than 2 readings")] * n
     if not good.any():
         return out
     out = list(out)
@@ -314,14 +357,15 @@ def counter_increases(ts: np.ndarray, counter: np.ndarray, sb: np.ndarray, t0: n
         var += (mr * (dur - cov)) ** 2
         counts = {"counter_wraps": int(k_wraps[k]), "counter_resets": int(k_resets[k]),
                   "counter_jumps": int(k_jumps[k])}
-        out[i] = _Raw(float(value[k]), math.sqrt(var), cov / dur, 1.0 - cov / dur, counts)
+        out[i] = RawEstimate(float(value[k]), math.sqrt(var), cov / dur, 1.0 - cov / dur, counts)
     return out
 
 
 def soc_energies(ts: np.ndarray, soc_pct: np.ndarray, sb: np.ndarray, t0: np.ndarray, t1: np.ndarray, *,
-                 resolution_pct: float, capacity_j: float) -> list[_Raw]:
-    """:func:`~cevm.ingest.consumption.soc_energy` of each trip's state-of-charge
-    samples (``sb``: their bounds) over ``[t0[i], t1[i]]``."""
+                 resolution_pct: float, capacity_j: float) -> list[RawEstimate]:
+    """Battery energy [J] each trip used over ``[t0[i], t1[i]]`` [s] from the first and
+    last state-of-charge readings [%] in the span (samples ``sb``: their bounds):
+    (soc_first - soc_last) / 100 * capacity_j."""
     duration = t1 - t0
     t, s, cb = _trip_readings(ts, soc_pct, sb, t0, t1)
     lens = np.diff(cb)
@@ -330,7 +374,7 @@ def soc_energies(ts: np.ndarray, soc_pct: np.ndarray, sb: np.ndarray, t0: np.nda
     for i in range(t0.size):
         dur = float(duration[i])
         if lens[i] < 2 or dur <= 0:
-            out.append(_Raw(math.nan, math.nan, 0.0, 1.0, {}, "fewer than 2 readings"))
+            out.append(RawEstimate(math.nan, math.nan, 0.0, 1.0, {}, "fewer than 2 readings"))
             continue
         a, b = int(cb[i]), int(cb[i + 1]) - 1
         value = float((s[a] - s[b]) / 100.0 * capacity_j)
@@ -338,5 +382,5 @@ def soc_energies(ts: np.ndarray, soc_pct: np.ndarray, sb: np.ndarray, t0: np.nda
         coverage = covered / dur
         mean_rate = value / covered if covered > 0 else 0.0
         var = q_j * q_j / 6.0 + (mean_rate * (dur - covered)) ** 2
-        out.append(_Raw(value, math.sqrt(var), coverage, 1.0 - coverage, {}))
+        out.append(RawEstimate(value, math.sqrt(var), coverage, 1.0 - coverage, {}))
     return out

@@ -731,6 +731,29 @@ def builtin_profile_dirs() -> list[Path]:
     return [_SHIPPED_PROFILES] if _SHIPPED_PROFILES.is_dir() else []
 
 
+#: Profiles parsed from files, by (path, modification time, size): each ingest, detection
+#: and worker asks for the profiles again, and parsing the shipped three costs about 2 ms
+#: (the TOML, the checks, the zone and unit look-ups); a file changed is parsed again.
+_PARSED: dict[tuple[str, int, int], Profile] = {}
+_PARSED_MAX = 256
+
+
+def _load_profile_cached(f: Path) -> Profile:
+    """:func:`load_profile` of the file ``f``, parsed once while it is unchanged."""
+    try:
+        st = f.stat()
+    except OSError:
+        return load_profile(f)  # says what is wrong with it
+    key = (str(f), st.st_mtime_ns, st.st_size)
+    p = _PARSED.get(key)
+    if p is None:
+        p = load_profile(f)
+        if len(_PARSED) >= _PARSED_MAX:
+            _PARSED.clear()
+        _PARSED[key] = p
+    return p
+
+
 def load_profiles(directory: str | Path | None = None, *, include_env: bool = True) -> dict[str, Profile]:
     """Load every ``*.toml`` profile, keyed by profile name.
 
@@ -752,7 +775,7 @@ def load_profiles(directory: str | Path | None = None, *, include_env: bool = Tr
             raise InputError(d, "profile directory does not exist")
         seen: dict[str, Path] = {}
         for f in sorted(d.glob("*.toml")):
-            p = load_profile(f)
+            p = _load_profile_cached(f)
             if p.name in seen:
                 raise InputError(f, f"profile name {p.name!r} already used by {seen[p.name]}", column="name")
             seen[p.name] = f

@@ -65,22 +65,6 @@ def bounds_of(lengths) -> np.ndarray:
     return out
 
 
-#: Batches of at least this many trips of at most :data:`SHORT_TRIP_SAMPLES` samples on
-#: average have their measured consumption and evidence made for all trips at once
-#: (:mod:`cevm.ingest.measured`, :func:`cevm.ingest.evidence.batch_evidence`): there the
-#: fixed cost of numpy calls per trip dominates. Longer trips are done one at a time, on
-#: views of the log's arrays: fewer passes over their samples (measured on the benchmark
-#: fleet's trips of 1,500-3,000 samples: 0.5-0.6x the time of the whole-batch steps).
-MANY_TRIPS = 6
-SHORT_TRIP_SAMPLES = 500
-
-
-def many_short_trips(bounds: np.ndarray) -> bool:
-    """Whether a batch's trips (``bounds``) are many and short (:data:`MANY_TRIPS`)."""
-    n = bounds.size - 1
-    return n >= MANY_TRIPS and int(bounds[-1] - bounds[0]) <= SHORT_TRIP_SAMPLES * n
-
-
 def ranges(starts, lengths) -> np.ndarray:
     """``np.arange(s, s + n)`` of each (start, length), end to end (int64)."""
     starts = np.asarray(starts, dtype=np.int64)

@@ -31,10 +31,9 @@ from cevm.executors import worker_cache
 from cevm.ingest.cleaning import CleanBatch, CleanParams, CleanStream
 from cevm.ingest.dsm import DsmHeaders, DsmSampler
 from cevm.ingest.elevation import ElevationParams, trip_elevation
-from cevm.ingest.evidence import EvidenceParams, batch_evidence, trip_evidence
+from cevm.ingest.evidence import EvidenceParams, batch_evidence
 from cevm.ingest.profiles import Profile
 from cevm.ingest.reading import ReadLimits, read_log
-from cevm.ingest.segments import many_short_trips
 from cevm.store import encode_profiles
 from cevm.text import printable
 
@@ -113,12 +112,8 @@ def _finish_batch(batch: CleanBatch, log, path: Path, sha: str, sampler: DsmSamp
     time_s = batch.time_s()
     start = batch.start_utc_s
     standstill = options.clean.standstill_mps
-    if many_short_trips(bounds):
-        evidence = batch_evidence(np.repeat(start, np.diff(bounds)) + time_s, batch.speed_mps, bounds, batch.row_t,
-                                  batch.rows, batch.row_window, standstill, options.evidence)
-    else:  # numpy on each trip's own slices: fewer passes over long trips' samples
-        evidence = [trip_evidence(start[i] + time_s[bounds[i]:bounds[i + 1]], batch.speed_mps[bounds[i]:bounds[i + 1]],
-                                  *batch.evidence_rows(i), standstill, options.evidence) for i in range(len(batch))]
+    evidence = batch_evidence(np.repeat(start, np.diff(bounds)) + time_s, batch.speed_mps, bounds, batch.row_t,
+                              batch.rows, batch.row_window, standstill, options.evidence)
     stage["evidence"] = stage.get("evidence", 0.0) + time.perf_counter() - t1
     made = []
     for i, (elev, (fields, evidence_q)) in enumerate(zip(elevations, evidence, strict=True)):

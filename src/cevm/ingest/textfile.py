@@ -6,8 +6,8 @@ gzip magic, decompresses it incrementally (every member of a multi-member file),
 more than a chunk at a time, so a small file that expands to gigabytes is stopped at a
 limit instead of being expanded first. :class:`Utf8Stream` decodes those bytes from the
 file's text encoding to UTF-8 (validating UTF-8 input as it goes) and refuses NUL bytes.
-:func:`sniff_bom` names the encoding a byte order mark declares: a BOM decides the
-encoding whatever the profile says (a UTF-8 BOM on a cp1252 portal export, UTF-16 from a
+:func:`cevm.sniff.sniff_bom` names the encoding a byte order mark declares: a BOM decides
+the encoding whatever the profile says (a UTF-8 BOM on a cp1252 portal export, UTF-16 from a
 spreadsheet's "Unicode text" export).
 
 :class:`ReadLimits` are the bounds, each an option of ``cevm ingest`` and of
@@ -22,13 +22,15 @@ import codecs
 import os
 import zlib
 from dataclasses import dataclass
-from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
 
 from cevm.errors import InputError
+from cevm.sniff import GZIP_MAGIC, ascii_transparent, sniff_bom, utf16_hint
 
+# sniff_bom and utf16_hint (cevm.sniff, the text-sniffing rules of every text input) are
+# named here too: the reader's callers take them from here
 __all__ = ["MAX_LINE_BYTES", "ByteStream", "ReadLimits", "Utf8Stream", "count_newlines", "sniff_bom", "utf16_hint"]
 
 #: Bytes compared at a time by :func:`count_newlines` (its temporary: one bool a byte).
@@ -131,7 +133,6 @@ def mb(n_bytes: int) -> str:
 #: Decompressed bytes after which the expansion limit applies.
 EXPANSION_FLOOR_BYTES = 32 << 20
 
-_GZIP_MAGIC = b"\x1f\x8b"
 
 
 class ByteStream:
@@ -148,7 +149,7 @@ class ByteStream:
         try:
             self._fh = open(path, "rb")  # noqa: SIM115 (held by the reader, closed by its close())
             self.size_on_disk = os.fstat(self._fh.fileno()).st_size
-            self.gzip = self._fh.read(2) == _GZIP_MAGIC
+            self.gzip = self._fh.read(2) == GZIP_MAGIC
             self._fh.seek(0)
         except OSError as exc:
             raise InputError(path, f"cannot read file: {exc.strerror or exc}") from None
@@ -215,7 +216,7 @@ class ByteStream:
                     rest = rest.lstrip(b"\x00")
                     if not rest:
                         return b""
-                    if not rest.startswith(_GZIP_MAGIC[: len(rest)]):
+                    if not rest.startswith(GZIP_MAGIC[: len(rest)]):
                         raise InputError(self.path, "corrupt gzip data: trailing bytes after the compressed data")
                     z = self._z = zlib.decompressobj(31)
                     self._zin = rest
@@ -254,41 +255,6 @@ class ByteStream:
                                         "(--max-expansion)")
 
 
-#: Byte order marks and the encodings they declare (UTF-32 before UTF-16: FF FE 00 00
-#: starts with the UTF-16 LE mark).
-_BOMS = (
-    (codecs.BOM_UTF8, "utf-8"),
-    (codecs.BOM_UTF32_LE, "utf-32-le"),
-    (codecs.BOM_UTF32_BE, "utf-32-be"),
-    (codecs.BOM_UTF16_LE, "utf-16-le"),
-    (codecs.BOM_UTF16_BE, "utf-16-be"),
-)
-
-
-def sniff_bom(head: bytes) -> tuple[str, int] | None:
-    """(encoding, length of the mark) of the byte order mark ``head`` starts with, if
-    any. A BOM is what a text's writer says its encoding is, so it wins over a profile's
-    ``csv.encoding``."""
-    for bom, enc in _BOMS:
-        if head.startswith(bom):
-            return enc, len(bom)
-    return None
-
-
-def utf16_hint(data: bytes) -> str:
-    """A hint for a message about binary data when ``data`` looks like UTF-16 text
-    without a byte order mark (every other byte NUL), else ``""``."""
-    sample = data[:4096]
-    if len(sample) < 16:
-        return ""
-    even, odd = sample[0::2], sample[1::2]
-    for zeros, enc in ((odd, "utf-16-le"), (even, "utf-16-be")):
-        other = even if zeros is odd else odd
-        if zeros.count(0) > 0.9 * len(zeros) and other.count(0) < 0.1 * len(other):
-            return f" (it looks like {enc.upper()} text without a byte order mark: set csv.encoding = {enc!r})"
-    return ""
-
-
 _UTF8_NAMES = {"utf-8", "utf8", "utf-8-sig", "u8"}
 _ASCII_NAMES = {"ascii", "us-ascii"}
 
@@ -318,7 +284,7 @@ class Utf8Stream:
         enc = codecs.lookup(encoding).name
         self._utf8 = enc in ("utf-8", "utf-8-sig") or encoding.lower() in _UTF8_NAMES
         self._ascii = enc == "ascii" or encoding.lower() in _ASCII_NAMES
-        self._ascii_compatible = self._utf8 or self._ascii or _ascii_transparent(encoding)
+        self._ascii_compatible = self._utf8 or self._ascii or ascii_transparent(encoding)
         self._dec = codecs.getincrementaldecoder("ascii" if self._ascii else "utf-8" if self._utf8
                                                  else encoding)(errors="strict")
         self.lines_done = 0  # line breaks in the text returned so far
@@ -389,13 +355,3 @@ class Utf8Stream:
             line=line,
             column=column,
         )
-
-
-@lru_cache(maxsize=64)
-def _ascii_transparent(encoding: str) -> bool:
-    """Whether ``encoding`` decodes every ASCII byte to that character (utf-8, cp1252,
-    latin-1, ...; not utf-16 or utf-7), so that ASCII text needs no re-encoding."""
-    try:
-        return bytes(range(128)).decode(encoding) == "".join(map(chr, range(128)))
-    except (UnicodeDecodeError, LookupError):
-        return False

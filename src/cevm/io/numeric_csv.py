@@ -4,7 +4,8 @@ Two steps, for any CSV of numbers a user gives (cycle files, and other numeric t
 
 1. :func:`sniff_csv` reads the first MiB (decompressed, for ``.gz`` or gzip magic bytes)
    and finds the layout: compression, encoding (UTF-8, a BOM dropped; the header may be
-   cp1252), separator (``,`` ``;`` tab ``|``: the one that splits the header and the
+   cp1252; UTF-16 and binary data refused: :func:`cevm.sniff.not_text_reason`),
+   separator (``,`` ``;`` tab ``|``: the one that splits the header and the
    first lines into the same number of fields, more than one) and decimal mark (``,``
    when the separator is not a comma and the data show a digit, comma, digit; else
    ``.``), unless given. It refuses binary data and a file without line breaks.
@@ -45,6 +46,7 @@ import numpy as np
 from cevm.errors import InputError
 from cevm.io.inputs import csv_reason, open_regular
 from cevm.runtime import release_free_memory
+from cevm.sniff import GZIP_MAGIC, not_text_reason
 from cevm.text import shorten
 
 #: Separators tried, in the order preferred when several split the lines alike (a
@@ -56,7 +58,6 @@ SNIFF_BYTES = 1 << 20
 #: Lines after the header that the separator must split like the header.
 SNIFF_LINES = 50
 
-_GZIP_MAGIC = b"\x1f\x8b"
 _DECIMAL_COMMA = re.compile(rb"\d,\d")
 _NUMBER = re.compile(r"\s*[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?\s*")
 _SEP_NAMES = {"\t": "tab", ";": "';'", ",": "','", "|": "'|'"}
@@ -101,11 +102,11 @@ def _head(path: Path) -> tuple[bytes, str | None, bool]:
     try:
         with open(path, "rb") as fh:
             magic = fh.read(2)
-        compression = "gzip" if magic == _GZIP_MAGIC else None
+        compression = "gzip" if magic == GZIP_MAGIC else None
         with _open_binary(path, compression) as fh:
             head = fh.read(SNIFF_BYTES + 1)
     except (OSError, EOFError, gzip.BadGzipFile) as exc:
-        what = "not a readable gzip file" if path.suffix == ".gz" or magic == _GZIP_MAGIC else "cannot read"
+        what = "not a readable gzip file" if path.suffix == ".gz" or magic == GZIP_MAGIC else "cannot read"
         raise InputError(path, f"{what}: {getattr(exc, 'strerror', None) or exc}") from None
     return head[:SNIFF_BYTES], compression, len(head) <= SNIFF_BYTES
 
@@ -141,8 +142,9 @@ def sniff_csv(path: str | Path, *, sep: str | None = None, decimal: str | None =
     if sep is not None and sep == decimal:
         raise InputError(path, f"the separator and the decimal mark cannot both be {sep!r}")
     head, compression, whole = _head(path)
-    if b"\x00" in head[:4096]:
-        raise InputError(path, f"binary data, not a {what} (CSV text)")
+    why = not_text_reason(head, what)  # the rules of every text input (cevm.sniff)
+    if why is not None:
+        raise InputError(path, why)
     # LF, CRLF, or CR alone (a classic Mac export; csv raised on it); the header and the
     # SNIFF_LINES lines after it are all that is looked at, the rest of the head stays one piece
     lines = _LINE_END.split(head, maxsplit=SNIFF_LINES + 1)

@@ -85,7 +85,8 @@ The steps, in order (parameters in :class:`CleanParams`):
    ``gps_max_fill_s`` (dropouts filled), NaN beyond; at standstill each stop holds one
    position, the median of its samples (jitter frozen: GPS noise creates no distance
    or elevation wiggle). Longitude interpolation does not handle the antimeridian.
-9. **Measured consumption** over the grid's span: :func:`cevm.ingest.consumption.measure_trip`.
+9. **Measured consumption** over the grid's span: :func:`cevm.ingest.measured.measure_trips`
+   (every trip of a batch at once).
 
 Fast distances inside (jump tests, speed from positions) use a local ellipsoidal
 approximation (meridian and prime-vertical radii of curvature of WGS84 at the mid

@@ -11,7 +11,7 @@ from cevm.ingest.cleaning.arrays import _runs
 from cevm.ingest.cleaning.geodesy import local_distance_m
 from cevm.ingest.cleaning.gps import FixWindow
 from cevm.ingest.cleaning.params import CleanParams
-from cevm.ingest.consumption import _interp_limited
+from cevm.ingest.consumption import interp_limited
 from cevm.ingest.segments import segment_ids, segment_medians
 
 
@@ -37,8 +37,8 @@ def positions_on_grid(grid_t: np.ndarray, gb: np.ndarray, v: np.ndarray, fixes: 
     least ``gps_max_fill_s`` before the batch's first grid time to as long after its last
     (the interpolation at a grid time uses two fixes at most ``gps_max_fill_s`` apart,
     both within that reach: the same values as with each trip's own fixes)."""
-    lat, lon = _interp_limited(grid_t, fixes.t, fixes.lat, p.gps_max_fill_s, fixes.lon)
-    alt = _interp_limited(grid_t, fixes.alt_t, fixes.alt, p.gps_max_fill_s)
+    lat, lon = interp_limited(grid_t, fixes.t, fixes.lat, p.gps_max_fill_s, fixes.lon)
+    alt = interp_limited(grid_t, fixes.alt_t, fixes.alt, p.gps_max_fill_s)
     st = v <= p.standstill_mps
     inner = np.ones(max(v.size - 1, 0), dtype=bool)  # steps within a trip
     inner[gb[1:-1] - 1] = False

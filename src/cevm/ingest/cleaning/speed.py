@@ -10,12 +10,12 @@ from cevm.ingest.cleaning.events import RepairEvents
 from cevm.ingest.cleaning.gps import GpsFixes, _clean_gps
 from cevm.ingest.cleaning.params import CleanParams
 from cevm.ingest.cleaning.plausibility import _speed_rows
-from cevm.ingest.consumption import _interp_limited, chunks
+from cevm.ingest.consumption import chunks, interp_limited
 
 
 def _interp_rows(t: np.ndarray, ok: np.ndarray | None, v: np.ndarray | None, max_fill_s: float,
                  at: np.ndarray | None = None) -> np.ndarray:
-    """``_interp_limited(t, t[ok], v[ok], max_fill_s)`` (all NaN for ``ok`` None) for a
+    """``interp_limited(t, t[ok], v[ok], max_fill_s)`` (all NaN for ``ok`` None) for a
     strictly increasing ``t``, at the rows ``at`` (None: every row): the rows' own
     values where ``ok``, interpolated between them elsewhere. Cheaper, as the sample
     positions in ``t`` are known: only the other rows are interpolated, a chunk of
@@ -41,7 +41,7 @@ def _interp_rows(t: np.ndarray, ok: np.ndarray | None, v: np.ndarray | None, max
         lo = max(int(np.searchsorted(samples, todo[0])) - 1, 0)  # the sample before the chunk ...
         hi = int(np.searchsorted(samples, todo[-1])) + 1  # ... to the one after it
         s = samples[lo:hi]
-        out[where[a:b]] = _interp_limited(t[todo], t[s], v[s], max_fill_s)
+        out[where[a:b]] = interp_limited(t[todo], t[s], v[s], max_fill_s)
     return out
 
 
@@ -63,7 +63,7 @@ def _speed_from_positions(t: np.ndarray, fixes: GpsFixes, rows: np.ndarray, p: C
         tm[k:j] = (0.5 * (ft[1:] + ft[:-1]))[ok]
         vm[k:j] = v[ok]
         k = j
-    return _interp_limited(t[rows], tm[:k], vm[:k], p.max_fill_s)
+    return interp_limited(t[rows], tm[:k], vm[:k], p.max_fill_s)
 
 
 def _row_speed(t, cols, p: CleanParams, ev: RepairEvents):

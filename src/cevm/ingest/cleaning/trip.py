@@ -26,10 +26,10 @@ from cevm.ingest.cleaning.grid import (
 from cevm.ingest.cleaning.jitter import positions_on_grid
 from cevm.ingest.cleaning.params import CleanBatch, CleanParams
 from cevm.ingest.cleaning.rows import CleanedLog
-from cevm.ingest.consumption import EnergySourceLike, measure_trip
+from cevm.ingest.consumption import EnergySourceLike
 from cevm.ingest.evidence import EVIDENCE_COLUMNS
 from cevm.ingest.measured import measure_trips
-from cevm.ingest.segments import bounds_of, many_short_trips, ranges, segment_ids, segment_medians
+from cevm.ingest.segments import bounds_of, ranges, segment_ids, segment_medians
 
 
 def _dropped(start_s: float, duration_s: float, distance_m: float, lines: tuple[int, int], reason: str) -> dict:
@@ -114,11 +114,7 @@ def _kept_batch(log: CleanedLog, seg: BatchSpeedRows, trips: np.ndarray, grid_t:
     soc, soc_dt = _start_socs(log, g0, p.start_soc_window_s)
     odo = log.cols.get("odometer_m")
     w = p.consumption.max_gap_s
-    if many_short_trips(gb):
-        consumption = measure_trips(log.t, log.cols, sources, g0, g1, p.consumption)
-    else:  # numpy on each trip's own slices: fewer passes over long trips' samples
-        consumption = [measure_trip(log.t, log.cols, sources, a, b, p.consumption)
-                       for a, b in zip(g0.tolist(), g1.tolist(), strict=True)]
+    consumption = measure_trips(log.t, log.cols, sources, g0, g1, p.consumption)
     qualities, measured = [], []
     for k, j in enumerate(trips.tolist()):
         gt, d = grid_t[first[k]:last[k] + 1], dist[first[k]:last[k] + 1]

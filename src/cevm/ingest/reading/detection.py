@@ -8,31 +8,12 @@ from pathlib import Path
 from cevm.errors import InputError
 from cevm.ingest.profiles import Profile, load_profiles
 from cevm.ingest.reading.header import _find_header
-from cevm.ingest.textfile import (
-    ByteStream,
-    ReadLimits,
-    _ascii_transparent,
-    sniff_bom,
-    utf16_hint,
-)
+from cevm.ingest.textfile import ByteStream, ReadLimits
+from cevm.sniff import ascii_transparent, looks_binary, sniff_bom, utf16_hint
 from cevm.text import shorten
 
 #: Bytes read from the start of a file to detect its profile.
 _HEAD_BYTES = 65536
-
-
-#: Bytes that never occur in a text CSV: C0 controls other than tab, LF, CR; and DEL.
-_BINARY_BYTES = bytes(b for b in range(32) if b not in (9, 10, 13)) + b"\x7f"
-
-
-def _looks_binary(head: bytes) -> bool:
-    """True when the first bytes hold a NUL, or more than 1 % control bytes: a binary file
-    (an image, a spreadsheet, random junk), whatever the text encoding would be."""
-    sample = head[:8192]
-    if b"\x00" in sample:
-        return True
-    n_ctrl = len(sample) - len(sample.translate(None, _BINARY_BYTES))
-    return n_ctrl > 0.01 * len(sample)
 
 
 def _head_bytes(path: Path, n: int = _HEAD_BYTES) -> bytes:
@@ -68,14 +49,14 @@ def _detect_in_head(path: Path, head: bytes, profiles: dict[str, Profile]) -> Pr
         head = head[n:].decode(enc, errors="replace").encode("utf-8")
         if not head or head.isspace():
             raise InputError(path, "file is empty", line=1)
-    if _looks_binary(head):
+    if looks_binary(head):
         raise InputError(path, "binary data, not a CSV text file" + utf16_hint(head), line=1)
     matches: list[Profile] = []
     seen_header: tuple[str, ...] = ()
     ascii_head = head.isascii()
     for prof in profiles.values():
         try:
-            if bom is not None or (ascii_head and _ascii_transparent(prof.encoding)):
+            if bom is not None or (ascii_head and ascii_transparent(prof.encoding)):
                 text = head  # what decoding and re-encoding as UTF-8 would give
             else:
                 text = head.decode(prof.encoding, errors="replace").encode("utf-8")
