@@ -76,12 +76,12 @@ def _params(mean: ArrayLike, sd: ArrayLike) -> tuple[np.ndarray, np.ndarray, np.
     """(m, s, log-normal's mu, its sigma) broadcast; mu and sigma are NaN where the
     Gaussian applies (m <= 0, or s = 0)."""
     m, s = np.broadcast_arrays(np.asarray(mean, dtype=np.float64), np.asarray(sd, dtype=np.float64))
-    ln = (m > 0) & (s > 0)
-    with np.errstate(divide="ignore", invalid="ignore", under="ignore"):
-        s2 = np.where(ln, np.log1p((s / np.where(ln, m, 1.0)) ** 2), np.nan)
-        ln &= s2 > 0  # an sd below the mean's last digit: the Gaussian (as good as the mean)
-        mu = np.where(ln, np.log(np.where(ln, m, 1.0)) - 0.5 * s2, np.nan)
-    return m, s, mu, np.sqrt(np.where(ln, s2, np.nan))
+    with np.errstate(divide="ignore", invalid="ignore", under="ignore", over="ignore"):
+        s2 = np.log1p(np.square(s / m))
+        # an sd below the mean's last digit (s2 = 0): the Gaussian, as good as the mean
+        s2 = np.where((m > 0) & (s2 > 0) & np.isfinite(s2), s2, np.nan)
+        mu = np.log(m) - 0.5 * s2
+    return m, s, mu, np.sqrt(s2)
 
 
 def lognormal(mean: ArrayLike, sd: ArrayLike) -> np.ndarray:
@@ -90,18 +90,23 @@ def lognormal(mean: ArrayLike, sd: ArrayLike) -> np.ndarray:
     return np.asarray((m > 0) & (s > 0))
 
 
-def quantile(mean: ArrayLike, sd: ArrayLike, q: ArrayLike) -> np.ndarray:
-    """The q-quantile(s), q in (0, 1) (broadcast)."""
-    z = normal_quantiles(q)
-    m, s, mu, sig = _params(mean, sd)
+def _quantile(params: tuple[np.ndarray, ...], z: ArrayLike) -> np.ndarray:
+    m, s, mu, sig = params
     with np.errstate(invalid="ignore", over="ignore"):
         out = np.where(np.isfinite(mu), np.exp(mu + sig * z), m + s * z)
     return np.asarray(out, dtype=np.float64)
 
 
+def quantile(mean: ArrayLike, sd: ArrayLike, q: ArrayLike) -> np.ndarray:
+    """The q-quantile(s), q in (0, 1) (broadcast)."""
+    return _quantile(_params(mean, sd), normal_quantiles(q))
+
+
 def interval(mean: ArrayLike, sd: ArrayLike, level: float) -> tuple[np.ndarray, np.ndarray]:
     """The central interval that holds the consumption with probability ``level``."""
-    return quantile(mean, sd, 0.5 - 0.5 * level), quantile(mean, sd, 0.5 + 0.5 * level)
+    params = _params(mean, sd)
+    z = normal_quantile(0.5 + 0.5 * level)
+    return _quantile(params, -z), _quantile(params, z)
 
 
 def prob_at_most(mean: ArrayLike, sd: ArrayLike, budget: ArrayLike) -> np.ndarray:
