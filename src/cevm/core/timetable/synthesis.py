@@ -169,6 +169,10 @@ def _solve_cruise(h: np.ndarray, w: np.ndarray, run: np.ndarray, d: np.ndarray) 
     and whether each run is feasible (sum w_i h_i >= d_r). Infeasible runs get their
     largest h."""
     R = d.size
+    moving = h > 0  # standing samples add nothing to any run's distance at any c
+    h, w, run = h[moving], w[moving], run[moving]
+    if not h.size:
+        return np.zeros(R), d <= 0
     # (run, h) order in one key: run * span + h, span a power of 2 above every h
     span = 2.0 ** math.ceil(math.log2(float(h.max(initial=0.0)) + 2.0))
     order = np.argsort(run * span + h, kind="stable")
