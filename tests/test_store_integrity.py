@@ -240,7 +240,10 @@ sys.exit(code)
 
 def run_measured(*args) -> tuple[subprocess.CompletedProcess, float]:
     """``cevm ARGS`` in a process of its own, and its peak resident memory [MB]."""
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(ROOT / "src"), os.environ.get("PYTHONPATH", "")]))
+    # a wide terminal: store check's table must not wrap the message the test reads (a
+    # pytest-xdist worker has no terminal, and COLUMNS of the caller's would apply)
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(ROOT / "src"), os.environ.get("PYTHONPATH", "")]),
+               COLUMNS="400")
     proc = subprocess.run([sys.executable, "-c", PEAK_CHILD, *map(str, args)], capture_output=True, text=True,
                           env=env, timeout=300)
     peak = float(proc.stderr.rsplit("@@peak_mb ", 1)[1])
@@ -345,7 +348,10 @@ def test_a_store_that_is_a_fifo_a_device_or_a_directory_is_refused(tmp_path):
     -wal and -shm files in /dev. Refused in one line (exit 2) before SQLite sees it."""
     fifo = tmp_path / "store.sqlite"
     os.mkfifo(fifo)
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(ROOT / "src"), os.environ.get("PYTHONPATH", "")]))
+    # a wide terminal: store check's table must not wrap the message the test reads (a
+    # pytest-xdist worker has no terminal, and COLUMNS of the caller's would apply)
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(ROOT / "src"), os.environ.get("PYTHONPATH", "")]),
+               COLUMNS="400")
     for args in (("trips",), ("store", "check"), ("route", "add", "R1", "--cycle", URBAN)):
         proc = subprocess.run([sys.executable, "-m", "cevm", *map(str, args), "--store", str(fifo)],
                               capture_output=True, text=True, env=env, timeout=60)
