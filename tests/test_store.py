@@ -735,17 +735,36 @@ def test_runs_are_recorded(store):
 # --------------------------------------------------------------------------- throughput
 
 
-def test_bulk_insert_is_fast(store, tmp_path):
-    n = 2000
-    sha = sha_of("bulk")
-    base = make_file_trips("bulk", n_trips=1, n_samples=5)[0][0]
-    trips = [Trip(**{**base.__dict__, "trip_index": i, "start_utc_s": 1.7e9 + 60.0 * i}) for i in range(n)]
-    vectors = [bytes([i % 256]) * 10_000 for i in range(n)]
-    t0 = time.perf_counter()
-    res = store.replace_file_trips(tmp_path / "bulk.csv", trips, vectors, sha256=sha,
-                                   size_bytes=1, mtime_s=0.0, profile="srf")
-    elapsed = time.perf_counter() - t0
-    assert res.inserted == n and store.count_trips() == n
-    # 10,000 such trips must take a few seconds; a fifth of that gets a generous bound
-    assert elapsed < 3.0, elapsed
+def test_bulk_insert_is_one_statement_per_table_not_per_trip(store, tmp_path, monkeypatch):
+    """A file's trips are written in bulk: the statements the store sends (execute and
+    executemany calls) do not grow with the number of trips, so 2,000 trips cost what a
+    handful do. (The speed itself is a benchmark's business, not a test's: a timed bound
+    here failed on a loaded machine.)"""
+    from cevm.store.failures import StoreConnection
+
+    calls: list[str] = []
+    for name in ("execute", "executemany"):
+        real = getattr(StoreConnection, name)
+
+        def counted(self, *args, _real=real, _name=name, **kw):
+            calls.append(_name)
+            return _real(self, *args, **kw)
+
+        monkeypatch.setattr(StoreConnection, name, counted)
+
+    def statements(n: int, name: str):
+        sha = sha_of(name)
+        base = make_file_trips(name, n_trips=1, n_samples=5)[0][0]
+        trips = [Trip(**{**base.__dict__, "trip_index": i, "start_utc_s": 1.7e9 + 60.0 * i}) for i in range(n)]
+        vectors = [bytes([i % 256]) * 10_000 for i in range(n)]
+        calls.clear()
+        res = store.replace_file_trips(tmp_path / f"{name}.csv", trips, vectors, sha256=sha,
+                                       size_bytes=1, mtime_s=0.0, profile="srf")
+        assert res.inserted == n
+        return len(calls), trips
+
+    few, _ = statements(3, "few")
+    many, trips = statements(2000, "bulk")
+    assert store.count_trips() == 2003
+    assert few > 0 and many == few, (few, many)  # the patch saw the writes; none per trip
     assert store.load_vector_bytes(trips[1234].trip_id) == bytes([1234 % 256]) * 10_000
