@@ -58,8 +58,8 @@ The synthesis' own error (``synthesis_sd``): the logs' own timetables synthesise
 each, the root mean square of the draws' mean wheel energy over the log's, less 1, beyond
 what the draws' spread explains (the log as one more draw), for a proxy bus whose braking
 counts half (:data:`PROXY_BUS`); scheduled trips add it, times their wheel energy's part,
-to their spread. 0 on the sample buses (their timetables' errors are their draws'), 0.05
-on the real Twizy logs, 0.16 on the public bus and truck cycles (the bus prior's).
+to their spread. 0.016 on the sample buses (fit_driving on all their trips), 0.064 on the
+real Twizy logs, 0.16 on the public bus and truck cycles (the class priors').
 
 Spreads: accelerations, decelerations and stop durations are log-normal (median, and the
 sd of their logarithm, split into a between-trip part, the sd of the trips' mean
