@@ -23,6 +23,7 @@ from pathlib import Path
 import pytest
 from typer.testing import CliRunner
 
+import faults
 from cevm.cli import make_app
 from cevm.cli.paths import is_output, option_names
 from fleet_store import DIESEL, URBAN, make_store
@@ -525,3 +526,86 @@ def test_damaged_pages_are_the_stores_damage_not_bad_input(words, function, vehi
     assert len(errors) == (res.exit_code == EXIT_STORE_DAMAGED), res.stderr
     if errors:
         assert "damaged" in errors[0] or "malformed" in errors[0], errors[0]
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not Path("/proc/self/status").exists(), reason="needs /proc (Linux)")
+@pytest.mark.parametrize("name", list(SIGNALS))
+def test_a_signal_at_random_moments_of_a_pool_is_one_line(name, store):
+    """A Ctrl-C (SIGINT to the process group, as a terminal sends it) or a SIGTERM to the
+    whole group (systemd's stop) at seeded random moments of a command with worker
+    processes, its forkserver's start included: the command's one line and code (or its
+    normal end), nothing from the workers, the forkserver or the resource tracker (no
+    traceback, no "leaked semaphore"), no process left."""
+    import contextlib
+    import random
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    db, ids, before = store
+    signum, code = SIGNALS[name]
+    rng = random.Random(32 + signum)
+    args = ["predict", "-v", str(ROOT / "configs" / "vehicles" / "electric-bus.toml"), "--vehicle-id", "EB-09",
+            "--workers", "2", "-f", "csv", "--store", str(db)]
+    for delay in sorted(rng.uniform(0.05, 4.0) for _ in range(4)):
+        proc = subprocess.Popen([sys.executable, "-m", "cevm", *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                text=True, env=_env(), start_new_session=True)
+        time.sleep(delay)
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(proc.pid, signum)
+        rc, _, err = _finish(proc)
+        lines = [ln for ln in err.splitlines() if ln.strip() and not ln.startswith("cevm: note:")]
+        assert "Traceback" not in err and "leaked" not in err, (delay, err)
+        assert rc == code or rc == 0, (delay, rc, err)
+        if rc == code:
+            assert len(lines) == 1 and name in lines[0], (delay, err)
+        t_end = time.monotonic() + 15.0  # the session's processes (forkserver, workers, tracker) end with it
+        while (left := faults.session_processes(proc.pid)) and time.monotonic() < t_end:
+            time.sleep(0.1)
+        for pid, _ in left:  # this test's: killed, so a failure leaves nothing running
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(pid, signal.SIGKILL)
+        assert not left, (delay, left)
+    assert trips_of(db) == before
+
+
+def test_a_reader_keeps_the_files_another_process_uses(store, tmp_path):
+    """The files a reader made are removed only if no other process has the store open: a
+    process that opened it meanwhile (a reader, or a writer about to write) keeps them,
+    and its commits are all there once it ends."""
+    import subprocess
+    import sys
+
+    from cevm.store import TripStore
+
+    db, ids, before = store
+    ready, go = tmp_path / "ready", tmp_path / "go"
+    code = (f"import sqlite3, time, pathlib\n"
+            f"con = sqlite3.connect({str(db)!r}, isolation_level=None)\n"
+            f"con.execute('SELECT COUNT(*) FROM trips').fetchone()\n"
+            f"pathlib.Path({str(ready)!r}).touch()\n"
+            f"while not pathlib.Path({str(go)!r}).exists(): time.sleep(0.01)\n"
+            f"con.execute(\"UPDATE meta SET value = 'x' WHERE key = 'cevm_version'\")\n"
+            f"con.close()\n")
+    reader = TripStore(db, readonly=True)
+    assert reader.count_trips() == len(before[0])
+    assert Path(f"{db}-shm").exists()  # SQLite made it for the reader
+    other = subprocess.Popen([sys.executable, "-c", code])
+    try:
+        while not ready.exists():
+            assert other.poll() is None
+        reader.close()
+        assert Path(f"{db}-shm").exists() and Path(f"{db}-wal").exists()  # in use: kept
+        go.touch()
+        assert other.wait(timeout=60) == 0
+    finally:
+        go.touch()
+        other.wait(timeout=60)
+    con = sqlite3.connect(f"{db.resolve().as_uri()}?mode=ro", uri=True)
+    try:
+        assert con.execute("SELECT value FROM meta WHERE key = 'cevm_version'").fetchone()[0] == "x"
+    finally:
+        con.close()
+    assert trips_of(db) == before
