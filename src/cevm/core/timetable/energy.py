@@ -25,7 +25,7 @@ import numpy as np
 
 from cevm.core import energy
 from cevm.core.cycle import CR0_DEFAULT, CycleVector, drive_cycle_vector, step_terms
-from cevm.core.predictive import Features, predictive
+from cevm.core.predictive import Features, predictive, spec_spread
 from cevm.core.predictive import mean as mean_of
 from cevm.core.timetable.driving import DrivingParams
 from cevm.core.timetable.synthesis import SynthCycle, synthesise_trips
@@ -111,7 +111,20 @@ def draw_features(cycles: list[SynthCycle], elevations: list[np.ndarray | None],
     idle = np.bincount(draw, weights=np.where(a > 0, 0.0, dt), minlength=n)
     trac = np.bincount(draw, weights=np.where(k + e + CR0_DEFAULT * r > 0, dt, 0.0), minlength=n)
     kin = m * np.bincount(draw, weights=np.maximum(k, 0.0), minlength=n)
-    return Features(P, N, dur, idle, trac, kin, np.full(n, energy.check_ambient_c(float(ambient_c))))
+    spec = None
+    if spec_spread(vehicle):
+        # the derivatives of (P, N) in ln CdA and ln Cr that Features.of takes for a file
+        # never calibrated: P and N are linear in both within the steps' signs, so each
+        # is the sum of its term over the steps of that sign
+        pos = wheel > 0.0
+        aero, roll = vehicle.cda_m2 * a, vehicle.cr * m * r
+
+        def split(term: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            return (np.bincount(draw, weights=np.where(pos, term, 0.0), minlength=n),
+                    np.bincount(draw, weights=np.where(pos, 0.0, term), minlength=n))
+
+        spec = (split(aero), split(roll))
+    return Features(P, N, dur, idle, trac, kin, np.full(n, energy.check_ambient_c(float(ambient_c))), 1.0, spec)
 
 
 def scheduled_trip_energy(vehicle: Vehicle, stop_dist_m, arrival_s, departure_s, *,
