@@ -89,11 +89,10 @@ def check_local(name: str, shown: str | None = None) -> str:
 
 
 def _sniff(path: Path) -> bytes:
-    try:
-        with open(path, "rb") as f:
-            return f.read(512)
-    except OSError as exc:
-        raise InputError(str(path), f"cannot read the DSM: {exc.strerror or exc}") from None
+    from cevm.io.inputs import open_regular  # a FIFO or a device refused, never read
+
+    with open_regular(path, "DSM raster") as f:
+        return f.read(512)
 
 
 def _is_vrt(head: bytes) -> bool:

@@ -10,6 +10,7 @@ from functools import lru_cache
 from pathlib import Path
 
 from cevm.errors import InputError
+from cevm.text import shorten
 
 
 @dataclass(frozen=True)
@@ -114,6 +115,24 @@ def _transformer(src: str, dst: str):
     return pyproj.Transformer.from_crs(src, dst, always_xy=True)
 
 
+def _usable_crs(wkt: str, shown: str) -> str:
+    """The raster's CRS as :func:`_crs_key_from_wkt` gives it, once PROJ has shown it can
+    transform GPS fixes (WGS84) into it; else an :class:`InputError` naming the raster:
+    a CRS that PROJ cannot transform to (an engineering CRS without a datum, a
+    projection it does not know) or PROJ's own data missing (``proj.db``) make the DSM
+    unusable, which is the user's to fix, not a failure of cevm."""
+    import pyproj.exceptions
+
+    try:
+        key = _crs_key_from_wkt(wkt)
+        _transformer("EPSG:4326", key)
+    except (pyproj.exceptions.ProjError, pyproj.exceptions.DataDirError) as exc:
+        raise InputError(shown, f"unusable DSM: PROJ cannot transform GPS positions (WGS84) into its CRS "
+                                f"({shorten(' '.join(wkt.split()), 120)}): {shorten(str(exc))}; reproject it, e.g. "
+                                "gdalwarp -t_srs EPSG:3857 (or check PROJ's data: PROJ_DATA)") from None
+    return key
+
+
 def _read_header(name: str, shown: str, driver: str = "") -> TileHeader:
     import rasterio
     from rasterio.errors import RasterioError
@@ -137,7 +156,7 @@ def _read_header(name: str, shown: str, driver: str = "") -> TileHeader:
             offset = ds.offsets[0] if ds.offsets and ds.offsets[0] is not None else 0.0
             return TileHeader(
                 name=name,
-                crs_key=_crs_key_from_wkt(ds.crs.to_wkt()),
+                crs_key=_usable_crs(ds.crs.to_wkt(), shown),
                 width=ds.width,
                 height=ds.height,
                 x0=float(t.c),
@@ -176,4 +195,19 @@ def _list_sources(source: str | os.PathLike | list[str | os.PathLike] | tuple[st
         return names
     if not path.exists():
         raise InputError(text, "DSM not found (expected a GeoTIFF, a VRT, a directory of tiles or a URL)")
+    refuse_irregular(path, text)
     return [text]
+
+
+def refuse_irregular(path: Path, shown: str) -> None:
+    """Refuse a DSM file that is not a regular file (a FIFO would hang GDAL's opening, a
+    device would be read without end), as every other input is
+    (:func:`cevm.io.inputs.file_kind`)."""
+    from cevm.io.inputs import file_kind
+
+    try:
+        kind = file_kind(os.stat(path).st_mode)
+    except OSError as exc:
+        raise InputError(shown, f"cannot read the DSM: {exc.strerror or exc}") from None
+    if kind is not None:
+        raise InputError(shown, f"is {kind}, not a DSM (a GeoTIFF, a VRT or a directory of tiles)")

@@ -132,7 +132,8 @@ class WindowReader:
 
     def _read_block(self, tile: int, brow: int, bcol: int) -> np.ndarray:
         """Pixels of block (brow, bcol) of a tile plus a one-pixel margin right and
-        below, as float (float32 for float32 rasters) with NaN for nodata. A tile that
+        below, as float (float32 for float32 rasters) with NaN for nodata and for
+        infinite values (no height, and no arithmetic warnings downstream). A tile that
         cannot be opened or read gives NaN from then on (:attr:`failed` says why): it
         costs only the points it covers."""
         from rasterio.errors import RasterioError
@@ -158,6 +159,8 @@ class WindowReader:
             arr[_nodata_mask(raw, t.nodata)] = np.nan
         if not plain:
             arr = arr * t.scale + t.offset
+        if np.isinf(arr).any():  # an infinite height is no height: no data, as a nodata pixel
+            arr[np.isinf(arr)] = np.nan
         self.stats.windows_read += 1
         self.stats.pixels_read += arr.size
         return arr
