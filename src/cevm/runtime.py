@@ -16,6 +16,7 @@ work that must not be split (a store write and its report).
 
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import ctypes.util
 import os
@@ -138,3 +139,42 @@ def signals_deferred(signums: tuple[int, ...] = (signal.SIGINT, signal.SIGTERM))
         if arrived:
             signum, frame = arrived[0]
             saved[signum](signum, frame)
+
+
+def warnings_as_lines(stream=None) -> None:
+    """Show every warning of this process as one ``cevm: warning:`` line on stderr (or
+    ``stream``), never as Python's two lines with a source file and its code line: a
+    NumPy ``RuntimeWarning`` that escapes the places where the result is handled (an
+    infinite value in a user's file) says what it is and nothing of cevm's source. The
+    command line applies it, and so does a worker of its local process pool (whose
+    stderr is the command's). Each distinct message is shown once per place, as
+    Python's default filter does."""
+    import warnings
+
+    from cevm.text import one_line
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        out = stream or file or sys.stderr
+        text = str(message)
+        if category.__name__ not in ("UserWarning", "CycleWarning"):
+            text += f" ({category.__name__})"
+        try:
+            out.write(f"cevm: warning: {one_line(text)}\n")
+            out.flush()
+        except (OSError, ValueError):  # a closed or broken stderr: nowhere to say it
+            pass
+
+    warnings.showwarning = show
+
+
+def text_streams_replace() -> None:
+    """Reconfigure stdout and stderr to replace what their encoding cannot take (a
+    vehicle id in Greek on a terminal or pipe that takes only ASCII: ``\\u03b1``
+    escaped) instead of ending the command with a UnicodeEncodeError: stdout with
+    ``backslashreplace`` (the value can still be told), stderr likewise."""
+    for stream in (sys.stdout, sys.stderr):
+        reconfigure = getattr(stream, "reconfigure", None)
+        if reconfigure is None:
+            continue
+        with contextlib.suppress(ValueError, OSError):  # a stream already detached or closed
+            reconfigure(errors="backslashreplace")

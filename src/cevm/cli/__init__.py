@@ -64,23 +64,16 @@ def _root(
 
 
 def _warnings_as_lines() -> None:
-    """Print the library's input warnings (:class:`cevm.io.cycles.CycleWarning`: a file
-    that reads, but probably not as meant) as one ``cevm: warning:`` line each, every
-    time they occur."""
+    """Print every warning as one ``cevm: warning:`` line (:func:`cevm.runtime.warnings_as_lines`:
+    never Python's source file and code line), and the library's input warnings
+    (:class:`cevm.io.cycles.CycleWarning`: a file that reads, but probably not as meant)
+    every time they occur."""
     import warnings
 
-    from cevm.cli.common import warn
     from cevm.io.cycles import CycleWarning
+    from cevm.runtime import warnings_as_lines
 
-    previous = warnings.showwarning
-
-    def show(message, category, filename, lineno, file=None, line=None):
-        if issubclass(category, CycleWarning):
-            warn(str(message))
-        else:
-            previous(message, category, filename, lineno, file, line)
-
-    warnings.showwarning = show
+    warnings_as_lines()
     warnings.simplefilter("always", CycleWarning)
 
 
@@ -124,8 +117,9 @@ def main() -> None:
     as the last flush of stdout."""
     from cevm.cli import interrupts
     from cevm.cli.common import flush_stdout, os_error_exit
-    from cevm.runtime import tune_allocator
+    from cevm.runtime import text_streams_replace, tune_allocator
 
+    text_streams_replace()  # a character the terminal cannot take is escaped, not a UnicodeEncodeError
     tune_allocator()
     first = sys.argv[1] if len(sys.argv) > 1 else None
     app = make_app(first if first in {c[0] for c in COMMANDS} else None)

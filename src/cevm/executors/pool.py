@@ -75,6 +75,9 @@ _SLOT = -1
 def pool_init(slots, counter, owner_pid: int) -> None:
     """A new worker's initializer: its lifelines, and its slot in the shared array."""
     global _SLOTS, _SLOT
+    from cevm.runtime import warnings_as_lines
+
+    warnings_as_lines()  # a warning in a worker is one line on the command's stderr, as in the command
     worker_lifelines(owner_pid)
     with counter.get_lock():
         _SLOT = counter.value % len(slots)
