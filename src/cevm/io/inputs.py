@@ -103,3 +103,19 @@ def _size(n: int) -> str:
         if n >= scale and n % scale == 0:
             return f"{n // scale} {unit}"
     return f"{n:,} bytes"
+
+
+#: The longest field Python's csv module reads (its default ``field_size_limit``): a
+#: longer one is refused with its file and line (:func:`csv_reason`).
+CSV_FIELD_BYTES = 128 << 10
+
+
+def csv_reason(exc: Exception) -> str:
+    """What a ``csv.Error`` of a user's file means, in words for its one line: a field
+    over :data:`CSV_FIELD_BYTES`, a NUL byte, else the module's own text."""
+    text = str(exc)
+    if "field larger than field limit" in text:
+        return f"a field longer than {CSV_FIELD_BYTES // 1024} KiB (not a CSV file of this kind?)"
+    if "NUL" in text:
+        return "a NUL byte (a binary file?)"
+    return text

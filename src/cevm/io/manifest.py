@@ -49,7 +49,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from cevm.errors import InputError
-from cevm.io.inputs import check_size, open_regular
+from cevm.io.inputs import CSV_FIELD_BYTES, check_size, csv_reason, open_regular
 
 #: Largest manifest read [bytes]: about a million rows of a TMS export (56 MB for a
 #: million window rows of vehicle, start, end and mass).
@@ -60,7 +60,7 @@ MAX_MANIFEST_BYTES = 64 << 20
 #: (before: 585-631 MB, and 1.67 GB at 3 M rows), and took 24-37 s.
 MAX_MANIFEST_ROWS = 1_000_000
 #: Longest field of a manifest [bytes] (Python's csv reader's own limit, 128 KiB).
-MAX_FIELD_BYTES = 128 << 10
+MAX_FIELD_BYTES = CSV_FIELD_BYTES
 
 #: Plausible gross masses [kg] of a road vehicle in a manifest: below, a light
 #: quadricycle's kerb mass; above, nothing that drives on a road.
@@ -328,7 +328,7 @@ class ManifestReader:
             try:
                 rec = self._guard(lambda: next(reader, None))
             except csv.Error as exc:
-                raise InputError(self._file, f"not a CSV line: {_csv_reason(exc)}", line=reader.line_num + 1) from None
+                raise InputError(self._file, f"not a CSV line: {csv_reason(exc)}", line=reader.line_num + 1) from None
             if rec is None:
                 return
             line_no = reader.line_num + 1  # the header was line 1 (a record spanning lines: its last)
@@ -383,16 +383,7 @@ def _records(path: Path, stream, sep: str) -> list[list[str]]:
     try:
         return list(csv.reader(stream, delimiter=sep))
     except csv.Error as exc:
-        raise InputError(path, f"not a CSV line: {_csv_reason(exc)}", line=1) from None
-
-
-def _csv_reason(exc: csv.Error) -> str:
-    text = str(exc)
-    if "field larger than field limit" in text:
-        return f"a field longer than {MAX_FIELD_BYTES // 1024} KiB"
-    if "NUL" in text:
-        return "a NUL byte (a binary file?)"
-    return text
+        raise InputError(path, f"not a CSV line: {csv_reason(exc)}", line=1) from None
 
 
 def _row(line: int, cell: dict, cols: dict, units: dict, decimal: str, zone) -> ManifestRow:

@@ -43,8 +43,9 @@ from typing import Any
 import numpy as np
 
 from cevm.errors import InputError
-from cevm.io.inputs import open_regular
+from cevm.io.inputs import csv_reason, open_regular
 from cevm.runtime import release_free_memory
+from cevm.text import shorten
 
 #: Separators tried, in the order preferred when several split the lines alike (a
 #: semicolon or a tab is rarely anything but a separator; a comma is also a decimal mark
@@ -113,8 +114,13 @@ def _head(path: Path) -> tuple[bytes, str | None, bool]:
 _LINE_END = re.compile(rb"\r\n|\n|\r")
 
 
-def _split(line: str, sep: str) -> list[str]:
-    return next(csv.reader([line], delimiter=sep), [])
+def _split(line: str, sep: str, path: Path | None = None, line_no: int | None = None) -> list[str]:
+    """The fields of one line; a line that is no CSV (a field over Python's csv limit,
+    128 KiB; a NUL byte) is an :class:`InputError` with its file and line."""
+    try:
+        return next(csv.reader([line], delimiter=sep), [])
+    except csv.Error as exc:
+        raise InputError(path, f"not a CSV line: {csv_reason(exc)}", line=line_no) from None
 
 
 def sniff_csv(path: str | Path, *, sep: str | None = None, decimal: str | None = None,
@@ -158,10 +164,11 @@ def sniff_csv(path: str | Path, *, sep: str | None = None, decimal: str | None =
     if not header_line.strip():
         raise InputError(path, f"empty first line: a {what} starts with a header of column names", line=1)
     body = [ln.rstrip(b"\r").decode(encoding, errors="replace") for ln in lines[1:SNIFF_LINES + 1]]
+    body_lines = [k for k, ln in enumerate(body, start=2) if ln.strip()]  # each line's number, for errors
     body = [ln for ln in body if ln.strip()]
     if sep is None:
-        sep = _detect_separator(path, header_line, body, decimal, what)
-    header = tuple(c.strip() for c in _split(header_line, sep))
+        sep = _detect_separator(path, header_line, body, decimal, what, body_lines)
+    header = tuple(c.strip() for c in _split(header_line, sep, path, 1))
     if decimal is None:
         data = head[len(lines[0]) + 1:]
         decimal = "," if sep != "," and _DECIMAL_COMMA.search(data) else "."
@@ -170,8 +177,11 @@ def sniff_csv(path: str | Path, *, sep: str | None = None, decimal: str | None =
     return CsvLayout(path=path, sep=sep, decimal=decimal, encoding=encoding, compression=compression, header=header)
 
 
-def _detect_separator(path: Path, header: str, body: list[str], decimal: str | None, what: str) -> str:
-    counts = {s: (len(_split(header, s)), [len(_split(b, s)) for b in body]) for s in SEPARATORS if s != decimal}
+def _detect_separator(path: Path, header: str, body: list[str], decimal: str | None, what: str,
+                      body_lines: list[int]) -> str:
+    counts = {s: (len(_split(header, s, path, 1)), [len(_split(b, s, path, k)) for b, k in zip(body, body_lines,
+                                                                                                strict=True)])
+              for s in SEPARATORS if s != decimal}
     for s, (nh, nb) in counts.items():  # every line split alike, into more than one field
         if nh > 1 and all(n == nh for n in nb):
             return s
@@ -207,7 +217,16 @@ def first_bad_cell(layout: CsvLayout, columns: Sequence[int], what: str = "CSV f
     cell of ``columns`` that is neither empty nor a finite number, as an InputError to
     raise (None if there is none). Reads the file line by line."""
     n = len(layout.header)
-    for line_no, row in enumerate(csv.reader(_text_lines(layout), delimiter=layout.sep), start=1):
+    reader = csv.reader(_text_lines(layout), delimiter=layout.sep)
+    rows = iter(lambda: next(reader, None), None)
+    try:
+        return _first_bad_row(layout, columns, n, enumerate(rows, start=1))
+    except csv.Error as exc:  # a field over Python's csv limit, a NUL byte: with its line
+        return InputError(layout.path, f"not a CSV line: {csv_reason(exc)}", line=reader.line_num)
+
+
+def _first_bad_row(layout: CsvLayout, columns: Sequence[int], n: int, rows) -> InputError | None:
+    for line_no, row in rows:
         if line_no == 1:
             continue
         if len(row) > n:
@@ -217,13 +236,13 @@ def first_bad_cell(layout: CsvLayout, columns: Sequence[int], what: str = "CSV f
             if cell and not _number_ok(cell, layout.decimal):
                 return InputError(layout.path, _not_a_number(layout, cell), line=line_no, column=layout.header[j])
             if cell and not np.isfinite(float(cell.replace(",", "."))):
-                return InputError(layout.path, f"not a finite number: {cell!r}", line=line_no,
+                return InputError(layout.path, f"not a finite number: {shorten(cell)!r}", line=line_no,
                                   column=layout.header[j])
     return None
 
 
 def _not_a_number(layout: CsvLayout, cell: str) -> str:
-    msg = f"not a number: {cell!r}"
+    msg = f"not a number: {shorten(cell)!r}"
     if layout.decimal == "." and re.fullmatch(r"\s*[+-]?\d*,\d+\s*", cell):
         msg += " (a decimal comma? give the decimal mark ',')"
     elif layout.decimal == "," and re.fullmatch(r"\s*[+-]?\d*\.\d+\s*", cell):
@@ -257,7 +276,7 @@ def describe_missing(layout: CsvLayout, row: int, column: int) -> InputError:
     name = layout.header[column]
     for i, text in enumerate(_text_lines(layout), start=1):
         if i == line_no:
-            fields = _split(text.rstrip("\r\n"), layout.sep)
+            fields = _split(text.rstrip("\r\n"), layout.sep, layout.path, line_no)
             if len(fields) <= column:
                 n = len(fields)
                 return InputError(layout.path, f"only {n} field{'s' if n != 1 else ''}, the header has "
