@@ -197,9 +197,20 @@ AmbientOption = Annotated[
                                      "Default: a stored trip's own logged mean, else the vehicle file's "
                                      "reference_temp_c, else 20 degC."),
 ]
+def cr0_check(ctx: typer.Context, param: typer.CallbackParam, value: float) -> float:
+    """--cr0 is a rolling resistance coefficient: finite and at least 0 (one line, exit 2)."""
+    if value is not None and not (math.isfinite(value) and value >= 0):
+        from cevm.core.cycle import CR0_DEFAULT
+
+        raise fail(f"{param.opts[0] if param.opts else '--cr0'} {value:g}: must be a finite number of at least 0 "
+                   f"(Cr0 of the simplification criterion; default {CR0_DEFAULT:g})")
+    return value
+
+
 Cr0Option = Annotated[
     float,
-    typer.Option(help="Cr0 of the simplification criterion, for --cycle files (stored trips and routes keep theirs).")
+    typer.Option(help="Cr0 of the simplification criterion, for --cycle files (stored trips and routes keep theirs).",
+                 callback=cr0_check)
 ]
 OutOption = Annotated[Path | None, typer.Option("--out", "-o", metavar="FILE",
                                                 help="Write the output to this file instead of stdout.")]

@@ -11,6 +11,7 @@ from cevm.cli.common import (
     FormatOption,
     StoreOption,
     TripOption,
+    cr0_check,
     existing_store,
     fail,
     with_cycle_options,
@@ -37,7 +38,8 @@ def route_add(
     store: StoreOption = None,
     replace: Annotated[bool, typer.Option(help="Overwrite an existing route of this name.")] = False,
     note: Annotated[str | None, typer.Option(help="A note kept with the route.")] = None,
-    cr0: Annotated[float, typer.Option(help="Cr0 for the cycle legs' vectors (trips keep theirs).")] = CR0_DEFAULT,
+    cr0: Annotated[float, typer.Option(help="Cr0 for the cycle legs' vectors (trips keep theirs).",
+                                       callback=cr0_check)] = CR0_DEFAULT,
     cycle_fmt=None,
 ) -> None:
     """Store a named route: stored trips (--trip) or cycle files (--cycle) in the order
