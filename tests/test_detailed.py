@@ -314,8 +314,15 @@ def test_shipped_vehicle_tables_parse(root):
     ],
 )
 def test_bad_ev_table_names_the_key(table, needle):
+    """Refused where the file is read (every command, predict as simulate), naming the
+    file; and by the table's reader itself, naming the vehicle."""
     with pytest.raises(InputError) as exc:
-        ev_params_from_vehicle(bus_vehicle(table))
+        bus_vehicle(table)
+    assert needle in str(exc.value)
+    assert str(exc.value).startswith("bus.toml:")
+    v = bus_vehicle()
+    with pytest.raises(InputError) as exc:
+        ev_params_from_vehicle(type(v)(**{**v.__dict__, "extra": {"detailed": table}}))
     assert needle in str(exc.value)
     assert str(exc.value).startswith("bus:")
 
@@ -331,8 +338,8 @@ def test_bad_ev_table_names_the_key(table, needle):
 )
 def test_bad_diesel_table_names_the_key(table, needle):
     with pytest.raises(InputError) as exc:
-        diesel_params_from_vehicle(hgv_vehicle(table))
-    assert needle in str(exc.value)
+        hgv_vehicle(table)  # refused where the file is read, in every command
+    assert needle in str(exc.value) and str(exc.value).startswith("hgv.toml:")
 
 
 def test_table_values_are_converted_to_si():

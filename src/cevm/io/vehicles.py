@@ -173,6 +173,10 @@ def vehicle_from_mapping(data: dict[str, Any], source: str = "<vehicle>", *,
     from cevm.io.priors import posterior_from_mapping, priors_from_mapping
 
     v = _vehicle_values(data, source, default_id=default_id)
+    if "detailed" in data:  # one rule in every command: what simulate refuses, predict does not take
+        from cevm.io.detailed import detailed_params
+
+        detailed_params(v, source)
     priors = priors_from_mapping(data, v.powertrain, v.mass_kg, source)
     v = replace(v, vehicle_class=priors.vehicle_class, priors=priors)
     return replace(v, posterior=posterior_from_mapping(data.get("posterior"), v, priors, source))
