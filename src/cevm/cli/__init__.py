@@ -77,6 +77,24 @@ def _warnings_as_lines() -> None:
     warnings.simplefilter("always", CycleWarning)
 
 
+def _usage_errors_one_line() -> None:
+    """A usage error (an option value out of its range, a value that is not a number, an
+    unknown option) is one ``cevm: error:`` line and exit 2, as every other error of
+    the command line, not click's three lines of usage, hint and error."""
+    from cevm.text import one_line
+
+    try:  # typer 0.29 carries its own copy of click
+        from typer._click import exceptions as click_exceptions
+    except ImportError:  # pragma: no cover - an older typer on click itself
+        from click import exceptions as click_exceptions
+
+    def show(self, file=None) -> None:
+        hint = f" (see '{self.ctx.command_path} --help')" if self.ctx is not None else ""
+        typer.echo(f"cevm: error: {one_line(self.format_message())}{hint}", err=True)
+
+    click_exceptions.UsageError.show = show  # type: ignore[method-assign]
+
+
 def make_app(only: str | None = None) -> typer.Typer:
     """The ``cevm`` app: every command of :data:`COMMANDS`, or only the one named
     ``only`` (its module alone imported; its help, options and errors are the same)."""
@@ -89,6 +107,7 @@ def make_app(only: str | None = None) -> typer.Typer:
         rich_markup_mode=None,  # help texts are plain: "[detailed]", "[kg]", "cevm[dask]" are words, not markup
     )
     app.callback()(_root)
+    _usage_errors_one_line()
     for name, module, attr, group in COMMANDS:
         if only is not None and name != only:
             continue

@@ -72,7 +72,8 @@ def ingest(
     ] = MAX_SAMPLES,
     max_file_mb: Annotated[
         float,
-        typer.Option(min=0.001, metavar="MB", help="Refuse a file of more text than this [MB], after decompression.")
+        typer.Option(min=0.001, max=1e9, metavar="MB",  # a finite bound: inf is no size in bytes
+                     help="Refuse a file of more text than this [MB], after decompression.")
     ] = _LIMITS.max_file_mb,
     max_expansion: Annotated[
         float, typer.Option(min=1.0, metavar="RATIO",
