@@ -147,6 +147,47 @@ def test_the_repair_note_of_cut_trips_names_the_rule():
     assert line.startswith("trips: 2 cut(s) of trips longer than 24 h") and "2020-09-13 12:26:40 UTC" in line
 
 
+def test_a_scenario_of_thousands_of_routes_loads_with_each_stops_routes(tmp_path):
+    """2,000 vehicles, each with a route of two stops (validation scanned every route for
+    every stop and made the vehicles' dict per route: 4,000 routes took 19 s): each
+    stop's options are its own route, looked up by index."""
+    import importlib.util
+
+    from cevm.io.scenario import load_scenario
+
+    spec = importlib.util.spec_from_file_location("bench_readers", ROOT / "benchmarks" / "bench_readers.py")
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)  # the benchmark's scenario, the same file it times
+    write_scenario = bench.write_scenario
+
+    sc = load_scenario(write_scenario(tmp_path / "many.toml", 2_000))
+    assert len(sc.routes) == 2_000 and sc.options("S1999b") == [1999] and sc.options("S0a") == [0]
+    assert sc.vehicle_by_id["V7"].id == "V7" and sc.day_index("d1") == 0
+
+
+def test_the_paper_scenarios_options_are_the_routes_through_each_stop_in_order():
+    """By hand from configs/fleet/paper-case-study.toml: the shared stop LH1S1/R1S2 is on
+    LH1 (route 0) and R1 (route 2), both allowed; LH1S2 on LH1 alone."""
+    from cevm.io.scenario import load_scenario
+
+    sc = load_scenario(ROOT / "configs" / "fleet" / "paper-case-study.toml")
+    assert sc.options("LH1S1/R1S2") == [0, 2] and sc.options("LH2S1/R1S4") == [1, 2]
+    assert sc.options("LH1S2") == [0] and sc.options("R1S5") == [2]
+    assert sc.day_index("day 3") == 2 and sc.vehicle_by_id is sc.vehicle_by_id
+
+
+def test_a_profile_mapping_a_source_twice_is_refused_in_one_pass():
+    from cevm.ingest.profiles import ColumnMap, _check_column_set
+
+    class Keys:
+        def fail(self, message, key):
+            return InputError("p.toml", f"{key}: {message}")
+
+    maps = tuple(ColumnMap(canonical=f"c{i}", source=f"s{i % 30_000}", unit=None, factor=1.0) for i in range(40_000))
+    with pytest.raises(InputError, match=r"source column\(s\) \['s0', 's1',"):
+        _check_column_set(maps, Keys())
+
+
 # --------------------------------------------------------------------------- the DSM
 @pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="needs FIFOs")
 def test_a_dsm_naming_a_fifo_is_refused_without_opening_it(tmp_path):
@@ -254,6 +295,17 @@ def test_a_metadata_comment_of_2_mb_gives_a_short_error_line(tmp_path, capsys, m
                                                          "--workers", "1"])
     failed = [ln for ln in err.splitlines() if ln.startswith("cevm: failed:")]
     assert code == 1 and len(failed) == 1 and len(failed[0]) < 600, err[:2000]
+
+
+def test_a_log_vehicle_id_longer_than_a_vehicle_files_is_refused(tmp_path):
+    """A 900 kB metadata comment was stored as the vehicle id, printed in every row."""
+    from cevm.ingest.reading import read_log
+
+    log = tmp_path / "long-id.csv"
+    log.write_bytes(b"# vehicle_id=EB-" + b"x" * 900_000 + b"\n" + EB01.read_bytes().split(b"\n", 1)[1])
+    with pytest.raises(InputError) as exc:
+        read_log(log, "srf")
+    assert "is 900,003 characters long, more than 80" in str(exc.value) and len(str(exc.value)) < 300
 
 
 def test_any_error_line_is_bounded_with_its_start_and_end_kept():

@@ -85,6 +85,7 @@ import os
 import re
 import tomllib
 import zoneinfo
+from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal, NamedTuple
@@ -647,8 +648,8 @@ def _check_column_set(maps: tuple[ColumnMap, ...], k: _Keys) -> None:
     mapped = {m.canonical for m in maps}
     if ("lat_deg" in mapped) != ("lon_deg" in mapped):
         raise k.fail("map both lat_deg and lon_deg, or neither", "columns")
-    sources = [m.source for m in maps]
-    dup = {s for s in sources if sources.count(s) > 1}
+    counts = Counter(m.source for m in maps)  # one pass: a count per source was quadratic
+    dup = {s for s, n in counts.items() if n > 1}
     if dup:
         raise k.fail(f"source column(s) {sorted(dup)} mapped twice", "columns")
 

@@ -509,9 +509,9 @@ def read_reference(path: Path, sc: Scenario) -> dict | None:
     assignment = data.get("assignment", {})
     if not isinstance(assignment, dict):
         raise InputError(path, "reference.assignment must be a table: day -> {stop -> vehicle id}")
-    stops, ids = set(sc.stops()), {v.id for v in sc.vehicles}
+    stops, ids, days = set(sc.stops()), {v.id for v in sc.vehicles}, set(sc.days)
     for day, choice in assignment.items():
-        if day not in sc.days:
+        if day not in days:
             raise InputError(path, f"reference.assignment: unknown day {day!r}; days: {', '.join(sc.days)}")
         if not isinstance(choice, dict):
             raise InputError(path, f"reference.assignment.{day!r} must be a table: stop -> vehicle id")

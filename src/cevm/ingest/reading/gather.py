@@ -328,11 +328,21 @@ def _first_value(block: bytes, index: int, sep: str, max_lines: int = 50) -> str
     return None
 
 
+#: Longest vehicle id a log may give [characters]: a vehicle file's bound
+#: (:data:`cevm.io.vehicles.ID_MAX_CHARS`), so that every id a log gives can be a vehicle
+#: file's, and a 900 kB metadata comment is not stored as an id printed in every row.
+LOG_ID_MAX_CHARS = 80
+
+
 def _check_vehicle_id(vid: str, path: Path, line: int | None, column: str | None, where: str | None) -> None:
     """A vehicle id may not hold control characters (a carriage return or line feed in
-    an id breaks CSV output and forges lines); refused at read."""
+    an id breaks CSV output and forges lines), nor be longer than
+    :data:`LOG_ID_MAX_CHARS`; refused at read."""
+    src = f" from {where}" if where else ""
+    if len(vid) > LOG_ID_MAX_CHARS:
+        raise InputError(path, f"vehicle id {vid[:40]!r}...{src} is {len(vid):,} characters long, more than "
+                               f"{LOG_ID_MAX_CHARS}", line=line, column=column)
     if has_control(vid):
-        src = f" from {where}" if where else ""
         raise InputError(path, f"vehicle id {vid!r}{src} holds a control character; ids must be printable text",
                          line=line, column=column)
 

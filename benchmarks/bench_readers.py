@@ -1,9 +1,11 @@
-"""Benchmark of a log's header reading against the header's width and the comment lines
-before it: the time must grow linearly (a count per name made a header of 100,000 names
-take 100 s; a scan from the start with each 1 MiB piece of text made 17 MB of comment
-lines take 5 s).
+"""Benchmark of the readers against their input's size: a log's header against its width
+and the comment lines before it, a fleet scenario against its routes. The time must grow
+linearly (a count per name made a header of 100,000 names take 100 s; a scan from the
+start with each 1 MiB piece of text made 17 MB of comment lines take 5 s; a scan of every
+route for every stop made a scenario of 4,000 routes take 19 s).
 
-    python benchmarks/bench_header.py [--widths 10000 100000] [--comments-mb 2 20]
+    python benchmarks/bench_readers.py [--widths 10000 100000] [--comments-mb 2 20]
+                                       [--routes 1000 4000]
 
 For each header width: the time of the column plan (``_plan_columns``, srf profile, every
 tenth name a duplicate) and of finding the header in its text (``_read_header`` over
@@ -11,9 +13,11 @@ tenth name a duplicate) and of finding the header in its text (``_read_header`` 
 of a ``collections.Counter`` over them (linear; its time per name still grows with the
 width, as the names outgrow the processor's caches). For each volume of comment lines
 before the header: the time of finding it, against one Python pass over its lines
-(``bytes.split``, ``startswith``). A linear reader keeps its ratio to the baseline at
-every size; a quadratic one's grows with the size (ten times at ten times the names).
-Best of three runs each.
+(``bytes.split``, ``startswith``). For each number of routes: ``load_scenario`` of a
+scenario of that many vehicles, each with a route of two stops (the shipped HGV and
+long-haul cycle), against parsing its TOML alone (``tomllib``). A linear reader keeps
+its ratio to the baseline at every size; a quadratic one's grows with the size (ten
+times at ten times the names). Best of three runs each (one for the scenarios).
 """
 
 from __future__ import annotations
@@ -53,6 +57,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--widths", type=int, nargs="*", default=[10_000, 100_000])
     ap.add_argument("--comments-mb", type=float, nargs="*", default=[2.0, 20.0])
+    ap.add_argument("--routes", type=int, nargs="*", default=[1_000, 4_000])
     args = ap.parse_args()
     from cevm.ingest.profiles import load_profiles
     from cevm.ingest.reading.header import Header, _plan_columns, _read_header
@@ -73,6 +78,40 @@ def main() -> None:
         s = best_of(lambda text=text: _read_header(Pieces(text), prof, path))
         ref = best_of(lambda text=text: sum(1 for ln in text.split(b"\n") if ln.startswith(b"#")))
         print(f"{format(mb, 'g') + ' MB of comment lines':32s} {s:9.3f} {ref:10.3f} {s / ref:7.1f}")
+    scenarios(args.routes)
+
+
+def write_scenario(path: Path, n: int) -> Path:
+    """A scenario of ``n`` HGVs, each with a route of two stops, one day; the shipped
+    HGV and long-haul cycle copied beside it (short names: 4,000 routes fit in 1 MiB)."""
+    import shutil
+
+    shutil.copy(ROOT / "configs" / "vehicles" / "diesel-hgv-paper.toml", path.parent / "hgv.toml")
+    shutil.copy(ROOT / "configs" / "cycles" / "long-haul-standin.csv", path.parent / "lh.csv")
+    lines = ['name = "many routes"', 'objective = "fuel"', "return_to_depot = true", 'days = ["d1"]', "[[depot]]",
+             'id = "depot"']
+    for i in range(n):
+        lines += ["[[vehicle]]", f'id = "V{i}"', 'file = "hgv.toml"']
+    for i in range(n):
+        lines += ["[[route]]", f'id = "R{i}"', f'vehicle = "V{i}"', f'stops = ["S{i}a", "S{i}b"]',
+                  'leg = { cycle = "lh.csv" }']
+    lines += ["[payload_kg]"] + [f'"S{i}{x}" = [1000]' for i in range(n) for x in "ab"]
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def scenarios(sizes: list[int]) -> None:
+    import tempfile
+    import tomllib
+
+    from cevm.io.scenario import load_scenario
+
+    with tempfile.TemporaryDirectory(prefix="cevm-readers-") as tmp:
+        for n in sizes:
+            path = write_scenario(Path(tmp) / f"s{n}.toml", n)
+            s = best_of(lambda path=path: load_scenario(path), runs=1)
+            ref = best_of(lambda path=path: tomllib.loads(path.read_text()), runs=1)
+            print(f"{'scenario of ' + format(n, ',') + ' routes':32s} {s:9.3f} {ref:10.3f} {s / ref:7.1f}")
 
 
 if __name__ == "__main__":
