@@ -170,7 +170,9 @@ def _read_header(name: str, shown: str, driver: str = "") -> TileHeader:
                 driver=driver,
             )
     except RasterioError as exc:
-        raise InputError(shown, f"cannot open as a raster: {exc}") from None
+        raise InputError(shown, f"cannot open as a raster: {shorten(str(exc))}") from None
+    except (UnicodeDecodeError, ValueError) as exc:  # GDAL's text of a damaged header (its CRS, its tags)
+        raise InputError(shown, f"cannot open as a raster: a damaged header ({shorten(str(exc))})") from None
 
 
 def _list_sources(source: str | os.PathLike | list[str | os.PathLike] | tuple[str | os.PathLike, ...]) -> list[str]:
