@@ -7,7 +7,6 @@ protects. Fast: small inputs, or the cheap part at the size that mattered (a hea
 
 from __future__ import annotations
 
-import io
 import os
 import subprocess
 import sys
@@ -347,11 +346,21 @@ def test_a_non_ascii_id_on_an_ascii_stdout_is_escaped_not_a_traceback(tmp_path):
 
 
 def test_a_warning_is_one_line_without_a_source_line():
+    """In a process of its own (as the command and its pool's workers are: no host
+    recording warnings), numpy's RuntimeWarning is one line naming its category."""
+    code = ("import numpy as np\nfrom cevm.runtime import warnings_as_lines\nwarnings_as_lines()\n"
+            "np.subtract(np.array([np.inf]), np.array([np.inf]))\n")
+    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60,
+                       env=dict(os.environ, PYTHONPATH=str(ROOT / "src")))
+    assert p.returncode == 0 and p.stderr == "cevm: warning: invalid value encountered in subtract (RuntimeWarning)\n"
+
+
+def test_a_hosts_warning_recorder_still_gets_the_warnings():
+    """Under a recorder (pytest's, catch_warnings(record=True)) the warnings go to it."""
     from cevm.runtime import warnings_as_lines
 
-    out = io.StringIO()
-    with warnings.catch_warnings():  # restores the display and the filters after
+    with warnings.catch_warnings(record=True) as seen:
         warnings.simplefilter("always")
-        warnings_as_lines(out)
-        np.subtract(np.array([np.inf]), np.array([np.inf]))  # numpy's own RuntimeWarning
-    assert out.getvalue() == "cevm: warning: invalid value encountered in subtract (RuntimeWarning)\n"
+        warnings_as_lines()
+        warnings.warn("from the library", RuntimeWarning, stacklevel=1)
+    assert [str(w.message) for w in seen] == ["from the library"]

@@ -141,22 +141,34 @@ def signals_deferred(signums: tuple[int, ...] = (signal.SIGINT, signal.SIGTERM))
             saved[signum](signum, frame)
 
 
-def warnings_as_lines(stream=None) -> None:
+def warnings_as_lines(stream=None, own: tuple[type[Warning], ...] = ()) -> None:
     """Show every warning of this process as one ``cevm: warning:`` line on stderr (or
     ``stream``), never as Python's two lines with a source file and its code line: a
     NumPy ``RuntimeWarning`` that escapes the places where the result is handled (an
     infinite value in a user's file) says what it is and nothing of cevm's source. The
     command line applies it, and so does a worker of its local process pool (whose
     stderr is the command's). Each distinct message is shown once per place, as
-    Python's default filter does."""
+    Python's default filter does. Where a host installed its own display (a test
+    runner's recorder), warnings other than the ``own`` categories (cevm's words to the
+    user, always lines) still go to it."""
     import warnings
 
     from cevm.text import one_line
 
+    previous = warnings.showwarning
+    # a host's display: showwarning replaced, or the recorder of catch_warnings(record=True)
+    # (pytest's) in place of the warnings module's own writer
+    impl = getattr(warnings, "_showwarnmsg_impl", None)
+    hosted = (previous is not getattr(warnings, "_showwarning_orig", previous)
+              or getattr(impl, "__module__", "warnings") != "warnings")
+
     def show(message, category, filename, lineno, file=None, line=None):
+        if hosted and not issubclass(category, own):
+            previous(message, category, filename, lineno, file, line)
+            return
         out = stream or file or sys.stderr
         text = str(message)
-        if category.__name__ not in ("UserWarning", "CycleWarning"):
+        if not issubclass(category, own) and category is not UserWarning:
             text += f" ({category.__name__})"
         try:
             out.write(f"cevm: warning: {one_line(text)}\n")

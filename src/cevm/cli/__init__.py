@@ -73,7 +73,7 @@ def _warnings_as_lines() -> None:
     from cevm.io.cycles import CycleWarning
     from cevm.runtime import warnings_as_lines
 
-    warnings_as_lines()
+    warnings_as_lines(own=(CycleWarning,))
     warnings.simplefilter("always", CycleWarning)
 
 
