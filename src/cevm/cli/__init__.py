@@ -84,15 +84,15 @@ def _usage_errors_one_line() -> None:
     from cevm.text import one_line
 
     try:  # typer 0.29 carries its own copy of click
-        from typer._click import exceptions as click_exceptions
+        click_exceptions = importlib.import_module("typer._click.exceptions")
     except ImportError:  # pragma: no cover - an older typer on click itself
-        from click import exceptions as click_exceptions
+        click_exceptions = importlib.import_module("click.exceptions")
 
     def show(self, file=None) -> None:
         hint = f" (see '{self.ctx.command_path} --help')" if self.ctx is not None else ""
         typer.echo(f"cevm: error: {one_line(self.format_message())}{hint}", err=True)
 
-    click_exceptions.UsageError.show = show  # type: ignore[method-assign]
+    click_exceptions.UsageError.show = show
 
 
 def make_app(only: str | None = None) -> typer.Typer:
