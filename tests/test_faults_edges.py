@@ -307,6 +307,23 @@ def test_a_log_vehicle_id_longer_than_a_vehicle_files_is_refused(tmp_path):
     assert "is 900,003 characters long, more than 80" in str(exc.value) and len(str(exc.value)) < 300
 
 
+def test_infinite_values_are_counted_among_the_values_they_are_impossible_of(tmp_path):
+    """Every latitude 'inf': the line said '6125 of 0 values are impossible' (the count
+    of values left the infinite ones out)."""
+    from cevm.ingest.reading import read_log
+
+    lines = EB01.read_text().split("\n")
+    header = lines[4].split(",")
+    lat = header.index("gps_lat_deg")
+    rows = [ln.split(",") for ln in lines[5:205] if ln]
+    for r in rows:
+        r[lat] = "inf"
+    log = tmp_path / "lat-inf.csv"
+    log.write_text("\n".join(lines[:5] + [",".join(r) for r in rows]) + "\n")
+    with pytest.raises(InputError, match="200 of 200 values are impossible for lat_deg"):
+        read_log(log, "srf")
+
+
 def test_any_error_line_is_bounded_with_its_start_and_end_kept():
     exc = InputError("f.csv", "a" * 1_000_000 + " the end", line=3)
     text = str(exc)

@@ -89,7 +89,7 @@ def _check_absurd(out: dict[str, np.ndarray], m: ColumnMap, lines: np.ndarray, p
         bad = (x < lo) | (x > hi)
     if not bad.any():
         return
-    n_values = int(np.isfinite(x).sum())
+    n_values = int((~np.isnan(x)).sum())  # values logged, an infinite one too (it is among the absurd)
     as_logged = ((-x if m.negate else x) - m.offset) / m.factor  # for messages, in the logger's unit
     _absurd_verdict(int(bad.sum()), n_values, m.canonical, m.source, lines, bad, as_logged, path, prof,
                     repairs, "values", m.unit)
@@ -117,7 +117,7 @@ def _check_position(out: dict[str, np.ndarray], prof: Profile, lines: np.ndarray
         lat_bad, lon_bad = (lat > 90.0) | (lat < -90.0), (lon > 180.0) | (lon < -180.0)
     absurd = lat_bad | lon_bad
     zero = ((lat == 0.0) | (lon == 0.0)) & ~absurd if prof.zero_position_is_no_fix else np.zeros(len(lat), bool)
-    n_values = int((np.isfinite(lat) & np.isfinite(lon)).sum())
+    n_values = int((~(np.isnan(lat) & np.isnan(lon))).sum())  # fixes logged (either half), infinite ones too
     for canon, bad, x in (("lat_deg", lat_bad, lat), ("lon_deg", lon_bad, lon)):
         if bad.any():
             src = next(m.source for m in prof.columns if m.canonical == canon)
