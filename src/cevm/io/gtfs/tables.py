@@ -1,0 +1,244 @@
+"""A GTFS feed's text files read as columns (zip or folder), every value checked where it
+is read, and a malformed one refused as ``FILE:LINE: column 'c': what is wrong`` (one line,
+exit 2, as a log's).
+
+Files are read with pyarrow's CSV reader, every column as text (so that a bad value never
+becomes pyarrow's own message without a line) and only the columns asked for; numbers
+and times are converted here, vectorised (:func:`to_float`, :func:`to_seconds`), and the
+first bad value found is reported with its line. ``stop_times.txt`` (the only large file:
+ten million rows in a city's feed) is read batch by batch (:func:`batches`) so that the
+caller keeps only the rows of the trips it needs, converted to numbers.
+
+A line number is the row's index plus 2 (the header is line 1); a quoted field holding a
+line break (never in a GTFS time or number, seldom in a name) would shift the lines after
+it.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import zipfile
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import IO
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.compute as pc
+import pyarrow.csv as pacsv
+
+from cevm.errors import FileAccessError, InputError
+
+#: Rows of a batch of stop_times.txt (pyarrow's block size): 16 MiB of text, about
+#: 300,000 rows; the batch's columns as text are the largest transient object.
+BLOCK_BYTES = 16 << 20
+
+_NUMBER = r"^\s*[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?\s*$"
+_TIME = r"^\s*\d{1,3}:\d{2}:\d{2}\s*$"
+
+
+@dataclass(frozen=True)
+class FeedSource:
+    """Where a feed's files are: a folder, or a zip archive (its files at the top or in
+    one folder inside it)."""
+
+    path: Path
+    members: dict[str, str]  # file name -> member of the zip (or the file's path in the folder)
+    is_zip: bool
+
+    @classmethod
+    def open(cls, path: str | Path) -> FeedSource:
+        p = Path(path)
+        if p.is_dir():
+            return cls(p, {f.name: str(f) for f in p.iterdir() if f.suffix == ".txt" and f.is_file()}, False)
+        if not p.exists():
+            raise FileAccessError(p, "GTFS feed not found (give a .zip or a folder of .txt files)")
+        try:
+            with zipfile.ZipFile(p) as z:
+                names = [n for n in z.namelist() if n.endswith(".txt") and not n.endswith("/")]
+        except (zipfile.BadZipFile, OSError) as exc:
+            raise FileAccessError(p, f"not a GTFS feed: neither a folder nor a readable zip archive ({exc})") from None
+        members: dict[str, str] = {}
+        for n in sorted(names, key=lambda s: s.count("/")):  # the top level first
+            members.setdefault(n.rsplit("/", 1)[-1], n)
+        return cls(p, members, True)
+
+    def has(self, name: str) -> bool:
+        return name in self.members
+
+    def shown(self, name: str) -> str:
+        """How a member is named in messages: ``feed.zip/stops.txt`` or the file's path."""
+        return f"{self.path}/{self.members.get(name, name)}" if self.is_zip else self.members.get(name, name)
+
+    def stream(self, name: str) -> IO[bytes]:
+        if name not in self.members:
+            raise InputError(self.path, f"the feed has no {name}")
+        if self.is_zip:
+            z = zipfile.ZipFile(self.path)
+            return z.open(self.members[name])
+        return open(self.members[name], "rb")
+
+
+def _header(src: FeedSource, name: str) -> list[str]:
+    with src.stream(name) as fh:
+        first = fh.readline()
+    text = first.decode("utf-8-sig", errors="replace").strip("\r\n")
+    if not text.strip():
+        raise InputError(src.shown(name), "empty file: no header line", line=1)
+    return [c.strip() for c in next(csv.reader([text]))]
+
+
+def _parse_error(src: FeedSource, name: str, exc: Exception) -> InputError:
+    """Where pyarrow could not parse ``name`` (a row with the wrong number of fields, an
+    unclosed quote): found again with Python's csv reader, to name the line."""
+    with src.stream(name) as fh:
+        text = io.TextIOWrapper(fh, encoding="utf-8-sig", errors="replace", newline="")
+        reader = csv.reader(text)
+        try:
+            width = len(next(reader))
+            for row in reader:
+                if row and len(row) != width:
+                    return InputError(src.shown(name), f"{len(row)} fields where the header has {width}",
+                                      line=reader.line_num)
+        except csv.Error as cexc:
+            return InputError(src.shown(name), f"not CSV: {cexc}", line=reader.line_num)
+    return InputError(src.shown(name), f"not readable as CSV: {str(exc).splitlines()[0]}")
+
+
+def batches(src: FeedSource, name: str, columns: list[str], required: tuple[str, ...] = (),
+            block_bytes: int = BLOCK_BYTES) -> Iterator[tuple[int, dict[str, pa.Array]]]:
+    """``name``'s columns ``columns`` (those present; ``required`` must be) as text, batch
+    by batch: (the first row's line, {column: array}). Empty fields are null."""
+    header = _header(src, name)
+    missing = [c for c in required if c not in header]
+    if missing:
+        raise InputError(src.shown(name), f"no column {missing[0]!r} (the header has {', '.join(header)})", line=1)
+    present = [c for c in columns if c in header]
+    if len(set(header)) != len(header):
+        dup = next(c for c in header if header.count(c) > 1)
+        raise InputError(src.shown(name), f"column {dup!r} appears twice in the header", line=1)
+    read = pacsv.ReadOptions(column_names=header, skip_rows=1, block_size=block_bytes, encoding="utf8")
+    conv = pacsv.ConvertOptions(include_columns=present, column_types={c: pa.string() for c in present},
+                                strings_can_be_null=True, null_values=[""], quoted_strings_can_be_null=True)
+    parse = pacsv.ParseOptions(newlines_in_values=False)
+    line = 2
+    with src.stream(name) as fh:
+        try:
+            reader = pacsv.open_csv(fh, read_options=read, convert_options=conv, parse_options=parse)
+            for batch in reader:
+                if batch.num_rows == 0:
+                    continue
+                cols = {c: pc.utf8_trim_whitespace(batch.column(c)) for c in present}
+                yield line, cols
+                line += batch.num_rows
+        except pa.ArrowInvalid as exc:
+            raise _parse_error(src, name, exc) from None
+        except UnicodeDecodeError as exc:
+            raise InputError(src.shown(name), f"not UTF-8 text ({exc.reason})") from None
+
+
+def read_table(src: FeedSource, name: str, columns: list[str], required: tuple[str, ...] = ()
+               ) -> tuple[int, dict[str, pa.Array]]:
+    """A whole (small) file's columns, as :func:`batches` gives them, in one batch: (number
+    of rows, {column: array}); an absent optional column is not in the dict."""
+    parts: dict[str, list[pa.Array]] = {}
+    n = 0
+    for _, cols in batches(src, name, columns, required):
+        for c, a in cols.items():
+            parts.setdefault(c, []).append(a)
+        n += len(next(iter(cols.values()))) if cols else 0
+    header = _header(src, name)
+    out = {c: pa.concat_arrays([x.combine_chunks() if isinstance(x, pa.ChunkedArray) else x for x in parts[c]])
+           if c in parts else pa.array([], pa.string()) for c in columns if c in header}
+    return n, out
+
+
+def _chunk(a: pa.Array | pa.ChunkedArray) -> pa.Array:
+    return a.combine_chunks() if isinstance(a, pa.ChunkedArray) else a
+
+
+def texts(a: pa.Array | pa.ChunkedArray) -> np.ndarray:
+    """A text column as a numpy array of str (null: "")."""
+    return np.asarray(_chunk(pc.fill_null(a, "")).to_numpy(zero_copy_only=False), dtype=object)
+
+
+def _first_bad(ok: pa.Array) -> int:
+    bad = np.flatnonzero(~np.asarray(pc.fill_null(ok, True).to_numpy(zero_copy_only=False), dtype=bool))
+    return int(bad[0]) if bad.size else -1
+
+
+def require(a: pa.Array, where: str, column: str, first_line: int) -> None:
+    """Refuse a null (empty) value of a required column."""
+    if a.null_count:
+        i = _first_bad(pc.is_valid(a))
+        raise InputError(where, "empty: a value is required", line=first_line + i, column=column)
+
+
+def to_float(a: pa.Array, where: str, column: str, first_line: int) -> np.ndarray:
+    """A text column as float64 (null: NaN), a value that is not a number refused with
+    its line."""
+    a = _chunk(a)
+    i = _first_bad(pc.match_substring_regex(a, _NUMBER))
+    if i >= 0:
+        raise InputError(where, f"{a[i].as_py()!r} is not a number", line=first_line + i, column=column)
+    return np.asarray(pc.cast(a, pa.float64()).to_numpy(zero_copy_only=False), dtype=np.float64)
+
+
+def to_int(a: pa.Array, where: str, column: str, first_line: int, lo: int | None = None,
+           hi: int | None = None) -> np.ndarray:
+    """A required text column of whole numbers (within ``lo``..``hi``) as int64."""
+    require(a, where, column, first_line)
+    x = to_float(a, where, column, first_line)
+    bad = (x != np.round(x)) | ((x < lo) if lo is not None else False) | ((x > hi) if hi is not None else False)
+    if np.any(bad):
+        i = int(np.flatnonzero(bad)[0])
+        span = f" in {lo}..{hi}" if lo is not None and hi is not None else ""
+        raise InputError(where, f"{_chunk(a)[i].as_py()!r} is not a whole number{span}", line=first_line + i,
+                         column=column)
+    return x.astype(np.int64)
+
+
+def to_seconds(a: pa.Array, where: str, column: str, first_line: int) -> np.ndarray:
+    """GTFS times ``H:MM:SS`` (hours past 24 allowed: a service day's trips after midnight)
+    as seconds after the service day's noon less 12 h, float64 (null: NaN)."""
+    a = _chunk(a)
+    i = _first_bad(pc.match_substring_regex(a, _TIME))
+    if i >= 0:
+        raise InputError(where, f"{a[i].as_py()!r} is not a time H:MM:SS", line=first_line + i, column=column)
+    valid = np.asarray(pc.is_valid(a).to_numpy(zero_copy_only=False), dtype=bool)
+    out = np.full(len(a), np.nan)
+    if valid.any():
+        parts = pc.split_pattern(pc.drop_null(a), ":")
+        hms = np.asarray(pc.cast(pc.list_flatten(parts), pa.int32()).to_numpy(zero_copy_only=False)).reshape(-1, 3)
+        bad = (hms[:, 1] > 59) | (hms[:, 2] > 59)
+        if bad.any():
+            j = int(np.flatnonzero(valid)[np.flatnonzero(bad)[0]])
+            raise InputError(where, f"{a[j].as_py()!r}: minutes and seconds must be below 60", line=first_line + j,
+                             column=column)
+        out[valid] = hms[:, 0] * 3600.0 + hms[:, 1] * 60.0 + hms[:, 2]
+    return out
+
+
+def to_date(a: pa.Array, where: str, column: str, first_line: int) -> np.ndarray:
+    """Required GTFS dates ``YYYYMMDD`` as proleptic Gregorian ordinals (int64)."""
+    from datetime import date
+
+    a = _chunk(a)
+    require(a, where, column, first_line)
+    i = _first_bad(pc.match_substring_regex(a, r"^\d{8}$"))
+    if i >= 0:
+        raise InputError(where, f"{a[i].as_py()!r} is not a date YYYYMMDD", line=first_line + i, column=column)
+    out = np.empty(len(a), dtype=np.int64)
+    cache: dict[str, int] = {}
+    for k, s in enumerate(a.to_pylist()):  # a calendar's few hundred rows
+        v = cache.get(s)
+        if v is None:
+            try:
+                v = cache[s] = date(int(s[:4]), int(s[4:6]), int(s[6:])).toordinal()
+            except ValueError:
+                raise InputError(where, f"{s!r} is not a date of the calendar", line=first_line + k,
+                                 column=column) from None
+        out[k] = v
+    return out
