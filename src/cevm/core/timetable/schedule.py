@@ -13,6 +13,7 @@ the synthesis's spread kept.
 
 from __future__ import annotations
 
+import zlib
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -108,7 +109,7 @@ def trip_geometry(tt: Timetable) -> TripGeometry:
         stops = tt.stop[a:b]
         sid = str(tt.shape_id[i])
         if not sid:
-            sid = "stops:" + "-".join(str(tt.stop_id[s]) for s in stops[[0, -1]]) + f":{hash(stops.tobytes()) & 0xFFFFFF:x}"
+            sid = "stops:" + "-".join(str(tt.stop_id[s]) for s in stops[[0, -1]]) + f":{zlib.crc32(stops.tobytes()):08x}"
             if sid not in shapes:
                 shapes[sid] = geo.straight_shape(tt.stop_lat[stops], tt.stop_lon[stops])
         pattern = (sid, stops.tobytes(), tt.dist[a:b].tobytes())

@@ -135,7 +135,7 @@ def busiest_weekday(cal: Calendar, trips_per_service: dict[str, int]) -> tuple[i
     kind = "weekday" if date.fromordinal(day).weekday() < 5 else "day"
     span = f"{date.fromordinal(first)} to {date.fromordinal(last)}"
     return day, (f"{date.fromordinal(day)} ({date.fromordinal(day):%A}): the first {kind} of the feed's period "
-                 f"({span}) with the most trips ({pick[0]}); --date for others")
+                 f"({span}) with the most trips ({pick[0]} in trips.txt); --date for others")
 
 
 def day_name(day: int) -> str:

@@ -214,7 +214,7 @@ def _check_times(where: str, st: dict[str, np.ndarray], bounds: np.ndarray, trip
                          "stop before it departed", line=int(st["line"][k]), column="arrival_time")
 
 
-def _frequencies(src: FeedSource, trips: _Trips, run_mask: np.ndarray) -> tuple[dict[str, list[float]], str]:
+def _frequencies(src: FeedSource, known: set[str], running: set[str]) -> tuple[dict[str, list[float]], str]:
     """The departures of each frequency-based trip that runs: template id -> start times
     [s]; and the sentence on frequencies.txt."""
     if not src.has("frequencies.txt"):
@@ -234,8 +234,6 @@ def _frequencies(src: FeedSource, trips: _Trips, run_mask: np.ndarray) -> tuple[
         if np.isnan(x).any():
             raise InputError(where, "empty: a value is required", line=int(np.flatnonzero(np.isnan(x))[0]) + 2,
                              column=c)
-    known = set(trips.trip_id.tolist())
-    running = set(trips.trip_id[run_mask].tolist())
     out: dict[str, list[float]] = {}
     for k in range(n):
         if ids[k] not in known:
@@ -350,9 +348,9 @@ def read_feed(path: str | Path, dates: list[int] | None = None) -> Timetable:
         raise CevmError(f"{src.path}: no trip runs on {', '.join(str(date.fromordinal(d)) for d in days)} (the "
                         f"feed's services run from {date.fromordinal(cal.period()[0])} to "
                         f"{date.fromordinal(cal.period()[1])})")
+    freq, fnote = _frequencies(src, set(trips.trip_id.tolist()), set(trips.trip_id[mask].tolist()))
     trips = _Trips(*(getattr(trips, f)[mask] for f in ("trip_id", "route_id", "service_id", "block_id", "shape_id")))
     runs = runs[mask]
-    freq, fnote = _frequencies(src, trips, np.ones(trips.trip_id.size, dtype=bool))
     if fnote:
         notes.append(fnote)
     stop_ids, lat, lon = _stops(src)
