@@ -12,13 +12,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from tests.conftest import shared_or_skip
 
 from cevm.core.timetable import geometry as geo
 from cevm.core.timetable.blocks import DeadheadRule, block_legs, day_blocks, infer_blocks
 from cevm.core.timetable.schedule import trip_geometry
 from cevm.errors import CevmError, InputError
 from cevm.io.gtfs import parse_dates, read_feed
-from tests.conftest import shared_or_skip
 
 SMALL = Path(__file__).parent / "data" / "gtfs" / "small"
 A_WGS84 = 6378137.0
@@ -251,7 +251,7 @@ def test_not_a_feed(tmp_path):
     (tmp_path / "x.zip").write_bytes(b"not a zip")
     with pytest.raises(InputError, match="neither a folder nor a readable zip"):
         read_feed(tmp_path / "x.zip")
-    with pytest.raises(InputError, match="has no agency.txt"):
+    with pytest.raises(InputError, match=r"has no agency\.txt"):
         read_feed(tmp_path)
 
 

@@ -13,7 +13,7 @@ from contextlib import ExitStack
 from datetime import UTC, datetime
 from pathlib import Path
 from types import SimpleNamespace
-from typing import Annotated
+from typing import Annotated, Any
 
 import numpy as np
 import typer
@@ -81,10 +81,11 @@ def _mass(o: SimpleNamespace, vehicle) -> tuple[float, str]:
     if o.mass_kg is not None and o.payload_kg is not None:
         raise CevmError("give --mass-kg or --payload-kg, not both")
     if o.mass_kg is not None:
-        return float(o.mass_kg), "--mass-kg"
+        return float(o.mass_kg), "given (--mass-kg)"
     if o.payload_kg is not None:
         try:
-            return float(vehicle.with_payload(o.payload_kg).mass_kg), f"--payload-kg {o.payload_kg:g} on kerb_mass_kg"
+            m = float(vehicle.with_payload(o.payload_kg).mass_kg)
+            return m, f"given: {o.payload_kg:g} kg payload (--payload-kg) on kerb_mass_kg"
         except ValueError as exc:
             raise CevmError(str(exc)) from None
     return float(vehicle.mass_kg), "the vehicle file's mass_kg (kerb + default payload)"
@@ -155,13 +156,13 @@ def _ambient(o: SimpleNamespace, vehicle, tt, gm, trip, date, origin, zone) -> t
     if o.weather is not None and o.ambient_c is not None:
         raise CevmError("give --weather or --ambient-c, not both")
     if o.ambient_c is not None:
-        return np.full(trip.size, float(o.ambient_c)), "--ambient-c"
+        return np.full(trip.size, float(o.ambient_c)), "given (--ambient-c)"
     if o.weather is not None:
         from cevm.io.gtfs.weather import ambient_at, read_weather
 
         first, last = gm.first_last(tt)
         mid = origin[date] + 0.5 * (gm.departure_s[first][trip] + gm.arrival_s[last][trip])
-        return ambient_at(read_weather(o.weather, zone), mid, str(o.weather)), f"--weather {Path(o.weather).name}"
+        return ambient_at(read_weather(o.weather, zone), mid, str(o.weather)), f"weather file {Path(o.weather).name}"
     t, src = default_ambient_c(vehicle)
     return np.full(trip.size, float(t)), src
 
@@ -175,12 +176,12 @@ class _Run:
     """What a run computed: the timetable, its trips' geometry and energies, the blocks'
     plans and probabilities, and the rows' shared texts."""
 
-    tt: object
-    gm: object
-    sch: object
-    vehicle: object
+    tt: Any  # Timetable
+    gm: Any  # TripGeometry
+    sch: Any  # Scheduled
+    vehicle: Any  # Vehicle
     settings: ReplaySettings
-    zone: object
+    zone: Any  # ZoneInfo
     origin: np.ndarray
     plans: list
     probs: list
@@ -257,7 +258,7 @@ def _block_rows(r: _Run) -> tuple[dict, int]:
         d = plan.duties
         tr = plan.trips
         revenue = np.array([not t.startswith("(") for t in tr.trip_ids])
-        first, bounds = d.first, d.bounds
+        first = d.first
         energy = np.add.reduceat(plan.energies.energy, first)
         lo, hi = central_interval(energy, plan.energy_sd, r.settings.interval)
         lv = plan.levels
@@ -294,11 +295,11 @@ def _block_rows(r: _Run) -> tuple[dict, int]:
         vals["feasible"] = _verdict(plan, vals["completes"], d.n)
         elev = [sorted({r.sch.elevation_from[i] for i in b.instance[b.instance >= 0].tolist()}) for b in by_date]
         vals["elevation_from"] = ["; ".join(e) for e in elev]
-        del bounds
         for k, x in vals.items():
             cols.setdefault(k, []).append(x if not isinstance(x, list) else np.array(x, dtype=object))
     n = sum(p.duties.n for p in r.plans)
-    out = {k: (list(np.concatenate(v)) if v and v[0].dtype == object else np.concatenate(v)) for k, v in cols.items()}
+    out: dict[str, Any] = {k: (list(np.concatenate(v)) if v and v[0].dtype == object else np.concatenate(v))
+                           for k, v in cols.items()}
     c = r.context
     s = r.settings
     out |= {"vehicle_key": r.vehicle.label, "powertrain": r.vehicle.powertrain, "reserve_pct": s.reserve_pct,
@@ -343,7 +344,8 @@ def _trip_rows(r: _Run) -> tuple[dict, int]:
            "date": [str(datetime.fromordinal(tt.dates[d]).date()) for d in sch.date.tolist()],
            "start_time": _iso(start, r.zone), "distance_km": sch.distance_m / 1e3, "duration_s": sch.duration_s,
            "stops": sch.stops, "ascent_m": sch.ascent_m, ("energy_kwh" if ev else "fuel_l"): sch.energy / unit,
-           ("energy_kwh_low" if ev else "fuel_l_low"): lo / unit, ("energy_kwh_high" if ev else "fuel_l_high"): hi / unit,
+           ("energy_kwh_low" if ev else "fuel_l_low"): lo / unit,
+           ("energy_kwh_high" if ev else "fuel_l_high"): hi / unit,
            "mass_kg": sch.mass_kg, "ambient_c": sch.ambient_c, "ambient_from": r.context["ambient_from"],
            "cycle_from": list(sch.cycle_from), "stops_from": list(gm.placed[sch.trip]),
            "elevation_from": list(sch.elevation_from)}

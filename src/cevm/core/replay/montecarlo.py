@@ -97,7 +97,8 @@ def _draw_energies(plan: DrawPlan, z_duty: np.ndarray, z_trip: np.ndarray) -> np
     count), per duty (per vehicle when chained: one group) the coefficients', the meter's
     and the extrapolation's, then per duty the scatter's two shared parts; ``z_trip`` (n,
     count) the trips' own scatter (its two parts are independent: one normal of their
-    combined variance, with the trip's own spread beyond the model's). Module notes of :mod:`cevm.core.replay.spread`."""
+    combined variance, with the trip's own spread beyond the model's). Module notes of
+    :mod:`cevm.core.replay.spread`."""
     sp = plan.spread
     k = sp.k
     sizes = np.diff(plan.bounds)
@@ -124,8 +125,8 @@ def _draw_energies(plan: DrawPlan, z_duty: np.ndarray, z_trip: np.ndarray) -> np
 
 def _weights(plan: DrawPlan) -> tuple[np.ndarray, np.ndarray]:
     """Per trip, the weights of its duty's k + 4 shared normals (the coefficients', the
-    meter's, the extrapolation's, the scatter's two shared parts) and of its own one (the
-    scatter's own part and the trip's spread beyond the model's, independent)."""
+    meter's, the extrapolation's, the scatter's two shared parts) and of its own one
+    (the scatter's own part and the trip's spread beyond the model's, independent)."""
     sp = plan.spread
     rho = sp.day_corr
     w = np.column_stack([sp.coef_part, sp.meter_share * plan.mean, sp.extra_sd, np.sqrt(rho) * sp.aux_sd,

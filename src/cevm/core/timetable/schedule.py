@@ -109,7 +109,8 @@ def trip_geometry(tt: Timetable) -> TripGeometry:
         stops = tt.stop[a:b]
         sid = str(tt.shape_id[i])
         if not sid:
-            sid = "stops:" + "-".join(str(tt.stop_id[s]) for s in stops[[0, -1]]) + f":{zlib.crc32(stops.tobytes()):08x}"
+            ends = "-".join(str(tt.stop_id[s]) for s in stops[[0, -1]])
+            sid = f"stops:{ends}:{zlib.crc32(stops.tobytes()):08x}"
             if sid not in shapes:
                 shapes[sid] = geo.straight_shape(tt.stop_lat[stops], tt.stop_lon[stops])
         pattern = (sid, stops.tobytes(), tt.dist[a:b].tobytes())
