@@ -439,10 +439,9 @@ def _plot(o: SimpleNamespace, r: _Run) -> None:
         d = plan.duties
         for k in range(d.n):
             a, b = int(d.bounds[k]), int(d.bounds[k + 1])
-            t = np.concatenate([[plan.trips.start_s[a]], np.column_stack([plan.trips.end_s[a:b],
-                                                                          plan.trips.end_s[a:b]]).ravel()])
-            lvl = np.concatenate([[plan.before[a]], np.column_stack([plan.after[a:b] - plan.gain[a:b],
-                                                                     plan.after[a:b]]).ravel()])
+            # each leg from its start to its end, the layover after it flat or charging
+            t = np.column_stack([plan.trips.start_s[a:b], plan.trips.end_s[a:b]]).ravel()
+            lvl = np.column_stack([plan.before[a:b], plan.after[a:b]]).ravel()
             curves.append((f"{plan.trips.vehicle_id} {datetime.fromtimestamp(float(t[0]), UTC).date()}", t,
                            100.0 * lvl / plan.capacity, bool(plan.levels.low[k] >= plan.reserve)))
     try:
