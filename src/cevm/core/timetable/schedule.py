@@ -33,7 +33,8 @@ class Timetable:
     ``bounds[i]:bounds[i+1]`` in stop_sequence order: ``stop`` (index into the stops),
     ``arrival_s`` and ``departure_s`` (seconds from the service day's noon less 12 h, NaN
     where the feed leaves a stop untimed), ``dist`` (the feed's shape_dist_traveled in
-    its own unit; NaN where not given), ``line`` (stop_times.txt line, 0 for an expanded
+    its own unit; NaN where not given): float32 (whole seconds exact; a city's ten million
+    rows in half the memory), ``line`` (stop_times.txt line, 0 for an expanded
     frequency trip). Stops: ``stop_id``, ``stop_lat``, ``stop_lon`` [deg]. ``shapes``:
     shape id -> (lat, lon, dist) in shape_pt_sequence order. ``dates`` service dates
     (ordinals) and ``date_from`` how they were chosen; ``timezone`` the agency's."""
@@ -120,8 +121,8 @@ def trip_geometry(tt: Timetable) -> TripGeometry:
         along[a:b] = hit[0]
         key[i] = sid
         placed[i] = hit[1]
-    arr = tt.arrival_s.copy()
-    dep = tt.departure_s.copy()
+    arr = tt.arrival_s.astype(np.float64)
+    dep = tt.departure_s.astype(np.float64)
     untimed = np.isnan(arr)
     if untimed.any():
         for i in np.unique(np.searchsorted(tt.bounds, np.flatnonzero(untimed), side="right") - 1).tolist():

@@ -4,7 +4,7 @@ and the shapes they use (:func:`read_feed`).
 Only what the run needs is kept: trips.txt whole (a row per trip), then stop_times.txt
 streamed batch by batch (:func:`cevm.io.gtfs.tables.batches`), each batch filtered to the
 trips that run on the dates before its columns are converted to numbers (trip and stop as
-int32 indices, times as float64 seconds, the distance as float64): ten million rows of a
+int32 indices, times and the distance as float32): ten million rows of a
 city's feed pass through in bounded memory (benchmarks/bench_gtfs.py measures it).
 shapes.txt the same way, filtered to the shapes the trips use.
 
@@ -57,35 +57,47 @@ class _Trips:
     shape_id: np.ndarray
 
 
-def _trips(src: FeedSource) -> _Trips:
+_TRIP_COLUMNS = ("trip_id", "route_id", "service_id", "block_id", "shape_id")
+
+
+def _trips(src: FeedSource) -> dict[str, pa.Array]:
+    """trips.txt's columns as text (arrow: a city's hundreds of thousands of trips stay
+    compact until those that run are chosen), trip ids checked unique."""
     where = src.shown("trips.txt")
-    _, t = read_table(src, "trips.txt", ["trip_id", "route_id", "service_id", "block_id", "shape_id"],
-                      required=("trip_id", "route_id", "service_id"))
+    n, t = read_table(src, "trips.txt", list(_TRIP_COLUMNS), required=("trip_id", "route_id", "service_id"))
     for c in ("trip_id", "route_id", "service_id"):
         require(t[c], where, c, 2)
-    ids = texts(t["trip_id"])
-    uniq, first, counts = np.unique(ids, return_index=True, return_counts=True)
-    if np.any(counts > 1):
-        k = int(np.flatnonzero(counts > 1)[0])
-        again = np.flatnonzero(ids == uniq[k])[1]
-        raise InputError(where, f"trip_id {uniq[k]!r} appears twice (first on line {first[k] + 2})",
-                         line=int(again) + 2, column="trip_id")
-    n = ids.size
-    blank = np.full(n, "", dtype=object)
-    return _Trips(ids, texts(t["route_id"]), texts(t["service_id"]),
-                  texts(t["block_id"]) if "block_id" in t else blank,
-                  texts(t["shape_id"]) if "shape_id" in t else blank.copy())
+    ids = pc.ascii_trim_whitespace(t["trip_id"])
+    if pc.count_distinct(ids).as_py() != n:
+        counts = pc.value_counts(ids)
+        dup = pc.filter(counts.field("values"), pc.greater(counts.field("counts"), 1))[0]
+        rows = np.flatnonzero(np.asarray(pc.equal(ids, dup).to_numpy(zero_copy_only=False), dtype=bool))
+        raise InputError(where, f"trip_id {dup.as_py()!r} appears twice (first on line {rows[0] + 2})",
+                         line=int(rows[1]) + 2, column="trip_id")
+    out = {c: pc.ascii_trim_whitespace(t[c]) if c in t else pa.nulls(n, pa.string()) for c in _TRIP_COLUMNS}
+    out["trip_id"] = ids
+    return out
 
 
-def _dates_and_runs(cal: Calendar, trips: _Trips, dates: list[int] | None) -> tuple[list[int], str, np.ndarray]:
+def _dates_and_runs(cal: Calendar, trips: dict[str, pa.Array], dates: list[int] | None
+                    ) -> tuple[list[int], str, np.ndarray]:
     if dates:
         how = "asked (--date)"
     else:
-        svc, counts = np.unique(trips.service_id, return_counts=True)
-        day, how = busiest_weekday(cal, dict(zip(svc.tolist(), counts.tolist(), strict=True)))
+        counts = pc.value_counts(trips["service_id"])
+        per = dict(zip(counts.field("values").to_pylist(), counts.field("counts").to_pylist(), strict=True))
+        day, how = busiest_weekday(cal, per)
         dates = [day]
-    runs = np.column_stack([np.isin(trips.service_id, list(cal.running(d))) for d in dates])
+    svc = trips["service_id"]
+    runs = np.column_stack([np.asarray(pc.is_in(svc, value_set=pa.array(sorted(cal.running(d)), pa.string()))
+                                       .to_numpy(zero_copy_only=False), dtype=bool) for d in dates])
     return dates, how, runs
+
+
+def _running(trips: dict[str, pa.Array], rows: np.ndarray) -> _Trips:
+    """The trips of ``rows`` as numpy text arrays."""
+    sel = pa.array(rows)
+    return _Trips(*(texts(pc.take(trips[c], sel)) for c in _TRIP_COLUMNS))
 
 
 def _stops(src: FeedSource) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -103,74 +115,145 @@ def _stops(src: FeedSource) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return ids, lat, lon
 
 
+#: Kept rows joined into one array at a time while stop_times.txt is read.
+CONSOLIDATE_ROWS = 1 << 20
+
+_ST_KEYS = ("trip", "seq", "stop", "arr", "dep", "dist", "line")
+_ST_TYPES = {"trip": np.int32, "seq": np.int32, "stop": np.int32, "arr": np.float32, "dep": np.float32,
+             "dist": np.float32, "line": np.int32}
+
+
 @dataclass
 class _StopTimes:
-    trip: list[np.ndarray] = field(default_factory=list)
-    seq: list[np.ndarray] = field(default_factory=list)
-    stop: list[np.ndarray] = field(default_factory=list)
-    arr: list[np.ndarray] = field(default_factory=list)
-    dep: list[np.ndarray] = field(default_factory=list)
-    dist: list[np.ndarray] = field(default_factory=list)
-    line: list[np.ndarray] = field(default_factory=list)
+    """The kept rows of stop_times.txt, batch by batch, in compact types: trip and stop
+    (int32 indices), stop_sequence and line (int32), times and distance (float32: whole
+    seconds are exact below 2^24 s, 194 days; a distance to 6e-8 of itself)."""
+
+    parts: dict[str, list[np.ndarray]] = field(default_factory=lambda: {key: [] for key in _ST_KEYS})
     rows: int = 0
+    loose: int = 0
+
+    def add(self, **cols: np.ndarray) -> None:
+        """A batch's kept rows; every :data:`CONSOLIDATE_ROWS` rows the small pieces are
+        joined into one array (its own mapping: freed whole, never a hole in the heap)."""
+        for k, v in cols.items():
+            self.parts[k].append(v)
+        self.loose += len(cols["trip"])
+        if self.loose >= CONSOLIDATE_ROWS:
+            for k, parts in self.parts.items():
+                first = next(i for i, p in enumerate(parts) if p.size < CONSOLIDATE_ROWS) if parts else 0
+                parts[first:] = [np.concatenate(parts[first:])]
+            self.loose = 0
+            _release()
+
+    def take(self, key: str) -> np.ndarray:
+        """One column concatenated, its batches freed."""
+        parts = self.parts.pop(key)
+        out = np.concatenate(parts) if parts else np.zeros(0, _ST_TYPES[key])
+        parts.clear()
+        return out
+
+
+def _trip_codes(col: pa.Array, want: dict[str, int]) -> np.ndarray:
+    """Each row's id (a trip's, a stop's) as its index in ``want`` (-1: not there): the
+    batch's distinct ids (a trip's rows lie together) looked up once each in a dict built
+    once for the file, not a hash of every wanted id built again for every batch."""
+    d = pc.dictionary_encode(pc.ascii_trim_whitespace(col))
+    codes = np.array([want.get(v, -1) for v in d.dictionary.to_pylist()], dtype=np.int32)
+    return codes[np.asarray(d.indices.to_numpy(zero_copy_only=False), dtype=np.int64)]
+
+
+def _batch_rows(t: dict, where: str, line: int, want: dict[str, int], stops: dict[str, int]
+                ) -> dict[str, np.ndarray] | None:
+    """One batch of stop_times.txt: the rows of the trips in ``want``, converted (None:
+    none kept)."""
+    require(t["trip_id"], where, "trip_id", line)
+    code = _trip_codes(t["trip_id"], want)
+    rows = np.flatnonzero(code >= 0)
+    if not rows.size:
+        return None
+    idx = pa.array(rows)
+    sub = {c: pc.ascii_trim_whitespace(pc.take(a, idx)) for c, a in t.items() if c != "trip_id"}
+    lines = (line + rows).astype(np.int32)
+    if sub["stop_id"].null_count:
+        k = int(np.flatnonzero(~np.asarray(pc.is_valid(sub["stop_id"]), dtype=bool))[0])
+        raise InputError(where, "empty: a value is required", line=int(lines[k]), column="stop_id")
+    s = _trip_codes(sub["stop_id"], stops)
+    if np.any(s < 0):
+        k = int(np.flatnonzero(s < 0)[0])
+        raise InputError(where, f"stop_id {sub['stop_id'][k].as_py()!r} is not in stops.txt", line=int(lines[k]),
+                         column="stop_id")
+    out = {"trip": code[rows],
+           "stop": s,
+           "seq": _located(lambda a, w, c, f: to_int(a, w, c, f, 0, 2 ** 31 - 1), sub, "stop_sequence", where,
+                           lines).astype(np.int32),
+           "line": lines}
+    for key, c in (("arr", "arrival_time"), ("dep", "departure_time")):
+        out[key] = (_located(to_seconds, sub, c, where, lines) if c in sub else np.full(rows.size, np.nan)
+                    ).astype(np.float32)
+    out["dist"] = (_located(to_float, sub, "shape_dist_traveled", where, lines) if "shape_dist_traveled" in sub
+                   else np.full(rows.size, np.nan)).astype(np.float32)
+    return out
 
 
 def _stop_times(src: FeedSource, trip_ids: np.ndarray, stop_ids: np.ndarray) -> tuple[dict[str, np.ndarray], int]:
     """The stop times of ``trip_ids`` (all others dropped batch by batch), sorted by trip
-    (its index in ``trip_ids``) and stop_sequence."""
+    (its index in ``trip_ids``) and stop_sequence; one column at a time, so that the peak
+    holds the kept rows once and a sort key (``benchmarks/bench_gtfs.py``)."""
     name = "stop_times.txt"
     where = src.shown(name)
-    want = pa.array(trip_ids.tolist(), pa.string())
-    stops = pa.array(stop_ids.tolist(), pa.string())
+    want = {str(t): i for i, t in enumerate(trip_ids.tolist())}
+    stops = {str(t): i for i, t in enumerate(stop_ids.tolist())}
     acc = _StopTimes()
     cols = ["trip_id", "arrival_time", "departure_time", "stop_id", "stop_sequence", "shape_dist_traveled"]
     for line, t in batches(src, name, cols, required=("trip_id", "stop_id", "stop_sequence")):
-        n_rows = len(t["trip_id"])
-        acc.rows += n_rows
-        require(t["trip_id"], where, "trip_id", line)
-        code = pc.index_in(t["trip_id"], value_set=want)
-        keep = pc.is_valid(code)
-        rows = np.flatnonzero(np.asarray(keep.to_numpy(zero_copy_only=False), dtype=bool))
-        if not rows.size:
-            continue
-        idx = pa.array(rows)
-        sub = {c: pc.take(a, idx) for c, a in t.items()}
-        lines = (line + rows).astype(np.int32)
-
-        def at(k: int, lines=lines) -> int:
-            return int(lines[k])
-
-        if sub["stop_id"].null_count:
-            k = int(np.flatnonzero(~np.asarray(pc.is_valid(sub["stop_id"]), dtype=bool))[0])
-            raise InputError(where, "empty: a value is required", line=at(k), column="stop_id")
-        s = pc.index_in(sub["stop_id"], value_set=stops)
-        if s.null_count:
-            k = int(np.flatnonzero(~np.asarray(pc.is_valid(s), dtype=bool))[0])
-            raise InputError(where, f"stop_id {sub['stop_id'][k].as_py()!r} is not in stops.txt", line=at(k),
-                             column="stop_id")
-        acc.trip.append(np.asarray(pc.take(code, idx).to_numpy(zero_copy_only=False), dtype=np.int32))
-        acc.stop.append(np.asarray(s.to_numpy(zero_copy_only=False), dtype=np.int32))
-        acc.seq.append(_located(lambda a, w, c, f: to_int(a, w, c, f, 0, 2 ** 31 - 1), sub, "stop_sequence",
-                                where, lines).astype(np.int32))
-        for key, c in (("arr", "arrival_time"), ("dep", "departure_time")):
-            x = (_located(to_seconds, sub, c, where, lines) if c in sub else np.full(rows.size, np.nan))
-            getattr(acc, key).append(x)
-        acc.dist.append(_located(to_float, sub, "shape_dist_traveled", where, lines)
-                        if "shape_dist_traveled" in sub else np.full(rows.size, np.nan))
-        acc.line.append(lines)
-    if not acc.trip:
-        return {"trip": np.zeros(0, np.int32), "seq": np.zeros(0, np.int32), "stop": np.zeros(0, np.int32),
-                "arr": np.zeros(0), "dep": np.zeros(0), "dist": np.zeros(0), "line": np.zeros(0, np.int32)}, acc.rows
-    out = {k: np.concatenate(getattr(acc, k)) for k in ("trip", "seq", "stop", "arr", "dep", "dist", "line")}
-    order = np.lexsort((out["seq"], out["trip"]))
-    out = {k: v[order] for k, v in out.items()}
-    same = (out["trip"][1:] == out["trip"][:-1]) & (out["seq"][1:] == out["seq"][:-1])
-    if same.any():
-        k = int(np.flatnonzero(same)[0]) + 1
-        raise InputError(where, f"stop_sequence {out['seq'][k]} appears twice in trip "
-                         f"{trip_ids[out['trip'][k]]!r} (also line {out['line'][k - 1]})", line=int(out["line"][k]),
-                         column="stop_sequence")
+        acc.rows += len(t["trip_id"])
+        got = _batch_rows(t, where, line, want, stops)
+        if got is not None:
+            acc.add(**got)
+    _release()  # the batches' temporaries, scattered between the kept pieces
+    trip, seq = acc.take("trip"), acc.take("seq")
+    order = _row_order(trip, seq)
+    out: dict[str, np.ndarray] = {}
+    for name in ("trip", "seq", *(c for c in _ST_KEYS if c not in ("trip", "seq"))):
+        col = trip if name == "trip" else seq if name == "seq" else acc.take(name)
+        out[name] = col if order is None else col[order]
+        del col
+        _release()  # its pieces
+    del trip, seq, order
+    tr, sq = out["trip"], out["seq"]
+    same = np.flatnonzero((tr[1:] == tr[:-1]) & (sq[1:] == sq[:-1]))
+    if same.size:
+        k = int(same[0]) + 1
+        raise InputError(where, f"stop_sequence {sq[k]} appears twice in trip {trip_ids[tr[k]]!r} (also line "
+                         f"{out['line'][k - 1]})", line=int(out["line"][k]), column="stop_sequence")
     return out, acc.rows
+
+
+def _release() -> None:
+    """Return the memory freed by the reader to the system: arrow's pool and glibc's heap
+    keep what was freed, and a feed read in blocks frees thousands of pieces between the
+    rows it keeps (on ten million rows the kept half's pieces alone would be held twice,
+    :func:`cevm.runtime.release_free_memory`)."""
+    from cevm.runtime import release_free_memory
+
+    pa.default_memory_pool().release_unused()
+    release_free_memory()
+
+
+def _row_order(trip: np.ndarray, seq: np.ndarray) -> np.ndarray | None:
+    """The rows' order grouped by trip, by stop_sequence within a trip: None when the file
+    has them so already (each trip's rows together, in sequence: the usual layout, and
+    then nothing is sorted nor copied), else a stable sort by (trip, sequence)."""
+    n = trip.size
+    if n < 2:
+        return None
+    change = trip[1:] != trip[:-1]
+    heads = trip[np.concatenate([[0], np.flatnonzero(change) + 1])]
+    if np.unique(heads).size == heads.size and np.all(change | (seq[1:] > seq[:-1])):
+        return None
+    key = (trip.astype(np.int64) << 32) | seq.astype(np.int64)
+    return np.argsort(key, kind="stable")
 
 
 def _located(conv, sub: dict, column: str, where: str, lines: np.ndarray) -> np.ndarray:
@@ -181,12 +264,16 @@ def _located(conv, sub: dict, column: str, where: str, lines: np.ndarray) -> np.
         raise InputError(where, exc.message, line=int(lines[exc.line or 0]), column=column) from None
 
 
+#: Rows checked together by :func:`_check_times` (bounds its temporaries).
+CHECK_CHUNK_ROWS = 1 << 20
+
+
 def _check_times(where: str, st: dict[str, np.ndarray], bounds: np.ndarray, trip_ids: np.ndarray) -> None:
-    """Every trip times its first and last stop; its times never go back."""
+    """A stop with only one of its times gets it for both (in place); every trip times its
+    first and last stop; its times never go back. Trips a chunk of rows at a time."""
     arr, dep = st["arr"], st["dep"]
-    arr_f = np.where(np.isnan(arr), dep, arr)
-    dep_f = np.where(np.isnan(dep), arr, dep)
-    st["arr"], st["dep"] = arr_f, dep_f
+    np.copyto(arr, dep, where=np.isnan(arr))
+    np.copyto(dep, arr, where=np.isnan(dep))
     n = bounds.size - 1
     if n == 0:
         return
@@ -196,25 +283,37 @@ def _check_times(where: str, st: dict[str, np.ndarray], bounds: np.ndarray, trip
         raise InputError(where, f"trip {trip_ids[i]!r} has {sizes[i]} stop time(s): a trip needs two stops at least",
                          line=int(st["line"][bounds[i]]) if sizes[i] else None)
     ends = np.concatenate([bounds[:-1], bounds[1:] - 1])
-    untimed = np.isnan(arr_f[ends])
+    untimed = np.isnan(arr[ends])
     if untimed.any():
         k = int(ends[np.flatnonzero(untimed)[0]])
         raise InputError(where, "a trip's first and last stops must be timed (arrival_time, departure_time)",
                          line=int(st["line"][k]), column="arrival_time")
-    bad = dep_f < arr_f
-    t = np.where(np.isnan(dep_f), arr_f, dep_f)
-    # timed stops never go back in time along a trip
-    trip_of = np.repeat(np.arange(n), sizes)
-    ok = np.isfinite(t)
-    tt, tr, rows = t[ok], trip_of[ok], np.flatnonzero(ok)
-    back = (tr[1:] == tr[:-1]) & (arr_f[rows[1:]] < tt[:-1])
-    if bad.any() or back.any():
-        k = int(np.flatnonzero(bad)[0]) if bad.any() else int(rows[1:][np.flatnonzero(back)[0]])
-        raise InputError(where, "a time goes back: a stop's departure before its arrival, or an arrival before the "
-                         "stop before it departed", line=int(st["line"][k]), column="arrival_time")
+    i0 = 0
+    while i0 < n:
+        i1 = max(int(np.searchsorted(bounds, bounds[i0] + CHECK_CHUNK_ROWS, side="right")) - 1, i0 + 1)
+        i1 = min(i1, n)
+        a, b = int(bounds[i0]), int(bounds[i1])
+        k = _time_goes_back(arr[a:b], dep[a:b], sizes[i0:i1])
+        if k >= 0:
+            raise InputError(where, "a time goes back: a stop's departure before its arrival, or an arrival before "
+                             "the stop before it departed", line=int(st["line"][a + k]), column="arrival_time")
+        i0 = i1
 
 
-def _frequencies(src: FeedSource, known: set[str], running: set[str]) -> tuple[dict[str, list[float]], str]:
+def _time_goes_back(arr: np.ndarray, dep: np.ndarray, sizes: np.ndarray) -> int:
+    """The first row (of whole trips' rows) whose departure is before its arrival, or
+    whose arrival is before the last timed stop's departure in its trip; -1: none."""
+    bad = dep < arr
+    timed = np.flatnonzero(np.isfinite(arr))
+    trip_of = np.repeat(np.arange(sizes.size, dtype=np.int32), sizes)[timed]
+    back = (trip_of[1:] == trip_of[:-1]) & (arr[timed[1:]] < dep[timed[:-1]])
+    rows = [int(np.flatnonzero(bad)[0])] if bad.any() else []
+    if back.any():
+        rows.append(int(timed[1:][np.flatnonzero(back)[0]]))
+    return min(rows) if rows else -1
+
+
+def _frequencies(src: FeedSource, known: pa.Array, running: set[str]) -> tuple[dict[str, list[float]], str]:
     """The departures of each frequency-based trip that runs: template id -> start times
     [s]; and the sentence on frequencies.txt."""
     if not src.has("frequencies.txt"):
@@ -234,9 +333,11 @@ def _frequencies(src: FeedSource, known: set[str], running: set[str]) -> tuple[d
         if np.isnan(x).any():
             raise InputError(where, "empty: a value is required", line=int(np.flatnonzero(np.isnan(x))[0]) + 2,
                              column=c)
+    unknown = ~np.asarray(pc.is_in(pa.array(ids, pa.string()), value_set=known).to_numpy(zero_copy_only=False),
+                          dtype=bool)
     out: dict[str, list[float]] = {}
     for k in range(n):
-        if ids[k] not in known:
+        if unknown[k]:
             raise InputError(where, f"trip_id {ids[k]!r} is not in trips.txt", line=k + 2, column="trip_id")
         if end[k] <= start[k]:
             raise InputError(where, "end_time must be after start_time", line=k + 2, column="end_time")
@@ -340,32 +441,35 @@ def read_feed(path: str | Path, dates: list[int] | None = None) -> Timetable:
             raise InputError(src.path, f"not a GTFS feed: it has no {required}")
     tz = _timezone(src)
     cal = read_calendar(src)
-    trips = _trips(src)
-    days, how, runs = _dates_and_runs(cal, trips, dates)
+    tcols = _trips(src)
+    days, how, runs = _dates_and_runs(cal, tcols, dates)
     notes: list[str] = []
     mask = runs.any(axis=1)
     if not mask.any():
         raise CevmError(f"{src.path}: no trip runs on {', '.join(str(date.fromordinal(d)) for d in days)} (the "
                         f"feed's services run from {date.fromordinal(cal.period()[0])} to "
                         f"{date.fromordinal(cal.period()[1])})")
-    freq, fnote = _frequencies(src, set(trips.trip_id.tolist()), set(trips.trip_id[mask].tolist()))
-    trips = _Trips(*(getattr(trips, f)[mask] for f in ("trip_id", "route_id", "service_id", "block_id", "shape_id")))
+    all_ids = tcols["trip_id"]
+    trips = _running(tcols, np.flatnonzero(mask))
+    del tcols
+    _release()  # trips.txt read whole
+    freq, fnote = _frequencies(src, all_ids, set(trips.trip_id.tolist()))
+    del all_ids
     runs = runs[mask]
     if fnote:
         notes.append(fnote)
     stop_ids, lat, lon = _stops(src)
     st, total_rows = _stop_times(src, trips.trip_id, stop_ids)
-    counts = np.bincount(st["trip"], minlength=trips.trip_id.size)
-    if np.any(counts == 0):
-        missing = trips.trip_id[counts == 0]
-        notes.append(f"{missing.size} trip(s) that run have no stop times, left out (e.g. {missing[0]})")
-        keep = counts > 0
-        remap = np.cumsum(keep) - 1
-        st["trip"] = remap[st["trip"]].astype(np.int32)
-        trips = _Trips(*(getattr(trips, f)[keep] for f in ("trip_id", "route_id", "service_id", "block_id",
-                                                           "shape_id")))
-        runs = runs[keep]
-        counts = counts[keep]
+    # the trips in the order of their rows (the file's, when it groups them): no row moves
+    change = np.flatnonzero(st["trip"][1:] != st["trip"][:-1]) + 1
+    heads = st["trip"][np.concatenate([[0], change])] if st["trip"].size else np.zeros(0, np.int32)
+    counts = np.diff(np.concatenate([[0], change, [st["trip"].size]])) if st["trip"].size else np.zeros(0, np.int64)
+    if heads.size < trips.trip_id.size:
+        missing = np.setdiff1d(np.arange(trips.trip_id.size), heads)
+        notes.append(f"{missing.size} trip(s) that run have no stop times, left out (e.g. {trips.trip_id[missing[0]]})")
+    trips = _Trips(*(getattr(trips, f)[heads] for f in ("trip_id", "route_id", "service_id", "block_id", "shape_id")))
+    runs = runs[heads]
+    del st["trip"], st["seq"]
     bounds = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
     _check_times(src.shown("stop_times.txt"), st, bounds, trips.trip_id)
     trips, runs, st, bounds = _expand(st, bounds, trips, runs, freq)

@@ -31,9 +31,11 @@ import pyarrow.csv as pacsv
 
 from cevm.errors import FileAccessError, InputError
 
-#: Rows of a batch of stop_times.txt (pyarrow's block size): 16 MiB of text, about
-#: 300,000 rows; the batch's columns as text are the largest transient object.
-BLOCK_BYTES = 16 << 20
+#: Bytes of a batch of stop_times.txt (pyarrow's block size, read on one thread): 1 MiB,
+#: about 25,000 rows. On ten million rows (benchmarks/bench_gtfs.py) 1 MiB peaks at 423 MB
+#: in 18.5 s, 4 MiB at 512 MB in 16.6 s; pyarrow's threads read blocks ahead (their
+#: buffers add to the peak) and parse no faster on the two cores of a small machine.
+BLOCK_BYTES = 1 << 20
 
 _NUMBER = r"^\s*[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?\s*$"
 _TIME = r"^\s*\d{1,3}:\d{2}:\d{2}\s*$"
@@ -119,7 +121,8 @@ def batches(src: FeedSource, name: str, columns: list[str], required: tuple[str,
     if len(set(header)) != len(header):
         dup = next(c for c in header if header.count(c) > 1)
         raise InputError(src.shown(name), f"column {dup!r} appears twice in the header", line=1)
-    read = pacsv.ReadOptions(column_names=header, skip_rows=1, block_size=block_bytes, encoding="utf8")
+    read = pacsv.ReadOptions(column_names=header, skip_rows=1, block_size=block_bytes, encoding="utf8",
+                             use_threads=False)
     conv = pacsv.ConvertOptions(include_columns=present, column_types={c: pa.string() for c in present},
                                 strings_can_be_null=True, null_values=[""], quoted_strings_can_be_null=True)
     parse = pacsv.ParseOptions(newlines_in_values=False)
@@ -160,8 +163,12 @@ def _chunk(a: pa.Array | pa.ChunkedArray) -> pa.Array:
 
 
 def texts(a: pa.Array | pa.ChunkedArray) -> np.ndarray:
-    """A text column as a numpy array of str (null: "")."""
-    return np.asarray(_chunk(pc.fill_null(a, "")).to_numpy(zero_copy_only=False), dtype=object)
+    """A text column as a numpy array of str (null: ""), a value repeated in many rows one
+    str object (a city's trips.txt: hundreds of thousands of rows, a few hundred routes)."""
+    d = pc.dictionary_encode(_chunk(a))
+    uniq = np.array([*d.dictionary.to_pylist(), ""], dtype=object)
+    idx = np.asarray(pc.fill_null(d.indices, len(uniq) - 1).to_numpy(zero_copy_only=False), dtype=np.int64)
+    return uniq[idx]
 
 
 def _first_bad(ok: pa.Array) -> int:
