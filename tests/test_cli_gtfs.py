@@ -186,3 +186,18 @@ def test_malformed_feed_is_one_line_exit_2(tmp_path, bus):
     assert res.exit_code == 2
     err = [line for line in res.output.splitlines() if line.startswith("cevm: error")]
     assert err == [f"cevm: error: {p}:7: column 'arrival_time': '08:2x:00' is not a time H:MM:SS"]
+
+
+def test_diesel_rows_in_litres_and_a_payload(tmp_path, root):
+    hgv = str(root / "configs" / "vehicles" / "diesel-hgv.toml")
+    out = tmp_path / "d.csv"
+    res = run(str(SMALL), "-v", hgv, "--payload-kg", "2000", "-f", "csv", "-o", str(out))
+    assert res.exit_code == 0, res.output
+    rows = rows_of(out.read_text())
+    from cevm.io import load_vehicle
+
+    kerb = load_vehicle(hgv).kerb_mass_kg
+    for r in rows:
+        assert r["energy_kwh"] == "" and float(r["fuel_l_low"]) < float(r["fuel_l"]) < float(r["fuel_l_high"])
+        assert float(r["mass_kg"]) == pytest.approx(kerb + 2000.0)
+        assert "--payload-kg" in r["mass_from"] and r["soc_min_pct"] == "" and r["tank_min_pct"] != ""

@@ -119,7 +119,7 @@ def _settings(o: SimpleNamespace, vehicle) -> ReplaySettings:
         raise CevmError("--charge-at depot: give the depot's position (--charge-at LAT,LON,RADIUS_M); layovers at "
                         "the depot are where blocks pass by it")
     try:
-        return ReplaySettings(rule="day", soc_start_pct=o.soc_start, reserve_pct=o.reserve_pct, charging=charging,
+        return ReplaySettings(rule="given", soc_start_pct=o.soc_start, reserve_pct=o.reserve_pct, charging=charging,
                               interval=o.interval, draws=o.draws, seed=o.seed,
                               battery_step=J_PER_KWH if vehicle.is_ev else 1.0, within_trips=False,
                               size_confidence=o.confidence)
@@ -185,6 +185,7 @@ class _Run:
     origin: np.ndarray
     plans: list
     probs: list
+    infos: list  # per plan, (block name, BlockDay) of each of its duties
     days: dict
     context: dict
     notes: list
@@ -195,7 +196,7 @@ def _compute(o: SimpleNamespace) -> _Run:
     from zoneinfo import ZoneInfo
 
     from cevm.core.timetable.blocks import DeadheadRule
-    from cevm.core.timetable.duties import block_trips, blocks_by_date, empty_energy, plan_block
+    from cevm.core.timetable.duties import block_trips, blocks_by_date, empty_energy, join_blocks, plan_block
     from cevm.core.timetable.schedule import instances, schedule_energies, trip_geometry
     from cevm.io.gtfs import parse_dates, read_feed
     from cevm.io.gtfs.calendar import noon_minus_12h
@@ -236,17 +237,26 @@ def _compute(o: SimpleNamespace) -> _Run:
     by_name: dict[str, list] = {}
     for bd in days:
         by_name.setdefault(bd.name, []).append(bd)
-    plans, probs = [], []
-    for name, bds in by_name.items():
-        plan = plan_block(block_trips(name, bds, tt, sch, origin, empty_run), vehicle, settings)
+    for bds in by_name.values():
+        bds.sort(key=lambda b: b.date)
+    blocks = [block_trips(name, bds, tt, sch, origin, empty_run) for name, bds in by_name.items()]
+    names = list(by_name)
+    # one run of every block-day (replay's sizing vectorised over them), or with levels
+    # carried between a block's dates, one run per block
+    groups = [list(range(len(blocks)))] if not settings.charging.chained else [[k] for k in range(len(blocks))]
+    plans, probs, infos = [], [], []
+    for g in groups:
+        plan = plan_block(join_blocks([blocks[k] for k in g]), vehicle, settings)
         plans.append(plan)
         probs.append(p_complete(plan.draw_plan(), settings.draws, settings.seed))
+        infos.append([(names[k], bd) for k in g for bd in by_name[names[k]]])
     from cevm.cli.replay import describe_run
 
     ctx = describe_run(vehicle, settings, tt.timezone)
     context = {"mass_kg": mass, "mass_from": mass_from, "ambient_from": ambient_from, "driving_from": params.source,
-               "charge_places": ctx["charge_places"], "overnight": ctx["overnight"]}
-    return _Run(tt, gm, sch, vehicle, settings, zone, origin, plans, probs, by_name, context, list(tt.notes))
+               "charge_places": ctx["charge_places"] if vehicle.is_ev else "nowhere: a diesel refuels overnight",
+               "overnight": ctx["overnight"]}
+    return _Run(tt, gm, sch, vehicle, settings, zone, origin, plans, probs, infos, by_name, context, list(tt.notes))
 
 
 def _block_rows(r: _Run) -> tuple[dict, int]:
@@ -254,7 +264,8 @@ def _block_rows(r: _Run) -> tuple[dict, int]:
     cols: dict[str, list] = {}
     ev = bool(r.vehicle.is_ev)
     unit = J_PER_KWH if ev else 1.0
-    for plan, p, (name, bds) in zip(r.plans, r.probs, r.days.items(), strict=True):
+    for plan, p, info in zip(r.plans, r.probs, r.infos, strict=True):
+        by_date = [bd for _, bd in info]
         d = plan.duties
         tr = plan.trips
         revenue = np.array([not t.startswith("(") for t in tr.trip_ids])
@@ -264,9 +275,8 @@ def _block_rows(r: _Run) -> tuple[dict, int]:
         lv = plan.levels
         ran_empty = plan.empty_trip >= 0
         pct = 100.0 / plan.capacity
-        by_date = sorted(bds, key=lambda b: b.date)
         vals = {
-            "block_id": [name] * d.n, "date": [str(datetime.fromordinal(r.tt.dates[b.date]).date()) for b in by_date],
+            "block_id": [name for name, _ in info], "date": [str(datetime.fromordinal(r.tt.dates[b.date]).date()) for b in by_date],
             "block_from": [b.source for b in by_date],
             "start_time": _iso(tr.start_s[first], r.zone), "end_time": _iso(tr.end_s[d.last], r.zone),
             "trips": np.add.reduceat(revenue.astype(float), first),

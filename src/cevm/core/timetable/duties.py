@@ -123,13 +123,42 @@ def block_trips(name: str, days: Sequence[BlockDay], tt: Timetable, sch: Schedul
                        end_lon=arr("elon"), day=arr("day", np.int64), own_sd=arr("own"), energy_offset=arr("off"))
 
 
+def join_blocks(blocks: Sequence[LoggedTrips]) -> LoggedTrips:
+    """Blocks' trips (each as :func:`block_trips` gives them) as one run whose duties are
+    the block-days, in order (replay's ``given`` rule: ``day`` becomes each trip's duty)."""
+    def ranks(b: LoggedTrips) -> np.ndarray:  # its dates as 0, 1, ...
+        assert b.day is not None, "block_trips gives each trip its date"
+        return np.unique(b.day, return_inverse=True)[1].astype(np.int64)
+
+    if len(blocks) == 1:
+        return dataclasses.replace(blocks[0], day=ranks(blocks[0]))
+    duty, offset = [], 0
+    for b in blocks:
+        rank = ranks(b)
+        duty.append(rank + offset)
+        offset += int(rank.max()) + 1 if rank.size else 0
+
+    def cat(name: str) -> np.ndarray:
+        return np.concatenate([getattr(b, name) for b in blocks])
+
+    return LoggedTrips(vehicle_id=blocks[0].vehicle_id if len(blocks) == 1 else "blocks",
+                       trip_ids=tuple(t for b in blocks for t in b.trip_ids), start_s=cat("start_s"), end_s=cat("end_s"),
+                       distance_m=cat("distance_m"), vectors=tuple(v for b in blocks for v in b.vectors),
+                       gross_kg=cat("gross_kg"), payload_kg=cat("payload_kg"),
+                       mass_source=tuple(m for b in blocks for m in b.mass_source), ambient_c=cat("ambient_c"),
+                       start_lat=cat("start_lat"), start_lon=cat("start_lon"), end_lat=cat("end_lat"),
+                       end_lon=cat("end_lon"), day=np.concatenate(duty), own_sd=cat("own_sd"),
+                       energy_offset=cat("energy_offset"))
+
+
 def _no_table(i: int) -> None:
     return None
 
 
 def plan_block(trips: LoggedTrips, vehicle: Vehicle, settings: ReplaySettings) -> VehiclePlan:
-    """One block's duties (one per date) run with replay's machinery (module notes)."""
-    s = dataclasses.replace(settings, rule="day", within_trips=False)
+    """Blocks' duties (:func:`join_blocks`: one per block and date) run with replay's
+    machinery (module notes)."""
+    s = dataclasses.replace(settings, rule="given", within_trips=False)
     return plan_vehicle(trips, vehicle, s, _no_table)
 
 

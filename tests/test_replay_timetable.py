@@ -1,7 +1,8 @@
-"""A per-trip spread of its own (a timetable's synthesised cycle: the spread between its
-draws) in replay's distribution: independent from trip to trip, added in quadrature to a
-trip's and a duty's variance, and drawn in the Monte Carlo (cevm.core.replay.spread,
-cevm.core.replay.montecarlo)."""
+"""What a timetable adds to replay's machinery: a per-trip spread of its own (a synthesised
+cycle: the spread between its draws), independent from trip to trip, added in quadrature
+to a trip's and a duty's variance and drawn in the Monte Carlo (cevm.core.replay.spread,
+cevm.core.replay.montecarlo); duties given by the caller (blocks that run at the same
+time: cevm.core.replay.duties, rule "given")."""
 
 from __future__ import annotations
 
@@ -9,7 +10,7 @@ import numpy as np
 import pytest
 from scipy.stats import norm
 
-from cevm.core.replay import Stops, TripSpread
+from cevm.core.replay import Stops, TripSpread, group_duties
 from cevm.core.replay.montecarlo import DrawPlan, p_complete
 
 
@@ -50,3 +51,18 @@ def test_monte_carlo_draws_the_own_spread():
     # chained (levels carried across duties): the same draws' law
     p2 = p_complete(DrawPlan(**{**plan.__dict__, "chained": True}), draws=draws, seed=2)[0]
     assert abs(p2 - expect) < 4 * np.sqrt(expect * (1 - expect) / draws)
+
+
+def test_given_duties_may_overlap_in_time():
+    # two blocks at the same time: block 0 (three trips), block 1 (two trips)
+    start = np.array([0.0, 100.0, 300.0, 50.0, 200.0])
+    end = np.array([90.0, 250.0, 400.0, 150.0, 260.0])
+    d = group_duties(start, end, rule="given", day=np.array([0, 0, 0, 1, 1]))
+    assert d.bounds.tolist() == [0, 3, 5]
+    # inside a duty the stops as ever (10 s, 50 s); after a duty's last trip none (NaN)
+    assert d.dwell_s[[0, 1, 3]].tolist() == [10.0, 50.0, 50.0]
+    assert np.isnan(d.dwell_s[[2, 4]]).all()
+    with pytest.raises(ValueError, match="lie together"):
+        group_duties(start, end, rule="given", day=np.array([0, 1, 0, 1, 1]))
+    with pytest.raises(ValueError, match="within a duty"):
+        group_duties(start[[1, 0, 2, 3, 4]], end, rule="given", day=np.array([0, 0, 0, 1, 1]))
