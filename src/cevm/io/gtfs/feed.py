@@ -154,6 +154,15 @@ class _StopTimes:
         return out
 
 
+def _same_text(a: pa.Array, b: pa.Array) -> bool:
+    """Whether two text columns hold the same values, empty in the same rows."""
+    if a.null_count != b.null_count:
+        return False
+    if a.null_count and not pc.all(pc.equal(pc.is_null(a), pc.is_null(b))).as_py():
+        return False
+    return bool(pc.all(pc.equal(a, b)).as_py() is not False)
+
+
 def _trip_codes(col: pa.Array, want: dict[str, int]) -> np.ndarray:
     """Each row's id (a trip's, a stop's) as its index in ``want`` (-1: not there): the
     batch's distinct ids (a trip's rows lie together) looked up once each in a dict built
@@ -189,6 +198,9 @@ def _batch_rows(t: dict, where: str, line: int, want: dict[str, int], stops: dic
                            lines).astype(np.int32),
            "line": lines}
     for key, c in (("arr", "arrival_time"), ("dep", "departure_time")):
+        if key == "dep" and "arrival_time" in sub and c in sub and _same_text(sub[c], sub["arrival_time"]):
+            out[key] = out["arr"].copy()  # the usual timetable: the same time twice, parsed once
+            continue
         out[key] = (_located(to_seconds, sub, c, where, lines) if c in sub else np.full(rows.size, np.nan)
                     ).astype(np.float32)
     out["dist"] = (_located(to_float, sub, "shape_dist_traveled", where, lines) if "shape_dist_traveled" in sub

@@ -184,13 +184,19 @@ def require(a: pa.Array, where: str, column: str, first_line: int) -> None:
 
 
 def to_float(a: pa.Array, where: str, column: str, first_line: int) -> np.ndarray:
-    """A text column as float64 (null: NaN), a value that is not a number refused with
-    its line."""
+    """A text column as float64 (null: NaN), a value that is not a (finite) number refused
+    with its line. pyarrow's cast first; the pattern, slower, only to find a bad value."""
     a = _chunk(a)
-    i = _first_bad(pc.match_substring_regex(a, _NUMBER))
-    if i >= 0:
+    try:
+        x = np.asarray(pc.cast(a, pa.float64()).to_numpy(zero_copy_only=False), dtype=np.float64)
+    except (pa.ArrowInvalid, pa.ArrowNotImplementedError):
+        x = None
+    if x is None or (np.isinf(x).any() or np.isnan(x).sum() != a.null_count):
+        i = _first_bad(pc.match_substring_regex(a, _NUMBER))
+        if i < 0 and x is not None:  # "inf", "nan": numbers to pyarrow, not to a feed
+            i = int(np.flatnonzero(~np.isfinite(x) & np.asarray(pc.is_valid(a).to_numpy(zero_copy_only=False)))[0])
         raise InputError(where, f"{a[i].as_py()!r} is not a number", line=first_line + i, column=column)
-    return np.asarray(pc.cast(a, pa.float64()).to_numpy(zero_copy_only=False), dtype=np.float64)
+    return x
 
 
 def to_int(a: pa.Array, where: str, column: str, first_line: int, lo: int | None = None,
@@ -209,22 +215,36 @@ def to_int(a: pa.Array, where: str, column: str, first_line: int, lo: int | None
 
 def to_seconds(a: pa.Array, where: str, column: str, first_line: int) -> np.ndarray:
     """GTFS times ``H:MM:SS`` (hours past 24 allowed: a service day's trips after midnight)
-    as seconds after the service day's noon less 12 h, float64 (null: NaN)."""
+    as seconds after the service day's noon less 12 h, float64 (null: NaN). The fields are
+    cut at fixed places from the end (``MM:SS`` is always five characters) and cast; the
+    pattern, slower, only to find a bad value."""
     a = _chunk(a)
-    i = _first_bad(pc.match_substring_regex(a, _TIME))
-    if i >= 0:
-        raise InputError(where, f"{a[i].as_py()!r} is not a time H:MM:SS", line=first_line + i, column=column)
     valid = np.asarray(pc.is_valid(a).to_numpy(zero_copy_only=False), dtype=bool)
     out = np.full(len(a), np.nan)
-    if valid.any():
-        parts = pc.split_pattern(pc.drop_null(a), ":")
-        hms = np.asarray(pc.cast(pc.list_flatten(parts), pa.int32()).to_numpy(zero_copy_only=False)).reshape(-1, 3)
-        bad = (hms[:, 1] > 59) | (hms[:, 2] > 59)
-        if bad.any():
-            j = int(np.flatnonzero(valid)[np.flatnonzero(bad)[0]])
-            raise InputError(where, f"{a[j].as_py()!r}: minutes and seconds must be below 60", line=first_line + j,
-                             column=column)
-        out[valid] = hms[:, 0] * 3600.0 + hms[:, 1] * 60.0 + hms[:, 2]
+    if not valid.any():
+        return out
+    v = pc.drop_null(a) if a.null_count else a
+    try:
+        colons = pc.and_(pc.equal(pc.utf8_slice_codeunits(v, -3, -2), ":"),
+                         pc.equal(pc.utf8_slice_codeunits(v, -6, -5), ":"))
+        fields = [np.asarray(pc.cast(pc.utf8_slice_codeunits(v, lo, hi), pa.int32()).to_numpy(zero_copy_only=False))
+                  for lo, hi in ((0, -6), (-5, -3), (-2, None))]
+        ok = bool(pc.all(colons).as_py()) and bool(np.all(fields[0] >= 0))
+        length = np.asarray(pc.utf8_length(v).to_numpy(zero_copy_only=False))
+        ok = ok and bool(np.all((length >= 7) & (length <= 9)))
+    except (pa.ArrowInvalid, pa.ArrowNotImplementedError):
+        ok = False
+    if not ok:
+        i = _first_bad(pc.match_substring_regex(a, _TIME))
+        raise InputError(where, f"{a[max(i, 0)].as_py()!r} is not a time H:MM:SS", line=first_line + max(i, 0),
+                         column=column)
+    h, m, sec = fields
+    bad = (m > 59) | (sec > 59) | (m < 0) | (sec < 0)
+    if bad.any():
+        j = int(np.flatnonzero(valid)[np.flatnonzero(bad)[0]])
+        raise InputError(where, f"{a[j].as_py()!r}: minutes and seconds must be 00 to 59", line=first_line + j,
+                         column=column)
+    out[valid] = h * 3600.0 + m * 60.0 + sec
     return out
 
 
