@@ -210,9 +210,13 @@ def schedule_energies(tt: Timetable, gm: TripGeometry, trip: np.ndarray, date: n
             if prof is not None:
                 start = float(gm.along_m[tt.bounds[i]])
                 pd, pz = geo.profile_between(prof[0], prof[1], start, start + float(d[-1]))
+            # a seed per pattern: the synthesis's draws of two trips independent, as the duty's
+            # distribution takes them (one seed for all would correlate them fully)
+            own_seed = (seed + zlib.crc32(b"".join(x if isinstance(x, bytes) else repr(x).encode()
+                                                   for x in pattern))) & 0x7FFFFFFF
             se = scheduled_trip_energy(vehicle, d, arr - t0, dep - t0, profile_dist_m=pd, profile_elev_m=pz,
                                        mass_kg=mass_kg, ambient_c=float(ambient_c[k]), params=params, draws=draws,
-                                       seed=seed)
+                                       seed=own_seed)
             rep = float(trip_energies([se.vector], vehicle, mass_kg, float(ambient_c[k])).energy[0])
             hit = cache[pattern] = (se, float(ambient_c[k]), rep)
         se, t_syn, rep = hit
