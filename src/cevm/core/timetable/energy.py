@@ -20,10 +20,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from cevm.core.cycle import CycleVector, drive_cycle_vector
+from cevm.core import energy
+from cevm.core.cycle import CR0_DEFAULT, CycleVector, drive_cycle_vector, step_terms
 from cevm.core.predictive import Features, predictive
 from cevm.core.timetable.driving import DrivingParams
-from cevm.core.timetable.synthesis import SynthCycle, synthesise_trip
+from cevm.core.timetable.synthesis import SynthCycle, synthesise_trips
 from cevm.core.vehicle import Vehicle
 from cevm.errors import CevmError
 
@@ -76,6 +77,38 @@ def _check_profile(profile_dist_m, profile_elev_m) -> tuple[np.ndarray | None, n
     return pd_, pe
 
 
+def draw_features(cycles: list[SynthCycle], elevations: list[np.ndarray | None], vehicle: Vehicle,
+                  mass_kg: float, ambient_c: float) -> Features:
+    """The :class:`~cevm.core.predictive.Features` of each drawn cycle in one pass over
+    their step terms (:func:`cevm.core.cycle.step_terms` of the cycles end to end, the
+    steps between two cycles left out): the wheel energy's parts P and N, the duration,
+    standstill and traction times and the positive kinetic energy, as
+    :meth:`Features.of` gets them from each cycle's vector (equal to rounding: the sums'
+    order differs; the simplified steps are exactly the ones of positive wheel energy
+    for every vehicle with Cr >= Cr0)."""
+    n = len(cycles)
+    t = np.concatenate([c.time_s for c in cycles])
+    v = np.concatenate([c.speed_mps for c in cycles])
+    h = None if all(e is None for e in elevations) else np.concatenate(
+        [np.zeros(c.time_s.size) if e is None else e for c, e in zip(cycles, elevations, strict=True)])
+    st = step_terms(t, v, h)
+    sizes = np.array([c.time_s.size for c in cycles])
+    draw = np.repeat(np.arange(n), sizes)[:-1]
+    inside = np.ones(t.size - 1, dtype=bool)
+    inside[np.cumsum(sizes)[:-1] - 1] = False  # the steps from one cycle to the next
+    draw = draw[inside]
+    k, a, r, e, dt = st.k[inside], st.a[inside], st.r[inside], st.e[inside], st.dt[inside]
+    m = float(mass_kg)
+    wheel = m * (k + e) + vehicle.cda_m2 * a + vehicle.cr * m * r
+    P = np.bincount(draw, weights=np.maximum(wheel, 0.0), minlength=n)
+    N = np.bincount(draw, weights=np.minimum(wheel, 0.0), minlength=n)
+    dur = np.bincount(draw, weights=dt, minlength=n)
+    idle = np.bincount(draw, weights=np.where(a > 0, 0.0, dt), minlength=n)
+    trac = np.bincount(draw, weights=np.where(k + e + CR0_DEFAULT * r > 0, dt, 0.0), minlength=n)
+    kin = m * np.bincount(draw, weights=np.maximum(k, 0.0), minlength=n)
+    return Features(P, N, dur, idle, trac, kin, np.full(n, energy.check_ambient_c(float(ambient_c))))
+
+
 def scheduled_trip_energy(vehicle: Vehicle, stop_dist_m, arrival_s, departure_s, *,
                           profile_dist_m: np.ndarray | None, profile_elev_m: np.ndarray | None,
                           mass_kg: float, ambient_c: float, params: DrivingParams,
@@ -90,16 +123,12 @@ def scheduled_trip_energy(vehicle: Vehicle, stop_dist_m, arrival_s, departure_s,
         raise CevmError(f"draws must be at least 1, got {draws}")
     pdist, pelev = _check_profile(profile_dist_m, profile_elev_m)
     rng = np.random.default_rng(seed)
-    cycles = [synthesise_trip(stop_dist_m, arrival_s, departure_s, params, rng, speed_cap_mps=speed_cap_mps,
-                              with_terminals=with_terminals) for _ in range(draws)]
+    cycles = synthesise_trips(stop_dist_m, arrival_s, departure_s, params, rng, draws, speed_cap_mps=speed_cap_mps,
+                              with_terminals=with_terminals)
     elev = [_elevation(c, pdist, pelev) for c in cycles]
-    vectors = [drive_cycle_vector(c.time_s, c.speed_mps, e, validate=False) for c, e in zip(cycles, elev, strict=True)]
-    means = np.empty(draws)
-    sds = np.empty(draws)
-    for i, vec in enumerate(vectors):
-        p = predictive(vehicle, Features.of(vec, vehicle, float(mass_kg), float(ambient_c)))
-        means[i] = float(np.asarray(p.mean).reshape(-1)[0])
-        sds[i] = float(np.asarray(p.sd).reshape(-1)[0])
+    p = predictive(vehicle, draw_features(cycles, elev, vehicle, mass_kg, ambient_c))
+    means = np.asarray(p.mean, dtype=np.float64).reshape(-1).copy()
+    sds = np.asarray(p.sd, dtype=np.float64).reshape(-1).copy()
     if not vehicle.is_ev:  # litres -> the fuel's energy [J]
         lhv = float(vehicle.fuel_lhv_j_per_l or math.nan)
         means, sds = means * lhv, sds * lhv
@@ -109,10 +138,12 @@ def scheduled_trip_energy(vehicle: Vehicle, stop_dist_m, arrival_s, departure_s,
     rep = int(np.argmin(np.abs(means - mean)))
     c = cycles[rep]
     e = elev[rep]
+    vector = drive_cycle_vector(c.time_s, c.speed_mps, e, validate=False)
+    Features.of(vector, vehicle, float(mass_kg), float(ambient_c))  # the model's checks (Cr >= the vector's Cr0)
     ascent = float(np.maximum(np.diff(e), 0.0).sum()) if e is not None else 0.0
     flat = "" if e is not None else "; flat road (no elevation profile)"
     return ScheduledEnergy(
-        vector=vectors[rep], energy_j=mean, sd_model_j=sd_model, sd_synthesis_j=sd_syn,
+        vector=vector, energy_j=mean, sd_model_j=sd_model, sd_synthesis_j=sd_syn,
         sd_j=math.hypot(sd_model, sd_syn), distance_m=float(c.distance_m[-1]),
         duration_s=float(c.time_s[-1] - c.time_s[0]), stops=int(np.size(stop_dist_m)), ascent_m=ascent,
         cycle_from=f"synthesised ({params.source}); {draws} draw{'s' if draws != 1 else ''}{flat}",
