@@ -57,11 +57,12 @@ $CEVM replay -v configs/vehicles/electric-truck.toml "${TRUCKS[@]}" --battery-kw
 echo "== 5. gtfs: the buses' timetable (sample_logs/gtfs, made by"
 echo "      'python -m cevm_samplegen gtfs-feed') with the calibrated bus, the"
 echo "      driving between stops learnt from EB-01's and EB-02's stored trips,"
-echo "      the road from the DSM, a cold day; then each trip, as CSV"
+echo "      the road from the DSM, a cold day; then the blocks and each trip as CSV"
 GTFS=(sample_logs/gtfs -v "$OUT"/electric-bus-EB-01.toml --dsm sample_logs/dsm --vehicle-id EB-01 --vehicle-id EB-02
       --date 2019-01-31 --ambient-c -3)
 $CEVM gtfs "${GTFS[@]}" --plot "$OUT"/gtfs-blocks.png
-$CEVM gtfs "${GTFS[@]}" --trips --format csv --out "$OUT"/gtfs-trips.csv
+$CEVM gtfs "${GTFS[@]}" --format csv --out "$OUT"/gtfs-blocks.csv 2>/dev/null
+$CEVM gtfs "${GTFS[@]}" --trips --format csv --out "$OUT"/gtfs-trips.csv 2>/dev/null
 echo "results: $OUT/ (calibrated vehicle files, plots, predictions' CSV)"
 echo "store: $CEVM_STORE"
 # the summary, by the Python cevm runs on (3.11+: tomllib)

@@ -39,3 +39,21 @@ def test_sample_feed_blocks():
         ("1-AM", "feed", 7), ("1-PM", "feed", 7), ("2-MID", "feed", 3), ("inferred:2-X-01", "inferred", 6)]
     with pytest.raises(CevmError, match="no trip runs on 2019-12-25"):
         read_feed(SAMPLE, parse_dates(["2019-12-25"]))
+
+
+def test_job_summary_says_the_timetable(tmp_path):
+    import subprocess
+    import sys
+
+    root = SAMPLE.parents[1]
+    (tmp_path / "gtfs-blocks.csv").write_text(
+        "block_id,date,block_from,distance_km,energy_kwh,completes,p_complete,vehicle_key,driving_from\n"
+        "1-AM,2019-01-31,feed,70,80,true,1.0,bus,\"learnt from 51 trips (390 km), shrunk\"\n"
+        "X,2019-01-31,inferred,30,40,false,0.2,bus,\"learnt from 51 trips (390 km), shrunk\"\n")
+    res = subprocess.run([sys.executable, str(root / "sample_logs/job_summary.py"), str(tmp_path)],
+                         capture_output=True, text=True, check=True)
+    flat = " ".join(res.stdout.split())
+    # 120 kWh over 100 km
+    assert ("bus on 2 block-days (1 inferred) of 1 date(s): 1 complete with the reserve kept, 1 at probability "
+            "0.95; 40.0-80.0 kWh a block, 1.20 kWh/km; driving learnt from 51 trips (390 km)") in flat
+    assert all(len(line) <= 80 for line in res.stdout.splitlines())
