@@ -201,3 +201,21 @@ def test_diesel_rows_in_litres_and_a_payload(tmp_path, root):
         assert r["energy_kwh"] == "" and float(r["fuel_l_low"]) < float(r["fuel_l"]) < float(r["fuel_l_high"])
         assert float(r["mass_kg"]) == pytest.approx(kerb + 2000.0)
         assert "--payload-kg" in r["mass_from"] and r["soc_min_pct"] == "" and r["tank_min_pct"] != ""
+
+
+def test_depot_pull_out_and_pull_in(tmp_path, bus):
+    # a depot at B (0.009 deg): B1 (A..A..A..C) pulls out B->A and pulls in C->B, each
+    # 0.009 deg of the equator x 1.3; B2 pulls out B->C and ends at B (no pull-in)
+    out = tmp_path / "b.csv"
+    res = run(str(SMALL), "-v", bus, "--depot", "0,0.009", "-f", "csv", "-o", str(out))
+    assert res.exit_code == 0, res.output
+    by = {r["block_id"]: r for r in rows_of(out.read_text())}
+    leg = equator_km(0.009) * 1.3
+    assert by["B1"]["deadheads"] == "2" and float(by["B1"]["deadhead_km"]) == pytest.approx(2 * leg, abs=1e-5)
+    assert by["B2"]["deadheads"] == "2"  # pull-out and the D->A deadhead
+    assert float(by["B2"]["deadhead_km"]) == pytest.approx(leg + equator_km(0.036) * 1.3, abs=1e-5)
+    # the pull-out leaves before the first departure: 08:00 less 0.009 deg x 1.3 at 30 km/h
+    # (156.3 s: 07:57:23.7, written to the second)
+    early = leg * 1e3 / (30 / 3.6)
+    assert early == pytest.approx(156.29, abs=0.01)
+    assert by["B1"]["start_time"] == "2026-01-05T07:57:23+01:00"
