@@ -478,8 +478,10 @@ def _shrink(x: float, n: float, prior: float, n0: float, *, log: bool = False) -
 def learn_driving(series: Sequence[tuple[np.ndarray, np.ndarray]], *, prior: DrivingParams,
                   label: str = "") -> DrivingParams:
     """The driving of ``series`` (per stored trip (time_s, speed_mps) on its 1 s grid),
-    each parameter shrunk towards ``prior`` by how much the logs saw (module notes).
-    ``label`` names the trips' vehicles in ``source`` (e.g. "EB-01, EB-02")."""
+    each parameter shrunk towards ``prior`` by how much the logs saw (module notes); the
+    cruise's wobbles and sway matched (:func:`match_kinetic`) with the others shrunk, then
+    shrunk by the km the logs drove (``kinetic_ratio`` and ``aero_ratio`` are the match's,
+    before that). ``label`` names the trips' vehicles in ``source`` (e.g. "EB-01, EB-02")."""
     m = measure_driving(series)
     if m.n_trips == 0 or float(m.km.sum()) <= 0:
         return prior

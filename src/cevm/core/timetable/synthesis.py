@@ -164,13 +164,15 @@ def _caps(speed_cap_mps, runs: int, params: DrivingParams) -> np.ndarray:
     return cap
 
 
-
-
 def _solve_cruise(h: np.ndarray, w: np.ndarray, run: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Per run r the cruise c_r with sum_{i in r} w_i min(c_r, h_i) = d_r (module notes),
     and whether each run is feasible (sum w_i h_i >= d_r). Infeasible runs get their
     largest h."""
     R = d.size
+    moving = h > 0  # standing samples add nothing to any run's distance at any c
+    h, w, run = h[moving], w[moving], run[moving]
+    if not h.size:
+        return np.zeros(R), d <= 0
     # (run, h) order in one key: run * span + h, span a power of 2 above every h
     span = 2.0 ** math.ceil(math.log2(float(h.max(initial=0.0)) + 2.0))
     order = np.argsort(run * span + h, kind="stable")
@@ -234,7 +236,8 @@ def _envelope(g: _Grid, dep: np.ndarray, arr: np.ndarray, a: np.ndarray, b: np.n
     np.clip(h, 0.0, cap[run], out=h)
     if ev_run.size:
         ar, br, cr = a[ev_run], b[ev_run], cap[ev_run]
-        off = (ev_run // (dep.size // max(g.bounds.size - 1, 1))) * _DRAW_SHIFT_S
+        runs_per_draw = dep.size // max(g.bounds.size - 1, 1)
+        off = (ev_run // runs_per_draw) * _DRAW_SHIFT_S  # the event's draw's clock in the key
         i0 = np.maximum(np.searchsorted(g.key, off + ev_s - (cr - ev_u) / br, side="left"), g.lo[ev_run])
         i1 = np.minimum(np.searchsorted(g.key, off + ev_e + (cr - ev_u) / ar, side="right"), g.hi[ev_run])
         cnt = np.maximum(i1 - i0, 0)
