@@ -219,3 +219,18 @@ def test_depot_pull_out_and_pull_in(tmp_path, bus):
     early = leg * 1e3 / (30 / 3.6)
     assert early == pytest.approx(156.29, abs=0.01)
     assert by["B1"]["start_time"] == "2026-01-05T07:57:23+01:00"
+
+
+def test_ann_arbor_weekday_blocks_through_the_command(tmp_path, bus):
+    from tests.conftest import shared_or_skip
+
+    z = shared_or_skip("gtfs", "ann-arbor-umich-2022.zip")
+    out = tmp_path / "aa.csv"
+    res = run(str(z), "-v", bus, "--date", "2022-01-11", "-f", "csv", "-o", str(out), "--draws", "200")
+    assert res.exit_code == 0, res.output
+    rows = rows_of(out.read_text())
+    # the feed's README: 83 blocks, mean 17 trips and about 100 km each
+    assert len(rows) == 83 and {r["block_from"] for r in rows} == {"feed"}
+    assert 15 <= np.mean([float(r["trips"]) for r in rows]) <= 19
+    assert 80 <= np.mean([float(r["distance_km"]) for r in rows]) <= 120
+    assert sum(int(r["trips"]) for r in rows) == 1428
