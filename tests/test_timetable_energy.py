@@ -4,6 +4,7 @@ predict and the predictive distribution on each drawn cycle's own vector."""
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -51,20 +52,22 @@ def test_each_draw_is_predicted_as_its_own_vector_would_be(bus):
 
 
 def test_the_spread_adds_the_draws_to_the_model(bus):
-    """sd_synthesis is the sample sd of the draws' predicted means, sd_model the mean of
-    their predictive sds, sd their root sum of squares; energy the draws' mean. Each
-    checked against the draws synthesised again with the same seed and predicted one
-    by one."""
-    p = driving_prior("bus")
+    """sd_synthesis is the sample sd of the draws' predicted means and the synthesis' own
+    error (synthesis_sd of the wheel's part: W / eta for the bus, from cevm.predict's
+    wheel energy) in quadrature, sd_model the mean of their predictive sds, sd their
+    root sum of squares; energy the draws' mean. Each checked against the draws
+    synthesised again with the same seed and predicted one by one."""
+    p = replace(driving_prior("bus"), synthesis_sd=0.1)
     e = scheduled_trip_energy(bus, STOPS, ARR, DEP, profile_dist_m=None, profile_elev_m=None, mass_kg=12_000.0,
                               ambient_c=4.0, params=p, draws=6, seed=11)
     cycles = synthesise_trips(STOPS, ARR, DEP, p, np.random.default_rng(11), 6)
-    preds = [predictive(bus, Features.of(drive_cycle_vector(c.time_s, c.speed_mps), bus, 12_000.0, 4.0))
-             for c in cycles]
+    vecs = [drive_cycle_vector(c.time_s, c.speed_mps) for c in cycles]
+    preds = [predictive(bus, Features.of(v, bus, 12_000.0, 4.0)) for v in vecs]
     means = np.array([float(q.mean) for q in preds])
     sds = np.array([float(q.sd) for q in preds])
+    wheel = np.mean([float(cevm.predict(v, bus, 12_000.0, ambient_c=4.0).wheel_energy_j) / bus.eta for v in vecs])
     assert e.energy_j == pytest.approx(means.mean(), rel=1e-9)
-    assert e.sd_synthesis_j == pytest.approx(means.std(ddof=1), rel=1e-6)
+    assert e.sd_synthesis_j == pytest.approx(math.hypot(means.std(ddof=1), 0.1 * wheel), rel=1e-6)
     assert e.sd_model_j == pytest.approx(sds.mean(), rel=1e-9)
     assert e.sd_j == pytest.approx(math.hypot(e.sd_model_j, e.sd_synthesis_j))
     assert e.stops == 6 and e.draws == 6 and e.distance_m == pytest.approx(2600.0)
@@ -72,7 +75,7 @@ def test_the_spread_adds_the_draws_to_the_model(bus):
     assert "flat road" in e.cycle_from and p.source in e.cycle_from and "6 draws" in e.cycle_from
     # the representative vector is one of the draws': the one nearest the mean
     rep = int(np.argmin(np.abs(means - means.mean())))
-    assert e.vector.k_pos == pytest.approx(drive_cycle_vector(cycles[rep].time_s, cycles[rep].speed_mps).k_pos)
+    assert e.vector.k_pos == pytest.approx(vecs[rep].k_pos)
 
 
 def test_deterministic_for_a_seed(bus):
@@ -86,10 +89,11 @@ def test_deterministic_for_a_seed(bus):
 
 
 def test_one_draw_is_predict_on_its_vector(bus, truck):
-    """With one draw there is no synthesis spread and the energy is cevm.predict's on the
+    """With one draw (and no synthesis error) there is no synthesis spread and the energy
+    is cevm.predict's on the
     returned vector: the battery's energy for the bus, the fuel times its heating value
     for the diesel truck."""
-    p = driving_prior("bus")
+    p = replace(driving_prior("bus"), synthesis_sd=0.0)
     for veh, mass in ((bus, 12_500.0), (truck, 30_000.0)):
         e = scheduled_trip_energy(veh, STOPS, ARR, DEP, profile_dist_m=None, profile_elev_m=None, mass_kg=mass,
                                   ambient_c=8.0, params=p, draws=1)

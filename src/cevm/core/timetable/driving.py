@@ -54,6 +54,13 @@ trucks' sway stays 0: it does not move their cubed speed); on the car's two cycl
 kinetic energy is 1.2 times theirs with no wobble at all. One wobble for all runs gave
 the Twizy's congested city trips 0.7x their logs' kinetic energy and its commutes 2x.
 
+The synthesis' own error (``synthesis_sd``): the logs' own timetables synthesised 4 times
+each, the root mean square of the draws' mean wheel energy over the log's, less 1, beyond
+what the draws' spread explains (the log as one more draw), for a proxy bus whose braking
+counts half (:data:`PROXY_BUS`); scheduled trips add it, times their wheel energy's part,
+to their spread. 0.016 on the sample buses (fit_driving on all their trips), 0.064 on the
+real Twizy logs, 0.16 on the public bus and truck cycles (the class priors').
+
 Spreads: accelerations, decelerations and stop durations are log-normal (median, and the
 sd of their logarithm, split into a between-trip part, the sd of the trips' mean
 logarithms beyond what the within-trip scatter explains, and the rest within trips); the
@@ -117,6 +124,8 @@ SHARE_LEVELS = tuple(round(0.05 + 0.1 * i, 2) for i in range(10))
 #: The cruise's wobble matched to the logs' kinetic energy (:func:`match_kinetic`): on at
 #: most this many trips, and at most this amplitude (a share of the cruise speed).
 KINETIC_MATCH_TRIPS = 60
+#: Draws of each of the logs' own timetables for the synthesis' own error (_synthesis_sd).
+SYNTH_SD_DRAWS = 4
 WOBBLE_MAX = 0.4
 #: Runs this long or longer [s] (departure to arrival) sway (:class:`DrivingParams`).
 SWAY_MIN_RUN_S = 180.0
@@ -168,6 +177,9 @@ class DrivingParams:
     # (NaN: not measured)
     kinetic_ratio: float = math.nan
     aero_ratio: float = math.nan
+    # the synthesis' own error beyond its draws' spread, as a share of a trip's wheel
+    # energy, on the logs' own timetables (NaN: not measured; scheduled_trip_energy adds it)
+    synthesis_sd: float = math.nan
     km: float = 0.0  # km of logs (0 for a prior: see source)
     n_launches: int = 0
     n_stops: int = 0
@@ -427,7 +439,8 @@ PRIORS: dict[str, DrivingParams] = {
         stop_trip_sd=0.663, slowdowns_per_km=2.55, slowdowns_trip_cv=0.748, slowdown_quantiles=(0.0, 0.0,
         0.00718, 0.0105, 0.0184, 0.11, 0.225, 0.452, 0.64, 0.818), cruise_tilt=-0.115, cruise_tilt_sd=0.279,
         cruise_ratio=1.6, top_speed_mps=14.2, wobble=0.137, sway=0.4, wobble_slow=0.4, wobble_split_mps=4.92,
-        kinetic_ratio=0.999, aero_ratio=0.842, km=34.5, n_launches=148, n_stops=124, n_slowdowns=88),
+        kinetic_ratio=0.999, aero_ratio=0.842, synthesis_sd=0.164, km=34.5, n_launches=148, n_stops=124,
+        n_slowdowns=88),
     "truck": DrivingParams(
         source="class prior (truck: ADVISOR's NYC truck, CBD truck, UDDS HDV, WVU city and suburban and "
                "CSHVR cycles)", n_trips=0,
@@ -436,8 +449,8 @@ PRIORS: dict[str, DrivingParams] = {
         stop_trip_sd=0.354, slowdowns_per_km=1.77, slowdowns_trip_cv=0.375, slowdown_quantiles=(0.0, 0.0864,
         0.156, 0.332, 0.457, 0.727, 0.788, 0.807, 0.924, 0.944), cruise_tilt=-0.28, cruise_tilt_sd=0.218,
         cruise_ratio=1.75, top_speed_mps=24.6, wobble=0.083, sway=0.0, wobble_slow=0.248,
-        wobble_split_mps=5.02, kinetic_ratio=0.998, aero_ratio=0.85, km=44.0, n_launches=53, n_stops=65,
-        n_slowdowns=78),
+        wobble_split_mps=5.02, kinetic_ratio=0.998, aero_ratio=0.85, synthesis_sd=0.165, km=44.0,
+        n_launches=53, n_stops=65, n_slowdowns=78),
     # no slowdown in these two cycles: its shares 0 (never drawn: the rate is 0), its spreads
     # 0 where a cycle pair cannot give one
     "car": DrivingParams(
@@ -447,7 +460,7 @@ PRIORS: dict[str, DrivingParams] = {
         stop_trip_sd=0.0, slowdowns_per_km=0.0, slowdowns_trip_cv=0.0, slowdown_quantiles=(0.0, 0.0, 0.0, 0.0,
         0.0, 0.0, 0.0, 0.0, 0.0, 0.0), cruise_tilt=-0.232, cruise_tilt_sd=0.058, cruise_ratio=1.35,
         top_speed_mps=24.6, wobble=0.0, sway=0.338, wobble_slow=0.0, wobble_split_mps=13.0, kinetic_ratio=1.2,
-        aero_ratio=1.0, km=9.66, n_launches=5, n_stops=3, n_slowdowns=0),
+        aero_ratio=1.0, synthesis_sd=0.0, km=9.66, n_launches=5, n_stops=3, n_slowdowns=0),
 }
 
 
@@ -518,7 +531,8 @@ def learn_driving(series: Sequence[tuple[np.ndarray, np.ndarray]], *, prior: Dri
         top_speed_mps=_shrink(x.top_speed_mps, km, prior.top_speed_mps, n0["km"]),
         km=km, n_launches=int(na), n_stops=int(ns), n_slowdowns=int(nd))
     matched = match_kinetic(series, shrunk)
-    return replace(matched, wobble=_shrink(matched.wobble, km, prior.wobble, n0["km"]),
+    return replace(matched, synthesis_sd=_shrink(matched.synthesis_sd, nt, prior.synthesis_sd, n0["trips"]),
+                   wobble=_shrink(matched.wobble, km, prior.wobble, n0["km"]),
                    sway=_shrink(matched.sway, km, prior.sway, n0["km"]),
                    wobble_slow=_shrink(matched.wobble_slow, km, prior.wobble_slow, n0["km"]),
                    wobble_split_mps=_shrink(matched.wobble_split_mps, km, prior.wobble_split_mps, n0["km"]))
@@ -621,7 +635,51 @@ def match_kinetic(series: Sequence[tuple[np.ndarray, np.ndarray]], params: Drivi
     p, got = secant(p, "wobble", 3)
     got = synth(p) if got is None else got
     return replace(p, kinetic_ratio=float(got[0] / target[0]) if target[0] > 0 else math.nan,
-                   aero_ratio=float(got[1] / target[1]) if target[1] > 0 else math.nan)
+                   aero_ratio=float(got[1] / target[1]) if target[1] > 0 else math.nan,
+                   synthesis_sd=_synthesis_sd(chosen, tables, p))
+
+
+#: The proxy vehicle of :func:`_synthesis_sd`: a 12 t city bus, CdA 5.5 m^2, Cr 0.007,
+#: its braking credited at half (a diesel credits none, an electric bus about eta^2, 0.6).
+PROXY_BUS = (12_000.0, 5.5, 0.007)
+PROXY_BRAKING_WEIGHT = 0.5
+
+
+def _proxy_j(t: np.ndarray, v: np.ndarray) -> float:
+    """A speed trace's wheel energy on a flat road for :data:`PROXY_BUS`, its braking
+    credited at :data:`PROXY_BRAKING_WEIGHT` (between a diesel's nothing and an electric
+    bus's eta^2) [J]: P + w N of the steps' m k + CdA a + Cr m r (eq. 28)."""
+    m, cda, cr = PROXY_BUS
+    dt = np.diff(t)
+    v0, v1 = v[:-1], v[1:]
+    step = m * 0.5 * (v1 * v1 - v0 * v0) + cda * 0.25 * 1.225 * (v0 ** 3 + v1 ** 3) * dt \
+        + cr * m * 0.5 * 9.81 * (v0 + v1) * dt
+    return float(np.maximum(step, 0.0).sum() + PROXY_BRAKING_WEIGHT * np.minimum(step, 0.0).sum())
+
+
+def _synthesis_sd(chosen: list[tuple[np.ndarray, np.ndarray]], tables: list, p: DrivingParams) -> float:
+    """The synthesis' own error beyond its draws' spread, relative to a trip's wheel
+    energy: on the logs' own timetables, each synthesised :data:`SYNTH_SD_DRAWS` times,
+    the root mean square of (the draws' mean proxy energy / the log's - 1) less what the
+    draws' spread explains (the log as one more draw); NaN with fewer than 3 trips."""
+    from cevm.core.timetable.synthesis import synthesise_trips  # (it imports this module)
+
+    if len(chosen) < 3:
+        return math.nan
+    rng = np.random.default_rng(1)
+    err, spread = [], []
+    for (t, v), (d, arr, dep) in zip(chosen, tables, strict=True):
+        e_log = _proxy_j(t, v)
+        if e_log <= 0:
+            continue
+        x = np.array([_proxy_j(c.time_s, c.speed_mps) for c in
+                      synthesise_trips(d, arr, dep, p, rng, SYNTH_SD_DRAWS, with_terminals=True)]) / e_log
+        err.append(float(x.mean()) - 1.0)
+        spread.append(float(x.var(ddof=1)))
+    if len(err) < 3:
+        return math.nan
+    excess = float(np.mean(np.square(err))) - float(np.mean(spread)) * (1.0 + 1.0 / SYNTH_SD_DRAWS)
+    return math.sqrt(max(excess, 0.0))
 
 
 def _finite(x: float) -> float:

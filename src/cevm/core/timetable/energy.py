@@ -5,10 +5,13 @@ vehicle's predictive distribution (:func:`cevm.core.predictive.predictive`, as `
 predict`` does: the calibration's posterior, else the class prior) at the trip's mass and
 ambient temperature.
 
-The trip's energy is the mean of the draws' predicted means; its spread adds the spread
-between the draws (their sample standard deviation: how much the energy depends on the
-driving the timetable does not fix) to the model's predictive sd (the mean of the
-draws' sds) in quadrature. Units: joules at the battery for an electric vehicle; for a
+The trip's energy is the mean of the draws' predicted means; its spread adds the
+synthesis' to the model's predictive sd (the mean of the draws' sds) in quadrature: the
+spread between the draws (their sample standard deviation: how much the energy depends
+on the driving the timetable does not fix) and the synthesis' own error beyond it
+(``params.synthesis_sd``, measured on the logs' own timetables, times the part of the
+energy the wheel work makes: the mean less the same draws predicted without it).
+Units: joules at the battery for an electric vehicle; for a
 diesel, the fuel predict gives in litres times the vehicle's heating value (the fuel's
 energy, ``fuel_lhv_j_per_l``): divide by it for litres.
 """
@@ -23,6 +26,7 @@ import numpy as np
 from cevm.core import energy
 from cevm.core.cycle import CR0_DEFAULT, CycleVector, drive_cycle_vector, step_terms
 from cevm.core.predictive import Features, predictive
+from cevm.core.predictive import mean as mean_of
 from cevm.core.timetable.driving import DrivingParams
 from cevm.core.timetable.synthesis import SynthCycle, synthesise_trips
 from cevm.core.vehicle import Vehicle
@@ -34,8 +38,9 @@ class ScheduledEnergy:
     """A scheduled trip's predicted energy (module notes): ``vector`` the representative
     draw's CE vector (the draw whose energy is nearest the mean); ``energy_j`` the mean
     over the draws [J: battery, or fuel energy for a diesel]; ``sd_model_j`` the model's
-    predictive sd, ``sd_synthesis_j`` the spread between draws, ``sd_j`` both; the
-    representative draw's ``distance_m``, ``duration_s`` and ``ascent_m`` (climb summed
+    predictive sd, ``sd_synthesis_j`` the synthesis' (the spread between draws and its
+    own error: module notes), ``sd_j`` both; the representative draw's ``distance_m``,
+    ``duration_s`` and ``ascent_m`` (climb summed
     along it), ``stops`` the timetable's; ``cycle_from`` where the cycle came from;
     ``late_s`` the most any draw reached the last stop after the timetable (0: kept);
     ``unscheduled_stops`` and ``slowdowns`` the mean drawn."""
@@ -126,15 +131,20 @@ def scheduled_trip_energy(vehicle: Vehicle, stop_dist_m, arrival_s, departure_s,
     cycles = synthesise_trips(stop_dist_m, arrival_s, departure_s, params, rng, draws, speed_cap_mps=speed_cap_mps,
                               with_terminals=with_terminals)
     elev = [_elevation(c, pdist, pelev) for c in cycles]
-    p = predictive(vehicle, draw_features(cycles, elev, vehicle, mass_kg, ambient_c))
+    f = draw_features(cycles, elev, vehicle, mass_kg, ambient_c)
+    p = predictive(vehicle, f)
     means = np.asarray(p.mean, dtype=np.float64).reshape(-1).copy()
     sds = np.asarray(p.sd, dtype=np.float64).reshape(-1).copy()
-    if not vehicle.is_ev:  # litres -> the fuel's energy [J]
-        lhv = float(vehicle.fuel_lhv_j_per_l or math.nan)
-        means, sds = means * lhv, sds * lhv
+    # the part of the energy the driving moves: the mean less the same draws without wheel work
+    still = Features(np.zeros(draws), np.zeros(draws), f.duration_s, f.idle_s, f.traction_s, np.zeros(draws),
+                     f.ambient_c)
+    wheel = means - np.asarray(mean_of(vehicle, still), dtype=np.float64).reshape(-1)
+    scale = 1.0 if vehicle.is_ev else float(vehicle.fuel_lhv_j_per_l or math.nan)  # litres -> fuel energy [J]
+    means, sds, wheel = means * scale, sds * scale, wheel * scale
     mean = float(means.mean())
     sd_model = float(sds.mean())
-    sd_syn = float(means.std(ddof=1)) if draws > 1 else 0.0
+    own = params.synthesis_sd if math.isfinite(params.synthesis_sd) else 0.0
+    sd_syn = math.hypot(float(means.std(ddof=1)) if draws > 1 else 0.0, own * max(float(wheel.mean()), 0.0))
     rep = int(np.argmin(np.abs(means - mean)))
     c = cycles[rep]
     e = elev[rep]
