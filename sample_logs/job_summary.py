@@ -5,8 +5,9 @@ what the predictions say, in lines of at most 80 characters.
     python sample_logs/job_summary.py OUT_DIR
 
 Reads the calibrated vehicle files (their [calibration] table), the predictions' CSV
-files (predict-*.csv, cevm predict -f csv) and the replays' summaries (replay-*.json,
-cevm replay --summary) the job wrote into OUT_DIR; the standard library only.
+files (predict-*.csv, cevm predict -f csv), the replays' summaries (replay-*.json,
+cevm replay --summary) and the timetable's blocks (gtfs-blocks.csv, cevm gtfs -f csv) the
+job wrote into OUT_DIR; the standard library only.
 """
 
 from __future__ import annotations
@@ -107,6 +108,23 @@ def replayed(path: Path) -> None:
     say(text)
 
 
+def timetabled(path: Path) -> None:
+    rows = list(csv.DictReader(path.open(encoding="utf-8", newline="")))
+    if not rows:
+        return
+    ev = bool(rows[0].get("energy_kwh"))
+    key, unit = ("energy_kwh", "kWh") if ev else ("fuel_l", "l")
+    energy = [number(r.get(key)) or 0.0 for r in rows]
+    km = sum(number(r.get("distance_km")) or 0.0 for r in rows)
+    p = [number(r.get("p_complete")) for r in rows]
+    inferred = sum(r.get("block_from") == "inferred" for r in rows)
+    say(f"{rows[0].get('vehicle_key', '?')} on {len(rows)} block-days ({inferred} inferred) of "
+        f"{len({r.get('date') for r in rows})} date(s): {sum(r.get('completes') == 'true' for r in rows)} complete "
+        f"with the reserve kept, {sum(x is not None and x >= 0.95 for x in p)} at probability 0.95; "
+        f"{min(energy):,.1f}-{max(energy):,.1f} {unit} a block, {sum(energy) / km if km else float('nan'):.2f} "
+        f"{unit}/km; driving {rows[0].get('driving_from', '?').split(',')[0]}")
+
+
 def main(out: Path) -> None:
     print("== summary")
     files = sorted(out.glob("*.toml"))
@@ -124,6 +142,10 @@ def main(out: Path) -> None:
         print("replayed (a candidate vehicle on the logged days):")
         for path in replays:
             replayed(path)
+    blocks = out / "gtfs-blocks.csv"
+    if blocks.exists():
+        print("timetabled (the buses' GTFS timetable, blocks run with a candidate):")
+        timetabled(blocks)
 
 
 if __name__ == "__main__":

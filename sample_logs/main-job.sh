@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # The main job on the shipped sample logs: ingest (with the operator's trip loads),
-# calibrate (the terms chosen by cross-validation), predict, and replay the diesel trucks'
-# days with a candidate electric truck.
+# calibrate (the terms chosen by cross-validation), predict, replay the diesel trucks'
+# days with a candidate electric truck, and run the buses' timetable (GTFS).
 #   bash sample_logs/main-job.sh            (after: pip install -e .)
 # Writes the store and results under "$OUT"/ (CEVM_OUT for another folder, CEVM_STORE for
 # another store).
@@ -54,6 +54,15 @@ $CEVM replay -v configs/vehicles/electric-truck.toml "${TRUCKS[@]}" --plot "$OUT
 $CEVM replay -v configs/vehicles/electric-truck.toml "${TRUCKS[@]}" --overnight none
 $CEVM replay -v configs/vehicles/electric-truck.toml "${TRUCKS[@]}" --battery-kwh 120
 $CEVM replay -v configs/vehicles/electric-truck.toml "${TRUCKS[@]}" --battery-kwh 120 --charger-kw 150
+echo "== 5. gtfs: the buses' timetable (sample_logs/gtfs, made by"
+echo "      'python -m cevm_samplegen gtfs-feed') with the calibrated bus, the"
+echo "      driving between stops learnt from EB-01's and EB-02's stored trips,"
+echo "      the road from the DSM, a cold day; then the blocks and each trip as CSV"
+GTFS=(sample_logs/gtfs -v "$OUT"/electric-bus-EB-01.toml --dsm sample_logs/dsm --vehicle-id EB-01 --vehicle-id EB-02
+      --date 2019-01-31 --ambient-c -3)
+$CEVM gtfs "${GTFS[@]}" --plot "$OUT"/gtfs-blocks.png
+$CEVM gtfs "${GTFS[@]}" --format csv --out "$OUT"/gtfs-blocks.csv 2>/dev/null
+$CEVM gtfs "${GTFS[@]}" --trips --format csv --out "$OUT"/gtfs-trips.csv 2>/dev/null
 echo "results: $OUT/ (calibrated vehicle files, plots, predictions' CSV)"
 echo "store: $CEVM_STORE"
 # the summary, by the Python cevm runs on (3.11+: tomllib)

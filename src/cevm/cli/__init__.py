@@ -9,7 +9,8 @@ one line on stderr, without a traceback.
 This module makes the app and registers the commands of one module per command (group):
 :mod:`~cevm.cli.ingest`, :mod:`~cevm.cli.trips`, :mod:`~cevm.cli.calibrate`,
 :mod:`~cevm.cli.simulate`, :mod:`~cevm.cli.fleet`, :mod:`~cevm.cli.predict`,
-:mod:`~cevm.cli.feasibility`, :mod:`~cevm.cli.replay`, :mod:`~cevm.cli.route`, :mod:`~cevm.cli.vehicle`,
+:mod:`~cevm.cli.feasibility`, :mod:`~cevm.cli.replay`, :mod:`~cevm.cli.gtfs`,
+:mod:`~cevm.cli.route`, :mod:`~cevm.cli.vehicle`,
 :mod:`~cevm.cli.store`; what they share is
 :mod:`~cevm.cli.common` and :mod:`~cevm.cli.output`. The command modules never import
 this package's app, nor each other; the library never imports the command line.
@@ -44,6 +45,7 @@ COMMANDS = (
     ("predict", "predict", "predict_cmd", False),
     ("feasibility", "feasibility", "feasibility_cmd", False),
     ("replay", "replay", "replay_cmd", False),
+    ("gtfs", "gtfs", "gtfs_cmd", False),
     ("route", "route", "app", True),
     ("vehicle", "vehicle", "app", True),
     ("store", "store", "app", True),

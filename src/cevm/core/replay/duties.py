@@ -8,6 +8,10 @@ the stops between them. Two rules (:data:`DUTY_RULES`):
   at 02:00 is one duty, not two halves of two calendar days.
 - ``day``: a new duty starts with each calendar day of the trips' starts (a day number
   per trip, computed in the user's time zone at the edge: the core takes integers).
+- ``given``: the caller says each trip's duty (an integer per trip, the same for a duty's
+  trips, which lie together, sorted by start within it): a timetable's blocks, which run
+  at the same time on different vehicles, as the duties of one run. The stop after a
+  duty's last trip is NaN (the next duty is another vehicle's).
 
 Trips are taken sorted by their start. A stop's *dwell* is the time from a trip's end
 to the next trip's start (0 where logged trips overlap: a clock step, a split log);
@@ -23,7 +27,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 #: The rules of :func:`group_duties`.
-DUTY_RULES = ("gap", "day")
+DUTY_RULES = ("gap", "day", "given")
 
 #: Default stop [h] that ends a duty. Longer than any break inside a working day: the
 #: EU drivers' hours rules (Regulation (EC) 561/2006) ask a 45-minute break after 4.5 h
@@ -122,8 +126,11 @@ def group_duties(start_s: ArrayLike, end_s: ArrayLike, *, rule: str = "gap", gap
     """Group trips sorted by ``start_s`` [s] (ending at ``end_s``) into duties by
     ``rule`` (:data:`DUTY_RULES`): ``"gap"``, a new duty after a stop of at least
     ``gap_s`` [s]; ``"day"``, a new duty at each change of ``day`` (an integer per
-    trip, non-decreasing: the calendar day of the trip's start in the chosen zone)."""
+    trip, non-decreasing: the calendar day of the trip's start in the chosen zone);
+    ``"given"``, ``day`` is each trip's duty (module notes)."""
     start = np.asarray(start_s, dtype=np.float64)
+    if rule == "given":
+        return _given_duties(start, np.asarray(end_s, dtype=np.float64), day)
     if start.size and np.any(np.diff(start) < 0):
         raise ValueError("trips must be sorted by their start")
     dwell = stop_dwell_s(start, end_s)
@@ -143,3 +150,25 @@ def group_duties(start_s: ArrayLike, end_s: ArrayLike, *, rule: str = "gap", gap
         raise ValueError(f"duty rule must be one of {DUTY_RULES}, not {rule!r}")
     bounds = np.concatenate([[0], np.flatnonzero(cut) + 1, [n]]) if n else np.zeros(1, dtype=np.int64)
     return Duties(bounds=bounds.astype(np.int64), dwell_s=dwell)
+
+
+def _given_duties(start: np.ndarray, end: np.ndarray, duty: ArrayLike | None) -> Duties:
+    """Duties as the caller gives them (rule ``given``): a new duty at each change of
+    ``duty``; the stops inside each duty as :func:`stop_dwell_s` finds them, NaN after a
+    duty's last trip."""
+    if duty is None:
+        raise ValueError("rule 'given' needs each trip's duty")
+    d = np.asarray(duty)
+    if d.shape != start.shape:
+        raise ValueError("one duty per trip")
+    n = start.size
+    cut = np.flatnonzero(d[1:] != d[:-1]) + 1 if n else np.zeros(0, dtype=np.int64)
+    bounds = np.concatenate([[0], cut, [n]]).astype(np.int64) if n else np.zeros(1, dtype=np.int64)
+    if np.unique(d[bounds[:-1]]).size != bounds.size - 1:
+        raise ValueError("a duty's trips must lie together")
+    dwell = np.full(n, np.nan)
+    for a, b in zip(bounds[:-1].tolist(), bounds[1:].tolist(), strict=True):  # duties (hundreds), vectorised inside
+        if np.any(np.diff(start[a:b]) < 0):
+            raise ValueError("trips must be sorted by their start within a duty")
+        dwell[a:b] = stop_dwell_s(start[a:b], end[a:b])
+    return Duties(bounds=bounds, dwell_s=dwell)

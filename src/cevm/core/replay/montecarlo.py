@@ -97,7 +97,8 @@ def _draw_energies(plan: DrawPlan, z_duty: np.ndarray, z_trip: np.ndarray) -> np
     count), per duty (per vehicle when chained: one group) the coefficients', the meter's
     and the extrapolation's, then per duty the scatter's two shared parts; ``z_trip`` (n,
     count) the trips' own scatter (its two parts are independent: one normal of their
-    combined variance). Module notes of :mod:`cevm.core.replay.spread`."""
+    combined variance, with the trip's own spread beyond the model's). Module notes of
+    :mod:`cevm.core.replay.spread`."""
     sp = plan.spread
     k = sp.k
     sizes = np.diff(plan.bounds)
@@ -118,18 +119,19 @@ def _draw_energies(plan: DrawPlan, z_duty: np.ndarray, z_trip: np.ndarray) -> np
         e += cp[:, j:j + 1] * per_trip(common[:, j], False)
     rho = sp.day_corr
     e += np.sqrt(rho) * (sp.aux_sd[:, None] * per_trip(day[:, 0]) + sp.share_sd[:, None] * per_trip(day[:, 1]))
-    e += np.sqrt((1.0 - rho) * (sp.aux_sd ** 2 + sp.share_sd ** 2))[:, None] * z_trip
+    e += np.sqrt((1.0 - rho) * (sp.aux_sd ** 2 + sp.share_sd ** 2) + sp.own ** 2)[:, None] * z_trip
     return np.asarray(e, dtype=np.float64)
 
 
 def _weights(plan: DrawPlan) -> tuple[np.ndarray, np.ndarray]:
     """Per trip, the weights of its duty's k + 4 shared normals (the coefficients', the
-    meter's, the extrapolation's, the scatter's two shared parts) and of its own one."""
+    meter's, the extrapolation's, the scatter's two shared parts) and of its own one
+    (the scatter's own part and the trip's spread beyond the model's, independent)."""
     sp = plan.spread
     rho = sp.day_corr
     w = np.column_stack([sp.coef_part, sp.meter_share * plan.mean, sp.extra_sd, np.sqrt(rho) * sp.aux_sd,
                          np.sqrt(rho) * sp.share_sd])
-    return w, np.sqrt((1.0 - rho) * (sp.aux_sd ** 2 + sp.share_sd ** 2))
+    return w, np.sqrt((1.0 - rho) * (sp.aux_sd ** 2 + sp.share_sd ** 2) + sp.own ** 2)
 
 
 def _independent_ok(plan: DrawPlan, gen: np.random.Generator, draws: int) -> np.ndarray:

@@ -12,6 +12,7 @@ own error), where it is crossed, and the sizes (:mod:`cevm.core.replay.sizing`).
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -48,7 +49,10 @@ class LoggedTrips:
     end positions [deg] (NaN where unknown; None: not read), ``day`` (per trip, for the
     ``day`` rule), ``missing`` (damaged trips left out), ``elevation_source`` (per trip,
     how ingest made its road elevation: its power's tolerance, :mod:`cevm.core.limits`;
-    None: unknown)."""
+    None: unknown), ``own_sd`` (per trip, a spread of its energy beyond the model's,
+    independent between trips, [J or l]: a timetable's synthesised cycles; None: none), ``energy_offset`` (per trip, added to the model's
+    mean on its vector [J or l]: a synthesised cycle's mean over its draws less its
+    representative draw's; None: none)."""
 
     vehicle_id: str
     trip_ids: tuple[str, ...]
@@ -67,6 +71,8 @@ class LoggedTrips:
     day: np.ndarray | None = None
     missing: int = 0
     elevation_source: tuple[str | None, ...] | None = None
+    own_sd: np.ndarray | None = None
+    energy_offset: np.ndarray | None = None
 
     @property
     def n(self) -> int:
@@ -328,11 +334,15 @@ def plan_vehicle(trips: LoggedTrips, vehicle: Vehicle, settings: ReplaySettings,
     duties = group_duties(trips.start_s, trips.end_s, rule=settings.rule, gap_s=settings.gap_s, day=trips.day)
     mass = candidate_masses(trips, vehicle, settings.logged_kerb_kg)
     energies = trip_energies(trips.vectors, vehicle, mass, trips.ambient_c, ice_braking=settings.ice_braking)
+    if trips.energy_offset is not None:
+        energies = dataclasses.replace(energies, energy=energies.energy + trips.energy_offset)
     stops, depot, unplaced = make_stops(trips, duties, vehicle, settings)
     cap = capacity_of(vehicle)
     start, reserve = settings.soc_start_pct / 100.0 * cap, settings.reserve_pct / 100.0 * cap
     eff = settings.charging.efficiency
     spread = trip_spread(vehicle, energies, ice_braking=settings.ice_braking)
+    if trips.own_sd is not None:
+        spread = spread.with_own(trips.own_sd)
     energy = energies.energy
     bounds = duties.bounds
     energy_sd = spread.duty_sd(energy, bounds)

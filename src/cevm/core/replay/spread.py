@@ -11,6 +11,9 @@ For trip i of a duty, with mean mu_i [J or l] (:mod:`cevm.core.replay.trips`)::
               + x_i z_x                       the extrapolation beyond the calibration's
                                               temperatures: taken as common (the unknown
                                               slope is one for every trip)
+              + o_i z_o,i                     a spread of the trip's own beyond the model
+                                              (``own_sd``: a timetable's synthesised cycle,
+                                              the spread between its draws), independent
 
 z standard normal, g_i the gradient of the mean in the coefficients, L L^T their
 covariance, a_i = s_aux D_i and s_i = s_share mu_i the scatter of the auxiliary power
@@ -27,6 +30,7 @@ completes with probability 0 or 1, as its mean says.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -55,6 +59,19 @@ class TripSpread:
     day_corr: float
     source: str = "none"
     note: str = ""
+    own_sd: np.ndarray | None = None
+
+    @property
+    def own(self) -> np.ndarray:
+        """(n,) a spread of each trip's own beyond the model's, independent from trip to
+        trip [J or l] (a timetable's synthesised drive cycles: the spread between their
+        draws); zeros for logged trips."""
+        return self.own_sd if self.own_sd is not None else np.zeros(self.n)
+
+    def with_own(self, own_sd: ArrayLike) -> TripSpread:
+        """This spread with an independent per-trip term ``own_sd`` (n,) added."""
+        own = np.broadcast_to(np.asarray(own_sd, dtype=np.float64), (self.n,)).copy()
+        return dataclasses.replace(self, own_sd=own)
 
     @classmethod
     def none(cls, n: int, note: str = "") -> TripSpread:
@@ -77,13 +94,14 @@ class TripSpread:
     def take(self, rows: np.ndarray) -> TripSpread:
         """The spread of the trips ``rows``."""
         return TripSpread(self.grad[rows], self.chol, self.meter_share, self.aux_sd[rows], self.share_sd[rows],
-                          self.extra_sd[rows], self.day_corr, self.source, self.note)
+                          self.extra_sd[rows], self.day_corr, self.source, self.note,
+                          None if self.own_sd is None else self.own_sd[rows])
 
     def trip_sd(self, mean: ArrayLike) -> np.ndarray:
         """Each trip's standard deviation [J or l]."""
         cp = self.coef_part
         var = np.einsum("ij,ij->i", cp, cp) + (self.meter_share * np.asarray(mean)) ** 2
-        var = var + self.aux_sd ** 2 + self.share_sd ** 2 + self.extra_sd ** 2
+        var = var + self.aux_sd ** 2 + self.share_sd ** 2 + self.extra_sd ** 2 + self.own ** 2
         return np.asarray(np.sqrt(var), dtype=np.float64)
 
     def duty_sd(self, mean: ArrayLike, bounds: np.ndarray) -> np.ndarray:
@@ -101,6 +119,7 @@ class TripSpread:
         shared = np.add.reduceat(a, first) ** 2 + np.add.reduceat(s, first) ** 2
         own = np.add.reduceat(a * a + s * s, first)
         var = var + rho * shared + (1.0 - rho) * own + np.add.reduceat(self.extra_sd, first) ** 2
+        var = var + np.add.reduceat(self.own ** 2, first)
         return np.asarray(np.sqrt(var), dtype=np.float64)
 
 
