@@ -308,3 +308,24 @@ def test_the_public_api_resolves():
     assert cevm.drive_cycle_vector.__module__ == "cevm.core.cycle"
     with pytest.raises(AttributeError):
         cevm.no_such_name  # noqa: B018
+
+
+# ------------------------------------------------------------------------- the tree itself
+
+
+def _tracked_files() -> list[str]:
+    """The files git tracks (None outside a checkout: an installed wheel's tests)."""
+    try:
+        out = subprocess.run(["git", "ls-files", "-z"], cwd=SRC.parent, capture_output=True, check=True)
+    except (OSError, subprocess.CalledProcessError):
+        return []
+    return [f for f in out.stdout.decode().split("\0") if f]
+
+
+def test_no_merge_leftover_is_committed():
+    """A patch's or a merge's leftovers (``*.orig``, ``*.rej``) are never committed: one
+    was (core/feasibility.py.orig), a stale copy a reader could take for the module."""
+    files = _tracked_files()
+    if not files:
+        pytest.skip("not a git checkout")
+    assert [f for f in files if f.endswith((".orig", ".rej"))] == []
