@@ -29,8 +29,8 @@ SCENARIO = ROOT / "configs" / "fleet" / "paper-case-study.toml"
 
 # (command, where it is held, whether worker processes run beside it)
 COMMANDS = [
-    (("calibrate", "-v", DIESEL, "--vehicle-id", "HGV-77", "--out", "{tmp}/out.toml"), "cevm.core.calibration:select",
-     False),
+    (("calibrate", "-v", DIESEL, "--vehicle-id", "HGV-77", "--out", "{tmp}/out.toml"),
+     "cevm.core.calibration.estimator:select", False),
     (("predict", "-v", BUS, "--vehicle-id", "EB-09", "-f", "csv"), "cevm.cli.predict:PredictWriter.add", False),
     (("predict", "-v", BUS, "--vehicle-id", "EB-09", "--workers", "2", "-f", "csv"),
      "cevm.cli.predict:PredictWriter.add", True),
@@ -77,6 +77,7 @@ CASES = [(*c, signal.SIGTERM) for c in COMMANDS] + [(*c, signal.SIGINT) for c in
                                                     if c[0][0] in ("calibrate", "store", "trips") or c[2]]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("args, where, workers, sig", CASES,
                          ids=[" ".join(map(str, c[0][:2])) + (" --workers 2" if c[2] else "") + f" {c[3].name}"
                               for c in CASES])
