@@ -154,6 +154,7 @@ def test_printed_numbers_leave_out_times_and_elisions():
     assert printed_numbers(lines) == ["25", "1866.6", "+-0.40", "21,410", "-0.06", "7"]
 
 
+@pytest.mark.slow
 def test_the_readme_worked_example_runs_as_printed(tmp_path, monkeypatch):
     """Every command of the README's example exits 0 and prints the numbers the README
     shows: the same fuel, errors, intervals and counts, whatever the terminal's width
@@ -178,3 +179,31 @@ def test_the_readme_worked_example_runs_as_printed(tmp_path, monkeypatch):
         missing = expected - got
         assert not missing, f"{cmd}: the README prints {sorted(missing.elements())}, not in\n{res.output}"
     assert os.path.exists("out/hgv-11.toml")
+
+
+def library_example() -> str:
+    """The Python block of docs/guide/library.md's five-line notebook."""
+    guide = (ROOT / "docs" / "guide" / "library.md").read_text(encoding="utf-8")
+    section = guide.split("## Calibrate a vehicle and predict a cycle, in five lines", 1)[1]
+    return re.search(r"```python\n(.*?)```", section, re.S).group(1)
+
+
+@pytest.mark.slow
+def test_the_library_guides_notebook_runs_and_prints_the_readmes_numbers(tmp_path, monkeypatch, capsys):
+    """The guide's lines, run as written, after the README's ingest: they print the terms
+    and the fuel with its 90 % half-width that the README's calibrate and predict print
+    (8.43 and 18.50 l, +-0.40 and +-0.74 l: the same model through the command line)."""
+    code = library_example()
+    assert len([ln for ln in code.splitlines() if ln.strip() and not ln.startswith("import ")]) == 5
+    for name in ("configs", "sample_logs"):
+        (tmp_path / name).symlink_to(ROOT / name)
+    monkeypatch.chdir(tmp_path)
+    ingest = next(c for c, _ in readme_example() if c.startswith("cevm ingest"))
+    assert CliRunner().invoke(app, shlex.split(ingest)[1:]).exit_code == 0
+    exec(compile(code, "docs/guide/library.md", "exec"), {})
+    printed = capsys.readouterr().out
+    assert printed.startswith("('eta', 'idle', 'kin', 'heat', 'cool') ")
+    readme = {c.split()[1]: printed_numbers(out) for c, out in readme_example()[1:]}
+    mean, half = [float(x) for x in NUMBER.findall(printed)[:2]], [float(x) for x in NUMBER.findall(printed)[2:]]
+    assert {f"{mean[0]:.2f}", f"{mean[1]:.2f}", f"+-{half[0]:.2f}", f"+-{half[1]:.2f}"} <= set(readme["predict"])
+    assert printed.strip() in (ROOT / "docs" / "guide" / "library.md").read_text(encoding="utf-8")
