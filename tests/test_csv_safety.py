@@ -76,6 +76,7 @@ def hostile(tmp_path):
     return db, cycle, bus
 
 
+@pytest.mark.slow
 def test_every_csv_output_neutralises_formulas_and_keeps_negative_numbers(hostile):
     db, cycle, bus = hostile
     trips = assert_safe(cevm("trips", "--store", db, "-f", "csv").stdout)

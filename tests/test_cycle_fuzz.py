@@ -13,6 +13,7 @@ import warnings
 from pathlib import Path
 
 import numpy as np
+import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -68,6 +69,7 @@ def cycle_files(draw) -> tuple[bytes, CycleFormat | None]:
     return data, fmt
 
 
+@pytest.mark.slow
 @settings(max_examples=300, deadline=None, derandomize=True, suppress_health_check=[HealthCheck.too_slow])
 @given(cycle_files())
 def test_the_cycle_reader_raises_only_its_own_errors_and_leaks_no_warning(case):

@@ -85,6 +85,7 @@ def run(*args, env=None):
     return runner.invoke(app, [str(a) for a in args], env=env)
 
 
+@pytest.mark.slow
 def test_ingest_srf_with_dsm_then_trips_and_predict(tmp_path, fleet, dsm, root):
     logs, truth = fleet
     store = tmp_path / "s.sqlite"
@@ -188,6 +189,7 @@ def test_options_refused_once_the_store_is_open_leave_no_new_store(tmp_path, fle
     assert not list(tmp_path.glob("new.sqlite*"))  # neither the store nor SQLite's side files
 
 
+@pytest.mark.slow
 def test_two_ingests_at_once_store_everything_once(tmp_path, fleet):
     logs, _ = fleet
     store = tmp_path / "s.sqlite"
@@ -234,6 +236,7 @@ from cevm.ingest.profiles import load_profiles  # noqa: E402
 SRF_HEAD = "timestamp_utc,gps_lat_deg,gps_lon_deg,fms_wheel_speed_kmh\n"
 
 
+@pytest.mark.slow
 @settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(st.one_of(
     st.binary(min_size=0, max_size=3000),

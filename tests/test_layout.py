@@ -157,6 +157,7 @@ def test_core_does_no_file_io(path):
     assert forbidden_calls(path.read_text()) == []
 
 
+@pytest.mark.slow
 def test_importing_the_core_loads_no_io_library():
     code = ("import sys\n" + "".join(f"import {module_name(p)}\n" for p in CORE_MODULES)
             + "print(sorted(m for m in ('sqlite3', 'rasterio', 'matplotlib', 'typer') if m in sys.modules))")
@@ -174,6 +175,7 @@ def _all_imports(path: Path) -> list[tuple[int, str]]:
     return imported_names(ast.parse(path.read_text()), module_name(path), is_package(path))
 
 
+@pytest.mark.slow
 def test_only_the_command_line_imports_the_command_line():
     cli = CEVM / "cli"
     entry = CEVM / "__main__.py"  # python -m cevm: the command line's entry point, imported by nothing
@@ -183,6 +185,7 @@ def test_only_the_command_line_imports_the_command_line():
     assert offenders == []
 
 
+@pytest.mark.slow
 def test_nothing_in_cevm_imports_the_sample_generator():
     offenders = [f"{p.relative_to(SRC)}:{line} imports {name}" for p in ALL_MODULES
                  for line, name in _all_imports(p) if _within(name, ("cevm_samplegen",))]
@@ -283,6 +286,7 @@ def test_strongly_connected_finds_a_cycle():
     assert sorted(c for c in strongly_connected(graph) if len(c) > 1) == [["a", "b", "c"]]
 
 
+@pytest.mark.slow
 def test_the_import_graph_has_no_cycle():
     graph = import_graph()
     assert "cevm.cli.predict" in graph and "cevm.core.cycle" in graph["cevm.core.sweep.profiles"]

@@ -742,6 +742,7 @@ def test_missing_file(tmp_path, profiles):
 # ======================================================================================
 # Properties of the vectorised time parser
 # ======================================================================================
+@pytest.mark.slow
 @settings(max_examples=60, deadline=None)
 @given(st.lists(st.datetimes(min_value=datetime(1990, 1, 1), max_value=datetime(2099, 12, 31)), min_size=1,
                 max_size=30),

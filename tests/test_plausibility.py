@@ -122,6 +122,7 @@ def _dsm(path, scale=1.0, offset_m=0.0, scale_tag=None):
     return path
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("how", ["values", "scale_tag"])
 def test_dsm_scaled_by_1e6_is_refused_and_gps_used(tmp_path, how):
     """Heights near 1.2e8 m (the plane's 120 m times 1e6, in the values or in the
@@ -144,6 +145,7 @@ def test_dsm_scaled_by_1e6_is_refused_and_gps_used(tmp_path, how):
     assert abs(vec.s_me) < 1e5  # J/kg: a few hundred metres of climb at most, not 1e8 m
 
 
+@pytest.mark.slow
 def test_dsm_right_but_offset_from_gps_is_warned(tmp_path):
     """A DSM 1000 m above the GPS altitude (a wrong datum or unit): kept (plausible
     heights) but warned about."""

@@ -120,6 +120,7 @@ def test_shipped_files_have_priors_and_no_posterior(root):
         assert v.priors is not None and v.posterior is None, f.name
 
 
+@pytest.mark.slow
 def test_calibrate_writes_what_reads_back_and_reports_its_intervals(tmp_path, root):
     """cevm calibrate on the sample HGV-11: every held-out row has an ordered interval,
     the summary's coverage counts them, the file says how many candidates there were and
@@ -172,6 +173,7 @@ def test_calibrate_writes_what_reads_back_and_reports_its_intervals(tmp_path, ro
     assert "held-out trips inside their 90 % interval" in res.stdout
 
 
+@pytest.mark.slow
 def test_forced_fits_respect_the_physical_bounds(tmp_path, root):
     """Issue 27: --fit eta,kin wrote a diesel eta of 1.0 and --fit eta,run 0.55-0.66
     with exit 0. Forced fits now start from the class's priors and stay inside the

@@ -198,6 +198,7 @@ def test_profile_round_trip_precision():
     assert float(np.float32(lat[0])) != lat[0]
 
 
+@pytest.mark.slow
 @settings(max_examples=40, deadline=None)
 @given(
     n=st.integers(0, 40),
@@ -573,6 +574,7 @@ print("NOT KILLED", flush=True)
 """
 
 
+@pytest.mark.slow
 def test_sigkill_mid_transaction_leaves_store_unchanged(store, db, tmp_path):
     path = tmp_path / "a.csv"
     put(store, path, "a_v1")
@@ -628,6 +630,7 @@ print("DONE", t_start, time.time(), flush=True)
 """
 
 
+@pytest.mark.slow
 def test_concurrent_processes_never_duplicate_or_corrupt(db, tmp_path):
     n_children = 3
     script = tmp_path / "concurrent_child.py"
@@ -735,6 +738,7 @@ def test_runs_are_recorded(store):
 # --------------------------------------------------------------------------- throughput
 
 
+@pytest.mark.slow
 def test_bulk_insert_is_fast(store, tmp_path):
     n = 2000
     sha = sha_of("bulk")

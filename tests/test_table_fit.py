@@ -166,6 +166,7 @@ URBAN = str(ROOT / "configs/cycles/urban-bus.csv")
 REGIONAL = str(ROOT / "configs/cycles/regional-delivery.csv")
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("cols", [80, 120, None], ids=["80", "120", "piped"])
 def test_predict_payload_sweep_table(cols):
     # issue 27: at 80 columns this printed 13,5...
@@ -178,6 +179,7 @@ def test_predict_payload_sweep_table(cols):
                                       "distance_km": 2})
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("cols", [80, 120, None], ids=["80", "120", "piped"])
 def test_predict_stored_trips_table(cols, twizy_store):
     # issue 27: the stored-trip table needs ~180 columns and lost its energy and error columns
@@ -191,6 +193,7 @@ def test_predict_stored_trips_table(cols, twizy_store):
         assert word in out
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("cols", [80, 120, None], ids=["80", "120", "piped"])
 def test_feasibility_and_fleet_tables(cols):
     out, err, code = run(["feasibility", "-v", BUS, "-v", HGV, "-c", URBAN, "-c", REGIONAL, "-p", "3000"], cols)
@@ -203,6 +206,7 @@ def test_feasibility_and_fleet_tables(cols):
     assert "54.37" in table_cells(out)
 
 
+@pytest.mark.slow
 def test_a_redirected_table_is_whole(tmp_path):
     # issue 27: a table redirected to a file was cut at about 128 columns
     path = tmp_path / "t.txt"

@@ -40,6 +40,7 @@ def rows_by_trip(res) -> dict:
     return {r["cycle"]: r for r in json.loads(res.stdout)}
 
 
+@pytest.mark.slow
 def test_predict_uses_each_trips_own_mass_and_shows_what_it_measured(fleet, tmp_path):
     db, ids, hgv, starts = fleet
     logged = ids["HGV-77"][1::2]
@@ -79,6 +80,7 @@ def test_predict_uses_each_trips_own_mass_and_shows_what_it_measured(fleet, tmp_
     assert at["measured_fuel_l"] == rows[unlogged(ids)[0]]["measured_fuel_l"]  # the truth is shown all the same
 
 
+@pytest.mark.slow
 def test_set_mass_by_hand_payload_and_clear(fleet, tmp_path):
     db, ids, hgv, starts = fleet
     t = unlogged(ids)[1]
@@ -118,6 +120,7 @@ def test_trips_list_each_trips_mass_and_where_it_comes_from(fleet):
     assert "mass from" in table.stdout and "1 trip(s) have a given mass more than 5 %" in table.stderr
 
 
+@pytest.mark.slow
 def test_calibrate_fits_each_trip_at_its_own_mass(fleet, tmp_path):
     db, ids, hgv, starts = fleet
     start = tmp_path / "start.toml"  # a wrong eta to start from
@@ -137,6 +140,7 @@ def test_calibrate_fits_each_trip_at_its_own_mass(fleet, tmp_path):
     assert {r["trip_id"]: r["mass_kg"] for r in after["trips"]} == ids["hgv_mass_kg"]
 
 
+@pytest.mark.slow
 def test_simulate_and_feasibility_use_the_trips_own_mass(fleet):
     db, ids, hgv, starts = fleet
     t = ids["HGV-77"][1]
@@ -152,6 +156,7 @@ def test_simulate_and_feasibility_use_the_trips_own_mass(fleet):
         "feasibility", "-v", hgv, "--vehicle-id", "HGV-77", "--store", db).stdout
 
 
+@pytest.mark.slow
 def test_ingest_takes_a_manifest_and_reports_a_disagreement_with_the_logger(tmp_path, root):
     import datetime as dt
 
@@ -187,6 +192,7 @@ def test_ingest_takes_a_manifest_and_reports_a_disagreement_with_the_logger(tmp_
     assert res.exit_code == 2 and "no mass column" in res.stderr and not (tmp_path / "t.sqlite").exists()
 
 
+@pytest.mark.slow
 def test_a_trips_gross_mass_applied_to_another_vehicle_is_said(fleet, tmp_path):
     # HGV-77's odd trips logged 30 t and 40 t gross and measured fuel: an electric bus, or a
     # 2.5 t van without a max gross, predicted at those masses is told so; the truck itself
