@@ -21,8 +21,8 @@ from typer.testing import CliRunner
 from cevm.cli import app
 from cevm.core.intervals import block_ranges, p_reserve_ok, p_tank_ok
 from cevm.core.sweep import PredictionSet, Source, sweep
-from cevm.core.uncertainty import Posterior, Scatter, coefficients
-from cevm.core.vehicle import FitDomain, predict
+from cevm.core.uncertainty import Posterior, Scatter
+from cevm.core.vehicle import FitDomain, coefficients, predict
 from cevm.io import load_vehicle, read_cycle_csv
 
 runner = CliRunner()

@@ -12,7 +12,8 @@ import pytest
 from typer.testing import CliRunner
 
 from cevm.cli import app
-from cevm.core.uncertainty import VEHICLE_CLASSES, Posterior, Scatter, coefficients
+from cevm.core.uncertainty import VEHICLE_CLASSES, Posterior, Scatter
+from cevm.core.vehicle import coefficients
 from cevm.errors import InputError
 from cevm.io import load_vehicle
 from cevm.io.priors import class_defaults, posterior_table

@@ -48,8 +48,8 @@ from cevm.core.uncertainty import (
     ScatterPrior,
     TermPrior,
     coefficient_covariance,
-    coefficients,
 )
+from cevm.core.vehicle import coefficients
 from cevm.errors import InputError
 from cevm.io.toml import read_toml
 
