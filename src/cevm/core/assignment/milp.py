@@ -16,8 +16,9 @@ from typing import Any
 
 import numpy as np
 
+from cevm.core.assignment.chance import MAX_CUTS, p_complete
 from cevm.core.assignment.curves import LegCurve, leg_curve, quantity
-from cevm.core.assignment.evaluation import objective_weights
+from cevm.core.assignment.evaluation import evaluate, objective_weights
 from cevm.core.assignment.problem import DayProblem, why_infeasible
 from cevm.core.assignment.scenario import BUDGET_RTOL, Route, Scenario
 from cevm.core.vehicle import predict
@@ -315,9 +316,6 @@ def solve_milp(sc: Scenario, prob: DayProblem, time_limit_s: float | None,
 def _chance_cuts(sc, prob, xb, terms, obj, rows, weights, info, best, p_min, time_limit_s):
     """The no-good cut loop of :mod:`.chance`: until HiGHS's assignment completes every
     budgeted day with probability ``p_min`` (or none is left)."""
-    from cevm.core.assignment.chance import MAX_CUTS, p_complete
-    from cevm.core.assignment.evaluation import evaluate
-
     cuts = 0
     while True:
         ps = p_complete(sc, prob.d, evaluate(sc, prob.d, best))
