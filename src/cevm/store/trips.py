@@ -48,11 +48,19 @@ from contextlib import contextmanager
 from pathlib import Path
 
 from cevm.errors import CevmError
+from cevm.store.codec import decode_cycle_profile, decode_profile
 from cevm.store.display import format_trips, format_utc
 from cevm.store.failures import StoreAccessError, StoreConnection
 from cevm.store.location import resolve_store_path
 from cevm.store.queries import FileState, TripQueries
-from cevm.store.schema import SCHEMA_VERSION, blob_crc32, ensure_schema, refuse_newer, stored_version
+from cevm.store.schema import (
+    SCHEMA_VERSION,
+    blob_crc32,
+    ensure_schema,
+    refuse_newer,
+    stored_version,
+    upgrade_trip_vector,
+)
 from cevm.store.writing import TripWriting, WriteResult
 
 BUSY_TIMEOUT_S = 60.0
@@ -72,17 +80,11 @@ def _checkpoint(stage: str) -> None:
 
 def _trip_vector_v3(vector: bytes, profile: bytes) -> bytes:
     """SQL function of migration 5 (:func:`cevm.store.schema.upgrade_trip_vector`)."""
-    from cevm.store.codec import decode_profile
-    from cevm.store.schema import upgrade_trip_vector
-
     return upgrade_trip_vector(vector, profile, decode_profile)
 
 
 def _route_vector_v3(vector: bytes, profile: bytes) -> bytes:
     """SQL function of migration 5 for a route's cycle leg (its own profile format)."""
-    from cevm.store.routes import decode_cycle_profile
-    from cevm.store.schema import upgrade_trip_vector
-
     return upgrade_trip_vector(vector, profile, decode_cycle_profile)
 
 
