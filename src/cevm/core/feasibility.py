@@ -37,7 +37,7 @@ import numpy as np
 from scipy.special import ndtr, ndtri
 
 from cevm.core import limits, physical_inputs
-from cevm.core.predictive import Features, predictive
+from cevm.core.predictive import Features, posterior_of, predictive
 from cevm.core.sweep import (
     AMBIENT_ORIGINS,
     DEFAULT_RESERVE_PCT,
@@ -170,8 +170,6 @@ class _LoadFunction:
 
     def source_of(self, v: int) -> str:
         """Where vehicle ``v``'s uncertainty comes from (posterior, prior, none)."""
-        from cevm.core.predictive import posterior_of
-
         post = posterior_of(self.vehicles[v])
         return "none" if post is None else post.label
 

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
-from scipy.special import ndtr
+from scipy.special import ndtr, ndtri
 
 from cevm.core.predictive import Features, predictive
 from cevm.core.vehicle import EXTRAPOLATION_AXES, extrapolation_mask, extrapolation_text
@@ -47,8 +47,6 @@ class RowRanges:
 
     def bounds(self, level: float) -> tuple[np.ndarray, np.ndarray]:
         """The central interval at ``level`` of every row."""
-        from scipy.special import ndtri
-
         z = float(ndtri(0.5 + 0.5 * level))
         return self.mean - z * self.sd, self.mean + z * self.sd
 

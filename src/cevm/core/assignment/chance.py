@@ -31,11 +31,11 @@ from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
 import numpy as np
-from scipy.special import ndtr
+from scipy.special import ndtr, ndtri
 
 from cevm.core.assignment.scenario import FleetVehicle, Scenario
 from cevm.core.cycle import CycleVector
-from cevm.core.predictive import Features, gradient_rows, posterior_of, sqrt_cov, total
+from cevm.core.predictive import Features, gradient_rows, mean, posterior_of, sqrt_cov, total
 
 if TYPE_CHECKING:
     from cevm.core.assignment.evaluation import Evaluation
@@ -106,8 +106,6 @@ class DayMoments:
             return
         uniq, inv = np.unique(masses, return_inverse=True)
         f = Features.of(vec, self.v.vehicle, uniq, None if t_day is None else np.full(uniq.size, t_day))
-        from cevm.core.predictive import mean
-
         mu_u = np.broadcast_to(mean(self.v.vehicle, f), uniq.shape)
         g_u = gradient_rows(self.v.vehicle, f, self.post.terms)
         inv = inv.reshape(masses.shape)
@@ -135,8 +133,6 @@ class DayMoments:
 
 
 def z_of(p: float) -> float:
-    from scipy.special import ndtri
-
     return float(ndtri(p))
 
 

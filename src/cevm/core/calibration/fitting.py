@@ -10,14 +10,14 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from scipy.stats import norm
 
-from cevm.core.calibration import plausibility
+from cevm.core.calibration import identifiability, plausibility
 from cevm.core.calibration import posterior as post
 from cevm.core.calibration.candidate import CandidateFit, Settings, fit_candidate
 from cevm.core.calibration.data import CalibrationError, TripData, TripSet, select_trips
 from cevm.core.calibration.options import Options
 from cevm.core.calibration.solve import condition_number, value_covariance
 from cevm.core.calibration.terms import TERMS_BY_POWERTRAIN, TermModel, neutral, normalise, with_values
-from cevm.core.calibration.validation import ErrorStats, TripRow, folds, predict_set, time_predictions
+from cevm.core.calibration.validation import ErrorStats, TripRow, folds, predict_one, predict_set, time_predictions
 from cevm.core.uncertainty import Posterior, Priors, Scatter
 from cevm.core.vehicle import FitDomain, Vehicle
 
@@ -195,8 +195,6 @@ def fit(vehicle: Vehicle, trips: Sequence[TripData], params: Sequence[str] = ("e
 def _prior_kept(cf: CandidateFit, fields: dict) -> dict:
     """Terms whose posterior standard deviation is still above :data:`PRIOR_KEPT_RATIO`
     of their prior's: the trips could not tell (with the hint of what they would need)."""
-    from cevm.core.calibration import identifiability
-
     out = {}
     sd = cf.fit.sd
     for j, n in enumerate(cf.names):
@@ -371,8 +369,6 @@ def predict_trips(vehicle: Vehicle, trips: Sequence[TripData]) -> np.ndarray:
     """Predicted consumption of each trip [l for an ICE, J for an EV] with
     :func:`cevm.core.vehicle.predict` (the trip's mass, or the vehicle's when None; the
     trip's ambient temperature, or the vehicle's default)."""
-    from cevm.core.calibration.validation import predict_one
-
     out = np.empty(len(trips))
     for i, t in enumerate(trips):
         out[i] = predict_one(vehicle, t.vector, vehicle.mass_kg if t.mass_kg is None else t.mass_kg,
