@@ -14,6 +14,7 @@
 from __future__ import annotations
 
 import ast
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -332,3 +333,110 @@ def test_no_merge_leftover_is_committed():
     if not files:
         pytest.skip("not a git checkout")
     assert [f for f in files if f.endswith((".orig", ".rej"))] == []
+
+
+# ---------------------------------------------------------------- docs/layout.md, sizes
+
+
+LAYOUT_PAGE = SRC.parent / "docs" / "layout.md"
+
+
+def _without_descriptions(text: str) -> str:
+    """``text`` without its parenthesised descriptions; a parenthesis right after a
+    subpackage (`` `reading/` (...) ``) or starting with ``+`` lists modules and stays."""
+    out: list[str] = []
+    i = 0
+    while i < len(text):
+        if text[i] != "(":
+            out.append(text[i])
+            i += 1
+            continue
+        depth, j = 1, i + 1
+        while j < len(text) and depth:
+            depth += {"(": 1, ")": -1}.get(text[j], 0)
+            j += 1
+        inner = text[i + 1: j - 1]
+        if "".join(out).rstrip().endswith("/`") or inner.lstrip().startswith("+"):
+            out.append("(" + _without_descriptions(inner) + ")")
+        i = j
+    return "".join(out)
+
+
+def named_modules(cell: str) -> dict[str, set[str] | None]:
+    """The modules a cell of the layout page names: ``{"cycle": None, "reading": {...}}``
+    (a subpackage written `` `name/` (`a`, `b`) `` with the modules in it)."""
+    text = _without_descriptions(cell)
+    sub = re.compile(r"`(\w+)/`\s*\(([^()]*)\)")
+    out: dict[str, set[str] | None] = {m.group(1): set(re.findall(r"`(\w+)`", m.group(2)))
+                                       for m in sub.finditer(text)}
+    for name in re.findall(r"`(\w+)/?`", sub.sub("", text)):
+        out.setdefault(name, None)
+    return out
+
+
+def layout_rows() -> dict[str, dict[str, set[str] | None]]:
+    """Package -> the modules docs/layout.md names for it: its table of modules, and the
+    sentence on the small modules at the top of ``cevm``."""
+    page = LAYOUT_PAGE.read_text(encoding="utf-8")
+    table = page.split("| package | modules |", 1)[1].split("\n\n", 1)[0]
+    rows = {m.group(1): named_modules(m.group(2)) for m in
+            (re.match(r"\|\s*`(cevm[\w.]*)`\s*\|\s*(.*)\|\s*$", line) for line in table.splitlines()) if m}
+    rows["cevm"] = named_modules(page.split("Small modules at the top of `cevm`:", 1)[1].split("\n\n", 1)[0])
+    return rows
+
+
+def _tree(package: str) -> tuple[set[str], set[str]]:
+    """(modules, subpackages) directly in ``package`` (``__init__`` and ``__main__`` apart)."""
+    d = SRC.joinpath(*package.split("."))
+    mods = {p.stem for p in d.glob("*.py") if p.stem not in ("__init__", "__main__")}
+    return mods, {p.name for p in d.iterdir() if (p / "__init__.py").is_file()}
+
+
+def layout_differences(rows: dict[str, dict[str, set[str] | None]]) -> list[str]:
+    out = []
+    for pkg, listed in rows.items():
+        mods, subs = _tree(pkg)
+        own_row = {s for s in subs if f"{pkg}.{s}" in rows}
+        expected = mods if pkg == "cevm" else mods | (subs - own_row)  # cevm's packages: the first table
+        out += [f"{pkg}.{x}: named, no such module" for x in sorted(set(listed) - expected - own_row)]
+        out += [f"{pkg}.{x}: not named" for x in sorted(expected - set(listed))]
+        for name, inner in listed.items():
+            if inner is not None and name in subs:
+                smods, ssubs = _tree(f"{pkg}.{name}")
+                out += [f"{pkg}.{name}.{x}: named, no such module" for x in sorted(inner - smods - ssubs)]
+                out += [f"{pkg}.{name}.{x}: not named" for x in sorted((smods | ssubs) - inner)]
+    return out
+
+
+def test_the_layout_checker_finds_what_it_looks_for():
+    assert named_modules("`cycle` (the CE vector), `cycles` (+ `numeric_csv`), `trips` (`TripStore`)") == {
+        "cycle": None, "cycles": None, "numeric_csv": None, "trips": None}
+    assert named_modules("`reading/` (`detection`, `header`) with `textfile` beside it") == {
+        "reading": {"detection", "header"}, "textfile": None}
+    rows = {"cevm.core.calibration": {"data": None, "gone": None}}
+    diff = layout_differences(rows)
+    assert "cevm.core.calibration.gone: named, no such module" in diff
+    assert "cevm.core.calibration.fitting: not named" in diff
+
+
+def test_the_layout_page_names_every_module_and_no_other():
+    """docs/layout.md's list of modules is the tree's: every module it names exists, and
+    every module of cevm (and cevm_samplegen) is named in its package's row."""
+    rows = layout_rows()
+    assert {"cevm", "cevm.core", "cevm.core.calibration", "cevm.ingest", "cevm.store", "cevm.cli"} <= set(rows)
+    assert layout_differences(rows) == []
+
+
+#: No module over about 800 lines (the house rule), but these, each with why.
+LONG_MODULES = {
+    # 806 lines: its split is part of the ingest rewrite under way, not done beside it
+    "cevm/ingest/elevation.py": 806,
+}
+MAX_MODULE_LINES = 800
+
+
+def test_no_module_is_over_800_lines():
+    sizes = {p.relative_to(SRC).as_posix(): len(p.read_text(encoding="utf-8").splitlines())
+             for p in sorted(SRC.rglob("*.py"))}
+    over = {m: n for m, n in sizes.items() if n > MAX_MODULE_LINES and n > LONG_MODULES.get(m, 0)}
+    assert over == {}, f"over {MAX_MODULE_LINES} lines: {over} (split along a seam, docs/layout.md)"
