@@ -1,4 +1,4 @@
-"""Every answer with its range (issue 22, part 2): predict's and feasibility's intervals,
+"""Every answer with its range: predict's and feasibility's intervals,
 their probabilities, and the rows that say where the interval comes from and what they
 extrapolate.
 

@@ -1,4 +1,4 @@
-"""Every command turns a write error into one line and exit 3 (issue 24): its output on a
+"""Every command turns a write error into one line and exit 3: its output on a
 full device (``> /dev/full``), an ``--out`` or ``--plot`` file on a full disk, a new store
 on a read-only file system. Never a traceback, never Python's "Exception ignored" at exit,
 never a half-written file left behind. The full disk is a 64 kB tmpfs (root only: skipped

@@ -1,4 +1,4 @@
-"""CSV output cannot carry a spreadsheet formula (issue 24; OWASP "CSV Injection"): ids,
+"""CSV output cannot carry a spreadsheet formula (OWASP "CSV Injection"): ids,
 cycle, vehicle and route names that start with ``=``, ``+``, ``-``, ``@``, a tab or a
 carriage return reach every CSV output with a leading apostrophe, while numbers (-3.5
 among them) stay numbers. Each through the command line, with names an operator's data

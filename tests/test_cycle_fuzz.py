@@ -1,4 +1,4 @@
-"""A fuzz test of the cycle reader (issue 24): whatever bytes a cycle file holds (headers
+"""A fuzz test of the cycle reader (a cycle file is untrusted input): whatever bytes a cycle file holds (headers
 of the names cevm detects and of others, separators, decimal marks, numbers and junk, CR,
 LF and CRLF line ends, byte order marks, NUL bytes, gzip), reading it either gives cycles
 or raises cevm's own error (:class:`~cevm.errors.CevmError`, one line naming the file):

@@ -207,3 +207,22 @@ def test_the_library_guides_notebook_runs_and_prints_the_readmes_numbers(tmp_pat
     mean, half = [float(x) for x in NUMBER.findall(printed)[:2]], [float(x) for x in NUMBER.findall(printed)[2:]]
     assert {f"{mean[0]:.2f}", f"{mean[1]:.2f}", f"+-{half[0]:.2f}", f"+-{half[1]:.2f}"} <= set(readme["predict"])
     assert printed.strip() in (ROOT / "docs" / "guide" / "library.md").read_text(encoding="utf-8")
+
+
+#: Files that still name a tracker's issue, each with why (the house rule: reasons in
+#: place, never a pointer to a tracker a reader of the code does not have).
+TRACKER_REFERENCE_EXCEPTIONS = {
+    "src/cevm/ingest/evidence.py",  # the ingest is being rewritten beside this change; fixed there
+    "src/cevm/ingest/profiles.py",  # the same
+}
+
+
+def test_no_file_points_at_a_tracker_issue():
+    pattern = re.compile(r"\b" + "issue" + r" \d+", re.I)
+    files = [ROOT / "README.md", *(p for d in ("src", "tests", "docs", "benchmarks") for p in (ROOT / d).rglob("*")
+                                   if p.suffix in (".py", ".md", ".toml", ".rst") and "_build" not in p.parts
+                                   and "generated" not in p.parts)]
+    found = [f"{p.relative_to(ROOT)}:{i}" for p in files if p.relative_to(ROOT).as_posix()
+             not in TRACKER_REFERENCE_EXCEPTIONS
+             for i, line in enumerate(p.read_text(encoding="utf-8").splitlines(), 1) if pattern.search(line)]
+    assert found == [], "say the reason in place: " + ", ".join(found)

@@ -1,4 +1,4 @@
-"""A fuzz test of srf ingest (issue 24): mutated srf logs give a stored result or one of
+"""A fuzz test of srf ingest (a log is untrusted input): mutated srf logs give a stored result or one of
 cevm's own errors (naming the file, and the line and column where there is one), never
 another exception, and leak no warning.
 

@@ -1,5 +1,5 @@
 """The stored trips, vectors and profiles of the shipped sample logs equal a reference
-made before the ingest stages were tuned for speed (issue 18), to rounding
+made before the ingest stages were tuned for speed (2026-12-01), to rounding
 (see tests/ingest_reference.py)."""
 
 from __future__ import annotations

@@ -1,4 +1,5 @@
-"""Every input that is not a log has a bound checked before the work (issue 24): TOML files
+"""Every input that is not a log has a bound checked before the work (memory stays
+bounded whatever a file holds): TOML files
 (vehicle files, scenarios) and manifests are read only when they are regular files within
 their size, TOML nests within the parser's depth, a manifest is streamed and bounded in
 rows and line length. Each refusal is one line and exit 2, never a traceback, a hang or

@@ -1,4 +1,4 @@
-"""Plausibility bounds at ingest's inputs (issue 17 items 5 and 7): DSM heights,
+"""Plausibility bounds at ingest's inputs: DSM heights,
 elevations and grades, speeds and accelerations, and a DSM tile that cannot be read."""
 
 from __future__ import annotations
@@ -58,7 +58,7 @@ def test_a_lasting_jump_is_reported_not_guessed():
 
 
 def test_a_spliced_recording_is_reported_with_its_time_and_size_and_kept_in_the_trip_quality(tmp_path):
-    """Issue 27: a 1-s jump of 119 km/h that lasts (two recordings spliced) is kept as
+    """A 1-s jump of 119 km/h that lasts (two recordings spliced) is kept as
     logged (it cannot be told from a spike of the other part), but no longer silently:
     the trip's stored quality lists it under 'speed_jumps' (UTC time, time step, speeds
     before and after, in SI) for calibrate, and the file's repairs say it with its time

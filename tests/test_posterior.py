@@ -1,4 +1,4 @@
-"""Calibration as inference (issue 22): on trips simulated with known coefficients and
+"""Calibration as inference: on trips simulated with known coefficients and
 scatter, posterior intervals hold the true coefficients and predictive intervals hold new
 trips at their nominal rate; with no data the posterior is the prior, with much data the
 prior stops mattering, and a term the trips cannot identify keeps its prior.

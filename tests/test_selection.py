@@ -121,7 +121,7 @@ def test_negative_auxiliary_power_is_refused_as_implausible():
 @pytest.mark.slow
 def test_efficiency_above_one_is_refused():
     """Measured consumption below the wheel energy (masses far too high, or kWh read as
-    MWh): eta > 1 is not a calibration, chosen or forced (issue 27: a forced term set is
+    MWh): eta > 1 is not a calibration, chosen or forced (a forced term set is
     held to the same physical bounds)."""
     trips = _trips(dataclasses.replace(BUS, eta=0.8), temps=np.full(60, 19.0))
     low = [dataclasses.replace(t, measured=t.measured * 0.5, uncertainty=t.uncertainty * 0.5) for t in trips]
@@ -135,7 +135,7 @@ def test_efficiency_above_one_is_refused():
 @pytest.mark.slow
 def test_an_idle_rate_several_times_the_measured_standstill_flow_is_refused():
     """The logs' standstill fuel flow refuses a model whose standstill rate is 3 times
-    off it, whether or not the model has an idle term (issue 27: without one it draws
+    off it, whether or not the model has an idle term (without one it draws
     nothing standing still); a model that takes the flow as observations of its idle
     rate is held to it."""
     truth = dataclasses.replace(TRUCK, idle_fuel_lps=6.0 / 3600)

@@ -207,7 +207,7 @@ def _trip_masses(store: Path) -> int:
 @pytest.mark.slow
 @pytest.mark.parametrize("sig,code", [(signal.SIGINT, 130), (signal.SIGTERM, 143)], ids=["SIGINT", "SIGTERM"])
 def test_a_signal_after_the_last_file_says_the_manifest_was_not_applied(logs, manifest, tmp_path, sig, code):
-    """Issue 27: a signal after the last file but before the manifest's masses are
+    """A signal after the last file but before the manifest's masses are
     written said "6 of 6 files done ... 0 not done", and nothing of the masses. The line
     (and the JSON object) says the manifest was not applied; the exit code is the
     signal's; a new run applies it."""

@@ -1,4 +1,4 @@
-"""SIGTERM and SIGINT stop every long-running command the same way (issue 24): exit 143 or
+"""SIGTERM and SIGINT stop every long-running command the same way: exit 143 or
 130, one line that says so, no traceback, no process of the command left, the store as it
 was. Each command is a real ``cevm`` process in a session of its own, stopped with a real
 signal while it is certainly in the middle of its work (tests/stall.py holds it there:

@@ -263,7 +263,7 @@ def test_profiles_of_format_1_still_decode_and_format_2_is_smaller():
 
 
 def test_a_profile_header_claiming_too_many_samples_is_refused_before_decompressing():
-    """Issue 24: a blob whose header says 10^9 samples (damaged, with a valid CRC) must
+    """A blob whose header says 10^9 samples (damaged, with a valid CRC) must
     not make a reader allocate gigabytes: refused from the header."""
     import json as _json
     import struct

@@ -1,4 +1,4 @@
-"""The store's integrity against what an operator's trial found (issue 24): every writer
+"""The store's integrity against what an operator's trial found: every writer
 checks the store as ingest does; read-only commands never create or change a file; a blob
 without a checksum is damage; a blob whose checksum is valid but whose content is a zip
 bomb costs no more memory than the trip it claims to be; text that is not UTF-8 in a row

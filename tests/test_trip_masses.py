@@ -1,4 +1,4 @@
-"""Trip masses end to end (issue 16 items 1 and 2): manifests read as exported, matched
+"""Trip masses end to end: manifests read as exported, matched
 to stored trips or reported, stored with their source and replaceable; every command
 predicts and calibrates a stored trip at its own mass (given, else logged, else the
 vehicle file's) and says which; a stored trip's prediction shows what it measured.
@@ -49,7 +49,7 @@ def test_predict_uses_each_trips_own_mass_and_shows_what_it_measured(fleet, tmp_
         r = rows[t]
         assert (r["mass_kg"], r["mass_source"]) == (ids["hgv_mass_kg"][t], "logged")
         assert abs(r["error_pct"]) < 1e-6 and r["measured_fuel_l"] == pytest.approx(r["fuel_l"], rel=1e-8)
-    for t in unlogged(ids):  # at the vehicle file's 18 t: the defect of issue 16, said so
+    for t in unlogged(ids):  # at the vehicle file's 18 t (every unlogged trip once was, silently): said so
         r = rows[t]
         assert (r["mass_kg"], r["mass_source"]) == (18000.0, "vehicle file") and r["error_pct"] < -20.0
 

@@ -29,7 +29,7 @@ What a source asks (:class:`Demand`, once per source, for any vehicle):
 
 **Logged traces** (stored trips and routes: a vehicle drove them, and a logger measured
 them) are held to the vehicle's limits with the tolerance of the measurement, so that a
-vehicle's own logs are not flagged for their noise (issue 27):
+vehicle's own logs are not flagged for their noise (predict once flagged over_power where feasibility said feasible):
 
 - a logged speed may read high: a speedometer or wheel-speed signal by up to
   :data:`SPEED_READING_HIGH_FRACTION` + :data:`SPEED_READING_HIGH_KMH` (UN ECE

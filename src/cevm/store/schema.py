@@ -2,7 +2,8 @@
 migrations (:data:`MIGRATIONS`, applied when a store is opened: :func:`ensure_schema`),
 and how Python values are kept in its columns.
 
-Tables
+Tables::
+
     ``meta``       key/value: ``schema_version``, ``created_utc_s``, ``cevm_version``.
     ``files``      one row per source file, keyed on its resolved absolute path: content
                    sha256 of the version last seen, size, mtime, logger profile, status

@@ -1,5 +1,5 @@
 """The fleet's logged working days run again with another vehicle, charging included
-(pure): ``cevm replay`` (issue 23).
+(pure): ``cevm replay``.
 
 A vehicle's stored trips are grouped into *duties* (:mod:`~cevm.core.replay.duties`),
 each run trip by trip in time order with the candidate vehicle: every trip at its own

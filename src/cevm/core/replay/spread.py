@@ -1,5 +1,5 @@
 """How far a trip's energy may be from its mean, in parts that say which trips share
-them (pure): the candidate's predictive distribution (issue 22, :mod:`cevm.core.predictive`)
+them (pure): the candidate's predictive distribution (:mod:`cevm.core.predictive`)
 taken apart so that a duty's trips can be drawn together.
 
 For trip i of a duty, with mean mu_i [J or l] (:mod:`cevm.core.replay.trips`)::
@@ -137,7 +137,7 @@ def central_interval(mean: ArrayLike, sd: ArrayLike, level: float) -> tuple[np.n
 def trip_spread(vehicle: Vehicle, trips: TripEnergies, *, ice_braking: str | None = None) -> TripSpread:
     """The spread of ``vehicle`` on the trips of ``trips`` (a
     :class:`~cevm.core.replay.trips.TripEnergies`), from the predictive distribution of
-    issue 22 (:mod:`cevm.core.predictive`: the vehicle's posterior, else its class's
+    the commands' (:mod:`cevm.core.predictive`: the vehicle's posterior, else its class's
     prior); :meth:`TripSpread.none` where there is none (module notes)."""
     n = trips.n
     post = pr.posterior_of(vehicle)
