@@ -40,36 +40,48 @@ class Calibrator(Options):
 
     Parameters
     ----------
-    vehicle : the vehicle to start from (its file's values, class and priors); the one
+    vehicle
+        the vehicle to start from (its file's values, class and priors); the one
         positional parameter
-    terms : the extra terms to choose among by grouped cross-validation (default all of
+    terms
+        the extra terms to choose among by grouped cross-validation (default all of
         the powertrain's: EV regen, aux, heat, cool, warm; ICE idle, run, kin, heat,
         cool, warm); ignored with ``fit_terms``
-    fit_terms : a forced term set instead of a choice ("eta" plus any of the above and
+    fit_terms
+        a forced term set instead of a choice ("eta" plus any of the above and
         "cda", "cr"), as ``cevm calibrate --fit``; default None: choose
-    nested : with a choice, also cross-validate the choice itself (nested
+    nested
+        with a choice, also cross-validate the choice itself (nested
         cross-validation: the error to quote for the procedure), default True
-    priors, cv_folds, loo_below, max_rel_uncertainty, min_distance_m,
-    rel_uncertainty_floor, max_correlation, max_rel_se, time_repeats, seed, vehicle_id,
-    robust, interval, fit_balance, plausible : as :class:`.options.Options`
+    priors, cv_folds, loo_below, max_rel_uncertainty, min_distance_m, rel_uncertainty_floor
+        and max_correlation, max_rel_se, time_repeats, seed, vehicle_id, robust,
+        interval, fit_balance, plausible: the calibration's options, each with its
+        default and why in :class:`.options.Options`
 
-    Attributes (after :meth:`fit`)
-    ------------------------------
-    vehicle_ : the calibrated :class:`~cevm.core.vehicle.Vehicle` (fitted values, its
+    Attributes
+    ----------
+    vehicle_
+        the calibrated :class:`~cevm.core.vehicle.Vehicle` (fitted values, its
         posterior and what it was calibrated on: it predicts with intervals)
-    terms_ : the terms of the fitted model, chosen or forced
-    fitted_ : vehicle field -> (value, standard deviation), SI units
-    cv_results_ : dict of lists, one element per candidate compared (a forced term set:
+    terms_
+        the terms of the fitted model, chosen or forced
+    fitted_
+        vehicle field -> (value, standard deviation), SI units
+    cv_results_
+        dict of lists, one element per candidate compared (a forced term set:
         one): ``terms``, ``standstill``, ``status``, ``mean_cv_error_pct``,
         ``std_cv_error_pct``, ``rms_cv_error_pct``, ``std_in_sample_error_pct``, ``loss``
         (the selection's mean loss), ``se_vs_best``, ``rank`` (1 the lowest loss)
-    nested_cv_ : the nested cross-validated error statistics (None without a choice)
-    result_ : the full :class:`~.fitting.CalibrationResult` (per-trip rows, coverage,
+    nested_cv_
+        the nested cross-validated error statistics (None without a choice)
+    result_
+        the full :class:`~.fitting.CalibrationResult` (per-trip rows, coverage,
         warnings, excluded trips, ...)
-    selection_ : the :class:`~.selection.Selection` (None for a forced term set)
+    selection_
+        the :class:`~.selection.Selection` (None for a forced term set)
 
-    The parameters are fixed at construction; :meth:`fit` fills the attributes above and
-    returns the estimator.
+    The parameters are fixed at construction; :meth:`fit` fills the attributes (they end
+    in ``_``) and returns the estimator.
     """
 
     vehicle: Vehicle = field(kw_only=False)

@@ -32,37 +32,62 @@ PRIOR_KEPT_RATIO = 0.9
 class CalibrationResult:
     """Outcome of :func:`fit` (or the chosen model of :func:`cevm.core.calibration.select`).
 
-    vehicle : the calibrated vehicle (fitted values replaced, the rest as given; with
+    Attributes
+    ----------
+    vehicle
+        the calibrated vehicle (fitted values replaced, the rest as given; with
         :attr:`domain` as its ``calibration`` and :attr:`posterior` as its ``posterior``)
-    terms : the model's terms' short names ("eta", "aux", ...; :mod:`.terms`)
-    fitted : vehicle field -> (value, standard deviation), SI units (eta [-],
+    terms
+        the model's terms' short names ("eta", "aux", ...; :mod:`cevm.core.calibration.terms`)
+    fitted
+        vehicle field -> (value, standard deviation), SI units (eta [-],
         aux_power_w [W], idle_fuel_lps [l/s], cda_m2 [m^2], cr [-], ...): the posterior
         mode and its standard deviation
-    correlation : (field_a, field_b) -> correlation of the two estimates
-    refused : requested term (vehicle field) -> why it was not fitted (a term without a
+    correlation
+        (field_a, field_b) -> correlation of the two estimates
+    refused
+        requested term (vehicle field) -> why it was not fitted (a term without a
         prior the trips cannot identify; kept at the vehicle's value)
-    prior_kept : vehicle field -> why the trips taught the term next to nothing (it is in
+    prior_kept
+        vehicle field -> why the trips taught the term next to nothing (it is in
         the model at its prior)
-    excluded : trip_id -> why the trip was not used
-    rows : one :class:`TripRow` per used trip, with its held-out interval
-    in_sample, cv : error statistics of in-sample and cross-validated predictions
+    excluded
+        trip_id -> why the trip was not used
+    rows
+        one :class:`TripRow` per used trip, with its held-out interval
+    in_sample, cv
+        error statistics of in-sample and cross-validated predictions
         (cv is None when cross-validation was off or impossible)
-    cv_scheme : e.g. "5-fold", "leave-one-out", "grouped 5-fold (12 groups)", "none"
-    interval : the level of the rows' intervals (0.9: 90 %)
-    coverage : nominal level -> share of held-out trips inside their interval at it
-    mean_rel_width_pct : mean width of the rows' held-out intervals [% of measured]
-    posterior : :class:`cevm.core.uncertainty.Posterior` of the coefficients, scatter
-    priors : the :class:`cevm.core.uncertainty.Priors` used (None: none, flat)
-    residual_scale : the in-sample weighted residuals' root mean square
-    condition_number : of the column-normalised weighted Jacobian at the optimum
-    time_per_prediction_s : (mean, std) over trips of the time of one prediction from a
+    cv_scheme
+        e.g. "5-fold", "leave-one-out", "grouped 5-fold (12 groups)", "none"
+    interval
+        the level of the rows' intervals (0.9: 90 %)
+    coverage
+        nominal level -> share of held-out trips inside their interval at it
+    mean_rel_width_pct
+        mean width of the rows' held-out intervals [% of measured]
+    posterior
+        :class:`cevm.core.uncertainty.Posterior` of the coefficients, scatter
+    priors
+        the :class:`cevm.core.uncertainty.Priors` used (None: none, flat)
+    residual_scale
+        the in-sample weighted residuals' root mean square
+    condition_number
+        of the column-normalised weighted Jacobian at the optimum
+    time_per_prediction_s
+        (mean, std) over trips of the time of one prediction from a
         cached vector [s], or None when not timed
-    unit : "l" (ICE fuel) or "J" (EV battery energy)
-    warnings : notes on the fit (parameter at a bound, failed folds, ...)
-    evidence : the fitted standstill rate against the logs' measured one
+    unit
+        "l" (ICE fuel) or "J" (EV battery energy)
+    warnings
+        notes on the fit (parameter at a bound, failed folds, ...)
+    evidence
+        the fitted standstill rate against the logs' measured one
         (:func:`.plausibility.evidence`), or None
-    standstill_used : whether the logs' standstill rates were observations of the fit
-    domain : what the fit saw (:class:`cevm.core.vehicle.FitDomain`)
+    standstill_used
+        whether the logs' standstill rates were observations of the fit
+    domain
+        what the fit saw (:class:`cevm.core.vehicle.FitDomain`)
     """
 
     vehicle: Vehicle
@@ -136,30 +161,36 @@ def fit(vehicle: Vehicle, trips: Sequence[TripData], params: Sequence[str] = ("e
     """Fit a vehicle's terms to measured trip consumption and validate the fit.
 
     :class:`cevm.Calibrator` (``fit_terms=params``) is the same as an estimator; this
-    function stays for scripts that call it.
+    function stays for scripts that call it. A forced term set is held to the same
+    physical bounds as a chosen one: a value the data want beyond them refuses the fit
+    (:class:`CalibrationError`, with the reason).
 
     Parameters
     ----------
-    vehicle : the vehicle to calibrate; its values are the starting point and are kept
+    vehicle
+        the vehicle to calibrate; its values are the starting point and are kept
         for every term that is not fitted (unless ``neutral_others``)
-    trips : the trips (see :class:`TripData`); measured in litres (ICE) or joules (EV)
-    params : terms to fit, "eta" required, plus any of the powertrain's terms
+    trips
+        the trips (see :class:`TripData`); measured in litres (ICE) or joules (EV)
+    params
+        terms to fit, "eta" required, plus any of the powertrain's terms
         (:data:`cevm.core.calibration.terms.EXTRA_TERMS`: EV regen, aux, heat, cool,
         warm; ICE idle, run, kin, heat, cool, warm) and "cda", "cr"; old names
         ("aux_power_w", "idle_fuel_lps", "cda_m2", ...) are accepted. Default ("eta",),
         the paper's calibration.
-    options : how trips are screened, folded and reported (:class:`.options.Options`);
+    options
+        how trips are screened, folded and reported (:class:`.options.Options`);
         ``changes`` replace single options by name (``cv_folds=0``, ``priors=...``);
         ``fit_balance`` defaults to False here (the vehicle's balance temperatures)
-    neutral_others : the terms not in ``params`` are taken out of the model (zero, or
+    neutral_others
+        the terms not in ``params`` are taken out of the model (zero, or
         regeneration at eta) instead of kept at the vehicle's values (model selection)
-    standstill : use the logs' standstill rates as observations (:mod:`.posterior`)
-    scatter : (s_aux [W or l/s], s_share [-]) to hold the trips' scatter at instead of
+    standstill
+        use the logs' standstill rates as observations (:mod:`.posterior`)
+    scatter
+        (s_aux [W or l/s], s_share [-]) to hold the trips' scatter at instead of
         fitting it (:class:`cevm.core.uncertainty.Scatter`); (0, 0): the measurement
         uncertainties alone weigh the trips
-
-    A forced term set is held to the same physical bounds as a chosen one: a value the
-    data want beyond them refuses the fit (:class:`CalibrationError`, with the reason).
 
     Raises
     ------

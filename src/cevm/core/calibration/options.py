@@ -19,36 +19,50 @@ class Options:
 
     Parameters
     ----------
-    priors : the terms' priors (:class:`cevm.core.uncertainty.Priors`); default the
+    priors
+        the terms' priors (:class:`cevm.core.uncertainty.Priors`); default the
         vehicle's own (``vehicle.priors``, read with its file), else none: each term is
         then what the trips say, within its physical range, and refused where they
         cannot say it
-    cv_folds : folds of the cross-validation, default 5 (the common choice: 80 % of the
+    cv_folds
+        folds of the cross-validation, default 5 (the common choice: 80 % of the
         trips train each fit); 0 or 1 turns cross-validation off
-    loo_below : with fewer groups (trips without a group are their own group) than this,
+    loo_below
+        with fewer groups (trips without a group are their own group) than this,
         default 10, cross-validation is leave-one-(group-)out: 5 folds of so few trips
         would remove too much of the training data
-    max_rel_uncertainty : trips whose uncertainty / measured exceeds this are excluded,
+    max_rel_uncertainty
+        trips whose uncertainty / measured exceeds this are excluded,
         default 0.10: beyond 10 % a trip says less about eta than the model's own error
         (the paper's CE model scatters by about 4 %)
-    min_distance_m : shorter trips are excluded [m], default 1000 m: below that, counter
+    min_distance_m
+        shorter trips are excluded [m], default 1000 m: below that, counter
         resolution and the energy of the start (battery or engine warm-up) dominate
-    rel_uncertainty_floor : lower bound of the relative uncertainty [-], default 0.001:
+    rel_uncertainty_floor
+        lower bound of the relative uncertainty [-], default 0.001:
         no on-board counter is better than 0.1 %, and a zero would be an infinite weight
-    max_correlation, max_rel_se : the identifiability limits of a term without a prior
+    max_correlation, max_rel_se
+        the identifiability limits of a term without a prior
         (:mod:`.identifiability`: refused above a multiple correlation of 0.98 with the
         others, or a standard error above 50 % of its value)
-    time_repeats : predictions timed per trip, default 20; 0 skips the timing
-    seed : seed of the fold assignment, default 0 (results are reproducible)
-    vehicle_id : recorded in the result's :attr:`~.fitting.CalibrationResult.domain`
-    robust : default True, Huber's M-estimate (:mod:`.posterior`): a trip whose
+    time_repeats
+        predictions timed per trip, default 20; 0 skips the timing
+    seed
+        seed of the fold assignment, default 0 (results are reproducible)
+    vehicle_id
+        recorded in the result's :attr:`~.fitting.CalibrationResult.domain`
+    robust
+        default True, Huber's M-estimate (:mod:`.posterior`): a trip whose
         measurement is far off cannot pull the fit more than one 2.5 sigma away; the
         model selection then compares candidates with a Huber loss too
-    interval : level of the rows' held-out intervals, default 0.9
-    fit_balance : search the balance temperatures of temperature terms on a grid
+    interval
+        level of the rows' held-out intervals, default 0.9
+    fit_balance
+        search the balance temperatures of temperature terms on a grid
         (:data:`.candidate.HEATING_GRID_C`); default None: searched when the terms are
         chosen, the vehicle's own for a forced term set
-    plausible : physical ranges {term: (low, high)} of the values (SI, vehicle-field
+    plausible
+        physical ranges {term: (low, high)} of the values (SI, vehicle-field
         meaning: eta as an efficiency) that replace the terms' own, for research fits on
         models that are no real vehicle (benchmarks/bench_tables.py fits the detailed
         model with every loss switched off: eta 0.95, above any real EV's 0.89); a fit

@@ -16,7 +16,8 @@ The candidates are the physical terms with every subset of the others, each with
 without the standstill observations. Each candidate is fitted to all usable trips and
 its trips predicted by the fits of the other days (:mod:`.candidate`). A candidate is
 *refused*, with the reason, when a term without a prior is not identifiable
-(:mod:`.identifiability`) or a value is physically implausible (:mod:`.plausibility`,
+(:mod:`.identifiability`) or a value is physically implausible
+(:mod:`cevm.core.calibration.plausibility`,
 the standstill rate included): such a candidate is shown, never chosen.
 
 Choice (the one-standard-error rule, on paired errors): let b be the candidate with the

@@ -1,7 +1,7 @@
 """The energy of each step along a source, per prediction (battery energy [J] for an
 EV, fuel [l] for an ICE), with every term of :mod:`cevm.core.energy`.
 
-Energy along the way, per step i, from :mod:`cevm.core.energy`:
+Energy along the way, per step i, from :mod:`cevm.core.energy`::
 
   EV:  g_i = W_i / eta + P_aux(T) dt_i,  W_i = Delta_i, or w Delta_i for a negative
        non-simplified step, w = eta eta_r (:func:`~cevm.core.energy.ev_negative_weight`),
