@@ -199,7 +199,7 @@ def _is_type_checking_block(node: ast.AST) -> bool:
     return (isinstance(node, ast.If) and isinstance(node.test, ast.Name) and node.test.id == "TYPE_CHECKING")
 
 
-def import_graph() -> dict[str, set[str]]:
+def import_graph(sources: dict[str, tuple[str, bool]] | None = None) -> dict[str, set[str]]:
     """cevm's modules -> the cevm modules their imports run, wherever the import stands
     (module level, a function, ``if TYPE_CHECKING:``).
 
@@ -207,12 +207,14 @@ def import_graph() -> dict[str, set[str]]:
     __init__). Importing a.b.c also runs the __init__ of a and a.b, except where the
     importer is inside that package (a package's __init__ that imports its submodules is
     not in a cycle with them unless one of them imports the package's own names), and
-    except for an import under ``if TYPE_CHECKING:``, which never runs."""
-    paths = {module_name(p): p for p in ALL_MODULES}
+    except for an import under ``if TYPE_CHECKING:``, which never runs. ``sources``:
+    module -> (source, whether a package), default cevm's own."""
+    if sources is None:
+        sources = {module_name(p): (p.read_text(), is_package(p)) for p in ALL_MODULES}
+    paths = sources
     graph: dict[str, set[str]] = {m: set() for m in paths}
-    for mod, path in paths.items():
-        pkg = is_package(path)
-        tree = ast.parse(path.read_text())
+    for mod, (source, pkg) in sources.items():
+        tree = ast.parse(source)
         typing_only = {id(n) for block in ast.walk(tree) if _is_type_checking_block(block) for n in ast.walk(block)}
         for node in ast.walk(tree):
             if not isinstance(node, (ast.Import, ast.ImportFrom)):
@@ -287,6 +289,17 @@ def test_strongly_connected_finds_a_cycle():
 
 
 @pytest.mark.slow
+def test_the_import_graph_sees_imports_in_functions_and_type_hints():
+    """A circle made of an import inside a function and one under TYPE_CHECKING is found."""
+    tree = {"p": ("", True),
+            "p.a": ("def f():\n    from p.b import g\n", False),
+            "p.b": ("from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    from p.a import f\n", False),
+            "p.c": ("from p.a import f\n", False)}
+    graph = import_graph(tree)
+    assert graph["p.a"] == {"p.b"} and graph["p.b"] == {"p.a"}
+    assert [c for c in strongly_connected(graph) if len(c) > 1] == [["p.a", "p.b"]]
+
+
 def test_the_import_graph_has_no_cycle():
     graph = import_graph()
     assert "cevm.cli.predict" in graph and "cevm.core.cycle" in graph["cevm.core.sweep.profiles"]
