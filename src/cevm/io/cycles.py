@@ -55,6 +55,7 @@ import difflib
 import fnmatch
 import math
 import re
+import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -662,8 +663,6 @@ def _check_grade_unit(layout: CsvLayout, col: int, g_raw: np.ndarray, factor: fl
     """A warning (:class:`CycleWarning`) for a grade column read in % whose values all
     stay below :data:`FLAT_GRADE_MAX_PCT` over at least
     :data:`FLAT_GRADE_MIN_DISTANCE_M` of road: likelier fractions, which % flattens."""
-    import warnings
-
     if factor != 0.01 or not np.any(g_raw != 0):
         return
     distance = float(np.sum(0.5 * (v[1:] + v[:-1]) * dt))

@@ -48,6 +48,7 @@ from cevm.core.uncertainty import (
     ScatterPrior,
     TermPrior,
     coefficient_covariance,
+    value_covariance,
 )
 from cevm.core.vehicle import coefficients
 from cevm.errors import InputError
@@ -238,8 +239,6 @@ def _round(x: float) -> float:
 
 def posterior_table(posterior: Posterior, vehicle) -> dict:
     """The ``[posterior]`` table (file units) of a calibrated vehicle."""
-    from cevm.core.uncertainty import value_covariance
-
     pt = vehicle.powertrain
     terms = posterior.terms
     coef = coefficients(vehicle, terms)

@@ -75,7 +75,7 @@ class CycleLeg:
         """The legs of a cycle file, one per cycle it holds (:func:`cevm.io.cycles.read_cycles`
         with the :class:`~cevm.io.cycles.CycleFormat` ``fmt``, at most ``max_samples``
         samples; ``one``: exactly one), each with the file's hash."""
-        from cevm.io.cycles import read_cycle_csv, read_cycles
+        from cevm.io.cycles import read_cycle_csv, read_cycles  # here: the cycle reader only when a route is added
 
         cycles = [read_cycle_csv(path, fmt)] if one else read_cycles(path, fmt, max_samples=max_samples)
         p = Path(path)

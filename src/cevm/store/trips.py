@@ -42,6 +42,7 @@ from __future__ import annotations
 import contextlib
 import os
 import sqlite3
+import stat
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -50,7 +51,7 @@ from pathlib import Path
 from cevm.errors import CevmError
 from cevm.store.codec import decode_cycle_profile, decode_profile
 from cevm.store.display import format_trips, format_utc
-from cevm.store.failures import StoreAccessError, StoreConnection
+from cevm.store.failures import StoreAccessError, StoreConnection, translate
 from cevm.store.location import resolve_store_path
 from cevm.store.queries import FileState, TripQueries
 from cevm.store.schema import (
@@ -150,8 +151,6 @@ class TripStore(TripWriting, TripQueries):
     def _cannot_open(self, exc: sqlite3.Error) -> CevmError:
         """The error for a store file SQLite could not open, with the reason the file
         system gives (a read-only file system, a directory without write permission)."""
-        from cevm.store.failures import translate
-
         err = translate(exc, self.path, BUSY_TIMEOUT_S)
         if self.readonly or not isinstance(err, StoreAccessError) or err.reason != "cantopen":
             return err or CevmError(f"{self.path}: not a usable cevm store: {exc}")
@@ -286,8 +285,6 @@ class TripStore(TripWriting, TripQueries):
 def _not_a_file(path: Path) -> str | None:
     """What ``path`` is when it exists and is not a regular file (a directory, a FIFO, a
     device), else None: SQLite would open any of them."""
-    import stat
-
     from cevm.io.inputs import file_kind
 
     try:
