@@ -58,7 +58,7 @@ import numpy as np
 from cevm.units import KMH_TO_MPS
 
 if TYPE_CHECKING:  # the sweep imports this module: no import back at run time
-    from cevm.core.sweep.profiles import LegProfile, StepTable
+    from cevm.core.sweep.steptable import LegProfile, StepTable
     from cevm.core.vehicle import Vehicle
 
 #: The window over which the power a source asks is averaged [s]: a drivetrain delivers

@@ -13,7 +13,7 @@ Energy along the way, per step i, from :mod:`cevm.core.energy`::
 
 :func:`step_coefficients` gives these per row as a few coefficients
 (:class:`StepCoefficients`), :func:`step_energies` the (rows, steps) energies on a
-:class:`~cevm.core.sweep.profiles.StepTable`; :func:`energy_trajectory` the same sum,
+:class:`~cevm.core.sweep.steptable.StepTable`; :func:`energy_trajectory` the same sum,
 sample by sample, for one vehicle and mass (plain per-step arithmetic: for plots and
 tests).
 """
@@ -28,8 +28,8 @@ from cevm.core import energy
 from cevm.core.cycle import step_terms
 from cevm.core.model import braking_weight
 from cevm.core.sweep.predictions import PredictionSet
-from cevm.core.sweep.profiles import StepTable
 from cevm.core.sweep.sources import Source
+from cevm.core.sweep.steptable import StepTable
 from cevm.core.vehicle import Vehicle
 
 
