@@ -17,7 +17,7 @@ Modules, in the order a calibration uses them:
 - :mod:`.terms`            the consumption model, linear in the terms' coefficients
 - :mod:`.posterior`        priors x likelihood: the posterior, the trips' scatter
 - :mod:`.identifiability`  which terms the trips can tell
-- :mod:`.plausibility`     which fitted values physics refuses; the standstill evidence
+- :mod:`.fit_plausibility` which fitted values physics refuses; the standstill evidence
 - :mod:`.candidate`        one candidate: balance temperatures, posterior, held-out scatter
 - :mod:`.validation`       grouped folds, error statistics, predictions, timing
 - :mod:`.fitting`          :func:`fit`: one term set, its cross-validated intervals

@@ -10,7 +10,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from scipy.stats import norm
 
-from cevm.core.calibration import identifiability, plausibility
+from cevm.core.calibration import fit_plausibility, identifiability
 from cevm.core.calibration import posterior as post
 from cevm.core.calibration.candidate import CandidateFit, Settings, fit_candidate
 from cevm.core.calibration.data import CalibrationError, TripData, TripSet, select_trips
@@ -83,7 +83,7 @@ class CalibrationResult:
         notes on the fit (parameter at a bound, failed folds, ...)
     evidence
         the fitted standstill rate against the logs' measured one
-        (:func:`.plausibility.evidence`), or None
+        (:func:`.fit_plausibility.evidence`), or None
     standstill_used
         whether the logs' standstill rates were observations of the fit
     domain
@@ -215,7 +215,7 @@ def fit(vehicle: Vehicle, trips: Sequence[TripData], params: Sequence[str] = ("e
     settings = opts.settings(fit_balance=False)
     cf = fit_candidate(model, names, np.arange(data.n), priors, settings, standstill=standstill,
                        heldout=opts.cv_folds >= 2, scatter=scatter)
-    refused = plausibility.implausible(cf.model, cf.fit, np.arange(data.n), cf.prior.lb, cf.prior.ub,
+    refused = fit_plausibility.implausible(cf.model, cf.fit, np.arange(data.n), cf.prior.lb, cf.prior.ub,
                                        opts.plausible)
     if refused is not None:
         raise CalibrationError(f"{refused[0]}: {refused[1]}")
@@ -293,7 +293,7 @@ def _fitted_values(cf: CandidateFit, settings: Settings, idx_all: np.ndarray
             corr[(fields[active[a]], fields[active[b]])] = float(vcov[a, b] / dd) if dd > 0 else math.nan
     if not result.converged:
         warnings.append("the fit did not converge to the requested tolerance")
-    why = plausibility.implausible(model, result, idx_all, cf.prior.lb, cf.prior.ub, settings.plausible)
+    why = fit_plausibility.implausible(model, result, idx_all, cf.prior.lb, cf.prior.ub, settings.plausible)
     if why is not None and why[0] == "eta":
         warnings.append(f"eta: {why[1]}")
     csd = result.sd
@@ -384,7 +384,7 @@ def fit_model(cf: CandidateFit, excluded: dict, settings: Settings, *, priors: P
         unit="J" if vehicle.is_ev else "l",
         warnings=tuple(warnings),
         terms=tuple(active),
-        evidence=plausibility.evidence(model, result, idx_all),
+        evidence=fit_plausibility.evidence(model, result, idx_all),
         domain=domain,
         posterior=posterior,
         priors=priors,

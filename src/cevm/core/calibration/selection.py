@@ -17,7 +17,7 @@ without the standstill observations. Each candidate is fitted to all usable trip
 its trips predicted by the fits of the other days (:mod:`.candidate`). A candidate is
 *refused*, with the reason, when a term without a prior is not identifiable
 (:mod:`.identifiability`) or a value is physically implausible
-(:mod:`cevm.core.calibration.plausibility`,
+(:mod:`cevm.core.calibration.fit_plausibility`,
 the standstill rate included): such a candidate is shown, never chosen.
 
 Choice (the one-standard-error rule, on paired errors): let b be the candidate with the
@@ -56,7 +56,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from cevm.core.calibration import plausibility
+from cevm.core.calibration import fit_plausibility
 from cevm.core.calibration.candidate import COOLING_GRID_C, HEATING_GRID_C, CandidateFit, Settings, fit_candidate  # noqa: F401 (the grids: part of the interface)
 from cevm.core.calibration.data import CalibrationError, TripData, TripSet, select_trips
 from cevm.core.calibration.fitting import CalibrationResult, fit_model
@@ -184,7 +184,7 @@ def _keys(model: TermModel, sets: Sequence[tuple[str, ...]], idx: np.ndarray) ->
     """Every (terms, standstill) candidate: with the standstill observations too where the
     trips measured enough and the set has the term they observe."""
     base = "aux" if model.ev else "idle"
-    evidence = _evidence_seconds(model, idx) >= plausibility.EVIDENCE_MIN_S
+    evidence = _evidence_seconds(model, idx) >= fit_plausibility.EVIDENCE_MIN_S
     out = []
     for names in sets:
         out.append((names, False))
@@ -212,7 +212,7 @@ def _select_on(model: TermModel, keys: Sequence[Key], idx: np.ndarray, priors: P
             term, why = next(iter(cf.refused.items()))
             reasons[key] = (term, why)
             continue
-        bad = plausibility.implausible(cf.model, cf.fit, idx, cf.prior.lb, cf.prior.ub, settings.plausible)
+        bad = fit_plausibility.implausible(cf.model, cf.fit, idx, cf.prior.lb, cf.prior.ub, settings.plausible)
         if bad is not None:
             reasons[key] = bad
             continue
