@@ -546,20 +546,20 @@ def test_exception_mid_write_leaves_store_unchanged(store, db, tmp_path, monkeyp
         if at == stage:
             raise RuntimeError(f"crash at {at}")
 
-    monkeypatch.setattr(store_mod.trips, "_checkpoint", boom)
+    monkeypatch.setattr(store_mod.tripstore, "_checkpoint", boom)
     with pytest.raises(RuntimeError, match="crash at"):
         put(store, path, "a_v2")
     with pytest.raises(RuntimeError, match="crash at"):
         put(store, tmp_path / "new.csv", "new")
     assert snapshot(db) == before
     assert not store.con.in_transaction
-    monkeypatch.setattr(store_mod.trips, "_checkpoint", lambda at: None)
+    monkeypatch.setattr(store_mod.tripstore, "_checkpoint", lambda at: None)
     assert put(store, path, "a_v2").inserted == 3  # the store is still usable
 
 
 KILL_CHILD = """
 import sys, time
-import cevm.store.trips as st
+import cevm.store.tripstore as st
 from test_store import put
 
 def stall(stage):

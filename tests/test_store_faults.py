@@ -20,7 +20,7 @@ from pathlib import Path
 import pytest
 from typer.testing import CliRunner
 
-import cevm.store.trips as trips_module
+import cevm.store.tripstore as trips_module
 from fleet_store import BUS, DIESEL, URBAN, make_store
 
 runner = CliRunner()

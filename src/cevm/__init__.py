@@ -69,7 +69,7 @@ _PUBLIC = {
     "load_scenario": "cevm.io.scenario",
     "plan": "cevm.core.assignment",
     "simulate": "cevm.core.detailed",
-    "TripStore": "cevm.store.trips",
+    "TripStore": "cevm.store.tripstore",
     "trips_for_calibration": "cevm.store.calibration",
     "IngestOptions": "cevm.ingest.task",
     "CevmError": "cevm.errors",

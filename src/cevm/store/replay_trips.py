@@ -24,7 +24,7 @@ from cevm.core.sweep import LegProfile, StepTable, build_step_table
 from cevm.errors import CevmError
 from cevm.store.failures import DamagedTripError
 from cevm.store.masses import trip_masses
-from cevm.store.trips import TripStore
+from cevm.store.tripstore import TripStore
 
 #: The trips' position columns, once the store has them.
 POSITION_COLUMNS = ("start_lat_deg", "start_lon_deg", "end_lat_deg", "end_lon_deg")
