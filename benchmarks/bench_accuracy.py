@@ -20,7 +20,7 @@ its summer days (May to September) predicts its other days with
 :func:`cevm.core.predictive.predictive` (the calibrated file's posterior), and the
 reverse: mean and worst error, and the share of those trips inside their 90 % interval.
 For comparison, the same split with the calibration before priors and intervals
-(issue 22's figures on real logs: a summer-only calibration predicted the winter trips
+(the figures on real logs: a summer-only calibration predicted the winter trips
 27 % low, a winter-only one the summer trips 27 % high).
 
 Vehicles: EB-* with configs/vehicles/electric-bus.toml, HGV-* and the portal trucks

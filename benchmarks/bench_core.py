@@ -8,7 +8,7 @@ Prints throughputs and their ratios against baselines measured in the same run:
 - a numpy per-prediction recomputation over all samples (vectorised over samples, one
   prediction at a time).
 It also checks that the fast predictions equal the baselines' (max relative difference).
-Targets on one core (issue 3): vector >= 20 M samples/s; predictions >= 1 M/s, exact.
+Targets on one core: vector >= 20 M samples/s; predictions >= 1 M/s, exact.
 """
 
 from __future__ import annotations

@@ -15,7 +15,7 @@ CPU seconds. Baselines in the same run: the bare cost of reading the same files 
 pandas.read_csv, and with a bare typed pyarrow parse (the floor of any reader of these
 bytes); and the read stage alone (``read_log`` of every file) with each parser, pyarrow
 (what ingest uses) and pandas (the parser before, still the fallback for blocks pyarrow
-refuses), best of two. Target (issue 4): >= 1 million samples/s.
+refuses), best of two. Target: >= 1 million samples/s.
 
 ``--baseline-src DIR`` also ingests the same files with another checkout's ``src`` (its
 ``configs`` beside it: e.g. ``git archive COMMIT src configs | tar -x -C /tmp/before``
@@ -32,7 +32,7 @@ alternating, ``--repeat`` times): the process's CPU seconds, the cost per trip s
 [us] and its peak memory (VmHWM), for a linear cost and a bounded memory whatever the
 file's size (the 5 M-row file with ``--max-rows`` and ``--max-samples`` lifted).
 
-``--held-out`` is issue 25's held-out check: one core's CPU on real logs against a bare
+``--held-out`` is the held-out check: one core's CPU on real logs against a bare
 typed pyarrow parse of the same bytes (goal: within 4x for many small files, 3x for a
 large one). Many small files: the Twizy logs of ``../shared/real-logs/twizy`` (no DSM
 covers them); one large file: the sample srf days of the long-haul truck HGV-21, each in
@@ -279,7 +279,7 @@ def _child_cpu(cmd: list[str], env: dict) -> float:
 
 
 def _held_out(args, tmp: Path) -> None:
-    """The held-out check of issue 25: one core's CPU on real logs against a bare typed
+    """The held-out check: one core's CPU on real logs against a bare typed
     pyarrow parse of the same bytes (module docstring)."""
     shared = next((p for p in (ROOT.parent / "shared", ROOT.parent.parent / "shared") if p.is_dir()), None)
     twizy = shared / "real-logs" / "twizy" if shared else None
@@ -365,7 +365,7 @@ def main() -> None:
                     help="alternating runs of this and the baseline (with --baseline-src)")
     ap.add_argument("--sizes", action="store_true", help="one file of 1k, 100k, 1M and 5M rows each: cost and memory")
     ap.add_argument("--held-out", action="store_true",
-                    help="real logs against a bare typed pyarrow parse of the same bytes (issue 25's held-out check)")
+                    help="real logs against a bare typed pyarrow parse of the same bytes (the held-out check)")
     ap.add_argument("--held-out-rows", type=int, default=1_000_000, help="rows of --held-out's large file")
     args = ap.parse_args()
     if args.held_out:

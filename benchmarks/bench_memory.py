@@ -40,7 +40,7 @@ and whether the peak meets the goal. The cases:
   bytes.
 - ``all NUL``: a 2 GB sparse file of NUL bytes: must fail without being read whole.
 
-The inputs that are not logs (issue 24), each as the command a user runs, at its
+The inputs that are not logs, each as the command a user runs, at its
 default limit or refused before the work:
 
 - ``vehicle``: a vehicle file of 1 MiB (its bound) of small keys, the most work for the
@@ -57,7 +57,7 @@ default limit or refused before the work:
 
 Baseline in the same run: the peak of a Python process that has imported cevm's ingest
 pipeline and done nothing else (``import only``), and the size of the 2M-row file
-itself. The default limits are printed first. The goal (issue 17): under 500 MB per
+itself. The default limits are printed first. The goal: under 500 MB per
 worker for any input on the default settings. ``--cases`` takes case names or kinds
 (``logs``, ``vehicle``, ``scenario``, ``manifest``, ``cycle``, ``blob``; ``big``: the
 large log alone).

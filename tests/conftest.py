@@ -39,3 +39,14 @@ def twizy_logs(request) -> tuple[Path, int]:
     if request.param == "public":
         return shared_or_skip("real-logs", "twizy"), 17
     return DATA / "twizy", 4
+
+
+@pytest.fixture(scope="session", autouse=True)
+def _no_users_store(tmp_path_factory):
+    """Every test runs as on a fresh account: the user's own store (``$CEVM_STORE``, or
+    the one under ``~/.local/share``) is never opened nor written by a test that leaves
+    out ``--store``, and parallel workers (``pytest -n``) never share one."""
+    with pytest.MonkeyPatch.context() as mp:
+        mp.delenv("CEVM_STORE", raising=False)
+        mp.setenv("XDG_DATA_HOME", str(tmp_path_factory.mktemp("xdg-data")))
+        yield

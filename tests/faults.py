@@ -137,7 +137,7 @@ def _main(argv: list[str]) -> None:
             raise SystemExit(f"faults.py: unknown option {opt}")
     import cevm.executors as executors
     import cevm.ingest.pipeline as pipeline
-    import cevm.store.trips as trips
+    import cevm.store.tripstore as trips
 
     pipeline.process_file = process_file_or_die
     if task_s is not None:

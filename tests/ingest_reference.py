@@ -9,7 +9,7 @@ digits, far finer than the comparison's tolerances). The reference
 
     PYTHONPATH=src python tests/ingest_reference.py --write
 
-on the code before the ingest stages were tuned (issue 18); ``tests/test_ingest_reference.py``
+on the code before the ingest stages were tuned for speed (2026-12-01); ``tests/test_ingest_reference.py``
 ingests the sample logs again and compares. Regenerate it only when the sample logs
 themselves change (the test then says so: the files' hashes are part of the reference),
 never to make a changed result pass.

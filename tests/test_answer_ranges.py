@@ -1,4 +1,4 @@
-"""Every answer with its range (issue 22, part 2): predict's and feasibility's intervals,
+"""Every answer with its range: predict's and feasibility's intervals,
 their probabilities, and the rows that say where the interval comes from and what they
 extrapolate.
 
@@ -21,8 +21,8 @@ from typer.testing import CliRunner
 from cevm.cli import app
 from cevm.core.intervals import block_ranges, p_reserve_ok, p_tank_ok
 from cevm.core.sweep import PredictionSet, Source, sweep
-from cevm.core.uncertainty import Posterior, Scatter, coefficients
-from cevm.core.vehicle import FitDomain, predict
+from cevm.core.uncertainty import Posterior, Scatter
+from cevm.core.vehicle import FitDomain, coefficients, predict
 from cevm.io import load_vehicle, read_cycle_csv
 
 runner = CliRunner()
@@ -46,6 +46,7 @@ def _calibrated_bus(root, margin: float = 1.0):
     return dataclasses.replace(bus, posterior=post, calibration=dom)
 
 
+@pytest.mark.slow
 def test_p_reserve_ok_is_the_frequency_in_simulation(root):
     """Draw vehicles from the posterior and trips from the scatter: the share that keeps
     the reserve all along (each drawn vehicle's lowest state of charge on the cycle,
@@ -73,6 +74,7 @@ def test_p_reserve_ok_is_the_frequency_in_simulation(root):
         assert float(p[j]) == pytest.approx(float(np.mean(kept)), abs=0.035), m
 
 
+@pytest.mark.slow
 def test_predict_rows_carry_ordered_intervals_in_csv_json_and_the_table(root, tmp_path):
     shipped = root / "configs/vehicles/electric-bus.toml"
     hgv = root / "configs/vehicles/diesel-hgv.toml"
@@ -200,6 +202,7 @@ def test_a_vehicle_without_priors_has_no_interval(root):
     assert p_tank_ok(block, rr).tolist() == [pytest.approx(np.nan, nan_ok=True)]
 
 
+@pytest.mark.slow
 def test_fleet_plan_with_a_chance_constraint_is_the_optimum_of_plain_enumeration():
     """Random EV fleets whose batteries make some assignments unsure: with
     min_p_complete, the enumeration's and the MILP's (no-good cuts) plans equal the

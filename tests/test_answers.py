@@ -1,4 +1,4 @@
-"""Answers a planner can hand on (issue 27): every assumption a row depends on is in the
+"""Answers a planner can hand on: every assumption a row depends on is in the
 row, a vehicle's own logs are not flagged for their noise, quiet unit mistakes are
 caught, fleet plans name the days they could not plan and say how they differ from the
 paper, every output path mistake is one line and exit 2, the shipped vehicle files
@@ -117,7 +117,7 @@ def test_a_log_far_beyond_the_vehicle_is_still_flagged():
 
 
 def test_a_time_column_in_milliseconds_is_refused(tmp_path):
-    # issue 27: UKBUS6 with its time in ms became 12,125 km, exit 0
+    # UKBUS6 with its time in ms once became 12,125 km, exit 0
     path = tmp_path / "ms.csv"
     path.write_text("Time,speed_kmh\n" + "".join(f"{i * 1000},{30 + 10 * math.sin(i / 20):.2f}\n" for i in range(600)))
     res = runner.invoke(app, ["predict", "-v", BUS, "-c", str(path)])

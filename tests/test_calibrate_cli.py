@@ -51,6 +51,7 @@ def store(tmp_path, root):
     return path
 
 
+@pytest.mark.slow
 def test_calibrate_recovers_eta_and_reports_the_papers_figures(store, root, tmp_path):
     bus = root / "configs/vehicles/electric-bus.toml"
     out = tmp_path / "bus-calibrated.toml"

@@ -308,6 +308,7 @@ def test_cv_prediction_never_sees_its_own_measurement(pool):
     assert r2.rows[other].predicted_cv != pytest.approx(r1.rows[other].predicted_cv, rel=1e-9)
 
 
+@pytest.mark.slow
 def test_cv_error_exceeds_in_sample_error_on_average(pool):
     _, vecs = pool
     rng = np.random.default_rng(13)

@@ -512,6 +512,7 @@ def _messy_drive(n, seed):
     return out
 
 
+@pytest.mark.slow
 @settings(max_examples=20, deadline=None)
 @given(n=st.integers(150, 400), seed=st.integers(0, 2**32 - 1))
 def test_results_do_not_depend_on_the_chunk_size(n, seed):
@@ -595,6 +596,7 @@ def _dedupe_reference(t, line, cols):
             int(dup.sum()), int((sizes > 1).sum()), conflicts)
 
 
+@pytest.mark.slow
 @settings(max_examples=60, deadline=None)
 @given(n=st.integers(1, 40), n_cols=st.integers(0, 3), seed=st.integers(0, 2**32 - 1))
 def test_tick_merging_matches_a_pandas_statement_of_the_rules(n, n_cols, seed):

@@ -74,6 +74,7 @@ def test_ice_braking_override_changes_fuel(files):
     assert nocredit["ice_braking"] == "no-credit" and nocredit["fuel_l"] > paper["fuel_l"]
 
 
+@pytest.mark.slow
 def test_bad_input_is_one_line_on_stderr_exit_2(tmp_path, files):
     bad = tmp_path / "bad.csv"
     bad.write_text("time_s,speed_kmh\n0,1\n1,x\n")
@@ -88,6 +89,7 @@ def test_bad_input_is_one_line_on_stderr_exit_2(tmp_path, files):
     assert f"{bad}:3: column 'speed_kmh'" in lines[0]
 
 
+@pytest.mark.slow
 def test_simulate_writes_per_second_csv_and_plot(files, tmp_path, root):
     import pandas as pd
 

@@ -1,4 +1,4 @@
-"""Every command turns a write error into one line and exit 3 (issue 24): its output on a
+"""Every command turns a write error into one line and exit 3: its output on a
 full device (``> /dev/full``), an ``--out`` or ``--plot`` file on a full disk, a new store
 on a read-only file system. Never a traceback, never Python's "Exception ignored" at exit,
 never a half-written file left behind. The full disk is a 64 kB tmpfs (root only: skipped
@@ -78,6 +78,7 @@ def _id(args) -> str:
     return " ".join(Path(a).stem if isinstance(a, Path) else str(a) for a in args)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("args", READERS, ids=[_id(a) for a in READERS])
 def test_output_on_a_full_device_is_one_line_and_exit_3(fleet, capsys, monkeypatch, args):
     db, ids = fleet
@@ -89,6 +90,7 @@ def test_output_on_a_full_device_is_one_line_and_exit_3(fleet, capsys, monkeypat
         "the output: could not be written: the disk is full" in line, line
 
 
+@pytest.mark.slow
 def test_a_shell_redirect_to_dev_full_and_a_closed_pipe(fleet):
     """As an operator types them: ``cevm trips -f csv > /dev/full`` (exit 3, one line), and
     ``cevm predict ... | head -1`` (the reader went away: nothing said, exit 141)."""
@@ -144,6 +146,7 @@ OUTS = [
 ]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("args", OUTS, ids=["simulate --out", "predict --out", "feasibility --out", "predict --plot",
                                             "simulate --plot", "calibrate --out", "calibrate --plot", "replay --plot",
                                             "replay --summary"])
@@ -161,6 +164,7 @@ def test_an_out_file_on_a_full_disk_is_one_line_and_leaves_nothing(fleet, capsys
         assert sorted(p.name for p in small.iterdir()) == ["filler"]  # nothing half-written left
 
 
+@pytest.mark.slow
 def test_an_out_path_that_is_a_device_is_written_not_replaced(fleet, capsys, monkeypatch, tmp_path):
     """``--out`` naming a device (here copies of /dev/full, named with the ending each
     option asks for) is written to, not replaced by a file renamed over it (as --out's

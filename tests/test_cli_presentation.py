@@ -130,6 +130,7 @@ def test_simulate_refuses_a_file_without_a_detailed_table(root, paths):
     assert "no [detailed] table" in line and "renault-twizy.toml" in line
 
 
+@pytest.mark.slow
 def test_fleet_days_by_name_or_1_based_number(root):
     scenario = str(root / "configs/fleet/paper-case-study.toml")
 

@@ -1,4 +1,4 @@
-"""CSV output cannot carry a spreadsheet formula (issue 24; OWASP "CSV Injection"): ids,
+"""CSV output cannot carry a spreadsheet formula (OWASP "CSV Injection"): ids,
 cycle, vehicle and route names that start with ``=``, ``+``, ``-``, ``@``, a tab or a
 carriage return reach every CSV output with a leading apostrophe, while numbers (-3.5
 among them) stay numbers. Each through the command line, with names an operator's data
@@ -76,6 +76,7 @@ def hostile(tmp_path):
     return db, cycle, bus
 
 
+@pytest.mark.slow
 def test_every_csv_output_neutralises_formulas_and_keeps_negative_numbers(hostile):
     db, cycle, bus = hostile
     trips = assert_safe(cevm("trips", "--store", db, "-f", "csv").stdout)

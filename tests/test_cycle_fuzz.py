@@ -1,4 +1,4 @@
-"""A fuzz test of the cycle reader (issue 24): whatever bytes a cycle file holds (headers
+"""A fuzz test of the cycle reader (a cycle file is untrusted input): whatever bytes a cycle file holds (headers
 of the names cevm detects and of others, separators, decimal marks, numbers and junk, CR,
 LF and CRLF line ends, byte order marks, NUL bytes, gzip), reading it either gives cycles
 or raises cevm's own error (:class:`~cevm.errors.CevmError`, one line naming the file):
@@ -13,6 +13,7 @@ import warnings
 from pathlib import Path
 
 import numpy as np
+import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -68,6 +69,7 @@ def cycle_files(draw) -> tuple[bytes, CycleFormat | None]:
     return data, fmt
 
 
+@pytest.mark.slow
 @settings(max_examples=300, deadline=None, derandomize=True, suppress_health_check=[HealthCheck.too_slow])
 @given(cycle_files())
 def test_the_cycle_reader_raises_only_its_own_errors_and_leaks_no_warning(case):

@@ -1,4 +1,4 @@
-"""Remote DSM access only when asked for (issue 17 item 8): URLs, network file systems,
+"""Remote DSM access only when asked for (a DSM path must not reach the network unasked): URLs, network file systems,
 VRTs that point at them (at any depth) and local files that GDAL would follow to a
 server are refused, and nothing reaches the server; allowed, the same DSM opens."""
 
@@ -116,7 +116,7 @@ def test_vrt_with_python_code_or_a_loop_is_refused(cog_dir, tmp_path):
                                                                               blockysize=16_384)],
                          ids=["one 40000-px strip", "16384-px tiles"])
 def test_a_raster_of_huge_blocks_is_refused_before_any_pixel_is_read(tmp_path, layout):
-    """Issue 24: a 40,000 x 40,000 GeoTIFF of one deflate strip (kilobytes on disk, 6.4 GB
+    """A 40,000 x 40,000 GeoTIFF of one deflate strip (kilobytes on disk, 6.4 GB
     decoded) drove ingest to 6.3 GB, 16,384-pixel tiles to 1.24 GB. Its header says so:
     refused when the DSM is opened, with the block size and the way out, and `cevm
     ingest` stops with exit 2 before any file is read."""

@@ -151,6 +151,7 @@ def test_predict_with_every_term_equals_the_reference(seed, ambient, ev, braking
     np.testing.assert_allclose(got, want, rtol=1e-9)
 
 
+@pytest.mark.slow
 @settings(max_examples=20, deadline=None)
 @given(seed=st.integers(0, 10_000), ambient=st.floats(-25.0, 40.0))
 def test_sweep_totals_and_lowest_soc_equal_the_reference(seed, ambient):

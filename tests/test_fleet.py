@@ -589,6 +589,7 @@ def test_standin_cycles_are_deterministic_and_the_papers_lengths(tmp_path):
     assert standin_cycle("regional-standin").distance_m == pytest.approx(7900.0, rel=0.01)
 
 
+@pytest.mark.slow
 def test_cli_fleet_plan_json_and_table():
     from typer.testing import CliRunner
 

@@ -227,6 +227,7 @@ def test_both_searches_for_the_sign_change_give_the_plain_loop(hilly, monkeypatc
     np.testing.assert_allclose(results[0].soc_min_pct, results[1].soc_min_pct, rtol=0, atol=1e-12)
 
 
+@pytest.mark.slow
 @settings(max_examples=30, deadline=None)
 @given(
     m=st.floats(300.0, 60000.0), cda=st.floats(0.0, 9.0), cr=st.sampled_from([0.004, 0.0066, 0.012]),
@@ -375,6 +376,7 @@ def test_infeasible_at_every_payload():
 # ------------------------------------------------------------------------------ CLI
 
 
+@pytest.mark.slow
 def test_cli_payload_sweep_csv_json_and_plot(tmp_path, root):
     bus, hgv = root / "configs/vehicles/electric-bus.toml", root / "configs/vehicles/diesel-hgv.toml"
     urban = root / "configs/cycles/urban-bus.csv"

@@ -1,4 +1,4 @@
-"""A fuzz test of srf ingest (issue 24): mutated srf logs give a stored result or one of
+"""A fuzz test of srf ingest (a log is untrusted input): mutated srf logs give a stored result or one of
 cevm's own errors (naming the file, and the line and column where there is one), never
 another exception, and leak no warning.
 
@@ -12,6 +12,7 @@ from __future__ import annotations
 import re
 import warnings
 
+import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -62,6 +63,7 @@ def _mutate(data: bytes, mutations) -> bytes:
 _FOREIGN = re.compile(r"internal error|: (?:ValueError|OSError|Error|UnicodeError|UnicodeDecodeError|[A-Za-z]+Error): ")
 
 
+@pytest.mark.slow
 @settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture,
                                                                    HealthCheck.too_slow])
 @given(st.lists(_mutation, min_size=1, max_size=4))

@@ -85,6 +85,7 @@ def run(*args, env=None):
     return runner.invoke(app, [str(a) for a in args], env=env)
 
 
+@pytest.mark.slow
 def test_ingest_srf_with_dsm_then_trips_and_predict(tmp_path, fleet, dsm, root):
     logs, truth = fleet
     store = tmp_path / "s.sqlite"
@@ -188,6 +189,7 @@ def test_options_refused_once_the_store_is_open_leave_no_new_store(tmp_path, fle
     assert not list(tmp_path.glob("new.sqlite*"))  # neither the store nor SQLite's side files
 
 
+@pytest.mark.slow
 def test_two_ingests_at_once_store_everything_once(tmp_path, fleet):
     logs, _ = fleet
     store = tmp_path / "s.sqlite"
@@ -234,6 +236,7 @@ from cevm.ingest.profiles import load_profiles  # noqa: E402
 SRF_HEAD = "timestamp_utc,gps_lat_deg,gps_lon_deg,fms_wheel_speed_kmh\n"
 
 
+@pytest.mark.slow
 @settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(st.one_of(
     st.binary(min_size=0, max_size=3000),
@@ -281,7 +284,7 @@ def test_an_unreadable_subfolder_is_reported_and_fails_the_run(tmp_path, fleet, 
 
 
 def test_a_trip_starts_at_the_state_of_charge_its_log_holds_there(root):
-    """Issue 22 item 6: a stored trip records the state of charge logged at its start:
+    """A stored trip records the state of charge logged at its start:
     the reading at or last before the start within 60 s, else the first within 60 s
     after it. Expected values read from the file with the csv module."""
     import csv
@@ -332,7 +335,7 @@ def test_trips_shows_the_start_state_and_sources_carry_it(tmp_path, root):
 
 
 def test_a_file_whose_trips_hold_too_many_samples_is_refused_before_they_are_made(tmp_path):
-    """Issue 24: a log ticking every 5 s gives five trip samples a row on the 1 s grid, and
+    """A log ticking every 5 s gives five trip samples a row on the 1 s grid, and
     a worker holds a file's stored trips until they are written: a 2.5 M-row portal
     export reached 0.79 GB. The trips' samples are bounded (--max-samples), checked once
     the trips are cut, before any is made. Here a 1 Hz log of 900 rows: about 900

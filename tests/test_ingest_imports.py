@@ -8,6 +8,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parents[1]
 
 _PROBE = r"""
@@ -22,6 +24,7 @@ print("pandas" in sys.modules)
 """
 
 
+@pytest.mark.slow
 def test_ingest_of_srf_logs_does_not_import_pandas():
     srf = ROOT / "sample_logs" / "srf" / "EB-01_2019-01-31.csv"
     out = subprocess.run([sys.executable, "-c", _PROBE, str(srf), str(ROOT / "sample_logs" / "dsm")],

@@ -1,5 +1,5 @@
 """The stored trips, vectors and profiles of the shipped sample logs equal a reference
-made before the ingest stages were tuned for speed (issue 18), to rounding
+made before the ingest stages were tuned for speed (2026-12-01), to rounding
 (see tests/ingest_reference.py)."""
 
 from __future__ import annotations
@@ -11,6 +11,7 @@ import pytest
 import ingest_reference as ir
 
 
+@pytest.mark.slow
 def test_sample_logs_ingest_as_the_reference(tmp_path):
     ref = json.loads(ir.REFERENCE.read_text())
     changed = {k for k, v in ir.file_hashes().items() if ref["files"].get(k) != v}
@@ -28,6 +29,7 @@ def test_sample_logs_ingest_as_the_reference(tmp_path):
     assert not diffs, "\n".join(diffs[:20])
 
 
+@pytest.mark.slow
 def test_the_comparison_sees_a_small_change():
     """The comparison is not blind: a 1 mm change of one elevation or a 1e-4 change of a
     vector sum is a difference."""

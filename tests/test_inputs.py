@@ -1,4 +1,5 @@
-"""Every input that is not a log has a bound checked before the work (issue 24): TOML files
+"""Every input that is not a log has a bound checked before the work (memory stays
+bounded whatever a file holds): TOML files
 (vehicle files, scenarios) and manifests are read only when they are regular files within
 their size, TOML nests within the parser's depth, a manifest is streamed and bounded in
 rows and line length. Each refusal is one line and exit 2, never a traceback, a hang or
@@ -67,6 +68,7 @@ def fifo(tmp_path):
 # ------------------------------------------------------------------------------- TOML
 
 
+@pytest.mark.slow
 def test_a_vehicle_file_that_is_a_device_or_a_fifo_is_refused_before_it_is_read(fifo, tmp_path):
     for args in (("vehicle", "show", "/dev/zero"), ("predict", "-v", fifo, "-c", URBAN)):
         if not Path(args[2]).exists():
@@ -107,6 +109,7 @@ def fleet(tmp_path):
     return make_fleet(tmp_path)
 
 
+@pytest.mark.slow
 def test_a_manifest_that_is_a_device_a_fifo_or_too_large_is_refused(fleet, fifo, tmp_path, monkeypatch):
     db, ids, hgv, starts = fleet
     for source, said in ((Path("/dev/zero"), "character device"), (fifo, "FIFO")):
@@ -169,6 +172,7 @@ def test_a_manifest_with_cr_line_ends_reads_as_with_lf(fleet, tmp_path):
     assert lf.rows == cr.rows == crlf.rows and len(lf.rows) == 3 and lf.rows[-1].line == 4
 
 
+@pytest.mark.slow
 def test_a_streamed_manifest_holds_no_rows(fleet, tmp_path):
     """20,000 rows that match no trip, matched as set-mass does (streamed, each problem
     passed on as found): the memory taken does not grow with the rows, against the same
@@ -202,6 +206,7 @@ def test_a_streamed_manifest_holds_no_rows(fleet, tmp_path):
     assert streamed - seen_bytes < 1.5e6 and held > 5e6, (streamed, held)
 
 
+@pytest.mark.slow
 def test_a_logger_profile_that_is_a_device_or_nested_without_end_is_refused(tmp_path):
     """``--profiles-dir`` (or $CEVM_PROFILES) holding a profile that is /dev/zero (a link
     to it), or one nested 50,000 levels deep: one line, exit 2 (before: memory without end,
@@ -257,6 +262,7 @@ leg = {{ cycle = "{cycle}" }}
 """
 
 
+@pytest.mark.slow
 def test_a_scenario_never_quotes_a_file_it_names(tmp_path):
     """A scenario naming someone's secrets as its leg or its vehicle file (the
     /etc/shadow of the trial, here files of the test's own) gets one line naming the file,
@@ -323,6 +329,7 @@ def test_a_cycle_file_with_cr_line_ends_reads_as_with_lf_everywhere(tmp_path):
     assert outputs[0] == outputs[1]
 
 
+@pytest.mark.slow
 def test_a_cycle_or_grade_file_that_is_a_fifo_or_a_device_is_refused(tmp_path):
     fifo = tmp_path / "pipe.csv"
     if not hasattr(os, "mkfifo"):
@@ -346,6 +353,7 @@ def _cycle(path: Path, n: int, columns: int = 1) -> Path:
     return path
 
 
+@pytest.mark.slow
 def test_cycle_samples_are_bounded_per_file_per_command_per_route_and_per_stored_trip(tmp_path, monkeypatch):
     """The bounds that keep a command under 500 MB (README of the bounds in
     docs/reference/commands.md), each refused in one line naming the file and line, before

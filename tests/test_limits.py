@@ -1,7 +1,7 @@
 """The one verdict (cevm.core.limits): what a source asks (held top speed, 5-s wheel power
 from de-spiked steps) against analytic cases, a logged trace's tolerance (UN ECE R39,
 elevation), the flags' truth table, and the same flags from predict, feasibility,
-simulate and fleet plan on the same question (issue 27)."""
+simulate and fleet plan on the same question."""
 
 from __future__ import annotations
 
@@ -152,7 +152,7 @@ def _json(args):
 
 
 def test_predict_and_feasibility_give_the_same_flags(files):
-    # issue 27: predict flagged over_power for the 13.5 t bus on regional-delivery, feasibility said feasible
+    # predict once flagged over_power for the 13.5 t bus on regional-delivery, feasibility said feasible
     # (regional-delivery is made for a 44 t truck to follow since: the bus at its 14 t on the
     # long-haul stand-in asks more than its 180 kW)
     cyc = files["long_haul"]

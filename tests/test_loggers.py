@@ -104,7 +104,8 @@ def test_builtin_profiles_load(profiles):
 
 
 def test_shipped_energy_sources_declare_their_accuracy(profiles):
-    """Every shipped [[energy]] entry states its systematic uncertainty (issue 15)."""
+    """Every shipped [[energy]] entry states its systematic uncertainty (a meter's
+    calibration error is common to all its trips, not scatter)."""
     for prof in profiles.values():
         if prof.path is not None and prof.path.parent.name == "loggers":
             for e in prof.energy:
@@ -660,7 +661,7 @@ def test_not_a_number_in_a_required_column_is_an_error(tmp_path, profiles):
 
 @pytest.mark.parametrize("cell", ["ERR", "abc", "---", "#N/A", "#VALUE!", "error"])
 def test_a_bad_cell_in_a_measured_column_is_a_missing_value_with_a_note(tmp_path, profiles, cell):
-    """Issue 27: one 'ERR' in a measured column (an energy counter here, a flow meter on a
+    """One 'ERR' in a measured column (an energy counter here, a flow meter on a
     truck) cost the whole day's log. Now it is a missing value, as 'N/A' is, and the
     repair names the line and the column; the other rows are read as written."""
     rows = srf_rows(6)
@@ -742,6 +743,7 @@ def test_missing_file(tmp_path, profiles):
 # ======================================================================================
 # Properties of the vectorised time parser
 # ======================================================================================
+@pytest.mark.slow
 @settings(max_examples=60, deadline=None)
 @given(st.lists(st.datetimes(min_value=datetime(1990, 1, 1), max_value=datetime(2099, 12, 31)), min_size=1,
                 max_size=30),

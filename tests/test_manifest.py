@@ -1,4 +1,4 @@
-"""Trip manifests and stored trip masses (issue 16 item 1): a manifest read as a transport
+"""Trip manifests and stored trip masses: a manifest read as a transport
 management system exports it, its rows matched to stored trips or reported by line,
 masses stored with their source, replaced, cleared, carried into a file's next version,
 and the precedence of a trip's masses (:mod:`cevm.io.manifest`, :mod:`cevm.store.masses`)."""

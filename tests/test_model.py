@@ -102,6 +102,7 @@ def random_cycle(rng, n, hilly=True):
     return t, v, h
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("seed", range(6))
 def test_vector_predictions_equal_reference(seed):
     rng = np.random.default_rng(seed)
@@ -247,6 +248,7 @@ vehicle_params = st.tuples(
 )
 
 
+@pytest.mark.slow
 @settings(max_examples=200, deadline=None)
 @given(cycles(), vehicle_params, st.sampled_from(list(MODES)))
 def test_property_equals_reference(cyc, params, mode):
@@ -258,6 +260,7 @@ def test_property_equals_reference(cyc, params, mode):
     assert got == pytest.approx(want, rel=1e-9, abs=1e-12 * magnitude(t, v, h, m, cda, cr))
 
 
+@pytest.mark.slow
 @settings(max_examples=100, deadline=None)
 @given(cycles(min_n=4), st.data(), vehicle_params, st.sampled_from(list(MODES)))
 def test_property_split_anywhere_sums_to_whole(cyc, data, params, mode):
@@ -272,6 +275,7 @@ def test_property_split_anywhere_sums_to_whole(cyc, data, params, mode):
     assert s == pytest.approx(w, rel=1e-9, abs=1e-12 * magnitude(t, v, h, m, cda, cr))
 
 
+@pytest.mark.slow
 @settings(max_examples=100, deadline=None)
 @given(cycles(), vehicle_params, st.floats(1.0, 10.0))
 def test_property_paper_ice_is_affine_in_mass(cyc, params, k):
@@ -284,6 +288,7 @@ def test_property_paper_ice_is_affine_in_mass(cyc, params, k):
     assert e2 - e1 == pytest.approx(e1 - e0, abs=1e-12 * magnitude(t, v, h, 2 * k * m, cda, cr))
 
 
+@pytest.mark.slow
 @settings(max_examples=100, deadline=None)
 @given(cycles(), vehicle_params)
 def test_property_braking_modes_are_ordered(cyc, params):
@@ -301,6 +306,7 @@ def test_property_braking_modes_are_ordered(cyc, params):
         assert np.all(np.diff(batt) <= 1e-11 * magnitude(t, v, h, m, cda, cr))
 
 
+@pytest.mark.slow
 @settings(max_examples=100, deadline=None)
 @given(cycles(), vehicle_params, st.floats(-1e4, 1e4), st.floats(-500.0, 500.0))
 def test_property_invariant_to_time_and_elevation_offsets(cyc, params, dt0, dh0):
@@ -314,6 +320,7 @@ def test_property_invariant_to_time_and_elevation_offsets(cyc, params, dt0, dh0)
         assert eb == pytest.approx(ea, rel=1e-9, abs=1e-11 * scale)
 
 
+@pytest.mark.slow
 @settings(max_examples=100, deadline=None)
 @given(cycles(), st.floats(500.0, 60000.0), st.floats(CR0_DEFAULT, 0.02))
 def test_property_linear_resampling_keeps_kinetic_potential_rolling(cyc, m, cr):

@@ -1,4 +1,4 @@
-"""Plausibility bounds at ingest's inputs (issue 17 items 5 and 7): DSM heights,
+"""Plausibility bounds at ingest's inputs: DSM heights,
 elevations and grades, speeds and accelerations, and a DSM tile that cannot be read."""
 
 from __future__ import annotations
@@ -58,7 +58,7 @@ def test_a_lasting_jump_is_reported_not_guessed():
 
 
 def test_a_spliced_recording_is_reported_with_its_time_and_size_and_kept_in_the_trip_quality(tmp_path):
-    """Issue 27: a 1-s jump of 119 km/h that lasts (two recordings spliced) is kept as
+    """A 1-s jump of 119 km/h that lasts (two recordings spliced) is kept as
     logged (it cannot be told from a spike of the other part), but no longer silently:
     the trip's stored quality lists it under 'speed_jumps' (UTC time, time step, speeds
     before and after, in SI) for calibrate, and the file's repairs say it with its time
@@ -122,6 +122,7 @@ def _dsm(path, scale=1.0, offset_m=0.0, scale_tag=None):
     return path
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("how", ["values", "scale_tag"])
 def test_dsm_scaled_by_1e6_is_refused_and_gps_used(tmp_path, how):
     """Heights near 1.2e8 m (the plane's 120 m times 1e6, in the values or in the
@@ -144,6 +145,7 @@ def test_dsm_scaled_by_1e6_is_refused_and_gps_used(tmp_path, how):
     assert abs(vec.s_me) < 1e5  # J/kg: a few hundred metres of climb at most, not 1e8 m
 
 
+@pytest.mark.slow
 def test_dsm_right_but_offset_from_gps_is_warned(tmp_path):
     """A DSM 1000 m above the GPS altitude (a wrong datum or unit): kept (plausible
     heights) but warned about."""

@@ -6,6 +6,8 @@ from __future__ import annotations
 import subprocess
 import sys
 
+import pytest
+
 SCRIPT = r"""
 import struct, sys
 import matplotlib
@@ -27,6 +29,7 @@ print(matplotlib.get_backend(), "matplotlib.pyplot" in sys.modules, struct.unpac
 """
 
 
+@pytest.mark.slow
 def test_plotting_keeps_the_callers_backend_and_leaves_pyplot_alone(tmp_path):
     out = subprocess.run([sys.executable, "-c", SCRIPT, str(tmp_path / "sim.png")], capture_output=True, text=True,
                          timeout=300)

@@ -1,4 +1,4 @@
-"""Calibration as inference (issue 22): on trips simulated with known coefficients and
+"""Calibration as inference: on trips simulated with known coefficients and
 scatter, posterior intervals hold the true coefficients and predictive intervals hold new
 trips at their nominal rate; with no data the posterior is the prior, with much data the
 prior stops mattering, and a term the trips cannot identify keeps its prior.
@@ -71,6 +71,7 @@ def _trips(truth, vectors, rng, n, temps, s_aux=500.0, s_share=0.02, u=0.005, pr
     return out
 
 
+@pytest.mark.slow
 def test_posterior_intervals_hold_the_true_coefficients_at_their_nominal_rate(vectors):
     """80 truths drawn from the prior, 20 trips each: the 90 % intervals of eta, aux,
     heat, cool hold the truth 90 % of the time (320 trials)."""
@@ -88,6 +89,7 @@ def test_posterior_intervals_hold_the_true_coefficients_at_their_nominal_rate(ve
     assert abs(rate - 0.9) <= tol, rate
 
 
+@pytest.mark.slow
 def test_predictive_intervals_hold_new_trips_at_their_nominal_rate(vectors):
     """40 truths, calibrated on 24 trips, each predicting 10 new trips through the public
     predictive API (the calibrated vehicle's posterior): 90 % of them inside their 90 %
@@ -122,6 +124,7 @@ def test_with_no_trips_the_posterior_is_the_prior(vectors):
     assert f.cov == pytest.approx(np.diag(cp.sd ** 2), rel=1e-9)
 
 
+@pytest.mark.slow
 def test_with_much_data_the_prior_stops_mattering(vectors):
     """The posterior mode under a prior centred far from the truth and the fit without
     any prior draw together as the trips grow (their difference, in standard

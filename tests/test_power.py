@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from cevm.core.sweep.power import POWER_WINDOW_S, peak_wheel_power_w, power_mass_window
-from cevm.core.sweep.profiles import LegProfile, build_step_table
+from cevm.core.sweep.steptable import LegProfile, build_step_table
 
 RHO, G = 1.225, 9.81
 

@@ -12,7 +12,8 @@ import pytest
 from typer.testing import CliRunner
 
 from cevm.cli import app
-from cevm.core.uncertainty import VEHICLE_CLASSES, Posterior, Scatter, coefficients
+from cevm.core.uncertainty import VEHICLE_CLASSES, Posterior, Scatter
+from cevm.core.vehicle import coefficients
 from cevm.errors import InputError
 from cevm.io import load_vehicle
 from cevm.io.priors import class_defaults, posterior_table
@@ -120,10 +121,11 @@ def test_shipped_files_have_priors_and_no_posterior(root):
         assert v.priors is not None and v.posterior is None, f.name
 
 
+@pytest.mark.slow
 def test_calibrate_writes_what_reads_back_and_reports_its_intervals(tmp_path, root):
     """cevm calibrate on the sample HGV-11: every held-out row has an ordered interval,
     the summary's coverage counts them, the file says how many candidates there were and
-    how many were compared as the table does (issue 27), carries [sources] for what it
+    how many were compared as the table does, carries [sources] for what it
     changed, and reads back with its posterior."""
     from cevm.ingest import IngestOptions, ingest
     from cevm.store import TripStore
@@ -172,8 +174,9 @@ def test_calibrate_writes_what_reads_back_and_reports_its_intervals(tmp_path, ro
     assert "held-out trips inside their 90 % interval" in res.stdout
 
 
+@pytest.mark.slow
 def test_forced_fits_respect_the_physical_bounds(tmp_path, root):
-    """Issue 27: --fit eta,kin wrote a diesel eta of 1.0 and --fit eta,run 0.55-0.66
+    """--fit eta,kin once wrote a diesel eta of 1.0 and --fit eta,run 0.55-0.66
     with exit 0. Forced fits now start from the class's priors and stay inside the
     physical ranges (a fit the data push beyond them is refused, exit 2:
     tests/test_selection.py)."""

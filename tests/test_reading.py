@@ -68,6 +68,7 @@ SAMPLES = sorted(p for d in ("srf", "portal")
                  for p in (ROOT / "sample_logs" / d).rglob("*.csv")) + sorted(DATA.glob("*.csv"))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("path", SAMPLES[:6] + SAMPLES[-4:], ids=lambda p: p.name)
 def test_pyarrow_and_pandas_parsers_and_small_blocks_give_the_same_logs(path, profiles, monkeypatch):
     ref = read_log(path, profiles=profiles, engine="pandas")
@@ -135,6 +136,7 @@ def test_real_twizy_logs_same_with_both_parsers(profiles, twizy_logs):
         frames_equal(read_log(f, profiles=profiles), read_log(f, profiles=profiles, engine="pandas"))
 
 
+@pytest.mark.slow
 @settings(max_examples=40, deadline=None)
 @given(st.lists(st.tuples(st.sampled_from(["", "36.0", "12.5", "0", "N/A", "-", "1e2"]),
                           st.sampled_from(["", "51.5", "-0.1", "x"]),
@@ -341,6 +343,7 @@ def run_limited(path: Path, headroom_mb: int = 400) -> subprocess.CompletedProce
                           capture_output=True, text=True, env=env, timeout=300)
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="RLIMIT_AS and /proc: Linux")
 def test_gzip_bomb_under_a_memory_limit(tmp_path):
     """1 GiB of valid rows from a 2 MB gzip, in a process allowed 400 MB more than it
@@ -350,6 +353,7 @@ def test_gzip_bomb_under_a_memory_limit(tmp_path):
     assert p.returncode == 0 and "REFUSED" in p.stdout and "zip bomb" in p.stdout, p.stdout + p.stderr
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="RLIMIT_AS and /proc: Linux")
 def test_line_less_file_under_a_memory_limit(tmp_path):
     """420 MB without a line break after a header-like start, 400 MB of headroom:

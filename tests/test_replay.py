@@ -1,4 +1,4 @@
-"""cevm replay's core (issue 23): duties, the levels carried from trip to trip with
+"""cevm replay's core: duties, the levels carried from trip to trip with
 charging, where a duty fails, the sizes it needs, and its probability of completing;
 against the plain per-step reference (tests/reference.py) and hand computations."""
 
@@ -439,7 +439,7 @@ def test_levels_at_the_trips_ends_only_read_no_profile(tmp_path):
 
 
 def test_the_spread_taken_apart_gives_the_predictive_distributions_back(tmp_path):
-    """Issue 22's API (cevm.core.predictive) gives each trip's spread and each day's
+    """The predictive API (cevm.core.predictive) gives each trip's spread and each day's
     total: the parts replay draws from add up to the same (a vehicle never calibrated: its
     class's prior, no extrapolation)."""
     pr = pytest.importorskip("cevm.core.predictive")

@@ -35,6 +35,7 @@ def replay(store: Path, *args: str):
                                *args])
 
 
+@pytest.mark.slow
 def test_rows_in_csv_json_and_table_say_the_same(store):
     args = ["-v", TRUCK, "--battery-kwh", "40", "--charger-kw", "50"]
     res = replay(store, *args, "-f", "json")
@@ -55,6 +56,7 @@ def test_rows_in_csv_json_and_table_say_the_same(store):
     assert res.exit_code == 0 and "TRK-2" in res.stdout and "keep the 15 % reserve" in res.stdout
 
 
+@pytest.mark.slow
 def test_a_duty_is_the_sum_of_the_trips_cevm_predict_gives(store):
     res = runner.invoke(app, ["predict", "--store", str(store), "-v", TRUCK, "--vehicle-id", "TRK-1", "-f", "json"])
     assert res.exit_code == 0, res.output
@@ -67,6 +69,7 @@ def test_a_duty_is_the_sum_of_the_trips_cevm_predict_gives(store):
     assert days[0]["mass_sources"] == "3 logged"
 
 
+@pytest.mark.slow
 def test_the_night_shift_is_one_duty_and_two_calendar_days(store):
     gap = json.loads(replay(store, "-v", TRUCK, "-f", "json").stdout)
     assert [r["day"] for r in gap if r["vehicle_id"] == "TRK-2"] == ["2020-09-13", "2020-09-14"]
@@ -79,6 +82,7 @@ def test_the_night_shift_is_one_duty_and_two_calendar_days(store):
     assert local[0]["start_time"].endswith("+09:00")
 
 
+@pytest.mark.slow
 def test_charging_at_the_depot_only(store):
     anywhere = json.loads(replay(store, "-v", TRUCK, "--battery-kwh", "40", "--charger-kw", "50", "-f", "json").stdout)
     depot = json.loads(replay(store, "-v", TRUCK, "--battery-kwh", "40", "--charger-kw", "50", "--charge-at", "depot",
@@ -91,6 +95,7 @@ def test_charging_at_the_depot_only(store):
     assert all(r["charges"] == 0 for r in d2)  # its one stop is at the customer
 
 
+@pytest.mark.slow
 def test_summary_plot_and_a_diesel_candidate(store, tmp_path):
     png, summary = tmp_path / "days.png", tmp_path / "summary.json"
     # the truck cannot follow 3 of the 5 duties (a trip each over its 600 kW: test_replay_judges_
@@ -111,6 +116,7 @@ def test_summary_plot_and_a_diesel_candidate(store, tmp_path):
     assert "energy_kwh" not in rows[0] and rows[0]["fuel_l"] > 0 and rows[0]["tank_l"] == 400.0
 
 
+@pytest.mark.slow
 def test_a_parallel_run_writes_the_bytes_of_a_serial_one(store, monkeypatch):
     from cevm.core.replay import TripSpread, plan
 

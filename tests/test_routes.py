@@ -145,6 +145,7 @@ def test_cycle_legs_do_not_need_the_file_afterwards(tmp_path, cycles, root):
     assert after.exit_code == 0 and json.loads(after.stdout) == before
 
 
+@pytest.mark.slow
 def test_cli_route_equals_the_sum_of_its_parts(store, cycles, root):
     path, ids = store
     s = str(path)
@@ -176,6 +177,7 @@ def test_cli_route_equals_the_sum_of_its_parts(store, cycles, root):
     assert {r["vehicle"] for r in json.loads(feas.stdout)} == {"Optare Metrocity EV", "Scania P320 diesel HGV"}
 
 
+@pytest.mark.slow
 def test_cli_route_errors(store, cycles, root):
     path, ids = store
     bus = str(root / "configs/vehicles/electric-bus.toml")

@@ -58,6 +58,7 @@ def test_release_free_memory_never_raises():
     assert isinstance(release_free_memory(), bool)
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(not sys.platform.startswith("linux") or platform.libc_ver()[0] != "glibc",
                     reason="glibc's malloc_trim and /proc")
 def test_release_free_memory_returns_what_many_small_arrays_freed():

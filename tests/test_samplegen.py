@@ -105,6 +105,7 @@ def is_integral(a, tol=1e-6) -> bool:
 # --------------------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_srf_columns_metadata_and_resolutions(small, truth):
     files = srf_files(small)
     assert any(p.name.endswith(".csv.gz") for p in files)  # one gzipped file exercised
@@ -471,6 +472,7 @@ def tree_hashes(root: Path) -> dict[str, str]:
             for p in sorted(root.rglob("*")) if p.is_file()}
 
 
+@pytest.mark.slow
 def test_same_bytes_on_every_run(small, tmp_path):
     sg.generate_sample_logs(tmp_path, small=True)
     a, b = tree_hashes(small), tree_hashes(tmp_path)
@@ -637,6 +639,7 @@ def test_uk_local_time_formatting():
     assert got == [t.astimezone(london).strftime("%d/%m/%Y %H:%M:%S") for t in ts]
 
 
+@pytest.mark.slow
 def test_fleet_for_benchmark(tmp_path):
     doc = sg.fleet_for_benchmark(2, 1, tmp_path)
     files = sorted((tmp_path / "srf").glob("*.csv"))

@@ -7,6 +7,7 @@ import itertools
 from contextlib import contextmanager
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -46,6 +47,7 @@ def _values(rng, n, kind):
     return np.abs(rng.standard_normal(n)).cumsum()
 
 
+@pytest.mark.slow
 @settings(max_examples=200, deadline=None)
 @given(lengths, st.integers(0, 2**32 - 1), st.integers(0, 2), st.booleans())
 def test_segment_sums_equal_numpy_sum(lens, seed, kind, batch):
@@ -110,6 +112,7 @@ def test_segment_medians_equal_numpy_median(lens, seed, with_nan, batch):
     assert want_plain.tobytes() == plain.tobytes()
 
 
+@pytest.mark.slow
 @settings(max_examples=150, deadline=None)
 @given(st.lists(st.integers(1, 60), min_size=1, max_size=8), st.integers(0, 2**32 - 1), st.booleans(),
        st.sampled_from(["left", "right"]))

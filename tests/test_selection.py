@@ -57,6 +57,7 @@ def _chosen(sel):
     return set(sel.chosen)
 
 
+@pytest.mark.slow
 def test_ev_selection_finds_the_temperature_dependent_auxiliaries():
     truth = dataclasses.replace(BUS, aux_power_w=4000.0, aux_heating_w_per_k=300.0, aux_cooling_w_per_k=200.0)
     sel = select(BUS, _trips(truth), time_repeats=0)
@@ -74,12 +75,14 @@ def test_ev_selection_finds_the_temperature_dependent_auxiliaries():
     assert r.domain.terms == sel.chosen and r.vehicle.calibration is r.domain
 
 
+@pytest.mark.slow
 def test_ev_selection_keeps_the_paper_model_when_nothing_else_is_there():
     """Trips made with eta alone: every extra term is either refused or not worth it."""
     sel = select(BUS, _trips(BUS, noise=0.02), time_repeats=0, nested=False)
     assert sel.chosen == ("eta",)
 
 
+@pytest.mark.slow
 def test_ice_selection_finds_the_willans_running_fuel():
     truth = dataclasses.replace(TRUCK, running_fuel_lps=6.0 / 3600, idle_fuel_lps=2.0 / 3600)
     sel = select(TRUCK, _trips(truth, temps=np.full(60, 15.0)), time_repeats=0, nested=False)
@@ -115,9 +118,10 @@ def test_negative_auxiliary_power_is_refused_as_implausible():
     assert sel.chosen == ("eta",)
 
 
+@pytest.mark.slow
 def test_efficiency_above_one_is_refused():
     """Measured consumption below the wheel energy (masses far too high, or kWh read as
-    MWh): eta > 1 is not a calibration, chosen or forced (issue 27: a forced term set is
+    MWh): eta > 1 is not a calibration, chosen or forced (a forced term set is
     held to the same physical bounds)."""
     trips = _trips(dataclasses.replace(BUS, eta=0.8), temps=np.full(60, 19.0))
     low = [dataclasses.replace(t, measured=t.measured * 0.5, uncertainty=t.uncertainty * 0.5) for t in trips]
@@ -128,9 +132,10 @@ def test_efficiency_above_one_is_refused():
         fit(BUS, low, time_repeats=0)
 
 
+@pytest.mark.slow
 def test_an_idle_rate_several_times_the_measured_standstill_flow_is_refused():
     """The logs' standstill fuel flow refuses a model whose standstill rate is 3 times
-    off it, whether or not the model has an idle term (issue 27: without one it draws
+    off it, whether or not the model has an idle term (without one it draws
     nothing standing still); a model that takes the flow as observations of its idle
     rate is held to it."""
     truth = dataclasses.replace(TRUCK, idle_fuel_lps=6.0 / 3600)
@@ -149,6 +154,7 @@ def test_an_idle_rate_several_times_the_measured_standstill_flow_is_refused():
     assert ok.result.evidence is not None and ok.result.evidence["ratio"] == pytest.approx(6.0 / 5.5, rel=0.1)
 
 
+@pytest.mark.slow
 def test_temperature_terms_need_logged_temperatures():
     truth = dataclasses.replace(BUS, aux_power_w=3000.0, aux_heating_w_per_k=300.0)
     trips = _trips(truth)
@@ -171,6 +177,7 @@ def test_temperature_terms_need_logged_temperatures():
     assert "heat" not in sel.chosen
 
 
+@pytest.mark.slow
 def test_selected_table_agrees_with_the_result():
     """The chosen candidate's cross-validated errors (the model's own vectorised
     predictions) equal the result's (through cevm.core.vehicle.predict)."""
@@ -182,6 +189,7 @@ def test_selected_table_agrees_with_the_result():
     assert sel.nested_cv is None
 
 
+@pytest.mark.slow
 def test_the_calibrated_vehicle_file_holds_the_model_and_what_it_saw(tmp_path):
     """select() -> the vehicle file: fitted keys in file units, the left-out terms zeroed,
     a reference temperature, and a [calibration] table that loads back as the domain."""
@@ -213,6 +221,7 @@ def test_the_calibrated_vehicle_file_holds_the_model_and_what_it_saw(tmp_path):
     assert 'cda_m2 = "somewhere"' in out.read_text()  # the rest of the file is kept
 
 
+@pytest.mark.slow
 def test_the_heating_balance_temperature_is_fitted():
     """Trips made with heating below 10 degC (not the default 16): the selection's grid
     finds 10, and its fit is better than one held at 16."""

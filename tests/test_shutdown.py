@@ -117,6 +117,7 @@ def check_consistent(store: Path, reference: dict, logs: Path, stored: int) -> N
     assert store_content(store) == reference
 
 
+@pytest.mark.slow
 def test_sigkill_of_an_ingest_leaves_no_process_and_a_consistent_store(logs, reference, tmp_path):
     store = tmp_path / "s.sqlite"
     (logs / "z_held.csv.hold").touch()
@@ -132,6 +133,7 @@ def test_sigkill_of_an_ingest_leaves_no_process_and_a_consistent_store(logs, ref
     check_consistent(store, reference, logs, N_FILES - 1)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("sig, code, to_group", [(signal.SIGTERM, 143, False), (signal.SIGINT, 130, True)],
                          ids=["kill PID", "Ctrl-C"])
 def test_sigterm_and_sigint_stop_an_ingest_cleanly_and_say_what_was_stored(logs, reference, tmp_path, sig, code,
@@ -162,6 +164,7 @@ def test_sigterm_and_sigint_stop_an_ingest_cleanly_and_say_what_was_stored(logs,
     check_consistent(store, reference, logs, N_FILES - 1)
 
 
+@pytest.mark.slow
 def test_sigterm_in_mid_transaction_finishes_that_file_and_counts_it(logs, reference, tmp_path):
     """The signal arrives while a2.csv's trips are half inserted: its transaction is
     finished (not rolled back), it is reported, and nothing after it is written."""
@@ -201,9 +204,10 @@ def _trip_masses(store: Path) -> int:
         con.close()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("sig,code", [(signal.SIGINT, 130), (signal.SIGTERM, 143)], ids=["SIGINT", "SIGTERM"])
 def test_a_signal_after_the_last_file_says_the_manifest_was_not_applied(logs, manifest, tmp_path, sig, code):
-    """Issue 27: a signal after the last file but before the manifest's masses are
+    """A signal after the last file but before the manifest's masses are
     written said "6 of 6 files done ... 0 not done", and nothing of the masses. The line
     (and the JSON object) says the manifest was not applied; the exit code is the
     signal's; a new run applies it."""
@@ -226,6 +230,7 @@ def test_a_signal_after_the_last_file_says_the_manifest_was_not_applied(logs, ma
     assert _trip_masses(store) == N_FILES
 
 
+@pytest.mark.slow
 def test_a_signal_after_the_summary_does_not_make_a_finished_run_interrupted(logs, manifest, tmp_path):
     """A SIGINT that arrives once the run is finished and its summary printed stops
     nothing: the exit code is the run's (0), the summary stands, and one line says the

@@ -1,4 +1,4 @@
-"""SIGTERM and SIGINT stop every long-running command the same way (issue 24): exit 143 or
+"""SIGTERM and SIGINT stop every long-running command the same way: exit 143 or
 130, one line that says so, no traceback, no process of the command left, the store as it
 was. Each command is a real ``cevm`` process in a session of its own, stopped with a real
 signal while it is certainly in the middle of its work (tests/stall.py holds it there:
@@ -29,8 +29,8 @@ SCENARIO = ROOT / "configs" / "fleet" / "paper-case-study.toml"
 
 # (command, where it is held, whether worker processes run beside it)
 COMMANDS = [
-    (("calibrate", "-v", DIESEL, "--vehicle-id", "HGV-77", "--out", "{tmp}/out.toml"), "cevm.core.calibration:select",
-     False),
+    (("calibrate", "-v", DIESEL, "--vehicle-id", "HGV-77", "--out", "{tmp}/out.toml"),
+     "cevm.core.calibration.estimator:select", False),
     (("predict", "-v", BUS, "--vehicle-id", "EB-09", "-f", "csv"), "cevm.cli.predict:PredictWriter.add", False),
     (("predict", "-v", BUS, "--vehicle-id", "EB-09", "--workers", "2", "-f", "csv"),
      "cevm.cli.predict:PredictWriter.add", True),
@@ -77,6 +77,7 @@ CASES = [(*c, signal.SIGTERM) for c in COMMANDS] + [(*c, signal.SIGINT) for c in
                                                     if c[0][0] in ("calibrate", "store", "trips") or c[2]]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("args, where, workers, sig", CASES,
                          ids=[" ".join(map(str, c[0][:2])) + (" --workers 2" if c[2] else "") + f" {c[3].name}"
                               for c in CASES])

@@ -198,6 +198,7 @@ def test_profile_round_trip_precision():
     assert float(np.float32(lat[0])) != lat[0]
 
 
+@pytest.mark.slow
 @settings(max_examples=40, deadline=None)
 @given(
     n=st.integers(0, 40),
@@ -262,7 +263,7 @@ def test_profiles_of_format_1_still_decode_and_format_2_is_smaller():
 
 
 def test_a_profile_header_claiming_too_many_samples_is_refused_before_decompressing():
-    """Issue 24: a blob whose header says 10^9 samples (damaged, with a valid CRC) must
+    """A blob whose header says 10^9 samples (damaged, with a valid CRC) must
     not make a reader allocate gigabytes: refused from the header."""
     import json as _json
     import struct
@@ -545,20 +546,20 @@ def test_exception_mid_write_leaves_store_unchanged(store, db, tmp_path, monkeyp
         if at == stage:
             raise RuntimeError(f"crash at {at}")
 
-    monkeypatch.setattr(store_mod.trips, "_checkpoint", boom)
+    monkeypatch.setattr(store_mod.tripstore, "_checkpoint", boom)
     with pytest.raises(RuntimeError, match="crash at"):
         put(store, path, "a_v2")
     with pytest.raises(RuntimeError, match="crash at"):
         put(store, tmp_path / "new.csv", "new")
     assert snapshot(db) == before
     assert not store.con.in_transaction
-    monkeypatch.setattr(store_mod.trips, "_checkpoint", lambda at: None)
+    monkeypatch.setattr(store_mod.tripstore, "_checkpoint", lambda at: None)
     assert put(store, path, "a_v2").inserted == 3  # the store is still usable
 
 
 KILL_CHILD = """
 import sys, time
-import cevm.store.trips as st
+import cevm.store.tripstore as st
 from test_store import put
 
 def stall(stage):
@@ -573,6 +574,7 @@ print("NOT KILLED", flush=True)
 """
 
 
+@pytest.mark.slow
 def test_sigkill_mid_transaction_leaves_store_unchanged(store, db, tmp_path):
     path = tmp_path / "a.csv"
     put(store, path, "a_v1")
@@ -628,6 +630,7 @@ print("DONE", t_start, time.time(), flush=True)
 """
 
 
+@pytest.mark.slow
 def test_concurrent_processes_never_duplicate_or_corrupt(db, tmp_path):
     n_children = 3
     script = tmp_path / "concurrent_child.py"
@@ -735,6 +738,7 @@ def test_runs_are_recorded(store):
 # --------------------------------------------------------------------------- throughput
 
 
+@pytest.mark.slow
 def test_bulk_insert_is_one_statement_per_table_not_per_trip(store, tmp_path, monkeypatch):
     """A file's trips are written in bulk: the statements the store sends (execute and
     executemany calls) do not grow with the number of trips, so 2,000 trips cost what a

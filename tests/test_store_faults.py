@@ -20,7 +20,7 @@ from pathlib import Path
 import pytest
 from typer.testing import CliRunner
 
-import cevm.store.trips as trips_module
+import cevm.store.tripstore as trips_module
 from fleet_store import BUS, DIESEL, URBAN, make_store
 
 runner = CliRunner()
@@ -102,6 +102,7 @@ READERS = [
 ]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("seed", range(6))
 def test_damaged_pages_are_named_never_a_traceback_and_never_written_into(fleet, seed):
     db, ids = fleet
@@ -121,6 +122,7 @@ def test_damaged_pages_are_named_never_a_traceback_and_never_written_into(fleet,
     assert db.read_bytes() == before  # refused before the first write
 
 
+@pytest.mark.slow
 def test_a_file_that_is_not_a_database_is_named_so_by_every_command(tmp_path):
     db = tmp_path / "s.sqlite"
     db.write_bytes(b"hello, not a database\n" * 400)
@@ -144,6 +146,7 @@ def garble(db: Path, sql: str, *args) -> None:
     con.close()
 
 
+@pytest.mark.slow
 def test_damaged_blobs_are_skipped_by_batch_readers_and_refused_by_name(fleet, tmp_path):
     db, ids = fleet
     bus_a, bus_b, bus_ok = ids["EB-09"]
@@ -202,6 +205,7 @@ def test_damaged_blobs_are_skipped_by_batch_readers_and_refused_by_name(fleet, t
     assert snapshot(db) == before
 
 
+@pytest.mark.slow
 def test_a_damaged_route_leg_is_named_by_route(fleet):
     db, ids = fleet
     garble(db, "UPDATE route_legs SET profile = randomblob(300) WHERE route = 'R1' AND kind = 'cycle'")
@@ -286,6 +290,7 @@ def comparable(args, stdout: str, path: Path):
     return stdout.replace(str(path), "STORE")
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("how", ["chattr-file", "chattr-dir", "mount", "chmod-file", "chmod-dir"])
 def test_read_only_store_reads_and_refuses_writes_in_one_line(fleet, how, tmp_path):
     db, ids = fleet
@@ -344,6 +349,7 @@ def small_tmpfs(where: Path, size: str = "4m"):
         subprocess.run(["umount", str(where)], check=True)
 
 
+@pytest.mark.slow
 def test_a_full_disk_is_one_line_and_the_store_as_it_was(fleet, tmp_path):
     db, ids = fleet
     with small_tmpfs(tmp_path / "small") as small:
@@ -376,6 +382,7 @@ main()
 """
 
 
+@pytest.mark.slow
 def test_a_file_size_limit_is_one_line_and_the_store_as_it_was(fleet, tmp_path):
     """The same through RLIMIT_FSIZE in a subprocess (no root needed): the -wal file may not
     grow past 16 kB, so the first large write fails."""
@@ -395,6 +402,7 @@ def test_a_file_size_limit_is_one_line_and_the_store_as_it_was(fleet, tmp_path):
 # --------------------------------------------------------------------------------- locked
 
 
+@pytest.mark.slow
 def test_locked_past_the_busy_timeout_is_one_line_and_the_store_as_it_was(fleet, monkeypatch):
     db, ids = fleet
     before = snapshot(db)

@@ -18,7 +18,8 @@ from cevm.core.cycle import DriveCycle, cycle_vector
 from cevm.core.trip import TRIP_EVIDENCE_FIELDS, Measurement, Trip
 from cevm.errors import CevmError
 from cevm.store import SCHEMA_VERSION, TripStore, encode_profile
-from cevm.store.routes import encode_cycle_profile, load_route_legs
+from cevm.store.codec import encode_cycle_profile
+from cevm.store.routes import load_route_legs
 
 # The layout of schema version 1 as cevm 0.1 wrote it, verbatim (not taken from the code
 # under test: this is what stores out there hold).

@@ -1,4 +1,4 @@
-"""Tables never cut a number (issue 27): the layout of cli/output.py on its own, and every
+"""Tables never cut a number: the layout of cli/output.py on its own, and every
 command that prints a table run in a pseudo-terminal of 80 and 120 columns and piped:
 no ellipsis, no line wider than the terminal, and every number of the CSV either in the
 table whole or its column named as left out."""
@@ -166,9 +166,10 @@ URBAN = str(ROOT / "configs/cycles/urban-bus.csv")
 REGIONAL = str(ROOT / "configs/cycles/regional-delivery.csv")
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("cols", [80, 120, None], ids=["80", "120", "piped"])
 def test_predict_payload_sweep_table(cols):
-    # issue 27: at 80 columns this printed 13,5...
+    # at 80 columns this once printed 13,5...
     args = ["predict", "-v", BUS, "-c", URBAN, "-p", "0,4500"]
     out, err, code = run(args, cols)
     assert code == 0, err
@@ -178,9 +179,10 @@ def test_predict_payload_sweep_table(cols):
                                       "distance_km": 2})
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("cols", [80, 120, None], ids=["80", "120", "piped"])
 def test_predict_stored_trips_table(cols, twizy_store):
-    # issue 27: the stored-trip table needs ~180 columns and lost its energy and error columns
+    # the stored-trip table needs ~180 columns and once lost its energy and error columns
     args = ["predict", "-v", TWIZY, "--vehicle-id", "RSK-Twizy", "--store", str(twizy_store)]
     out, err, code = run(args, cols)
     assert code == 0, err
@@ -191,6 +193,7 @@ def test_predict_stored_trips_table(cols, twizy_store):
         assert word in out
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("cols", [80, 120, None], ids=["80", "120", "piped"])
 def test_feasibility_and_fleet_tables(cols):
     out, err, code = run(["feasibility", "-v", BUS, "-v", HGV, "-c", URBAN, "-c", REGIONAL, "-p", "3000"], cols)
@@ -203,8 +206,9 @@ def test_feasibility_and_fleet_tables(cols):
     assert "54.37" in table_cells(out)
 
 
+@pytest.mark.slow
 def test_a_redirected_table_is_whole(tmp_path):
-    # issue 27: a table redirected to a file was cut at about 128 columns
+    # a table redirected to a file was once cut at about 128 columns
     path = tmp_path / "t.txt"
     with path.open("w") as fh:
         res = subprocess.run([sys.executable, "-m", "cevm", "predict", "-v", BUS, "-v", HGV, "-v", TWIZY, "-c", URBAN,

@@ -16,11 +16,10 @@ from cevm.core.timetable.driving import (
     SHARE_LEVELS,
     SHRINK_N0,
     driving_prior,
-    fit_driving,
-    learn_driving,
     measure_driving,
     params_from_measures,
 )
+from cevm.core.timetable.learning import fit_driving, learn_driving
 from cevm.core.timetable.synthesis import synthesise_trip, timetable_from_log
 from conftest import shared_or_skip
 

@@ -19,12 +19,16 @@ The public API, by what it is for:
 - cycles and predictions: :class:`DriveCycle`, :func:`drive_cycle_vector`,
   :class:`CycleVector`, :class:`Vehicle`, :func:`predict`, :class:`Prediction`;
 - files: :func:`load_vehicle`, :func:`load_vehicles`, :func:`read_cycle_csv`;
-- calibration: :class:`TripData`, :func:`fit`, :class:`CalibrationResult`;
+- calibration: :class:`Calibrator` (scikit-learn's shape: ``Calibrator(vehicle, ...)
+  .fit(trips)``, then ``.vehicle_``, ``.terms_``, ``.cv_results_``, ``.predict(cycles)``
+  with intervals; a store's trips from :func:`trips_for_calibration`), :class:`TripData`,
+  :class:`CalibrationResult`, and :func:`fit` (one forced term set, as a function);
 - fleet predictions: :class:`Source`, :class:`PredictionSet`, :func:`sweep`,
   :func:`feasibility`;
 - fleet assignment: :func:`load_scenario`, :func:`plan`;
 - the detailed time-step model: :func:`simulate`;
-- logger data: :class:`TripStore` (the SQLite trip store), :class:`IngestOptions` (the
+- logger data: :class:`TripStore` (the SQLite trip store), :func:`trips_for_calibration`
+  (a vehicle's stored trips as a calibration's input), :class:`IngestOptions` (the
   pipeline itself is :func:`cevm.ingest.ingest`);
 - errors: :class:`CevmError`, :class:`InputError`;
 - :func:`tune_allocator`, for long sweeps in your own program (the CLI calls it).
@@ -54,6 +58,7 @@ _PUBLIC = {
     "load_vehicle": "cevm.io.vehicles",
     "load_vehicles": "cevm.io.vehicles",
     "read_cycle_csv": "cevm.io.cycles",
+    "Calibrator": "cevm.core.calibration",
     "TripData": "cevm.core.calibration",
     "fit": "cevm.core.calibration",
     "CalibrationResult": "cevm.core.calibration",
@@ -64,7 +69,8 @@ _PUBLIC = {
     "load_scenario": "cevm.io.scenario",
     "plan": "cevm.core.assignment",
     "simulate": "cevm.core.detailed",
-    "TripStore": "cevm.store.trips",
+    "TripStore": "cevm.store.tripstore",
+    "trips_for_calibration": "cevm.store.calibration",
     "IngestOptions": "cevm.ingest.task",
     "CevmError": "cevm.errors",
     "InputError": "cevm.errors",

@@ -15,5 +15,5 @@ def main() -> None:
     cli_main()
 
 
-if __name__ == "__main__":
+if __name__ == "__main__":  # importing this module (pkgutil, the API reference's autosummary) runs nothing
     main()

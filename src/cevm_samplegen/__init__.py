@@ -167,8 +167,8 @@ from cevm_samplegen.consumption import (
     standin_consumption,
 )
 from cevm_samplegen.fleet import (
-    _BUS_KERB,
-    _HGV_KERB,
+    BUS_KERB_KG,
+    HGV_KERB_KG,
     SAMPLE_FLEET,
     SMALL_FLEET,
     ConsumptionFn,
@@ -191,7 +191,7 @@ from cevm_samplegen.world import (
     route_dsm_summary,
     write_dsm_tiles,
 )
-from cevm_samplegen.writers import _Counters, _portal_file, _srf_file, _transformer
+from cevm_samplegen.writers import Counters, bng_to_wgs84, portal_file, srf_file
 
 __all__ = [
     "SAMPLE_FLEET",
@@ -248,13 +248,13 @@ def _write(path: Path, data: bytes, gz: bool) -> Path:
 
 
 def _write_srf(outdir: Path, world: World, fleet: FleetSpec, truth, seed: int) -> tuple[list[dict], list[dict]]:
-    transformer = _transformer()
+    transformer = bng_to_wgs84()
     files, records = [], []
     for veh in fleet.srf_vehicles:
-        state = _Counters()
+        state = Counters()
         for day_index, date in enumerate(fleet.srf_dates):
             trips = truth[veh.vehicle_id][day_index]
-            data, recs, info = _srf_file(world, veh, trips, date, state, fleet, seed, transformer)
+            data, recs, info = srf_file(world, veh, trips, date, state, fleet, seed, transformer)
             gz = (veh.vehicle_id, day_index) in fleet.gzip_files
             path = _write(outdir / "srf" / f"{veh.vehicle_id}_{date}.csv", data, gz)
             rel = path.relative_to(outdir).as_posix()
@@ -309,7 +309,7 @@ def generate_sample_logs(outdir: str | Path, consumption_fn: ConsumptionFn = sta
     world, truth = simulate_fleet(fleet, consumption_fn, seed)
     files, records = _write_srf(outdir, world, fleet, truth, seed)
     if fleet.portal_vehicles:
-        data, precs, pinfo = _portal_file(world, fleet, truth, seed, _transformer())
+        data, precs, pinfo = portal_file(world, fleet, truth, seed, bng_to_wgs84())
         dates = sorted({d for ds in fleet.portal_dates.values() for d in ds})
         # the night duty's first trip starts the evening before its first date
         first = min(datetime.fromtimestamp(r["start_utc_s"], UTC).date().isoformat() for r in precs)
@@ -377,7 +377,7 @@ def fleet_for_benchmark(n_vehicles: int, n_days: int, outdir: str | Path, *, see
         if full_days:
             duty = f"{duty}-day"
         vid = f"BM-{i + 1:03d}"
-        vehicles.append(VehicleSpec(vid, vt, duty, route, _BUS_KERB if vt == "electric-bus" else _HGV_KERB,
+        vehicles.append(VehicleSpec(vid, vt, duty, route, BUS_KERB_KG if vt == "electric-bus" else HGV_KERB_KG,
                                     flowmeter=(i % 8 == 2), fuel_counter_start_l=1000.0 * (i + 1),
                                     energy_counter_start_kwh=500.0 * (i + 1)))
     d0 = datetime.fromisoformat(first_date)

@@ -18,7 +18,7 @@ BNG = "EPSG:27700"
 WGS84 = "EPSG:4326"
 
 
-def _rng(seed: int, *keys: object) -> np.random.Generator:
+def seeded_rng(seed: int, *keys: object) -> np.random.Generator:
     """An independent, reproducible generator for ``(seed, *keys)`` (strings hashed with
     CRC-32, never Python's salted ``hash``)."""
     ints = [int(seed)] + [k if isinstance(k, int) else zlib.crc32(str(k).encode()) for k in keys]

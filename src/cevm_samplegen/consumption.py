@@ -91,7 +91,7 @@ DRIVER_MAX_WHEEL_POWER_W: dict[str, float] = {
 MEASUREMENT_KIND = {"electric-bus": "energy_j", "diesel-hgv": "fuel_l"}
 
 
-def _wheel_power_w(p: StandInParams, dt_s, v0, v1, dh_m, mass_kg) -> np.ndarray:
+def wheel_power_w(p: StandInParams, dt_s, v0, v1, dh_m, mass_kg) -> np.ndarray:
     """Mean wheel power [W] over steps: kinetic (with rotating mass), potential, rolling
     and aerodynamic work divided by the step duration."""
     vm = 0.5 * (v0 + v1)
@@ -181,7 +181,7 @@ def standin_consumption(kind: str, time_s, speed_mps, elevation_m, mass_kg: floa
                         conditions: TripConditions) -> Consumption:
     """STAND-IN consumption for tests and trial runs: cumulative per sample, from 0.
 
-    Per step, wheel power P_w [W] from longitudinal dynamics (:func:`_wheel_power_w`).
+    Per step, wheel power P_w [W] from longitudinal dynamics (:func:`wheel_power_w`).
     ``"electric-bus"`` -> joules at the battery: P_b = P_w / drive_eff + drive_loss_w when
     P_w > 0, else max(P_w, -regen_max_w) * regen_eff; plus aux_w and the cabin's HVAC.
     So the efficiency varies with load (low at light load) and regeneration is partial.
@@ -197,7 +197,7 @@ def standin_consumption(kind: str, time_s, speed_mps, elevation_m, mass_kg: floa
     _check_kind(kind, t.size, conditions)
     p = STANDIN[kind]
     dt = np.diff(t)
-    pw = _wheel_power_w(p, dt, v[:-1], v[1:], np.diff(h), float(mass_kg))
+    pw = wheel_power_w(p, dt, v[:-1], v[1:], np.diff(h), float(mass_kg))
     cab = _cabin(kind, t, v, conditions)
     if kind == "electric-bus":
         pb = np.where(pw > 0, pw / p.drive_eff + p.drive_loss_w, np.maximum(pw, -p.regen_max_w) * p.regen_eff)

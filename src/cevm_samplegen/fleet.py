@@ -11,7 +11,7 @@ from datetime import UTC, datetime
 import numpy as np
 
 from cevm.units import M_PER_MILE, MPS_TO_KMH, S_PER_H
-from cevm_samplegen.common import DEFAULT_SEED, _rng
+from cevm_samplegen.common import DEFAULT_SEED, seeded_rng
 from cevm_samplegen.consumption import (
     DRIVER_MAX_WHEEL_POWER_W,
     STANDIN,
@@ -193,8 +193,8 @@ class FleetSpec:
         return day_weather(date, seed, forced)
 
 
-_BUS_KERB = 9000.0
-_HGV_KERB = 18000.0
+BUS_KERB_KG = 9000.0
+HGV_KERB_KG = 18000.0
 
 #: The cold snap at the end of January 2019 (frost, clear) and the heat of late July and
 #: late August 2019: the days that make the heating and the air conditioning work.
@@ -207,24 +207,24 @@ SAMPLE_WEATHER = (
 
 SAMPLE_FLEET = FleetSpec(
     srf_vehicles=(
-        VehicleSpec("EB-01", "electric-bus", "bus-logged", "bus-1", _BUS_KERB, energy_counter_start_kwh=48213.7,
+        VehicleSpec("EB-01", "electric-bus", "bus-logged", "bus-1", BUS_KERB_KG, energy_counter_start_kwh=48213.7,
                     ambient_bias_k=0.4),
-        VehicleSpec("EB-02", "electric-bus", "bus-logged", "bus-2", _BUS_KERB, energy_counter_start_kwh=51977.2,
+        VehicleSpec("EB-02", "electric-bus", "bus-logged", "bus-2", BUS_KERB_KG, energy_counter_start_kwh=51977.2,
                     ambient_bias_k=-0.3),
-        VehicleSpec("HGV-11", "diesel-hgv", "regional", "regional", _HGV_KERB, flowmeter=True,
+        VehicleSpec("HGV-11", "diesel-hgv", "regional", "regional", HGV_KERB_KG, flowmeter=True,
                     fuel_counter_start_l=96310.5, ecu_fuel_bias=1.03, wheel_speed_scale=1.015, ambient_bias_k=0.7,
                     schedule=(("regional", "regional"), ("urban", "bus-2"), ("regional", "regional"),
                               ("urban", "bus-1"), ("regional", "regional"), ("urban", "bus-2"))),
-        VehicleSpec("HGV-21", "diesel-hgv", "longhaul", "trunk", _HGV_KERB, fuel_counter_start_l=1843210.5,
+        VehicleSpec("HGV-21", "diesel-hgv", "longhaul", "trunk", HGV_KERB_KG, fuel_counter_start_l=1843210.5,
                     ambient_bias_k=-0.2,
                     schedule=(("longhaul", "trunk"), ("regional", "regional"), ("longhaul", "trunk"),
                               ("longhaul", "trunk"), ("regional", "regional"), ("longhaul", "trunk"))),
     ),
     srf_dates=("2019-01-31", "2019-02-01", "2019-04-10", "2019-05-15", "2019-07-25", "2019-08-27"),
     portal_vehicles=(
-        VehicleSpec("KX19 LMR", "diesel-hgv", "regional", "regional", _HGV_KERB, fuel_counter_start_l=212344.0,
+        VehicleSpec("KX19 LMR", "diesel-hgv", "regional", "regional", HGV_KERB_KG, fuel_counter_start_l=212344.0,
                     odometer_start_m=287041.3 * M_PER_MILE),
-        VehicleSpec("KX19 LMT", "diesel-hgv", "night", "trunk", _HGV_KERB, fuel_counter_start_l=418870.5,
+        VehicleSpec("KX19 LMT", "diesel-hgv", "night", "trunk", HGV_KERB_KG, fuel_counter_start_l=418870.5,
                     odometer_start_m=402118.8 * M_PER_MILE),
     ),
     portal_dates={"KX19 LMR": ("2019-10-25", "2019-10-26", "2019-10-28"),
@@ -237,17 +237,17 @@ SAMPLE_FLEET = FleetSpec(
 
 SMALL_FLEET = FleetSpec(
     srf_vehicles=(
-        VehicleSpec("EB-01", "electric-bus", "bus-short", "bus-1", _BUS_KERB, energy_counter_start_kwh=48213.7,
+        VehicleSpec("EB-01", "electric-bus", "bus-short", "bus-1", BUS_KERB_KG, energy_counter_start_kwh=48213.7,
                     ambient_bias_k=0.4),
-        VehicleSpec("HGV-11", "diesel-hgv", "truck-short", "regional", _HGV_KERB, flowmeter=True,
+        VehicleSpec("HGV-11", "diesel-hgv", "truck-short", "regional", HGV_KERB_KG, flowmeter=True,
                     fuel_counter_start_l=1843210.5, ecu_fuel_bias=1.03, wheel_speed_scale=1.015, ambient_bias_k=0.7,
                     schedule=(("truck-short", "regional"), ("urban-short", "bus-1"))),
     ),
     srf_dates=("2019-01-31", "2019-07-25"),
     portal_vehicles=(
-        VehicleSpec("KX19 LMR", "diesel-hgv", "truck-short", "regional", _HGV_KERB, fuel_counter_start_l=212344.0,
+        VehicleSpec("KX19 LMR", "diesel-hgv", "truck-short", "regional", HGV_KERB_KG, fuel_counter_start_l=212344.0,
                     odometer_start_m=287041.3 * M_PER_MILE),
-        VehicleSpec("KX19 LMT", "diesel-hgv", "night-short", "regional", _HGV_KERB, fuel_counter_start_l=418870.5,
+        VehicleSpec("KX19 LMT", "diesel-hgv", "night-short", "regional", HGV_KERB_KG, fuel_counter_start_l=418870.5,
                     odometer_start_m=402118.8 * M_PER_MILE),
     ),
     portal_dates={"KX19 LMR": ("2019-10-26",), "KX19 LMT": ("2019-10-27",)},
@@ -416,7 +416,7 @@ def simulate_day(world: World, veh: VehicleSpec, day_index: int, date: str, cons
     """The truth trips of one vehicle-day (each day starts at the route's s = 0)."""
     duty_name, route_name = veh.duty_on(day_index)
     duty = DUTIES[duty_name]
-    rng = _rng(seed, "day", veh.vehicle_id, date)
+    rng = seeded_rng(seed, "day", veh.vehicle_id, date)
     n_trips = int(rng.integers(duty.trips_per_day[0], duty.trips_per_day[1] + 1))
     loads = _day_loads(duty, n_trips, rng)
     start = _utc_midnight_s(date) + round(rng.uniform(*duty.first_start_utc_h) * S_PER_H)

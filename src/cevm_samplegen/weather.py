@@ -37,7 +37,7 @@ from datetime import UTC, datetime
 import numpy as np
 
 from cevm.units import S_PER_H
-from cevm_samplegen.common import _rng
+from cevm_samplegen.common import seeded_rng
 
 _GRID_S = 60.0
 _DAY_S = 86400.0
@@ -171,7 +171,7 @@ def day_weather(date: str, seed: int, forced: ForcedDay | None = None, climate: 
     ``forced`` gives it. Pure: the same arguments give the same weather."""
     day = datetime.fromisoformat(date).replace(tzinfo=UTC)
     doy = float(day.timetuple().tm_yday)
-    rng = _rng(seed, "weather", date)
+    rng = seeded_rng(seed, "weather", date)
     anomaly = float(rng.normal(0.0, climate.anomaly_sd_k))
     cloud = float(rng.beta(2.6, 1.4))
     n = int(2.0 * _DAY_S / _GRID_S) + 1

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from cevm_samplegen.common import BNG, DEFAULT_SEED, WORLD_ORIGIN_EN, _rng
+from cevm_samplegen.common import BNG, DEFAULT_SEED, WORLD_ORIGIN_EN, seeded_rng
 
 
 @dataclass(frozen=True, eq=False)
@@ -37,7 +37,7 @@ def make_terrain(seed: int) -> Terrain:
     """Eight waves, wavelengths log-uniform in 0.7-16 km, random directions, amplitude =
     grade x wavelength / 2 pi with grade uniform in 0.4-1.2 %; base 95 m (Milton Keynes
     lies at 60-150 m)."""
-    rng = _rng(seed, "terrain")
+    rng = seeded_rng(seed, "terrain")
     n = 8
     lam = np.exp(rng.uniform(np.log(700.0), np.log(16000.0), n))
     theta = rng.uniform(0.0, np.pi, n)
@@ -279,7 +279,7 @@ def _place_objects(seed: int, terrain: Terrain, routes: dict[str, Route], dsm: D
 
     for name in sorted(routes):
         route = routes[name]
-        rng = _rng(seed, "objects", name)
+        rng = seeded_rng(seed, "objects", name)
         bsp, tsp, trees_per_km, n_bridges = _DENSITY.get(name, _DENSITY["regional"])
         inside = _in_box(route.x_m, route.y_m, box, 200.0)
         if not inside.any():
@@ -318,7 +318,7 @@ def _place_objects(seed: int, terrain: Terrain, routes: dict[str, Route], dsm: D
         H["cy"].append(y)
         H["r"].append(rng.uniform(3.0, 8.0, m))
     # Off-road holes (water, voids): about one per km^2 of the survey box.
-    rng = _rng(seed, "holes")
+    rng = seeded_rng(seed, "holes")
     area_km2 = (box[2] - box[0]) * (box[3] - box[1]) / 1e6
     m = max(1, int(round(area_km2)))
     H["cx"].append(rng.uniform(box[0], box[2], m))

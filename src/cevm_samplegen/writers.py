@@ -9,8 +9,8 @@ from datetime import UTC, datetime
 import numpy as np
 
 from cevm.units import J_PER_KWH, M_PER_MILE, MPH_TO_MPS, MPS_TO_KMH, RAD_S_PER_RPM, S_PER_H
-from cevm_samplegen.common import BNG, GEOID_UNDULATION_M, WGS84, _rng
-from cevm_samplegen.consumption import STANDIN, _wheel_power_w
+from cevm_samplegen.common import BNG, GEOID_UNDULATION_M, WGS84, seeded_rng
+from cevm_samplegen.consumption import STANDIN, wheel_power_w
 from cevm_samplegen.csvfmt import assemble, iso_utc_ms, num_field, text_field, uk_local
 from cevm_samplegen.fleet import FleetSpec, TruthTrip, VehicleSpec
 from cevm_samplegen.world import World
@@ -101,7 +101,7 @@ def _round_q(x, q):
     return np.round(np.asarray(x) / q) * q
 
 
-def _transformer():
+def bng_to_wgs84():
     import pyproj
 
     return pyproj.Transformer.from_crs(BNG, WGS84, always_xy=True)
@@ -114,7 +114,7 @@ def _fms_common(veh: VehicleSpec, tr: TruthTrip, at: dict, rng: np.random.Genera
     v0, v1 = tr.speed_mps[k], tr.speed_mps[k + 1]
     acc = v1 - v0  # the grid step is 1 s
     dh = tr.elevation_m[k + 1] - tr.elevation_m[k]
-    pw = _wheel_power_w(p, 1.0, v0, v1, dh, tr.mass_kg)
+    pw = wheel_power_w(p, 1.0, v0, v1, dh, tr.mass_kg)
     v = at["speed"]
     n = v.size
     out = {}
@@ -166,7 +166,7 @@ def conditions_record(tr: TruthTrip, t_first: float, t_last: float) -> dict:
 
 
 @dataclass
-class _Counters:
+class Counters:
     """Running state of one vehicle across its days: cumulative true consumption."""
 
     consumption: float = 0.0
@@ -258,10 +258,10 @@ def _srf_assemble(veh: VehicleSpec, cols: tuple[str, ...], blocks: list[dict], r
     return data, info
 
 
-def _srf_file(world: World, veh: VehicleSpec, trips: list[TruthTrip], date: str, state: _Counters, fleet: FleetSpec,
+def srf_file(world: World, veh: VehicleSpec, trips: list[TruthTrip], date: str, state: Counters, fleet: FleetSpec,
               seed: int, transformer) -> tuple[bytes, list[dict], dict]:
     """One srf session file: (bytes, truth records of its trips, file record)."""
-    rng = _rng(seed, "srf", veh.vehicle_id, date)
+    rng = seeded_rng(seed, "srf", veh.vehicle_id, date)
     is_bus = veh.vehicle_type == "electric-bus"
     cols: tuple[str, ...] = SRF_BUS_COLUMNS if is_bus else SRF_TRUCK_COLUMNS
     if not is_bus and not veh.flowmeter:
@@ -369,10 +369,10 @@ PORTAL_COLUMNS = ("Registration", "Date/Time", "Latitude", "Longitude", "Speed (
                   "Ignition", "Event")
 
 
-def _portal_vehicle(world: World, veh: VehicleSpec, days: list[list[TruthTrip]], state: _Counters, seed: int,
+def _portal_vehicle(world: World, veh: VehicleSpec, days: list[list[TruthTrip]], state: Counters, seed: int,
                     transformer) -> tuple[dict[str, np.ndarray], list[dict]]:
     """Rows of one vehicle (time order) and truth records of its trips."""
-    rng = _rng(seed, "portal", veh.vehicle_id)
+    rng = seeded_rng(seed, "portal", veh.vehicle_id)
     rows: dict[str, list[np.ndarray]] = {k: [] for k in ("t", "x", "y", "speed_mph", "odo", "fuel", "ign", "event")}
     records = []
     trips = [tr for day in days for tr in day]
@@ -448,13 +448,13 @@ def _portal_vehicle(world: World, veh: VehicleSpec, days: list[list[TruthTrip]],
     return out, records
 
 
-def _portal_file(world: World, fleet: FleetSpec, truth: dict[str, list[list[TruthTrip]]], seed: int,
+def portal_file(world: World, fleet: FleetSpec, truth: dict[str, list[list[TruthTrip]]], seed: int,
                  transformer) -> tuple[bytes, list[dict], dict]:
     """The portal export of all portal vehicles: (cp1252 bytes, truth records, file record)."""
     per = []
     records = []
     for veh in sorted(fleet.portal_vehicles, key=lambda v: v.vehicle_id):
-        rows, recs = _portal_vehicle(world, veh, truth[veh.vehicle_id], _Counters(odometer_m=veh.odometer_start_m),
+        rows, recs = _portal_vehicle(world, veh, truth[veh.vehicle_id], Counters(odometer_m=veh.odometer_start_m),
                                      seed, transformer)
         per.append((veh, rows))
         records.extend(recs)

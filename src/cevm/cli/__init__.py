@@ -17,7 +17,9 @@ this package's app, nor each other; the library never imports the command line.
 ``app`` (the whole command line) is made on first use; :func:`main` makes one with only
 the command it was asked for when its first argument names one (:func:`make_app`): the
 other commands' modules are not imported nor their options built, a tenth of a second of
-every command's start.
+every command's start. For the same reason a command's module imports the library it
+runs (pandas, SciPy, the store, matplotlib) inside the command function, not at its top:
+``cevm X --help`` and the parsing of its options load none of it.
 """
 
 from __future__ import annotations

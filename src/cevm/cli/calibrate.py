@@ -87,8 +87,7 @@ def calibrate(
     never saw its day, with an interval (--interval), and the summary says how many of
     them it holds. In-sample and cross-validated errors: the paper's tables 1 and 2 for
     your fleet."""
-    from cevm.core.calibration import fit as fit_vehicle
-    from cevm.core.calibration import select
+    from cevm.core.calibration import Calibrator, term
     from cevm.io import load_vehicle
     from cevm.io.calibrated import calibration_table, write_calibrated_vehicle
     from cevm.io.plots import plot_calibration
@@ -110,7 +109,6 @@ def calibrate(
     path = existing_store(store)
     if ice_braking is not None and ice_braking not in ICE_BRAKING_MODES:
         raise fail(f"--ice-braking must be one of: {', '.join(ICE_BRAKING_MODES)}")
-    selection = None
     try:
         veh = load_vehicle(vehicle)
         if ice_braking is not None:
@@ -119,17 +117,11 @@ def calibrate(
             veh = dataclasses.replace(veh, ice_braking=ice_braking)
         with TripStore.open(path, readonly=True) as st:
             sel = trips_for_calibration(st, vehicle_id, veh)
-        if forced:
-            result = fit_vehicle(veh, sel.trips, ["eta", *forced], cv_folds=cv_folds,
-                                 max_rel_uncertainty=max_rel_uncertainty, vehicle_id=vehicle_id, interval=interval)
-        else:
-            from cevm.core.calibration import term
-
-            names = [term(veh, t).name for t in allowed] if allowed else None
-            selection = select(veh, sel.trips, terms=names, cv_folds=cv_folds,
-                               max_rel_uncertainty=max_rel_uncertainty, nested=nested, vehicle_id=vehicle_id,
-                               interval=interval)
-            result = selection.result
+        cal = Calibrator(veh, fit_terms=["eta", *forced] if forced else None,
+                         terms=[term(veh, t).name for t in allowed] if allowed else None, nested=nested,
+                         cv_folds=cv_folds, max_rel_uncertainty=max_rel_uncertainty, vehicle_id=vehicle_id,
+                         interval=interval).fit(sel.trips)
+        result, selection = cal.result_, cal.selection_
         if out is not None:
             table = calibration_table(
                 result, store=str(path), selected_from=None if selection is None else len(selection.candidates),

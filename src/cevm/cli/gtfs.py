@@ -92,7 +92,8 @@ def _mass(o: SimpleNamespace, vehicle) -> tuple[float, str]:
 
 
 def _driving(o: SimpleNamespace, vehicle):
-    from cevm.core.timetable.driving import driving_prior, learn_driving
+    from cevm.core.timetable.driving import driving_prior
+    from cevm.core.timetable.learning import learn_driving
 
     prior = driving_prior(vehicle.vehicle_class)
     if not o.vehicle_id:

@@ -167,7 +167,7 @@ def _fmt(value: Any, digits: int) -> str:
 
 # ------------------------------------------------------------------ fitting a table
 #
-# One table layout for every command (issue 27: a table never cuts a number). The
+# One table layout for every command (a table never cuts a number: 13,5 read at 80 columns was 13,500 cut). The
 # widths are decided here, not by rich (which cuts cells with an ellipsis when a table
 # is wider than the console): each column's narrowest width is its longest cell
 # (identifiers and numbers never wrap; free text wraps between words, so no word is

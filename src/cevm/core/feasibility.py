@@ -38,7 +38,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from cevm.core import distribution, limits, physical_inputs
-from cevm.core.predictive import Features, predictive
+from cevm.core.predictive import Features, posterior_of, predictive
 from cevm.core.sweep import (
     AMBIENT_ORIGINS,
     DEFAULT_RESERVE_PCT,
@@ -172,8 +172,6 @@ class _LoadFunction:
 
     def source_of(self, v: int) -> str:
         """Where vehicle ``v``'s uncertainty comes from (posterior, prior, none)."""
-        from cevm.core.predictive import posterior_of
-
         post = posterior_of(self.vehicles[v])
         return "none" if post is None else post.label
 

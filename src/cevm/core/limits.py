@@ -29,7 +29,7 @@ What a source asks (:class:`Demand`, once per source, for any vehicle):
 
 **Logged traces** (stored trips and routes: a vehicle drove them, and a logger measured
 them) are held to the vehicle's limits with the tolerance of the measurement, so that a
-vehicle's own logs are not flagged for their noise (issue 27):
+vehicle's own logs are not flagged for their noise (predict once flagged over_power where feasibility said feasible):
 
 - a logged speed may read high: a speedometer or wheel-speed signal by up to
   :data:`SPEED_READING_HIGH_FRACTION` + :data:`SPEED_READING_HIGH_KMH` (UN ECE
@@ -58,7 +58,7 @@ import numpy as np
 from cevm.units import KMH_TO_MPS
 
 if TYPE_CHECKING:  # the sweep imports this module: no import back at run time
-    from cevm.core.sweep.profiles import LegProfile, StepTable
+    from cevm.core.sweep.steptable import LegProfile, StepTable
     from cevm.core.vehicle import Vehicle
 
 #: The window over which the power a source asks is averaged [s]: a drivetrain delivers

@@ -136,13 +136,20 @@ def wheel_energy_j(
 ) -> np.ndarray | np.float64:  # np.float64 for Python scalar arguments (the fast path)
     """Wheel energy E_DC = E_DC1 + E_DC2 over the cycle [J] (eq. 22, 24/27, 25/30).
 
-    Parameters (broadcast together)
+    The parameters: broadcast together.
+
+    Parameters
     ----------
-    vector : the cycle's :class:`~cevm.core.cycle.CycleVector`
-    mass_kg : vehicle mass m [kg], > 0
-    cda_m2 : drag area CdA [m^2], >= 0
-    cr : rolling-resistance coefficient [-], >= vector.cr0
-    negative_weight : w applied to negative non-simplified steps: 1 for the paper's ICE
+    vector
+        the cycle's :class:`~cevm.core.cycle.CycleVector`
+    mass_kg
+        vehicle mass m [kg], > 0
+    cda_m2
+        drag area CdA [m^2], >= 0
+    cr
+        rolling-resistance coefficient [-], >= vector.cr0
+    negative_weight
+        w applied to negative non-simplified steps: 1 for the paper's ICE
         (eq. 24), 0 for an ICE with no braking credit, eta^2 for an EV (eq. 29)
     """
     if all(isinstance(x, (float, int)) for x in (mass_kg, cda_m2, cr, negative_weight)):

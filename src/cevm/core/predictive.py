@@ -54,7 +54,7 @@ from cevm.core.uncertainty import Posterior, Scatter, coefficient_prior, extrapo
 from cevm.core.vehicle import Vehicle, default_ambient_c
 
 #: The relative step of the CdA and Cr derivatives of :meth:`Features.of` (and of
-#: :func:`cevm.core.replay.trips.trip_energies`).
+#: :func:`cevm.core.replay.trip_energies.trip_energies`).
 SPEC_STEP = 1e-6
 
 

@@ -27,15 +27,11 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import ArrayLike
 
 from cevm.core.terms import TERMS_BY_POWERTRAIN
-
-if TYPE_CHECKING:
-    from cevm.core.vehicle import Vehicle
 
 #: z of a two-sided 95 % range: a prior range [low, high] is mean +- Z95 standard deviations.
 Z95 = 1.959963984540054
@@ -189,22 +185,6 @@ class Posterior:
 
 
 # ----------------------------------------------------------------- coefficients
-
-
-def coefficient(vehicle: Vehicle, term: str) -> float:
-    """The coefficient of ``term`` at the vehicle's values (module notes); NaN for an EV's
-    regeneration tied to eta."""
-    if term == "eta":
-        return 1.0 / float(vehicle.eta)
-    if term == "kin":
-        return 0.0 if vehicle.kinetic_eta is None else 1.0 / vehicle.kinetic_eta - 1.0 / vehicle.eta
-    if term == "regen":
-        return math.nan if vehicle.regen_eta is None else float(vehicle.regen_eta)
-    return float(getattr(vehicle, TERMS_BY_POWERTRAIN[(vehicle.powertrain, term)].field))
-
-
-def coefficients(vehicle: Vehicle, terms: Sequence[str]) -> np.ndarray:
-    return np.array([coefficient(vehicle, t) for t in terms], dtype=np.float64)
 
 
 def value_jacobian(terms: Sequence[str], coef: np.ndarray) -> np.ndarray:

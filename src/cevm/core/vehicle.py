@@ -17,6 +17,8 @@ power up to 200 kW, fuel rates up to 50-100 l/h, rated power 0.1-5,000 kW, top s
 
 from __future__ import annotations
 
+import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from typing import Literal
 
@@ -30,6 +32,7 @@ from cevm.core.model import (
     braking_weight,
     wheel_energy_j,
 )
+from cevm.core.terms import TERMS_BY_POWERTRAIN
 from cevm.core.uncertainty import Posterior, Priors
 
 Powertrain = Literal["ev", "ice"]
@@ -255,6 +258,25 @@ PLAUSIBLE: dict[str, tuple[float, float, str]] = {
     "max_power_kw": (0.1, 5_000.0, "kW"),
     "max_speed_kmh": (5.0, 400.0, "km/h"),
 }
+
+def coefficient(vehicle: Vehicle, term: str) -> float:
+    """The coefficient of ``term`` at the vehicle's values (the model is linear in its
+    coefficients, :mod:`cevm.core.uncertainty`): 1/eta for eta, 1/eta_k - 1/eta for the
+    kinetic term, the field's own value for the others; NaN for an EV's regeneration
+    tied to eta."""
+    if term == "eta":
+        return 1.0 / float(vehicle.eta)
+    if term == "kin":
+        return 0.0 if vehicle.kinetic_eta is None else 1.0 / vehicle.kinetic_eta - 1.0 / vehicle.eta
+    if term == "regen":
+        return math.nan if vehicle.regen_eta is None else float(vehicle.regen_eta)
+    return float(getattr(vehicle, TERMS_BY_POWERTRAIN[(vehicle.powertrain, term)].field))
+
+
+def coefficients(vehicle: Vehicle, terms: Sequence[str]) -> np.ndarray:
+    """:func:`coefficient` of each of ``terms``."""
+    return np.array([coefficient(vehicle, t) for t in terms], dtype=np.float64)
+
 
 def default_ambient_c(vehicle: Vehicle) -> tuple[float, str]:
     """The ambient temperature [degC] of a prediction that gives none, and where it

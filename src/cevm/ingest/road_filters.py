@@ -8,17 +8,23 @@ ramps pass unchanged) and the grade bound (:func:`bound_grade`). Split from
 from __future__ import annotations
 
 from functools import lru_cache
-from typing import TYPE_CHECKING
+from typing import Protocol
 
 import numpy as np
 from scipy import ndimage
 from scipy.fft import next_fast_len
 
-if TYPE_CHECKING:
-    from cevm.ingest.elevation import ElevationParams
 
-__all__ = ["FFT_MIN_TAPS", "bound_grade", "bound_grade_or_same", "gaussian_valid", "gaussian_weights", "odd_pad",
-           "runs", "smooth_profile"]
+class SmoothingParams(Protocol):
+    """What :func:`smooth_profile` reads of :class:`cevm.ingest.elevation.ElevationParams`
+    (a protocol, so that this module need not import the one that imports it)."""
+
+    median_window_m: float
+    spike_threshold_m: float
+    lowpass_sigma_m: float
+
+__all__ = ["FFT_MIN_TAPS", "SmoothingParams", "bound_grade", "bound_grade_or_same", "gaussian_valid",
+           "gaussian_weights", "odd_pad", "runs", "smooth_profile"]
 
 
 def odd_pad(x: np.ndarray, r: int) -> np.ndarray:
@@ -37,7 +43,7 @@ def odd_pad(x: np.ndarray, r: int) -> np.ndarray:
     return out
 
 
-def smooth_profile(h: np.ndarray, step: float, params: ElevationParams) -> np.ndarray:
+def smooth_profile(h: np.ndarray, step: float, params: SmoothingParams) -> np.ndarray:
     """Robust smoothing of a gap-free uniform profile with spacing ``step`` [m].
 
     A running median of ``median_window_m`` is the reference ground; cells further than

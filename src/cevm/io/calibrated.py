@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 import tomlkit
 
+from cevm import __version__
 from cevm.core.calibration import TERMS_BY_POWERTRAIN, CalibrationResult
 from cevm.core.calibration.terms import EXTRA_TERMS
 from cevm.errors import CevmError
@@ -160,8 +161,6 @@ def calibration_table(result: CalibrationResult, *, store: str | None = None, se
                       nested_std_pct: float | None = None, compared: int | None = None) -> dict:
     """The ``[calibration]`` table of the calibrated file, in file units (see
     :class:`cevm.core.vehicle.FitDomain`, which reads it back)."""
-    from cevm import __version__
-
     d = result.domain
     if d is None:
         raise ValueError("a calibration result without its fit domain")

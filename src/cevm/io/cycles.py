@@ -55,6 +55,7 @@ import difflib
 import fnmatch
 import math
 import re
+import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -77,7 +78,7 @@ from cevm.units import FT_TO_M, KMH_TO_MPS, MPH_TO_MPS, S_PER_H
 
 #: Highest speed of a cycle [km/h]: above every road vehicle a fleet runs (production
 #: cars are mostly limited to 250 km/h; EU speed limiters hold trucks to 90 and buses to
-#: 100 km/h). The cycle at 99,999 km/h of issue 17 is refused here.
+#: 100 km/h). A cycle at 99,999 km/h (a unit mistake a user made) is refused here.
 MAX_SPEED_KMH = 300.0
 #: Largest acceleration or deceleration between two samples [m/s^2], about 1.5 g: more
 #: than tyre grip on a dry road allows any road vehicle (friction coefficient about
@@ -662,8 +663,6 @@ def _check_grade_unit(layout: CsvLayout, col: int, g_raw: np.ndarray, factor: fl
     """A warning (:class:`CycleWarning`) for a grade column read in % whose values all
     stay below :data:`FLAT_GRADE_MAX_PCT` over at least
     :data:`FLAT_GRADE_MIN_DISTANCE_M` of road: likelier fractions, which % flattens."""
-    import warnings
-
     if factor != 0.01 or not np.any(g_raw != 0):
         return
     distance = float(np.sum(0.5 * (v[1:] + v[:-1]) * dt))

@@ -47,6 +47,7 @@ import re
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
+from zoneinfo import ZoneInfo, ZoneInfoNotFoundError
 
 from cevm.errors import InputError
 from cevm.io.inputs import CSV_FIELD_BYTES, check_size, csv_reason, open_regular
@@ -195,8 +196,6 @@ def parse_zone(tz: str | None) -> dt.tzinfo | None:
     if m:
         sign = 1 if m.group(1) == "+" else -1
         return dt.timezone(sign * dt.timedelta(hours=int(m.group(2)), minutes=int(m.group(3))))
-    from zoneinfo import ZoneInfo, ZoneInfoNotFoundError
-
     try:
         return ZoneInfo(tz.strip())
     except (ZoneInfoNotFoundError, ValueError):

@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING, Any, cast
 import numpy as np
 
 from cevm.errors import OutputError, os_error_text
+from cevm.io.outputs import OutFile
 from cevm.text import printable
 
 if TYPE_CHECKING:
@@ -27,6 +28,7 @@ PLOT_MAX_LINES = 12
 
 def _figure(figsize: tuple[float, float]):
     """A new figure of ``figsize`` [in] on its own Agg canvas (PNG), outside pyplot."""
+    # matplotlib (0.3 s) is imported when a figure is drawn, never by importing cevm.io
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
@@ -120,8 +122,6 @@ def save_figure(fig, path) -> None:
     :class:`~cevm.errors.OutputError` naming the file (exit 3), and leaves no half-written
     file. The figure goes to a file cevm opened, not to a path: matplotlib, given a path,
     wrote to ``/dev/full`` without a word."""
-    from cevm.io.outputs import OutFile
-
     fmt = Path(path).suffix.lstrip(".").lower() or "png"
     try:
         with OutFile(path, binary=True) as fh:

@@ -48,8 +48,9 @@ from cevm.core.uncertainty import (
     ScatterPrior,
     TermPrior,
     coefficient_covariance,
-    coefficients,
+    value_covariance,
 )
+from cevm.core.vehicle import coefficients
 from cevm.errors import InputError
 from cevm.io.toml import read_toml
 from cevm.units import J_PER_KWH
@@ -325,8 +326,6 @@ def _round(x: float) -> float:
 
 def posterior_table(posterior: Posterior, vehicle) -> dict:
     """The ``[posterior]`` table (file units) of a calibrated vehicle."""
-    from cevm.core.uncertainty import value_covariance
-
     pt = vehicle.powertrain
     terms = posterior.terms
     coef = coefficients(vehicle, terms)

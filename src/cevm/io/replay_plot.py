@@ -22,6 +22,7 @@ def plot_duties(path: Path, *, vehicle: list[str], start_s: np.ndarray, energy: 
     """Duties' energies [``unit``] at their start dates, with their intervals (``low``,
     ``high``), a cross where a duty does not complete; lines at the ``usable`` energy
     (the start level) and at what is usable above the reserve."""
+    # matplotlib (0.3 s) is imported when a figure is drawn, never by importing cevm.io
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 

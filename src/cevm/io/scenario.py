@@ -49,6 +49,7 @@ from cevm.core.assignment import (
 )
 from cevm.core.assignment.verdict import LegDemand, reference_differences, vehicle_verdicts, verdict_warnings
 from cevm.core.cycle import CycleVector, drive_cycle_vector
+from cevm.core.predictive import posterior_of
 from cevm.core.vehicle import Vehicle
 from cevm.errors import FileAccessError, InputError
 from cevm.io.cycles import CycleFormat, read_cycle_csv
@@ -435,11 +436,9 @@ def _payloads(path: Path, data: dict, n_days: int) -> dict[str, tuple[float, ...
 
 def _day_temperatures(path: Path, value, n_days: int) -> tuple[float | None, ...]:
     """``ambient_c`` of a scenario: one temperature [degC] per day, or one for all."""
-    from cevm.core.energy import AMBIENT_RANGE_C
-
     if value is None:
         return ()
-    lo, hi = AMBIENT_RANGE_C
+    lo, hi = energy.AMBIENT_RANGE_C
     vals = value if isinstance(value, list) else [value] * n_days
     if len(vals) != n_days:
         raise InputError(path, f"ambient_c has {len(vals)} values for {n_days} days")
@@ -528,8 +527,6 @@ def read_reference(path: Path, sc: Scenario) -> dict | None:
 
 def _interval_from(vehicle: Vehicle) -> str:
     """posterior, prior or none: what a vehicle's probabilities come from."""
-    from cevm.core.predictive import posterior_of
-
     post = posterior_of(vehicle)
     return "none" if post is None else post.label
 

@@ -76,6 +76,7 @@ from __future__ import annotations
 import difflib
 import math
 from collections.abc import Sequence
+from dataclasses import replace
 from pathlib import Path
 from typing import Any, Literal, overload
 
@@ -83,7 +84,9 @@ from cevm.core import energy
 from cevm.core.model import ICE_BRAKING_DEFAULT, ICE_BRAKING_MODES
 from cevm.core.vehicle import PLAUSIBLE, FitDomain, Vehicle
 from cevm.errors import InputError
+from cevm.io.priors import posterior_from_mapping, priors_from_mapping, with_prior_values
 from cevm.io.toml import read_toml
+from cevm.text import printable
 from cevm.units import J_PER_KWH, J_PER_MJ, S_PER_H
 
 _COMMON_KEYS = {
@@ -178,9 +181,6 @@ def vehicle_from_mapping(data: dict[str, Any], source: str = "<vehicle>", *,
     :class:`~cevm.errors.InputError` naming ``source`` and the key for a missing,
     unknown, out-of-range or implausible key (:data:`cevm.core.vehicle.PLAUSIBLE`).
     """
-    from dataclasses import replace
-
-    from cevm.io.priors import posterior_from_mapping, priors_from_mapping, with_prior_values
 
     v = _vehicle_values(data, source, default_id=default_id)
     if "detailed" in data:  # one rule in every command: what simulate refuses, predict does not take
@@ -353,8 +353,6 @@ def fit_domain_from_mapping(table: Any, source: str = "<vehicle>") -> FitDomain 
 def stem_id(path: str | Path) -> str:
     """The id a vehicle file without an ``id`` key gets: its stem, with any control
     character escaped (a file name cannot forge output)."""
-    from cevm.text import printable
-
     return printable(Path(path).stem)
 
 

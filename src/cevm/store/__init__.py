@@ -8,7 +8,7 @@
 - :mod:`~cevm.store.writing`: a source file's trips written in one transaction, failures,
   forgotten files, ingest runs;
 - :mod:`~cevm.store.queries`: files, trips, vectors, profiles and runs read back;
-- :mod:`~cevm.store.trips`: :class:`TripStore`, the connection that composes the three
+- :mod:`~cevm.store.tripstore`: :class:`TripStore`, the connection that composes the three
   (read-write, or read-only for the commands that only read);
 - :mod:`~cevm.store.failures`: SQLite's errors as the store's (damaged, could not be
   written) and the damaged trips and routes;
@@ -32,7 +32,7 @@ from cevm.store.location import (
     file_key,
     resolve_store_path,
 )
-from cevm.store.trips import SCHEMA_VERSION, FileState, TripStore, WriteResult, format_trips, format_utc
+from cevm.store.tripstore import SCHEMA_VERSION, FileState, TripStore, WriteResult, format_trips, format_utc
 
 __all__ = [
     "NO_STORE_HINT",

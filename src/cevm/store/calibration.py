@@ -22,7 +22,7 @@ from cevm.errors import CevmError
 from cevm.store.failures import DamagedTripError
 from cevm.store.masses import trip_masses
 from cevm.store.queries import row_measurement
-from cevm.store.trips import TripStore
+from cevm.store.tripstore import TripStore
 
 
 @dataclass(frozen=True)

@@ -1,6 +1,7 @@
 """The stored form of a trip's profile arrays: one compact BLOB per trip
 (:func:`encode_profile`, :func:`decode_profile`), made by ingest's workers
-(:func:`trip_profile_blob`) so that the store's single writer does not.
+(:func:`trip_profile_blob`) so that the store's single writer does not; and a route's
+cycle leg (:func:`encode_cycle_profile`, :func:`decode_cycle_profile`).
 
 Decoding is bounded before any decompression: a profile's header says how many samples
 it holds, and a header above :data:`MAX_PROFILE_SAMPLES` (or, where the caller knows it,
@@ -24,7 +25,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from cevm.core.cycle import CycleVector
+from cevm.core.cycle import CycleVector, DriveCycle
 from cevm.core.trip import Trip
 from cevm.errors import CevmError
 
@@ -171,6 +172,45 @@ def decode_profile(blob: bytes, n_samples: int | None = None) -> dict[str, np.nd
         del raw
         out[name] = a.astype(np.float64)
     return out
+
+
+#: The stored form of a route's cycle leg (:mod:`cevm.store.routes`): time, speed and
+#: elevation as given, not a logged trip's profile.
+_CYCLE_PROFILE_MAGIC = b"CEVMRTP1"
+
+
+def encode_cycle_profile(cycle: DriveCycle) -> bytes:
+    """Lossless BLOB of a cycle's time [s], speed [m/s] and elevation [m]: ``b"CEVMRTP1"``,
+    a little-endian uint32 sample count and uint32 flag (1: with elevation), then the
+    zlib-compressed (level 6) float64 arrays one after another. A flat cycle stores no
+    elevation. Raw arrays rather than an npz: decoding is a ``frombuffer``."""
+    t = np.ascontiguousarray(cycle.time_s, dtype="<f8")
+    parts = [t, np.ascontiguousarray(cycle.speed_mps, dtype="<f8")]
+    if cycle.elevation_m is not None:
+        parts.append(np.ascontiguousarray(cycle.elevation_m, dtype="<f8"))
+    head = struct.pack("<II", t.size, int(cycle.elevation_m is not None))
+    return _CYCLE_PROFILE_MAGIC + head + zlib.compress(b"".join(a.tobytes() for a in parts), 6)
+
+
+def decode_cycle_profile(blob: bytes) -> dict[str, np.ndarray]:
+    """Inverse of :func:`encode_cycle_profile`, as a profile dict (keys of
+    :data:`cevm.store.PROFILE_DTYPES`): distance is the trapezoidal cumulative distance
+    [m], elevation zeros for a flat cycle, latitude and longitude NaN."""
+    blob = bytes(blob)
+    if not blob.startswith(_CYCLE_PROFILE_MAGIC):
+        raise CevmError("corrupt cycle profile in a route (bad magic); re-create the route")
+    n, has_h = struct.unpack_from("<II", blob, len(_CYCLE_PROFILE_MAGIC))
+    check_samples(n)  # before inflating: a bomb's header is refused
+    if has_h not in (0, 1):
+        raise CevmError("corrupt cycle profile in a route (bad flag); re-create the route")
+    body = blob[len(_CYCLE_PROFILE_MAGIC) + 8 :]
+    raw = np.frombuffer(inflate_exactly(body, 8 * n * (3 if has_h else 2)), dtype="<f8")
+    t = raw[:n].astype(np.float64)
+    v = raw[n : 2 * n].astype(np.float64)
+    h = raw[2 * n :].astype(np.float64) if has_h else np.zeros(n)
+    dist = np.concatenate([[0.0], np.cumsum(0.5 * (v[1:] + v[:-1]) * np.diff(t))])
+    nan = np.broadcast_to(np.float64(np.nan), (n,))  # read-only, no memory: a cycle has no positions
+    return {"time_s": t, "speed_mps": v, "distance_m": dist, "elevation_m": h, "lat_deg": nan, "lon_deg": nan}
 
 
 def check_samples(n: int, expected: int | None = None) -> None:

@@ -1,5 +1,5 @@
 """Stored trips' 1 Hz speed series, the input of
-:func:`cevm.core.timetable.driving.learn_driving`: read one profile at a time (each
+:func:`cevm.core.timetable.learning.learn_driving`: read one profile at a time (each
 decoded, its time and speed kept, the rest dropped), at most ``max_trips`` of them, so
 that memory stays at one decoded profile plus the kept series (16 bytes a sample)."""
 
@@ -11,7 +11,7 @@ import numpy as np
 
 from cevm.errors import CevmError
 from cevm.store.failures import DamagedTripError
-from cevm.store.trips import TripStore
+from cevm.store.tripstore import TripStore
 
 
 def driving_trip_ids(store: TripStore, vehicle_ids: Sequence[str], *, max_trips: int = 500) -> list[str]:

@@ -13,7 +13,7 @@ from cevm.store.codec import decode_vector
 from cevm.store.failures import StoreDamagedError
 from cevm.store.routes import load_route_legs, route_names
 from cevm.store.schema import SCHEMA_VERSION, TRIP_COLUMNS
-from cevm.store.trips import TripStore
+from cevm.store.tripstore import TripStore
 
 
 @dataclass(frozen=True)

@@ -35,7 +35,7 @@ import numpy as np
 
 from cevm.errors import CevmError
 from cevm.store.schema import in_json
-from cevm.store.trips import TripStore
+from cevm.store.tripstore import TripStore
 
 #: A given mass and the logged gross weight of a trip that differ by more than this
 #: fraction of the logged one are reported.

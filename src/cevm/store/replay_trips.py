@@ -4,7 +4,7 @@
 Positions: where each trip starts and ends (for charging at named places and finding a
 depot) come from :func:`trip_positions`, the one place that reads them: from the trips'
 ``start_lat_deg`` / ``start_lon_deg`` / ``end_lat_deg`` / ``end_lon_deg`` columns where
-the store has them (the ingest of issue 22 adds them), else from each trip's stored
+the store has them (ingest stores them since the store's evidence columns), else from each trip's stored
 profile (its first and last valid GPS fix: one profile read per trip, about 2 ms).
 """
 
@@ -25,7 +25,7 @@ from cevm.core.sweep import LegProfile, StepTable, build_step_table
 from cevm.errors import CevmError
 from cevm.store.failures import DamagedTripError
 from cevm.store.masses import trip_masses
-from cevm.store.trips import TripStore
+from cevm.store.tripstore import TripStore
 
 #: The trips' position columns, once the store has them.
 POSITION_COLUMNS = ("start_lat_deg", "start_lon_deg", "end_lat_deg", "end_lon_deg")

@@ -29,9 +29,7 @@ import fnmatch
 import hashlib
 import json
 import re
-import struct
 import time
-import zlib
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -41,12 +39,11 @@ import numpy as np
 from cevm.core.cycle import CR0_DEFAULT, CycleVector, DriveCycle, cycle_vector
 from cevm.errors import CevmError, InputError
 from cevm.store import TripStore
-from cevm.store.codec import check_samples, decode_vector, inflate_exactly
+from cevm.store.codec import decode_cycle_profile, decode_vector, encode_cycle_profile
 from cevm.store.failures import DamagedRouteError
 from cevm.store.schema import blob_crc32
 
 _NAME_RE = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,99}\Z")
-_PROFILE_MAGIC = b"CEVMRTP1"
 
 # ------------------------------------------------------------------------ leg inputs
 
@@ -78,7 +75,7 @@ class CycleLeg:
         """The legs of a cycle file, one per cycle it holds (:func:`cevm.io.cycles.read_cycles`
         with the :class:`~cevm.io.cycles.CycleFormat` ``fmt``, at most ``max_samples``
         samples; ``one``: exactly one), each with the file's hash."""
-        from cevm.io.cycles import read_cycle_csv, read_cycles
+        from cevm.io.cycles import read_cycle_csv, read_cycles  # here: the cycle reader only when a route is added
 
         cycles = [read_cycle_csv(path, fmt)] if one else read_cycles(path, fmt, max_samples=max_samples)
         p = Path(path)
@@ -140,39 +137,6 @@ def check_route_name(name: str) -> str:
         raise InputError("route name", f"{name!r} is not a valid route name: use 1-100 letters, digits, '.', '_' "
                                        "or '-', starting with a letter or digit")
     return name
-
-
-def encode_cycle_profile(cycle: DriveCycle) -> bytes:
-    """Lossless BLOB of a cycle's time [s], speed [m/s] and elevation [m]: ``b"CEVMRTP1"``,
-    a little-endian uint32 sample count and uint32 flag (1: with elevation), then the
-    zlib-compressed (level 6) float64 arrays one after another. A flat cycle stores no
-    elevation. Raw arrays rather than an npz: decoding is a ``frombuffer``."""
-    t = np.ascontiguousarray(cycle.time_s, dtype="<f8")
-    parts = [t, np.ascontiguousarray(cycle.speed_mps, dtype="<f8")]
-    if cycle.elevation_m is not None:
-        parts.append(np.ascontiguousarray(cycle.elevation_m, dtype="<f8"))
-    head = struct.pack("<II", t.size, int(cycle.elevation_m is not None))
-    return _PROFILE_MAGIC + head + zlib.compress(b"".join(a.tobytes() for a in parts), 6)
-
-
-def decode_cycle_profile(blob: bytes) -> dict[str, np.ndarray]:
-    """Inverse of :func:`encode_cycle_profile`, as a profile dict (keys of
-    :data:`cevm.store.PROFILE_DTYPES`): distance is the trapezoidal cumulative distance
-    [m], elevation zeros for a flat cycle, latitude and longitude NaN."""
-    blob = bytes(blob)
-    if not blob.startswith(_PROFILE_MAGIC):
-        raise CevmError("corrupt cycle profile in a route (bad magic); re-create the route")
-    n, has_h = struct.unpack_from("<II", blob, len(_PROFILE_MAGIC))
-    check_samples(n)  # before inflating: a bomb's header is refused (cevm.store.codec)
-    if has_h not in (0, 1):
-        raise CevmError("corrupt cycle profile in a route (bad flag); re-create the route")
-    raw = np.frombuffer(inflate_exactly(blob[len(_PROFILE_MAGIC) + 8 :], 8 * n * (3 if has_h else 2)), dtype="<f8")
-    t = raw[:n].astype(np.float64)
-    v = raw[n : 2 * n].astype(np.float64)
-    h = raw[2 * n :].astype(np.float64) if has_h else np.zeros(n)
-    dist = np.concatenate([[0.0], np.cumsum(0.5 * (v[1:] + v[:-1]) * np.diff(t))])
-    nan = np.broadcast_to(np.float64(np.nan), (n,))  # read-only, no memory: a cycle has no positions
-    return {"time_s": t, "speed_mps": v, "distance_m": dist, "elevation_m": h, "lat_deg": nan, "lon_deg": nan}
 
 
 def _checked_blob(route: str, part: str, blob: bytes, crc: int | None) -> bytes:

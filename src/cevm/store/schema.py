@@ -2,7 +2,8 @@
 migrations (:data:`MIGRATIONS`, applied when a store is opened: :func:`ensure_schema`),
 and how Python values are kept in its columns.
 
-Tables
+Tables::
+
     ``meta``       key/value: ``schema_version``, ``created_utc_s``, ``cevm_version``.
     ``files``      one row per source file, keyed on its resolved absolute path: content
                    sha256 of the version last seen, size, mtime, logger profile, status
@@ -57,6 +58,7 @@ import numpy as np
 from cevm import __version__
 from cevm.core.trip import TRIP_EVIDENCE_FIELDS
 from cevm.errors import CevmError
+from cevm.store.codec import decode_vector
 
 #: A trip's state at its start (migration 6): the state of charge its log holds there [%]
 #: (NULL where the log has none), and the time the vehicle stood since the end of its
@@ -427,8 +429,6 @@ def upgrade_trip_vector(vector: bytes, profile: bytes, decode) -> bytes:
     """A vector blob in format 3: ``vector`` with the k_pos and traction_s of the cycle in
     ``profile`` (decoded by ``decode`` into time_s, speed_mps, elevation_m arrays); an
     undecodable pair is left as it was (``cevm store check`` names it)."""
-    from cevm.store.codec import decode_vector
-
     try:
         vec = decode_vector(vector)  # bounded: a zip of version 1 by its declared sizes
         if vec.has_trip_sums:

@@ -31,7 +31,7 @@ from cevm.store.routes import (
     load_route_vector,
     resolve_route_patterns,
 )
-from cevm.store.trips import TripStore
+from cevm.store.tripstore import TripStore
 
 
 @dataclass(frozen=True, eq=False)

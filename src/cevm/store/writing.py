@@ -255,25 +255,36 @@ class TripWriting:
 
         Parameters
         ----------
-        path : the source file; keyed on its resolved absolute path (:func:`file_key`),
+        path
+            the source file; keyed on its resolved absolute path (:func:`file_key`),
             which is also stored as each trip's ``source_file``.
-        trips : the file's trips (or their :class:`~cevm.core.trip.TripRecord`, with
+        trips
+            the file's trips (or their :class:`~cevm.core.trip.TripRecord`, with
             ``profile_blobs``); every ``trip.source_sha256`` must equal ``sha256``.
-        vectors : the drive-cycle vector bytes of each trip, same order (opaque here).
-        sha256 : hex sha256 of the file's content.
-        size_bytes, mtime_s : file size [bytes] and modification time [s since epoch],
+        vectors
+            the drive-cycle vector bytes of each trip, same order (opaque here).
+        sha256
+            hex sha256 of the file's content.
+        size_bytes, mtime_s
+            file size [bytes] and modification time [s since epoch],
             kept so a caller can skip hashing unchanged files.
-        profile : name of the logger profile used.
-        force : default False; True rewrites even if this version is already stored
+        profile
+            name of the logger profile used.
+        force
+            default False; True rewrites even if this version is already stored
             (e.g. after a DSM or cevm update).
-        profile_blobs : each trip's :func:`trip_profile_blob`, same order, if made
+        profile_blobs
+            each trip's :func:`trip_profile_blob`, same order, if made
             already (by a worker); default None: made here.
 
-        Returns a :class:`WriteResult`. If the same path and sha256 are already stored
-        with status ``'ok'`` (checked inside the write lock, so two processes racing on
-        one file write it once), nothing is written and ``unchanged`` is True. Trips
-        whose trip_id is already stored from another path are skipped and listed in
-        ``duplicates``. Any exception rolls the whole file back.
+        Returns
+        -------
+        WriteResult
+            If the same path and sha256 are already stored with status ``'ok'``
+            (checked inside the write lock, so two processes racing on one file write
+            it once), nothing is written and ``unchanged`` is True. Trips whose trip_id
+            is already stored from another path are skipped and listed in
+            ``duplicates``. Any exception rolls the whole file back.
         """
         key = file_key(path)
         trip_rows, blob_rows, ids = _rows(key, trips, vectors, sha256, profile_blobs)

@@ -70,12 +70,11 @@ from cevm.core.assignment.evaluation import (
     Evaluation,
     RouteUse,
     VehicleUse,
-    calibration_warnings,
     default_assignment,
     evaluate,
 )
 from cevm.core.assignment.planning import AUTO_ENUM_LIMIT, ENUM_LIMIT, Plan, plan
-from cevm.core.assignment.reports import table4_rows
+from cevm.core.assignment.reports import calibration_warnings, table4_rows
 from cevm.core.assignment.scenario import (
     BUDGET_RTOL,
     EV_RESERVE_FRACTION_DEFAULT,

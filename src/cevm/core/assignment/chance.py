@@ -39,10 +39,12 @@ import numpy as np
 
 from cevm.core.assignment.scenario import FleetVehicle, Scenario
 from cevm.core.cycle import CycleVector
+from cevm.core.distribution import normal_quantile
 from cevm.core.predictive import (
     Features,
     extrapolation_var,
     gradient_rows,
+    mean,
     posterior_of,
     spec_parts,
     sqrt_cov,
@@ -120,8 +122,6 @@ class DayMoments:
             return
         uniq, inv = np.unique(masses, return_inverse=True)
         f = Features.of(vec, self.v.vehicle, uniq, None if t_day is None else np.full(uniq.size, t_day))
-        from cevm.core.predictive import mean
-
         mu_u = np.broadcast_to(mean(self.v.vehicle, f), uniq.shape)
         g_u = gradient_rows(self.v.vehicle, f, self.post.terms)
         inv = inv.reshape(masses.shape)
@@ -154,9 +154,7 @@ class DayMoments:
 
 
 def z_of(p: float) -> float:
-    from scipy.special import ndtri
-
-    return float(ndtri(p))
+    return normal_quantile(p)
 
 
 def check_level(p: float | None) -> None:

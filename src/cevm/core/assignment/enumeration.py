@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from cevm.core.assignment.chance import DayMoments, budget_of
+from cevm.core.assignment.chance import prob as p_within
 from cevm.core.assignment.curves import quantity
 from cevm.core.assignment.evaluation import objective_weights, vector_groups
 from cevm.core.assignment.problem import DayProblem, over_budget, why_infeasible
@@ -28,8 +30,6 @@ def solve_enumerate(sc: Scenario, prob: DayProblem, min_p_complete: float | None
     fv = sc.vehicle_by_id
     moments = {}
     if min_p_complete is not None:
-        from cevm.core.assignment.chance import DayMoments, budget_of
-
         moments = {v.id: DayMoments(v, n_comb) for v in sc.vehicles if budget_of(v) is not None}
     for ri, r in enumerate(sc.routes):
         v = fv[r.vehicle_id]
@@ -67,9 +67,6 @@ def solve_enumerate(sc: Scenario, prob: DayProblem, min_p_complete: float | None
         if v.energy_budget_j is not None:
             feasible &= vehicle_q[v.id] <= v.energy_budget_j * (1 + BUDGET_RTOL)
         if v.id in moments:
-            from cevm.core.assignment.chance import budget_of
-            from cevm.core.assignment.chance import prob as p_within
-
             budget = budget_of(v)
             if budget is not None:
                 feasible &= p_within(vehicle_q[v.id], moments[v.id].sd(), budget) >= min_p_complete

@@ -1,24 +1,19 @@
 """The exact CE evaluation of one assignment: every leg predicted at the mass it
-carries (:func:`evaluate`), the default assignment savings are measured against, and
-the calibration-domain warnings of a plan."""
+carries (:func:`evaluate`) and the default assignment savings are measured against."""
 
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from itertools import pairwise
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from cevm.core.assignment.curves import quantity
 from cevm.core.assignment.scenario import BUDGET_RTOL, Leg, Route, Scenario
 from cevm.core.cycle import CycleVector
-from cevm.core.vehicle import default_ambient_c, predict
+from cevm.core.vehicle import predict
 from cevm.units import J_PER_KWH
-
-if TYPE_CHECKING:
-    from cevm.core.assignment.planning import Plan
 
 
 @dataclass(frozen=True)
@@ -111,37 +106,6 @@ def vector_groups(legs: Sequence[Leg]) -> list[tuple[CycleVector, list[int]]]:
     for j, leg in enumerate(legs):
         groups.setdefault(id(leg.vector), (leg.vector, []))[1].append(j)
     return list(groups.values())
-
-
-def calibration_warnings(sc: Scenario, plans: Sequence[Plan]) -> list[str]:
-    """Warnings for the fleet's vehicles asked outside what their calibration saw
-    (:func:`cevm.core.vehicle.domain_warnings`; none for a vehicle file that was not
-    calibrated), over ``plans``: the gross masses of the legs each vehicle drives under
-    the chosen assignment, the days' ambient temperatures (the vehicle's default where a
-    day gives none) and the mean speeds of its routes' legs. Each line starts with the
-    fleet's id of the vehicle."""
-    from cevm.core.vehicle import domain_warnings
-
-    masses: dict[str, list[float]] = {}
-    temps: dict[str, list[float]] = {}
-    fv = sc.vehicle_by_id
-    for p in plans:
-        t = sc.ambient_of(sc.day_index(p.day))
-        for vu in p.evaluation.vehicles:
-            masses.setdefault(vu.vehicle_id, []).extend(m for ru in vu.routes for m in ru.leg_mass_kg)
-            veh = fv[vu.vehicle_id].vehicle
-            temps.setdefault(vu.vehicle_id, []).append(float(default_ambient_c(veh)[0]) if t is None else float(t))
-    speeds: dict[str, list[float]] = {}
-    for r in sc.routes:
-        speeds.setdefault(r.vehicle_id, []).extend(
-            leg.vector.distance_m / leg.vector.duration_s for leg in r.legs if leg.vector.duration_s > 0)
-    out: list[str] = []
-    for v in sc.vehicles:
-        if not masses.get(v.id):
-            continue
-        out.extend(f"{v.id}: {w}" for w in domain_warnings(v.vehicle, mass_kg=masses[v.id], ambient_c=temps[v.id],
-                                                            mean_speed_mps=speeds.get(v.id) or None))
-    return out
 
 
 def leg_names(route: Route) -> list[str]:

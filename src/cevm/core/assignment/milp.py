@@ -16,12 +16,12 @@ from typing import Any
 
 import numpy as np
 
+from cevm.core.assignment.chance import MAX_CUTS, p_complete
 from cevm.core.assignment.curves import LegCurve, leg_curve, quantity
-from cevm.core.assignment.evaluation import objective_weights
+from cevm.core.assignment.evaluation import evaluate, objective_weights
 from cevm.core.assignment.problem import DayProblem, over_budget, why_infeasible
 from cevm.core.assignment.scenario import BUDGET_RTOL, Route, Scenario
 from cevm.core.vehicle import predict
-from cevm.units import J_PER_KWH
 
 #: Scaled objective magnitude for the MILP (see the package docstring).
 _MILP_OBJECTIVE_SCALE = 1e3
@@ -204,6 +204,8 @@ class _Rows:
         self.hi.append(ub)
 
     def constraint(self, n_var: int):
+        # SciPy's optimize and sparse are imported when a MILP is solved: 0.2-0.3 s that
+        # enumeration (most plans) and importing the package never pay
         from scipy.optimize import LinearConstraint
         from scipy.sparse import csr_matrix
 
@@ -248,7 +250,7 @@ def constraints(sc: Scenario, prob: DayProblem, xb: Binaries, terms: LegTerms, o
 def _highs(obj: Objective, rows: _Rows, terms: LegTerms, n_x: int, time_limit_s: float | None):
     """HiGHS on the model: binaries in [0, x_ub], epigraph variables free; a relative
     gap of 0 (proven optimal)."""
-    from scipy.optimize import Bounds, milp
+    from scipy.optimize import Bounds, milp  # when solved: see _Rows.constraint
 
     n_t = terms.n_t
     integrality = np.concatenate([np.ones(n_x), np.zeros(n_t)])
@@ -325,9 +327,6 @@ def solve_milp(sc: Scenario, prob: DayProblem, time_limit_s: float | None,
 def _chance_cuts(sc, prob, xb, terms, obj, rows, weights, info, best, p_min, time_limit_s):
     """The no-good cut loop of :mod:`.chance`: until HiGHS's assignment completes every
     budgeted day with probability ``p_min`` (or none is left)."""
-    from cevm.core.assignment.chance import MAX_CUTS, p_complete
-    from cevm.core.assignment.evaluation import evaluate
-
     cuts = 0
     while True:
         ps = p_complete(sc, prob.d, evaluate(sc, prob.d, best))

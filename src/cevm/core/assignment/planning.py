@@ -6,6 +6,7 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass
 
+from cevm.core.assignment.chance import check_level, p_complete
 from cevm.core.assignment.enumeration import solve_enumerate
 from cevm.core.assignment.evaluation import Evaluation, default_assignment, evaluate
 from cevm.core.assignment.milp import solve_milp
@@ -148,8 +149,6 @@ def plan(sc: Scenario, day: str | int, *, method: str = "auto", enum_limit: int 
 
     Raises InputError when no assignment satisfies the limits (the message says why).
     """
-    from cevm.core.assignment.chance import check_level, p_complete
-
     check_level(min_p_complete)
     t0 = time.perf_counter()
     d = sc.day_index(day)

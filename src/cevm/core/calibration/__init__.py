@@ -17,17 +17,23 @@ Modules, in the order a calibration uses them:
 - :mod:`.terms`            the consumption model, linear in the terms' coefficients
 - :mod:`.posterior`        priors x likelihood: the posterior, the trips' scatter
 - :mod:`.identifiability`  which terms the trips can tell
-- :mod:`.plausibility`     which fitted values physics refuses; the standstill evidence
+- :mod:`.fit_plausibility` which fitted values physics refuses; the standstill evidence
 - :mod:`.candidate`        one candidate: balance temperatures, posterior, held-out scatter
 - :mod:`.validation`       grouped folds, error statistics, predictions, timing
 - :mod:`.fitting`          :func:`fit`: one term set, its cross-validated intervals
 - :mod:`.selection`        :func:`select`: the candidates, the one-standard-error choice,
                            nested cross-validation of the procedure
+- :mod:`.options`          :class:`Options`: how trips are screened, folded and reported
+                           (one set, shared by the two above and the estimator)
+- :mod:`.estimator`        :class:`Calibrator`: the calibration in scikit-learn's shape
+                           (``fit(trips)``, ``predict(cycles)`` with intervals)
 - :mod:`.solve`            helpers of the fit (starting values, bounds, value covariance)
 """
 
 from cevm.core.calibration.data import CalibrationError, TripData, TripSet
+from cevm.core.calibration.estimator import Calibrator
 from cevm.core.calibration.fitting import CalibrationResult, fit, fit_domain, predict_trips
+from cevm.core.calibration.options import Options
 from cevm.core.calibration.selection import Candidate, Selection, candidate_sets, select
 from cevm.core.calibration.terms import ALIASES, EXTRA_TERMS, TERMS_BY_POWERTRAIN, Term, term
 from cevm.core.calibration.validation import ErrorStats, TripRow
@@ -39,8 +45,10 @@ __all__ = [
     "TERMS_BY_POWERTRAIN",
     "CalibrationError",
     "CalibrationResult",
+    "Calibrator",
     "Candidate",
     "ErrorStats",
+    "Options",
     "Selection",
     "Term",
     "TripData",

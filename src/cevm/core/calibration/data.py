@@ -33,27 +33,44 @@ class CalibrationError(CevmError):
 class TripData:
     """One trip as the fit sees it.
 
-    trip_id : unique id (e.g. :attr:`cevm.core.trip.Trip.trip_id`)
-    vector : the trip's cached :class:`~cevm.core.cycle.CycleVector`
-    mass_kg : gross mass of the trip [kg]; None: the vehicle's ``mass_kg``
-    measured : measured consumption: litres of fuel (ICE) or joules at the battery (EV);
+    Attributes
+    ----------
+    trip_id
+        unique id (e.g. :attr:`cevm.core.trip.Trip.trip_id`)
+    vector
+        the trip's cached :class:`~cevm.core.cycle.CycleVector`
+    mass_kg
+        gross mass of the trip [kg]; None: the vehicle's ``mass_kg``
+    measured
+        measured consumption: litres of fuel (ICE) or joules at the battery (EV);
         None or NaN when the trip has no measurement
-    uncertainty : 1-sigma error of ``measured``, same unit
-    quality : extra weight factor in (0, 1] (DSM coverage, gaps...), default 1
-    group : key of trips that must stay together in cross-validation (day, route), or None
-    kind : "fuel_l" or "energy_j" when known; checked against the powertrain
-    ambient_c : the trip's mean ambient temperature [degC], None when not logged
-    start_utc_s : start [s since the Unix epoch], None when unknown (ranges only)
-    standstill_s : time at standstill with a measured rate [s] (evidence), None
-    standstill_rate : the measured mean battery power [W] (EV) or fuel rate [l/s] (ICE)
+    uncertainty
+        1-sigma error of ``measured``, same unit
+    quality
+        extra weight factor in (0, 1] (DSM coverage, gaps...), default 1
+    group
+        key of trips that must stay together in cross-validation (day, route), or None
+    kind
+        "fuel_l" or "energy_j" when known; checked against the powertrain
+    ambient_c
+        the trip's mean ambient temperature [degC], None when not logged
+    start_utc_s
+        start [s since the Unix epoch], None when unknown (ranges only)
+    standstill_s
+        time at standstill with a measured rate [s] (evidence), None
+    standstill_rate
+        the measured mean battery power [W] (EV) or fuel rate [l/s] (ICE)
         while standing still: evidence that fitted auxiliary and idle terms are checked
         against, never an input of the model
-    mass_source : where ``mass_kg`` comes from ("logged", "manifest", "vehicle file"...)
-    systematic_uncertainty : the part of ``uncertainty`` that is the meter's calibration
+    mass_source
+        where ``mass_kg`` comes from ("logged", "manifest", "vehicle file"...)
+    systematic_uncertainty
+        the part of ``uncertainty`` that is the meter's calibration
         error, common to every trip it measured (same unit; None: unknown, the whole
         uncertainty is taken as the trip's own); a calibration absorbs it into its
         coefficients, so it is no trip-to-trip scatter but an uncertainty of them all
-    flags : notes on the trip that a calibration reports beside it (e.g. a splice the
+    flags
+        notes on the trip that a calibration reports beside it (e.g. a splice the
         cleaner could not repair)
     """
 

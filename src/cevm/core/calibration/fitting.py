@@ -4,19 +4,20 @@ intervals, and what the fit saw (pure)."""
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from cevm.core import distribution
-from cevm.core.calibration import plausibility
+from cevm.core.calibration import fit_plausibility, identifiability
 from cevm.core.calibration import posterior as post
 from cevm.core.calibration.candidate import CandidateFit, Settings, fit_candidate
 from cevm.core.calibration.data import CalibrationError, TripData, TripSet, select_trips
-from cevm.core.calibration.solve import HUBER_C, condition_number, value_covariance
+from cevm.core.calibration.options import Options
+from cevm.core.calibration.solve import condition_number, value_covariance
 from cevm.core.calibration.terms import TERMS_BY_POWERTRAIN, TermModel, neutral, normalise, with_values
-from cevm.core.calibration.validation import ErrorStats, TripRow, folds, predict_set, time_predictions
+from cevm.core.calibration.validation import ErrorStats, TripRow, folds, predict_one, predict_set, time_predictions
 from cevm.core.uncertainty import Posterior, Priors, Scatter
 from cevm.core.vehicle import FitDomain, Vehicle
 
@@ -31,37 +32,62 @@ PRIOR_KEPT_RATIO = 0.9
 class CalibrationResult:
     """Outcome of :func:`fit` (or the chosen model of :func:`cevm.core.calibration.select`).
 
-    vehicle : the calibrated vehicle (fitted values replaced, the rest as given; with
+    Attributes
+    ----------
+    vehicle
+        the calibrated vehicle (fitted values replaced, the rest as given; with
         :attr:`domain` as its ``calibration`` and :attr:`posterior` as its ``posterior``)
-    terms : the model's terms' short names ("eta", "aux", ...; :mod:`.terms`)
-    fitted : vehicle field -> (value, standard deviation), SI units (eta [-],
+    terms
+        the model's terms' short names ("eta", "aux", ...; :mod:`cevm.core.calibration.terms`)
+    fitted
+        vehicle field -> (value, standard deviation), SI units (eta [-],
         aux_power_w [W], idle_fuel_lps [l/s], cda_m2 [m^2], cr [-], ...): the posterior
         mode and its standard deviation
-    correlation : (field_a, field_b) -> correlation of the two estimates
-    refused : requested term (vehicle field) -> why it was not fitted (a term without a
+    correlation
+        (field_a, field_b) -> correlation of the two estimates
+    refused
+        requested term (vehicle field) -> why it was not fitted (a term without a
         prior the trips cannot identify; kept at the vehicle's value)
-    prior_kept : vehicle field -> why the trips taught the term next to nothing (it is in
+    prior_kept
+        vehicle field -> why the trips taught the term next to nothing (it is in
         the model at its prior)
-    excluded : trip_id -> why the trip was not used
-    rows : one :class:`TripRow` per used trip, with its held-out interval
-    in_sample, cv : error statistics of in-sample and cross-validated predictions
+    excluded
+        trip_id -> why the trip was not used
+    rows
+        one :class:`TripRow` per used trip, with its held-out interval
+    in_sample, cv
+        error statistics of in-sample and cross-validated predictions
         (cv is None when cross-validation was off or impossible)
-    cv_scheme : e.g. "5-fold", "leave-one-out", "grouped 5-fold (12 groups)", "none"
-    interval : the level of the rows' intervals (0.9: 90 %)
-    coverage : nominal level -> share of held-out trips inside their interval at it
-    mean_rel_width_pct : mean width of the rows' held-out intervals [% of measured]
-    posterior : :class:`cevm.core.uncertainty.Posterior` of the coefficients, scatter
-    priors : the :class:`cevm.core.uncertainty.Priors` used (None: none, flat)
-    residual_scale : the in-sample weighted residuals' root mean square
-    condition_number : of the column-normalised weighted Jacobian at the optimum
-    time_per_prediction_s : (mean, std) over trips of the time of one prediction from a
+    cv_scheme
+        e.g. "5-fold", "leave-one-out", "grouped 5-fold (12 groups)", "none"
+    interval
+        the level of the rows' intervals (0.9: 90 %)
+    coverage
+        nominal level -> share of held-out trips inside their interval at it
+    mean_rel_width_pct
+        mean width of the rows' held-out intervals [% of measured]
+    posterior
+        :class:`cevm.core.uncertainty.Posterior` of the coefficients, scatter
+    priors
+        the :class:`cevm.core.uncertainty.Priors` used (None: none, flat)
+    residual_scale
+        the in-sample weighted residuals' root mean square
+    condition_number
+        of the column-normalised weighted Jacobian at the optimum
+    time_per_prediction_s
+        (mean, std) over trips of the time of one prediction from a
         cached vector [s], or None when not timed
-    unit : "l" (ICE fuel) or "J" (EV battery energy)
-    warnings : notes on the fit (parameter at a bound, failed folds, ...)
-    evidence : the fitted standstill rate against the logs' measured one
-        (:func:`.plausibility.evidence`), or None
-    standstill_used : whether the logs' standstill rates were observations of the fit
-    domain : what the fit saw (:class:`cevm.core.vehicle.FitDomain`)
+    unit
+        "l" (ICE fuel) or "J" (EV battery energy)
+    warnings
+        notes on the fit (parameter at a bound, failed folds, ...)
+    evidence
+        the fitted standstill rate against the logs' measured one
+        (:func:`.fit_plausibility.evidence`), or None
+    standstill_used
+        whether the logs' standstill rates were observations of the fit
+    domain
+        what the fit saw (:class:`cevm.core.vehicle.FitDomain`)
     """
 
     vehicle: Vehicle
@@ -129,83 +155,42 @@ def posterior_source(domain: FitDomain) -> str:
     return f"calibrated on {domain.n_trips} trips{who}{when}"
 
 
-def fit(
-    vehicle: Vehicle,
-    trips: Sequence[TripData],
-    params: Sequence[str] = ("eta",),
-    *,
-    priors: Priors | None = None,
-    cv_folds: int = 5,
-    loo_below: int = 10,
-    max_rel_uncertainty: float = 0.10,
-    min_distance_m: float = 1000.0,
-    rel_uncertainty_floor: float = 0.001,
-    max_correlation: float = 0.98,
-    max_rel_se: float = 0.5,
-    time_repeats: int = 20,
-    seed: int = 0,
-    neutral_others: bool = False,
-    vehicle_id: str | None = None,
-    robust: bool = True,
-    interval: float = 0.9,
-    standstill: bool = False,
-    fit_balance: bool = False,
-    scatter: tuple[float, ...] | None = None,
-    plausible: Mapping[str, tuple[float, float]] | None = None,
-) -> CalibrationResult:
+def fit(vehicle: Vehicle, trips: Sequence[TripData], params: Sequence[str] = ("eta",), options: Options | None = None,
+        *, neutral_others: bool = False, standstill: bool = False, scatter: tuple[float, ...] | None = None,
+        **changes) -> CalibrationResult:
     """Fit a vehicle's terms to measured trip consumption and validate the fit.
+
+    :class:`cevm.Calibrator` (``fit_terms=params``) is the same as an estimator; this
+    function stays for scripts that call it. A forced term set is held to the same
+    physical bounds as a chosen one: a value the data want beyond them refuses the fit
+    (:class:`CalibrationError`, with the reason).
 
     Parameters
     ----------
-    vehicle : the vehicle to calibrate; its values are the starting point and are kept
+    vehicle
+        the vehicle to calibrate; its values are the starting point and are kept
         for every term that is not fitted (unless ``neutral_others``)
-    trips : the trips (see :class:`TripData`); measured in litres (ICE) or joules (EV)
-    params : terms to fit, "eta" required, plus any of the powertrain's terms
+    trips
+        the trips (see :class:`TripData`); measured in litres (ICE) or joules (EV)
+    params
+        terms to fit, "eta" required, plus any of the powertrain's terms
         (:data:`cevm.core.calibration.terms.EXTRA_TERMS`: EV regen, aux, heat, cool,
         warm; ICE idle, run, kin, heat, cool, warm) and "cda", "cr"; old names
         ("aux_power_w", "idle_fuel_lps", "cda_m2", ...) are accepted. Default ("eta",),
         the paper's calibration.
-    priors : the terms' priors (:class:`cevm.core.uncertainty.Priors`); default the
-        vehicle's own (``vehicle.priors``, read with its file), else none: each term is
-        then what the trips say, within its physical range, and refused where they
-        cannot say it
-    cv_folds : folds of the cross-validation, default 5 (the common choice: 80 % of the
-        trips train each fit); 0 or 1 turns cross-validation off
-    loo_below : with fewer groups (trips without a group are their own group) than this,
-        default 10, cross-validation is leave-one-(group-)out: 5 folds of so few trips
-        would remove too much of the training data
-    max_rel_uncertainty : trips whose uncertainty / measured exceeds this are excluded,
-        default 0.10: beyond 10 % a trip says less about eta than the model's own error
-        (the paper's CE model scatters by about 4 %)
-    min_distance_m : shorter trips are excluded [m], default 1000 m: below that, counter
-        resolution and the energy of the start (battery or engine warm-up) dominate
-    rel_uncertainty_floor : lower bound of the relative uncertainty [-], default 0.001:
-        no on-board counter is better than 0.1 %, and a zero would be an infinite weight
-    max_correlation, max_rel_se : the identifiability limits of a term without a prior
-        (:mod:`.identifiability`: refused above a multiple correlation of 0.98 with the
-        others, or a standard error above 50 % of its value)
-    time_repeats : predictions timed per trip, default 20; 0 skips the timing
-    seed : seed of the fold assignment, default 0 (results are reproducible)
-    neutral_others : the terms not in ``params`` are taken out of the model (zero, or
+    options
+        how trips are screened, folded and reported (:class:`.options.Options`);
+        ``changes`` replace single options by name (``cv_folds=0``, ``priors=...``);
+        ``fit_balance`` defaults to False here (the vehicle's balance temperatures)
+    neutral_others
+        the terms not in ``params`` are taken out of the model (zero, or
         regeneration at eta) instead of kept at the vehicle's values (model selection)
-    vehicle_id : recorded in the result's :attr:`~CalibrationResult.domain`
-    robust : default True, Huber's M-estimate (:mod:`.posterior`): a trip whose
-        measurement is far off cannot pull the fit more than one 2.5 sigma away
-    interval : level of the rows' held-out intervals, default 0.9
-    standstill : use the logs' standstill rates as observations (:mod:`.posterior`)
-    fit_balance : search the balance temperatures of temperature terms on a grid
-        (:mod:`.candidate`); default False: the vehicle's
-    scatter : (s_aux [W or l/s], s_share [-][, s_trip [J or l]]) to hold the trips'
-        scatter at instead of fitting it (:class:`cevm.core.uncertainty.Scatter`; s_trip
-        0 where not given); (0, 0): the measurement uncertainties alone weigh the trips
-    plausible : physical ranges {term: (low, high)} of the values (SI, vehicle-field
-        meaning: eta as an efficiency) that replace the terms' own, for research fits on
-        models that are no real vehicle (benchmarks/bench_tables.py fits the detailed
-        model with every loss switched off: eta 0.95, above any real EV's 0.89); a fit
-        on real trips keeps the defaults
-
-    A forced term set is held to the same physical bounds as a chosen one: a value the
-    data want beyond them refuses the fit (:class:`CalibrationError`, with the reason).
+    standstill
+        use the logs' standstill rates as observations (:mod:`.posterior`)
+    scatter
+        (s_aux [W or l/s], s_share [-][, s_trip [J or l]]) to hold the trips' scatter
+        at instead of fitting it (:class:`cevm.core.uncertainty.Scatter`; s_trip 0 where
+        not given); (0, 0): the measurement uncertainties alone weigh the trips
 
     Raises
     ------
@@ -213,12 +198,13 @@ def fit(
         when eta itself cannot be fitted (fewer than 3 usable trips), for unknown
         parameter names, duplicate trip ids, and physically implausible fits.
     """
+    opts = Options.of(options, **changes)
     names = normalise(vehicle, params)
-    _check_interval(interval)
-    priors = vehicle.priors if priors is None else priors
+    opts.check()
+    priors = vehicle.priors if opts.priors is None else opts.priors
     if neutral_others:
         vehicle = neutral(vehicle, names)
-    data, excluded = select_trips(vehicle, trips, max_rel_uncertainty, min_distance_m, rel_uncertainty_floor)
+    data, excluded = select_trips(vehicle, trips, *opts.screening())
     if data.n < 3:
         why = "; ".join(f"{k}: {v}" for k, v in list(excluded.items())[:5])
         raise CalibrationError(
@@ -226,27 +212,20 @@ def fit(
             + (f" (excluded: {why}{' ...' if len(excluded) > 5 else ''})" if excluded else "")
         )
     model = TermModel(vehicle, data)
-    settings = Settings(HUBER_C if robust else None, cv_folds, loo_below, seed, fit_balance, max_correlation,
-                        max_rel_se, plausible)
+    settings = opts.settings(fit_balance=False)
     cf = fit_candidate(model, names, np.arange(data.n), priors, settings, standstill=standstill,
-                       heldout=cv_folds >= 2, scatter=scatter)
-    refused = plausibility.implausible(cf.model, cf.fit, np.arange(data.n), cf.prior.lb, cf.prior.ub, plausible)
+                       heldout=opts.cv_folds >= 2, scatter=scatter)
+    refused = fit_plausibility.implausible(cf.model, cf.fit, np.arange(data.n), cf.prior.lb, cf.prior.ub,
+                                       opts.plausible)
     if refused is not None:
         raise CalibrationError(f"{refused[0]}: {refused[1]}")
-    return fit_model(cf, excluded, settings, priors=priors, interval=interval, time_repeats=time_repeats,
-                     vehicle_id=vehicle_id)
-
-
-def _check_interval(level: float) -> None:
-    if not (isinstance(level, (int, float)) and 0.0 < level < 1.0):
-        raise CalibrationError(f"the interval level must be in (0, 1), got {level!r}")
+    return fit_model(cf, excluded, settings, priors=priors, interval=opts.interval, time_repeats=opts.time_repeats,
+                     vehicle_id=opts.vehicle_id)
 
 
 def _prior_kept(cf: CandidateFit, fields: dict) -> dict:
     """Terms whose posterior standard deviation is still above :data:`PRIOR_KEPT_RATIO`
     of their prior's: the trips could not tell (with the hint of what they would need)."""
-    from cevm.core.calibration import identifiability
-
     out = {}
     sd = cf.fit.sd
     for j, n in enumerate(cf.names):
@@ -318,7 +297,7 @@ def _fitted_values(cf: CandidateFit, settings: Settings, idx_all: np.ndarray
             corr[(fields[active[a]], fields[active[b]])] = float(vcov[a, b] / dd) if dd > 0 else math.nan
     if not result.converged:
         warnings.append("the fit did not converge to the requested tolerance")
-    why = plausibility.implausible(model, result, idx_all, cf.prior.lb, cf.prior.ub, settings.plausible)
+    why = fit_plausibility.implausible(model, result, idx_all, cf.prior.lb, cf.prior.ub, settings.plausible)
     if why is not None and why[0] == "eta":
         warnings.append(f"eta: {why[1]}")
     csd = result.sd
@@ -409,7 +388,7 @@ def fit_model(cf: CandidateFit, excluded: dict, settings: Settings, *, priors: P
         unit="J" if vehicle.is_ev else "l",
         warnings=tuple(warnings),
         terms=tuple(active),
-        evidence=plausibility.evidence(model, result, idx_all),
+        evidence=fit_plausibility.evidence(model, result, idx_all),
         domain=domain,
         posterior=posterior,
         priors=priors,
@@ -425,8 +404,6 @@ def predict_trips(vehicle: Vehicle, trips: Sequence[TripData]) -> np.ndarray:
     """Predicted consumption of each trip [l for an ICE, J for an EV] with
     :func:`cevm.core.vehicle.predict` (the trip's mass, or the vehicle's when None; the
     trip's ambient temperature, or the vehicle's default)."""
-    from cevm.core.calibration.validation import predict_one
-
     out = np.empty(len(trips))
     for i, t in enumerate(trips):
         out[i] = predict_one(vehicle, t.vector, vehicle.mass_kg if t.mass_kg is None else t.mass_kg,

@@ -9,12 +9,12 @@ least :data:`MIN_SPREAD_K`.
 After a fit:
 
 - :func:`confounded`: the multiple correlation of a term's weighted Jacobian column with
-  the others' exceeds ``max_correlation`` (0.98; for two terms this is |correlation of
-  the estimates|). Example: aux power and 1/eta when every trip has the same speed
+  the others' exceeds ``max_correlation`` (0.98; for two terms this is abs(correlation of
+  the estimates)). Example: aux power and 1/eta when every trip has the same speed
   profile and mass (aux energy ~ duration ~ distance / speed, traction ~ distance).
-- :func:`imprecise`: its standard error exceeds ``max_rel_se`` (50 %) of max(|value|,
+- :func:`imprecise`: its standard error exceeds ``max_rel_se`` (50 %) of max(abs(value),
   reference), the reference being 10 % of the median consumption rate y_i / D_i for the
-  rate terms (so a well-measured zero is accepted), |value| otherwise.
+  rate terms (so a well-measured zero is accepted), abs(value) otherwise.
 
 With priors (:mod:`.priors`) a term the trips cannot identify is not dropped: it keeps
 its prior, and these functions say why the data could not tell.

@@ -1,7 +1,7 @@
 """The posterior of a set of terms: Gaussian priors, a model of the trips' scatter, the
 mode under the physical bounds and its Laplace covariance (pure).
 
-Model of trip i's measured consumption y_i [J or l] (:mod:`.terms`: x_i the features,
+Model of trip i's measured consumption y_i [J or l] (:mod:`cevm.core.calibration.terms`: x_i the features,
 theta the coefficients, f_i the terms held fixed)::
 
     y_i = x_i theta + f_i + sqrt(r_i) (D_i b_g(i) + mu_i a_g(i)) + e_i
@@ -25,7 +25,7 @@ where a physical bound binds; Gauss-Newton steps for an EV's regeneration tied t
 the model's one non-linearity), and its covariance the inverse of the normal matrix
 (Laplace at the mode; the day effects marginalised). Robustness as before
 (:data:`.solve.HUBER_C`): a trip whose standardised residual exceeds c has its variance
-inflated by |z| / c (Huber's M-estimate, by iterative reweighting).
+inflated by abs(z) / c (Huber's M-estimate, by iterative reweighting).
 
 The scatter is fitted in two steps. In sample, (s_aux, s_share, s_stand) maximise the
 log marginal likelihood (the Laplace evidence, the coefficients integrated out: a

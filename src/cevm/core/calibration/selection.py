@@ -16,7 +16,8 @@ The candidates are the physical terms with every subset of the others, each with
 without the standstill observations. Each candidate is fitted to all usable trips and
 its trips predicted by the fits of the other days (:mod:`.candidate`). A candidate is
 *refused*, with the reason, when a term without a prior is not identifiable
-(:mod:`.identifiability`) or a value is physically implausible (:mod:`.plausibility`,
+(:mod:`.identifiability`) or a value is physically implausible
+(:mod:`cevm.core.calibration.fit_plausibility`,
 the standstill rate included): such a candidate is shown, never chosen.
 
 Choice (the one-standard-error rule, on paired errors): let b be the candidate with the
@@ -55,11 +56,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from cevm.core.calibration import plausibility
+from cevm.core.calibration import fit_plausibility
 from cevm.core.calibration.candidate import COOLING_GRID_C, HEATING_GRID_C, CandidateFit, Settings, fit_candidate  # noqa: F401 (the grids: part of the interface)
 from cevm.core.calibration.data import CalibrationError, TripData, TripSet, select_trips
-from cevm.core.calibration.fitting import CalibrationResult, _check_interval, fit_model
-from cevm.core.calibration.solve import HUBER_C, value_covariance
+from cevm.core.calibration.fitting import CalibrationResult, fit_model
+from cevm.core.calibration.options import Options
+from cevm.core.calibration.solve import value_covariance
 from cevm.core.calibration.terms import EXTRA_TERMS, TERMS_BY_POWERTRAIN, TermModel, neutral
 from cevm.core.calibration.validation import ErrorStats, folds
 from cevm.core.terms import STRUCTURAL
@@ -182,7 +184,7 @@ def _keys(model: TermModel, sets: Sequence[tuple[str, ...]], idx: np.ndarray) ->
     """Every (terms, standstill) candidate: with the standstill observations too where the
     trips measured enough and the set has the term they observe."""
     base = "aux" if model.ev else "idle"
-    evidence = _evidence_seconds(model, idx) >= plausibility.EVIDENCE_MIN_S
+    evidence = _evidence_seconds(model, idx) >= fit_plausibility.EVIDENCE_MIN_S
     out = []
     for names in sets:
         out.append((names, False))
@@ -210,7 +212,7 @@ def _select_on(model: TermModel, keys: Sequence[Key], idx: np.ndarray, priors: P
             term, why = next(iter(cf.refused.items()))
             reasons[key] = (term, why)
             continue
-        bad = plausibility.implausible(cf.model, cf.fit, idx, cf.prior.lb, cf.prior.ub, settings.plausible)
+        bad = fit_plausibility.implausible(cf.model, cf.fit, idx, cf.prior.lb, cf.prior.ub, settings.plausible)
         if bad is not None:
             reasons[key] = bad
             continue
@@ -224,43 +226,28 @@ def _select_on(model: TermModel, keys: Sequence[Key], idx: np.ndarray, priors: P
     return best, chosen, errs, fits, reasons, loss, se
 
 
-def select(
-    vehicle: Vehicle,
-    trips: Sequence[TripData],
-    *,
-    terms: Sequence[str] | None = None,
-    priors: Priors | None = None,
-    cv_folds: int = 5,
-    loo_below: int = 10,
-    max_rel_uncertainty: float = 0.10,
-    min_distance_m: float = 1000.0,
-    rel_uncertainty_floor: float = 0.001,
-    max_correlation: float = 0.98,
-    max_rel_se: float = 0.5,
-    time_repeats: int = 20,
-    seed: int = 0,
-    nested: bool = True,
-    vehicle_id: str | None = None,
-    robust: bool = True,
-    fit_balance: bool = True,
-    interval: float = 0.9,
-) -> Selection:
+def select(vehicle: Vehicle, trips: Sequence[TripData], options: Options | None = None, *,
+           terms: Sequence[str] | None = None, nested: bool = True, **changes) -> Selection:
     """Choose the vehicle's terms by grouped cross-validation (module docstring) and fit
-    the chosen model (:func:`~.fitting.fit`'s parameters; ``terms`` restricts the extra
-    terms tried; ``priors`` default the vehicle's own; ``nested`` runs the nested
-    cross-validation of the procedure; ``robust`` (default) fits Huber M-estimates and
+    the chosen model.
+
+    :class:`cevm.Calibrator` is the same as an estimator. ``options``
+    (:class:`.options.Options`, with ``changes`` by name as in :func:`~.fitting.fit`):
+    ``priors`` default the vehicle's own; ``robust`` (default) fits Huber M-estimates and
     compares candidates with a Huber loss on their cross-validated errors, so a few
-    broken measurements decide nothing); ``fit_balance`` (default) chooses the balance
-    temperatures of temperature terms on a grid (:data:`HEATING_GRID_C`), False keeps
-    the vehicle's.
+    broken measurements decide nothing; ``fit_balance`` defaults to True here: the
+    balance temperatures of temperature terms are chosen on a grid
+    (:data:`HEATING_GRID_C`), False keeps the vehicle's. ``terms`` restricts the extra
+    terms tried; ``nested`` runs the nested cross-validation of the procedure.
 
     Every candidate starts from ``vehicle`` with the terms it does not hold taken out of
     the model (no auxiliary power, regeneration at eta, ...); CdA and Cr stay as given.
     """
-    _check_interval(interval)
-    priors = vehicle.priors if priors is None else priors
+    opts = Options.of(options, **changes)
+    opts.check()
+    priors = vehicle.priors if opts.priors is None else opts.priors
     base = neutral(vehicle)
-    data, excluded = select_trips(base, trips, max_rel_uncertainty, min_distance_m, rel_uncertainty_floor)
+    data, excluded = select_trips(base, trips, *opts.screening())
     data, excluded, t_note = _trips_with_temperature(base, data, excluded, terms)
     if data.n < 3:
         why = "; ".join(f"{k}: {v}" for k, v in list(excluded.items())[:5])
@@ -272,9 +259,8 @@ def select(
     sets = candidate_sets(base, extras, priors)
     idx = np.arange(data.n)
     keys = _keys(model, sets, idx)
-    fold_of, scheme = folds(data, cv_folds, loo_below, seed)
-    settings = Settings(HUBER_C if robust else None, cv_folds, loo_below, seed, fit_balance, max_correlation,
-                        max_rel_se)
+    fold_of, scheme = folds(data, opts.cv_folds, opts.loo_below, opts.seed)
+    settings = opts.settings(fit_balance=True)
     best, chosen, errs, fits, reasons, loss, se = _select_on(model, keys, idx, priors, settings)
     cands = []
     for key in keys:
@@ -292,8 +278,8 @@ def select(
         ins = ErrorStats.of((cf.fit.pred - data.y) / data.y * 100.0)
         cands.append(Candidate(names, "chosen" if key == chosen else "ok", ErrorStats.of(errs[key]), ins, fitted,
                                loss[key], se[key], standstill=ss))
-    result = fit_model(fits[chosen], excluded, settings, priors=priors, interval=interval, time_repeats=time_repeats,
-                       vehicle_id=vehicle_id)
+    result = fit_model(fits[chosen], excluded, settings, priors=priors, interval=opts.interval,
+                       time_repeats=opts.time_repeats, vehicle_id=opts.vehicle_id)
     nested_cv = None
     if nested and np.any(fold_of >= 0):
         nested_cv = _nested(model, keys, fold_of, priors, settings)

@@ -11,7 +11,7 @@ times better than the model can predict does not take over the fit.
 Robustness: a real fleet's logs hold a few trips whose measurement is wrong (a counter
 glitch, a gap the logger bridged badly). With ``huber_c`` (default :data:`HUBER_C`) the
 fit is a Huber M-estimate by iteratively reweighted least squares: a trip whose
-standardised residual r_i / sqrt(u_i^2 + tau^2) exceeds c keeps the weight c / |z_i| of
+standardised residual r_i / sqrt(u_i^2 + tau^2) exceeds c keeps the weight c / abs(z_i) of
 it, so it cannot pull the fit more than a trip c standard deviations away; trips within
 c count fully (for normal errors, 99 % of them at c = 2.5), so on clean data the fit is
 the least-squares one.

@@ -3,28 +3,28 @@
 Every term of :mod:`cevm.core.energy` is, for fixed CdA and Cr, linear in a
 *coefficient* that multiplies a per-trip *feature*:
 
-==========  =====================  =========================  ====================
-term        vehicle field          coefficient                feature
-==========  =====================  =========================  ====================
+==========  =======================  =========================  =================================
+term        vehicle field            coefficient                feature
+==========  =======================  =========================  =================================
 EV
-eta         eta                    1 / eta                    P  [J]
-regen       regen_eta              eta_r                      N  [J] (<= 0)
-aux         aux_power_w            p0 [W]                     D  [s]
-heat        aux_heating_w_per_k    p_heat [W/K]               D h(T)  [K s]
-cool        aux_cooling_w_per_k    p_cool [W/K]               D c(T)  [K s]
-warm        warmup_j_per_k         e_warm [J/K]               h(T)  [K]
+eta         eta                      1 / eta                    P  [J]
+regen       regen_eta                eta_r                      N  [J] (<= 0)
+aux         aux_power_w              p0 [W]                     D  [s]
+heat        aux_heating_w_per_k      p_heat [W/K]               D h(T)  [K s]
+cool        aux_cooling_w_per_k      p_cool [W/K]               D c(T)  [K s]
+warm        warmup_j_per_k           e_warm [J/K]               h(T)  [K]
 ICE
-eta         eta                    1 / eta                    (P + w N) / U  [l]
-kin         kinetic_eta            1 / eta_k - 1 / eta        m k_pos / U  [l]
-idle        idle_fuel_lps          r_idle [l/s]               I  [s]
-run         running_fuel_lps       r_run [l/s]                D_t  [s] (traction)
-heat        heating_fuel_lps_per_k r_heat [l/s/K]             D h(T)  [K s]
-cool        cooling_fuel_lps_per_k r_cool [l/s/K]             D c(T)  [K s]
-warm        warmup_fuel_l_per_k    l_warm [l/K]               h(T)  [K]
+eta         eta                      1 / eta                    (P + w N) / U  [l]
+kin         kinetic_eta              1 / eta_k - 1 / eta        m k_pos / U  [l]
+idle        idle_fuel_lps            r_idle [l/s]               I  [s]
+run         running_fuel_lps         r_run [l/s]                D_t  [s] (traction)
+heat        heating_fuel_lps_per_k   r_heat [l/s/K]             D h(T)  [K s]
+cool        cooling_fuel_lps_per_k   r_cool [l/s/K]             D c(T)  [K s]
+warm        warmup_fuel_l_per_k      l_warm [l/K]               h(T)  [K]
 both
-cda         cda_m2                 CdA (nonlinear: P and N depend on it)
-cr          cr                     Cr  (nonlinear)
-==========  =====================  =========================  ====================
+cda         cda_m2                   CdA                        (nonlinear: P and N depend on it)
+cr          cr                       Cr                         (nonlinear)
+==========  =======================  =========================  =================================
 
 An EV whose ``regen`` is neither fitted nor set regenerates with eta (the paper): its
 N term is N / c_eta, not linear in c_eta; the fit linearises it (Gauss-Newton).

@@ -61,7 +61,7 @@ def compare(vehicle: Vehicle, res: SimulationResult, ambient_c: float = float("n
     NaN, the vehicle's reference or the default, as for a stored trip without a logged
     temperature) beside the detailed model's result (module notes)."""
     from cevm.core import energy
-    from cevm.core.replay.trips import trip_energies
+    from cevm.core.replay.trip_energies import trip_energies
 
     vec = cycle_vector(DriveCycle(time_s=res.time_s, speed_mps=res.speed_mps, elevation_m=res.elevation_m))
     te = trip_energies([vec], vehicle, [res.mass_kg], [ambient_c])

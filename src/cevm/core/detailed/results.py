@@ -78,7 +78,7 @@ class SimulationResult:
         samples (a slice: a block of them to write, every k-th to plot), so that the
         frame of a long trace need not be held whole beside the result.
         """
-        import pandas as pd
+        import pandas as pd  # here: the core imports pandas only for this frame, on request
 
         n = self.time_s.size
         sel = slice(None) if rows is None else rows

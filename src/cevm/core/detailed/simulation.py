@@ -59,21 +59,29 @@ def simulate(vehicle, time_s, speed_mps, elevation_m=None, mass_kg: float | None
 
     Parameters
     ----------
-    vehicle : road-load parameters (mass, CdA, Cr), battery capacity (EV) or fuel
+    vehicle
+        road-load parameters (mass, CdA, Cr), battery capacity (EV) or fuel
         heating value (ICE). The CE-model terms ``eta``, ``aux_power_kw`` and
         ``idle_fuel_lph`` are not used.
-    time_s : (N,) time [s], strictly increasing (any step)
-    speed_mps : (N,) speed [m/s], >= 0
-    elevation_m : (N,) road elevation [m], or None for a flat road
-    mass_kg : gross mass [kg]; default the vehicle's ``mass_kg``
-    soc_start : EV state of charge at the first sample [0..1], default 1.0 (full)
-    params : :class:`EvParams` / :class:`DieselParams`: the powertrain (auxiliaries
+    time_s
+        (N,) time [s], strictly increasing (any step)
+    speed_mps
+        (N,) speed [m/s], >= 0
+    elevation_m
+        (N,) road elevation [m], or None for a flat road
+    mass_kg
+        gross mass [kg]; default the vehicle's ``mass_kg``
+    soc_start
+        EV state of charge at the first sample [0..1], default 1.0 (full)
+    params
+        :class:`EvParams` / :class:`DieselParams`: the powertrain (auxiliaries
         included). A vehicle file's ``[detailed]`` table is read into these by
         :func:`cevm.io.detailed.detailed_params`. None: the defaults, for a vehicle
         without such a table (one with a non-empty table is refused, TypeError: the
         core reads no configuration, and leaving it out would quietly simulate another
         powertrain).
-    time_step_s : simulation step [s], default 1.0: a trace sampled faster is decimated
+    time_step_s
+        simulation step [s], default 1.0: a trace sampled faster is decimated
         to one sample per ``time_step_s`` (:func:`decimate_indices`) before simulating,
         as backward models usually run at 1 s. Speed logged at 10 Hz with 0.1 mph
         resolution gives +-0.45 m/s^2 acceleration spikes from quantisation alone, which
@@ -81,15 +89,20 @@ def simulate(vehicle, time_s, speed_mps, elevation_m=None, mass_kg: float | None
         them). Kinetic and potential energy telescope, so the decimated trace needs the
         same net energy. None: simulate every sample. The result's arrays are on the
         simulated samples.
-    physics : air density and gravity (the paper's by default)
-    aux_power_w : (N,) auxiliary power [W] per sample beyond the ``[detailed]`` table's
+    physics
+        air density and gravity (the paper's by default)
+    aux_power_w
+        (N,) auxiliary power [W] per sample beyond the ``[detailed]`` table's
         (>= 0): EV, from the battery (heating and air conditioning that follow the
         weather); diesel, mechanical at the engine (an A/C compressor). None: none.
-    friction_scale : (N,) diesel only: factor (> 0) on the engine friction per sample,
+    friction_scale
+        (N,) diesel only: factor (> 0) on the engine friction per sample,
         e.g. above 1 while a cold engine warms up. None: 1.
 
-    Raises ValueError for an invalid trace (see :func:`cevm.core.cycle.validate_cycle`)
-    or series.
+    Raises
+    ------
+    ValueError
+        for an invalid trace (see :func:`cevm.core.cycle.validate_cycle`) or series.
     """
     validate_cycle(time_s, speed_mps, elevation_m)
     n_samples = np.size(time_s)

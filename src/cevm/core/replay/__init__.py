@@ -1,9 +1,9 @@
 """The fleet's logged working days run again with another vehicle, charging included
-(pure): ``cevm replay`` (issue 23).
+(pure): ``cevm replay``.
 
 A vehicle's stored trips are grouped into *duties* (:mod:`~cevm.core.replay.duties`),
 each run trip by trip in time order with the candidate vehicle: every trip at its own
-mass and temperature (:mod:`~cevm.core.replay.trips`, the CE model on the trip's cached
+mass and temperature (:mod:`~cevm.core.replay.trip_energies`, the CE model on the trip's cached
 vector), the battery's level (or the tank's) carried from trip to trip and charged in the
 stops long enough, at the places allowed (:mod:`~cevm.core.replay.places`,
 :mod:`~cevm.core.replay.chain`). Each duty gets its lowest level, where it first crosses
@@ -43,7 +43,7 @@ from cevm.core.replay.sizing import (
     smallest_passing,
 )
 from cevm.core.replay.spread import TripSpread, central_interval, trip_spread
-from cevm.core.replay.trips import TripEnergies, trip_crossing, trip_energies, trips_excess
+from cevm.core.replay.trip_energies import TripEnergies, trip_crossing, trip_energies, trips_excess
 
 __all__ = [
     "BATTERY_STEP_KWH", "CHARGER_STEP_KW", "DEFAULT_CHARGE_EFFICIENCY", "DEFAULT_CONFIDENCE", "DEFAULT_DRAWS",

@@ -4,7 +4,7 @@ in the stops (pure, vectorised over chains and draws).
 Levels are energies in the battery [J] (EV) or fuel in the tank [l] (ICE), from 0
 (empty) to the capacity C (the usable battery, the tank). Trip by trip, in time order,
 with L the level at the trip's start, E the trip's energy and x its excess (the most it
-draws inside the trip beyond E, :mod:`cevm.core.replay.trips`):
+draws inside the trip beyond E, :mod:`cevm.core.replay.trip_energies`):
 
 - the lowest level inside the trip is L - E - x;
 - after the trip the level is min(L - E, C): a full battery takes no regenerated energy;

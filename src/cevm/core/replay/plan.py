@@ -5,7 +5,7 @@ need (pure; the step tables of the few trips that need one come through a callab
 :func:`plan_vehicle` does everything but the Monte Carlo, which needs no step table and
 is the costly part (:meth:`VehiclePlan.draw_plan`: a task for a worker); it reads a
 trip's step table only where the trip's in-trip excess could decide something
-(:mod:`cevm.core.replay.trips`): the duty's lowest point, whether the reserve is kept
+(:mod:`cevm.core.replay.trip_energies`): the duty's lowest point, whether the reserve is kept
 within 4 standard deviations of the duty's energy (so the Monte Carlo is exact to its
 own error), where it is crossed, and the sizes (:mod:`cevm.core.replay.sizing`).
 """
@@ -28,7 +28,7 @@ from cevm.core.replay.places import Depot, find_depot, rest_positions, stops_at
 from cevm.core.replay.settings import ReplaySettings
 from cevm.core.replay.sizing import battery_needed, charger_needed, undecided_trips
 from cevm.core.replay.spread import TripSpread, energy_at_confidence, trip_spread
-from cevm.core.replay.trips import TripEnergies, trip_crossing, trip_energies, trips_excess
+from cevm.core.replay.trip_energies import TripEnergies, trip_crossing, trip_energies, trips_excess
 from cevm.core.sweep import StepTable
 from cevm.core.vehicle import Vehicle
 from cevm.errors import CevmError

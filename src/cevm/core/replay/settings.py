@@ -31,7 +31,7 @@ DEFAULT_MIN_DWELL_MIN = 30.0
 #: carried).
 OVERNIGHT_MODES = ("full", "none", "power")
 
-#: Default interval of the duties' energy [-] (issue 22's default for predict).
+#: Default interval of the duties' energy [-] (predict's default: a 90 % range).
 DEFAULT_INTERVAL = 0.9
 #: Default confidence at which a duty counts as completed in the fleet's summary: 0.95,
 #: the upper end of the default 90 % interval (a duty whose energy at its interval's

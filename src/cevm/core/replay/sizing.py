@@ -10,7 +10,7 @@ monotone and is bisected directly.
 
 A duty's needs are computed with the trips' in-trip excess known or bounded: ``excess``
 gives the value used (the exact one where the step table was read, else the bound of
-:mod:`cevm.core.replay.trips`), so the size found is sufficient; where it could be
+:mod:`cevm.core.replay.trip_energies`), so the size found is sufficient; where it could be
 smaller with the exact excess (:func:`undecided_trips`), the caller reads those trips'
 step tables and sizes again, until the bound no longer decides anything.
 """

@@ -1,8 +1,8 @@
 """How far a trip's energy may be from its mean, in parts that say which trips share
-them (pure): the candidate's predictive distribution (issue 22, :mod:`cevm.core.predictive`)
+them (pure): the candidate's predictive distribution (:mod:`cevm.core.predictive`)
 taken apart so that a duty's trips can be drawn together.
 
-For trip i of a duty, with mean mu_i [J or l] (:mod:`cevm.core.replay.trips`)::
+For trip i of a duty, with mean mu_i [J or l] (:mod:`cevm.core.replay.trip_energies`)::
 
     y_i = mu_i + g_i . (L z_par)              the model's coefficients: common to all trips
               + meter mu_i z_m                the calibration meter's systematic share: common
@@ -38,7 +38,7 @@ from numpy.typing import ArrayLike
 
 from cevm.core import distribution
 from cevm.core import predictive as pr
-from cevm.core.replay.trips import TripEnergies
+from cevm.core.replay.trip_energies import TripEnergies
 from cevm.core.vehicle import Vehicle
 
 
@@ -156,8 +156,8 @@ def central_interval(mean: ArrayLike, sd: ArrayLike, level: float) -> tuple[np.n
 
 def trip_spread(vehicle: Vehicle, trips: TripEnergies, *, ice_braking: str | None = None) -> TripSpread:
     """The spread of ``vehicle`` on the trips of ``trips`` (a
-    :class:`~cevm.core.replay.trips.TripEnergies`), from the predictive distribution of
-    issue 22 (:mod:`cevm.core.predictive`: the vehicle's posterior, else its class's
+    :class:`~cevm.core.replay.trip_energies.TripEnergies`), from the predictive distribution of
+    the commands' (:mod:`cevm.core.predictive`: the vehicle's posterior, else its class's
     prior); :meth:`TripSpread.none` where there is none (module notes)."""
     n = trips.n
     post = pr.posterior_of(vehicle)

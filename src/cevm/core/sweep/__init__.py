@@ -16,7 +16,7 @@ come from the source's per-step terms.
 
 One module per concern, in the order a prediction flows through them:
 
-- :mod:`~cevm.core.sweep.profiles`: a leg's samples (:class:`LegProfile`) and a source's
+- :mod:`~cevm.core.sweep.steptable`: a leg's samples (:class:`LegProfile`) and a source's
   plain per-step terms in driving order (:class:`StepTable`);
 - :mod:`~cevm.core.sweep.compressed`: the step terms compressed into blocks for the
   lowest state of charge (:class:`SourceSteps`);
@@ -51,10 +51,10 @@ from cevm.core.sweep.evaluate import check_cr, predict_source, predict_sources
 from cevm.core.sweep.peak import peak_energy_j
 from cevm.core.sweep.power import POWER_WINDOW_S, follow_flags, peak_wheel_power_w, power_mass_window
 from cevm.core.sweep.predictions import AMBIENT_ORIGINS, PredictionSet, RowTerms, row_terms
-from cevm.core.sweep.profiles import LegProfile, StepTable, build_step_table
 from cevm.core.sweep.ranges import RANGE_FIELDS, crossings, source_ranges
 from cevm.core.sweep.sources import Source
 from cevm.core.sweep.stepenergy import energy_trajectory, step_coefficients, step_energies
+from cevm.core.sweep.steptable import LegProfile, StepTable, build_step_table
 from cevm.core.sweep.wheel import ce_wheel_energy_j
 
 __all__ = [

@@ -6,7 +6,7 @@ with W(D) = D if D > 0 else eta^2 D (eq. 27-31); E_j = sum_{i<=j} g_i; the final
 the CE model's total. The lowest SoC is SoC_start - 100 max(0, max_j E_j) / E_batt.
 
 Per source, once (:func:`build_steps`): the per-step terms x = k + e, a, r, dt of every
-leg, in time order (the source's :class:`~cevm.core.sweep.profiles.StepTable`). Steps that draw energy for every
+leg, in time order (the source's :class:`~cevm.core.sweep.steptable.StepTable`). Steps that draw energy for every
 admissible vehicle (simplified steps, eq. 8, and standstill on flat ground) have
 g_i >= 0, so a run of them never holds a maximum inside: each maximal run is merged into
 one element (exact). The other steps stay single elements. Elements are cut into blocks
@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from cevm.core.cycle import CR0_DEFAULT, PAPER_PHYSICS, Physics
-from cevm.core.sweep.profiles import LegProfile, StepTable, build_step_table
+from cevm.core.sweep.steptable import LegProfile, StepTable, build_step_table
 
 #: Target number of elements (merged steps) per block of :class:`SourceSteps`. Smaller
 #: blocks prune more precisely but cost one more bound per block and prediction; 48 and
@@ -102,7 +102,7 @@ def build_steps(
 
 
 def steps_of_table(st: StepTable, *, cr0: float = CR0_DEFAULT, block_elements: int = BLOCK_ELEMENTS) -> SourceSteps:
-    """:func:`build_steps` from a source's :class:`~cevm.core.sweep.profiles.StepTable`
+    """:func:`build_steps` from a source's :class:`~cevm.core.sweep.steptable.StepTable`
     (its step terms, computed once for the source)."""
     x, a, r, dt = st.x, st.a, st.r, st.dt
     n = x.size

@@ -73,7 +73,7 @@ def sweep(
             yield from predict_sources(sources[i:j], pset, soc_start_pct=soc_start_pct, reserve_pct=reserve_pct,
                                        lowest_soc=lowest_soc, first_index=i, ranges=ranges)
         return
-    from cevm.executors import Task
+    from cevm.executors import Task  # only with an executor: the process pools' modules stay unloaded otherwise
 
     use_steps = lowest_soc and bool(pset.is_ev.any())
     spans: list[tuple[int, int]] = []

@@ -193,14 +193,21 @@ def peak_energy_j(
     ``negative_weight`` otherwise on non-simplified steps (eta^2 for an EV: then E_j is
     the battery energy and SoC_min = SoC_start - 100 peak / E_batt).
 
-    Parameters (arrays of P predictions, broadcast together)
+    The parameters: arrays of P predictions, broadcast together.
+
+    Parameters
     ----------
-    steps : the source's :class:`SourceSteps`
-    mass_kg : gross mass [kg]; cda_m2 [m^2]; cr [-] (>= steps.cr0); eta (0, 1]
-    negative_weight : w in [0, 1]; aux_power_w : auxiliary power [W], >= 0 (default 0)
-    group : optional (P,) ints; predictions with the same group must share CdA and Cr
+    steps
+        the source's :class:`SourceSteps`
+    mass_kg
+        gross mass [kg]; cda_m2 [m^2]; cr [-] (>= steps.cr0); eta (0, 1]
+    negative_weight
+        w in [0, 1]; aux_power_w : auxiliary power [W], >= 0 (default 0)
+    group
+        optional (P,) ints; predictions with the same group must share CdA and Cr
         (e.g. the vehicle index). Default: grouped by (CdA, Cr).
-    end_energy_j : optional (P,) E_n from the CE model, used as a known lower bound of the
+    end_energy_j
+        optional (P,) E_n from the CE model, used as a known lower bound of the
         maximum (and included in it, so SoC_min <= SoC_end holds exactly).
     """
     m = np.asarray(mass_kg, dtype=np.float64).ravel()

@@ -12,7 +12,7 @@ import numpy as np
 from cevm.core import limits
 from cevm.core.limits import POWER_WINDOW_S
 from cevm.core.sweep.block import SweepBlock
-from cevm.core.sweep.profiles import StepTable, edges
+from cevm.core.sweep.steptable import StepTable, edges
 
 
 def _window_coefficients(st: StepTable, window_s: float = POWER_WINDOW_S):

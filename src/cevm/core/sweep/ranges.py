@@ -1,6 +1,6 @@
 """Where a vehicle first crosses its reserve or runs empty along a source, and its range.
 
-Computed from the plain per-step terms (:class:`~cevm.core.sweep.profiles.StepTable`),
+Computed from the plain per-step terms (:class:`~cevm.core.sweep.steptable.StepTable`),
 for the rows that need them: the energy drawn is summed step by step as the CE model's
 terms give it (:mod:`cevm.core.sweep.stepenergy`), so the total at the end equals the
 model's.
@@ -25,8 +25,8 @@ import numpy as np
 
 from cevm.core.model import braking_weight
 from cevm.core.sweep.block import DEFAULT_RESERVE_PCT, DEFAULT_SOC_START_PCT, SweepBlock
-from cevm.core.sweep.profiles import StepTable
 from cevm.core.sweep.stepenergy import StepCoefficients, step_coefficients, step_energies
+from cevm.core.sweep.steptable import StepTable
 
 #: Cells (rows x steps) of one chunk of :func:`crossings` (8 MB of float64).
 _RANGE_CHUNK_CELLS = 1 << 20

@@ -4,7 +4,7 @@ A :class:`Source` carries its CE drive-cycle vector (:class:`~cevm.core.cycle.Cy
 for totals) and its legs' profiles (time, speed, elevation: for the state of charge along
 the way, the range and the power it asks), from which it builds, on first use and once,
 its compressed step terms (:class:`~cevm.core.sweep.compressed.SourceSteps`) and its
-plain step table (:class:`~cevm.core.sweep.profiles.StepTable`).
+plain step table (:class:`~cevm.core.sweep.steptable.StepTable`).
 """
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ from functools import cached_property
 from cevm.core.cycle import CR0_DEFAULT, PAPER_PHYSICS, CycleVector, DriveCycle, Physics, cycle_vector
 from cevm.core.limits import Demand, source_demand
 from cevm.core.sweep.compressed import BLOCK_ELEMENTS, SourceSteps, steps_of_table
-from cevm.core.sweep.profiles import LegProfile, StepTable, build_step_table
+from cevm.core.sweep.steptable import LegProfile, StepTable, build_step_table
 
 
 @dataclass(frozen=True, eq=False)

@@ -1,7 +1,7 @@
 """The energy of each step along a source, per prediction (battery energy [J] for an
 EV, fuel [l] for an ICE), with every term of :mod:`cevm.core.energy`.
 
-Energy along the way, per step i, from :mod:`cevm.core.energy`:
+Energy along the way, per step i, from :mod:`cevm.core.energy`::
 
   EV:  g_i = W_i / eta + P_aux(T) dt_i,  W_i = Delta_i, or w Delta_i for a negative
        non-simplified step, w = eta eta_r (:func:`~cevm.core.energy.ev_negative_weight`),
@@ -13,7 +13,7 @@ Energy along the way, per step i, from :mod:`cevm.core.energy`:
 
 :func:`step_coefficients` gives these per row as a few coefficients
 (:class:`StepCoefficients`), :func:`step_energies` the (rows, steps) energies on a
-:class:`~cevm.core.sweep.profiles.StepTable`; :func:`energy_trajectory` the same sum,
+:class:`~cevm.core.sweep.steptable.StepTable`; :func:`energy_trajectory` the same sum,
 sample by sample, for one vehicle and mass (plain per-step arithmetic: for plots and
 tests).
 """
@@ -28,8 +28,8 @@ from cevm.core import energy
 from cevm.core.cycle import step_terms
 from cevm.core.model import braking_weight
 from cevm.core.sweep.predictions import PredictionSet
-from cevm.core.sweep.profiles import StepTable
 from cevm.core.sweep.sources import Source
+from cevm.core.sweep.steptable import StepTable
 from cevm.core.vehicle import Vehicle
 
 

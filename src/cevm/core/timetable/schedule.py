@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from cevm.core.replay.trips import trip_energies
+from cevm.core.replay.trip_energies import trip_energies
 from cevm.core.timetable import geometry as geo
 from cevm.core.vehicle import Vehicle
 

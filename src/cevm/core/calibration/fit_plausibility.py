@@ -99,7 +99,7 @@ def implausible(model: TermModel, fit: FitLike, idx: np.ndarray, lb: np.ndarray 
             f"implausible: {', '.join(extra)} would take {100 * share[i]:.0f} % of trip "
             f"{model.data.ids[idx[i]]}'s measured consumption")
     ev = evidence(model, fit, idx)
-    # the model's standstill rate against the logs' (issue 27: also for a model without an
+    # the model's standstill rate against the logs' (also for a model without an
     # auxiliary or idle term, which draws nothing standing still)
     base = "aux" if model.ev else "idle"
     if ev is not None and ev["ratio"] is not None:

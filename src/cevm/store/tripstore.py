@@ -48,14 +48,16 @@ import collections
 import contextlib
 import os
 import sqlite3
+import stat
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
 from cevm.errors import CevmError
+from cevm.store.codec import decode_cycle_profile, decode_profile
 from cevm.store.display import format_trips, format_utc
-from cevm.store.failures import StoreAccessError, StoreConnection
+from cevm.store.failures import StoreAccessError, StoreConnection, translate
 from cevm.store.location import resolve_store_path
 from cevm.store.queries import FileState, TripQueries
 from cevm.store.schema import (
@@ -67,6 +69,7 @@ from cevm.store.schema import (
     layout_problems,
     refuse_newer,
     stored_version,
+    upgrade_trip_vector,
 )
 from cevm.store.writing import TripWriting, WriteResult
 
@@ -87,17 +90,11 @@ def _checkpoint(stage: str) -> None:
 
 def _trip_vector_v3(vector: bytes, profile: bytes) -> bytes:
     """SQL function of migration 5 (:func:`cevm.store.schema.upgrade_trip_vector`)."""
-    from cevm.store.codec import decode_profile
-    from cevm.store.schema import upgrade_trip_vector
-
     return upgrade_trip_vector(vector, profile, decode_profile)
 
 
 def _route_vector_v3(vector: bytes, profile: bytes) -> bytes:
     """SQL function of migration 5 for a route's cycle leg (its own profile format)."""
-    from cevm.store.routes import decode_cycle_profile
-    from cevm.store.schema import upgrade_trip_vector
-
     return upgrade_trip_vector(vector, profile, decode_cycle_profile)
 
 
@@ -172,8 +169,6 @@ class TripStore(TripWriting, TripQueries):
     def _cannot_open(self, exc: sqlite3.Error) -> CevmError:
         """The error for a store file SQLite could not open, with the reason the file
         system gives (a read-only file system, a directory without write permission)."""
-        from cevm.store.failures import translate
-
         err = translate(exc, self.path, BUSY_TIMEOUT_S)
         if self.readonly or not isinstance(err, StoreAccessError) or err.reason != "cantopen":
             return err or CevmError(f"{self.path}: not a usable cevm store: {exc}")
@@ -386,8 +381,6 @@ def _remember_store(path: Path) -> None:
 def _not_a_file(path: Path) -> str | None:
     """What ``path`` is when it exists and is not a regular file (a directory, a FIFO, a
     device), else None: SQLite would open any of them."""
-    import stat
-
     from cevm.io.inputs import file_kind
 
     try:
