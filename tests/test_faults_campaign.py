@@ -250,6 +250,7 @@ STORE_USE: dict[str, dict] = {
     "route add": {"cycle": [URBAN]},
     "route remove": {"name": "R1"},
     "ingest": {"paths": str(sorted((ROOT / "sample_logs" / "srf").glob("HGV-11_*"))[0])},
+    "gtfs": {"feed": str(ROOT / "tests" / "data" / "gtfs" / "small"), "vehicle_id": ["HGV-77"]},
 }
 
 #: Commands with a --store option that need not open it, and why.
