@@ -233,3 +233,136 @@ def test_a_file_named_inside_a_scenario_is_not_overwritten(tmp_path):
     assert len(error_lines(res)) == 1 and "vehicle file" in res.stderr, res.stderr
     assert vehicle.read_bytes() == content
     assert not list(cfg.rglob("*.partial"))
+
+
+# ------------------------------------------------------------------ the store's schema
+
+#: What makes a command open the store, by its words (a trip id stands for "the first
+#: HGV-77 trip"): the command's required parameters alone may not. A command with a
+#: --store option that is not here is tried with its required parameters only; it must
+#: then open the store (else add it here).
+STORE_USE: dict[str, dict] = {
+    "predict": {"vehicle_id": ["HGV-77"]},
+    "feasibility": {"vehicle_id": ["HGV-77"]},
+    "simulate": {"trip": "TRIP"},
+    "trips set-mass": {"trip_ids": ["TRIP"], "gross_kg": 30000},
+    "route add": {"cycle": [URBAN]},
+    "route remove": {"name": "R1"},
+    "ingest": {"paths": str(sorted((ROOT / "sample_logs" / "srf").glob("HGV-11_*"))[0])},
+}
+
+#: Commands with a --store option that need not open it, and why.
+STORE_UNUSED = {
+    "fleet plan": "opens the store only for legs that name stored trips or routes (the shipped scenario names cycles)",
+}
+
+#: Commands that write into the store: they refuse a damaged one before writing anything.
+WRITERS = {"ingest", "trips set-mass", "route add", "route remove"}
+
+STORE_COMMANDS = [(w, f) for w, f in commands() if has_store(f) and " ".join(w) not in STORE_UNUSED]
+
+
+def store_invocation(words, function, db: Path, ids: dict, **extra) -> list[str]:
+    given = {k: ([ids["HGV-77"][0] if x == "TRIP" else x for x in v] if isinstance(v, list)
+                 else ids["HGV-77"][0] if v == "TRIP" else v)
+             for k, v in STORE_USE.get(" ".join(words), {}).items()}
+    return invocation(words, function, store=db, **given, **extra)
+
+
+def _damage(db: Path, kind: str) -> str:
+    """Damage the schema of the store at ``db``; returns the words the error must name."""
+    con = sqlite3.connect(db, isolation_level=None)
+    try:
+        if kind == "version-text":
+            con.execute("UPDATE meta SET value = 'abc' WHERE key = 'schema_version'")
+            return "schema_version"
+        if kind == "version-gone":
+            con.execute("DELETE FROM meta WHERE key = 'schema_version'")
+            return "schema_version"
+        if kind == "meta-gone":
+            con.execute("DROP TABLE meta")
+            return "meta"
+        if kind == "blobs-gone":
+            con.execute("DROP TABLE trip_blobs")
+            return "trip_blobs"
+        if kind == "column-gone":
+            con.execute("ALTER TABLE trips DROP COLUMN standstill_before_s")
+            return "standstill_before_s"
+        if kind == "masses-gone":
+            con.execute("DROP TABLE trip_masses")
+            return "trip_masses"
+        raise AssertionError(kind)
+    finally:
+        con.close()  # the last connection: -wal merged and removed
+
+
+def test_every_command_that_names_a_store_is_tried():
+    for words, function in commands():
+        name = " ".join(words)
+        if has_store(function) and name not in STORE_UNUSED:
+            assert name in STORE_USE or all(p.default is not inspect.Parameter.empty or p.name in VALUES
+                                             for p in parameters(function)), name
+
+
+@pytest.mark.parametrize("kind", ["version-text", "version-gone", "meta-gone", "blobs-gone", "column-gone",
+                                  "masses-gone"])
+@pytest.mark.parametrize("words, function", STORE_COMMANDS, ids=[" ".join(w) for w, _ in STORE_COMMANDS])
+def test_a_damaged_schema_is_exit_4_naming_it_and_nothing_is_written(words, function, kind, store, tmp_path):
+    db, ids, _ = store
+    what = _damage(db, kind)
+    content, listing = db.read_bytes(), sorted(os.listdir(db.parent))
+    res = cevm(store_invocation(words, function, db, ids))
+    assert res.exit_code == EXIT_STORE_DAMAGED, (kind, res.exit_code, res.stdout, res.stderr)
+    errors = [ln for ln in error_lines(res) if ln.startswith("cevm: error:")]
+    if words == ("store", "check") and not errors:  # its report says what is damaged, on stdout
+        assert what in res.stdout and "DAMAGED" in res.stdout, res.stdout
+    else:
+        assert len(errors) == 1 and what in errors[0] and "damaged" in errors[0], res.stderr
+    assert db.read_bytes() == content  # a writer wrote nothing: no run row, no migration
+    assert sorted(os.listdir(db.parent)) == listing
+
+
+# ---------------------------------------------------------------- a read-only opening
+
+READERS = [(w, f) for w, f in STORE_COMMANDS if " ".join(w) not in WRITERS]
+
+
+@pytest.mark.parametrize("words, function", READERS, ids=[" ".join(w) for w, _ in READERS])
+def test_a_reader_leaves_no_file_beside_the_store(words, function, store):
+    """SQLite makes -wal and -shm files for a reader of a store in WAL mode: a command
+    that only reads leaves none behind, and the store's file as it was."""
+    db, ids, before = store
+    content, listing = db.read_bytes(), sorted(os.listdir(db.parent))
+    res = cevm(store_invocation(words, function, db, ids))
+    assert res.exit_code in (0, 1), (words, res.stderr)
+    assert sorted(os.listdir(db.parent)) == listing
+    assert db.read_bytes() == content
+
+
+def test_a_reader_beside_an_open_connection_keeps_its_files(store):
+    """Another connection has the store open (a long ingest): its -wal and -shm are in
+    use, and a reader that ends meanwhile leaves them."""
+    db, ids, _ = store
+    con = sqlite3.connect(db, isolation_level=None)
+    con.execute("SELECT COUNT(*) FROM trips").fetchone()
+    try:
+        assert Path(f"{db}-shm").exists()
+        res = cevm(["trips", "--store", str(db), "-f", "csv"])
+        assert res.exit_code == 0 and Path(f"{db}-shm").exists() and Path(f"{db}-wal").exists()
+        con.execute("UPDATE meta SET value = value WHERE key = 'cevm_version'")  # still usable
+    finally:
+        con.close()
+
+
+@pytest.mark.parametrize("how", ["chattr-file", "chattr-dir"])
+def test_readers_work_on_a_read_only_store_and_add_no_file(how, store):
+    from test_store_faults import read_only
+
+    db, ids, before = store
+    with read_only(db, how) as path:
+        listing = sorted(os.listdir(path.parent))
+        for words, function in READERS:
+            res = cevm(store_invocation(words, function, path, ids))
+            assert res.exit_code in (0, 1), (how, words, res.stderr)
+            assert sorted(os.listdir(path.parent)) == listing, (how, words)
+    assert trips_of(db) == before

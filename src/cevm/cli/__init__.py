@@ -22,6 +22,7 @@ every command's start.
 from __future__ import annotations
 
 import importlib
+import signal
 import sys
 from typing import Annotated
 
@@ -124,6 +125,11 @@ def main() -> None:
     (a full disk, ``> /dev/full``, an I/O error) is one line and exit 3
     (:func:`cevm.cli.common.os_error_exit`), never a traceback, even when it shows only
     as the last flush of stdout."""
+    from cevm import stops
+
+    own = not stops.installed()  # called in a process that did not start at cevm.__main__ (a test's)
+    saved = {s: signal.getsignal(s) for s in stops.STOP_SIGNALS} if own else {}
+    stops.install()  # a signal before the command starts: its line and code (the entry point did this already)
     from cevm.cli import interrupts
     from cevm.cli.common import flush_stdout, os_error_exit
     from cevm.runtime import tune_allocator
@@ -149,4 +155,7 @@ def main() -> None:
             code = flush_stdout(code, said=said)
         except KeyboardInterrupt as exc:  # a signal while the above was reporting another end
             code = interrupts.stopped(exc, sys.argv[1:])
+    stops.finished()  # a signal from now on: cevm.stops's line, after the work was done
+    for s, handler in saved.items():
+        signal.signal(s, handler)
     sys.exit(code)

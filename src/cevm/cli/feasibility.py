@@ -14,6 +14,7 @@ import typer
 from cevm.cli.columns import Column
 from cevm.cli.common import (
     DEFAULT_CONFIDENCE,
+    EXIT_INPUT,
     EXIT_PARTIAL,
     TABLE_MAX_ROWS,
     AmbientOption,
@@ -33,6 +34,7 @@ from cevm.cli.common import (
     VehicleOption,
     check_common,
     check_output_path,
+    exit_code_for,
     fail,
     load_sources,
     note_flat_cycles,
@@ -138,8 +140,8 @@ def feasibility_cmd(
                                       payload_kg=src_payload, mass_kg=src_mass, payload_cap_kg=payload_cap_kg,
                                       ice_braking=ice_braking, ambient_c=ambient_c, confidence=confidence)
                 except CevmError as exc:
-                    if mass_source in ("--mass-kg", "--payload-kg", "vehicle file"):
-                        raise
+                    if mass_source in ("--mass-kg", "--payload-kg", "vehicle file") or exit_code_for(exc) != EXIT_INPUT:
+                        raise  # the store's failures (a trip's profile damaged on disk: exit 4) as they are
                     raise CevmError(f"trip {src.name!r} ({src.mass.describe()} mass): {exc}") from None
                 rows.extend(feasibility_row(res, i, ice_braking, mass_source, interval, soc_from)
                             for i in range(len(res.vehicles)))

@@ -9,7 +9,9 @@ killed, and the exit code is ``128 + the signal's number``: **130** after SIGINT
 command it was and however its libraries handle the interrupt (typer turns it into exit
 130 without a word: :func:`stopped` puts the signal's code and line back). ``cevm
 ingest`` says in one line what it stored and what it did not; every other command says
-``cevm COMMAND: interrupted by SIGTERM: ...`` (:func:`stopped_line`).
+``cevm COMMAND: interrupted by SIGTERM: ...`` (:func:`stopped_line`). Before the command
+starts and after it ends, :mod:`cevm.stops` (installed first by the entry point) says the
+same and exits with the same codes.
 """
 
 from __future__ import annotations
@@ -19,11 +21,10 @@ import sys
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 
-#: The exit code after a signal is this plus its number (the shells' convention).
-EXIT_SIGNAL_BASE = 128
+from cevm.stops import EXIT_SIGNAL_BASE, STOP_SIGNALS, command_name, stopped_line
 
-#: Signals that stop a command.
-STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+__all__ = ["EXIT_SIGNAL_BASE", "STOP_SIGNALS", "Interrupted", "command_name", "exit_code", "interrupts_raise",
+           "late_signals_noted", "received", "signal_name", "stopped", "stopped_line"]
 
 _received: list[int] = []
 
@@ -91,24 +92,6 @@ def _reported_by_command(exc: BaseException) -> bool:
     return getattr(exc, "code", None) not in (1, 130)  # click's "Aborted!" (1), a bare 130
 
 
-def command_name(argv: Sequence[str]) -> str:
-    """The command's words from the arguments: ``calibrate``, ``trips set-mass``,
-    ``route add`` (a group's first word, and its subcommand when one follows)."""
-    words = [a for a in argv[:2] if not a.startswith("-")]
-    if words and words[0] in ("trips", "route", "store", "fleet", "vehicle") and len(argv) > 1 and words[1:]:
-        return " ".join(words[:2])
-    return words[0] if words else ""
-
-
-def stopped_line(signum: int, command: str) -> str:
-    """The line a command (other than ingest, which says what it stored) prints when a
-    stop signal ended it."""
-    name = signal.Signals(signum).name
-    return (f"cevm {command}: interrupted by {name}: stopped before the end (each write to the store is made whole "
-            "or not at all; no --out file is left half-written; output on stdout may be cut short)").replace(
-        "cevm :", "cevm:")
-
-
 def stopped(exc: BaseException, argv: Sequence[str]) -> int | str | None:
     """The exit code of a command that ended with ``exc`` (SystemExit or an interrupt):
     after a stop signal, ``128 + its number`` (130, 143) and, unless the command said so
@@ -125,7 +108,7 @@ def stopped(exc: BaseException, argv: Sequence[str]) -> int | str | None:
         return code  # it finished, the signal came too late to stop it
     if not _reported_by_command(exc):
         try:
-            sys.stderr.write(stopped_line(signum, command_name(argv)) + "\n")
+            sys.stderr.write(stopped_line(signum, command_name(list(argv))) + "\n")
             sys.stderr.flush()
         except OSError:
             pass

@@ -99,12 +99,19 @@ def start_forkserver(env: Mapping[str, str]) -> None:
     parent-death signal follows the thread that forks, which may end long before this
     process (the workers still watch this process themselves). This process's own
     environment is left as it was."""
-    from multiprocessing import forkserver
+    from multiprocessing import forkserver, resource_tracker
 
     env = dict(env)
     if threading.current_thread() is threading.main_thread():
         env[FORKSERVER_PARENT_ENV] = str(os.getpid())
     saved = {k: os.environ.get(k) for k in env}
+    # SIGINT blocked while the forkserver is made: it starts with it blocked (the mask is
+    # inherited across fork and exec), so that a Ctrl-C during its preload (a second or
+    # so: numpy, rasterio, pyproj) cannot print a KeyboardInterrupt traceback of its own
+    # before it ignores SIGINT; here (in this thread) a Ctrl-C only waits for the block to end.
+    # The resource tracker first: starting it unblocks SIGINT whatever the mask was.
+    resource_tracker.ensure_running()
+    mask = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT}) if hasattr(signal, "pthread_sigmask") else None
     try:
         for k, v in env.items():
             if k == FORKSERVER_PARENT_ENV:
@@ -113,6 +120,8 @@ def start_forkserver(env: Mapping[str, str]) -> None:
                 os.environ.setdefault(k, v)
         forkserver.ensure_running()
     finally:
+        if mask is not None:
+            signal.pthread_sigmask(signal.SIG_SETMASK, mask)
         for k, old in saved.items():
             if old is None:
                 os.environ.pop(k, None)

@@ -64,6 +64,9 @@ def check_store(store: TripStore, progress: Callable[[int, int], None] | None = 
         report.problems += [Problem("database", "", line) for line in lines[:20]]
         if len(lines) > 20:
             report.problems.append(Problem("database", "", f"... and {len(lines) - 20} more from SQLite's check"))
+    if store.layout_problems:  # tables or columns missing: the blobs cannot be read back
+        report.problems += [Problem("database", "", text) for text in store.layout_problems]
+        return report
     if store.schema_version < SCHEMA_VERSION:  # opened without migrating (it failed): SQLite's check only
         report.problems.append(Problem("database", "", f"schema version {store.schema_version} could not be migrated "
                                                        f"to {SCHEMA_VERSION}, so its blobs were not read back"))

@@ -43,6 +43,7 @@ Versions
 
 from __future__ import annotations
 
+import functools
 import json
 import math
 import time
@@ -279,20 +280,102 @@ store with a higher version was written by a newer cevm and is refused; a lower 
 migrated when opened."""
 
 
+#: Tables that only a cevm store holds: a database with one of them and no schema
+#: version in ``meta`` is a damaged store, not a database of something else.
+_OWN_TABLES = frozenset({"trips", "trip_blobs", "files", "runs", "trip_masses"})
+
+
 def stored_version(con, path: Path) -> int:
     """The schema version of the database on ``con``: 0 for an empty database; refuses a
-    database of something else."""
+    database of something else, and a store whose version is missing or not a version
+    number (:class:`~cevm.store.failures.StoreDamagedError`: exit 4)."""
+    from cevm.store.failures import DAMAGED_HINT, StoreDamagedError
+
     tables = {r[0] for r in con.execute("SELECT name FROM sqlite_master WHERE type='table'")}
     if "meta" in tables:
         row = con.execute("SELECT value FROM meta WHERE key='schema_version'").fetchone()
         if row is not None:
-            return int(row[0])
+            text = str(row[0]).strip()
+            if not text.isascii() or not text.isdigit():
+                raise StoreDamagedError(f"{path}: the store is damaged: meta.schema_version is {str(row[0])[:40]!r}, "
+                                        f"not a version number; {DAMAGED_HINT}")
+            return int(text)
     if not tables - {"sqlite_sequence"}:
         return 0
+    if tables & _OWN_TABLES:
+        where = "its schema_version row in table meta" if "meta" in tables else "its table meta"
+        raise StoreDamagedError(f"{path}: the store is damaged: {where} is missing (tables "
+                                f"{', '.join(sorted(tables)[:8])}); {DAMAGED_HINT}")
     raise CevmError(
         f"{path}: an SQLite database of something else (tables "
         f"{sorted(tables)[:5]}), not a cevm store; choose another --store"
     )
+
+
+@functools.cache
+def expected_layout(version: int) -> dict[str, tuple[str, ...]]:
+    """The tables and their columns of a store at ``version``: the migrations up to it run
+    on an empty database in memory (so the layout is never written twice)."""
+    import sqlite3
+
+    con = sqlite3.connect(":memory:")
+    try:
+        con.create_function("crc32", 1, blob_crc32)
+        for name in ("cevm_trip_vector_v3", "cevm_route_vector_v3"):  # never called: the tables are empty
+            con.create_function(name, 2, lambda vector, profile: vector)
+        for m in MIGRATIONS[:version]:
+            for stmt in m.statements:
+                con.execute(stmt)
+        return _layout(con)
+    finally:
+        con.close()
+
+
+def _layout(con) -> dict[str, tuple[str, ...]]:
+    tables = [r[0] for r in con.execute("SELECT name FROM sqlite_master WHERE type='table' AND name NOT LIKE "
+                                        "'sqlite_%' ORDER BY name")]
+    return {t: tuple(r[1] for r in con.execute(f"PRAGMA table_info(\"{t}\")")) for t in tables}
+
+
+def check_layout(con, path: Path, version: int) -> None:
+    """Refuse (:class:`~cevm.store.failures.StoreDamagedError`, exit 4) a store whose
+    tables or columns are not all those of its ``version`` (:func:`expected_layout`),
+    naming what is missing: before any query meets "no such table" (SQLite's
+    OperationalError), and before a writer writes anything. Tables and columns of its
+    own that a store has beyond them are left alone."""
+    from cevm.store.failures import DAMAGED_HINT, StoreDamagedError
+
+    problems = layout_problems(con, version)
+    if problems:
+        raise StoreDamagedError(f"{path}: the store is damaged: {'; '.join(problems[:6])}"
+                                f"{'; ...' if len(problems) > 6 else ''}; {DAMAGED_HINT}")
+
+
+def layout_problems(con, version: int) -> list[str]:
+    """What :func:`check_layout` finds missing, one text each ('table trip_blobs is
+    missing', 'table trips lacks column vehicle_id')."""
+    if not 0 < version <= SCHEMA_VERSION:
+        return []
+    have = _layout(con)
+    problems = []
+    for table, columns in expected_layout(version).items():
+        if table not in have:
+            problems.append(f"table {table} is missing")
+            continue
+        lacking = [c for c in columns if c not in have[table]]
+        if lacking:
+            problems.append(f"table {table} lacks column{'s' if len(lacking) > 1 else ''} {', '.join(lacking)}")
+    return problems
+
+
+def check_schema(con, path: Path) -> int:
+    """The store's schema checked as a whole before it is used: its version a number
+    (:func:`stored_version`), not a newer cevm's (:func:`refuse_newer`), and its tables
+    and columns all there (:func:`check_layout`). Returns the version."""
+    version = stored_version(con, path)
+    refuse_newer(version, path)
+    check_layout(con, path, version)
+    return version
 
 
 def ensure_schema(store) -> int:
@@ -306,13 +389,11 @@ def ensure_schema(store) -> int:
     something else, and a store written by a newer cevm (a version above this one's).
     """
     con = store.con
-    version = stored_version(con, store.path)
+    version = check_schema(con, store.path)
     if version == SCHEMA_VERSION:
         return version
-    refuse_newer(version, store.path)
     with store._write():
-        version = stored_version(con, store.path)  # another process may have migrated it
-        refuse_newer(version, store.path)
+        version = check_schema(con, store.path)  # another process may have migrated it
         for m in MIGRATIONS[version:]:
             for stmt in m.statements:
                 con.execute(stmt)

@@ -20,7 +20,7 @@ from cevm.errors import CevmError
 from cevm.io.cycles import MAX_CYCLE_SAMPLES, CycleFormat, read_cycle_files
 from cevm.io.scenario import LegResolver, default_resolver
 from cevm.store.codec import MAX_PROFILE_SAMPLES
-from cevm.store.failures import DamagedTripError
+from cevm.store.failures import DAMAGED_HINT, DamagedTripError, StoreDamagedError
 from cevm.store.location import existing_store_path
 from cevm.store.masses import TripMass, trip_masses
 from cevm.store.queries import row_measurement
@@ -164,13 +164,19 @@ def load_sources(stack: ExitStack, store: Path | None, cycles: Sequence[Path], t
                     raise exc
                 on_damaged(exc)
                 del got[exc.trip_id]
-        if not got:
-            raise CevmError(f"vehicle id {vid!r} has no usable stored trips (all are damaged); "
-                            "'cevm store check' lists them")
+        if not got:  # the store's damage (exit 4), not the user's mistake
+            raise StoreDamagedError(f"{path}: vehicle id {vid!r} has no usable stored trips (all are damaged); "
+                                    "'cevm store check' lists them")
         vectors.update((tid, vec) for tid, vec in got.items() if tid not in vectors)
     facts: dict[str, tuple] = {}
     if vectors:
-        rows = st.list_trips(trip_ids=list(vectors))
+        try:
+            rows = st.list_trips(trip_ids=list(vectors))
+        except CevmError as exc:  # trips just read by id or vehicle that the store cannot find again: a damaged index
+            if type(exc) is not CevmError:
+                raise
+            raise StoreDamagedError(f"{path}: the store is damaged: trips it listed cannot be found again ({exc}); "
+                                    f"{DAMAGED_HINT}") from None
         for tid, n in zip(rows["trip_id"], rows["n_samples"], strict=True):
             if n > MAX_SOURCE_SAMPLES:  # bounded as a cycle file is: one source's samples are held together
                 # a count no stored profile can hold (cevm.store.codec) is the row's damage, not a long trip

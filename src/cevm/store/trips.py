@@ -18,6 +18,11 @@ Read-only
     ``TripStore(path, readonly=True)`` opens with SQLite's ``mode=ro`` (nothing can be
     written; a read-only file works), falling back to ``immutable=1`` in a read-only
     directory where the WAL's ``-shm`` file cannot be made (see :meth:`_open_readonly`).
+    It leaves no file behind: a store in WAL mode makes SQLite create its ``-wal`` and
+    ``-shm`` files even for a reader, and a reader cannot remove them as the last writer
+    does; so when they were not there before, they are removed once it closes, if no
+    other connection has the store open (:func:`_remove_reader_files`, as SQLite's own
+    last close does: under the database's exclusive lock, and only an empty ``-wal``).
     It never creates a store, nor writes into an empty file (0 bytes, or an SQLite
     database without tables): that is no store, as a missing file is not. (A store of an
     older schema is the one exception: it is migrated once, which needs write access.)
@@ -39,6 +44,7 @@ edge that turns rows into what a person reads (ISO 8601 times, km, kWh).
 
 from __future__ import annotations
 
+import collections
 import contextlib
 import os
 import sqlite3
@@ -52,7 +58,16 @@ from cevm.store.display import format_trips, format_utc
 from cevm.store.failures import StoreAccessError, StoreConnection
 from cevm.store.location import resolve_store_path
 from cevm.store.queries import FileState, TripQueries
-from cevm.store.schema import SCHEMA_VERSION, blob_crc32, ensure_schema, refuse_newer, stored_version
+from cevm.store.schema import (
+    SCHEMA_VERSION,
+    blob_crc32,
+    check_layout,
+    check_schema,
+    ensure_schema,
+    layout_problems,
+    refuse_newer,
+    stored_version,
+)
 from cevm.store.writing import TripWriting, WriteResult
 
 BUSY_TIMEOUT_S = 60.0
@@ -103,7 +118,11 @@ class TripStore(TripWriting, TripQueries):
         self.schema_version = SCHEMA_VERSION
         self._migrate = migrate
         self._intact = False  # the quick check passed on this connection
+        self.layout_problems: list[str] = []  # tables or columns missing (read-only without migrating only)
         self._con: StoreConnection | None = None
+        self._key = os.path.realpath(self.path)
+        self._counted = False  # counted in _OPEN
+        self._reader_files = False  # a reader found no -wal or -shm file: it removes those SQLite makes
         _remember_store(self.path)
         kind = _not_a_file(self.path)
         if kind is not None:  # a FIFO would hang the command where no signal reaches it, /dev/null swallow it
@@ -121,6 +140,7 @@ class TripStore(TripWriting, TripQueries):
             self._con = self._connect(str(self.path))
             if intact:
                 self.require_intact()  # before the first write: WAL, migrations
+                check_schema(self._con, self.path)  # version, tables, columns: before the first write too
             self._enable_wal()
             # NORMAL in WAL mode: a power cut may lose the last commits, never corrupts.
             self._con.execute("PRAGMA synchronous=NORMAL")
@@ -134,6 +154,9 @@ class TripStore(TripWriting, TripQueries):
             raise
 
     def _connect(self, database: str, uri: bool = False) -> StoreConnection:
+        if not self._counted:  # before: a failed connect's close() counts it down
+            _OPEN[self._key] += 1
+            self._counted = True
         try:
             con = sqlite3.connect(database, timeout=BUSY_TIMEOUT_S, isolation_level=None, uri=uri,
                                   factory=StoreConnection)
@@ -168,12 +191,20 @@ class TripStore(TripWriting, TripQueries):
         ``-wal`` file holds changes, the file is opened ``immutable=1`` (read as it is,
         with no locks: nobody can be writing it, since a writer would have made the
         ``-shm`` file); with changes in a ``-wal`` file it is refused (they would be
-        missed). An older schema is first migrated, which needs write access once."""
+        missed). A store file this process cannot write, without ``-wal`` and ``-shm``
+        files, is read the same way (SQLite would make them, and only a process that can
+        lock the file for writing can remove them). An older schema is first migrated,
+        which needs write access once."""
         if not self.path.exists():
             raise CevmError(f"{self.path}: no trip store here")
+        self._reader_files = not any(Path(f"{self.path}{s}").exists() for s in _READER_FILES)
         uri = self.path.resolve().as_uri() + "?mode=ro"
         try:
             try:
+                if self._reader_files and not os.access(self.path, os.W_OK):  # SQLite would make -wal and -shm
+                    # files this reader could not remove (that needs the file's write lock): read immutable, as
+                    # in a read-only directory (no writer is there, or it would have made them)
+                    raise StoreAccessError(f"{self.path}: a read-only file", "readonly")
                 self._con = self._connect(uri, uri=True)
                 version = stored_version(self._con, self.path)
             except StoreAccessError as exc:
@@ -195,6 +226,14 @@ class TripStore(TripWriting, TripQueries):
             self.close()
             raise
         self.schema_version = version
+        if version > 0 and not self._migrate:  # for SQLite's own checks (cevm store check): say what is missing
+            self.layout_problems = layout_problems(self._con, min(version, SCHEMA_VERSION))
+        elif 0 < version <= SCHEMA_VERSION:
+            try:
+                check_layout(self._con, self.path, version)
+            except BaseException:
+                self.close()
+                raise
         if version == 0:  # an empty file: no store, and nothing is written into it
             self.close()
             raise CevmError(f"{self.path}: no trip store here: an empty file ("
@@ -242,10 +281,16 @@ class TripStore(TripWriting, TripQueries):
         return cls(resolve_store_path(path), readonly=readonly)
 
     def close(self) -> None:
-        """Close the connection (idempotent)."""
+        """Close the connection (idempotent); a reader removes the files SQLite made for it
+        (see the module's notes)."""
         if self._con is not None:
             self._con.close()
             self._con = None
+        if self._counted:
+            self._counted = False
+            _OPEN[self._key] -= 1
+            if self.readonly and self._reader_files and not self.immutable and _OPEN[self._key] == 0:
+                _remove_reader_files(self.path)
 
     def __enter__(self) -> TripStore:
         return self
@@ -280,6 +325,52 @@ class TripStore(TripWriting, TripQueries):
 
     def _checkpoint(self, stage: str) -> None:
         _checkpoint(stage)  # the module's hook, looked up at each call (tests replace it)
+
+
+#: The files SQLite makes beside a store in WAL mode, for readers too.
+_READER_FILES = ("-wal", "-shm")
+
+#: Connections of this process open on each store (by real path): a reader's files are
+#: removed only when none is (closing any descriptor of a file drops every POSIX lock
+#: this process holds on it, SQLite's included).
+_OPEN: collections.Counter[str] = collections.Counter()
+
+#: SQLite's lock bytes on the database file (os_unix.c): its shared range.
+_SHARED_FIRST, _SHARED_SIZE = 0x40000002, 510
+
+
+def _remove_reader_files(path: Path) -> None:
+    """Remove the ``-wal`` and ``-shm`` files SQLite made for a reader of the store at
+    ``path``, if no process has the store open: under a write lock on SQLite's shared
+    lock range of the database (every connection holds a read lock there while open, so
+    it is refused while any is, and a connection that opens meanwhile waits for it), and
+    only when the ``-wal`` file is empty (it holds no commit). Anything that fails leaves
+    the files as they are (harmless: SQLite uses or removes them later)."""
+    try:
+        import fcntl
+    except ImportError:  # not POSIX: SQLite's files stay
+        return
+    try:
+        fd = os.open(path, os.O_RDWR | getattr(os, "O_CLOEXEC", 0))
+    except OSError:
+        return
+    try:
+        try:
+            fcntl.lockf(fd, fcntl.LOCK_EX | fcntl.LOCK_NB, _SHARED_SIZE, _SHARED_FIRST, os.SEEK_SET)
+        except OSError:
+            return  # another connection has it open: its files are in use
+        try:
+            wal = Path(f"{path}-wal")
+            if wal.exists() and wal.stat().st_size > 0:
+                return
+            for suffix in _READER_FILES:
+                Path(f"{path}{suffix}").unlink(missing_ok=True)
+        finally:
+            fcntl.lockf(fd, fcntl.LOCK_UN, _SHARED_SIZE, _SHARED_FIRST, os.SEEK_SET)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
 
 
 def _remember_store(path: Path) -> None:
