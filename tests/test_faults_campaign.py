@@ -304,9 +304,19 @@ def test_every_command_that_names_a_store_is_tried():
                                              for p in parameters(function)), name
 
 
-@pytest.mark.parametrize("kind", ["version-text", "version-gone", "meta-gone", "blobs-gone", "column-gone",
-                                  "masses-gone"])
-@pytest.mark.parametrize("words, function", STORE_COMMANDS, ids=[" ".join(w) for w, _ in STORE_COMMANDS])
+DAMAGE_KINDS = ("version-text", "version-gone", "meta-gone", "blobs-gone", "column-gone", "masses-gone")
+
+
+def _damage_cases():
+    """Every command with every kind of damage; in the fast loop each command with one
+    kind, in turn, so that every kind and every command is tried there."""
+    for i, (words, function) in enumerate(STORE_COMMANDS):
+        for j, kind in enumerate(DAMAGE_KINDS):
+            marks = () if j == i % len(DAMAGE_KINDS) else (pytest.mark.slow,)
+            yield pytest.param(words, function, kind, marks=marks, id=f"{' '.join(words)}-{kind}")
+
+
+@pytest.mark.parametrize("words, function, kind", list(_damage_cases()))
 def test_a_damaged_schema_is_exit_4_naming_it_and_nothing_is_written(words, function, kind, store, tmp_path):
     db, ids, _ = store
     what = _damage(db, kind)
@@ -366,3 +376,108 @@ def test_readers_work_on_a_read_only_store_and_add_no_file(how, store):
             assert res.exit_code in (0, 1), (how, words, res.stderr)
             assert sorted(os.listdir(path.parent)) == listing, (how, words)
     assert trips_of(db) == before
+
+
+# ------------------------------------------------------------------- stop signals
+
+LATE = Path(__file__).resolve().parent / "late.py"
+SIGNALS = {"SIGTERM": (15, 143), "SIGINT": (2, 130)}
+
+
+def _caught(pid: int, signum: int) -> bool:
+    """Whether process ``pid`` has a handler of its own for ``signum`` (/proc: SigCgt)."""
+    try:
+        for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+            if line.startswith("SigCgt:"):
+                return bool(int(line.split()[1], 16) >> (signum - 1) & 1)
+    except OSError:
+        pass
+    return False
+
+
+def _env() -> dict:
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join([str(ROOT / "src"), str(ROOT / "tests"), env.get("PYTHONPATH", "")])
+    return env
+
+
+def _finish(proc, timeout: float = 60.0) -> tuple[int, str, str]:
+    import subprocess
+
+    try:
+        out, err = proc.communicate(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        out, err = proc.communicate()
+        raise AssertionError(f"still running after {timeout} s: {err[-2000:]}") from None
+    return proc.returncode, out, err
+
+
+SIGNAL_COMMANDS = [(w, f) for w, f in commands()]
+
+
+@pytest.mark.skipif(not Path("/proc/self/status").exists(), reason="needs /proc (Linux)")
+@pytest.mark.parametrize("name", list(SIGNALS))
+@pytest.mark.parametrize("words, function", SIGNAL_COMMANDS, ids=[" ".join(w) for w, _ in SIGNAL_COMMANDS])
+def test_a_signal_at_the_first_instant_is_one_line_and_its_code(words, function, name, store):
+    """The signal as soon as cevm's handler is in place (the process catches SIGTERM:
+    the entry point's first act, before typer, numpy or pandas are imported): one line,
+    130 or 143, nothing changed. Before that only the interpreter's own start runs."""
+    import subprocess
+    import sys
+    import time
+
+    db, ids, before = store
+    signum, code = SIGNALS[name]
+    args = store_invocation(words, function, db, ids) if has_store(function) else invocation(words, function)
+    proc = subprocess.Popen([sys.executable, "-m", "cevm", *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, env=_env())
+    t0 = time.monotonic()
+    while not _caught(proc.pid, 15) and proc.poll() is None and time.monotonic() - t0 < 30:
+        time.sleep(0.0005)
+    proc.send_signal(signum)
+    rc, _, err = _finish(proc)
+    lines = [ln for ln in err.splitlines() if ln.strip()]
+    assert rc == code, (rc, err)
+    assert "Traceback" not in err and len(lines) == 1 and name in lines[0], err
+    assert lines[0].startswith(f"cevm {' '.join(words)}:"), lines[0]
+    assert trips_of(db) == before
+
+
+#: The one case of the late signal in the fast loop (each runs a whole command: seconds).
+LATE_FAST = (("trips",), "SIGTERM")
+
+
+def _late_cases():
+    for words, function in SIGNAL_COMMANDS:
+        for name in SIGNALS:
+            marks = () if (words, name) == LATE_FAST else (pytest.mark.slow,)
+            yield pytest.param(words, function, name, marks=marks, id=f"{' '.join(words)}-{name}")
+
+
+@pytest.mark.skipif(not Path("/proc/self/status").exists(), reason="needs /proc (Linux)")
+@pytest.mark.parametrize("words, function, name", list(_late_cases()))
+def test_a_signal_after_the_command_ended_is_one_line_and_its_code(words, function, name, store, tmp_path):
+    """The signal once the command has returned, as the process exits (tests/late.py
+    holds it there): the command's own output stands, one more line says the signal came,
+    the code is 130 or 143, never a traceback."""
+    import subprocess
+    import sys
+    import time
+
+    db, ids, before = store
+    signum, code = SIGNALS[name]
+    marker = tmp_path / "ended"
+    args = store_invocation(words, function, db, ids) if has_store(function) else invocation(words, function)
+    proc = subprocess.Popen([sys.executable, str(LATE), str(marker), *args], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, env=_env())
+    t0 = time.monotonic()
+    while not marker.exists() and proc.poll() is None and time.monotonic() - t0 < 120:
+        time.sleep(0.01)
+    assert marker.exists(), proc.communicate()
+    proc.send_signal(signum)
+    rc, _, err = _finish(proc)
+    lines = [ln for ln in err.splitlines() if ln.strip()]
+    assert rc == code and "Traceback" not in err, (rc, err)
+    assert lines[-1].startswith(f"cevm {' '.join(words)}: interrupted by {name} as it exited"), err
+    assert not any(name in ln for ln in lines[:-1]), err
