@@ -336,8 +336,12 @@ def test_a_damaged_schema_is_exit_4_naming_it_and_nothing_is_written(words, func
 
 READERS = [(w, f) for w, f in STORE_COMMANDS if " ".join(w) not in WRITERS]
 
+#: Readers that take seconds (a calibration): in the slow loop only.
+SLOW_READERS = {("calibrate",)}
 
-@pytest.mark.parametrize("words, function", READERS, ids=[" ".join(w) for w, _ in READERS])
+
+@pytest.mark.parametrize("words, function", [
+    pytest.param(w, f, marks=(pytest.mark.slow,) if w in SLOW_READERS else (), id=" ".join(w)) for w, f in READERS])
 def test_a_reader_leaves_no_file_beside_the_store(words, function, store):
     """SQLite makes -wal and -shm files for a reader of a store in WAL mode: a command
     that only reads leaves none behind, and the store's file as it was."""
@@ -364,14 +368,15 @@ def test_a_reader_beside_an_open_connection_keeps_its_files(store):
         con.close()
 
 
+@pytest.mark.parametrize("every", [False, pytest.param(True, marks=pytest.mark.slow)], ids=["trips", "every-reader"])
 @pytest.mark.parametrize("how", ["chattr-file", "chattr-dir"])
-def test_readers_work_on_a_read_only_store_and_add_no_file(how, store):
+def test_readers_work_on_a_read_only_store_and_add_no_file(how, every, store):
     from test_store_faults import read_only
 
     db, ids, before = store
     with read_only(db, how) as path:
         listing = sorted(os.listdir(path.parent))
-        for words, function in READERS:
+        for words, function in READERS if every else [(w, f) for w, f in READERS if w == ("trips",)]:
             res = cevm(store_invocation(words, function, path, ids))
             assert res.exit_code in (0, 1), (how, words, res.stderr)
             assert sorted(os.listdir(path.parent)) == listing, (how, words)
