@@ -23,6 +23,7 @@ from pathlib import Path
 import pytest
 from typer.testing import CliRunner
 
+import faults
 from cevm.cli import make_app
 from cevm.cli.paths import is_output, option_names
 from fleet_store import DIESEL, URBAN, make_store
@@ -525,3 +526,46 @@ def test_damaged_pages_are_the_stores_damage_not_bad_input(words, function, vehi
     assert len(errors) == (res.exit_code == EXIT_STORE_DAMAGED), res.stderr
     if errors:
         assert "damaged" in errors[0] or "malformed" in errors[0], errors[0]
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not Path("/proc/self/status").exists(), reason="needs /proc (Linux)")
+@pytest.mark.parametrize("name", list(SIGNALS))
+def test_a_signal_at_random_moments_of_a_pool_is_one_line(name, store):
+    """A Ctrl-C (SIGINT to the process group, as a terminal sends it) or a SIGTERM to the
+    whole group (systemd's stop) at seeded random moments of a command with worker
+    processes, its forkserver's start included: the command's one line and code (or its
+    normal end), nothing from the workers, the forkserver or the resource tracker (no
+    traceback, no "leaked semaphore"), no process left."""
+    import contextlib
+    import random
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    db, ids, before = store
+    signum, code = SIGNALS[name]
+    rng = random.Random(32 + signum)
+    args = ["predict", "-v", str(ROOT / "configs" / "vehicles" / "electric-bus.toml"), "--vehicle-id", "EB-09",
+            "--workers", "2", "-f", "csv", "--store", str(db)]
+    for delay in sorted(rng.uniform(0.05, 4.0) for _ in range(4)):
+        proc = subprocess.Popen([sys.executable, "-m", "cevm", *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                text=True, env=_env(), start_new_session=True)
+        time.sleep(delay)
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(proc.pid, signum)
+        rc, _, err = _finish(proc)
+        lines = [ln for ln in err.splitlines() if ln.strip() and not ln.startswith("cevm: note:")]
+        assert "Traceback" not in err and "leaked" not in err, (delay, err)
+        assert rc == code or rc == 0, (delay, rc, err)
+        if rc == code:
+            assert len(lines) == 1 and name in lines[0], (delay, err)
+        t_end = time.monotonic() + 15.0  # the session's processes (forkserver, workers, tracker) end with it
+        while (left := faults.session_processes(proc.pid)) and time.monotonic() < t_end:
+            time.sleep(0.1)
+        for pid, _ in left:  # this test's: killed, so a failure leaves nothing running
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(pid, signal.SIGKILL)
+        assert not left, (delay, left)
+    assert trips_of(db) == before

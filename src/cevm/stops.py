@@ -78,7 +78,9 @@ def _stop_now(signum: int, frame) -> None:
 
 def install() -> None:
     """SIGINT and SIGTERM end the process with their line and code (:func:`_stop_now`);
-    main thread only (elsewhere nothing changes)."""
+    main thread only (elsewhere nothing changes). The command has not finished yet."""
+    global _finished
+    _finished = False
     try:
         for s in STOP_SIGNALS:
             _signal.signal(s, _stop_now)

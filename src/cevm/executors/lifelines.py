@@ -129,12 +129,48 @@ def start_forkserver(env: Mapping[str, str]) -> None:
                 os.environ[k] = old
 
 
+def owner_gone(owner_pid: int) -> bool:
+    """Whether process ``owner_pid`` has ended (gone, or a zombie not yet reaped)."""
+    try:
+        os.kill(owner_pid, 0)
+    except ProcessLookupError:
+        return True
+    except PermissionError:  # alive, another user's (its pid reused)
+        return False
+    try:
+        with open(f"/proc/{owner_pid}/stat", "rb") as fh:
+            stat = fh.read()
+        return stat[stat.rindex(b")") + 2:][:1] in (b"Z", b"X")
+    except (OSError, ValueError):
+        return False
+
+
+def quiet_when_orphaned(owner_pid: int) -> None:
+    """In the forkserver (and the workers it forks, which inherit it): an exception that
+    ends a process after the pool's owner has ended prints nothing. A worker forked as
+    the owner stops on a signal fails to rebuild the pool's semaphores, which the owner
+    has removed (``FileNotFoundError`` in ``SemLock``), and multiprocessing prints that
+    through ``sys.excepthook``: beside the owner's one line, a traceback that is no
+    failure of anyone's. So is that error itself, which arrives as the owner ends, before
+    it has ended. Other exceptions print as before while the owner lives (a worker that
+    fails to start is also reported by the owner's pool, as a broken pool)."""
+    default = sys.excepthook
+
+    def hook(exc_type, exc, tb) -> None:
+        if owner_gone(owner_pid) or issubclass(exc_type, (FileNotFoundError, KeyboardInterrupt)):
+            return  # a semaphore already removed: the owner is ending (it may not have ended yet)
+        default(exc_type, exc, tb)
+
+    sys.excepthook = hook
+
+
 def forkserver_lifeline() -> None:
     """In the forkserver that :func:`start_forkserver` started (it imports this module
     first): die with the process that started it, as its workers die with it. Does
     nothing in any other process."""
     want = os.environ.get(FORKSERVER_PARENT_ENV)
     if want and want == str(os.getppid()):
+        quiet_when_orphaned(int(want))
         if not set_parent_death_signal():
             watch_owner(int(want))
         elif os.getppid() != int(want):  # it died before the request took effect
