@@ -569,3 +569,43 @@ def test_a_signal_at_random_moments_of_a_pool_is_one_line(name, store):
                 os.kill(pid, signal.SIGKILL)
         assert not left, (delay, left)
     assert trips_of(db) == before
+
+
+def test_a_reader_keeps_the_files_another_process_uses(store, tmp_path):
+    """The files a reader made are removed only if no other process has the store open: a
+    process that opened it meanwhile (a reader, or a writer about to write) keeps them,
+    and its commits are all there once it ends."""
+    import subprocess
+    import sys
+
+    from cevm.store import TripStore
+
+    db, ids, before = store
+    ready, go = tmp_path / "ready", tmp_path / "go"
+    code = (f"import sqlite3, time, pathlib\n"
+            f"con = sqlite3.connect({str(db)!r}, isolation_level=None)\n"
+            f"con.execute('SELECT COUNT(*) FROM trips').fetchone()\n"
+            f"pathlib.Path({str(ready)!r}).touch()\n"
+            f"while not pathlib.Path({str(go)!r}).exists(): time.sleep(0.01)\n"
+            f"con.execute(\"UPDATE meta SET value = 'x' WHERE key = 'cevm_version'\")\n"
+            f"con.close()\n")
+    reader = TripStore(db, readonly=True)
+    assert reader.count_trips() == len(before[0])
+    assert Path(f"{db}-shm").exists()  # SQLite made it for the reader
+    other = subprocess.Popen([sys.executable, "-c", code])
+    try:
+        while not ready.exists():
+            assert other.poll() is None
+        reader.close()
+        assert Path(f"{db}-shm").exists() and Path(f"{db}-wal").exists()  # in use: kept
+        go.touch()
+        assert other.wait(timeout=60) == 0
+    finally:
+        go.touch()
+        other.wait(timeout=60)
+    con = sqlite3.connect(f"{db.resolve().as_uri()}?mode=ro", uri=True)
+    try:
+        assert con.execute("SELECT value FROM meta WHERE key = 'cevm_version'").fetchone()[0] == "x"
+    finally:
+        con.close()
+    assert trips_of(db) == before
