@@ -610,3 +610,25 @@ def test_a_reader_keeps_the_files_another_process_uses(store, tmp_path):
     finally:
         con.close()
     assert trips_of(db) == before
+
+
+def test_a_reader_keeps_the_files_a_plain_connection_of_this_process_uses(store):
+    """A connection of the same process outside TripStore (a notebook's plain sqlite3
+    one) has the store open: the reader that made the files leaves them (an open file
+    description lock conflicts with that connection's lock, where a POSIX one would not),
+    and that connection's locks and writes are intact."""
+    from cevm.store import TripStore
+
+    db, ids, before = store
+    reader = TripStore(db, readonly=True)
+    assert reader.count_trips() == len(before[0]) and Path(f"{db}-shm").exists()
+    con = sqlite3.connect(db, isolation_level=None)
+    try:
+        con.execute("SELECT COUNT(*) FROM trips").fetchone()
+        reader.close()
+        assert Path(f"{db}-shm").exists() and Path(f"{db}-wal").exists()
+        con.execute("UPDATE meta SET value = 'y' WHERE key = 'cevm_version'")
+    finally:
+        con.close()
+    assert not Path(f"{db}-wal").exists()  # its last close merged and removed them, as SQLite does
+    assert trips_of(db) == before

@@ -175,4 +175,6 @@ def main() -> None:
     stops.finished()  # a signal from now on: cevm.stops's line, after the work was done
     for s, handler in saved.items():
         signal.signal(s, handler)
-    sys.exit(code)
+    if own:  # called by a test in its own process: it goes on after this
+        sys.exit(code)
+    stops.exit_now(code)  # the process's end with the handlers in place to the last instant

@@ -336,24 +336,26 @@ _SHARED_FIRST, _SHARED_SIZE = 0x40000002, 510
 
 def _remove_reader_files(path: Path) -> None:
     """Remove the ``-wal`` and ``-shm`` files SQLite made for a reader of the store at
-    ``path``, if no process has the store open: under a write lock on SQLite's shared
+    ``path``, if no connection has the store open: under a write lock on SQLite's shared
     lock range of the database (every connection holds a read lock there while open, so
     it is refused while any is, and a connection that opens meanwhile waits for it), and
-    only when the ``-wal`` file is empty (it holds no commit). Anything that fails leaves
-    the files as they are (harmless: SQLite uses or removes them later)."""
+    only when the ``-wal`` file is empty (it holds no commit). The lock is an open file
+    description lock where there are such (Linux), which a connection of this very
+    process outside :class:`TripStore` (a plain ``sqlite3`` one) also refuses; else a
+    POSIX one. Its descriptor is kept open (:data:`_LOCK_FDS`): closing one would drop
+    every POSIX lock this process holds on the file, SQLite's included. Anything that
+    fails leaves the files as they are (harmless: SQLite uses or removes them later)."""
     try:
         import fcntl
     except ImportError:  # not POSIX: SQLite's files stay
         return
+    key = os.path.realpath(path)
     try:
-        fd = os.open(path, os.O_RDWR | getattr(os, "O_CLOEXEC", 0))
-    except OSError:
-        return
-    try:
-        try:
-            fcntl.lockf(fd, fcntl.LOCK_EX | fcntl.LOCK_NB, _SHARED_SIZE, _SHARED_FIRST, os.SEEK_SET)
-        except OSError:
-            return  # another connection has it open: its files are in use
+        fd = _LOCK_FDS.get(key)
+        if fd is None:
+            fd = _LOCK_FDS[key] = os.open(path, os.O_RDWR | getattr(os, "O_CLOEXEC", 0))
+        if not _lock_shared_range(fcntl, fd, fcntl.F_WRLCK):
+            return  # a connection has it open: its files are in use
         try:
             wal = Path(f"{path}-wal")
             if wal.exists() and wal.stat().st_size > 0:
@@ -361,11 +363,34 @@ def _remove_reader_files(path: Path) -> None:
             for suffix in _READER_FILES:
                 Path(f"{path}{suffix}").unlink(missing_ok=True)
         finally:
-            fcntl.lockf(fd, fcntl.LOCK_UN, _SHARED_SIZE, _SHARED_FIRST, os.SEEK_SET)
+            _lock_shared_range(fcntl, fd, fcntl.F_UNLCK)
     except OSError:
         pass
-    finally:
-        os.close(fd)
+
+
+#: Descriptors of the stores :func:`_remove_reader_files` locked, kept open (by real path).
+_LOCK_FDS: dict[str, int] = {}
+
+
+def _lock_shared_range(fcntl, fd: int, kind: int) -> bool:
+    """Lock (``F_WRLCK``, without waiting) or unlock (``F_UNLCK``) SQLite's shared lock
+    range of the database open on ``fd``; False when another lock holds it."""
+    if hasattr(fcntl, "F_OFD_SETLK"):
+        import struct
+
+        # struct flock: l_type, l_whence (short), l_start, l_len (off_t), l_pid (0 for OFD)
+        lock = struct.pack("@hhqqi4x", kind, os.SEEK_SET, _SHARED_FIRST, _SHARED_SIZE, 0)
+        try:
+            fcntl.fcntl(fd, fcntl.F_OFD_SETLK, lock)
+        except (BlockingIOError, PermissionError):
+            return False
+        return True
+    try:
+        fcntl.lockf(fd, fcntl.LOCK_UN if kind == fcntl.F_UNLCK else fcntl.LOCK_EX | fcntl.LOCK_NB, _SHARED_SIZE,
+                    _SHARED_FIRST, os.SEEK_SET)
+    except (BlockingIOError, PermissionError):
+        return False
+    return True
 
 
 def _remember_store(path: Path) -> None:
