@@ -232,11 +232,14 @@ def test_every_ice_answer_says_its_braking_mode(root):
                               "-c", cyc])
     assert res.exit_code == 0, res.output
     legend = [x for x in res.stdout.splitlines() if x.startswith("vehicles: ")]
-    assert len(legend) == 1 and "diesel-hgv = Scania P320 diesel HGV (ICE, braking energy not credited)" in legend[0]
-    assert "electric-bus = Optare Metrocity EV" in legend[0] and "EV (ICE" not in legend[0]
+    # (the shipped files state no heating or A/C: they take their class's, and the legend says so)
+    taken = " with heat+cool from its class's priors"
+    assert len(legend) == 1 and f"diesel-hgv = Scania P320 diesel HGV{taken} (ICE, braking energy not credited)" \
+        in legend[0]
+    assert f"electric-bus = Optare Metrocity EV{taken}" in legend[0] and "priors (ICE" not in legend[0].split(";")[1]
     res = runner.invoke(app, ["feasibility", "-v", str(veh / "diesel-hgv.toml"), "-c", cyc, "--ice-braking", "paper"])
     assert res.exit_code == 0, res.output
-    assert "diesel-hgv = Scania P320 diesel HGV (ICE, braking energy credited (eq. 24))" in res.stdout
+    assert f"diesel-hgv = Scania P320 diesel HGV{taken} (ICE, braking energy credited (eq. 24))" in res.stdout
     res = runner.invoke(app, ["feasibility", "-v", str(veh / "diesel-hgv.toml"), "-c", cyc, "--ice-braking", "paper",
                               "-f", "json"])
     assert [r["ice_braking"] for r in json.loads(res.stdout)] == ["paper"]

@@ -47,7 +47,7 @@ from cevm.cli.common import (
     with_cycle_options,
 )
 from cevm.cli.output import OutputFormat, vehicle_legend, write_lines, write_rows
-from cevm.cli.prediction_columns import FEASIBILITY, assumptions_line, feasibility_row, verdict_text
+from cevm.cli.prediction_columns import FEASIBILITY, assumptions_line, feasibility_row, legend_name, verdict_text
 from cevm.core.cycle import CR0_DEFAULT
 from cevm.core.feasibility import feasibility
 from cevm.core.sweep import DEFAULT_RESERVE_PCT
@@ -237,7 +237,7 @@ def _print_feasibility(rows: list[dict], stream: IO[str]) -> None:
         table.append({"cycle": r["cycle"], "vehicle": r["vehicle_key"], "payload kg": r["payload_kg"],
                       "feasible": verdict_text(r, energy=False), "state": state, "margin": margin,
                       "range km": r["range_km"], "max payload kg": payload, "limited by": r["limited_by"]})
-        names[r["vehicle_key"]] = (r["vehicle"], r.get("ice_braking"))
+        names[r["vehicle_key"]] = (legend_name(r), r.get("ice_braking"))
     conf = rows[0].get("confidence") if rows else None
     title = "cevm feasibility" + (f" (first {len(table)} of {len(rows)})" if len(rows) > len(table) else "") + (
         f": verdicts and payloads at confidence {conf:g}" if conf is not None else "")

@@ -74,6 +74,7 @@ from cevm.cli.prediction_columns import (
     RangeOptions,
     assumptions_line,
     interval_text,
+    legend_name,
     verdict_text,
 )
 from cevm.cli.values import parse_value_options
@@ -158,7 +159,7 @@ class PredictWriter:
                     x = float(c[i])
                     row[k] = None if x != x else (x > 0.5 if column.kind == "bool" else x)
             self.table_rows.append(with_status(row))
-            self.names[row["vehicle_key"]] = (row["vehicle"], row.get("ice_braking"))
+            self.names[row["vehicle_key"]] = (legend_name(row), row.get("ice_braking"))
 
     def close(self) -> None:
         if self.fmt == OutputFormat.table:

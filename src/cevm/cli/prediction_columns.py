@@ -100,6 +100,13 @@ def from_prior_text(vehicle: Any) -> str:
     return "+".join(vehicle.from_prior) if vehicle.from_prior else "none"
 
 
+def legend_name(row: dict) -> str:
+    """A row's vehicle as the legend under a table names it: its name, and the terms its
+    file leaves out that it took from its class's priors (column from_prior)."""
+    taken = row.get("from_prior")
+    return row["vehicle"] if taken in (None, "none") else f"{row['vehicle']} with {taken} from its class's priors"
+
+
 class BlockRows:
     """What a predict column reads: one block of rows (:class:`~cevm.core.sweep.SweepBlock`)
     and where its masses come from (``mass_source``), with helpers that give arrays of
