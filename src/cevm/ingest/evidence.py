@@ -251,24 +251,23 @@ def _batch_ambient(t_abs, bounds, row_t, temp, lo, hi, params: EvidenceParams, o
         out_f[i].update(none)
     if not has.size:
         return
-    # the farthest instant of each trip from a reading: candidates t0, t1 and the readings' midpoints
+    # the farthest instant of each trip from a reading: t0, t1, or a midpoint of two
+    # consecutive readings inside [t0, t1] (one outside stands at t0 or t1: no farther)
     starts, lens = rb[has], counts[has]
-    mids_n = lens - 1
-    mb = np.concatenate(([0], np.cumsum(mids_n + 2)))
-    cand = np.empty(int(mb[-1]))
-    cseg = np.repeat(np.arange(has.size), mids_n + 2)
-    cand[mb[:-1]] = t0[has]
-    cand[mb[:-1] + 1] = t1[has]
-    mrows = ranges(starts, mids_n)
-    mpos = ranges(mb[:-1] + 2, mids_n)
-    mseg = cseg[mpos]  # np.clip's own steps (times are never NaN), without its cost on array bounds
-    cand[mpos] = np.minimum(np.maximum(0.5 * (rt[mrows + 1] + rt[mrows]), t0[has][mseg]), t1[has][mseg])
-    k = segment_searchsorted(rt, starts, lens, cand, cseg, "left")
-    ln = lens[cseg]
-    first = starts[cseg]
-    before = np.abs(cand - rt[first + np.minimum(np.maximum(k - 1, 0), ln - 1)])
-    after = np.abs(rt[first + np.minimum(np.maximum(k, 0), ln - 1)] - cand)
-    far = np.maximum.reduceat(np.minimum(before, after), mb[:-1])
+    t0h, t1h = t0[has], t1[has]
+    trip = np.arange(has.size)
+    ends, eseg = np.concatenate((t0h, t1h)), np.concatenate((trip, trip))
+    k = segment_searchsorted(rt, starts, lens, ends, eseg, "left")
+    ln, first = lens[eseg], starts[eseg]
+    before = np.abs(ends - rt[first + np.minimum(np.maximum(k - 1, 0), ln - 1)])
+    after = np.abs(rt[first + np.minimum(np.maximum(k, 0), ln - 1)] - ends)
+    near = np.minimum(before, after)
+    far = np.maximum(near[:has.size], near[has.size:])
+    mrows = ranges(starts, lens - 1)
+    mseg = np.repeat(trip, lens - 1)
+    mid = 0.5 * (rt[mrows + 1] + rt[mrows])
+    within = (mid >= t0h[mseg]) & (mid <= t1h[mseg])  # its nearest readings: the two it lies between
+    np.maximum.at(far, mseg[within], np.minimum(np.abs(mid - rt[mrows]), np.abs(rt[mrows + 1] - mid))[within])
     for g, i in enumerate(has.tolist()):
         out_q[i]["ambient_temp"]["max_hold_s"] = float(far[g])
     good = far <= hold
@@ -290,9 +289,15 @@ def _batch_ambient(t_abs, bounds, row_t, temp, lo, hi, params: EvidenceParams, o
     pts = np.empty(int(pb[-1]))
     pts[pb[:-1]] = gt0
     pts[pb[1:] - 1] = gt1
-    pts[ranges(pb[:-1] + 1, n_in)] = grt[inside]
-    pseg = np.repeat(np.arange(gi.size), n_in + 2)
-    vals = segment_interp(pts, pseg, rt, g_starts, g_lens, rv)
+    at_readings = ranges(pb[:-1] + 1, n_in)
+    pts[at_readings] = grt[inside]
+    # the interpolant: a reading's own value at its time (np.interp's exact match), so
+    # only t0 and t1 of each trip are interpolated
+    vals = np.empty(pts.size)
+    vals[at_readings] = rv[ranges(g_starts, g_lens)][inside]
+    ends = np.concatenate((pb[:-1], pb[1:] - 1))
+    trip = np.arange(gi.size)
+    vals[ends] = segment_interp(pts[ends], np.concatenate((trip, trip)), rt, g_starts, g_lens, rv)
     steps = np.ones(pts.size - 1, dtype=bool)
     steps[pb[1:-1] - 1] = False
     terms = (0.5 * (vals[1:] + vals[:-1]) * np.diff(pts))[steps]
