@@ -47,8 +47,8 @@ sys.path.insert(0, str(ROOT / "src"))
 from cevm.core.cycle import drive_cycle_vector  # noqa: E402
 from cevm.core.predictive import Features, predictive  # noqa: E402
 from cevm.core.timetable.driving import driving_prior  # noqa: E402
-from cevm.core.timetable.learning import learn_driving  # noqa: E402
 from cevm.core.timetable.energy import scheduled_trip_energy  # noqa: E402
+from cevm.core.timetable.learning import learn_driving  # noqa: E402
 from cevm.core.timetable.synthesis import synthesise_trip, timetable_from_log  # noqa: E402
 from cevm.io.vehicles import load_vehicle  # noqa: E402
 from cevm.store import TripStore  # noqa: E402

@@ -29,9 +29,8 @@ def _named() -> list[tuple[str, int, str]]:
     out = []
     for path in sorted(SRC.rglob("*.py")):
         tree = ast.parse(path.read_text(encoding="utf-8"))
-        for line, text in _strings(tree):
-            for m in QUOTED.finditer(text):
-                out.append((str(path.relative_to(SRC)), line, m.group(1)))
+        rel = str(path.relative_to(SRC))
+        out.extend((rel, line, m.group(1)) for line, text in _strings(tree) for m in QUOTED.finditer(text))
     return out
 
 

@@ -13,8 +13,8 @@ from typer.testing import CliRunner
 from cevm.cli import app
 from cevm.core.predictive import Features, predictive
 from cevm.core.timetable.driving import driving_prior
-from cevm.core.timetable.learning import learn_driving
 from cevm.core.timetable.energy import scheduled_trip_energy
+from cevm.core.timetable.learning import learn_driving
 from cevm.core.timetable.synthesis import timetable_from_log
 from cevm.errors import CevmError
 from cevm.io import load_vehicle

@@ -277,7 +277,8 @@ def _block_rows(r: _Run) -> tuple[dict, int]:
         ran_empty = plan.empty_trip >= 0
         pct = 100.0 / plan.capacity
         vals = {
-            "block_id": [name for name, _ in info], "date": [str(datetime.fromordinal(r.tt.dates[b.date]).date()) for b in by_date],
+            "block_id": [name for name, _ in info],
+            "date": [str(datetime.fromordinal(r.tt.dates[b.date]).date()) for b in by_date],
             "block_from": [b.source for b in by_date],
             "start_time": _iso(tr.start_s[first], r.zone), "end_time": _iso(tr.end_s[d.last], r.zone),
             "trips": np.add.reduceat(revenue.astype(float), first),

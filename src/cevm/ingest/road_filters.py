@@ -19,9 +19,12 @@ class SmoothingParams(Protocol):
     """What :func:`smooth_profile` reads of :class:`cevm.ingest.elevation.ElevationParams`
     (a protocol, so that this module need not import the one that imports it)."""
 
-    median_window_m: float
-    spike_threshold_m: float
-    lowpass_sigma_m: float
+    @property
+    def median_window_m(self) -> float: ...
+    @property
+    def spike_threshold_m(self) -> float: ...
+    @property
+    def lowpass_sigma_m(self) -> float: ...
 
 __all__ = ["FFT_MIN_TAPS", "SmoothingParams", "bound_grade", "bound_grade_or_same", "gaussian_valid",
            "gaussian_weights", "odd_pad", "runs", "smooth_profile"]

@@ -50,9 +50,9 @@ class LoggedTrips:
     ``day`` rule), ``missing`` (damaged trips left out), ``elevation_source`` (per trip,
     how ingest made its road elevation: its power's tolerance, :mod:`cevm.core.limits`;
     None: unknown), ``own_sd`` (per trip, a spread of its energy beyond the model's,
-    independent between trips, [J or l]: a timetable's synthesised cycles; None: none), ``energy_offset`` (per trip, added to the model's
-    mean on its vector [J or l]: a synthesised cycle's mean over its draws less its
-    representative draw's; None: none)."""
+    independent between trips, [J or l]: a timetable's synthesised cycles; None: none),
+    ``energy_offset`` (per trip, added to the model's mean on its vector [J or l]: a
+    synthesised cycle's mean over its draws less its representative draw's; None: none)."""
 
     vehicle_id: str
     trip_ids: tuple[str, ...]

@@ -29,8 +29,9 @@ What is measured (:func:`measure_driving`, on each series' own samples; a sample
 - **top speed**: the 99th percentile of moving speed, the default speed cap.
 
 Three parameters are not read off the logs but matched
-(:func:`~cevm.core.timetable.learning.match_kinetic`), so that the logs' own timetables (:func:`~cevm.core.timetable.synthesis.timetable_from_log`),
-synthesised, drive as the logs did where the energy sees it:
+(:func:`~cevm.core.timetable.learning.match_kinetic`), so that the logs' own timetables
+(:func:`~cevm.core.timetable.synthesis.timetable_from_log`), synthesised, drive as the logs
+did where the energy sees it:
 
 - the cruise's *wobbles*, a sine's amplitude as a share of the cruise speed (periods of
   10-30 s), one for the runs slower than the median run (mean speed, distance over

@@ -142,7 +142,8 @@ def join_blocks(blocks: Sequence[LoggedTrips]) -> LoggedTrips:
         return np.concatenate([getattr(b, name) for b in blocks])
 
     return LoggedTrips(vehicle_id=blocks[0].vehicle_id if len(blocks) == 1 else "blocks",
-                       trip_ids=tuple(t for b in blocks for t in b.trip_ids), start_s=cat("start_s"), end_s=cat("end_s"),
+                       trip_ids=tuple(t for b in blocks for t in b.trip_ids), start_s=cat("start_s"),
+                       end_s=cat("end_s"),
                        distance_m=cat("distance_m"), vectors=tuple(v for b in blocks for v in b.vectors),
                        gross_kg=cat("gross_kg"), payload_kg=cat("payload_kg"),
                        mass_source=tuple(m for b in blocks for m in b.mass_source), ambient_c=cat("ambient_c"),

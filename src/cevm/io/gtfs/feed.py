@@ -140,7 +140,7 @@ class _StopTimes:
             self.parts[k].append(v)
         self.loose += len(cols["trip"])
         if self.loose >= CONSOLIDATE_ROWS:
-            for k, parts in self.parts.items():
+            for parts in self.parts.values():
                 first = next(i for i, p in enumerate(parts) if p.size < CONSOLIDATE_ROWS) if parts else 0
                 parts[first:] = [np.concatenate(parts[first:])]
             self.loose = 0
