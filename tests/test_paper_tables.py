@@ -71,7 +71,7 @@ def test_the_figures_cevm_prints_as_the_papers_are_the_papers(bt, kind, table, i
     from cevm.cli.calibrate import PAPER_CE
 
     paper = _paper_table(table)
-    name, mu, sd, tmu, tsd = PAPER_CE[is_ev]
+    name, mu, sd, tmu, tsd = PAPER_CE[(is_ev, kind)]  # by powertrain and class
     assert f"table {table}" in name
     assert (mu, sd) == (paper["mu(e)"][0], paper["sigma(e)"][0])
     assert (tmu, tsd) == pytest.approx((paper["mu(t_{exe})"][0], paper["sigma(t_{exe})"][0]), rel=1e-12)

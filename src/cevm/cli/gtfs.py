@@ -105,7 +105,7 @@ def _driving(o: SimpleNamespace, vehicle):
         known = set(st.vehicle_ids())
         unknown = [v for v in o.vehicle_id if v not in known]
         if unknown:
-            raise CevmError(f"no stored trips of vehicle id(s) {', '.join(map(repr, unknown))}; 'cevm trips list' "
+            raise CevmError(f"no stored trips of vehicle id(s) {', '.join(map(repr, unknown))}; 'cevm trips' "
                             "shows the stored vehicles")
         series = load_driving_series(st, list(dict.fromkeys(o.vehicle_id)))
     return learn_driving(series, prior=prior)
