@@ -192,7 +192,7 @@ def library_example() -> str:
 def test_the_library_guides_notebook_runs_and_prints_the_readmes_numbers(tmp_path, monkeypatch, capsys):
     """The guide's lines, run as written, after the README's ingest: they print the terms
     and the fuel with its 90 % half-width that the README's calibrate and predict print
-    (8.43 and 18.50 l, +-0.40 and +-0.74 l: the same model through the command line)."""
+    (7.06 and 15.48 l, +-0.34 and +-0.59 l: the same model through the command line)."""
     code = library_example()
     assert len([ln for ln in code.splitlines() if ln.strip() and not ln.startswith("import ")]) == 5
     for name in ("configs", "sample_logs"):

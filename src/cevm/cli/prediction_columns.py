@@ -405,8 +405,9 @@ INTERVAL_TEXT = Column("interval_text", "half the width of the row's central int
 
 
 def interval_text(row: dict) -> str | None:
-    """'+-half-width unit' of a row's energy (EV) or fuel (ICE) interval (central, so
-    the value plus and minus it); None without one."""
+    """'+-half-width unit' of a row's energy (EV) or fuel (ICE) interval: half its
+    width (a log-normal interval reaches a little further above the mean than below it;
+    the CSV and JSON give both ends, ``*_low`` and ``*_high``); None without one."""
     ev = row.get("powertrain") == "ev"
     key, unit = ("energy_kwh", "kWh") if ev else ("fuel_l", "l")
     lo, hi = row.get(f"{key}_low"), row.get(f"{key}_high")
