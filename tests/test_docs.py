@@ -211,10 +211,7 @@ def test_the_library_guides_notebook_runs_and_prints_the_readmes_numbers(tmp_pat
 
 #: Files that still name a tracker's issue, each with why (the house rule: reasons in
 #: place, never a pointer to a tracker a reader of the code does not have).
-TRACKER_REFERENCE_EXCEPTIONS = {
-    "src/cevm/ingest/evidence.py",  # the ingest is being rewritten beside this change; fixed there
-    "src/cevm/ingest/profiles.py",  # the same
-}
+TRACKER_REFERENCE_EXCEPTIONS: set[str] = set()
 
 
 def test_no_file_points_at_a_tracker_issue():
