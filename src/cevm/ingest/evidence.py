@@ -2,7 +2,8 @@
 measured while the vehicle stood still (the :data:`cevm.core.trip.TRIP_EVIDENCE_FIELDS`).
 
 These are evidence that a calibration checks its auxiliary and idle terms against
-(what the vehicle drew standing still, at the logged temperature), never model inputs: a prediction for a future trip would not have them.
+(what the vehicle drew standing still, at the logged temperature), never model inputs:
+a prediction for a future trip would not have them.
 Pure functions over a :class:`cevm.ingest.cleaning.CleanTrip`'s arrays; no I/O.
 
 - **Ambient temperature** (``ambient_temp_c``, ``_min_c``, ``_max_c``): readings of the

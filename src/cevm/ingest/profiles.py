@@ -376,7 +376,7 @@ def _read_toml(source: str | Path | dict, path: Path | None) -> tuple[dict, Path
     if isinstance(source, dict):
         return source, path
     path = Path(source)
-    data = read_bounded(path, MAX_TOML_BYTES, "logger profile")  # a regular file of at most 1 MiB (a FIFO must not hang)
+    data = read_bounded(path, MAX_TOML_BYTES, "logger profile")  # a regular file of at most 1 MiB: no FIFO
     try:
         return tomllib.loads(data.decode("utf-8-sig")), path
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
