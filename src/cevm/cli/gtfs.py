@@ -384,10 +384,12 @@ def _write(o: SimpleNamespace, spec, table_cols, rows: dict, n: int, ev: bool, t
                     row[c.name] = x[1][int(x[0][i])] or None
                 else:
                     f = float(x[i])
-                    row[c.name] = None if f != f else (f > 0.5 if c.kind == "bool" else f)
+                    # a verdict in words as every command's table says it (yes / NO)
+                    row[c.name] = None if f != f else (("yes" if f > 0.5 else "NO") if c.kind == "bool" else f)
             table.append(row)
         names = [c for c in table_cols if any(t.get(c) is not None for t in table)]
-        write_rows(table, OutputFormat.table, columns=[spec[c] for c in names],
+        shown_cols = [dataclasses.replace(spec[c], kind="text") if spec[c].kind == "bool" else spec[c] for c in names]
+        write_rows(table, OutputFormat.table, columns=shown_cols,
                    title=title + (f" (first {shown} of {n})" if n > shown else ""), stream=stream)
         if n > shown:
             typer.echo(f"cevm: {n - shown} more rows not shown; use --format csv or json (and --out FILE)", err=True)
