@@ -168,3 +168,18 @@ def json_objects(cols: dict[str, ColumnValues], spec: ColumnSpec, is_ev: np.ndar
     ev_rows = zip(*(vals[k] for k in ev_keys), strict=True)
     ice_rows = zip(*(vals[k] for k in ice_keys), strict=True)
     return [ev_fmt % ev if e else ice_fmt % ice for e, ev, ice in zip(is_ev.tolist(), ev_rows, ice_rows, strict=True)]
+
+
+def table_row(cols: dict[str, ColumnValues], spec: ColumnSpec, i: int) -> dict[str, object]:
+    """Row ``i`` of columnar values as a row of a table for people: a text column's
+    string (None where empty), a number as a float (None where NaN), a bool column's
+    value as a bool (None where NaN)."""
+    row: dict[str, object] = {}
+    for column in spec.columns:
+        c = cols[column.name]
+        if isinstance(c, tuple):
+            row[column.name] = c[1][int(c[0][i])] or None
+        else:
+            x = float(c[i])
+            row[column.name] = None if x != x else (x > 0.5 if column.kind == "bool" else x)
+    return row

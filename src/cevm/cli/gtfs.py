@@ -18,7 +18,7 @@ from typing import Annotated, Any
 import numpy as np
 import typer
 
-from cevm.cli.columnar import csv_text, json_objects
+from cevm.cli.columnar import csv_text, json_objects, table_row
 from cevm.cli.common import (
     PNG,
     TABLE_MAX_ROWS,
@@ -377,16 +377,9 @@ def _write(o: SimpleNamespace, spec, table_cols, rows: dict, n: int, ev: bool, t
         shown = min(n, TABLE_MAX_ROWS)
         table = []
         for i in range(shown):
-            row = {}
-            for c in spec.columns:
-                x = cols[c.name]
-                if isinstance(x, tuple):
-                    row[c.name] = x[1][int(x[0][i])] or None
-                else:
-                    f = float(x[i])
-                    # a verdict in words as every command's table says it (yes / NO)
-                    row[c.name] = None if f != f else (("yes" if f > 0.5 else "NO") if c.kind == "bool" else f)
-            table.append(row)
+            row = table_row(cols, spec, i)
+            # a verdict in words as every command's table says it (yes / NO)
+            table.append({k: ("yes" if v else "NO") if isinstance(v, bool) else v for k, v in row.items()})
         names = [c for c in table_cols if any(t.get(c) is not None for t in table)]
         shown_cols = [dataclasses.replace(spec[c], kind="text") if spec[c].kind == "bool" else spec[c] for c in names]
         write_rows(table, OutputFormat.table, columns=shown_cols,

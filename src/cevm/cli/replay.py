@@ -26,7 +26,7 @@ from typing import IO, Annotated
 import numpy as np
 import typer
 
-from cevm.cli.columnar import concat_columns, csv_text, json_objects
+from cevm.cli.columnar import concat_columns, csv_text, json_objects, table_row
 from cevm.cli.common import (
     EXIT_PARTIAL,
     PNG,
@@ -194,15 +194,7 @@ class ReplayWriter:
 
     def _table_add(self, cols: dict, n: int) -> None:
         for i in range(min(n, TABLE_MAX_ROWS - len(self.table_rows))):
-            row = {}
-            for column in REPLAY.columns:
-                c = cols[column.name]
-                if isinstance(c, tuple):
-                    row[column.name] = c[1][int(c[0][i])] or None
-                else:
-                    x = float(c[i])
-                    row[column.name] = None if x != x else (x > 0.5 if column.kind == "bool" else x)
-            self.table_rows.append(with_status(row))
+            self.table_rows.append(with_status(table_row(cols, REPLAY, i)))
 
     def close(self) -> None:
         if self.fmt == OutputFormat.table:
