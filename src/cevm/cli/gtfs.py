@@ -33,6 +33,7 @@ from cevm.cli.common import (
     open_out,
     warn,
 )
+from cevm.cli.duty_options import build_charging, candidate_vehicle, describe_run
 from cevm.cli.gtfs_columns import BLOCKS, BLOCKS_TABLE, TRIPS, TRIPS_TABLE, columns_of
 from cevm.cli.output import OutputFormat, write_lines, write_rows
 from cevm.core.replay import (
@@ -67,13 +68,6 @@ def _depot(text: str | None) -> tuple[float, float] | None:
     if not (abs(lat) <= 90 and abs(lon) <= 180):
         raise CevmError(f"--depot {text!r}: latitude within 90 and longitude within 180 degrees")
     return lat, lon
-
-
-def _candidate(o: SimpleNamespace):
-    """The one candidate vehicle (-v), with --battery-kwh: as replay reads it (one place)."""
-    from cevm.cli.replay import _candidate as replay_candidate
-
-    return replay_candidate(o)
 
 
 def _mass(o: SimpleNamespace, vehicle) -> tuple[float, str]:
@@ -112,8 +106,6 @@ def _driving(o: SimpleNamespace, vehicle):
 
 
 def _settings(o: SimpleNamespace, vehicle) -> ReplaySettings:
-    from cevm.cli.replay import build_charging
-
     charging = build_charging(vehicle, o.charger_kw, o.min_dwell_min, o.charge_efficiency, o.charge_at, None,
                               200.0, o.overnight, None)
     if charging.depot:
@@ -203,7 +195,7 @@ def _compute(o: SimpleNamespace) -> _Run:
     from cevm.io.gtfs.calendar import noon_minus_12h
     from cevm.io.gtfs.elevation import ShapeElevation
 
-    vehicle = _candidate(o)
+    vehicle = candidate_vehicle(o)
     settings = _settings(o, vehicle)
     mass, mass_from = _mass(o, vehicle)
     try:
@@ -251,8 +243,6 @@ def _compute(o: SimpleNamespace) -> _Run:
         plans.append(plan)
         probs.append(p_complete(plan.draw_plan(), settings.draws, settings.seed))
         infos.append([(names[k], bd) for k in g for bd in by_name[names[k]]])
-    from cevm.cli.replay import describe_run
-
     ctx = describe_run(vehicle, settings, tt.timezone)
     context = {"mass_kg": mass, "mass_from": mass_from, "ambient_from": ambient_from, "driving_from": params.source,
                "charge_places": ctx["charge_places"] if vehicle.is_ev else "nowhere: a diesel refuels overnight",
