@@ -271,29 +271,24 @@ def store_invocation(words, function, db: Path, ids: dict, **extra) -> list[str]
     return invocation(words, function, store=db, **given, **extra)
 
 
+#: Each kind of schema damage: the SQL that does it, and the word the error must name.
+SCHEMA_DAMAGE = {
+    "version-text": ("UPDATE meta SET value = 'abc' WHERE key = 'schema_version'", "schema_version"),
+    "version-gone": ("DELETE FROM meta WHERE key = 'schema_version'", "schema_version"),
+    "meta-gone": ("DROP TABLE meta", "meta"),
+    "blobs-gone": ("DROP TABLE trip_blobs", "trip_blobs"),
+    "column-gone": ("ALTER TABLE trips DROP COLUMN standstill_before_s", "standstill_before_s"),
+    "masses-gone": ("DROP TABLE trip_masses", "trip_masses"),
+}
+
+
 def _damage(db: Path, kind: str) -> str:
     """Damage the schema of the store at ``db``; returns the words the error must name."""
+    sql, named = SCHEMA_DAMAGE[kind]
     con = sqlite3.connect(db, isolation_level=None)
     try:
-        if kind == "version-text":
-            con.execute("UPDATE meta SET value = 'abc' WHERE key = 'schema_version'")
-            return "schema_version"
-        if kind == "version-gone":
-            con.execute("DELETE FROM meta WHERE key = 'schema_version'")
-            return "schema_version"
-        if kind == "meta-gone":
-            con.execute("DROP TABLE meta")
-            return "meta"
-        if kind == "blobs-gone":
-            con.execute("DROP TABLE trip_blobs")
-            return "trip_blobs"
-        if kind == "column-gone":
-            con.execute("ALTER TABLE trips DROP COLUMN standstill_before_s")
-            return "standstill_before_s"
-        if kind == "masses-gone":
-            con.execute("DROP TABLE trip_masses")
-            return "trip_masses"
-        raise AssertionError(kind)
+        con.execute(sql)
+        return named
     finally:
         con.close()  # the last connection: -wal merged and removed
 
@@ -306,7 +301,7 @@ def test_every_command_that_names_a_store_is_tried():
                                              for p in parameters(function)), name
 
 
-DAMAGE_KINDS = ("version-text", "version-gone", "meta-gone", "blobs-gone", "column-gone", "masses-gone")
+DAMAGE_KINDS = tuple(SCHEMA_DAMAGE)
 
 
 def _damage_cases():
